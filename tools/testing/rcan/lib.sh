@@ -1,0 +1,33 @@
+# SPDX-License-Identifier: GPL-2.0
+# Shared settings for the rcan test scripts. Sourced, not run.
+
+RCAN_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/../../.." && pwd)
+RCAN_CACHE=${RCAN_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/rcan}
+RCAN_KERNEL=${RCAN_KERNEL:-release}
+RCAN_BINDGEN_VERSION=0.73.0
+KERNEL_TARBALL=/usr/src/linux-source-6.12.tar.xz
+
+export PATH="$HOME/.cargo/bin:$PATH"
+
+die() { echo "rcan: $*" >&2; exit 1; }
+log() { echo "rcan: $*" >&2; }
+
+# Directory of the extracted kernel source (shared by both variants).
+rcan_ksrc() { echo "$RCAN_CACHE/src/linux-source-6.12"; }
+
+# Cache key: everything that changes the kernel binary.
+rcan_kernel_key() {
+	local frags="$RCAN_ROOT/tools/testing/rcan/config/base.config"
+	[ "$RCAN_KERNEL" = debug ] && frags="$frags $RCAN_ROOT/tools/testing/rcan/config/debug.config"
+	{
+		ls -l "$KERNEL_TARBALL" 2>/dev/null | awk '{print $5}'
+		cat $frags
+		rustc --version
+		bindgen --version 2>/dev/null
+		clang --version | head -n 1
+		echo "$RCAN_KERNEL"
+	} | sha256sum | cut -c1-12
+}
+
+# Build directory (O=) of the selected kernel variant.
+rcan_kbuild() { echo "$RCAN_CACHE/kernel/$RCAN_KERNEL-$(rcan_kernel_key)"; }

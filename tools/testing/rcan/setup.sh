@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-2.0
+# Install everything the build and the VM tests need. Idempotent; fast when
+# all is present. Run as root (apt-get).
+set -euo pipefail
+. "$(dirname "$0")/lib.sh"
+
+pkgs="linux-source-6.12 clang lld llvm libclang-dev flex bison bc libelf-dev
+libssl-dev qemu-system-x86 can-utils busybox-static cpio kmod iproute2 make"
+missing=""
+for p in $pkgs; do
+	dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" ||
+		missing="$missing $p"
+done
+if [ -n "$missing" ]; then
+	log "installing:$missing"
+	export DEBIAN_FRONTEND=noninteractive
+	apt-get update -qq
+	apt-get install -y -qq $missing >/dev/null
+fi
+
+command -v rustup >/dev/null || die "rustup not found"
+rustup component list --installed 2>/dev/null | grep -q '^rust-src' ||
+	rustup component add rust-src
+rustup component list --installed 2>/dev/null | grep -q '^clippy' ||
+	rustup component add clippy || log "clippy unavailable"
+rustup component list --installed 2>/dev/null | grep -q '^rustfmt' ||
+	rustup component add rustfmt || log "rustfmt unavailable"
+
+if ! bindgen --version 2>/dev/null | grep -q "$RCAN_BINDGEN_VERSION"; then
+	log "installing bindgen-cli $RCAN_BINDGEN_VERSION"
+	cargo install --locked bindgen-cli --version "$RCAN_BINDGEN_VERSION"
+fi
+log "setup complete"
