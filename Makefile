@@ -1,0 +1,47 @@
+# SPDX-License-Identifier: GPL-2.0
+#
+# Front door for humans and CI. Kbuild reads ./Kbuild, not this file.
+#
+#   make demo     build everything, boot the VM, run the thesis-API sample
+#   make check    host tests + VM test suite (what CI runs)
+#   make modules  just the kernel modules (KDIR=... for your own kernel)
+#
+# RCAN_KERNEL=debug selects the KASAN/lockdep/kmemleak kernel.
+
+T := tools/testing/rcan
+KDIR ?= $(shell bash $(T)/build-kernel.sh)
+RCAN_CONFIG := CONFIG_RCAN=m CONFIG_RCAN_PF=m CONFIG_RCAN_PROTO_CAN=m \
+	CONFIG_RCAN_LOOP=m
+BINDINGS := rust/bindings/bindings_generated.rs
+
+.PHONY: all setup kernel modules bindings userspace demo check clean
+
+all: modules userspace
+
+setup:
+	bash $(T)/setup.sh
+
+kernel: setup
+	@echo $(KDIR)
+
+$(BINDINGS): rust/bindings/rcan_bindings.h rust/helpers/rcan_helpers.h \
+		rust/bindings/gen-bindings.sh
+	bash rust/bindings/gen-bindings.sh $(KDIR) $@
+
+bindings: $(BINDINGS)
+
+modules: $(BINDINGS)
+	$(MAKE) -C $(KDIR) M=$(CURDIR) LLVM=1 $(RCAN_CONFIG) modules
+
+userspace:
+	cargo build --release --workspace --bins
+
+demo: setup modules userspace
+	bash $(T)/demo.sh
+
+check: setup modules userspace
+	bash $(T)/run-tests.sh
+
+clean:
+	$(MAKE) -C $(KDIR) M=$(CURDIR) clean || true
+	rm -f $(BINDINGS)

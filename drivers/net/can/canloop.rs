@@ -1,0 +1,146 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! rcan_loop: the CAN loopback device (thesis 5.3.5, module `canloop`).
+//!
+//! Registers `count` devices `can%d` (ARPHRD_CAN, IFF_NOARP, IFF_ECHO).
+//! Every frame handed to a device for transmission is reflected into the
+//! receive path (`netif_rx`) as if it had come back from a bus, unless the
+//! `droprate` parameter makes the device drop it to simulate loss. With
+//! `verbose`, each frame is logged with the device name.
+//!
+//! Contexts: `start_xmit` runs with BH disabled under the device's TX lock
+//! (so the per-device counters need no lock of their own); `open`/`stop`
+//! run in process context under RTNL. The parameters are read with
+//! READ_ONCE and may change at any time through sysfs.
+
+use kernel::prelude::*;
+
+#[path = "../../../rust/glue/mod.rs"]
+mod glue;
+#[path = "../../../net/can/rcan_core.rs"]
+mod rcan_core;
+
+use glue::bindings;
+use kernel::c_str;
+use glue::netdev::{Driver, NetDev, Registration, Setup, Xmit};
+use glue::skb::Skb;
+use rcan_core::canloop::{DropRate, FrameDump};
+use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+
+module! {
+    type: CanLoop,
+    name: "rcan_loop",
+    author: "rcan developers",
+    description: "CAN loopback device (thesis canloop)",
+    license: "GPL",
+}
+
+/// Most devices one module instance registers.
+const MAX_COUNT: u32 = 16;
+
+const PARAM_COUNT: i32 = 0;
+const PARAM_VERBOSE: i32 = 1;
+const PARAM_DROPRATE: i32 = 2;
+
+extern "C" {
+    fn rcan_loop_get(which: i32) -> u32;
+}
+
+fn param(which: i32) -> u32 {
+    // SAFETY: reads a module parameter with READ_ONCE.
+    unsafe { rcan_loop_get(which) }
+}
+
+/// Validates a parameter value for the C parameter setter: refusing a bad
+/// value at insmod time makes the load fail with EINVAL.
+#[no_mangle]
+extern "C" fn rcan_loop_param_ok(which: i32, val: u32) -> bool {
+    match which {
+        PARAM_COUNT => (1..=MAX_COUNT).contains(&val),
+        PARAM_VERBOSE => val <= 1,
+        _ => DropRate::new(val).is_some(),
+    }
+}
+
+struct LoopDriver;
+
+impl Driver for LoopDriver {
+    type Priv = ();
+
+    fn setup() -> Setup {
+        Setup {
+            type_: bindings::ARPHRD_CAN as u16,
+            flags: bindings::net_device_flags_IFF_NOARP | bindings::net_device_flags_IFF_ECHO,
+            mtu: CAN_FRAME_LEN as u32,
+            hard_header_len: 0,
+            tx_queue_len: 10,
+        }
+    }
+
+    fn open(dev: &NetDev, _p: &()) -> Result {
+        dev.start_queue();
+        Ok(())
+    }
+
+    fn stop(dev: &NetDev, _p: &()) -> Result {
+        dev.stop_queue();
+        Ok(())
+    }
+
+    fn start_xmit(skb: Skb, dev: &NetDev, _p: &()) -> Xmit {
+        let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
+            // Not a classic CAN frame (e.g. a packet socket's garbage).
+            dev.stats_tx_dropped();
+            drop(skb);
+            return Xmit::Ok;
+        };
+        let frame = CanFrame::from_bytes(bytes);
+        if param(PARAM_VERBOSE) != 0 {
+            pr_info!("{}: tx {}\n", dev.name(), FrameDump::new(&frame).as_str());
+        }
+        // The parameter setter only stores valid rates.
+        let drop_it = match DropRate::new(param(PARAM_DROPRATE)) {
+            Some(rate) if rate.percent() > 0 => {
+                // SAFETY: get_random_u32 may be called in any context.
+                rate.should_drop(unsafe { bindings::rcan_get_random_u32() })
+            }
+            _ => false,
+        };
+        if drop_it {
+            dev.stats_tx_dropped();
+            drop(skb);
+            return Xmit::Ok;
+        }
+        let bytes = frame.dlc() as u32;
+        dev.stats_tx(bytes);
+        dev.stats_rx(bytes);
+        // Reflect: the same skb comes back as a received, locally
+        // originated frame (the sending socket stays in skb->sk so that
+        // protocols can tell their own frames).
+        let mut skb = skb;
+        skb.set_can(dev, bindings::PACKET_LOOPBACK as u8);
+        dev.rx(skb);
+        Xmit::Ok
+    }
+}
+
+struct CanLoop {
+    _devs: KVec<Registration<LoopDriver>>,
+}
+
+impl kernel::Module for CanLoop {
+    fn init(_module: &'static ThisModule) -> Result<Self> {
+        let count = param(PARAM_COUNT);
+        let mut devs = KVec::new();
+        for _ in 0..count {
+            let reg = Registration::<LoopDriver>::register(c_str!("can%d"), ())?;
+            pr_info!(
+                "{}: CAN loopback device, droprate {}%\n",
+                reg.dev().name(),
+                param(PARAM_DROPRATE)
+            );
+            devs.push(reg, GFP_KERNEL)?;
+        }
+        Ok(CanLoop { _devs: devs })
+    }
+}

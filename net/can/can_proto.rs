@@ -1,0 +1,396 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! rcan_can: the thesis' CAN 2.0 data link protocol, CANPROTO_CAN
+//! (thesis 5.2.1-5.2.5 and 5.3.2, module `can`).
+//!
+//! `socket(PF_CAN, SOCK_RAW, CANPROTO_CAN)`; addresses are
+//! `struct sockaddr_canarb` (thesis figure 5-5 arbitration field). `bind`
+//! sets the acceptance filter, `connect` the default arbitration field,
+//! `sendmsg` sends one frame (data length = DLC), `recvmsg` returns one
+//! frame's data bytes. Reference: Documentation/networking/rcan/canproto-can.rst.
+//!
+//! Contexts and locks:
+//!
+//! * System calls (process context) take RTNL, then the socket lock (the
+//!   order mainline raw.c uses), then pf_can's writers' mutex inside
+//!   `rcan_rx_set`.
+//! * `can_rx` runs in NET_RX softirq under RCU; it only clones the skb and
+//!   queues it on the socket (receive-queue spinlock).
+//! * `SOCKETS` (every open socket, for the netdevice notifier) is protected
+//!   by RTNL.
+
+use kernel::ffi;
+use kernel::prelude::*;
+
+#[path = "../../rust/glue/mod.rs"]
+mod glue;
+mod rcan_api;
+mod rcan_core;
+
+use glue::bindings;
+use glue::neterr;
+use kernel::c_str;
+use glue::netdev::{DevRef, NetDev};
+use glue::skb::Skb;
+use glue::sock::{Msg, ProtoReg, Sock};
+use glue::sync::{CCell, Rtnl, RtnlLocked, RtnlProof};
+use rcan_api::{CanProto, RxFilter, CANPROTO_CAN};
+use rcan_core::arb::{Arb, MAX_DLC};
+use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use rcan_core::sockaddr::{self, SockaddrArb, AF_UNSPEC, SOCKADDR_CANARB_LEN};
+
+module! {
+    type: CanProtoModule,
+    name: "rcan_can",
+    author: "rcan developers",
+    description: "CANPROTO_CAN: thesis CAN 2.0A/B socket protocol",
+    license: "GPL",
+}
+
+/// A CANPROTO_CAN socket's state, protected by its socket lock.
+#[derive(Default)]
+struct CanSock {
+    /// The filter given to bind, as given (for getsockname).
+    bound: Option<SockaddrArb>,
+    /// The arbitration field and interface given to connect.
+    peer: Option<(Arb, i32)>,
+}
+
+struct CanProtoOps;
+
+static PROTO: ProtoReg<CanProtoOps> = ProtoReg::new();
+
+/// Every open socket, so the notifier can find those bound to a vanishing
+/// device. Protected by RTNL.
+static SOCKETS: RtnlLocked<KVec<usize>> = RtnlLocked::new(KVec::new());
+
+type S = Sock<CanProtoOps>;
+
+/// Headroom for mainline's `struct can_skb_priv`, so mainline CAN drivers
+/// accept our skbs too.
+const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
+
+/// Receive callback (see `rcan_api::RxFn`): softirq, RCU read side.
+unsafe extern "C" fn can_rx(skb: *mut bindings::sk_buff, data: *mut ffi::c_void) {
+    // SAFETY: pf_can passes a valid, borrowed skb; `data` is a sock of ours
+    // that stays alive while its receivers are registered (release()
+    // removes them and waits for running callbacks before the sock can go).
+    let (skb, sk) = unsafe {
+        let Some(s) = Skb::from_raw(skb) else { return };
+        (s, S::from_raw(data.cast()))
+    };
+    // `skb` is only borrowed: clone it and give our reference back.
+    let clone = skb.clone_atomic();
+    core::mem::forget(skb);
+    let Some(mut clone) = clone else { return };
+    // The receiving interface may be gone by the time recvmsg runs.
+    let ifindex = clone.ifindex();
+    clone.set_cb_u32(0, ifindex as u32);
+    // A full receive queue drops the frame (counted by the socket layer).
+    let _ = sk.queue_rcv(clone);
+}
+
+fn set_receivers(sk: &S, filter: Option<&SockaddrArb>) -> Result {
+    let f = filter.map(|a| RxFilter {
+        ifindex: a.ifindex as i32,
+        arb: a.arb,
+        mask: a.mask,
+    });
+    let (ptr, n) = match &f {
+        Some(f) => (f as *const RxFilter, 1),
+        None => (core::ptr::null(), 0),
+    };
+    // SAFETY: `ptr` points to `n` filters valid for the call; `sk` stays
+    // alive until release() removes its receivers (n = 0), which returns
+    // only after every running callback has finished.
+    glue::to_result(unsafe { rcan_api::rcan_rx_set(can_rx, sk.as_ptr().cast(), ptr, n) })
+        .map(|_| ())
+}
+
+/// Checks that `ifindex` is 0 or a CAN device. Caller holds RTNL, so the
+/// answer stays true until it is dropped.
+fn check_ifindex(ifindex: i32, _rtnl: &dyn RtnlProof) -> Result {
+    if ifindex == 0 {
+        return Ok(());
+    }
+    match DevRef::by_index(ifindex) {
+        Some(dev) if dev.is_can() => Ok(()),
+        _ => Err(ENODEV),
+    }
+}
+
+impl glue::sock::Proto for CanProtoOps {
+    type Data = CanSock;
+
+    fn new_data() -> CanSock {
+        CanSock::default()
+    }
+
+    fn release(sk: &S) {
+        let mut rtnl = Rtnl::lock();
+        let me = sk.as_ptr() as usize;
+        glue::kvec_remove_all(SOCKETS.get(&mut rtnl), me);
+        let mut s = sk.lock();
+        if s.bound.take().is_some() {
+            let _ = set_receivers(sk, None);
+        }
+        s.peer = None;
+    }
+
+    fn bind(sk: &S, addr: &[u8]) -> Result {
+        let a = sockaddr::parse(addr).map_err(|e| glue::errno(e.errno()))?;
+        let rx = a.bind_filter().map_err(|e| glue::errno(e.errno()))?;
+        let rtnl = Rtnl::lock();
+        check_ifindex(rx.ifindex, &rtnl)?;
+        let mut s = sk.lock();
+        set_receivers(sk, Some(&a))?;
+        s.bound = Some(a);
+        Ok(())
+    }
+
+    fn connect(sk: &S, addr: &[u8], _flags: i32) -> Result {
+        if addr.len() >= 2 && u16::from_ne_bytes([addr[0], addr[1]]) == AF_UNSPEC {
+            sk.lock().peer = None;
+            return Ok(());
+        }
+        let a = sockaddr::parse(addr).map_err(|e| glue::errno(e.errno()))?;
+        let dest = a.dest().map_err(|e| glue::errno(e.errno()))?;
+        let rtnl = Rtnl::lock();
+        check_ifindex(dest.1, &rtnl)?;
+        sk.lock().peer = Some(dest);
+        Ok(())
+    }
+
+    fn getname(sk: &S, peer: bool, out: &mut [u8]) -> Result<usize> {
+        let s = sk.lock();
+        let a = if peer {
+            let (arb, ifindex) = s.peer.ok_or(neterr::ENOTCONN())?;
+            SockaddrArb {
+                family: sockaddr::AF_CAN,
+                arb: arb.raw(),
+                mask: 0,
+                ifindex: ifindex as u32,
+            }
+        } else {
+            s.bound.unwrap_or(SockaddrArb {
+                family: sockaddr::AF_CAN,
+                arb: 0,
+                mask: 0,
+                ifindex: 0,
+            })
+        };
+        out[..SOCKADDR_CANARB_LEN].copy_from_slice(&a.encode());
+        Ok(SOCKADDR_CANARB_LEN)
+    }
+
+    fn sendmsg(sk: &S, msg: &mut Msg, len: usize) -> Result<usize> {
+        let flags = msg_flags(msg);
+        if flags & bindings::MSG_OOB != 0 {
+            return Err(neterr::EOPNOTSUPP());
+        }
+        let (arb, ifindex) = match msg.name() {
+            Some(name) => {
+                let a = sockaddr::parse(name).map_err(|e| glue::errno(e.errno()))?;
+                a.dest().map_err(|e| glue::errno(e.errno()))?
+            }
+            None => sk.lock().peer.ok_or(neterr::EDESTADDRREQ())?,
+        };
+        if len > MAX_DLC {
+            return Err(EINVAL);
+        }
+        let mut data = [0u8; MAX_DLC];
+        if !arb.is_rtr() {
+            msg.copy_from_user(&mut data[..len])?;
+        }
+        let frame = CanFrame::from_arb(arb, len, &data[..len]).map_err(|e| glue::errno(e.errno()))?;
+        let nonblock = flags & bindings::MSG_DONTWAIT != 0;
+        if ifindex != 0 {
+            let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+            send_one(sk, &dev, &frame, nonblock)?;
+            return Ok(len);
+        }
+        // ifindex 0: every CAN interface that is up (thesis 5.2.2).
+        let (mut any, mut sent) = (false, false);
+        let mut after = 0;
+        while let Some(dev) = DevRef::next_can(after) {
+            after = dev.ifindex();
+            any = true;
+            if dev.is_up() {
+                send_one(sk, &dev, &frame, nonblock)?;
+                sent = true;
+            }
+        }
+        match (any, sent) {
+            (_, true) => Ok(len),
+            (true, false) => Err(neterr::ENETDOWN()),
+            (false, _) => Err(ENODEV),
+        }
+    }
+
+    fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
+        if flags as u32 & (bindings::MSG_OOB | bindings::MSG_ERRQUEUE) != 0 {
+            return Err(neterr::EOPNOTSUPP());
+        }
+        let skb = sk.recv_datagram(flags)?;
+        let bytes: &[u8; CAN_FRAME_LEN] = skb.data().try_into().map_err(|_| EINVAL)?;
+        let frame = CanFrame::from_bytes(bytes);
+        let dlc = frame.dlc();
+        let n = dlc.min(len);
+        // The data field sits at offset 8 of struct can_frame.
+        msg.copy_from_skb(&skb, 8, n)?;
+        if n < dlc {
+            msg.add_flags(bindings::MSG_TRUNC);
+        }
+        msg.recv_cmsgs(sk, &skb);
+        if let Some(arb) = frame.arb() {
+            let a = SockaddrArb {
+                family: sockaddr::AF_CAN,
+                arb: arb.raw(),
+                mask: 0,
+                ifindex: skb.cb_u32(0),
+            };
+            msg.set_name(&a.encode());
+        }
+        // SAFETY: `skb` came from skb_recv_datagram on this sock.
+        unsafe { bindings::skb_free_datagram(sk.as_ptr(), skb.into_raw()) };
+        Ok(if flags as u32 & bindings::MSG_TRUNC != 0 { dlc } else { n })
+    }
+}
+
+fn msg_flags(_msg: &Msg) -> u32 {
+    // sendmsg's flags arrive in msg->msg_flags.
+    _msg.flags()
+}
+
+/// Builds and queues one frame on `dev`. Process context; may block on the
+/// send buffer (thesis 5.2.3: a full transmit queue blocks the sender,
+/// MSG_DONTWAIT gives EAGAIN).
+fn send_one(sk: &S, dev: &DevRef, frame: &CanFrame, nonblock: bool) -> Result {
+    if !dev.is_can() {
+        return Err(ENODEV);
+    }
+    if !dev.is_up() {
+        return Err(neterr::ENETDOWN());
+    }
+    let mut skb = sk.alloc_send_skb(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, nonblock)?;
+    skb.reserve(SKB_PRIV_LEN);
+    // struct can_skb_priv { int ifindex; int skbcnt; }
+    let mut prv = [0u8; SKB_PRIV_LEN as usize];
+    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
+    if !skb.write_headroom(&prv) || !skb.put_data(&frame.to_bytes()) {
+        return Err(neterr::ENOBUFS());
+    }
+    skb.set_can(dev, bindings::PACKET_HOST as u8);
+    // SAFETY: dev_queue_xmit consumes the skb in every case; `dev` is held
+    // until after it returns.
+    let ret = unsafe { bindings::rcan_dev_queue_xmit(skb.into_raw()) };
+    match ret {
+        r if r < 0 => Err(Error::from_errno(r)),
+        0 => Ok(()),
+        r if r as u32 == bindings::NET_XMIT_CN => Ok(()),
+        _ => Err(neterr::ENOBUFS()),
+    }
+}
+
+/// `CanProto.create`: a new CANPROTO_CAN socket. Process context.
+unsafe extern "C" fn can_create(
+    net: *mut bindings::net,
+    sock: *mut bindings::socket,
+    protocol: ffi::c_int,
+    kern: ffi::c_int,
+) -> ffi::c_int {
+    // SAFETY: called by pf_can's create with the socket layer's arguments.
+    if let Err(e) = unsafe { PROTO.create(net, sock, protocol, kern) } {
+        return e.to_errno();
+    }
+    // SAFETY: create succeeded, so `sock->sk` is our new sock.
+    let sk = unsafe { (*sock).sk } as usize;
+    let mut rtnl = Rtnl::lock();
+    if SOCKETS.get(&mut rtnl).push(sk, GFP_KERNEL).is_err() {
+        // The socket layer calls release on failure, which copes with a
+        // socket missing from the list.
+        return ENOMEM.to_errno();
+    }
+    0
+}
+
+static CAN_PROTO: CCell<CanProto> = CCell::new(CanProto {
+    protocol: CANPROTO_CAN,
+    type_: bindings::sock_type_SOCK_RAW as i32,
+    owner: core::ptr::null_mut(),
+    create: can_create,
+});
+
+/// Netdevice notifier: a CAN device is going away. Process context, RTNL
+/// held. Sockets bound to it lose their filter and get ENODEV once.
+unsafe extern "C" fn can_notifier(
+    _nb: *mut bindings::notifier_block,
+    event: ffi::c_ulong,
+    info: *mut ffi::c_void,
+) -> ffi::c_int {
+    if event != bindings::netdev_cmd_NETDEV_UNREGISTER as ffi::c_ulong {
+        return bindings::NOTIFY_DONE as ffi::c_int;
+    }
+    // SAFETY: netdevice notifiers receive a netdev_notifier_info.
+    let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
+    if !dev.is_can() {
+        return bindings::NOTIFY_DONE as ffi::c_int;
+    }
+    let ifindex = dev.ifindex();
+    let mut held = Rtnl::assert_held();
+    for &p in SOCKETS.get(&mut held).iter() {
+        // SAFETY: sockets are in SOCKETS from create until release, which
+        // removes them under RTNL (held here), so `p` is alive.
+        let sk = unsafe { S::from_raw(p as *mut bindings::sock) };
+        let mut s = sk.lock();
+        if matches!(s.bound, Some(b) if b.ifindex as i32 == ifindex) {
+            s.bound = None;
+            let _ = set_receivers(&sk, None);
+            drop(s);
+            sk.report_error(-ENODEV.to_errno());
+        }
+    }
+    bindings::NOTIFY_DONE as ffi::c_int
+}
+
+static NOTIFIER: CCell<bindings::notifier_block> = CCell::new(bindings::notifier_block {
+    notifier_call: Some(can_notifier),
+    next: core::ptr::null_mut(),
+    priority: 0,
+});
+
+struct CanProtoModule;
+
+impl kernel::Module for CanProtoModule {
+    fn init(_module: &'static ThisModule) -> Result<Self> {
+        PROTO.register(c_str!("CANPROTO_CAN"), bindings::PF_CAN as i32)?;
+        // SAFETY: module init: nothing else sees CAN_PROTO yet.
+        unsafe { (*CAN_PROTO.get()).owner = glue::this_module() };
+        // SAFETY: static notifier, unregistered in Drop.
+        if let Err(e) = glue::to_result(unsafe { bindings::register_netdevice_notifier(NOTIFIER.get()) }) {
+            PROTO.unregister();
+            return Err(e);
+        }
+        // SAFETY: static CanProto, unregistered in Drop.
+        if let Err(e) = glue::to_result(unsafe { rcan_api::rcan_proto_register(CAN_PROTO.get()) }) {
+            // SAFETY: registered just above.
+            unsafe { bindings::unregister_netdevice_notifier(NOTIFIER.get()) };
+            PROTO.unregister();
+            return Err(e);
+        }
+        pr_info!("CANPROTO_CAN ({}) registered\n", CANPROTO_CAN);
+        Ok(CanProtoModule)
+    }
+}
+
+impl Drop for CanProtoModule {
+    fn drop(&mut self) {
+        // Every socket holds a reference on this module, so none is left.
+        // SAFETY: registered in init.
+        unsafe {
+            rcan_api::rcan_proto_unregister(CAN_PROTO.get());
+            bindings::unregister_netdevice_notifier(NOTIFIER.get());
+        }
+        PROTO.unregister();
+    }
+}

@@ -1,0 +1,16 @@
+// SPDX-License-Identifier: GPL-2.0
+//! Host-testable core logic of the rcan CAN stack (thesis chapter 5).
+//!
+//! Every module below is also compiled into the kernel modules through
+//! `#[path = ".../net/can/core/src/<name>.rs"] mod <name>;`, so each file is
+//! `no_std`, allocation-free and `unsafe`-free, and refers to its siblings
+//! only as `super::<name>`.
+#![cfg_attr(not(test), no_std)]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod arb;
+pub mod canloop;
+pub mod filter;
+pub mod frame;
+pub mod sockaddr;

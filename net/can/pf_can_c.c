@@ -1,0 +1,27 @@
+// SPDX-License-Identifier: GPL-2.0
+/*
+ * C side of rcan_pf: the writers' mutex and the export table of the
+ * functions defined in pf_can.rs (Rust cannot emit EXPORT_SYMBOL itself).
+ * The prototypes are placeholders for the export table only; the real
+ * signatures are in rcan_api.rs.
+ */
+#include <linux/export.h>
+#include <linux/mutex.h>
+
+#include "../../rust/helpers/rcan_helpers.c"
+
+static DEFINE_MUTEX(rcan_pf_mutex);
+
+struct mutex *rcan_pf_mutex_ptr(void);
+struct mutex *rcan_pf_mutex_ptr(void)
+{
+	return &rcan_pf_mutex;
+}
+
+void rcan_proto_register(void);
+void rcan_proto_unregister(void);
+void rcan_rx_set(void);
+
+EXPORT_SYMBOL_GPL(rcan_proto_register);
+EXPORT_SYMBOL_GPL(rcan_proto_unregister);
+EXPORT_SYMBOL_GPL(rcan_rx_set);

@@ -1,0 +1,17 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The pure, host-tested logic of `net/can/core` (crate `rcan-core`),
+//! compiled into a kernel module. Each file is allocation-free `no_std` Rust
+//! with no `unsafe`; `cargo test -p rcan-core` tests the same files.
+#![allow(dead_code, unreachable_pub, missing_docs)]
+
+#[path = "core/src/arb.rs"]
+pub(crate) mod arb;
+#[path = "core/src/canloop.rs"]
+pub(crate) mod canloop;
+#[path = "core/src/filter.rs"]
+pub(crate) mod filter;
+#[path = "core/src/frame.rs"]
+pub(crate) mod frame;
+#[path = "core/src/sockaddr.rs"]
+pub(crate) mod sockaddr;

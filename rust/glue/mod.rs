@@ -1,0 +1,121 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The rcan glue layer: the only place where rcan code touches raw kernel
+//! pointers.
+//!
+//! Every rcan module compiles this directory into itself
+//! (`#[path = "../../rust/glue/mod.rs"] mod glue;`), together with
+//! bindgen's output for the networking headers that the 6.12 `kernel` crate
+//! does not cover (`rust/bindings/rcan_bindings.h`). Protocol and driver code
+//! above it is safe Rust; each `unsafe` block here says who guarantees it.
+//!
+//! One file per kernel concept: [`sync`] (RCU, RTNL, C-defined mutexes),
+//! [`skb`] (owned socket buffers), [`sock`] (socket protocols from a Rust
+//! trait), [`netdev`] (network devices from a Rust trait).
+#![allow(dead_code)]
+
+#[allow(
+    non_upper_case_globals,
+    non_camel_case_types,
+    non_snake_case,
+    dead_code,
+    unreachable_pub,
+    missing_docs,
+    improper_ctypes,
+    unsafe_op_in_unsafe_fn,
+    clippy::all,
+    rustdoc::all
+)]
+pub(crate) mod bindings {
+    use kernel::ffi;
+    include!("../bindings/bindings_generated.rs");
+    // The kernel blocklists these so that they map to Rust's own types.
+    pub type __kernel_size_t = usize;
+    pub type __kernel_ssize_t = isize;
+    pub type __kernel_ptrdiff_t = isize;
+}
+
+pub(crate) mod netdev;
+pub(crate) mod skb;
+pub(crate) mod sock;
+pub(crate) mod sync;
+
+use kernel::error::{code, Error};
+
+/// Allocation flags, from the `kernel` crate (bindgen cannot see them).
+pub(crate) const GFP_KERNEL: bindings::gfp_t = kernel::bindings::GFP_KERNEL;
+pub(crate) const GFP_ATOMIC: bindings::gfp_t = kernel::bindings::GFP_ATOMIC;
+
+/// This module's `struct module`, for `owner` fields and module references.
+pub(crate) fn this_module() -> *mut bindings::module {
+    #[allow(improper_ctypes)]
+    extern "C" {
+        static __this_module: kernel::types::Opaque<bindings::module>;
+    }
+    // SAFETY: `__this_module` is defined by modpost for every module and
+    // lives as long as the module's code; taking its address is always valid.
+    unsafe { __this_module.get() }
+}
+
+/// Converts a negative C return value into an [`Error`].
+pub(crate) fn to_result(ret: i32) -> kernel::error::Result<i32> {
+    if ret < 0 {
+        Err(Error::from_errno(ret))
+    } else {
+        Ok(ret)
+    }
+}
+
+/// `EINVAL` and friends as [`Error`]s from the pure crates' positive errnos.
+pub(crate) fn errno(positive: i32) -> Error {
+    if positive <= 0 {
+        return code::EINVAL;
+    }
+    Error::from_errno(-positive)
+}
+
+/// Networking errno values that the 6.12 `kernel` crate does not declare,
+/// as functions (`Error::from_errno` is not `const` there).
+#[allow(non_snake_case)]
+pub(crate) mod neterr {
+    use super::{bindings, errno};
+    use kernel::error::Error;
+
+    macro_rules! net_errors {
+        ($($name:ident),* $(,)?) => {
+            $(pub(crate) fn $name() -> Error {
+                errno(bindings::$name as i32)
+            })*
+        };
+    }
+
+    net_errors!(
+        EAFNOSUPPORT,
+        EDESTADDRREQ,
+        ENETDOWN,
+        ENOBUFS,
+        ENOPROTOOPT,
+        ENOTCONN,
+        EOPNOTSUPP,
+        EPROTONOSUPPORT,
+        EPROTOTYPE,
+    );
+}
+
+/// Removes every element equal to `x` from `v` (6.12's `KVec` has no
+/// `retain`). Order is not kept.
+pub(crate) fn kvec_remove_all<T: Copy + PartialEq>(v: &mut kernel::alloc::KVec<T>, x: T) {
+    let mut len = v.len();
+    let mut i = 0;
+    while i < len {
+        if v[i] == x {
+            v.as_mut_slice().swap(i, len - 1);
+            len -= 1;
+        } else {
+            i += 1;
+        }
+    }
+    // SAFETY: `len <= v.len()`; the elements past it are `Copy` (no drop
+    // needed) and are simply forgotten.
+    unsafe { v.set_len(len) };
+}

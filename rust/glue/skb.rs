@@ -1,0 +1,194 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! Owned socket buffers.
+//!
+//! [`Skb`] owns one reference to a `struct sk_buff`. Dropping it is
+//! `kfree_skb` (counted as a drop); [`Skb::consume`] frees it as
+//! successfully used. CAN skbs are linear (allocated by rcan or by drivers
+//! with the data in the head), so [`Skb::data`] covers the whole frame.
+
+use super::bindings;
+use core::ptr::NonNull;
+
+/// An owned reference to a socket buffer.
+///
+/// # Invariants
+///
+/// `self.0` points to a valid `sk_buff` on which we own one reference.
+pub(crate) struct Skb(NonNull<bindings::sk_buff>);
+
+// SAFETY: an skb reference may be handed between contexts and CPUs; the
+// kernel does so on every path (softirq to process context, etc.).
+unsafe impl Send for Skb {}
+
+impl Skb {
+    /// Takes ownership of one reference.
+    ///
+    /// # Safety
+    ///
+    /// `ptr` is NULL or a valid skb whose reference the caller gives away.
+    pub(crate) unsafe fn from_raw(ptr: *mut bindings::sk_buff) -> Option<Skb> {
+        // INVARIANT: non-NULL and owned per the safety contract.
+        NonNull::new(ptr).map(Skb)
+    }
+
+    /// Gives the reference away (to a C function that consumes it).
+    pub(crate) fn into_raw(self) -> *mut bindings::sk_buff {
+        let p = self.0.as_ptr();
+        core::mem::forget(self);
+        p
+    }
+
+    pub(crate) fn as_ptr(&self) -> *mut bindings::sk_buff {
+        self.0.as_ptr()
+    }
+
+    /// Allocates a linear skb. Any context with the matching `gfp`.
+    pub(crate) fn alloc(size: u32, gfp: bindings::gfp_t) -> Option<Skb> {
+        // SAFETY: plain allocation; NULL on failure.
+        unsafe { Skb::from_raw(bindings::rcan_alloc_skb(size, gfp)) }
+    }
+
+    /// Bytes in the skb.
+    pub(crate) fn len(&self) -> u32 {
+        // SAFETY: valid skb by the type invariant.
+        unsafe { (*self.as_ptr()).len }
+    }
+
+    /// The linear data (the whole skb for the linear skbs CAN uses).
+    pub(crate) fn data(&self) -> &[u8] {
+        // SAFETY: `data` points to `len - data_len` readable bytes (the
+        // linear part), valid as long as we hold the reference; `&self`
+        // ties the slice to that.
+        unsafe {
+            let skb = &*self.as_ptr();
+            let head_len = (skb.len - skb.data_len) as usize;
+            if head_len == 0 {
+                return &[];
+            }
+            core::slice::from_raw_parts(skb.data, head_len)
+        }
+    }
+
+    /// Reserves headroom in an empty skb.
+    pub(crate) fn reserve(&mut self, len: u32) {
+        // SAFETY: valid skb; the kernel checks bounds (skb_reserve on an empty
+        // skb only moves data/tail within the allocated head).
+        unsafe { bindings::rcan_skb_reserve(self.as_ptr(), len as i32) };
+    }
+
+    /// Headroom in front of `data`.
+    pub(crate) fn headroom(&self) -> u32 {
+        // SAFETY: valid skb.
+        unsafe { bindings::rcan_skb_headroom(self.as_ptr()) }
+    }
+
+    /// Appends `src` (skb_put + copy). The caller allocated enough tailroom;
+    /// the kernel panics (skb_over_panic) otherwise, so check first.
+    pub(crate) fn put_data(&mut self, src: &[u8]) -> bool {
+        // SAFETY: valid skb; reading the tail/end offsets.
+        let tailroom = unsafe {
+            let skb = &*self.as_ptr();
+            if skb.data_len != 0 {
+                return false;
+            }
+            skb.end.saturating_sub(skb.tail)
+        };
+        if (src.len() as u64) > u64::from(tailroom) {
+            return false;
+        }
+        // SAFETY: tailroom checked above; skb_put returns a pointer to
+        // `src.len()` writable bytes inside the head.
+        unsafe {
+            let dst = bindings::skb_put(self.as_ptr(), src.len() as u32) as *mut u8;
+            core::ptr::copy_nonoverlapping(src.as_ptr(), dst, src.len());
+        }
+        true
+    }
+
+    /// Writes `src` into the headroom just in front of `data` (for
+    /// `struct can_skb_priv`); false if the headroom is too small.
+    pub(crate) fn write_headroom(&mut self, src: &[u8]) -> bool {
+        if (src.len() as u64) > u64::from(self.headroom()) {
+            return false;
+        }
+        // SAFETY: headroom checked; the bytes in front of `data` belong to
+        // this skb's head and nobody else reads them yet (fresh skb).
+        unsafe {
+            let data = (*self.as_ptr()).data;
+            core::ptr::copy_nonoverlapping(src.as_ptr(), data.sub(src.len()), src.len());
+        }
+        true
+    }
+
+    /// `skb_clone(GFP_ATOMIC)`: a new head sharing the data. Any context.
+    pub(crate) fn clone_atomic(&self) -> Option<Skb> {
+        // SAFETY: valid skb; skb_clone returns a new owned reference or NULL.
+        unsafe { Skb::from_raw(bindings::skb_clone(self.as_ptr(), super::GFP_ATOMIC)) }
+    }
+
+    /// Marks the skb as a CAN frame leaving by / arriving on `dev`
+    /// (protocol ETH_P_CAN, headers reset, checksum unnecessary).
+    ///
+    /// The caller holds a reference on `dev` for as long as the skb may use
+    /// it (the transmit path holds it until dev_queue_xmit returns).
+    pub(crate) fn set_can(&mut self, dev: &super::netdev::NetDev, pkt_type: u8) {
+        // SAFETY: valid skb we own; `dev` is a live device (NetDev invariant).
+        unsafe { bindings::rcan_skb_set_can(self.as_ptr(), dev.as_ptr(), pkt_type) };
+    }
+
+    /// Frees as successfully consumed (not a drop in drop monitors).
+    pub(crate) fn consume(self) {
+        // SAFETY: we own the reference and give it up.
+        unsafe { bindings::rcan_consume_skb(self.into_raw()) };
+    }
+
+    /// ifindex of the device the skb arrived on / leaves by (0 if none).
+    pub(crate) fn ifindex(&self) -> i32 {
+        // SAFETY: valid skb; `dev` is NULL or a device kept alive by the
+        // path that handed us the skb (receive path or transmit path).
+        unsafe {
+            let dev = bindings::rcan_skb_dev(self.as_ptr());
+            if dev.is_null() {
+                0
+            } else {
+                (*dev).ifindex
+            }
+        }
+    }
+
+    /// `skb->pkt_type` (PACKET_HOST, PACKET_LOOPBACK, ...).
+    pub(crate) fn pkt_type(&self) -> u8 {
+        // SAFETY: valid skb.
+        unsafe { bindings::rcan_skb_pkt_type(self.as_ptr()) }
+    }
+
+    /// The first bytes of the 48-byte control buffer, owned by whoever queues
+    /// the skb (rcan protocols store the receive ifindex there).
+    pub(crate) fn cb_u32(&self, idx: usize) -> u32 {
+        // SAFETY: valid skb; cb is a 48-byte array, idx bounded below.
+        unsafe {
+            let cb = &(*self.as_ptr()).cb;
+            let i = idx.min(cb.len() / 4 - 1) * 4;
+            u32::from_ne_bytes([cb[i] as u8, cb[i + 1] as u8, cb[i + 2] as u8, cb[i + 3] as u8])
+        }
+    }
+
+    pub(crate) fn set_cb_u32(&mut self, idx: usize, v: u32) {
+        // SAFETY: valid skb we own; cb bounds as above.
+        unsafe {
+            let cb = &mut (*self.as_ptr()).cb;
+            let i = idx.min(cb.len() / 4 - 1) * 4;
+            for (k, b) in v.to_ne_bytes().iter().enumerate() {
+                cb[i + k] = *b as _;
+            }
+        }
+    }
+}
+
+impl Drop for Skb {
+    fn drop(&mut self) {
+        // SAFETY: we own one reference (type invariant).
+        unsafe { bindings::rcan_kfree_skb(self.as_ptr()) };
+    }
+}

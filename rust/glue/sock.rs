@@ -1,0 +1,509 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! Socket protocols from a Rust trait.
+//!
+//! A protocol implements [`Proto`]; [`proto_ops_template`] builds its
+//! `struct proto_ops`, [`ProtoReg`] registers its `struct proto` (whose
+//! objects are a `struct sock` followed by `Proto::Data`), and [`create`]
+//! makes a new socket of it. `Proto::Data` is constructed in `create` and
+//! dropped in `sk_destruct`, when the last reference to the sock goes.
+//!
+//! Locking: `Proto::Data` is protected by the socket lock (`lock_sock`),
+//! reached through [`Sock::lock`]; only process context takes it. The
+//! receive path (softirq) never touches `Data`: it queues skbs with
+//! [`Sock::queue_rcv`], which uses the receive queue's own spinlock.
+
+use super::bindings;
+use super::skb::Skb;
+use core::marker::PhantomData;
+use kernel::error::{code, Error, Result};
+use kernel::ffi;
+
+/// The object sk_alloc() allocates for protocol `T`.
+#[repr(C)]
+struct SockObj<D> {
+    sk: bindings::sock,
+    data: D,
+}
+
+/// A socket protocol. All methods run in process context, called through
+/// the socket layer on behalf of a system call, and may sleep.
+pub(crate) trait Proto: Sized + 'static {
+    /// Per-socket state, protected by the socket lock.
+    type Data: Send;
+
+    /// Initial state of a new socket.
+    fn new_data() -> Self::Data;
+    /// The socket is being closed. Undo everything that makes other code
+    /// reach the sock (receivers, lists) before returning.
+    fn release(sk: &Sock<Self>);
+    fn bind(sk: &Sock<Self>, addr: &[u8]) -> Result;
+    fn connect(sk: &Sock<Self>, addr: &[u8], flags: i32) -> Result;
+    /// Writes the local or peer address into `out`; returns its length.
+    fn getname(sk: &Sock<Self>, peer: bool, out: &mut [u8]) -> Result<usize>;
+    fn sendmsg(sk: &Sock<Self>, msg: &mut Msg, len: usize) -> Result<usize>;
+    fn recvmsg(sk: &Sock<Self>, msg: &mut Msg, len: usize, flags: i32) -> Result<usize>;
+}
+
+/// A `struct sock` of protocol `T`, borrowed.
+pub(crate) struct Sock<T: Proto> {
+    sk: *mut bindings::sock,
+    _t: PhantomData<T>,
+}
+
+impl<T: Proto> Sock<T> {
+    /// # Safety
+    ///
+    /// `sk` is a live sock created by [`create`] for `T`, and stays alive
+    /// while the returned value is used.
+    pub(crate) unsafe fn from_raw(sk: *mut bindings::sock) -> Sock<T> {
+        Sock {
+            sk,
+            _t: PhantomData,
+        }
+    }
+
+    pub(crate) fn as_ptr(&self) -> *mut bindings::sock {
+        self.sk
+    }
+
+    /// Takes the socket lock (`lock_sock`). Process context; sleeps.
+    pub(crate) fn lock(&self) -> SockGuard<'_, T> {
+        // SAFETY: live sock (type invariant); released in the guard's Drop.
+        unsafe { bindings::rcan_lock_sock(self.sk) };
+        SockGuard {
+            sock: self,
+            _not_send: PhantomData,
+        }
+    }
+
+    /// Queues `skb` on the receive queue (charging the receive buffer) and
+    /// wakes readers. Softirq or process context. The skb is freed if the
+    /// queue is full.
+    pub(crate) fn queue_rcv(&self, skb: Skb) -> Result {
+        let p = skb.into_raw();
+        // SAFETY: live sock; on success the queue owns the skb.
+        let ret = unsafe { bindings::rcan_sock_queue_rcv_skb(self.sk, p) };
+        if ret < 0 {
+            // SAFETY: on failure the reference is still ours.
+            drop(unsafe { Skb::from_raw(p) });
+            return Err(Error::from_errno(ret));
+        }
+        Ok(())
+    }
+
+    /// Waits for and dequeues one skb (`skb_recv_datagram`), honouring
+    /// MSG_DONTWAIT, MSG_PEEK, SO_RCVTIMEO and pending `sk_err`.
+    pub(crate) fn recv_datagram(&self, flags: i32) -> Result<Skb> {
+        let mut err: ffi::c_int = 0;
+        // SAFETY: live sock.
+        let skb = unsafe { bindings::skb_recv_datagram(self.sk, flags as u32, &mut err) };
+        // SAFETY: an owned skb or NULL with `err` set.
+        unsafe { Skb::from_raw(skb) }.ok_or_else(|| Error::from_errno(err))
+    }
+
+    /// Allocates an skb charged to the send buffer, blocking while it is
+    /// full unless `nonblock` (then EAGAIN); honours SO_SNDTIMEO.
+    pub(crate) fn alloc_send_skb(&self, size: u32, nonblock: bool) -> Result<Skb> {
+        let mut err: ffi::c_int = 0;
+        // SAFETY: live sock.
+        let skb = unsafe {
+            bindings::rcan_sock_alloc_send_skb(self.sk, size as _, nonblock as i32, &mut err)
+        };
+        // SAFETY: an owned skb or NULL with `err` set.
+        unsafe { Skb::from_raw(skb) }.ok_or_else(|| Error::from_errno(err))
+    }
+
+    /// Sets `sk_err` and reports it to waiters (recv/poll see it once).
+    pub(crate) fn report_error(&self, errno: i32) {
+        // SAFETY: live sock; sk_err is written like this by every protocol.
+        unsafe {
+            (*self.sk).sk_err = errno;
+            bindings::sk_error_report(self.sk);
+        }
+    }
+}
+
+/// The socket lock held; gives access to `Proto::Data`.
+pub(crate) struct SockGuard<'a, T: Proto> {
+    sock: &'a Sock<T>,
+    _not_send: PhantomData<*mut ()>,
+}
+
+impl<T: Proto> core::ops::Deref for SockGuard<'_, T> {
+    type Target = T::Data;
+    fn deref(&self) -> &T::Data {
+        // SAFETY: the sock was created by `create` for `T`, so it is a
+        // `SockObj<T::Data>` with initialised data; the socket lock is held.
+        unsafe { &(*self.sock.sk.cast::<SockObj<T::Data>>()).data }
+    }
+}
+
+impl<T: Proto> core::ops::DerefMut for SockGuard<'_, T> {
+    fn deref_mut(&mut self) -> &mut T::Data {
+        // SAFETY: as above; the socket lock gives exclusive access.
+        unsafe { &mut (*self.sock.sk.cast::<SockObj<T::Data>>()).data }
+    }
+}
+
+impl<T: Proto> Drop for SockGuard<'_, T> {
+    fn drop(&mut self) {
+        // SAFETY: paired with lock_sock in Sock::lock.
+        unsafe { bindings::rcan_release_sock(self.sock.sk) };
+    }
+}
+
+/// A `struct msghdr` of a sendmsg/recvmsg call.
+pub(crate) struct Msg(*mut bindings::msghdr);
+
+impl Msg {
+    /// The destination address of a sendmsg (a kernel copy), if any.
+    pub(crate) fn name(&self) -> Option<&[u8]> {
+        // SAFETY: the socket layer passes a valid msghdr whose msg_name, if
+        // set, points to a kernel sockaddr_storage of msg_namelen bytes.
+        unsafe {
+            let m = &*self.0;
+            if m.msg_name.is_null() {
+                None
+            } else {
+                let len = (m.msg_namelen.max(0) as usize).min(128);
+                Some(core::slice::from_raw_parts(m.msg_name as *const u8, len))
+            }
+        }
+    }
+
+    /// Stores a source address for recvmsg (if the caller asked for one).
+    pub(crate) fn set_name(&mut self, addr: &[u8]) {
+        // SAFETY: for recvmsg, msg_name is NULL or a kernel
+        // sockaddr_storage (128 bytes) that is copied out afterwards.
+        unsafe {
+            let m = &mut *self.0;
+            if m.msg_name.is_null() {
+                return;
+            }
+            let n = addr.len().min(128);
+            core::ptr::copy_nonoverlapping(addr.as_ptr(), m.msg_name as *mut u8, n);
+            m.msg_namelen = n as i32;
+        }
+    }
+
+    /// Copies `dst.len()` bytes from the user's buffers; EFAULT on a bad
+    /// pointer.
+    pub(crate) fn copy_from_user(&mut self, dst: &mut [u8]) -> Result {
+        // SAFETY: valid msghdr; `dst` is a writable kernel buffer.
+        let ret = unsafe {
+            bindings::rcan_memcpy_from_msg(dst.as_mut_ptr().cast(), self.0, dst.len() as i32)
+        };
+        super::to_result(ret).map(|_| ())
+    }
+
+    /// Copies `len` bytes of `skb` from `offset` to the user's buffers.
+    pub(crate) fn copy_from_skb(&mut self, skb: &Skb, offset: usize, len: usize) -> Result {
+        // SAFETY: valid msghdr and skb; the kernel checks the skb bounds.
+        let ret = unsafe {
+            bindings::rcan_skb_copy_datagram_msg(skb.as_ptr(), offset as i32, self.0, len as i32)
+        };
+        super::to_result(ret).map(|_| ())
+    }
+
+    /// The flags of a sendmsg call.
+    pub(crate) fn flags(&self) -> u32 {
+        // SAFETY: valid msghdr.
+        unsafe { (*self.0).msg_flags }
+    }
+
+    /// Adds `flag` (e.g. MSG_TRUNC) to the flags returned to the user.
+    pub(crate) fn add_flags(&mut self, flag: u32) {
+        // SAFETY: valid msghdr.
+        unsafe { (*self.0).msg_flags |= flag };
+    }
+
+    /// Timestamps and other control messages the socket asked for.
+    pub(crate) fn recv_cmsgs<T: Proto>(&mut self, sk: &Sock<T>, skb: &Skb) {
+        // SAFETY: valid msghdr, sock and skb.
+        unsafe { bindings::rcan_sock_recv_cmsgs(self.0, sk.as_ptr(), skb.as_ptr()) };
+    }
+}
+
+/// A registered `struct proto` (the sock allocator of protocol `T`).
+///
+/// It lives in a static of the protocol module ([`ProtoReg::new`] is const);
+/// [`ProtoReg::register`] in module init, [`ProtoReg::unregister`] in exit.
+pub(crate) struct ProtoReg<T: Proto> {
+    proto: core::cell::UnsafeCell<bindings::proto>,
+    ops: core::cell::UnsafeCell<bindings::proto_ops>,
+    _t: PhantomData<T>,
+}
+
+// SAFETY: the C structs are written only in `register`, which module init
+// calls before anything else can see them; afterwards they are read-only.
+unsafe impl<T: Proto> Sync for ProtoReg<T> {}
+
+impl<T: Proto> ProtoReg<T> {
+    pub(crate) const fn new() -> Self {
+        ProtoReg {
+            // SAFETY: all-zero is a valid `struct proto` / `proto_ops`
+            // before registration; `register` fills in what is needed.
+            proto: core::cell::UnsafeCell::new(unsafe { core::mem::zeroed() }),
+            ops: core::cell::UnsafeCell::new(unsafe { core::mem::zeroed() }),
+            _t: PhantomData,
+        }
+    }
+
+    /// Fills in and registers the proto. Module init only (process context,
+    /// before any socket of `T` can exist). `name` must be static.
+    pub(crate) fn register(&self, name: &'static kernel::str::CStr, family: i32) -> Result {
+        // SAFETY: module init is single-threaded with respect to these
+        // structs: nothing else references them before registration.
+        unsafe {
+            let p = &mut *self.proto.get();
+            let n = name.as_bytes_with_nul();
+            for (i, b) in n.iter().take(p.name.len() - 1).enumerate() {
+                p.name[i] = *b as ffi::c_char;
+            }
+            p.owner = super::this_module();
+            p.obj_size = core::mem::size_of::<SockObj<T::Data>>() as u32;
+            let o = &mut *self.ops.get();
+            *o = proto_ops_template::<T>();
+            o.family = family;
+            o.owner = super::this_module();
+            super::to_result(bindings::proto_register(p, 0))?;
+        }
+        Ok(())
+    }
+
+    /// Module exit only, after the last socket is gone (guaranteed by the
+    /// module reference each socket holds).
+    pub(crate) fn unregister(&self) {
+        // SAFETY: registered in `register`.
+        unsafe { bindings::proto_unregister(self.proto.get()) };
+    }
+
+    /// Creates a socket of this protocol: allocates the sock, initialises
+    /// `T::Data`. Process context.
+    ///
+    /// # Safety
+    ///
+    /// `net` and `sock` come from the socket layer's `create` call;
+    /// `register` succeeded.
+    pub(crate) unsafe fn create(
+        &self,
+        net: *mut bindings::net,
+        sock: *mut bindings::socket,
+        protocol: i32,
+        kern: i32,
+    ) -> Result {
+        // SAFETY: per the contract; sk_alloc zeroes the whole object.
+        unsafe {
+            (*sock).ops = self.ops.get();
+            let sk = bindings::sk_alloc(
+                net,
+                bindings::PF_CAN as i32,
+                super::GFP_KERNEL,
+                self.proto.get(),
+                kern,
+            );
+            if sk.is_null() {
+                return Err(code::ENOMEM);
+            }
+            bindings::sock_init_data(sock, sk);
+            (*sk).sk_protocol = protocol as u16;
+            core::ptr::addr_of_mut!((*sk.cast::<SockObj<T::Data>>()).data).write(T::new_data());
+            (*sk).sk_destruct = Some(destruct::<T>);
+        }
+        Ok(())
+    }
+}
+
+/// `sk_destruct`: the last reference is gone. Any context (the final
+/// `sock_put` can come from an skb destructor in softirq).
+unsafe extern "C" fn destruct<T: Proto>(sk: *mut bindings::sock) {
+    // SAFETY: the sock was created by `ProtoReg::create` for `T` with
+    // initialised data; nothing can reach it any more.
+    unsafe {
+        bindings::rcan_sk_purge_queues(sk);
+        core::ptr::drop_in_place(core::ptr::addr_of_mut!((*sk.cast::<SockObj<T::Data>>()).data));
+    }
+}
+
+/// The `struct proto_ops` of protocol `T`: our hooks plus the kernel's
+/// "not supported" ones. `family` and `owner` are set by `ProtoReg`.
+pub(crate) const fn proto_ops_template<T: Proto>() -> bindings::proto_ops {
+    bindings::proto_ops {
+        release: Some(release::<T>),
+        bind: Some(bind::<T>),
+        connect: Some(connect::<T>),
+        socketpair: Some(bindings::sock_no_socketpair),
+        accept: Some(bindings::sock_no_accept),
+        getname: Some(getname::<T>),
+        poll: Some(bindings::datagram_poll),
+        ioctl: Some(no_ioctl),
+        listen: Some(bindings::sock_no_listen),
+        shutdown: Some(bindings::sock_no_shutdown),
+        setsockopt: Some(no_setsockopt),
+        getsockopt: Some(no_getsockopt),
+        sendmsg: Some(sendmsg::<T>),
+        recvmsg: Some(recvmsg::<T>),
+        mmap: Some(bindings::sock_no_mmap),
+        // SAFETY: all-zero is valid for the remaining (optional) hooks.
+        ..unsafe { core::mem::zeroed() }
+    }
+}
+
+fn ret(r: Result) -> ffi::c_int {
+    match r {
+        Ok(()) => 0,
+        Err(e) => e.to_errno(),
+    }
+}
+
+/// # Safety
+///
+/// `sock` is a socket of protocol `T` (called through its proto_ops).
+unsafe fn sock_of<T: Proto>(sock: *mut bindings::socket) -> Option<Sock<T>> {
+    // SAFETY: the socket layer passes a valid socket; `sk` is NULL after
+    // release or a sock of ours kept alive by the socket.
+    unsafe {
+        let sk = (*sock).sk;
+        if sk.is_null() {
+            None
+        } else {
+            Some(Sock::from_raw(sk))
+        }
+    }
+}
+
+unsafe extern "C" fn release<T: Proto>(sock: *mut bindings::socket) -> ffi::c_int {
+    // SAFETY: called by the socket layer on close, once.
+    let Some(sk) = (unsafe { sock_of::<T>(sock) }) else {
+        return 0;
+    };
+    T::release(&sk);
+    // SAFETY: the protocol removed every path to the sock in release();
+    // orphan it, detach it from the socket and drop the socket's reference.
+    unsafe {
+        bindings::rcan_sock_orphan(sk.as_ptr());
+        (*sock).sk = core::ptr::null_mut();
+        bindings::rcan_sock_put(sk.as_ptr());
+    }
+    0
+}
+
+/// # Safety
+///
+/// `addr` points to `len` readable bytes (a kernel copy made by the socket
+/// layer) or is NULL.
+unsafe fn addr_slice<'a>(addr: *mut bindings::sockaddr, len: ffi::c_int) -> &'a [u8] {
+    if addr.is_null() || len <= 0 {
+        return &[];
+    }
+    // SAFETY: per the contract; the socket layer caps len at
+    // sizeof(struct sockaddr_storage).
+    unsafe { core::slice::from_raw_parts(addr as *const u8, (len as usize).min(128)) }
+}
+
+unsafe extern "C" fn bind<T: Proto>(
+    sock: *mut bindings::socket,
+    addr: *mut bindings::sockaddr,
+    len: ffi::c_int,
+) -> ffi::c_int {
+    // SAFETY: socket-layer call with a kernel copy of the address.
+    let (sk, a) = unsafe { (sock_of::<T>(sock), addr_slice(addr, len)) };
+    match sk {
+        Some(sk) => ret(T::bind(&sk, a)),
+        None => code::EBADF.to_errno(),
+    }
+}
+
+unsafe extern "C" fn connect<T: Proto>(
+    sock: *mut bindings::socket,
+    addr: *mut bindings::sockaddr,
+    len: ffi::c_int,
+    flags: ffi::c_int,
+) -> ffi::c_int {
+    // SAFETY: as in bind.
+    let (sk, a) = unsafe { (sock_of::<T>(sock), addr_slice(addr, len)) };
+    match sk {
+        Some(sk) => ret(T::connect(&sk, a, flags)),
+        None => code::EBADF.to_errno(),
+    }
+}
+
+unsafe extern "C" fn getname<T: Proto>(
+    sock: *mut bindings::socket,
+    addr: *mut bindings::sockaddr,
+    peer: ffi::c_int,
+) -> ffi::c_int {
+    // SAFETY: `addr` is a kernel sockaddr_storage (128 bytes).
+    let out = unsafe { core::slice::from_raw_parts_mut(addr as *mut u8, 128) };
+    // SAFETY: socket-layer call.
+    match unsafe { sock_of::<T>(sock) } {
+        Some(sk) => match T::getname(&sk, peer != 0, out) {
+            Ok(n) => n as ffi::c_int,
+            Err(e) => e.to_errno(),
+        },
+        None => code::EBADF.to_errno(),
+    }
+}
+
+unsafe extern "C" fn sendmsg<T: Proto>(
+    sock: *mut bindings::socket,
+    msg: *mut bindings::msghdr,
+    len: usize,
+) -> ffi::c_int {
+    let mut m = Msg(msg);
+    // SAFETY: socket-layer call.
+    match unsafe { sock_of::<T>(sock) } {
+        Some(sk) => match T::sendmsg(&sk, &mut m, len) {
+            Ok(n) => n as ffi::c_int,
+            Err(e) => e.to_errno(),
+        },
+        None => code::EBADF.to_errno(),
+    }
+}
+
+unsafe extern "C" fn recvmsg<T: Proto>(
+    sock: *mut bindings::socket,
+    msg: *mut bindings::msghdr,
+    len: usize,
+    flags: ffi::c_int,
+) -> ffi::c_int {
+    let mut m = Msg(msg);
+    // SAFETY: socket-layer call.
+    match unsafe { sock_of::<T>(sock) } {
+        Some(sk) => match T::recvmsg(&sk, &mut m, len, flags) {
+            Ok(n) => n as ffi::c_int,
+            Err(e) => e.to_errno(),
+        },
+        None => code::EBADF.to_errno(),
+    }
+}
+
+/// Lets the socket layer fall back to the generic device ioctls.
+unsafe extern "C" fn no_ioctl(
+    _sock: *mut bindings::socket,
+    _cmd: ffi::c_uint,
+    _arg: ffi::c_ulong,
+) -> ffi::c_int {
+    -(bindings::ENOIOCTLCMD as ffi::c_int)
+}
+
+unsafe extern "C" fn no_setsockopt(
+    _sock: *mut bindings::socket,
+    _level: ffi::c_int,
+    _name: ffi::c_int,
+    _val: bindings::sockptr_t,
+    _len: ffi::c_uint,
+) -> ffi::c_int {
+    -(bindings::ENOPROTOOPT as ffi::c_int)
+}
+
+unsafe extern "C" fn no_getsockopt(
+    _sock: *mut bindings::socket,
+    _level: ffi::c_int,
+    _name: ffi::c_int,
+    _val: *mut ffi::c_char,
+    _len: *mut ffi::c_int,
+) -> ffi::c_int {
+    -(bindings::ENOPROTOOPT as ffi::c_int)
+}

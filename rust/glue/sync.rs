@@ -1,0 +1,234 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! RCU, RTNL and C-defined mutexes.
+//!
+//! * [`RcuReadGuard`]: an RCU read-side critical section (any context).
+//! * [`RcuPtr`]: a pointer published under RCU: readers load it inside a
+//!   read-side section, writers swap it under their own lock and free the
+//!   old object after a grace period.
+//! * [`Rtnl`]: the RTNL mutex (process context).
+//! * [`CMutex`]: data protected by a `struct mutex` defined in the module's
+//!   C file with `DEFINE_MUTEX` (6.12's `kernel::sync::Mutex` cannot be a
+//!   plain `static`).
+
+use super::bindings;
+use core::cell::UnsafeCell;
+use core::marker::PhantomData;
+use core::ops::{Deref, DerefMut};
+use core::sync::atomic::{AtomicPtr, Ordering};
+
+/// An RCU read-side critical section; ends when dropped. Not `Send`: it must
+/// end on the CPU and in the context that started it.
+pub(crate) struct RcuReadGuard(PhantomData<*mut ()>);
+
+impl RcuReadGuard {
+    /// Enters a read-side critical section. Any context.
+    pub(crate) fn new() -> Self {
+        // SAFETY: rcu_read_lock() may be called in any context; the matching
+        // unlock is in Drop.
+        unsafe { bindings::rcan_rcu_read_lock() };
+        RcuReadGuard(PhantomData)
+    }
+}
+
+impl Drop for RcuReadGuard {
+    fn drop(&mut self) {
+        // SAFETY: paired with the rcu_read_lock() in new().
+        unsafe { bindings::rcan_rcu_read_unlock() };
+    }
+}
+
+/// Waits for all pre-existing RCU readers. Process context; sleeps.
+pub(crate) fn synchronize_rcu() {
+    // SAFETY: callers are in process context (documented contract).
+    unsafe { bindings::synchronize_rcu() };
+}
+
+/// Waits for all pending `call_rcu` callbacks. Process context; sleeps.
+/// Module exit calls it so no callback runs after the code is gone.
+pub(crate) fn rcu_barrier() {
+    // SAFETY: callers are in process context (documented contract).
+    unsafe { bindings::rcu_barrier() };
+}
+
+/// A pointer to a heap object published under RCU.
+///
+/// Readers: [`RcuPtr::read`] inside an [`RcuReadGuard`]. Writers: must be
+/// serialised by a lock of their own (named at each `RcuPtr` definition);
+/// [`RcuPtr::replace`] publishes the new object with release ordering
+/// (`rcu_assign_pointer`) and returns the old one, which the writer frees only
+/// after a grace period.
+pub(crate) struct RcuPtr<T> {
+    ptr: AtomicPtr<T>,
+}
+
+// SAFETY: the pointee is only shared through `&T` with readers on any CPU,
+// and moved between CPUs by writers: `T: Send + Sync` makes that sound.
+unsafe impl<T: Send + Sync> Sync for RcuPtr<T> {}
+
+impl<T> RcuPtr<T> {
+    /// An empty (NULL) pointer.
+    pub(crate) const fn null() -> Self {
+        RcuPtr {
+            ptr: AtomicPtr::new(core::ptr::null_mut()),
+        }
+    }
+
+    /// `rcu_dereference`: the current object, valid while `_guard` lives.
+    pub(crate) fn read<'a>(&self, _guard: &'a RcuReadGuard) -> Option<&'a T> {
+        let p = self.ptr.load(Ordering::Acquire);
+        // SAFETY: writers publish only fully initialised objects (release
+        // store in replace()) and free replaced objects only after a grace
+        // period, which cannot end while `_guard` holds the read lock.
+        unsafe { p.as_ref() }
+    }
+
+    /// `rcu_assign_pointer`: publishes `new` and returns the previous
+    /// pointer. The caller holds the writers' lock and must not free the
+    /// returned object before a grace period has elapsed.
+    pub(crate) fn replace(&self, new: *mut T) -> *mut T {
+        self.ptr.swap(new, Ordering::AcqRel)
+    }
+
+    /// The current pointer, for writers (who hold the writers' lock).
+    pub(crate) fn get_locked(&self) -> *mut T {
+        self.ptr.load(Ordering::Acquire)
+    }
+}
+
+/// Holding the RTNL mutex. Process context; sleeps.
+pub(crate) struct Rtnl(PhantomData<*mut ()>);
+
+impl Rtnl {
+    /// Takes the RTNL mutex.
+    pub(crate) fn lock() -> Self {
+        // SAFETY: process context (callers' contract); unlocked in Drop.
+        unsafe { bindings::rcan_rtnl_lock() };
+        Rtnl(PhantomData)
+    }
+
+    /// For code called by the kernel with RTNL already held (netdevice
+    /// notifiers): asserts it and returns a token that does not unlock.
+    pub(crate) fn assert_held() -> RtnlHeld {
+        // SAFETY: ASSERT_RTNL only reads the lock state.
+        unsafe { bindings::rcan_assert_rtnl() };
+        RtnlHeld(PhantomData)
+    }
+}
+
+impl Drop for Rtnl {
+    fn drop(&mut self) {
+        // SAFETY: paired with rtnl_lock() in lock().
+        unsafe { bindings::rcan_rtnl_unlock() };
+    }
+}
+
+/// Proof that RTNL is held by a caller further up (see [`Rtnl::assert_held`]).
+pub(crate) struct RtnlHeld(PhantomData<*mut ()>);
+
+/// Something that proves RTNL is held.
+pub(crate) trait RtnlProof {}
+impl RtnlProof for Rtnl {}
+impl RtnlProof for RtnlHeld {}
+
+/// Data protected by RTNL.
+pub(crate) struct RtnlLocked<T> {
+    data: UnsafeCell<T>,
+}
+
+// SAFETY: access only through `get`, which requires proof that RTNL is held,
+// so at most one thread touches `data` at a time.
+unsafe impl<T: Send> Sync for RtnlLocked<T> {}
+
+impl<T> RtnlLocked<T> {
+    pub(crate) const fn new(data: T) -> Self {
+        RtnlLocked {
+            data: UnsafeCell::new(data),
+        }
+    }
+
+    /// The data, for as long as the RTNL proof is borrowed.
+    #[allow(clippy::mut_from_ref)]
+    pub(crate) fn get<'a>(&'a self, _rtnl: &'a mut dyn RtnlProof) -> &'a mut T {
+        // SAFETY: RTNL is held for 'a (proof borrowed mutably, so no second
+        // `&mut T` can be made from the same proof), and RTNL excludes every
+        // other accessor.
+        unsafe { &mut *self.data.get() }
+    }
+}
+
+/// Data protected by a `struct mutex` defined in C with `DEFINE_MUTEX`.
+pub(crate) struct CMutex<T> {
+    lock: fn() -> *mut bindings::mutex,
+    data: UnsafeCell<T>,
+}
+
+// SAFETY: `data` is only reached through a guard holding the mutex.
+unsafe impl<T: Send> Sync for CMutex<T> {}
+
+impl<T> CMutex<T> {
+    /// `lock` returns the address of the C mutex.
+    pub(crate) const fn new(lock: fn() -> *mut bindings::mutex, data: T) -> Self {
+        CMutex {
+            lock,
+            data: UnsafeCell::new(data),
+        }
+    }
+
+    /// Locks the mutex. Process context; sleeps.
+    pub(crate) fn lock(&self) -> CMutexGuard<'_, T> {
+        // SAFETY: the pointer is a statically defined, initialised mutex.
+        unsafe { bindings::rcan_mutex_lock((self.lock)()) };
+        CMutexGuard {
+            m: self,
+            _not_send: PhantomData,
+        }
+    }
+}
+
+/// A held [`CMutex`].
+pub(crate) struct CMutexGuard<'a, T> {
+    m: &'a CMutex<T>,
+    _not_send: PhantomData<*mut ()>,
+}
+
+impl<T> Deref for CMutexGuard<'_, T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        // SAFETY: the mutex is held while the guard lives.
+        unsafe { &*self.m.data.get() }
+    }
+}
+
+impl<T> DerefMut for CMutexGuard<'_, T> {
+    fn deref_mut(&mut self) -> &mut T {
+        // SAFETY: the mutex is held while the guard lives, exclusively.
+        unsafe { &mut *self.m.data.get() }
+    }
+}
+
+impl<T> Drop for CMutexGuard<'_, T> {
+    fn drop(&mut self) {
+        // SAFETY: we locked it in CMutex::lock().
+        unsafe { bindings::rcan_mutex_unlock((self.m.lock)()) };
+    }
+}
+
+/// A C struct in a `static` that the kernel links into its own lists
+/// (`packet_type`, `notifier_block`, ...): mutable through raw pointers only.
+pub(crate) struct CCell<T>(UnsafeCell<T>);
+
+// SAFETY: the kernel serialises access to such structs with its own locks
+// (registration under RTNL or the ptype lock); Rust only hands out the
+// pointer.
+unsafe impl<T> Sync for CCell<T> {}
+
+impl<T> CCell<T> {
+    pub(crate) const fn new(v: T) -> Self {
+        CCell(UnsafeCell::new(v))
+    }
+
+    pub(crate) fn get(&self) -> *mut T {
+        self.0.get()
+    }
+}

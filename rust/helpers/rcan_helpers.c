@@ -1,0 +1,275 @@
+// SPDX-License-Identifier: GPL-2.0
+/*
+ * Out-of-line wrappers for inline kernel functions; see rcan_helpers.h.
+ * Included by one small C file per module (e.g. net/can/pf_can_helpers.c)
+ * so that every module has its own private copy.
+ */
+#include <linux/can.h>
+#include <linux/if_arp.h>
+#include <linux/module.h>
+#include <linux/mutex.h>
+#include <linux/netdevice.h>
+#include <linux/random.h>
+#include <linux/rcupdate.h>
+#include <linux/rtnetlink.h>
+#include <linux/skbuff.h>
+#include <net/sock.h>
+
+#include "rcan_helpers.h"
+
+void rcan_rcu_read_lock(void)
+{
+	rcu_read_lock();
+}
+
+void rcan_rcu_read_unlock(void)
+{
+	rcu_read_unlock();
+}
+
+void rcan_mutex_lock(struct mutex *lock)
+{
+	mutex_lock(lock);
+}
+
+void rcan_mutex_unlock(struct mutex *lock)
+{
+	mutex_unlock(lock);
+}
+
+void rcan_rtnl_lock(void)
+{
+	rtnl_lock();
+}
+
+void rcan_rtnl_unlock(void)
+{
+	rtnl_unlock();
+}
+
+void rcan_assert_rtnl(void)
+{
+	ASSERT_RTNL();
+}
+
+struct sk_buff *rcan_alloc_skb(unsigned int size, gfp_t gfp)
+{
+	return alloc_skb(size, gfp);
+}
+
+void rcan_kfree_skb(struct sk_buff *skb)
+{
+	kfree_skb(skb);
+}
+
+void rcan_consume_skb(struct sk_buff *skb)
+{
+	consume_skb(skb);
+}
+
+struct sk_buff *rcan_sock_alloc_send_skb(struct sock *sk, unsigned long size,
+					 int noblock, int *errcode)
+{
+	return sock_alloc_send_skb(sk, size, noblock, errcode);
+}
+
+void rcan_skb_reserve(struct sk_buff *skb, int len)
+{
+	skb_reserve(skb, len);
+}
+
+unsigned int rcan_skb_headroom(const struct sk_buff *skb)
+{
+	return skb_headroom(skb);
+}
+
+void rcan_skb_reset_headers(struct sk_buff *skb)
+{
+	skb_reset_mac_header(skb);
+	skb_reset_network_header(skb);
+	skb_reset_transport_header(skb);
+}
+
+struct net_device *rcan_skb_dev(const struct sk_buff *skb)
+{
+	return skb->dev;
+}
+
+u8 rcan_skb_pkt_type(const struct sk_buff *skb)
+{
+	return skb->pkt_type;
+}
+
+/* Marks @skb as a classic CAN frame on @dev (what every CAN driver sets). */
+void rcan_skb_set_can(struct sk_buff *skb, struct net_device *dev, u8 pkt_type)
+{
+	skb->dev = dev;
+	skb->protocol = htons(ETH_P_CAN);
+	skb->pkt_type = pkt_type;
+	skb->ip_summed = CHECKSUM_UNNECESSARY;
+	skb_reset_mac_header(skb);
+	skb_reset_network_header(skb);
+	skb_reset_transport_header(skb);
+}
+
+int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
+			       struct msghdr *msg, int size)
+{
+	return skb_copy_datagram_msg(skb, offset, msg, size);
+}
+
+int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len)
+{
+	return memcpy_from_msg(data, msg, len);
+}
+
+int rcan_sock_queue_rcv_skb(struct sock *sk, struct sk_buff *skb)
+{
+	return sock_queue_rcv_skb(sk, skb);
+}
+
+void rcan_sock_recv_cmsgs(struct msghdr *msg, struct sock *sk,
+			  struct sk_buff *skb)
+{
+	sock_recv_cmsgs(msg, sk, skb);
+}
+
+void rcan_lock_sock(struct sock *sk)
+{
+	lock_sock(sk);
+}
+
+void rcan_sock_hold(struct sock *sk)
+{
+	sock_hold(sk);
+}
+
+void rcan_sock_put(struct sock *sk)
+{
+	sock_put(sk);
+}
+
+void rcan_sock_orphan(struct sock *sk)
+{
+	sock_orphan(sk);
+}
+
+void rcan_sk_purge_queues(struct sock *sk)
+{
+	skb_queue_purge(&sk->sk_receive_queue);
+	skb_queue_purge(&sk->sk_error_queue);
+}
+
+void rcan_release_sock(struct sock *sk)
+{
+	release_sock(sk);
+}
+
+struct net *rcan_sock_net(const struct sock *sk)
+{
+	return sock_net(sk);
+}
+
+bool rcan_net_is_init(const struct net *net)
+{
+	return net_eq(net, &init_net);
+}
+
+void *rcan_netdev_priv(const struct net_device *dev)
+{
+	return netdev_priv(dev);
+}
+
+void rcan_netif_start_queue(struct net_device *dev)
+{
+	netif_start_queue(dev);
+}
+
+void rcan_netif_stop_queue(struct net_device *dev)
+{
+	netif_stop_queue(dev);
+}
+
+void rcan_dev_hold(struct net_device *dev)
+{
+	dev_hold(dev);
+}
+
+void rcan_dev_put(struct net_device *dev)
+{
+	dev_put(dev);
+}
+
+struct net_device *rcan_dev_get_by_index(int ifindex)
+{
+	return dev_get_by_index(&init_net, ifindex);
+}
+
+/*
+ * The CAN device with the smallest ifindex above @after_ifindex, with a
+ * reference held, or NULL. Lets Rust walk the device list without holding
+ * the RCU read lock across sleeping calls.
+ */
+struct net_device *rcan_next_can_dev(int after_ifindex)
+{
+	struct net_device *dev, *best = NULL;
+
+	rcu_read_lock();
+	for_each_netdev_rcu(&init_net, dev) {
+		if (dev->type != ARPHRD_CAN || dev->ifindex <= after_ifindex)
+			continue;
+		if (!best || dev->ifindex < best->ifindex)
+			best = dev;
+	}
+	if (best)
+		dev_hold(best);
+	rcu_read_unlock();
+	return best;
+}
+
+int rcan_dev_queue_xmit(struct sk_buff *skb)
+{
+	return dev_queue_xmit(skb);
+}
+
+struct net_device *rcan_netdev_notifier_dev(void *info)
+{
+	return netdev_notifier_info_to_dev(info);
+}
+
+void rcan_dev_stats_tx(struct net_device *dev, unsigned int bytes)
+{
+	DEV_STATS_INC(dev, tx_packets);
+	DEV_STATS_ADD(dev, tx_bytes, bytes);
+}
+
+void rcan_dev_stats_rx(struct net_device *dev, unsigned int bytes)
+{
+	DEV_STATS_INC(dev, rx_packets);
+	DEV_STATS_ADD(dev, rx_bytes, bytes);
+}
+
+void rcan_dev_stats_tx_dropped(struct net_device *dev)
+{
+	DEV_STATS_INC(dev, tx_dropped);
+}
+
+void rcan_dev_stats_rx_dropped(struct net_device *dev)
+{
+	DEV_STATS_INC(dev, rx_dropped);
+}
+
+bool rcan_try_module_get(struct module *mod)
+{
+	return try_module_get(mod);
+}
+
+void rcan_module_put(struct module *mod)
+{
+	module_put(mod);
+}
+
+u32 rcan_get_random_u32(void)
+{
+	return get_random_u32();
+}

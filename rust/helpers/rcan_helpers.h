@@ -1,0 +1,84 @@
+/* SPDX-License-Identifier: GPL-2.0 */
+/*
+ * Out-of-line wrappers for kernel inline functions and macros that bindgen
+ * cannot see. No logic lives here: each helper is one call.
+ *
+ * Every rcan module links its own copy (see rcan_helpers.c); the symbols are
+ * not exported, so copies in different modules do not clash.
+ */
+#ifndef _RCAN_HELPERS_H
+#define _RCAN_HELPERS_H
+
+#include <linux/types.h>
+
+struct sk_buff;
+struct sock;
+struct msghdr;
+struct net_device;
+struct mutex;
+struct module;
+struct net;
+
+/* RCU */
+void rcan_rcu_read_lock(void);
+void rcan_rcu_read_unlock(void);
+
+/* Locks defined with DEFINE_MUTEX in the modules' C files */
+void rcan_mutex_lock(struct mutex *lock);
+void rcan_mutex_unlock(struct mutex *lock);
+void rcan_rtnl_lock(void);
+void rcan_rtnl_unlock(void);
+void rcan_assert_rtnl(void);
+
+/* sk_buff */
+struct sk_buff *rcan_alloc_skb(unsigned int size, gfp_t gfp);
+void rcan_kfree_skb(struct sk_buff *skb);
+void rcan_consume_skb(struct sk_buff *skb);
+struct sk_buff *rcan_sock_alloc_send_skb(struct sock *sk, unsigned long size,
+					 int noblock, int *errcode);
+void rcan_skb_reserve(struct sk_buff *skb, int len);
+unsigned int rcan_skb_headroom(const struct sk_buff *skb);
+void rcan_skb_reset_headers(struct sk_buff *skb);
+struct net_device *rcan_skb_dev(const struct sk_buff *skb);
+u8 rcan_skb_pkt_type(const struct sk_buff *skb);
+void rcan_skb_set_can(struct sk_buff *skb, struct net_device *dev, u8 pkt_type);
+int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
+			       struct msghdr *msg, int size);
+int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len);
+int rcan_sock_queue_rcv_skb(struct sock *sk, struct sk_buff *skb);
+void rcan_sock_recv_cmsgs(struct msghdr *msg, struct sock *sk,
+			  struct sk_buff *skb);
+
+/* sock */
+void rcan_lock_sock(struct sock *sk);
+void rcan_sock_hold(struct sock *sk);
+void rcan_sock_put(struct sock *sk);
+void rcan_sock_orphan(struct sock *sk);
+void rcan_sk_purge_queues(struct sock *sk);
+void rcan_release_sock(struct sock *sk);
+struct net *rcan_sock_net(const struct sock *sk);
+bool rcan_net_is_init(const struct net *net);
+
+/* net_device */
+void *rcan_netdev_priv(const struct net_device *dev);
+void rcan_netif_start_queue(struct net_device *dev);
+void rcan_netif_stop_queue(struct net_device *dev);
+void rcan_dev_hold(struct net_device *dev);
+void rcan_dev_put(struct net_device *dev);
+struct net_device *rcan_dev_get_by_index(int ifindex);
+struct net_device *rcan_next_can_dev(int after_ifindex);
+int rcan_dev_queue_xmit(struct sk_buff *skb);
+struct net_device *rcan_netdev_notifier_dev(void *info);
+void rcan_dev_stats_tx(struct net_device *dev, unsigned int bytes);
+void rcan_dev_stats_rx(struct net_device *dev, unsigned int bytes);
+void rcan_dev_stats_tx_dropped(struct net_device *dev);
+void rcan_dev_stats_rx_dropped(struct net_device *dev);
+
+/* module references */
+bool rcan_try_module_get(struct module *mod);
+void rcan_module_put(struct module *mod);
+
+/* random */
+u32 rcan_get_random_u32(void);
+
+#endif /* _RCAN_HELPERS_H */
