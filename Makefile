@@ -24,13 +24,12 @@ setup:
 kernel: setup
 	@echo $(KDIR)
 
-$(BINDINGS): rust/bindings/rcan_bindings.h rust/helpers/rcan_helpers.h \
-		rust/bindings/gen-bindings.sh
-	bash rust/bindings/gen-bindings.sh $(KDIR) $@
+# Regenerated on every build: the layout depends on the kernel (KDIR), and
+# the script leaves the file alone when nothing changed.
+bindings:
+	bash rust/bindings/gen-bindings.sh $(KDIR) $(BINDINGS)
 
-bindings: $(BINDINGS)
-
-modules: $(BINDINGS)
+modules: bindings
 	$(MAKE) -C $(KDIR) M=$(CURDIR) LLVM=1 $(RCAN_CONFIG) modules
 
 userspace:

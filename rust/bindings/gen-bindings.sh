@@ -31,4 +31,10 @@ tmp=$(mktemp)
 # Constants the kernel hides behind RUST_CONST_HELPER_ names get their
 # plain names, as in the kernel's own bindings.
 sed -Ei 's/pub const RUST_CONST_HELPER_([a-zA-Z0-9_]*)/pub const \1/g' "$tmp"
-mv "$tmp" "$out"
+# Keep the old file (and its mtime) when nothing changed, so Kbuild does
+# not rebuild every module.
+if cmp -s "$tmp" "$out"; then
+	rm -f "$tmp"
+else
+	mv "$tmp" "$out"
+fi

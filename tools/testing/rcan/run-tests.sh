@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-2.0
+# The test command (make check, called by .ci/run): host tests, then the VM
+# suite on the release kernel and again on the debug kernel (KASAN, lockdep,
+# kmemleak), each VM run failing on any kernel report. Prints one closing
+# "N passed, M failed" line over all stages.
+#
+# RCAN_SKIP_DEBUG=1 skips the debug-kernel stage (for quick local runs).
+set -uo pipefail
+. "$(dirname "$0")/lib.sh"
+cd "$RCAN_ROOT"
+
+passed=0
+failed=0
+log_dir=$(mktemp -d)
+
+# Adds the "N passed, M failed" counts of a stage log; a stage that exited
+# non-zero without a count line counts as one failure.
+tally() {
+	local name=$1 rc=$2 logf=$3 line p f
+	line=$(grep -E '^[0-9]+ passed, [0-9]+ failed' "$logf" | tail -n 1)
+	if [ -n "$line" ]; then
+		p=${line%% passed*}
+		f=${line#*passed, }
+		f=${f%% failed*}
+	else
+		p=0
+		f=0
+	fi
+	if [ "$rc" != 0 ] && [ "$f" = 0 ]; then
+		f=1
+		echo "rcan: stage '$name' failed (exit $rc)"
+	fi
+	echo "rcan: stage '$name': $p passed, $f failed"
+	passed=$((passed + p))
+	failed=$((failed + f))
+}
+
+echo "=== host: cargo test"
+cargo test --workspace 2>&1 | tee "$log_dir/host.log"
+rc=${PIPESTATUS[0]}
+hp=$(grep -Eo 'test result: [a-z]+\. [0-9]+ passed' "$log_dir/host.log" | awk '{s+=$4} END {print s+0}')
+hf=$(grep -Eo '[0-9]+ failed;' "$log_dir/host.log" | awk '{s+=$1} END {print s+0}')
+echo "$hp passed, $hf failed" >> "$log_dir/host.log"
+tally host "$rc" "$log_dir/host.log"
+
+vm_stage() {
+	local variant=$1
+	echo "=== VM suite on the $variant kernel"
+	if ! RCAN_KERNEL=$variant make --no-print-directory modules > "$log_dir/build-$variant.log" 2>&1; then
+		tail -n 40 "$log_dir/build-$variant.log"
+		tally "vm-$variant" 1 /dev/null
+		return
+	fi
+	RCAN_KERNEL=$variant bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 -- \
+		target/release/rcan-vmtest 2>&1 | tee "$log_dir/vm-$variant.log"
+	tally "vm-$variant" "${PIPESTATUS[0]}" "$log_dir/vm-$variant.log"
+}
+
+vm_stage release
+if [ "${RCAN_SKIP_DEBUG:-0}" != 1 ]; then
+	vm_stage debug
+	# Leave release modules in the tree, as `make modules` would.
+	RCAN_KERNEL=release make --no-print-directory modules > /dev/null 2>&1 || true
+fi
+
+rm -rf "$log_dir"
+echo "$passed passed, $failed failed"
+[ "$failed" = 0 ]
