@@ -1,0 +1,99 @@
+// SPDX-License-Identifier: GPL-2.0
+//! Module load order and reference counting.
+
+use std::thread;
+use std::time::{Duration, Instant};
+
+use super::{stack1, test_table};
+use crate::check::{ensure, expect_frame, Frame, TestResult};
+use crate::ctx::{Ctx, Module};
+use crate::Test;
+
+pub const TESTS: &[Test] = test_table![
+    module_can_needs_pf,
+    module_pf_pinned_by_can,
+    module_can_pinned_by_socket,
+];
+
+/// rcan_can cannot be loaded before rcan_pf.
+fn module_can_needs_pf(ctx: &mut Ctx) -> TestResult {
+    ensure!(
+        ctx.insmod(Module::Can, &[]).is_err(),
+        "insmod rcan_can without rcan_pf succeeded"
+    );
+    ensure!(
+        !ctx.is_loaded(Module::Can),
+        "rcan_can is listed in /proc/modules after a failed insmod"
+    );
+    ctx.insmod(Module::Pf, &[])?;
+    ctx.insmod(Module::Can, &[])?;
+    ctx.rmmod(Module::Can)?;
+    ctx.rmmod(Module::Pf)
+}
+
+/// rcan_pf cannot be unloaded while rcan_can is loaded.
+fn module_pf_pinned_by_can(ctx: &mut Ctx) -> TestResult {
+    ctx.insmod(Module::Pf, &[])?;
+    ctx.insmod(Module::Can, &[])?;
+    ensure!(
+        ctx.rmmod(Module::Pf).is_err(),
+        "rmmod rcan_pf succeeded while rcan_can is loaded"
+    );
+    ensure!(ctx.is_loaded(Module::Pf), "rcan_pf vanished");
+    ctx.rmmod(Module::Can)?;
+    ctx.rmmod(Module::Pf)
+}
+
+/// rcan_can cannot be unloaded while one of its sockets is open; after the
+/// last close it can, also when the socket had frames queued.
+fn module_can_pinned_by_socket(ctx: &mut Ctx) -> TestResult {
+    ctx.insmod(Module::Pf, &[])?;
+    ctx.insmod(Module::Can, &[])?;
+    let s = ctx.socket()?;
+    ensure!(
+        ctx.rmmod(Module::Can).is_err(),
+        "rmmod rcan_can succeeded with a socket open"
+    );
+    drop(s);
+    rmmod_after_close(ctx, "an unbound socket")?;
+    ctx.rmmod(Module::Pf)?;
+
+    // Again with the driver and a bound socket holding a queued frame.
+    let idx = stack1(ctx)?;
+    let s = ctx.bound(0, rcan_uapi::CAN_MASK_ANY, idx)?;
+    let f = Frame::std(0x42, &[1, 2, 3]);
+    f.send(&s, idx)?;
+    f.send(&s, idx)?;
+    expect_frame(&s, &f, idx)?; // the second copy stays queued
+    ensure!(
+        ctx.rmmod(Module::Can).is_err(),
+        "rmmod rcan_can succeeded with a bound socket open"
+    );
+    drop(s);
+    rmmod_after_close(ctx, "a bound socket with a queued frame")
+}
+
+/// rmmod rcan_can right after the last socket was closed. A socket whose
+/// memory is freed after an RCU grace period may keep the module busy
+/// briefly, so retry for up to 2 s, and say so if it was needed.
+fn rmmod_after_close(ctx: &mut Ctx, what: &str) -> TestResult {
+    let start = Instant::now();
+    let mut tries = 0;
+    loop {
+        tries += 1;
+        match ctx.rmmod(Module::Can) {
+            Ok(()) => break,
+            Err(e) if start.elapsed() > Duration::from_secs(2) => {
+                return Err(format!("after closing {what}: {e}"))
+            }
+            Err(_) => thread::sleep(Duration::from_millis(20)),
+        }
+    }
+    if tries > 1 {
+        ctx.note(format!(
+            "rmmod rcan_can after closing {what} succeeded only at try {tries} ({:?})",
+            start.elapsed()
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,208 @@
+// SPDX-License-Identifier: GPL-2.0
+//! # rcan-vmtest: the rcan VM test suite
+//!
+//! Exercises the thesis CAN socket API (`CANPROTO_CAN`, section 5.2) and the
+//! `rcan_loop` driver against the real kernel modules. It loads and unloads
+//! modules, so it runs as root inside the test VM, never on the host:
+//!
+//! ```text
+//! cargo build -p rcan-vmtests
+//! tools/testing/rcan/vm-run.sh -- target/debug/rcan-vmtest            # all tests
+//! tools/testing/rcan/vm-run.sh -- target/debug/rcan-vmtest filter_    # names containing "filter_"
+//! target/debug/rcan-vmtest --list                                     # just the names
+//! ```
+//!
+//! Usage: `rcan-vmtest [--root DIR] [--timeout SECS] [--list] [FILTER]`
+//!
+//! - `--root DIR`: repository root holding the built `.ko` files (default:
+//!   `$RCAN_ROOT`, else the current directory).
+//! - `--timeout SECS`: per-test watchdog (default 180). A test that takes
+//!   longer is reported as hung and the run ends there.
+//! - `FILTER`: run only the tests whose name contains it.
+//!
+//! Output, one line per test, then one summary line; exit status 1 if any
+//! test failed:
+//!
+//! ```text
+//! # informational note
+//! ok - roundtrip_std_sendto
+//! not ok - filter_exact_ext: expected STD 6AF ... got ...
+//! 45 passed, 1 failed
+//! ```
+//!
+//! Every test loads the modules it needs (`Ctx::load_stack`) and the runner
+//! unloads everything afterwards, also after a failure or panic, so tests
+//! are independent. Receives use a 2 s `SO_RCVTIMEO`; "nothing arrives" is
+//! checked with `MSG_DONTWAIT` after a 200 ms pause. No test asserts on
+//! wall-clock time.
+
+mod cases;
+mod check;
+mod ctx;
+
+use std::panic::{self, AssertUnwindSafe};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use check::TestResult;
+use ctx::{Ctx, Module};
+
+/// A named test case.
+pub struct Test {
+    /// Unique name, used by FILTER.
+    pub name: &'static str,
+    /// The test body; modules are unloaded by the runner afterwards.
+    pub run: fn(&mut Ctx) -> TestResult,
+}
+
+struct Options {
+    root: Option<PathBuf>,
+    filter: Option<String>,
+    list: bool,
+    timeout: Duration,
+}
+
+fn parse_args() -> Result<Options, String> {
+    let mut o = Options {
+        root: std::env::var_os("RCAN_ROOT").map(PathBuf::from),
+        filter: None,
+        list: false,
+        timeout: Duration::from_secs(180),
+    };
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--root" => o.root = Some(args.next().ok_or("--root needs a directory")?.into()),
+            "--timeout" => {
+                let s = args.next().ok_or("--timeout needs seconds")?;
+                let secs = s.parse().map_err(|_| format!("bad --timeout {s:?}"))?;
+                o.timeout = Duration::from_secs(secs);
+            }
+            "--list" => o.list = true,
+            "-h" | "--help" => {
+                return Err(
+                    "usage: rcan-vmtest [--root DIR] [--timeout SECS] [--list] [FILTER]".into(),
+                )
+            }
+            f if !f.starts_with('-') && o.filter.is_none() => o.filter = Some(f.to_string()),
+            other => return Err(format!("unexpected argument {other:?}")),
+        }
+    }
+    Ok(o)
+}
+
+/// Progress shared with the watchdog thread.
+#[derive(Default)]
+struct Progress {
+    current: Option<(&'static str, Instant)>,
+    passed: usize,
+    failed: usize,
+}
+
+/// Ends the run if a test exceeds `limit` (e.g. a kernel hang in rmmod or
+/// recv), reporting that test as failed. Modules stay loaded then, but the
+/// VM is about to be discarded anyway.
+fn spawn_watchdog(progress: Arc<Mutex<Progress>>, limit: Duration) {
+    thread::spawn(move || loop {
+        thread::sleep(Duration::from_secs(1));
+        let p = progress.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((name, start)) = p.current {
+            if start.elapsed() > limit {
+                println!("not ok - {name}: hung, no result after {limit:?}");
+                println!("{} passed, {} failed", p.passed, p.failed + 1);
+                std::process::exit(1);
+            }
+        }
+    });
+}
+
+/// Runs one test between two full unloads, catching panics.
+fn run_one(ctx: &mut Ctx, t: &Test) -> TestResult {
+    ctx.unload_all()
+        .map_err(|e| format!("leftover modules from an earlier test: {e}"))?;
+    let r = panic::catch_unwind(AssertUnwindSafe(|| (t.run)(ctx))).unwrap_or_else(|p| {
+        let msg = p
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_else(|| "unknown payload".into());
+        Err(format!("panicked: {msg}"))
+    });
+    let cleanup = ctx.unload_all();
+    match (r, cleanup) {
+        (Ok(()), Ok(())) => Ok(()),
+        (Ok(()), Err(c)) => Err(format!("cleanup: {c}")),
+        (Err(e), Ok(())) => Err(e),
+        (Err(e), Err(c)) => Err(format!("{e}; cleanup: {c}")),
+    }
+}
+
+fn main() -> ExitCode {
+    let opts = match parse_args() {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("rcan-vmtest: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let tests: Vec<&Test> = cases::all()
+        .filter(|t| opts.filter.as_deref().is_none_or(|f| t.name.contains(f)))
+        .collect();
+    if opts.list {
+        tests.iter().for_each(|t| println!("{}", t.name));
+        return ExitCode::SUCCESS;
+    }
+
+    let root = opts
+        .root
+        .unwrap_or_else(|| std::env::current_dir().unwrap_or_default());
+    let mut ctx = Ctx::new(root);
+    for m in Module::ALL {
+        if !ctx.ko(m).is_file() {
+            eprintln!(
+                "rcan-vmtest: {} not found (build the modules; set RCAN_ROOT or --root)",
+                ctx.ko(m).display()
+            );
+            return ExitCode::from(2);
+        }
+    }
+    // run_one turns a panic into a test failure; the hook only logs it as
+    // a comment line, with its location.
+    panic::set_hook(Box::new(|info| eprintln!("# panic: {info}")));
+
+    let progress = Arc::new(Mutex::new(Progress::default()));
+    spawn_watchdog(Arc::clone(&progress), opts.timeout);
+    let lock = || progress.lock().unwrap_or_else(|e| e.into_inner());
+
+    println!(
+        "# rcan-vmtest: {} tests, modules from {}",
+        tests.len(),
+        ctx.root().display()
+    );
+    for t in tests {
+        lock().current = Some((t.name, Instant::now()));
+        let r = run_one(&mut ctx, t);
+        let mut p = lock();
+        p.current = None;
+        match r {
+            Ok(()) => {
+                p.passed += 1;
+                println!("ok - {}", t.name);
+            }
+            Err(e) => {
+                p.failed += 1;
+                println!("not ok - {}: {}", t.name, e.replace('\n', "; "));
+            }
+        }
+    }
+    let p = lock();
+    println!("{} passed, {} failed", p.passed, p.failed);
+    if p.failed > 0 {
+        ExitCode::FAILURE
+    } else {
+        ExitCode::SUCCESS
+    }
+}
