@@ -276,6 +276,7 @@ read -ra extra <<<"$qemu_extra"
 } >"$out/vm-cmd.sh"
 # Read by the guest's busybox sh: single quotes, ' escaped.
 printf "RCAN_HOST_OUT='%s'\n" "${out//\'/\'\\\'\'}" >"$out/vm-init.conf"
+printf "RCAN_HOST_ROOT='%s'\n" "${RCAN_ROOT//\'/\'\\\'\'}" >>"$out/vm-init.conf"
 
 # console=ttyS0: the only console. loglevel=5: WARNING and worse still show
 # up live, between the command's output; the full log goes to dmesg.txt.
