@@ -28,12 +28,12 @@ mod rcan_api;
 mod rcan_core;
 
 use glue::bindings;
-use glue::neterr;
-use kernel::c_str;
 use glue::netdev::{DevRef, NetDev};
+use glue::neterr;
 use glue::skb::Skb;
 use glue::sock::{Msg, ProtoReg, Sock};
 use glue::sync::{CCell, Rtnl, RtnlLocked, RtnlProof};
+use kernel::c_str;
 use rcan_api::{CanProto, RxFilter, CANPROTO_CAN};
 use rcan_core::arb::{Arb, MAX_DLC};
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
@@ -202,7 +202,8 @@ impl glue::sock::Proto for CanProtoOps {
         if !arb.is_rtr() {
             msg.copy_from_user(&mut data[..len])?;
         }
-        let frame = CanFrame::from_arb(arb, len, &data[..len]).map_err(|e| glue::errno(e.errno()))?;
+        let frame =
+            CanFrame::from_arb(arb, len, &data[..len]).map_err(|e| glue::errno(e.errno()))?;
         let nonblock = flags & bindings::MSG_DONTWAIT != 0;
         if ifindex != 0 {
             let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
@@ -253,7 +254,11 @@ impl glue::sock::Proto for CanProtoOps {
         }
         // SAFETY: `skb` came from skb_recv_datagram on this sock.
         unsafe { bindings::skb_free_datagram(sk.as_ptr(), skb.into_raw()) };
-        Ok(if flags as u32 & bindings::MSG_TRUNC != 0 { dlc } else { n })
+        Ok(if flags as u32 & bindings::MSG_TRUNC != 0 {
+            dlc
+        } else {
+            n
+        })
     }
 }
 
@@ -367,7 +372,9 @@ impl kernel::Module for CanProtoModule {
         // SAFETY: module init: nothing else sees CAN_PROTO yet.
         unsafe { (*CAN_PROTO.get()).owner = glue::this_module() };
         // SAFETY: static notifier, unregistered in Drop.
-        if let Err(e) = glue::to_result(unsafe { bindings::register_netdevice_notifier(NOTIFIER.get()) }) {
+        if let Err(e) =
+            glue::to_result(unsafe { bindings::register_netdevice_notifier(NOTIFIER.get()) })
+        {
             PROTO.unregister();
             return Err(e);
         }

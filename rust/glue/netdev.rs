@@ -293,7 +293,9 @@ impl<T: Driver> Registration<T> {
         if ret < 0 {
             // SAFETY: never registered: drop the private data, free it.
             unsafe {
-                core::ptr::drop_in_place(bindings::rcan_netdev_priv(dev.as_ptr()).cast::<T::Priv>());
+                core::ptr::drop_in_place(
+                    bindings::rcan_netdev_priv(dev.as_ptr()).cast::<T::Priv>(),
+                );
                 bindings::free_netdev(dev.as_ptr());
             }
             return Err(Error::from_errno(ret));
@@ -323,7 +325,9 @@ impl<T: Driver> Drop for Registration<T> {
         // be dropped and the device freed.
         unsafe {
             bindings::unregister_netdev(self.dev.as_ptr());
-            core::ptr::drop_in_place(bindings::rcan_netdev_priv(self.dev.as_ptr()).cast::<T::Priv>());
+            core::ptr::drop_in_place(
+                bindings::rcan_netdev_priv(self.dev.as_ptr()).cast::<T::Priv>(),
+            );
             bindings::free_netdev(self.dev.as_ptr());
         }
     }

@@ -170,7 +170,12 @@ impl Skb {
         unsafe {
             let cb = &(*self.as_ptr()).cb;
             let i = idx.min(cb.len() / 4 - 1) * 4;
-            u32::from_ne_bytes([cb[i] as u8, cb[i + 1] as u8, cb[i + 2] as u8, cb[i + 3] as u8])
+            u32::from_ne_bytes([
+                cb[i] as u8,
+                cb[i + 1] as u8,
+                cb[i + 2] as u8,
+                cb[i + 3] as u8,
+            ])
         }
     }
 

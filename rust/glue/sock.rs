@@ -322,7 +322,9 @@ unsafe extern "C" fn destruct<T: Proto>(sk: *mut bindings::sock) {
     // initialised data; nothing can reach it any more.
     unsafe {
         bindings::rcan_sk_purge_queues(sk);
-        core::ptr::drop_in_place(core::ptr::addr_of_mut!((*sk.cast::<SockObj<T::Data>>()).data));
+        core::ptr::drop_in_place(core::ptr::addr_of_mut!(
+            (*sk.cast::<SockObj<T::Data>>()).data
+        ));
     }
 }
 

@@ -21,9 +21,9 @@ mod glue;
 mod rcan_core;
 
 use glue::bindings;
-use kernel::c_str;
 use glue::netdev::{Driver, NetDev, Registration, Setup, Xmit};
 use glue::skb::Skb;
+use kernel::c_str;
 use rcan_core::canloop::{DropRate, FrameDump};
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 
