@@ -399,5 +399,8 @@ impl Drop for CanProtoModule {
             bindings::unregister_netdevice_notifier(NOTIFIER.get());
         }
         PROTO.unregister();
+        // Statics are never dropped: free the (empty) list's buffer.
+        let mut rtnl = Rtnl::lock();
+        *SOCKETS.get(&mut rtnl) = KVec::new();
     }
 }
