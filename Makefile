@@ -10,7 +10,7 @@
 
 T := tools/testing/rcan
 KDIR ?= $(shell bash $(T)/build-kernel.sh)
-RCAN_CONFIG := CONFIG_RCAN=m CONFIG_RCAN_PF=m CONFIG_RCAN_PROTO_CAN=m \
+RCAN_CONFIG := CONFIG_RCAN=m CONFIG_RCAN_PF=m CONFIG_RCAN_PROTO_CAN=m CONFIG_RCAN_PROTO_RAW=m \
 	CONFIG_RCAN_LOOP=m
 BINDINGS := rust/bindings/bindings_generated.rs
 

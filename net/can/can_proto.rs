@@ -14,8 +14,8 @@
 //! * System calls (process context) take RTNL, then the socket lock (the
 //!   order mainline raw.c uses), then pf_can's writers' mutex inside
 //!   `rcan_rx_set`.
-//! * `can_rx` runs in NET_RX softirq under RCU; it only clones the skb and
-//!   queues it on the socket (receive-queue spinlock).
+//! * `can_rx` runs in NET_RX softirq under RCU; it only clones (or takes
+//!   over) the skb and queues it on the socket (receive-queue spinlock).
 //! * `SOCKETS` (every open socket, for the netdevice notifier) is protected
 //!   by RTNL.
 
@@ -34,7 +34,7 @@ use glue::skb::Skb;
 use glue::sock::{Msg, ProtoReg, Sock};
 use glue::sync::{CCell, Rtnl, RtnlLocked, RtnlProof};
 use kernel::c_str;
-use rcan_api::{CanProto, RxFilter, CANPROTO_CAN};
+use rcan_api::{CanProto, RxFilter, CANPROTO_CAN, RX_FILTER_ARB};
 use rcan_core::arb::{Arb, MAX_DLC};
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use rcan_core::sockaddr::{self, SockaddrArb, AF_UNSPEC, SOCKADDR_CANARB_LEN};
@@ -71,40 +71,53 @@ type S = Sock<CanProtoOps>;
 const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
 /// Receive callback (see `rcan_api::RxFn`): softirq, RCU read side.
-unsafe extern "C" fn can_rx(skb: *mut bindings::sk_buff, data: *mut ffi::c_void) {
-    // SAFETY: pf_can passes a valid, borrowed skb; `data` is a sock of ours
-    // that stays alive while its receivers are registered (release()
-    // removes them and waits for running callbacks before the sock can go).
+/// Every frame is delivered, the socket's own ones included (on canloop the
+/// sender sees its frames come back, thesis 5.3.5).
+unsafe extern "C" fn can_rx(
+    skb: *mut bindings::sk_buff,
+    sk: *mut bindings::sock,
+    _cookie: u32,
+    owned: bool,
+) {
+    // SAFETY: pf_can passes a valid skb, borrowed or owned as `owned` says,
+    // and a sock of ours that its receiver record keeps alive for the call.
     let (skb, sk) = unsafe {
         let Some(s) = Skb::from_raw(skb) else { return };
-        (s, S::from_raw(data.cast()))
+        (s, S::from_raw(sk))
     };
-    // `skb` is only borrowed: clone it and give our reference back.
-    let clone = skb.clone_atomic();
-    core::mem::forget(skb);
-    let Some(mut clone) = clone else { return };
+    let mut skb = if owned {
+        skb
+    } else {
+        // Only borrowed: clone it and give the reference back.
+        let clone = skb.clone_atomic();
+        core::mem::forget(skb);
+        match clone {
+            Some(c) => c,
+            None => return,
+        }
+    };
     // The receiving interface may be gone by the time recvmsg runs.
-    let ifindex = clone.ifindex();
-    clone.set_cb_u32(0, ifindex as u32);
+    let ifindex = skb.ifindex();
+    skb.set_cb_u32(0, ifindex as u32);
     // A full receive queue drops the frame (counted by the socket layer).
-    let _ = sk.queue_rcv(clone);
+    let _ = sk.queue_rcv(skb);
 }
 
 fn set_receivers(sk: &S, filter: Option<&SockaddrArb>) -> Result {
-    let f = filter.map(|a| RxFilter {
-        ifindex: a.ifindex as i32,
-        arb: a.arb,
-        mask: a.mask,
-    });
-    let (ptr, n) = match &f {
-        Some(f) => (f as *const RxFilter, 1),
-        None => (core::ptr::null(), 0),
-    };
-    // SAFETY: `ptr` points to `n` filters valid for the call; `sk` stays
-    // alive until release() removes its receivers (n = 0), which returns
-    // only after every running callback has finished.
-    glue::to_result(unsafe { rcan_api::rcan_rx_set(can_rx, sk.as_ptr().cast(), ptr, n) })
-        .map(|_| ())
+    match filter {
+        Some(a) => {
+            let f = RxFilter {
+                kind: RX_FILTER_ARB,
+                id: a.arb,
+                mask: a.mask,
+            };
+            rcan_api::rx_set(can_rx, sk, 0, a.ifindex as i32, &[f], false, 0)
+        }
+        None => {
+            rcan_api::rx_remove(can_rx, sk);
+            Ok(())
+        }
+    }
 }
 
 /// Checks that `ifindex` is 0 or a CAN device. Caller holds RTNL, so the
@@ -252,8 +265,7 @@ impl glue::sock::Proto for CanProtoOps {
             };
             msg.set_name(&a.encode());
         }
-        // SAFETY: `skb` came from skb_recv_datagram on this sock.
-        unsafe { bindings::skb_free_datagram(sk.as_ptr(), skb.into_raw()) };
+        sk.free_datagram(skb);
         Ok(if flags as u32 & bindings::MSG_TRUNC != 0 {
             dlc
         } else {
@@ -285,16 +297,8 @@ fn send_one(sk: &S, dev: &DevRef, frame: &CanFrame, nonblock: bool) -> Result {
     if !skb.write_headroom(&prv) || !skb.put_data(&frame.to_bytes()) {
         return Err(neterr::ENOBUFS());
     }
-    skb.set_can(dev, bindings::PACKET_HOST as u8);
-    // SAFETY: dev_queue_xmit consumes the skb in every case; `dev` is held
-    // until after it returns.
-    let ret = unsafe { bindings::rcan_dev_queue_xmit(skb.into_raw()) };
-    match ret {
-        r if r < 0 => Err(Error::from_errno(r)),
-        0 => Ok(()),
-        r if r as u32 == bindings::NET_XMIT_CN => Ok(()),
-        _ => Err(neterr::ENOBUFS()),
-    }
+    // Thesis sockets always loop their frames back to local receivers.
+    rcan_api::send(skb, dev, true)
 }
 
 /// `CanProto.create`: a new CANPROTO_CAN socket. Process context.

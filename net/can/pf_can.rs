@@ -6,22 +6,31 @@
 //!   CAN protocol registered for its protocol number, holding a reference
 //!   on that protocol's module while its `create` runs.
 //! * Receives every ETH_P_CAN frame (packet_type handler, NET_RX softirq)
-//!   and dispatches it to the receivers whose filters match.
+//!   and dispatches it to the receivers whose filters match, through one
+//!   receive table shared by every protocol (`rcan_core::rxtable`).
+//! * Sends frames for the protocols (`rcan_send`, mainline `can_send`),
+//!   looping them back to local receivers when the device cannot echo.
 //!
 //! Shared state and its discipline:
 //!
 //! * `PROTOS`: the protocol table. Read under RCU (`pf_can_create`, process
-//!   context); written under `rcan_pf_mutex` (register/unregister, process
+//!   context); written under `WRITERS` (register/unregister, process
 //!   context). The thesis uses a spinlock for writers; a mutex serves the
 //!   same purpose here because every writer is in process context and the
 //!   receive table's writers, which share it, must allocate.
-//! * `RX`: the receive table, an immutable snapshot published under RCU.
-//!   Read without locks in softirq (`can_rcv`); replaced under
-//!   `rcan_pf_mutex` by `rcan_rx_set` (process context), old snapshots
-//!   freed by `call_rcu`.
+//! * `WRITERS` (`rcan_pf_mutex`) protects the registry: every receiver
+//!   registration ([`Record`]), the authoritative copy from which receive
+//!   tables are built.
+//! * `RX`: the receive table, an immutable snapshot ([`RxTable`]) published
+//!   under RCU. Read without locks in softirq (`can_rcv`); rebuilt and
+//!   replaced under `WRITERS` by `rcan_rx_set` (process context); replaced
+//!   snapshots and removed records are freed by `call_rcu` callbacks
+//!   (softirq), so neither writers nor `close()` wait for a grace period.
+//!   Each record holds a reference on its socket until that callback.
 //!
-//! Lock order (outermost first): RTNL, socket lock, `rcan_pf_mutex`.
+//! Lock order (outermost first): RTNL, socket lock, `WRITERS`.
 
+use core::sync::atomic::{AtomicPtr, Ordering};
 use kernel::ffi;
 use kernel::prelude::*;
 
@@ -34,9 +43,12 @@ use glue::bindings;
 use glue::netdev::NetDev;
 use glue::skb::Skb;
 use glue::sync::{rcu_barrier, synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard};
-use rcan_api::{CanProto, RxFilter, RxFn, CANPROTO_MAX};
-use rcan_core::filter::{ArbFilter, Receiver};
+use rcan_api::{CanProto, RxFilter, RxFn, RxSpec, CANPROTO_MAX, RX_FILTER_ARB, RX_FILTER_CAN_ID};
+use rcan_core::filter::ArbFilter;
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use rcan_core::rxtable::{
+    self, CanFilterKind, ErrEntry, ExactEntry, Filter, MaskedEntry, RegSpec, Table, TableSink,
+};
 
 module! {
     type: PfCan,
@@ -55,33 +67,126 @@ fn pf_mutex() -> *mut bindings::mutex {
     unsafe { rcan_pf_mutex_ptr() }
 }
 
-/// Serialises all writers of `PROTOS` and `RX`. Process context.
-static WRITERS: CMutex<()> = CMutex::new(pf_mutex, ());
+/// One receiver registration (one socket of one protocol). Owned by the
+/// registry under `WRITERS`; once removed, freed by `free_record` after a
+/// grace period, which also drops the socket reference.
+#[repr(C)]
+struct Record {
+    /// For call_rcu; first so the callback can find the record.
+    rcu: bindings::callback_head,
+    /// Held (`sock_hold`) from registration until `free_record`.
+    sk: *mut bindings::sock,
+    func: RxFn,
+    cookie: u32,
+    ifindex: i32,
+    join: bool,
+    err_mask: u32,
+    filters: KVec<Filter>,
+    /// Index of this record in the `rcvs` of the published table.
+    slot: usize,
+}
+
+// SAFETY: `sk` is a counted reference, usable from any CPU; the rest is
+// plain data.
+unsafe impl Send for Record {}
+
+impl Record {
+    fn spec(&self) -> RegSpec<'_> {
+        RegSpec {
+            ifindex: self.ifindex,
+            filters: &self.filters,
+            join: self.join,
+            err_mask: self.err_mask,
+        }
+    }
+}
+
+/// The registry: every live record. Protected by `WRITERS`.
+struct Registry {
+    recs: KVec<KBox<Record>>,
+}
+
+/// Serialises all writers of `PROTOS` and `RX` and protects the registry.
+/// Process context.
+static WRITERS: CMutex<Registry> = CMutex::new(pf_mutex, Registry { recs: KVec::new() });
 
 /// The protocol table (RCU readers, `WRITERS` for writers).
 static PROTOS: [RcuPtr<CanProto>; CANPROTO_MAX] = [const { RcuPtr::null() }; CANPROTO_MAX];
 
-/// One receiver: a filter and the callback it feeds.
-#[derive(Clone, Copy)]
-struct RxEntry {
-    rx: Receiver,
+/// Where the receive path finds a receiver: a copy of its record's
+/// callback, with the socket pointer cleared in place if the record had to
+/// be removed without a rebuild (allocation failure).
+struct RcvSlot {
+    sk: AtomicPtr<bindings::sock>,
     func: RxFn,
-    data: *mut ffi::c_void,
+    cookie: u32,
 }
 
-/// A snapshot of all receivers, published through `RX`.
+/// A snapshot of all receivers, published through `RX`; immutable once
+/// published (but for `RcvSlot::sk`).
 #[repr(C)]
 struct RxTable {
     /// For call_rcu; first so the callback can find the table.
     rcu: bindings::callback_head,
-    entries: KVec<RxEntry>,
+    exact: KVec<ExactEntry>,
+    starts: KVec<u32>,
+    masked: KVec<MaskedEntry>,
+    filters: KVec<Filter>,
+    err: KVec<ErrEntry>,
+    /// Indexed by registration number.
+    rcvs: KVec<RcvSlot>,
 }
 
-// SAFETY: `data` pointers are opaque tokens passed back to their `func`;
-// the table itself is immutable once published.
+// SAFETY: the socket pointers are counted references held by the records,
+// which outlive every table that names them (both freed after a grace
+// period); the rest is plain data.
 unsafe impl Send for RxTable {}
-// SAFETY: as above.
+// SAFETY: as above; shared access only reads, `RcvSlot::sk` is atomic.
 unsafe impl Sync for RxTable {}
+
+impl RxTable {
+    fn new() -> RxTable {
+        RxTable {
+            // SAFETY: an all-zero callback_head is what call_rcu expects.
+            rcu: unsafe { core::mem::zeroed() },
+            exact: KVec::new(),
+            starts: KVec::new(),
+            masked: KVec::new(),
+            filters: KVec::new(),
+            err: KVec::new(),
+            rcvs: KVec::new(),
+        }
+    }
+
+    fn view(&self) -> Table<'_> {
+        Table {
+            exact: &self.exact,
+            starts: &self.starts,
+            masked: &self.masked,
+            filters: &self.filters,
+            err: &self.err,
+        }
+    }
+}
+
+impl TableSink for RxTable {
+    type Error = kernel::alloc::AllocError;
+    fn exact(&mut self, e: ExactEntry) -> Result<(), Self::Error> {
+        self.exact.push(e, GFP_KERNEL)
+    }
+    fn masked(&mut self, e: MaskedEntry) -> Result<(), Self::Error> {
+        self.masked.push(e, GFP_KERNEL)
+    }
+    fn filter(&mut self, f: Filter) -> Result<(), Self::Error> {
+        self.filters.push(f, GFP_KERNEL)
+    }
+    fn filters_len(&self) -> usize {
+        self.filters.len()
+    }
+    fn err(&mut self, e: ErrEntry) -> Result<(), Self::Error> {
+        self.err.push(e, GFP_KERNEL)
+    }
+}
 
 /// The receive table (RCU readers in softirq, `WRITERS` for writers).
 static RX: RcuPtr<RxTable> = RcuPtr::null();
@@ -89,84 +194,199 @@ static RX: RcuPtr<RxTable> = RcuPtr::null();
 /// `call_rcu` callback freeing a replaced table (softirq context).
 unsafe extern "C" fn free_table(head: *mut bindings::callback_head) {
     // SAFETY: `head` is the first field of an `RxTable` leaked from a KBox
-    // by `rcan_rx_set`; the grace period has ended, so no reader is left.
+    // by `publish`; the grace period has ended, so no reader is left.
     drop(unsafe { KBox::from_raw(head.cast::<RxTable>()) });
 }
 
-/// Publishes `entries` as the new table and retires the old one.
-/// Caller holds `WRITERS`.
-fn publish(entries: KVec<RxEntry>) -> Result {
-    let table = KBox::new(
-        RxTable {
-            // SAFETY: an all-zero callback_head is what call_rcu expects.
-            rcu: unsafe { core::mem::zeroed() },
-            entries,
-        },
-        GFP_KERNEL,
-    )?;
+/// `call_rcu` callback freeing a removed record and dropping its socket
+/// reference (softirq context; the final `sock_put` may free the sock).
+unsafe extern "C" fn free_record(head: *mut bindings::callback_head) {
+    // SAFETY: `head` is the first field of a `Record` leaked from a KBox by
+    // `retire`; no table published after its removal names it, and the
+    // grace period ended, so no receive path uses it any more.
+    let rec = unsafe { KBox::from_raw(head.cast::<Record>()) };
+    // SAFETY: the reference taken in `rx_set` when the record was made.
+    unsafe { bindings::rcan_sock_put(rec.sk) };
+}
+
+/// Frees a removed record after a grace period. Caller holds `WRITERS`.
+fn retire(rec: KBox<Record>) {
+    let p = KBox::into_raw(rec);
+    // SAFETY: `p` is a valid record we own; free_record frees it once
+    // every reader that could have seen it has finished.
+    unsafe { bindings::call_rcu(core::ptr::addr_of_mut!((*p).rcu), Some(free_record)) };
+}
+
+/// Builds a table from the registry (registration number = index).
+/// Process context, `WRITERS` held; allocates.
+fn build(recs: &[KBox<Record>]) -> Result<KBox<RxTable>> {
+    let mut t = RxTable::new();
+    for (i, r) in recs.iter().enumerate() {
+        t.rcvs.push(
+            RcvSlot {
+                sk: AtomicPtr::new(r.sk),
+                func: r.func,
+                cookie: r.cookie,
+            },
+            GFP_KERNEL,
+        )?;
+        rxtable::add_registration(&mut t, i as u32, &r.spec())?;
+    }
+    if !t.exact.is_empty() {
+        let nbuckets = rxtable::bucket_count(t.exact.len());
+        t.starts = KVec::from_elem(0u32, nbuckets + 1, GFP_KERNEL)?;
+        let kept = rxtable::build_index(&mut t.exact, &mut t.starts);
+        glue::kvec_truncate(&mut t.exact, kept);
+    }
+    Ok(KBox::new(t, GFP_KERNEL)?)
+}
+
+/// Publishes `table` and retires the old one. Caller holds `WRITERS`.
+fn publish(table: KBox<RxTable>) {
     let old = RX.replace(KBox::into_raw(table));
     if !old.is_null() {
         // SAFETY: `old` was published by us and is now unreachable for new
         // readers; free_table runs after the current readers are done.
         unsafe { bindings::call_rcu(core::ptr::addr_of_mut!((*old).rcu), Some(free_table)) };
     }
-    Ok(())
 }
 
-/// See [`rcan_api::rcan_rx_set`]. Process context; sleeps.
-fn rx_set(func: RxFn, data: *mut ffi::c_void, filters: &[RxFilter]) -> Result {
-    let mut removed = false;
-    {
-        let _w = WRITERS.lock();
-        let _g = RcuReadGuard::new();
-        let cur = RX.read(&_g);
-        let mut entries = KVec::new();
-        if let Some(t) = cur {
-            for e in t.entries.iter() {
-                if e.func as usize == func as usize && e.data == data {
-                    removed = true;
-                } else {
-                    entries.push(*e, GFP_KERNEL)?;
-                }
+/// Converts the C filters of a spec.
+fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<KVec<Filter>> {
+    let mut v = KVec::with_capacity(filters.len(), GFP_KERNEL)?;
+    for f in filters {
+        match f.kind {
+            RX_FILTER_ARB => {
+                let af = ArbFilter::new(f.id, f.mask).map_err(|e| glue::errno(e.errno()))?;
+                v.push(Filter::Arb(af), GFP_KERNEL)?;
+            }
+            RX_FILTER_CAN_ID => match Filter::from_can_filter(f.id, f.mask) {
+                CanFilterKind::Frames(x) => v.push(x, GFP_KERNEL)?,
+                CanFilterKind::Errors(m) => *err_mask |= m,
+            },
+            _ => return Err(EINVAL),
+        }
+    }
+    Ok(v)
+}
+
+/// See [`rcan_api::rcan_rx_set`]. Process context; sleeps (allocates,
+/// takes `WRITERS`).
+fn rx_set(func: RxFn, sk: *mut bindings::sock, cookie: u32, spec: Option<&RxSpec>) -> Result {
+    // Allocate before locking.
+    let new = match spec {
+        Some(spec) => {
+            let filters = if spec.nfilters == 0 || spec.filters.is_null() {
+                &[][..]
+            } else {
+                // SAFETY: the caller passes `nfilters` readable filters
+                // (rcan_api contract).
+                unsafe { core::slice::from_raw_parts(spec.filters, spec.nfilters) }
+            };
+            let mut err_mask = spec.err_mask & rxtable::CAN_ERR_MASK;
+            let filters = filters_of(filters, &mut err_mask)?;
+            if filters.is_empty() && err_mask == 0 {
+                None
+            } else {
+                Some(KBox::new(
+                    Record {
+                        // SAFETY: an all-zero callback_head is what
+                        // call_rcu expects.
+                        rcu: unsafe { core::mem::zeroed() },
+                        sk,
+                        func,
+                        cookie,
+                        ifindex: spec.ifindex,
+                        join: spec.join,
+                        err_mask,
+                        filters,
+                        slot: 0,
+                    },
+                    GFP_KERNEL,
+                )?)
             }
         }
-        drop(_g);
-        for f in filters {
-            let filter = ArbFilter::new(f.arb, f.mask).map_err(|e| glue::errno(e.errno()))?;
-            let rx = Receiver {
-                ifindex: f.ifindex,
-                filter,
-            };
-            entries.push(rx_entry(rx, func, data), GFP_KERNEL)?;
-        }
-        publish(entries)?;
+        None => None,
+    };
+    let removal_only = new.is_none();
+
+    let mut reg = WRITERS.lock();
+    let old = reg
+        .recs
+        .iter()
+        .position(|r| r.sk == sk && r.func as usize == func as usize)
+        .and_then(|i| glue::kvec_swap_remove(&mut reg.recs, i));
+    if old.is_none() && removal_only {
+        return Ok(());
     }
-    if removed && filters.is_empty() {
-        // The caller is about to free `data`: wait out every reader that
-        // may still be calling `func` with it.
-        synchronize_rcu();
+    let mut added = false;
+    if let Some(n) = new {
+        if let Err(e) = reg.recs.push(n, GFP_KERNEL) {
+            if let Some(o) = old {
+                // Capacity for it is there: it was just removed.
+                let _ = reg.recs.push(o, GFP_KERNEL);
+            }
+            return Err(e.into());
+        }
+        // SAFETY: the caller's `sk` is a live sock; the record keeps this
+        // reference until free_record.
+        unsafe { bindings::rcan_sock_hold(sk) };
+        added = true;
+    }
+    match build(&reg.recs) {
+        Ok(t) => {
+            publish(t);
+            for (i, r) in reg.recs.iter_mut().enumerate() {
+                r.slot = i;
+            }
+        }
+        Err(e) => {
+            if added {
+                let last = reg.recs.len() - 1;
+                if let Some(n) = glue::kvec_swap_remove(&mut reg.recs, last) {
+                    // Never published: no reader can see it.
+                    // SAFETY: the reference taken above.
+                    unsafe { bindings::rcan_sock_put(n.sk) };
+                }
+            }
+            let Some(o) = old else { return Err(e) };
+            if !removal_only {
+                let _ = reg.recs.push(o, GFP_KERNEL);
+                return Err(e);
+            }
+            // Removal must not fail: silence the receiver in the current
+            // table instead; the next rebuild leaves it out.
+            let g = RcuReadGuard::new();
+            if let Some(t) = RX.read(&g) {
+                if let Some(s) = t.rcvs.get(o.slot) {
+                    s.sk.store(core::ptr::null_mut(), Ordering::Release);
+                }
+            }
+            drop(g);
+            retire(o);
+            return Ok(());
+        }
+    }
+    if let Some(o) = old {
+        retire(o);
     }
     Ok(())
-}
-
-fn rx_entry(rx: Receiver, func: RxFn, data: *mut ffi::c_void) -> RxEntry {
-    RxEntry { rx, func, data }
 }
 
 #[no_mangle]
 extern "C" fn rcan_rx_set(
     func: RxFn,
-    data: *mut ffi::c_void,
-    filters: *const RxFilter,
-    n: usize,
+    sk: *mut bindings::sock,
+    cookie: u32,
+    spec: *const RxSpec,
 ) -> ffi::c_int {
-    let filters = if n == 0 || filters.is_null() {
-        &[][..]
-    } else {
-        // SAFETY: the caller passes `n` readable filters (rcan_api contract).
-        unsafe { core::slice::from_raw_parts(filters, n) }
-    };
-    match rx_set(func, data, filters) {
+    if sk.is_null() {
+        return EINVAL.to_errno();
+    }
+    // SAFETY: NULL or a valid spec for the duration of the call (rcan_api
+    // contract).
+    let spec = unsafe { spec.as_ref() };
+    match rx_set(func, sk, cookie, spec) {
         Ok(()) => 0,
         Err(e) => e.to_errno(),
     }
@@ -258,6 +478,10 @@ static FAMILY: CCell<bindings::net_proto_family> = CCell::new(bindings::net_prot
 
 /// ETH_P_CAN packet handler: every CAN frame received on any device.
 /// NET_RX softirq context, inside the core's RCU read-side section.
+///
+/// Each matching receiver is called once; all but the last get the skb
+/// borrowed (they clone it), the last one gets our reference, so the common
+/// single-receiver case queues the skb without cloning it.
 unsafe extern "C" fn can_rcv(
     skb: *mut bindings::sk_buff,
     dev: *mut bindings::net_device,
@@ -275,22 +499,55 @@ unsafe extern "C" fn can_rcv(
         drop(skb); // counted as a drop
         return bindings::NET_RX_DROP as ffi::c_int;
     };
-    if let Some(arb) = frame.arb() {
-        let ifindex = dev.ifindex();
-        let g = RcuReadGuard::new();
-        if let Some(t) = RX.read(&g) {
-            for e in t.entries.iter() {
-                if e.rx.matches(ifindex, arb) {
-                    // SAFETY: the receiver is registered (it is in the
-                    // published table), so `data` is alive until its owner
-                    // removes it and waits for us (rx_set).
-                    unsafe { (e.func)(skb.as_ptr(), e.data) };
-                }
+    let g = RcuReadGuard::new();
+    let Some(t) = RX.read(&g) else {
+        skb.consume();
+        return bindings::NET_RX_SUCCESS as ffi::c_int;
+    };
+    let mut pending: Option<&RcvSlot> = None;
+    t.view().for_each_match(dev.ifindex(), frame.can_id, |reg| {
+        if let Some(slot) = t.rcvs.get(reg as usize) {
+            if let Some(prev) = pending.replace(slot) {
+                deliver_borrowed(prev, &skb);
             }
         }
+    });
+    match pending {
+        Some(last) => deliver_last(last, skb),
+        None => skb.consume(),
     }
-    skb.consume();
     bindings::NET_RX_SUCCESS as ffi::c_int
+}
+
+/// Calls a receiver with the skb borrowed. Softirq, RCU read side.
+fn deliver_borrowed(slot: &RcvSlot, skb: &Skb) {
+    let sk = slot.sk.load(Ordering::Acquire);
+    if sk.is_null() {
+        return;
+    }
+    // SAFETY: the slot is in the published table, so its record (and the
+    // sock reference it holds, and the receiver's module through the sock)
+    // lives until after our RCU read-side section; the skb is valid and
+    // borrowed for the call (RxFn contract, owned = false).
+    unsafe { (slot.func)(skb.as_ptr(), sk, slot.cookie, false) };
+}
+
+/// Calls the last receiver, handing it our reference when nobody else
+/// holds one. Softirq, RCU read side.
+fn deliver_last(slot: &RcvSlot, skb: Skb) {
+    let sk = slot.sk.load(Ordering::Acquire);
+    if sk.is_null() {
+        skb.consume();
+        return;
+    }
+    if skb.is_shared() {
+        deliver_borrowed(slot, &skb);
+        skb.consume();
+        return;
+    }
+    // SAFETY: as in deliver_borrowed; the callee takes our (only)
+    // reference (RxFn contract, owned = true).
+    unsafe { (slot.func)(skb.into_raw(), sk, slot.cookie, true) };
 }
 
 /// The frame in `skb` if it is a well-formed classic CAN frame from a CAN
@@ -302,6 +559,70 @@ fn valid_frame(skb: &Skb, dev: &NetDev) -> Option<CanFrame> {
     let bytes: &[u8; CAN_FRAME_LEN] = skb.data().try_into().ok()?;
     let frame = CanFrame::from_bytes(bytes);
     (usize::from(frame.len) <= rcan_core::arb::MAX_DLC).then_some(frame)
+}
+
+/// See [`rcan_api::rcan_send`]. Process or softirq context.
+fn send(mut skb: Skb, dev: &NetDev, loopback: bool) -> Result {
+    let frame_ok = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data())
+        .map(|b| usize::from(CanFrame::from_bytes(b).len) <= rcan_core::arb::MAX_DLC)
+        .unwrap_or(false);
+    if !frame_ok {
+        return Err(EINVAL);
+    }
+    if skb.len() > dev.mtu() {
+        return Err(glue::neterr::EMSGSIZE());
+    }
+    if !dev.is_can() {
+        return Err(EPERM);
+    }
+    if !dev.is_up() {
+        return Err(glue::neterr::ENETDOWN());
+    }
+    let pkt_type = if loopback {
+        bindings::PACKET_LOOPBACK
+    } else {
+        bindings::PACKET_HOST
+    };
+    skb.set_can(dev, pkt_type as u8);
+    // A device without IFF_ECHO cannot loop the frame back itself: local
+    // receivers get a copy that still names the sending socket.
+    let echo = if loopback && !dev.has_echo() {
+        Some(skb.clone_with_owner().ok_or(ENOMEM)?)
+    } else {
+        None
+    };
+    // SAFETY: dev_queue_xmit consumes the skb in every case; the caller
+    // holds a reference on `dev` until we return.
+    let ret = unsafe { bindings::rcan_dev_queue_xmit(skb.into_raw()) };
+    let err = match ret {
+        r if r < 0 => r,
+        0 => 0,
+        r if r as u32 == bindings::NET_XMIT_CN => 0,
+        _ => glue::neterr::ENOBUFS().to_errno(),
+    };
+    if err != 0 {
+        return Err(Error::from_errno(err));
+    }
+    if let Some(e) = echo {
+        dev.rx(e);
+    }
+    Ok(())
+}
+
+#[no_mangle]
+extern "C" fn rcan_send(skb: *mut bindings::sk_buff, loopback: bool) -> ffi::c_int {
+    // SAFETY: the caller gives us its reference (rcan_api contract).
+    let Some(skb) = (unsafe { Skb::from_raw(skb) }) else {
+        return EINVAL.to_errno();
+    };
+    // SAFETY: the caller holds a reference on skb->dev until we return.
+    let Some(dev) = (unsafe { skb.dev() }) else {
+        return ENODEV.to_errno();
+    };
+    match send(skb, dev, loopback) {
+        Ok(()) => 0,
+        Err(e) => e.to_errno(),
+    }
 }
 
 static PACKET: CCell<bindings::packet_type> = CCell::new(bindings::packet_type {
@@ -342,7 +663,9 @@ impl Drop for PfCan {
             bindings::sock_unregister(bindings::PF_CAN as i32);
         }
         let old = {
-            let _w = WRITERS.lock();
+            let mut reg = WRITERS.lock();
+            // Statics are never dropped: free the (empty) registry's buffer.
+            reg.recs = KVec::new();
             RX.replace(core::ptr::null_mut())
         };
         synchronize_rcu();
@@ -350,7 +673,8 @@ impl Drop for PfCan {
             // SAFETY: unpublished and past a grace period.
             drop(unsafe { KBox::from_raw(old) });
         }
-        // Let pending free_table callbacks finish before our code goes.
+        // Let pending free_table/free_record callbacks finish before our
+        // code goes.
         rcu_barrier();
         pr_info!("PF_CAN protocol family unregistered\n");
     }

@@ -13,5 +13,7 @@ pub(crate) mod canloop;
 pub(crate) mod filter;
 #[path = "core/src/frame.rs"]
 pub(crate) mod frame;
+#[path = "core/src/rxtable.rs"]
+pub(crate) mod rxtable;
 #[path = "core/src/sockaddr.rs"]
 pub(crate) mod sockaddr;

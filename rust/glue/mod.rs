@@ -57,6 +57,12 @@ pub(crate) fn this_module() -> *mut bindings::module {
     unsafe { __this_module.get() }
 }
 
+/// A random number (`get_random_u32`). Any context.
+pub(crate) fn random_u32() -> u32 {
+    // SAFETY: get_random_u32 may be called in any context.
+    unsafe { bindings::rcan_get_random_u32() }
+}
+
 /// Converts a negative C return value into an [`Error`].
 pub(crate) fn to_result(ret: i32) -> kernel::error::Result<i32> {
     if ret < 0 {
@@ -92,6 +98,7 @@ pub(crate) mod neterr {
     net_errors!(
         EAFNOSUPPORT,
         EDESTADDRREQ,
+        EMSGSIZE,
         ENETDOWN,
         ENOBUFS,
         ENOPROTOOPT,
@@ -100,6 +107,35 @@ pub(crate) mod neterr {
         EPROTONOSUPPORT,
         EPROTOTYPE,
     );
+}
+
+/// Shortens `v` to `len` elements (6.12's `KVec` has no `truncate`); a
+/// `len` beyond the current length does nothing. The elements are `Copy`,
+/// so nothing needs dropping.
+pub(crate) fn kvec_truncate<T: Copy>(v: &mut kernel::alloc::KVec<T>, len: usize) {
+    if len < v.len() {
+        // SAFETY: `len` is below the current length; the elements past it
+        // are `Copy` (no drop needed) and are simply forgotten.
+        unsafe { v.set_len(len) };
+    }
+}
+
+/// Removes and returns element `idx` of `v`, moving the last element into
+/// its place (6.12's `KVec` has no `swap_remove`). `None` if out of range.
+pub(crate) fn kvec_swap_remove<T>(v: &mut kernel::alloc::KVec<T>, idx: usize) -> Option<T> {
+    let len = v.len();
+    if idx >= len {
+        return None;
+    }
+    v.as_mut_slice().swap(idx, len - 1);
+    // SAFETY: `len - 1` is in bounds and initialised; after set_len the
+    // vector no longer owns that slot, so the value is moved out exactly
+    // once.
+    unsafe {
+        let x = core::ptr::read(v.as_ptr().add(len - 1));
+        v.set_len(len - 1);
+        Some(x)
+    }
 }
 
 /// Removes every element equal to `x` from `v` (6.12's `KVec` has no

@@ -52,6 +52,20 @@ impl NetDev {
         unsafe { (*self.as_ptr()).flags & bindings::net_device_flags_IFF_UP != 0 }
     }
 
+    /// IFF_ECHO: the driver loops sent frames back itself.
+    pub(crate) fn has_echo(&self) -> bool {
+        // SAFETY: valid device; flags are set before registration and
+        // IFF_ECHO never changes afterwards.
+        unsafe { (*self.as_ptr()).flags & bindings::net_device_flags_IFF_ECHO != 0 }
+    }
+
+    /// The device MTU.
+    pub(crate) fn mtu(&self) -> u32 {
+        // SAFETY: valid device; a racy read of the MTU is what the core's
+        // transmit checks do too.
+        unsafe { (*self.as_ptr()).mtu }
+    }
+
     /// The interface name ("can0").
     pub(crate) fn name(&self) -> &str {
         // SAFETY: valid device; `name` is a NUL-terminated array that only

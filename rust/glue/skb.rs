@@ -137,6 +137,114 @@ impl Skb {
         unsafe { bindings::rcan_skb_set_can(self.as_ptr(), dev.as_ptr(), pkt_type) };
     }
 
+    /// Appends `len` bytes copied from the user's buffers of `msg`
+    /// (`skb_put` + `memcpy_from_msg`). EINVAL if the tailroom is too
+    /// small, EFAULT on a bad user pointer.
+    pub(crate) fn put_from_msg(
+        &mut self,
+        msg: &mut super::sock::Msg,
+        len: usize,
+    ) -> kernel::error::Result {
+        // SAFETY: valid skb; reading the tail/end offsets.
+        let tailroom = unsafe {
+            let skb = &*self.as_ptr();
+            if skb.data_len != 0 {
+                return Err(kernel::error::code::EINVAL);
+            }
+            skb.end.saturating_sub(skb.tail)
+        };
+        if len as u64 > u64::from(tailroom) {
+            return Err(kernel::error::code::EINVAL);
+        }
+        // SAFETY: tailroom checked above; the helper copies into the
+        // `len` bytes skb_put reserves.
+        let ret =
+            unsafe { bindings::rcan_skb_put_from_msg(self.as_ptr(), msg.as_ptr(), len as i32) };
+        super::to_result(ret).map(|_| ())
+    }
+
+    /// Copies the socket's priority and mark into the skb, as every
+    /// protocol's sendmsg does for the qdisc layer.
+    pub(crate) fn set_sock_params(&mut self, sk: *mut bindings::sock) {
+        // SAFETY: valid skb we own; `sk` is the live sending sock (callers
+        // pass their own).
+        unsafe { bindings::rcan_skb_sock_params(self.as_ptr(), sk) };
+    }
+
+    /// Writes `src` into the control buffer at `off` (clamped to its 48
+    /// bytes).
+    pub(crate) fn cb_write(&mut self, off: usize, src: &[u8]) {
+        // SAFETY: valid skb we own; bounds checked by slicing.
+        let cb = unsafe { &mut (*self.as_ptr()).cb };
+        let end = (off + src.len()).min(cb.len());
+        for (d, s) in cb.get_mut(off..end).unwrap_or(&mut []).iter_mut().zip(src) {
+            *d = *s as _;
+        }
+    }
+
+    /// Reads `dst.len()` bytes of the control buffer from `off`.
+    pub(crate) fn cb_read(&self, off: usize, dst: &mut [u8]) {
+        // SAFETY: valid skb; bounds checked by slicing.
+        let cb = unsafe { &(*self.as_ptr()).cb };
+        let end = (off + dst.len()).min(cb.len());
+        for (d, s) in dst.iter_mut().zip(cb.get(off..end).unwrap_or(&[])) {
+            *d = *s as u8;
+        }
+    }
+
+    /// `skb_clone` keeping the sending socket (`can_skb_set_owner`, holds a
+    /// reference on it): the copy a CAN device without IFF_ECHO loops back
+    /// still tells receivers who sent it. Any context.
+    pub(crate) fn clone_with_owner(&self) -> Option<Skb> {
+        // SAFETY: valid skb; the helper clones it and, if the original has
+        // an owner socket (kept alive by the original's reference), takes a
+        // reference on it for the clone.
+        unsafe {
+            Skb::from_raw(bindings::rcan_skb_clone_owned(
+                self.as_ptr(),
+                super::GFP_ATOMIC,
+            ))
+        }
+    }
+
+    /// Whether someone else holds a reference too (`skb_shared`).
+    pub(crate) fn is_shared(&self) -> bool {
+        // SAFETY: valid skb.
+        unsafe { bindings::rcan_skb_shared(self.as_ptr()) }
+    }
+
+    /// The socket that sent the skb (`skb->sk`), for identity comparisons
+    /// only; NULL for frames from the bus.
+    pub(crate) fn sk_ptr(&self) -> *mut bindings::sock {
+        // SAFETY: valid skb; reading a pointer field.
+        unsafe { (*self.as_ptr()).sk }
+    }
+
+    /// Sets `skb->pkt_type`.
+    pub(crate) fn set_pkt_type(&mut self, pkt_type: u8) {
+        // SAFETY: valid skb we own.
+        unsafe { bindings::rcan_skb_set_pkt_type(self.as_ptr(), pkt_type) };
+    }
+
+    /// The device in `skb->dev`.
+    ///
+    /// # Safety
+    ///
+    /// `skb->dev` is NULL or a device the caller keeps alive (holds a
+    /// reference, or runs in the receive or transmit path of that device)
+    /// for `'a`.
+    pub(crate) unsafe fn dev<'a>(&self) -> Option<&'a super::netdev::NetDev> {
+        // SAFETY: valid skb; the device's lifetime per the contract.
+        unsafe {
+            let dev = bindings::rcan_skb_dev(self.as_ptr());
+            if dev.is_null() {
+                None
+            } else {
+                Some(super::netdev::NetDev::from_raw(dev))
+            }
+        }
+    }
+
     /// Frees as successfully consumed (not a drop in drop monitors).
     pub(crate) fn consume(self) {
         // SAFETY: we own the reference and give it up.

@@ -43,6 +43,76 @@ pub(crate) trait Proto: Sized + 'static {
     fn getname(sk: &Sock<Self>, peer: bool, out: &mut [u8]) -> Result<usize>;
     fn sendmsg(sk: &Sock<Self>, msg: &mut Msg, len: usize) -> Result<usize>;
     fn recvmsg(sk: &Sock<Self>, msg: &mut Msg, len: usize, flags: i32) -> Result<usize>;
+    /// `setsockopt` at a level other than SOL_SOCKET (which the socket
+    /// layer handles itself).
+    fn setsockopt(_sk: &Sock<Self>, _level: i32, _name: i32, _opt: &OptIn) -> Result {
+        Err(super::neterr::ENOPROTOOPT())
+    }
+    /// `getsockopt` at a level other than SOL_SOCKET.
+    fn getsockopt(_sk: &Sock<Self>, _level: i32, _name: i32, _opt: &OptOut) -> Result {
+        Err(super::neterr::ENOPROTOOPT())
+    }
+}
+
+/// The value of a `setsockopt` call: user (or, for in-kernel callers,
+/// kernel) memory of `len()` bytes.
+pub(crate) struct OptIn {
+    val: bindings::sockptr_t,
+    len: usize,
+}
+
+impl OptIn {
+    /// The option length the caller passed.
+    pub(crate) fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Copies the first `dst.len()` bytes of the value (the caller checked
+    /// `dst.len() <= len()`); EFAULT on a bad pointer.
+    pub(crate) fn read(&self, dst: &mut [u8]) -> Result {
+        if dst.len() > self.len {
+            return Err(code::EINVAL);
+        }
+        // SAFETY: `dst` is a writable kernel buffer of dst.len() bytes; the
+        // helper checks the user pointer (copy_from_sockptr).
+        let ret = unsafe {
+            bindings::rcan_copy_from_sockptr(dst.as_mut_ptr().cast(), self.val, dst.len())
+        };
+        super::to_result(ret).map(|_| ())
+    }
+}
+
+/// The result buffer of a `getsockopt` call: `optval` and `optlen` are
+/// user pointers.
+pub(crate) struct OptOut {
+    val: *mut ffi::c_char,
+    len: *mut ffi::c_int,
+}
+
+impl OptOut {
+    /// The buffer length the caller passed in `*optlen`; EFAULT on a bad
+    /// pointer.
+    pub(crate) fn len(&self) -> Result<i32> {
+        let mut v: ffi::c_int = 0;
+        // SAFETY: `len` is a user pointer; the helper uses get_user.
+        super::to_result(unsafe { bindings::rcan_get_user_int(self.len, &mut v) })?;
+        Ok(v)
+    }
+
+    /// Stores `n` in `*optlen`.
+    pub(crate) fn set_len(&self, n: i32) -> Result {
+        // SAFETY: as in len(); put_user checks the pointer.
+        super::to_result(unsafe { bindings::rcan_put_user_int(self.len, n) }).map(|_| ())
+    }
+
+    /// Copies `src` to `optval`.
+    pub(crate) fn write(&self, src: &[u8]) -> Result {
+        // SAFETY: `src` is readable; copy_to_user checks the user pointer.
+        let ret = unsafe {
+            bindings::rcan_copy_to_user(self.val.cast(), src.as_ptr().cast(), src.len() as _)
+        };
+        super::to_result(ret).map(|_| ())
+    }
 }
 
 /// A `struct sock` of protocol `T`, borrowed.
@@ -102,6 +172,14 @@ impl<T: Proto> Sock<T> {
         unsafe { Skb::from_raw(skb) }.ok_or_else(|| Error::from_errno(err))
     }
 
+    /// Frees an skb obtained from [`Sock::recv_datagram`]
+    /// (`skb_free_datagram`).
+    pub(crate) fn free_datagram(&self, skb: Skb) {
+        // SAFETY: live sock; `skb` came from skb_recv_datagram on it and we
+        // give its reference away.
+        unsafe { bindings::skb_free_datagram(self.sk, skb.into_raw()) };
+    }
+
     /// Allocates an skb charged to the send buffer, blocking while it is
     /// full unless `nonblock` (then EAGAIN); honours SO_SNDTIMEO.
     pub(crate) fn alloc_send_skb(&self, size: u32, nonblock: bool) -> Result<Skb> {
@@ -114,13 +192,25 @@ impl<T: Proto> Sock<T> {
         unsafe { Skb::from_raw(skb) }.ok_or_else(|| Error::from_errno(err))
     }
 
-    /// Sets `sk_err` and reports it to waiters (recv/poll see it once).
+    /// Sets `sk_err` and reports it to waiters (recv/poll see it once);
+    /// a socket already closed (SOCK_DEAD) is not woken.
     pub(crate) fn report_error(&self, errno: i32) {
         // SAFETY: live sock; sk_err is written like this by every protocol.
-        unsafe {
-            (*self.sk).sk_err = errno;
-            bindings::sk_error_report(self.sk);
-        }
+        unsafe { bindings::rcan_sk_report_error(self.sk, errno) };
+    }
+
+    /// Dequeues from the error queue (`sock_recv_errqueue`); EAGAIN when
+    /// it is empty.
+    pub(crate) fn recv_errqueue(
+        &self,
+        msg: &mut Msg,
+        len: usize,
+        level: i32,
+        type_: i32,
+    ) -> Result<usize> {
+        // SAFETY: live sock and a valid msghdr of the current recvmsg.
+        let ret = unsafe { bindings::sock_recv_errqueue(self.sk, msg.0, len as i32, level, type_) };
+        super::to_result(ret).map(|n| n as usize)
     }
 }
 
@@ -157,6 +247,10 @@ impl<T: Proto> Drop for SockGuard<'_, T> {
 pub(crate) struct Msg(*mut bindings::msghdr);
 
 impl Msg {
+    pub(crate) fn as_ptr(&self) -> *mut bindings::msghdr {
+        self.0
+    }
+
     /// The destination address of a sendmsg (a kernel copy), if any.
     pub(crate) fn name(&self) -> Option<&[u8]> {
         // SAFETY: the socket layer passes a valid msghdr whose msg_name, if
@@ -342,8 +436,9 @@ pub(crate) const fn proto_ops_template<T: Proto>() -> bindings::proto_ops {
         ioctl: Some(no_ioctl),
         listen: Some(bindings::sock_no_listen),
         shutdown: Some(bindings::sock_no_shutdown),
-        setsockopt: Some(no_setsockopt),
-        getsockopt: Some(no_getsockopt),
+        setsockopt: Some(setsockopt::<T>),
+        getsockopt: Some(getsockopt::<T>),
+        gettstamp: Some(bindings::sock_gettstamp),
         sendmsg: Some(sendmsg::<T>),
         recvmsg: Some(recvmsg::<T>),
         mmap: Some(bindings::sock_no_mmap),
@@ -490,22 +585,36 @@ unsafe extern "C" fn no_ioctl(
     -(bindings::ENOIOCTLCMD as ffi::c_int)
 }
 
-unsafe extern "C" fn no_setsockopt(
-    _sock: *mut bindings::socket,
-    _level: ffi::c_int,
-    _name: ffi::c_int,
-    _val: bindings::sockptr_t,
-    _len: ffi::c_uint,
+unsafe extern "C" fn setsockopt<T: Proto>(
+    sock: *mut bindings::socket,
+    level: ffi::c_int,
+    name: ffi::c_int,
+    val: bindings::sockptr_t,
+    len: ffi::c_uint,
 ) -> ffi::c_int {
-    -(bindings::ENOPROTOOPT as ffi::c_int)
+    let opt = OptIn {
+        val,
+        len: len as usize,
+    };
+    // SAFETY: socket-layer call.
+    match unsafe { sock_of::<T>(sock) } {
+        Some(sk) => ret(T::setsockopt(&sk, level, name, &opt)),
+        None => code::EBADF.to_errno(),
+    }
 }
 
-unsafe extern "C" fn no_getsockopt(
-    _sock: *mut bindings::socket,
-    _level: ffi::c_int,
-    _name: ffi::c_int,
-    _val: *mut ffi::c_char,
-    _len: *mut ffi::c_int,
+unsafe extern "C" fn getsockopt<T: Proto>(
+    sock: *mut bindings::socket,
+    level: ffi::c_int,
+    name: ffi::c_int,
+    val: *mut ffi::c_char,
+    len: *mut ffi::c_int,
 ) -> ffi::c_int {
-    -(bindings::ENOPROTOOPT as ffi::c_int)
+    let opt = OptOut { val, len };
+    // SAFETY: socket-layer call; `val` and `len` are user pointers that
+    // OptOut only passes to the uaccess helpers.
+    match unsafe { sock_of::<T>(sock) } {
+        Some(sk) => ret(T::getsockopt(&sk, level, name, &opt)),
+        None => code::EBADF.to_errno(),
+    }
 }

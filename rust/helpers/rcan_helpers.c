@@ -5,6 +5,7 @@
  * so that every module has its own private copy.
  */
 #include <linux/can.h>
+#include <linux/can/skb.h>
 #include <linux/if_arp.h>
 #include <linux/module.h>
 #include <linux/mutex.h>
@@ -13,6 +14,8 @@
 #include <linux/rcupdate.h>
 #include <linux/rtnetlink.h>
 #include <linux/skbuff.h>
+#include <linux/sockptr.h>
+#include <linux/uaccess.h>
 #include <net/sock.h>
 
 #include "rcan_helpers.h"
@@ -110,6 +113,37 @@ void rcan_skb_set_can(struct sk_buff *skb, struct net_device *dev, u8 pkt_type)
 	skb_reset_mac_header(skb);
 	skb_reset_network_header(skb);
 	skb_reset_transport_header(skb);
+}
+
+/* A clone of @skb that keeps its sending socket (mainline can_send's echo). */
+struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp)
+{
+	struct sk_buff *n = skb_clone(skb, gfp);
+
+	if (n)
+		can_skb_set_owner(n, skb->sk);
+	return n;
+}
+
+bool rcan_skb_shared(const struct sk_buff *skb)
+{
+	return skb_shared(skb);
+}
+
+void rcan_skb_set_pkt_type(struct sk_buff *skb, u8 pkt_type)
+{
+	skb->pkt_type = pkt_type;
+}
+
+int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len)
+{
+	return memcpy_from_msg(skb_put(skb, len), msg, len);
+}
+
+void rcan_skb_sock_params(struct sk_buff *skb, struct sock *sk)
+{
+	skb->priority = READ_ONCE(sk->sk_priority);
+	skb->mark = READ_ONCE(sk->sk_mark);
 }
 
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
@@ -272,4 +306,31 @@ void rcan_module_put(struct module *mod)
 u32 rcan_get_random_u32(void)
 {
 	return get_random_u32();
+}
+
+void rcan_sk_report_error(struct sock *sk, int err)
+{
+	WRITE_ONCE(sk->sk_err, err);
+	if (!sock_flag(sk, SOCK_DEAD))
+		sk_error_report(sk);
+}
+
+int rcan_copy_from_sockptr(void *dst, sockptr_t src, size_t size)
+{
+	return copy_from_sockptr(dst, src, size) ? -EFAULT : 0;
+}
+
+int rcan_get_user_int(int __user *p, int *val)
+{
+	return get_user(*val, p);
+}
+
+int rcan_put_user_int(int __user *p, int val)
+{
+	return put_user(val, p);
+}
+
+int rcan_copy_to_user(void __user *dst, const void *src, unsigned long n)
+{
+	return copy_to_user(dst, src, n) ? -EFAULT : 0;
 }

@@ -10,6 +10,7 @@
 #define _RCAN_HELPERS_H
 
 #include <linux/types.h>
+#include <linux/sockptr.h>
 
 struct sk_buff;
 struct sock;
@@ -42,6 +43,11 @@ void rcan_skb_reset_headers(struct sk_buff *skb);
 struct net_device *rcan_skb_dev(const struct sk_buff *skb);
 u8 rcan_skb_pkt_type(const struct sk_buff *skb);
 void rcan_skb_set_can(struct sk_buff *skb, struct net_device *dev, u8 pkt_type);
+struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp);
+bool rcan_skb_shared(const struct sk_buff *skb);
+void rcan_skb_set_pkt_type(struct sk_buff *skb, u8 pkt_type);
+int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len);
+void rcan_skb_sock_params(struct sk_buff *skb, struct sock *sk);
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 			       struct msghdr *msg, int size);
 int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len);
@@ -73,6 +79,14 @@ void rcan_dev_stats_tx(struct net_device *dev, unsigned int bytes);
 void rcan_dev_stats_rx(struct net_device *dev, unsigned int bytes);
 void rcan_dev_stats_tx_dropped(struct net_device *dev);
 void rcan_dev_stats_rx_dropped(struct net_device *dev);
+
+void rcan_sk_report_error(struct sock *sk, int err);
+
+/* user memory */
+int rcan_copy_from_sockptr(void *dst, sockptr_t src, size_t size);
+int rcan_get_user_int(int __user *p, int *val);
+int rcan_put_user_int(int __user *p, int val);
+int rcan_copy_to_user(void __user *dst, const void *src, unsigned long n);
 
 /* module references */
 bool rcan_try_module_get(struct module *mod);

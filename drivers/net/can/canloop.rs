@@ -3,10 +3,15 @@
 //! rcan_loop: the CAN loopback device (thesis 5.3.5, module `canloop`).
 //!
 //! Registers `count` devices `can%d` (ARPHRD_CAN, IFF_NOARP, IFF_ECHO).
-//! Every frame handed to a device for transmission is reflected into the
-//! receive path (`netif_rx`) as if it had come back from a bus, unless the
-//! `droprate` parameter makes the device drop it to simulate loss. With
-//! `verbose`, each frame is logged with the device name.
+//! Every frame handed to a device for transmission with a loopback request
+//! (`skb->pkt_type == PACKET_LOOPBACK`, set by `rcan_send` for thesis
+//! sockets and for CAN_RAW sockets with CAN_RAW_LOOPBACK on) is reflected
+//! into the receive path (`netif_rx`) as if it had come back from a bus,
+//! unless the `droprate` parameter makes the device drop it to simulate
+//! loss. Frames sent without a loopback request are counted as sent and
+//! freed: the device is an echoing device in mainline's sense (IFF_ECHO),
+//! like `vcan echo=1`. With `verbose`, each frame is logged with the device
+//! name.
 //!
 //! Contexts: `start_xmit` runs with BH disabled under the device's TX lock
 //! (so the per-device counters need no lock of their own); `open`/`stop`
@@ -47,7 +52,8 @@ extern "C" {
 }
 
 fn param(which: i32) -> u32 {
-    // SAFETY: reads a module parameter with READ_ONCE.
+    // SAFETY: the C side reads a module parameter with READ_ONCE; any
+    // `which` is valid.
     unsafe { rcan_loop_get(which) }
 }
 
@@ -100,10 +106,7 @@ impl Driver for LoopDriver {
         }
         // The parameter setter only stores valid rates.
         let drop_it = match DropRate::new(param(PARAM_DROPRATE)) {
-            Some(rate) if rate.percent() > 0 => {
-                // SAFETY: get_random_u32 may be called in any context.
-                rate.should_drop(unsafe { bindings::rcan_get_random_u32() })
-            }
+            Some(rate) if rate.percent() > 0 => rate.should_drop(glue::random_u32()),
             _ => false,
         };
         if drop_it {
@@ -113,6 +116,11 @@ impl Driver for LoopDriver {
         }
         let bytes = frame.dlc() as u32;
         dev.stats_tx(bytes);
+        if skb.pkt_type() != bindings::PACKET_LOOPBACK as u8 {
+            // Nobody asked for the echo: the frame "left on the bus".
+            skb.consume();
+            return Xmit::Ok;
+        }
         dev.stats_rx(bytes);
         // Reflect: the same skb comes back as a received, locally
         // originated frame (the sending socket stays in skb->sk so that

@@ -13,4 +13,5 @@ pub mod arb;
 pub mod canloop;
 pub mod filter;
 pub mod frame;
+pub mod rxtable;
 pub mod sockaddr;

@@ -1,0 +1,637 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! rcan_raw: CAN_RAW, the raw protocol of mainline SocketCAN, on the rcan
+//! stack (DESIGN decision 5).
+//!
+//! `socket(PF_CAN, SOCK_RAW, CAN_RAW)` with mainline's ABI for classic CAN:
+//! 16-byte `struct can_frame` reads and writes, `struct sockaddr_can` (only
+//! `can_family` and `can_ifindex` are used; 8 bytes are required and
+//! returned), `SOL_CAN_RAW` options. Programs written for mainline
+//! (can-utils, python-can, the `socketcan` crate) run unchanged. Every
+//! errno is mainline's for the same input; see
+//! Documentation/networking/rcan/can-raw.rst for the reference and for the
+//! few deliberate differences (no CAN FD/XL: this stack is classic only).
+//!
+//! Contexts and locks:
+//!
+//! * System calls run in process context. Those that change what the
+//!   socket receives (bind, CAN_RAW_FILTER, CAN_RAW_ERR_FILTER,
+//!   CAN_RAW_RECV_OWN_MSGS, CAN_RAW_JOIN_FILTERS) take RTNL, then the
+//!   socket lock, then (inside `rcan_rx_set`) pf_can's writers' mutex —
+//!   the order of mainline raw.c; RTNL keeps the device from vanishing
+//!   between the check and the registration, and serialises with the
+//!   netdevice notifier.
+//! * `raw_rx`, the receive callback, runs in NET_RX softirq under RCU. It
+//!   reads only its arguments (the socket's receive options travel in the
+//!   registration's `cookie`), never the socket lock.
+//! * `SOCKETS`, every open socket (for the notifier), is protected by RTNL.
+
+use kernel::ffi;
+use kernel::prelude::*;
+
+#[path = "../../rust/glue/mod.rs"]
+mod glue;
+mod rcan_api;
+mod rcan_core;
+
+use glue::bindings;
+use glue::netdev::{DevRef, NetDev};
+use glue::neterr;
+use glue::skb::Skb;
+use glue::sock::{Msg, OptIn, OptOut, ProtoReg, Sock};
+use glue::sync::{CCell, Rtnl, RtnlLocked};
+use kernel::c_str;
+use rcan_api::{CanProto, RxFilter, CAN_RAW, RX_FILTER_CAN_ID};
+use rcan_core::frame::CAN_FRAME_LEN;
+use rcan_core::rxtable::CAN_ERR_MASK;
+
+module! {
+    type: RawModule,
+    name: "rcan_raw",
+    author: "rcan developers",
+    description: "CAN_RAW: SocketCAN-compatible raw CAN protocol",
+    license: "GPL",
+}
+
+/// `SOL_CAN_RAW` (`SOL_CAN_BASE + CAN_RAW`).
+const SOL_CAN_RAW: i32 = 101;
+const CAN_RAW_FILTER: i32 = 1;
+const CAN_RAW_ERR_FILTER: i32 = 2;
+const CAN_RAW_LOOPBACK: i32 = 3;
+const CAN_RAW_RECV_OWN_MSGS: i32 = 4;
+const CAN_RAW_FD_FRAMES: i32 = 5;
+const CAN_RAW_JOIN_FILTERS: i32 = 6;
+const CAN_RAW_XL_FRAMES: i32 = 7;
+/// `SCM_CAN_RAW_ERRQUEUE`: cmsg type of error-queue messages.
+const SCM_CAN_RAW_ERRQUEUE: i32 = 1;
+/// Most filters one socket may set (`CAN_RAW_FILTER_MAX`).
+const CAN_RAW_FILTER_MAX: usize = 512;
+/// `sizeof(struct can_filter)`.
+const CAN_FILTER_LEN: usize = 8;
+/// Bytes of `struct sockaddr_can` that CAN_RAW requires and returns
+/// (`can_family`, padding, `can_ifindex`).
+const RAW_MIN_NAMELEN: usize = 8;
+/// Mainline checks a write's size against the smallest and largest frame
+/// of any CAN flavour (CAN XL header + 1 byte, and the CAN XL MTU) before
+/// anything else; keeping the same bounds keeps the errnos identical.
+const MIN_WRITE: usize = 13;
+const MAX_WRITE: usize = 2060;
+
+/// `cookie` bit of the registration: deliver the socket's own frames.
+const COOKIE_RECV_OWN: u32 = 1;
+
+/// Offsets in `skb->cb` of a queued frame: the source address
+/// (`RAW_MIN_NAMELEN` bytes of `struct sockaddr_can`), then the recvmsg
+/// flags.
+const CB_NAME: usize = 0;
+const CB_FLAGS: usize = RAW_MIN_NAMELEN;
+
+/// Headroom for mainline's `struct can_skb_priv`.
+const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
+
+/// `struct can_filter`, as the user set it.
+#[derive(Clone, Copy, PartialEq, Eq)]
+struct CanFilter {
+    can_id: u32,
+    can_mask: u32,
+}
+
+/// The filter of a new socket: everything (`can_mask` 0).
+static DEFAULT_FILTER: [CanFilter; 1] = [CanFilter {
+    can_id: 0,
+    can_mask: 0,
+}];
+
+/// A CAN_RAW socket's state, protected by its socket lock.
+struct RawSock {
+    bound: bool,
+    /// Interface given to bind (0 = all CAN interfaces).
+    ifindex: i32,
+    /// Filters set with CAN_RAW_FILTER; `None` = the default filter.
+    filters: Option<KVec<CanFilter>>,
+    err_mask: u32,
+    /// Option values as the user set them (mainline keeps the int).
+    loopback: i32,
+    recv_own_msgs: i32,
+    join_filters: i32,
+}
+
+impl RawSock {
+    fn filters(&self) -> &[CanFilter] {
+        match &self.filters {
+            Some(v) => v,
+            None => &DEFAULT_FILTER,
+        }
+    }
+
+    fn cookie(&self) -> u32 {
+        if self.recv_own_msgs != 0 {
+            COOKIE_RECV_OWN
+        } else {
+            0
+        }
+    }
+}
+
+struct RawProto;
+
+static PROTO: ProtoReg<RawProto> = ProtoReg::new();
+
+/// Every open socket, so the notifier can find those bound to a device.
+/// Protected by RTNL.
+static SOCKETS: RtnlLocked<KVec<usize>> = RtnlLocked::new(KVec::new());
+
+type S = Sock<RawProto>;
+
+/// Receive callback (see `rcan_api::RxFn`): NET_RX softirq, RCU read side.
+/// Mainline `raw_rcv`: own frames only with CAN_RAW_RECV_OWN_MSGS,
+/// MSG_DONTROUTE for frames sent from this host, MSG_CONFIRM for frames
+/// sent by this socket.
+unsafe extern "C" fn raw_rx(
+    skb: *mut bindings::sk_buff,
+    sk: *mut bindings::sock,
+    cookie: u32,
+    owned: bool,
+) {
+    // SAFETY: pf_can passes a valid skb, borrowed or owned as `owned` says,
+    // and a sock of ours that its receiver record keeps alive for the call.
+    let (skb, sock) = unsafe {
+        let Some(s) = Skb::from_raw(skb) else { return };
+        (s, S::from_raw(sk))
+    };
+    let origin = skb.sk_ptr();
+    let own = origin == sk;
+    if own && cookie & COOKIE_RECV_OWN == 0 {
+        if owned {
+            skb.consume();
+        } else {
+            core::mem::forget(skb);
+        }
+        return;
+    }
+    let mut flags = 0u32;
+    if !origin.is_null() {
+        flags |= bindings::MSG_DONTROUTE;
+    }
+    if own {
+        flags |= bindings::MSG_CONFIRM;
+    }
+    let mut skb = if owned {
+        skb
+    } else {
+        let clone = skb.clone_atomic();
+        core::mem::forget(skb);
+        match clone {
+            Some(c) => c,
+            None => return,
+        }
+    };
+    let mut name = [0u8; RAW_MIN_NAMELEN];
+    name[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
+    name[4..].copy_from_slice(&skb.ifindex().to_ne_bytes());
+    skb.cb_write(CB_NAME, &name);
+    skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
+    // A full receive queue drops the frame (counted by the socket layer).
+    let _ = sock.queue_rcv(skb);
+}
+
+/// (Re)registers the socket's receiver from its current state, or removes
+/// it when the socket is not bound. Process context; caller holds RTNL and
+/// the socket lock (passes the locked state in `s`).
+fn register(sk: &S, s: &RawSock) -> Result {
+    if !s.bound {
+        rcan_api::rx_remove(raw_rx, sk);
+        return Ok(());
+    }
+    let fs = s.filters();
+    let mut v = KVec::with_capacity(fs.len(), GFP_KERNEL)?;
+    for f in fs {
+        v.push(
+            RxFilter {
+                kind: RX_FILTER_CAN_ID,
+                id: f.can_id,
+                mask: f.can_mask,
+            },
+            GFP_KERNEL,
+        )?;
+    }
+    rcan_api::rx_set(
+        raw_rx,
+        sk,
+        s.cookie(),
+        s.ifindex,
+        &v,
+        s.join_filters != 0,
+        s.err_mask,
+    )
+}
+
+fn unregister(sk: &S) {
+    rcan_api::rx_remove(raw_rx, sk);
+}
+
+/// Parses the `can_family`/`can_ifindex` part of a `struct sockaddr_can`.
+fn parse_addr(addr: &[u8]) -> Result<i32> {
+    if addr.len() < RAW_MIN_NAMELEN {
+        return Err(EINVAL);
+    }
+    if u16::from_ne_bytes([addr[0], addr[1]]) != bindings::AF_CAN as u16 {
+        return Err(EINVAL);
+    }
+    Ok(i32::from_ne_bytes([addr[4], addr[5], addr[6], addr[7]]))
+}
+
+/// Reads an `int` option; EINVAL unless `optlen` is exactly 4.
+fn read_int(opt: &OptIn) -> Result<i32> {
+    if opt.len() != 4 {
+        return Err(EINVAL);
+    }
+    let mut b = [0u8; 4];
+    opt.read(&mut b)?;
+    Ok(i32::from_ne_bytes(b))
+}
+
+/// A change of what a socket receives.
+enum Change {
+    Filters(KVec<CanFilter>),
+    ErrMask(u32),
+    RecvOwn(i32),
+    Join(i32),
+}
+
+/// Applies `change` and re-registers the receiver if the socket is bound;
+/// on failure the old state stays. Process context; takes RTNL and the
+/// socket lock.
+fn update(sk: &S, change: Change) -> Result {
+    let _rtnl = Rtnl::lock();
+    let mut s = sk.lock();
+    let (err_mask, recv_own, join) = (s.err_mask, s.recv_own_msgs, s.join_filters);
+    let mut old_filters = None;
+    match change {
+        Change::Filters(v) => old_filters = Some(s.filters.replace(v)),
+        Change::ErrMask(m) => s.err_mask = m,
+        Change::RecvOwn(v) => s.recv_own_msgs = v,
+        Change::Join(v) => s.join_filters = v,
+    }
+    if s.bound {
+        if let Err(e) = register(sk, &s) {
+            s.err_mask = err_mask;
+            s.recv_own_msgs = recv_own;
+            s.join_filters = join;
+            if let Some(f) = old_filters {
+                s.filters = f;
+            }
+            return Err(e);
+        }
+    }
+    Ok(())
+}
+
+impl glue::sock::Proto for RawProto {
+    type Data = RawSock;
+
+    fn new_data() -> RawSock {
+        RawSock {
+            bound: false,
+            ifindex: 0,
+            filters: None,
+            err_mask: 0,
+            loopback: 1,
+            recv_own_msgs: 0,
+            join_filters: 0,
+        }
+    }
+
+    fn release(sk: &S) {
+        let mut rtnl = Rtnl::lock();
+        glue::kvec_remove_all(SOCKETS.get(&mut rtnl), sk.as_ptr() as usize);
+        let mut s = sk.lock();
+        if s.bound {
+            unregister(sk);
+        }
+        s.bound = false;
+        s.ifindex = 0;
+        s.filters = None;
+    }
+
+    fn bind(sk: &S, addr: &[u8]) -> Result {
+        let mut ifindex = parse_addr(addr)?;
+        let mut enetdown = false;
+        {
+            let _rtnl = Rtnl::lock();
+            let mut s = sk.lock();
+            if s.bound && s.ifindex == ifindex {
+                return Ok(());
+            }
+            if ifindex != 0 {
+                let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+                if !dev.is_can() {
+                    return Err(ENODEV);
+                }
+                enetdown = !dev.is_up();
+                ifindex = dev.ifindex();
+            }
+            let old = (s.bound, s.ifindex);
+            s.bound = true;
+            s.ifindex = ifindex;
+            if let Err(e) = register(sk, &s) {
+                (s.bound, s.ifindex) = old;
+                return Err(e);
+            }
+        }
+        if enetdown {
+            sk.report_error(bindings::ENETDOWN as i32);
+        }
+        Ok(())
+    }
+
+    fn connect(_sk: &S, _addr: &[u8], _flags: i32) -> Result {
+        Err(neterr::EOPNOTSUPP())
+    }
+
+    fn getname(sk: &S, peer: bool, out: &mut [u8]) -> Result<usize> {
+        if peer {
+            return Err(neterr::EOPNOTSUPP());
+        }
+        let ifindex = sk.lock().ifindex;
+        out[..RAW_MIN_NAMELEN].fill(0);
+        out[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
+        out[4..RAW_MIN_NAMELEN].copy_from_slice(&ifindex.to_ne_bytes());
+        Ok(RAW_MIN_NAMELEN)
+    }
+
+    fn sendmsg(sk: &S, msg: &mut Msg, len: usize) -> Result<usize> {
+        if !(MIN_WRITE..=MAX_WRITE).contains(&len) {
+            return Err(EINVAL);
+        }
+        let (bound_ifindex, loopback) = {
+            let s = sk.lock();
+            (s.ifindex, s.loopback != 0)
+        };
+        let ifindex = match msg.name() {
+            Some(name) => parse_addr(name)?,
+            None => bound_ifindex,
+        };
+        let dev = DevRef::by_index(ifindex).ok_or(ENXIO)?;
+        let nonblock = msg.flags() & bindings::MSG_DONTWAIT != 0;
+        let mut skb = sk.alloc_send_skb(SKB_PRIV_LEN + len as u32, nonblock)?;
+        skb.reserve(SKB_PRIV_LEN);
+        // struct can_skb_priv { int ifindex; int skbcnt; }
+        let mut prv = [0u8; SKB_PRIV_LEN as usize];
+        prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
+        if !skb.write_headroom(&prv) {
+            return Err(neterr::ENOBUFS());
+        }
+        skb.put_from_msg(msg, len)?;
+        // Only a classic frame (16 bytes, len <= 8) is valid here.
+        let ok = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data())
+            .map(|b| usize::from(b[4]) <= rcan_core::arb::MAX_DLC)
+            .unwrap_or(false);
+        if !ok {
+            return Err(EINVAL);
+        }
+        skb.set_sock_params(sk.as_ptr());
+        rcan_api::send(skb, &dev, loopback)?;
+        Ok(len)
+    }
+
+    fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
+        if flags as u32 & bindings::MSG_ERRQUEUE != 0 {
+            return sk.recv_errqueue(msg, len, SOL_CAN_RAW, SCM_CAN_RAW_ERRQUEUE);
+        }
+        let skb = sk.recv_datagram(flags)?;
+        let n = skb.len() as usize;
+        let size = if len < n {
+            msg.add_flags(bindings::MSG_TRUNC);
+            len
+        } else {
+            n
+        };
+        if let Err(e) = msg.copy_from_skb(&skb, 0, size) {
+            sk.free_datagram(skb);
+            return Err(e);
+        }
+        msg.recv_cmsgs(sk, &skb);
+        let mut name = [0u8; RAW_MIN_NAMELEN];
+        skb.cb_read(CB_NAME, &mut name);
+        msg.set_name(&name);
+        let mut f = [0u8; 4];
+        skb.cb_read(CB_FLAGS, &mut f);
+        msg.add_flags(u32::from_ne_bytes(f));
+        sk.free_datagram(skb);
+        Ok(size)
+    }
+
+    fn setsockopt(sk: &S, level: i32, name: i32, opt: &OptIn) -> Result {
+        if level != SOL_CAN_RAW {
+            return Err(EINVAL);
+        }
+        match name {
+            CAN_RAW_FILTER => {
+                let len = opt.len();
+                if len % CAN_FILTER_LEN != 0 || len > CAN_RAW_FILTER_MAX * CAN_FILTER_LEN {
+                    return Err(EINVAL);
+                }
+                let mut raw = KVec::from_elem(0u8, len, GFP_KERNEL)?;
+                opt.read(&mut raw)?;
+                let mut v = KVec::with_capacity(len / CAN_FILTER_LEN, GFP_KERNEL)?;
+                for c in raw.chunks_exact(CAN_FILTER_LEN) {
+                    v.push(
+                        CanFilter {
+                            can_id: u32::from_ne_bytes([c[0], c[1], c[2], c[3]]),
+                            can_mask: u32::from_ne_bytes([c[4], c[5], c[6], c[7]]),
+                        },
+                        GFP_KERNEL,
+                    )?;
+                }
+                update(sk, Change::Filters(v))
+            }
+            CAN_RAW_ERR_FILTER => {
+                let m = read_int(opt)? as u32 & CAN_ERR_MASK;
+                update(sk, Change::ErrMask(m))
+            }
+            CAN_RAW_LOOPBACK => {
+                let v = read_int(opt)?;
+                sk.lock().loopback = v;
+                Ok(())
+            }
+            CAN_RAW_RECV_OWN_MSGS => {
+                let v = read_int(opt)?;
+                update(sk, Change::RecvOwn(v))
+            }
+            CAN_RAW_JOIN_FILTERS => {
+                let v = read_int(opt)?;
+                update(sk, Change::Join(v))
+            }
+            // Classic CAN only: "off" is accepted, "on" is not available.
+            CAN_RAW_FD_FRAMES | CAN_RAW_XL_FRAMES => match read_int(opt)? {
+                0 => Ok(()),
+                _ => Err(neterr::ENOPROTOOPT()),
+            },
+            _ => Err(neterr::ENOPROTOOPT()),
+        }
+    }
+
+    fn getsockopt(sk: &S, level: i32, name: i32, opt: &OptOut) -> Result {
+        if level != SOL_CAN_RAW {
+            return Err(EINVAL);
+        }
+        let len = opt.len()?;
+        if len < 0 {
+            return Err(EINVAL);
+        }
+        let s = sk.lock();
+        let val: i32 = match name {
+            CAN_RAW_FILTER => {
+                let fs = s.filters();
+                let fsize = (fs.len() * CAN_FILTER_LEN) as i32;
+                if fs.is_empty() {
+                    return opt.set_len(0);
+                }
+                if len < fsize {
+                    opt.set_len(fsize)?;
+                    return Err(glue::errno(bindings::ERANGE as i32));
+                }
+                let mut buf = KVec::with_capacity(fsize as usize, GFP_KERNEL)?;
+                for f in fs {
+                    buf.extend_from_slice(&f.can_id.to_ne_bytes(), GFP_KERNEL)?;
+                    buf.extend_from_slice(&f.can_mask.to_ne_bytes(), GFP_KERNEL)?;
+                }
+                drop(s);
+                opt.write(&buf)?;
+                return opt.set_len(fsize);
+            }
+            CAN_RAW_ERR_FILTER => s.err_mask as i32,
+            CAN_RAW_LOOPBACK => s.loopback,
+            CAN_RAW_RECV_OWN_MSGS => s.recv_own_msgs,
+            CAN_RAW_JOIN_FILTERS => s.join_filters,
+            CAN_RAW_FD_FRAMES | CAN_RAW_XL_FRAMES => 0,
+            _ => return Err(neterr::ENOPROTOOPT()),
+        };
+        drop(s);
+        let n = len.min(4);
+        opt.set_len(n)?;
+        opt.write(&val.to_ne_bytes()[..n as usize])
+    }
+}
+
+/// `CanProto.create`: a new CAN_RAW socket. Process context.
+unsafe extern "C" fn raw_create(
+    net: *mut bindings::net,
+    sock: *mut bindings::socket,
+    protocol: ffi::c_int,
+    kern: ffi::c_int,
+) -> ffi::c_int {
+    // SAFETY: called by pf_can's create with the socket layer's arguments.
+    if let Err(e) = unsafe { PROTO.create(net, sock, protocol, kern) } {
+        return e.to_errno();
+    }
+    // SAFETY: create succeeded, so `sock->sk` is our new sock.
+    let sk = unsafe { (*sock).sk } as usize;
+    let mut rtnl = Rtnl::lock();
+    if SOCKETS.get(&mut rtnl).push(sk, GFP_KERNEL).is_err() {
+        // The socket layer calls release on failure, which copes with a
+        // socket missing from the list.
+        return ENOMEM.to_errno();
+    }
+    0
+}
+
+static RAW_PROTO: CCell<CanProto> = CCell::new(CanProto {
+    protocol: CAN_RAW,
+    type_: bindings::sock_type_SOCK_RAW as i32,
+    owner: core::ptr::null_mut(),
+    create: raw_create,
+});
+
+/// Netdevice notifier (mainline `raw_notify`). Process context, RTNL held.
+/// Sockets bound to a device that goes away lose their filters and get
+/// ENODEV; those bound to a device that goes down get ENETDOWN.
+unsafe extern "C" fn raw_notifier(
+    _nb: *mut bindings::notifier_block,
+    event: ffi::c_ulong,
+    info: *mut ffi::c_void,
+) -> ffi::c_int {
+    let unregister_ev = event == bindings::netdev_cmd_NETDEV_UNREGISTER as ffi::c_ulong;
+    let down_ev = event == bindings::netdev_cmd_NETDEV_DOWN as ffi::c_ulong;
+    if !unregister_ev && !down_ev {
+        return bindings::NOTIFY_DONE as ffi::c_int;
+    }
+    // SAFETY: netdevice notifiers receive a netdev_notifier_info.
+    let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
+    if !dev.is_can() {
+        return bindings::NOTIFY_DONE as ffi::c_int;
+    }
+    let ifindex = dev.ifindex();
+    let mut held = Rtnl::assert_held();
+    for &p in SOCKETS.get(&mut held).iter() {
+        // SAFETY: sockets are in SOCKETS from create until release, which
+        // removes them under RTNL (held here), so `p` is alive.
+        let sk = unsafe { S::from_raw(p as *mut bindings::sock) };
+        let mut s = sk.lock();
+        if !s.bound || s.ifindex != ifindex {
+            continue;
+        }
+        let errno = if unregister_ev {
+            unregister(&sk);
+            s.bound = false;
+            s.ifindex = 0;
+            // Mainline forgets the filters too: a new bind receives
+            // nothing until CAN_RAW_FILTER is set again.
+            s.filters = Some(KVec::new());
+            bindings::ENODEV
+        } else {
+            bindings::ENETDOWN
+        };
+        drop(s);
+        sk.report_error(errno as i32);
+    }
+    bindings::NOTIFY_DONE as ffi::c_int
+}
+
+static NOTIFIER: CCell<bindings::notifier_block> = CCell::new(bindings::notifier_block {
+    notifier_call: Some(raw_notifier),
+    next: core::ptr::null_mut(),
+    priority: 0,
+});
+
+struct RawModule;
+
+impl kernel::Module for RawModule {
+    fn init(_module: &'static ThisModule) -> Result<Self> {
+        PROTO.register(c_str!("CAN_RAW"), bindings::PF_CAN as i32)?;
+        // SAFETY: module init: nothing else sees RAW_PROTO yet.
+        unsafe { (*RAW_PROTO.get()).owner = glue::this_module() };
+        // SAFETY: static notifier, unregistered in Drop.
+        if let Err(e) =
+            glue::to_result(unsafe { bindings::register_netdevice_notifier(NOTIFIER.get()) })
+        {
+            PROTO.unregister();
+            return Err(e);
+        }
+        // SAFETY: static CanProto, unregistered in Drop.
+        if let Err(e) = glue::to_result(unsafe { rcan_api::rcan_proto_register(RAW_PROTO.get()) }) {
+            // SAFETY: registered just above.
+            unsafe { bindings::unregister_netdevice_notifier(NOTIFIER.get()) };
+            PROTO.unregister();
+            return Err(e);
+        }
+        pr_info!("CAN_RAW ({}) registered\n", CAN_RAW);
+        Ok(RawModule)
+    }
+}
+
+impl Drop for RawModule {
+    fn drop(&mut self) {
+        // Every socket holds a reference on this module, so none is left.
+        // SAFETY: registered in init.
+        unsafe {
+            rcan_api::rcan_proto_unregister(RAW_PROTO.get());
+            bindings::unregister_netdevice_notifier(NOTIFIER.get());
+        }
+        PROTO.unregister();
+        // Statics are never dropped: free the (empty) list's buffer.
+        let mut rtnl = Rtnl::lock();
+        *SOCKETS.get(&mut rtnl) = KVec::new();
+    }
+}
