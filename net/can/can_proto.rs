@@ -75,10 +75,11 @@ const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 /// sender sees its frames come back, thesis 5.3.5).
 unsafe extern "C" fn can_rx(
     skb: *mut bindings::sk_buff,
-    sk: *mut bindings::sock,
+    owner: *mut ffi::c_void,
     _cookie: u32,
     owned: bool,
 ) {
+    let sk: *mut bindings::sock = owner.cast();
     // SAFETY: pf_can passes a valid skb, borrowed or owned as `owned` says,
     // and a sock of ours that its receiver record keeps alive for the call.
     let (skb, sk) = unsafe {

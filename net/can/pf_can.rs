@@ -74,8 +74,12 @@ fn pf_mutex() -> *mut bindings::mutex {
 struct Record {
     /// For call_rcu; first so the callback can find the record.
     rcu: bindings::callback_head,
-    /// Held (`sock_hold`) from registration until `free_record`.
-    sk: *mut bindings::sock,
+    /// The receiver's socket (held with `sock_hold` from registration until
+    /// `free_record`), or for a kernel receiver its opaque data pointer.
+    owner: *mut ffi::c_void,
+    /// `owner` is a `struct sock` (else a kernel receiver, whose removal
+    /// waits for a grace period instead of counting references).
+    is_sock: bool,
     func: RxFn,
     cookie: u32,
     ifindex: i32,
@@ -86,8 +90,9 @@ struct Record {
     slot: usize,
 }
 
-// SAFETY: `sk` is a counted reference, usable from any CPU; the rest is
-// plain data.
+// SAFETY: `owner` is a counted sock reference or a kernel receiver's data
+// that outlives the record; both are usable from any CPU. The rest is plain
+// data.
 unsafe impl Send for Record {}
 
 impl Record {
@@ -117,13 +122,13 @@ static PROTOS: [RcuPtr<CanProto>; CANPROTO_MAX] = [const { RcuPtr::null() }; CAN
 /// callback, with the socket pointer cleared in place if the record had to
 /// be removed without a rebuild (allocation failure).
 struct RcvSlot {
-    sk: AtomicPtr<bindings::sock>,
+    owner: AtomicPtr<ffi::c_void>,
     func: RxFn,
     cookie: u32,
 }
 
 /// A snapshot of all receivers, published through `RX`; immutable once
-/// published (but for `RcvSlot::sk`).
+/// published (but for `RcvSlot::owner`).
 #[repr(C)]
 struct RxTable {
     /// For call_rcu; first so the callback can find the table.
@@ -137,11 +142,11 @@ struct RxTable {
     rcvs: KVec<RcvSlot>,
 }
 
-// SAFETY: the socket pointers are counted references held by the records,
-// which outlive every table that names them (both freed after a grace
-// period); the rest is plain data.
+// SAFETY: the owner pointers are counted references (or kernel receivers'
+// data) held by the records, which outlive every table that names them
+// (both freed after a grace period); the rest is plain data.
 unsafe impl Send for RxTable {}
-// SAFETY: as above; shared access only reads, `RcvSlot::sk` is atomic.
+// SAFETY: as above; shared access only reads, `RcvSlot::owner` is atomic.
 unsafe impl Sync for RxTable {}
 
 impl RxTable {
@@ -205,8 +210,10 @@ unsafe extern "C" fn free_record(head: *mut bindings::callback_head) {
     // `retire`; no table published after its removal names it, and the
     // grace period ended, so no receive path uses it any more.
     let rec = unsafe { KBox::from_raw(head.cast::<Record>()) };
-    // SAFETY: the reference taken in `rx_set` when the record was made.
-    unsafe { bindings::rcan_sock_put(rec.sk) };
+    if rec.is_sock {
+        // SAFETY: the reference taken in `rx_set` when the record was made.
+        unsafe { bindings::rcan_sock_put(rec.owner.cast()) };
+    }
 }
 
 /// Frees a removed record after a grace period. Caller holds `WRITERS`.
@@ -224,7 +231,7 @@ fn build(recs: &[KBox<Record>]) -> Result<KBox<RxTable>> {
     for (i, r) in recs.iter().enumerate() {
         t.rcvs.push(
             RcvSlot {
-                sk: AtomicPtr::new(r.sk),
+                owner: AtomicPtr::new(r.owner),
                 func: r.func,
                 cookie: r.cookie,
             },
@@ -272,7 +279,13 @@ fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<KVec<Filter>> 
 
 /// See [`rcan_api::rcan_rx_set`]. Process context; sleeps (allocates,
 /// takes `WRITERS`).
-fn rx_set(func: RxFn, sk: *mut bindings::sock, cookie: u32, spec: Option<&RxSpec>) -> Result {
+fn rx_set(
+    func: RxFn,
+    owner: *mut ffi::c_void,
+    is_sock: bool,
+    cookie: u32,
+    spec: Option<&RxSpec>,
+) -> Result {
     // Allocate before locking.
     let new = match spec {
         Some(spec) => {
@@ -293,7 +306,8 @@ fn rx_set(func: RxFn, sk: *mut bindings::sock, cookie: u32, spec: Option<&RxSpec
                         // SAFETY: an all-zero callback_head is what
                         // call_rcu expects.
                         rcu: unsafe { core::mem::zeroed() },
-                        sk,
+                        owner,
+                        is_sock,
                         func,
                         cookie,
                         ifindex: spec.ifindex,
@@ -314,7 +328,7 @@ fn rx_set(func: RxFn, sk: *mut bindings::sock, cookie: u32, spec: Option<&RxSpec
     let old = reg
         .recs
         .iter()
-        .position(|r| r.sk == sk && r.func as usize == func as usize)
+        .position(|r| r.owner == owner && r.func as usize == func as usize)
         .and_then(|i| glue::kvec_swap_remove(&mut reg.recs, i));
     if old.is_none() && removal_only {
         return Ok(());
@@ -328,9 +342,11 @@ fn rx_set(func: RxFn, sk: *mut bindings::sock, cookie: u32, spec: Option<&RxSpec
             }
             return Err(e.into());
         }
-        // SAFETY: the caller's `sk` is a live sock; the record keeps this
-        // reference until free_record.
-        unsafe { bindings::rcan_sock_hold(sk) };
+        if is_sock {
+            // SAFETY: the caller's `owner` is a live sock; the record keeps
+            // this reference until free_record.
+            unsafe { bindings::rcan_sock_hold(owner.cast()) };
+        }
         added = true;
     }
     match build(&reg.recs) {
@@ -345,8 +361,10 @@ fn rx_set(func: RxFn, sk: *mut bindings::sock, cookie: u32, spec: Option<&RxSpec
                 let last = reg.recs.len() - 1;
                 if let Some(n) = glue::kvec_swap_remove(&mut reg.recs, last) {
                     // Never published: no reader can see it.
-                    // SAFETY: the reference taken above.
-                    unsafe { bindings::rcan_sock_put(n.sk) };
+                    if n.is_sock {
+                        // SAFETY: the reference taken above.
+                        unsafe { bindings::rcan_sock_put(n.owner.cast()) };
+                    }
                 }
             }
             let Some(o) = old else { return Err(e) };
@@ -359,16 +377,26 @@ fn rx_set(func: RxFn, sk: *mut bindings::sock, cookie: u32, spec: Option<&RxSpec
             let g = RcuReadGuard::new();
             if let Some(t) = RX.read(&g) {
                 if let Some(s) = t.rcvs.get(o.slot) {
-                    s.sk.store(core::ptr::null_mut(), Ordering::Release);
+                    s.owner.store(core::ptr::null_mut(), Ordering::Release);
                 }
             }
             drop(g);
             retire(o);
+            drop(reg);
+            if !is_sock {
+                synchronize_rcu();
+            }
             return Ok(());
         }
     }
     if let Some(o) = old {
         retire(o);
+        drop(reg);
+        if !is_sock {
+            // A kernel receiver's data may be freed by the caller once we
+            // return: wait out every callback that may still use it.
+            synchronize_rcu();
+        }
     }
     Ok(())
 }
@@ -386,7 +414,25 @@ extern "C" fn rcan_rx_set(
     // SAFETY: NULL or a valid spec for the duration of the call (rcan_api
     // contract).
     let spec = unsafe { spec.as_ref() };
-    match rx_set(func, sk, cookie, spec) {
+    match rx_set(func, sk.cast(), true, cookie, spec) {
+        Ok(()) => 0,
+        Err(e) => e.to_errno(),
+    }
+}
+
+#[no_mangle]
+extern "C" fn rcan_rx_set_kernel(
+    func: RxFn,
+    data: *mut ffi::c_void,
+    cookie: u32,
+    spec: *const RxSpec,
+) -> ffi::c_int {
+    if data.is_null() {
+        return EINVAL.to_errno();
+    }
+    // SAFETY: as in rcan_rx_set.
+    let spec = unsafe { spec.as_ref() };
+    match rx_set(func, data, false, cookie, spec) {
         Ok(()) => 0,
         Err(e) => e.to_errno(),
     }
@@ -521,22 +567,23 @@ unsafe extern "C" fn can_rcv(
 
 /// Calls a receiver with the skb borrowed. Softirq, RCU read side.
 fn deliver_borrowed(slot: &RcvSlot, skb: &Skb) {
-    let sk = slot.sk.load(Ordering::Acquire);
-    if sk.is_null() {
+    let owner = slot.owner.load(Ordering::Acquire);
+    if owner.is_null() {
         return;
     }
     // SAFETY: the slot is in the published table, so its record (and the
-    // sock reference it holds, and the receiver's module through the sock)
+    // sock reference it holds, and the receiver's module through the sock;
+    // or a kernel receiver's data, whose removal waits for a grace period)
     // lives until after our RCU read-side section; the skb is valid and
     // borrowed for the call (RxFn contract, owned = false).
-    unsafe { (slot.func)(skb.as_ptr(), sk, slot.cookie, false) };
+    unsafe { (slot.func)(skb.as_ptr(), owner, slot.cookie, false) };
 }
 
 /// Calls the last receiver, handing it our reference when nobody else
 /// holds one. Softirq, RCU read side.
 fn deliver_last(slot: &RcvSlot, skb: Skb) {
-    let sk = slot.sk.load(Ordering::Acquire);
-    if sk.is_null() {
+    let owner = slot.owner.load(Ordering::Acquire);
+    if owner.is_null() {
         skb.consume();
         return;
     }
@@ -547,7 +594,7 @@ fn deliver_last(slot: &RcvSlot, skb: Skb) {
     }
     // SAFETY: as in deliver_borrowed; the callee takes our (only)
     // reference (RxFn contract, owned = true).
-    unsafe { (slot.func)(skb.into_raw(), sk, slot.cookie, true) };
+    unsafe { (slot.func)(skb.into_raw(), owner, slot.cookie, true) };
 }
 
 /// The frame in `skb` if it is a well-formed classic CAN frame from a CAN

@@ -149,10 +149,11 @@ type S = Sock<RawProto>;
 /// sent by this socket.
 unsafe extern "C" fn raw_rx(
     skb: *mut bindings::sk_buff,
-    sk: *mut bindings::sock,
+    owner: *mut ffi::c_void,
     cookie: u32,
     owned: bool,
 ) {
+    let sk: *mut bindings::sock = owner.cast();
     // SAFETY: pf_can passes a valid skb, borrowed or owned as `owned` says,
     // and a sock of ours that its receiver record keeps alive for the call.
     let (skb, sock) = unsafe {

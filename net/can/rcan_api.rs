@@ -78,10 +78,11 @@ pub(crate) struct RxSpec {
 /// With `owned` false it is borrowed: clone it to keep it. With `owned`
 /// true the callee owns the reference and must consume or free it (it is
 /// then the last receiver, and the skb is not shared). `sk` and `cookie`
-/// are what the receiver registered.
+/// `owner` and `cookie` are what the receiver registered: its
+/// `struct sock` ([`rcan_rx_set`]) or its data ([`rcan_rx_set_kernel`]).
 pub(crate) type RxFn = unsafe extern "C" fn(
     skb: *mut bindings::sk_buff,
-    sk: *mut bindings::sock,
+    owner: *mut ffi::c_void,
     cookie: u32,
     owned: bool,
 );
@@ -103,6 +104,17 @@ extern "C" {
     pub(crate) fn rcan_rx_set(
         func: RxFn,
         sk: *mut bindings::sock,
+        cookie: u32,
+        spec: *const RxSpec,
+    ) -> ffi::c_int;
+    /// Like [`rcan_rx_set`], for a receiver inside the kernel that has no
+    /// socket: `data` is passed to `func` as its `owner`. No reference is
+    /// taken; instead a call that removes or replaces the receiver returns
+    /// only after every running callback with the old registration has
+    /// finished, so the caller may free `data` then. Process context.
+    pub(crate) fn rcan_rx_set_kernel(
+        func: RxFn,
+        data: *mut ffi::c_void,
         cookie: u32,
         spec: *const RxSpec,
     ) -> ffi::c_int;
