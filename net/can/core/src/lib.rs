@@ -14,4 +14,5 @@ pub mod canloop;
 pub mod filter;
 pub mod frame;
 pub mod rxtable;
+pub mod sja1000;
 pub mod sockaddr;

@@ -1,0 +1,991 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The Philips SJA1000 in PeliCAN mode: registers, frame buffer layout and
+//! the chip-level driver logic of the thesis' abstract `sja1000` driver
+//! (5.3.6), over a register-access trait that each front-end implements
+//! (the thesis' read/write/readn/writen).
+//!
+//! Everything here is pure: the kernel driver
+//! (`drivers/net/can/sja1000/`) supplies a [`Regs`] that touches the
+//! hardware and turns the [`Event`]s of [`Chip::irq`] into skbs and
+//! statistics; the host tests supply a register-level model of the chip.
+
+use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK, MAX_DLC};
+use super::frame::CanFrame;
+
+/// Register offsets (PeliCAN mode).
+pub mod reg {
+    /// Mode.
+    pub const MOD: u8 = 0x00;
+    /// Command (write only).
+    pub const CMR: u8 = 0x01;
+    /// Status.
+    pub const SR: u8 = 0x02;
+    /// Interrupt (read clears all bits but RI).
+    pub const IR: u8 = 0x03;
+    /// Interrupt enable.
+    pub const IER: u8 = 0x04;
+    /// Bus timing 0.
+    pub const BTR0: u8 = 0x06;
+    /// Bus timing 1.
+    pub const BTR1: u8 = 0x07;
+    /// Output control.
+    pub const OCR: u8 = 0x08;
+    /// Arbitration lost capture.
+    pub const ALC: u8 = 0x0B;
+    /// Error code capture.
+    pub const ECC: u8 = 0x0C;
+    /// Error warning limit.
+    pub const EWLR: u8 = 0x0D;
+    /// Receive error counter.
+    pub const RXERR: u8 = 0x0E;
+    /// Transmit error counter.
+    pub const TXERR: u8 = 0x0F;
+    /// Frame information of the TX/RX buffer (operating mode), or
+    /// acceptance code 0 (reset mode).
+    pub const FI: u8 = 0x10;
+    /// Acceptance code 0..3 (reset mode).
+    pub const ACR0: u8 = 0x10;
+    /// Acceptance mask 0..3 (reset mode).
+    pub const AMR0: u8 = 0x14;
+    /// Receive message counter.
+    pub const RMC: u8 = 0x1D;
+    /// Clock divider.
+    pub const CDR: u8 = 0x1F;
+}
+
+/// MOD bits.
+pub mod mode {
+    /// Reset mode.
+    pub const RM: u8 = 0x01;
+    /// Listen only.
+    pub const LOM: u8 = 0x02;
+    /// Self test.
+    pub const STM: u8 = 0x04;
+    /// Acceptance filter mode: 1 = single, 0 = dual.
+    pub const AFM: u8 = 0x08;
+    /// Sleep.
+    pub const SM: u8 = 0x10;
+}
+
+/// CMR bits.
+pub mod cmd {
+    /// Transmission request.
+    pub const TR: u8 = 0x01;
+    /// Abort transmission.
+    pub const AT: u8 = 0x02;
+    /// Release receive buffer.
+    pub const RRB: u8 = 0x04;
+    /// Clear data overrun.
+    pub const CDO: u8 = 0x08;
+    /// Self reception request.
+    pub const SRR: u8 = 0x10;
+}
+
+/// SR bits.
+pub mod status {
+    /// Receive buffer status: a frame is available.
+    pub const RBS: u8 = 0x01;
+    /// Data overrun.
+    pub const DOS: u8 = 0x02;
+    /// Transmit buffer released (free).
+    pub const TBS: u8 = 0x04;
+    /// Last transmission complete.
+    pub const TCS: u8 = 0x08;
+    /// Receiving.
+    pub const RS: u8 = 0x10;
+    /// Transmitting.
+    pub const TS: u8 = 0x20;
+    /// Error status: a counter reached the warning limit.
+    pub const ES: u8 = 0x40;
+    /// Bus status: bus-off.
+    pub const BS: u8 = 0x80;
+}
+
+/// IR / IER bits.
+pub mod irq {
+    /// Receive.
+    pub const RI: u8 = 0x01;
+    /// Transmit.
+    pub const TI: u8 = 0x02;
+    /// Error warning (ES or BS changed).
+    pub const EI: u8 = 0x04;
+    /// Data overrun.
+    pub const DOI: u8 = 0x08;
+    /// Wake-up.
+    pub const WUI: u8 = 0x10;
+    /// Error passive.
+    pub const EPI: u8 = 0x20;
+    /// Arbitration lost.
+    pub const ALI: u8 = 0x40;
+    /// Bus error.
+    pub const BEI: u8 = 0x80;
+    /// What the driver enables: all but bus errors (one per bit error
+    /// would flood the host on a broken bus).
+    pub const ENABLED: u8 = RI | TI | EI | DOI | EPI | ALI;
+}
+
+/// CDR: PeliCAN mode.
+pub const CDR_PELICAN: u8 = 0x80;
+/// CDR: comparator bypass.
+pub const CDR_CBP: u8 = 0x40;
+/// CDR: clock out off.
+pub const CDR_CLK_OFF: u8 = 0x08;
+/// FI: extended frame.
+pub const FI_FF: u8 = 0x80;
+/// FI: remote frame.
+pub const FI_RTR: u8 = 0x40;
+
+/// Register access of one chip: what a front-end provides (thesis 5.3.6:
+/// `read`, `write`, `readn`, `writen`). Implementations run in any
+/// context the driver calls them from (process, softirq, hardirq) and
+/// must not sleep.
+pub trait Regs {
+    /// Reads register `reg`.
+    fn read(&mut self, reg: u8) -> u8;
+    /// Writes `val` to register `reg`.
+    fn write(&mut self, reg: u8, val: u8);
+    /// Reads `buf.len()` consecutive registers from `reg`.
+    fn readn(&mut self, reg: u8, buf: &mut [u8]) {
+        for (i, b) in buf.iter_mut().enumerate() {
+            *b = self.read(reg + i as u8);
+        }
+    }
+    /// Writes `buf` to consecutive registers from `reg`.
+    fn writen(&mut self, reg: u8, buf: &[u8]) {
+        for (i, b) in buf.iter().enumerate() {
+            self.write(reg + i as u8, *b);
+        }
+    }
+}
+
+/// Encodes `frame` into the 13-byte TX buffer image (FI, identifier,
+/// data); returns the image and the number of bytes used. Error frames
+/// cannot be sent (`None`).
+pub fn encode(frame: &CanFrame) -> Option<([u8; 13], usize)> {
+    if frame.can_id & CAN_ERR_FLAG != 0 {
+        return None;
+    }
+    let dlc = frame.dlc();
+    let rtr = frame.can_id & CAN_RTR_FLAG != 0;
+    let mut b = [0u8; 13];
+    b[0] = dlc as u8 | if rtr { FI_RTR } else { 0 };
+    let data_at = if frame.can_id & CAN_EFF_FLAG != 0 {
+        b[0] |= FI_FF;
+        let id = (frame.can_id & CAN_EFF_MASK) << 3;
+        b[1..5].copy_from_slice(&id.to_be_bytes());
+        5
+    } else {
+        let id = ((frame.can_id & CAN_SFF_MASK) << 5) as u16;
+        b[1..3].copy_from_slice(&id.to_be_bytes());
+        3
+    };
+    if !rtr {
+        b[data_at..data_at + dlc].copy_from_slice(&frame.data[..dlc]);
+    }
+    Some((b, data_at + if rtr { 0 } else { dlc }))
+}
+
+/// Decodes a 13-byte RX buffer image. A DLC above 8 (legal on the bus)
+/// gives 8 data bytes, as mainline does.
+pub fn decode(b: &[u8; 13]) -> CanFrame {
+    let fi = b[0];
+    let dlc = usize::from(fi & 0x0F).min(MAX_DLC);
+    let rtr = fi & FI_RTR != 0;
+    let (mut can_id, data_at) = if fi & FI_FF != 0 {
+        let id = u32::from_be_bytes([b[1], b[2], b[3], b[4]]) >> 3;
+        (id | CAN_EFF_FLAG, 5)
+    } else {
+        let id = u32::from(u16::from_be_bytes([b[1], b[2]]) >> 5);
+        (id, 3)
+    };
+    let mut f = CanFrame {
+        len: dlc as u8,
+        ..CanFrame::default()
+    };
+    if rtr {
+        can_id |= CAN_RTR_FLAG;
+    } else {
+        f.data[..dlc].copy_from_slice(&b[data_at..data_at + dlc]);
+    }
+    f.can_id = can_id;
+    f
+}
+
+/// Controller state (mainline `enum can_state`, without the sleeping and
+/// stopped states the driver tracks itself).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum State {
+    /// Both error counters below 96.
+    Active,
+    /// A counter reached the warning limit (96).
+    Warning,
+    /// A counter above 127.
+    Passive,
+    /// Transmit counter above 255: the chip left the bus (and entered
+    /// reset mode by itself).
+    BusOff,
+}
+
+/// What an interrupt brought.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Event {
+    /// A frame was received (and its buffer released).
+    Rx(CanFrame),
+    /// The frame in the TX buffer was sent.
+    TxDone,
+    /// The frame in the TX buffer was aborted (not sent).
+    TxAborted,
+    /// Frames were lost: the receive FIFO overflowed.
+    Overrun,
+    /// The error state changed (`rxerr`/`txerr` are the counters).
+    State {
+        /// New state.
+        state: State,
+        /// Receive error counter.
+        rxerr: u8,
+        /// Transmit error counter.
+        txerr: u8,
+    },
+    /// Arbitration was lost at bit `bit` (the frame is retried by the chip).
+    ArbitrationLost {
+        /// ALC bits 4..0.
+        bit: u8,
+    },
+}
+
+/// Static configuration of one chip, from the front-end and the bit
+/// timing parameters.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Config {
+    /// Bus timing register 0 (thesis Kconfig `SJA1000_BTR0`, default 0x01).
+    pub btr0: u8,
+    /// Bus timing register 1 (`SJA1000_BTR1`, default 0x14: 500 kbit/s
+    /// with a 16 MHz crystal).
+    pub btr1: u8,
+    /// Output control register (board-specific).
+    pub ocr: u8,
+    /// Clock divider register bits besides `CDR_PELICAN` (board-specific).
+    pub cdr: u8,
+}
+
+/// Why an operation failed.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Sja1000Error {
+    /// The chip did not enter or leave reset mode.
+    ModeTimeout,
+    /// The TX buffer is still in use.
+    Busy,
+    /// The frame cannot be sent (error frame).
+    BadFrame,
+    /// No chip answers at this address (probe).
+    NoChip,
+}
+
+/// Times the mode register is polled when switching modes (the chip
+/// switches within a bit time; a few reads suffice on real hardware).
+const MODE_POLLS: usize = 100;
+
+/// The driver's view of one SJA1000: its registers and configuration.
+pub struct Chip<R: Regs> {
+    /// Register access.
+    pub regs: R,
+    /// Configuration applied by [`Chip::init`].
+    pub cfg: Config,
+    state: State,
+}
+
+impl<R: Regs> Chip<R> {
+    /// A chip behind `regs`; nothing is written yet.
+    pub fn new(regs: R, cfg: Config) -> Self {
+        Chip {
+            regs,
+            cfg,
+            state: State::Active,
+        }
+    }
+
+    /// The last error state reported.
+    pub fn state(&self) -> State {
+        self.state
+    }
+
+    /// Probes for a chip (mainline `sja1000_probe_chip`-style): after a
+    /// reset request the mode register must read back with RM set and the
+    /// clock divider must keep the PeliCAN bit. Leaves the chip in reset.
+    pub fn probe(&mut self) -> Result<(), Sja1000Error> {
+        if self.regs.read(reg::MOD) == 0xFF {
+            return Err(Sja1000Error::NoChip);
+        }
+        self.enter_reset()?;
+        self.regs.write(reg::CDR, CDR_PELICAN | self.cfg.cdr);
+        if self.regs.read(reg::CDR) & CDR_PELICAN == 0 {
+            return Err(Sja1000Error::NoChip);
+        }
+        Ok(())
+    }
+
+    /// Puts the chip into reset mode (interrupts off); polls until it is.
+    pub fn enter_reset(&mut self) -> Result<(), Sja1000Error> {
+        for _ in 0..MODE_POLLS {
+            if self.regs.read(reg::MOD) & mode::RM != 0 {
+                self.regs.write(reg::IER, 0);
+                return Ok(());
+            }
+            self.regs.write(reg::MOD, mode::RM);
+        }
+        Err(Sja1000Error::ModeTimeout)
+    }
+
+    /// Full initialisation in reset mode: PeliCAN mode, output control,
+    /// bit timing, and the acceptance filter `filter`. The chip stays in
+    /// reset mode.
+    pub fn init(&mut self, filter: &HwFilter) -> Result<(), Sja1000Error> {
+        self.enter_reset()?;
+        self.regs.write(reg::CDR, CDR_PELICAN | self.cfg.cdr);
+        self.regs.write(reg::OCR, self.cfg.ocr);
+        self.regs.write(reg::BTR0, self.cfg.btr0);
+        self.regs.write(reg::BTR1, self.cfg.btr1);
+        self.write_filter(filter);
+        Ok(())
+    }
+
+    /// Writes the acceptance filter registers and the AFM bit. Reset mode
+    /// only (the registers are the frame buffer in operating mode).
+    fn write_filter(&mut self, filter: &HwFilter) {
+        self.regs.writen(reg::ACR0, &filter.acr);
+        self.regs.writen(reg::AMR0, &filter.amr);
+        let afm = if filter.single { mode::AFM } else { 0 };
+        self.regs.write(reg::MOD, mode::RM | afm);
+    }
+
+    /// Reprograms the acceptance filter of a running chip: reset mode,
+    /// filter, back to operating mode (a frame arriving in between is
+    /// lost, as on any SJA1000 filter change). `running` says whether to
+    /// restart.
+    pub fn set_filter(&mut self, filter: &HwFilter, running: bool) -> Result<(), Sja1000Error> {
+        self.enter_reset()?;
+        self.write_filter(filter);
+        if running {
+            self.start(filter)?;
+        }
+        Ok(())
+    }
+
+    /// Leaves reset mode: clears error counters and pending interrupts,
+    /// enables interrupts and enters operating mode (thesis: `open`).
+    pub fn start(&mut self, filter: &HwFilter) -> Result<(), Sja1000Error> {
+        if self.regs.read(reg::MOD) & mode::RM == 0 {
+            self.enter_reset()?;
+        }
+        self.regs.write(reg::TXERR, 0);
+        self.regs.write(reg::RXERR, 0);
+        let _ = self.regs.read(reg::ECC);
+        let _ = self.regs.read(reg::IR);
+        self.regs.write(reg::IER, irq::ENABLED);
+        let afm = if filter.single { mode::AFM } else { 0 };
+        for _ in 0..MODE_POLLS {
+            if self.regs.read(reg::MOD) & mode::RM == 0 {
+                self.state = State::Active;
+                return Ok(());
+            }
+            self.regs.write(reg::MOD, afm);
+        }
+        Err(Sja1000Error::ModeTimeout)
+    }
+
+    /// Stops the chip (thesis: `stop`): reset mode, interrupts off.
+    pub fn stop(&mut self) -> Result<(), Sja1000Error> {
+        self.enter_reset()
+    }
+
+    /// Loads `frame` into the TX buffer and requests transmission. The
+    /// caller keeps its queue stopped until [`Event::TxDone`] or
+    /// [`Event::TxAborted`]: the chip has one TX buffer.
+    pub fn xmit(&mut self, frame: &CanFrame) -> Result<(), Sja1000Error> {
+        let (img, n) = encode(frame).ok_or(Sja1000Error::BadFrame)?;
+        if self.regs.read(reg::SR) & status::TBS == 0 {
+            return Err(Sja1000Error::Busy);
+        }
+        self.regs.writen(reg::FI, &img[..n]);
+        self.regs.write(reg::CMR, cmd::TR);
+        Ok(())
+    }
+
+    /// Handles one interrupt (thesis: the interrupt handler): reads IR
+    /// until no cause is left (at most `max_rounds` rounds), draining the
+    /// receive FIFO and reporting each event through `ev`. Returns whether
+    /// the chip had raised anything (for shared interrupt lines). Hardirq
+    /// context in the kernel: must not sleep, and does not.
+    pub fn irq(&mut self, max_rounds: usize, mut ev: impl FnMut(Event)) -> bool {
+        let mut handled = false;
+        for _ in 0..max_rounds {
+            let ir = self.regs.read(reg::IR);
+            if ir == 0 || ir == 0xFF {
+                // 0xFF: the device went away (hot unplug).
+                break;
+            }
+            handled = true;
+            if ir & irq::TI != 0 {
+                let sr = self.regs.read(reg::SR);
+                ev(if sr & status::TCS != 0 {
+                    Event::TxDone
+                } else {
+                    Event::TxAborted
+                });
+            }
+            if ir & irq::RI != 0 {
+                self.drain_rx(&mut ev);
+            }
+            if ir & irq::DOI != 0 {
+                self.regs.write(reg::CMR, cmd::CDO);
+                ev(Event::Overrun);
+                // Whatever made it into the FIFO before the overrun.
+                self.drain_rx(&mut ev);
+            }
+            if ir & irq::ALI != 0 {
+                let bit = self.regs.read(reg::ALC) & 0x1F;
+                ev(Event::ArbitrationLost { bit });
+            }
+            if ir & (irq::EI | irq::EPI | irq::BEI) != 0 {
+                let _ = self.regs.read(reg::ECC);
+                self.update_state(&mut ev);
+            }
+        }
+        handled
+    }
+
+    /// Reads every frame in the receive FIFO, releasing each buffer.
+    fn drain_rx(&mut self, ev: &mut impl FnMut(Event)) {
+        // The FIFO holds at most 64 bytes: 21 three-byte-minimum frames.
+        for _ in 0..32 {
+            if self.regs.read(reg::SR) & status::RBS == 0 {
+                break;
+            }
+            let mut img = [0u8; 13];
+            self.regs.readn(reg::FI, &mut img);
+            self.regs.write(reg::CMR, cmd::RRB);
+            ev(Event::Rx(decode(&img)));
+        }
+    }
+
+    /// Recomputes the error state from SR and the counters; reports a
+    /// change.
+    fn update_state(&mut self, ev: &mut impl FnMut(Event)) {
+        let sr = self.regs.read(reg::SR);
+        let rxerr = self.regs.read(reg::RXERR);
+        let txerr = self.regs.read(reg::TXERR);
+        let state = if sr & status::BS != 0 {
+            State::BusOff
+        } else if rxerr > 127 || txerr > 127 {
+            State::Passive
+        } else if sr & status::ES != 0 {
+            State::Warning
+        } else {
+            State::Active
+        };
+        if state != self.state {
+            self.state = state;
+            ev(Event::State {
+                state,
+                rxerr,
+                txerr,
+            });
+        }
+    }
+}
+
+/// Contents of the acceptance filter registers.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct HwFilter {
+    /// Single filter mode (MOD.AFM = 1); else dual.
+    pub single: bool,
+    /// Acceptance code ACR0..3.
+    pub acr: [u8; 4],
+    /// Acceptance mask AMR0..3 (1 = don't care).
+    pub amr: [u8; 4],
+}
+
+impl HwFilter {
+    /// Accepts every frame.
+    pub const OPEN: HwFilter = HwFilter {
+        single: true,
+        acr: [0; 4],
+        amr: [0xFF; 4],
+    };
+
+    /// Whether the chip accepts `frame` with this filter (datasheet
+    /// section 6.4.15; the data bytes of standard frames take part).
+    pub fn accepts(&self, frame: &CanFrame) -> bool {
+        let acr = u32::from_be_bytes(self.acr);
+        let amr = u32::from_be_bytes(self.amr);
+        let (img, _) = match encode(frame) {
+            Some(x) => x,
+            None => return false,
+        };
+        let eff = frame.can_id & CAN_EFF_FLAG != 0;
+        let rtr = frame.can_id & CAN_RTR_FLAG != 0;
+        let pass = |code: u32, mask: u32, bits: u32, sel: u32| (code ^ bits) & !mask & sel == 0;
+        if self.single {
+            let bits = if eff {
+                // ID28..0 left-aligned, RTR in bit 2, bits 1..0 unused.
+                let id = u32::from_be_bytes([img[1], img[2], img[3], img[4]]) & !0x7;
+                id | if rtr { 0x4 } else { 0 }
+            } else {
+                // ID10..0 in bits 31..21, RTR bit 20, data bytes 1 and 2
+                // (bits 15..0); bits 19..16 unused.
+                let id = u32::from(u16::from_be_bytes([img[1], img[2]]) & 0xFFE0) << 16;
+                let d = if rtr {
+                    [0, 0]
+                } else {
+                    [frame.data[0], frame.data[1]]
+                };
+                let d = if frame.dlc() < 1 || rtr {
+                    0
+                } else {
+                    u32::from(d[0]) << 8 | if frame.dlc() >= 2 { u32::from(d[1]) } else { 0 }
+                };
+                id | if rtr { 1 << 20 } else { 0 } | d
+            };
+            let sel = if eff {
+                0xFFFF_FFFC
+            } else {
+                // Data bytes beyond the DLC are not compared.
+                let mut s = 0xFFF0_0000;
+                if !rtr && frame.dlc() >= 1 {
+                    s |= 0xFF00;
+                }
+                if !rtr && frame.dlc() >= 2 {
+                    s |= 0x00FF;
+                }
+                s
+            };
+            pass(acr, amr, bits, sel)
+        } else if eff {
+            // Two filters over ID28..13: ACR0/1 and ACR2/3.
+            let id = (frame.can_id & CAN_EFF_MASK) >> 13;
+            let f1 = pass(acr >> 16, amr >> 16, id, 0xFFFF);
+            let f2 = pass(acr & 0xFFFF, amr & 0xFFFF, id, 0xFFFF);
+            f1 || f2
+        } else {
+            // Filter 1: ID10..0 + RTR in ACR0/ACR1[7..4], data byte 1 in
+            // ACR1[3..0] (high nibble) and ACR3[3..0] (low nibble).
+            // Filter 2: ID10..0 + RTR in ACR2/ACR3[7..4].
+            let id_rtr = ((frame.can_id & CAN_SFF_MASK) << 1) | u32::from(rtr);
+            let d1 = if !rtr && frame.dlc() >= 1 {
+                Some(u32::from(frame.data[0]))
+            } else {
+                None
+            };
+            let code1 = u32::from(self.acr[0]) << 4 | u32::from(self.acr[1] >> 4);
+            let mask1 = u32::from(self.amr[0]) << 4 | u32::from(self.amr[1] >> 4);
+            let mut f1 = pass(code1, mask1, id_rtr, 0xFFF);
+            if let Some(d) = d1 {
+                let dcode = u32::from(self.acr[1] & 0xF) << 4 | u32::from(self.acr[3] & 0xF);
+                let dmask = u32::from(self.amr[1] & 0xF) << 4 | u32::from(self.amr[3] & 0xF);
+                f1 = f1 && pass(dcode, dmask, d, 0xFF);
+            }
+            let code2 = u32::from(self.acr[2]) << 4 | u32::from(self.acr[3] >> 4);
+            let mask2 = u32::from(self.amr[2]) << 4 | u32::from(self.amr[3] >> 4);
+            let f2 = pass(code2, mask2, id_rtr, 0xFFF);
+            f1 || f2
+        }
+    }
+}
+
+/// A set of wanted frames of one format as a ternary pattern over `bits`
+/// bits: a frame is in it when `(frame_bits ^ value) & care == 0`.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Cube {
+    /// Pattern (bits outside `care` are zero).
+    pub value: u32,
+    /// Bits that must match.
+    pub care: u32,
+}
+
+impl Cube {
+    fn new(value: u32, care: u32) -> Cube {
+        Cube {
+            value: value & care,
+            care,
+        }
+    }
+
+    /// The smallest cube containing both.
+    pub fn merge(self, o: Cube) -> Cube {
+        let care = self.care & o.care & !(self.value ^ o.value);
+        Cube::new(self.value, care)
+    }
+}
+
+/// What one filter wants, per frame format: standard frames as a cube over
+/// 12 bits (identifier bits 11..1, RTR bit 0) and extended frames over 30
+/// bits (identifier bits 29..1, RTR bit 0). `None`: no frame of that
+/// format.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Wanted {
+    /// Standard frames.
+    pub sff: Option<Cube>,
+    /// Extended frames.
+    pub eff: Option<Cube>,
+}
+
+impl Wanted {
+    /// Every frame.
+    pub const ALL: Wanted = Wanted {
+        sff: Some(Cube { value: 0, care: 0 }),
+        eff: Some(Cube { value: 0, care: 0 }),
+    };
+
+    /// The frames a receive filter accepts (a superset where a filter is
+    /// not expressible as a cube: inverted filters want "everything").
+    pub fn of(f: &super::rxtable::Filter) -> Wanted {
+        use super::arb::{CAN_IDE, CAN_RTR};
+        use super::rxtable::Filter;
+        match *f {
+            Filter::Id { inv: true, .. } => Wanted::ALL,
+            Filter::Id {
+                id,
+                mask,
+                inv: false,
+            } => {
+                let rtr_care = u32::from(mask & CAN_RTR_FLAG != 0);
+                let rtr_val = u32::from(id & CAN_RTR_FLAG != 0);
+                let eff_care = mask & CAN_EFF_FLAG != 0;
+                let is_eff = id & CAN_EFF_FLAG != 0;
+                // Standard frames have zero identifier bits 11..28.
+                let high = CAN_EFF_MASK & !CAN_SFF_MASK;
+                let sff_possible = (!eff_care || !is_eff) && id & mask & high == 0;
+                let sff = sff_possible.then(|| {
+                    Cube::new(
+                        ((id & CAN_SFF_MASK) << 1) | rtr_val,
+                        ((mask & CAN_SFF_MASK) << 1) | rtr_care,
+                    )
+                });
+                let eff = (!eff_care || is_eff).then(|| {
+                    Cube::new(
+                        ((id & CAN_EFF_MASK) << 1) | rtr_val,
+                        ((mask & CAN_EFF_MASK) << 1) | rtr_care,
+                    )
+                });
+                Wanted { sff, eff }
+            }
+            Filter::Arb(a) => {
+                // Arbitration field: care = !mask (thesis: 1 = don't care).
+                let (pat, care) = (a.arb(), !a.mask());
+                let rtr_care = u32::from(care & CAN_RTR != 0);
+                let rtr_val = u32::from(pat & CAN_RTR != 0);
+                let ide_care = care & CAN_IDE != 0;
+                let is_eff = pat & CAN_IDE != 0;
+                // Standard frames have zero extension bits (20..3).
+                let ext = 0x001F_FFF8;
+                let sff_possible = (!ide_care || !is_eff) && pat & care & ext == 0;
+                let sff = sff_possible.then(|| {
+                    Cube::new(((pat >> 21) << 1) | rtr_val, ((care >> 21) << 1) | rtr_care)
+                });
+                let eff = (!ide_care || is_eff)
+                    .then(|| Cube::new(((pat >> 3) << 1) | rtr_val, ((care >> 3) << 1) | rtr_care));
+                Wanted { sff, eff }
+            }
+        }
+    }
+}
+
+/// A cube placed in the 32 acceptance bits of single filter mode, or in
+/// the 16 bits of one dual-mode filter.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+struct Placed {
+    cube: Cube,
+    /// Came from a standard-frame cube (dual mode: the data nibbles of
+    /// filter 1 must then be "don't care").
+    sff: bool,
+}
+
+/// Places a format cube into single-filter-mode bit positions.
+fn single_bits(c: Cube, sff: bool) -> Cube {
+    if sff {
+        // ID10..0 + RTR -> bits 31..20.
+        Cube::new(c.value << 20, c.care << 20)
+    } else {
+        // ID28..0 + RTR -> bits 31..2.
+        Cube::new(c.value << 2, c.care << 2)
+    }
+}
+
+/// Places a format cube into one dual-mode filter's 16 bits.
+fn dual_bits(c: Cube, sff: bool) -> Cube {
+    if sff {
+        // ID10..0 + RTR -> bits 15..4; bits 3..0 are data (set apart).
+        Cube::new(c.value << 4, c.care << 4)
+    } else {
+        // ID28..13 -> bits 15..0; the rest of the identifier and RTR are
+        // not compared in dual mode.
+        Cube::new(c.value >> 14, c.care >> 14)
+    }
+}
+
+/// Fractions below are fixed point: 1 << `ONE_SHIFT` is "every frame of
+/// a format". Integer only: kernel code has no floating point.
+const ONE_SHIFT: u32 = 32;
+
+/// `2^(dc - bits)` of a format, in fixed point.
+fn frac(dc: u32, bits: u32) -> u64 {
+    1u64 << (ONE_SHIFT + dc - bits)
+}
+
+/// Cost of a single-mode cube: the accepted fraction of standard frames
+/// plus that of extended frames (lower is tighter).
+fn cost_single(c: Cube) -> u64 {
+    let sff_dc = (!c.care >> 20 & 0xFFF).count_ones();
+    let eff_dc = (!c.care >> 2 & 0x3FFF_FFFF).count_ones();
+    frac(sff_dc, 12) + frac(eff_dc, 30)
+}
+
+/// Cost of dual mode with filters `a` and `b` (16-bit cubes): accepted
+/// fraction of standard frames (12 identifier+RTR bits) plus that of
+/// extended frames (16 compared bits), by inclusion-exclusion.
+fn cost_dual(a: Cube, b: Cube) -> u64 {
+    let part = |c: Cube, bits: u32, shift: u32| {
+        let dc = (!c.care >> shift & ((1 << bits) - 1)).count_ones();
+        frac(dc, bits)
+    };
+    // Intersection of two cubes: empty if they disagree on a common care
+    // bit.
+    let both = if (a.value ^ b.value) & a.care & b.care != 0 {
+        None
+    } else {
+        Some(Cube::new(a.value | b.value, a.care | b.care))
+    };
+    let union = |bits: u32, shift: u32| {
+        let inter = both.map_or(0, |i| part(i, bits, shift));
+        part(a, bits, shift) + part(b, bits, shift) - inter
+    };
+    union(12, 4) + union(16, 0)
+}
+
+/// Most cubes for which every split into two dual-mode groups is tried;
+/// above, a greedy split is used.
+const EXHAUSTIVE: usize = 12;
+
+/// The tightest acceptance filter (single or dual mode) that accepts every
+/// frame some filter in `wanted` wants (thesis 5.3.4/5.3.6, DESIGN
+/// decision 7). An empty `wanted` (nobody listens) gives the tightest
+/// filter there is: one identifier. `promisc` (a packet socket or
+/// IFF_PROMISC) opens it.
+pub fn hw_filter(wanted: &[Wanted], promisc: bool) -> HwFilter {
+    if promisc {
+        return HwFilter::OPEN;
+    }
+    let mut cubes: [Option<Placed>; 2 * EXHAUSTIVE] = [None; 2 * EXHAUSTIVE];
+    let mut n = 0;
+    let mut single: Option<Cube> = None;
+    let mut overflow = false;
+    for w in wanted {
+        for (c, sff) in [(w.sff, true), (w.eff, false)] {
+            let Some(c) = c else { continue };
+            let s = single_bits(c, sff);
+            single = Some(single.map_or(s, |x| x.merge(s)));
+            if n < cubes.len() {
+                cubes[n] = Some(Placed { cube: c, sff });
+                n += 1;
+            } else {
+                overflow = true;
+            }
+        }
+    }
+    let Some(single) = single else {
+        // Nobody wants anything: accept only standard remote frame 0x7FF
+        // in both dual filters, the least likely frame on a real bus.
+        let c = dual_bits(Cube::new(0xFFF, 0xFFF), true);
+        let code = (c.value as u16).to_be_bytes();
+        let mask = (!(c.care as u16)).to_be_bytes();
+        return HwFilter {
+            single: false,
+            acr: [code[0], code[1], code[0], code[1]],
+            amr: [mask[0], mask[1], mask[0], mask[1]],
+        };
+    };
+    let single_f = to_single(single);
+    if n < 2 {
+        return single_f;
+    }
+    let best_single = cost_single(single);
+    let placed = &cubes[..n];
+    let mut best: Option<(u64, [Cube; 2], bool)> = None;
+    let mut consider = |groups: [Option<(Cube, bool)>; 2]| {
+        let (a, b) = match groups {
+            [Some(a), Some(b)] => (a, b),
+            _ => return,
+        };
+        let cost = cost_dual(a.0, b.0);
+        if best.as_ref().is_none_or(|(c, _, _)| cost < *c) {
+            best = Some((cost, [a.0, b.0], a.1));
+        }
+    };
+    let merge_into = |g: &mut Option<(Cube, bool)>, p: &Placed| {
+        let d = dual_bits(p.cube, p.sff);
+        *g = Some(match *g {
+            None => (d, p.sff),
+            Some((c, s)) => (c.merge(d), s || p.sff),
+        });
+    };
+    if !overflow && n <= EXHAUSTIVE {
+        // Cube 0 always in group A; every subset of the rest joins B.
+        for bits in 0u32..(1 << (n - 1)) {
+            let mut g: [Option<(Cube, bool)>; 2] = [None, None];
+            for (i, p) in placed.iter().flatten().enumerate() {
+                let side = if i == 0 {
+                    0
+                } else {
+                    ((bits >> (i - 1)) & 1) as usize
+                };
+                merge_into(&mut g[side], p);
+            }
+            consider(g);
+        }
+    } else {
+        // Greedy: seed with the first cube and the one farthest from it,
+        // then add each cube where it widens its group least.
+        let first = placed[0].unwrap_or(Placed {
+            cube: Cube::new(0, 0),
+            sff: true,
+        });
+        let far = placed
+            .iter()
+            .flatten()
+            .max_by_key(|p| {
+                let a = dual_bits(first.cube, first.sff);
+                let b = dual_bits(p.cube, p.sff);
+                ((a.value ^ b.value) & a.care & b.care).count_ones()
+            })
+            .copied()
+            .unwrap_or(first);
+        let mut g: [Option<(Cube, bool)>; 2] = [None, None];
+        merge_into(&mut g[0], &first);
+        merge_into(&mut g[1], &far);
+        let mut add = |p: &Placed| {
+            let d = dual_bits(p.cube, p.sff);
+            let widen = |x: Option<(Cube, bool)>| {
+                x.map_or(0, |(c, _)| (c.care & !c.merge(d).care).count_ones())
+            };
+            let side = usize::from(widen(g[1]) < widen(g[0]));
+            merge_into(&mut g[side], p);
+        };
+        placed.iter().flatten().for_each(&mut add);
+        // Cubes that did not fit the scratch array go to the cheaper side
+        // too; the single-mode cube already covers them.
+        for w in wanted.iter().skip(EXHAUSTIVE) {
+            for (c, sff) in [(w.sff, true), (w.eff, false)] {
+                if let Some(c) = c {
+                    add(&Placed { cube: c, sff });
+                }
+            }
+        }
+        consider(g);
+    }
+    match best {
+        Some((cost, [a, b], sff_in_a)) if cost < best_single => to_dual(a, b, sff_in_a),
+        _ => single_f,
+    }
+}
+
+fn to_single(c: Cube) -> HwFilter {
+    HwFilter {
+        single: true,
+        acr: c.value.to_be_bytes(),
+        amr: (!c.care).to_be_bytes(),
+    }
+}
+
+/// Dual-mode registers for filters `a` (ACR0/1) and `b` (ACR2/3). When
+/// filter 1 holds standard-frame cubes, its data nibbles (ACR1[3..0],
+/// ACR3[3..0]) must not reject anything.
+fn to_dual(a: Cube, b: Cube, sff_in_a: bool) -> HwFilter {
+    let (mut ca, mut cb) = (a.care, b.care);
+    if sff_in_a {
+        ca &= !0xF;
+        cb &= !0xF;
+    }
+    let va = (a.value & ca) as u16;
+    let vb = (b.value & cb) as u16;
+    let (ma, mb) = (!(ca as u16), !(cb as u16));
+    HwFilter {
+        single: false,
+        acr: [(va >> 8) as u8, va as u8, (vb >> 8) as u8, vb as u8],
+        amr: [(ma >> 8) as u8, ma as u8, (mb >> 8) as u8, mb as u8],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::rxtable::{CanFilterKind, Filter};
+    use super::*;
+
+    fn raw(id: u32, mask: u32) -> Filter {
+        match Filter::from_can_filter(id, mask) {
+            CanFilterKind::Frames(f) => f,
+            CanFilterKind::Errors(_) => unreachable!(),
+        }
+    }
+
+    fn frame(can_id: u32, data: &[u8]) -> CanFrame {
+        let mut f = CanFrame {
+            can_id,
+            len: data.len() as u8,
+            ..CanFrame::default()
+        };
+        f.data[..data.len()].copy_from_slice(data);
+        f
+    }
+
+    const EXACT_SFF: u32 = CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG;
+
+    #[test]
+    fn codec_round_trip() {
+        for f in [
+            frame(0x123, &[1, 2, 3]),
+            frame(0x7FF | CAN_RTR_FLAG, &[]),
+            frame(0x1234_5678 | CAN_EFF_FLAG, &[9; 8]),
+            frame(CAN_EFF_FLAG | CAN_RTR_FLAG | 5, &[]),
+        ] {
+            let (img, n) = encode(&f).unwrap();
+            assert!(n <= 13);
+            assert_eq!(decode(&img), f);
+        }
+        assert_eq!(encode(&frame(CAN_ERR_FLAG | 4, &[])), None);
+        // The datasheet's layout of a standard frame: ID10..3, ID2..0<<5.
+        let (img, n) = encode(&frame(0x123, &[0xAA])).unwrap();
+        assert_eq!(&img[..n], &[0x01, 0x24, 0x60, 0xAA]);
+    }
+
+    #[test]
+    fn exact_sff_filter_is_tight() {
+        let hw = hw_filter(&[Wanted::of(&raw(0x123, EXACT_SFF))], false);
+        assert!(hw.accepts(&frame(0x123, &[1, 2])));
+        assert!(!hw.accepts(&frame(0x124, &[])));
+        assert!(!hw.accepts(&frame(0x123 | CAN_RTR_FLAG, &[])));
+    }
+
+    #[test]
+    fn two_ids_use_dual_mode() {
+        let w = [
+            Wanted::of(&raw(0x100, EXACT_SFF)),
+            Wanted::of(&raw(0x7F0, EXACT_SFF)),
+        ];
+        let hw = hw_filter(&w, false);
+        assert!(!hw.single);
+        assert!(hw.accepts(&frame(0x100, &[5])));
+        assert!(hw.accepts(&frame(0x7F0, &[])));
+        assert!(!hw.accepts(&frame(0x101, &[])));
+        assert!(!hw.accepts(&frame(0x3F0, &[])));
+    }
+
+    #[test]
+    fn nothing_wanted_and_promisc() {
+        let hw = hw_filter(&[], false);
+        assert!(!hw.accepts(&frame(0x123, &[])));
+        assert!(!hw.accepts(&frame(CAN_EFF_FLAG | 0x123, &[])));
+        assert_eq!(hw_filter(&[], true), HwFilter::OPEN);
+        assert!(HwFilter::OPEN.accepts(&frame(CAN_EFF_FLAG | 0x123, &[])));
+    }
+}
