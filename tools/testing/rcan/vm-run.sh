@@ -36,6 +36,7 @@
 # auto probes once whether KVM guests actually boot here (nested KVM often
 # hangs) and caches the verdict, falling back to TCG.
 set -euo pipefail
+# shellcheck source=lib.sh source-path=SCRIPTDIR
 . "$(dirname "$0")/lib.sh"
 
 VM_DIR="$RCAN_ROOT/tools/testing/rcan/vm"
@@ -167,7 +168,7 @@ kvm_probe() {
 	return $ok
 }
 
-# Prints the qemu accelerator arguments to use.
+# Sets the array accel to the qemu accelerator arguments to use.
 pick_accel() {
 	local kernel=$1 initrd=$2 key file verdict=
 	case ${RCAN_KVM:-auto} in
@@ -196,10 +197,10 @@ pick_accel() {
 	*) die "RCAN_KVM must be auto, 0 or 1" ;;
 	esac
 	if [ "$verdict" = kvm ]; then
-		echo "-accel kvm -cpu host"
+		accel=(-accel kvm -cpu host)
 	else
 		# Multi-threaded TCG: one host thread per vCPU.
-		echo "-accel tcg,thread=multi -cpu max"
+		accel=(-accel "tcg,thread=multi" -cpu max)
 	fi
 }
 
@@ -254,7 +255,7 @@ rm -f "$out/rc" "$out/dmesg.txt" "$out/kmemleak.txt" "$out/console.log" \
 	"$out/init-error" "$out/vm-cmd.sh" "$out/vm-init.conf"
 
 initrd=$(build_initramfs)
-read -ra accel <<<"$(pick_accel "$kernel" "$initrd")"
+pick_accel "$kernel" "$initrd"
 read -ra extra <<<"$qemu_extra"
 
 # The command goes through a script in the output share: no kernel
