@@ -11,10 +11,11 @@
 T := tools/testing/rcan
 KDIR ?= $(shell bash $(T)/build-kernel.sh)
 RCAN_CONFIG := CONFIG_RCAN=m CONFIG_RCAN_PF=m CONFIG_RCAN_PROTO_CAN=m CONFIG_RCAN_PROTO_RAW=m \
-	CONFIG_RCAN_LOOP=m
+	CONFIG_RCAN_LOOP=m CONFIG_RCAN_SJA1000=m CONFIG_RCAN_KVASER_PCI=m CONFIG_RCAN_ADVANTECH_PCI=m \
+	CONFIG_RCAN_DSOR_TIME=m CONFIG_RCAN_DSOR_RTIME=m
 BINDINGS := rust/bindings/bindings_generated.rs
 
-.PHONY: all setup kernel modules bindings userspace demo check clean
+.PHONY: all setup kernel modules bindings userspace demo check bench clean
 
 all: modules userspace
 
@@ -40,6 +41,10 @@ demo: setup modules userspace
 
 check: setup modules userspace
 	bash $(T)/run-tests.sh
+
+# Benchmarks, not tests: ours vs mainline SocketCAN in one VM boot.
+bench: setup modules userspace
+	bash $(T)/bench.sh
 
 clean:
 	$(MAKE) -C $(KDIR) M=$(CURDIR) clean || true

@@ -31,10 +31,10 @@ use glue::bindings;
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::skb::Skb;
-use glue::sock::{Msg, ProtoReg, Sock};
-use glue::sync::{CCell, Rtnl, RtnlLocked, RtnlProof};
+use glue::sock::{Msg, Sock};
+use glue::sync::{Rtnl, RtnlLocked, RtnlProof};
 use kernel::c_str;
-use rcan_api::{CanProto, RxFilter, CANPROTO_CAN, RX_FILTER_ARB};
+use rcan_api::{ProtoModule, RxFilter, CANPROTO_CAN, RX_FILTER_ARB};
 use rcan_core::arb::{Arb, MAX_DLC};
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use rcan_core::sockaddr::{self, SockaddrArb, AF_UNSPEC, SOCKADDR_CANARB_LEN};
@@ -58,7 +58,13 @@ struct CanSock {
 
 struct CanProtoOps;
 
-static PROTO: ProtoReg<CanProtoOps> = ProtoReg::new();
+/// This module's registrations (proto, CAN protocol, notifier).
+static MODULE: ProtoModule<CanProtoOps> = ProtoModule::new(
+    CANPROTO_CAN,
+    bindings::sock_type_SOCK_RAW as i32,
+    can_create,
+    can_notifier,
+);
 
 /// Every open socket, so the notifier can find those bound to a vanishing
 /// device. Protected by RTNL.
@@ -135,10 +141,13 @@ fn check_ifindex(ifindex: i32, _rtnl: &dyn RtnlProof) -> Result {
 
 impl glue::sock::Proto for CanProtoOps {
     type Data = CanSock;
+    type Shared = ();
 
     fn new_data() -> CanSock {
         CanSock::default()
     }
+
+    fn new_shared() {}
 
     fn release(sk: &S) {
         let mut rtnl = Rtnl::lock();
@@ -310,7 +319,7 @@ unsafe extern "C" fn can_create(
     kern: ffi::c_int,
 ) -> ffi::c_int {
     // SAFETY: called by pf_can's create with the socket layer's arguments.
-    if let Err(e) = unsafe { PROTO.create(net, sock, protocol, kern) } {
+    if let Err(e) = unsafe { MODULE.proto.create(net, sock, protocol, kern) } {
         return e.to_errno();
     }
     // SAFETY: create succeeded, so `sock->sk` is our new sock.
@@ -323,13 +332,6 @@ unsafe extern "C" fn can_create(
     }
     0
 }
-
-static CAN_PROTO: CCell<CanProto> = CCell::new(CanProto {
-    protocol: CANPROTO_CAN,
-    type_: bindings::sock_type_SOCK_RAW as i32,
-    owner: core::ptr::null_mut(),
-    create: can_create,
-});
 
 /// Netdevice notifier: a CAN device is going away. Process context, RTNL
 /// held. Sockets bound to it lose their filter and get ENODEV once.
@@ -363,33 +365,11 @@ unsafe extern "C" fn can_notifier(
     bindings::NOTIFY_DONE as ffi::c_int
 }
 
-static NOTIFIER: CCell<bindings::notifier_block> = CCell::new(bindings::notifier_block {
-    notifier_call: Some(can_notifier),
-    next: core::ptr::null_mut(),
-    priority: 0,
-});
-
 struct CanProtoModule;
 
 impl kernel::Module for CanProtoModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        PROTO.register(c_str!("CANPROTO_CAN"), bindings::PF_CAN as i32)?;
-        // SAFETY: module init: nothing else sees CAN_PROTO yet.
-        unsafe { (*CAN_PROTO.get()).owner = glue::this_module() };
-        // SAFETY: static notifier, unregistered in Drop.
-        if let Err(e) =
-            glue::to_result(unsafe { bindings::register_netdevice_notifier(NOTIFIER.get()) })
-        {
-            PROTO.unregister();
-            return Err(e);
-        }
-        // SAFETY: static CanProto, unregistered in Drop.
-        if let Err(e) = glue::to_result(unsafe { rcan_api::rcan_proto_register(CAN_PROTO.get()) }) {
-            // SAFETY: registered just above.
-            unsafe { bindings::unregister_netdevice_notifier(NOTIFIER.get()) };
-            PROTO.unregister();
-            return Err(e);
-        }
+        MODULE.register(c_str!("CANPROTO_CAN"))?;
         pr_info!("CANPROTO_CAN ({}) registered\n", CANPROTO_CAN);
         Ok(CanProtoModule)
     }
@@ -397,13 +377,7 @@ impl kernel::Module for CanProtoModule {
 
 impl Drop for CanProtoModule {
     fn drop(&mut self) {
-        // Every socket holds a reference on this module, so none is left.
-        // SAFETY: registered in init.
-        unsafe {
-            rcan_api::rcan_proto_unregister(CAN_PROTO.get());
-            bindings::unregister_netdevice_notifier(NOTIFIER.get());
-        }
-        PROTO.unregister();
+        MODULE.unregister();
         // Statics are never dropped: free the (empty) list's buffer.
         let mut rtnl = Rtnl::lock();
         *SOCKETS.get(&mut rtnl) = KVec::new();

@@ -43,7 +43,9 @@ use glue::bindings;
 use glue::netdev::NetDev;
 use glue::skb::Skb;
 use glue::sync::{rcu_barrier, synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard};
-use rcan_api::{CanProto, RxFilter, RxFn, RxSpec, CANPROTO_MAX, RX_FILTER_ARB, RX_FILTER_CAN_ID};
+use rcan_api::{
+    CanProto, ListenFn, RxFilter, RxFn, RxSpec, CANPROTO_MAX, RX_FILTER_ARB, RX_FILTER_CAN_ID,
+};
 use rcan_core::filter::ArbFilter;
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use rcan_core::rxtable::{
@@ -106,14 +108,34 @@ impl Record {
     }
 }
 
-/// The registry: every live record. Protected by `WRITERS`.
+/// A driver that wants to know when the receive table changes (to
+/// recompute its hardware filter, DESIGN decision 7).
+#[derive(Clone, Copy)]
+struct Listener {
+    func: ListenFn,
+    data: *mut ffi::c_void,
+}
+
+/// The registry: every live record, and the drivers listening for
+/// changes. Protected by `WRITERS`.
 struct Registry {
     recs: KVec<KBox<Record>>,
+    listeners: KVec<Listener>,
 }
+
+// SAFETY: the raw pointers are opaque tokens handed back to their owners'
+// callbacks; the owners guarantee their validity (rcan_api contracts).
+unsafe impl Send for Registry {}
 
 /// Serialises all writers of `PROTOS` and `RX` and protects the registry.
 /// Process context.
-static WRITERS: CMutex<Registry> = CMutex::new(pf_mutex, Registry { recs: KVec::new() });
+static WRITERS: CMutex<Registry> = CMutex::new(
+    pf_mutex,
+    Registry {
+        recs: KVec::new(),
+        listeners: KVec::new(),
+    },
+);
 
 /// The protocol table (RCU readers, `WRITERS` for writers).
 static PROTOS: [RcuPtr<CanProto>; CANPROTO_MAX] = [const { RcuPtr::null() }; CANPROTO_MAX];
@@ -355,6 +377,7 @@ fn rx_set(
             for (i, r) in reg.recs.iter_mut().enumerate() {
                 r.slot = i;
             }
+            notify(&reg.listeners);
         }
         Err(e) => {
             if added {
@@ -435,6 +458,92 @@ extern "C" fn rcan_rx_set_kernel(
     match rx_set(func, data, false, cookie, spec) {
         Ok(()) => 0,
         Err(e) => e.to_errno(),
+    }
+}
+
+/// Tells every listening driver that the receive table changed. Process
+/// context, `WRITERS` held (so a listener being removed is not called
+/// after its removal returns).
+fn notify(listeners: &[Listener]) {
+    for l in listeners {
+        // SAFETY: a registered listener's data stays valid until
+        // rcan_rx_listen removes it, which needs `WRITERS` (held here).
+        unsafe { (l.func)(l.data) };
+    }
+}
+
+#[no_mangle]
+extern "C" fn rcan_rx_listen(func: ListenFn, data: *mut ffi::c_void, add: bool) -> ffi::c_int {
+    let mut reg = WRITERS.lock();
+    if let Some(i) = reg
+        .listeners
+        .iter()
+        .position(|l| l.func as usize == func as usize && l.data == data)
+    {
+        glue::kvec_swap_remove(&mut reg.listeners, i);
+    }
+    if add {
+        if let Err(e) = reg.listeners.push(Listener { func, data }, GFP_KERNEL) {
+            return Error::from(e).to_errno();
+        }
+    }
+    0
+}
+
+/// Collects the filters that apply to frames received on `ifindex`
+/// (registrations on it and on "all interfaces"), for drivers computing a
+/// hardware filter. Any context (RCU read side).
+fn rx_filters(ifindex: i32, out: &mut [Filter]) -> Option<usize> {
+    let g = RcuReadGuard::new();
+    let Some(t) = RX.read(&g) else {
+        return Some(0);
+    };
+    let mut n = 0;
+    let mut put = |f: Filter| -> Option<()> {
+        *out.get_mut(n)? = f;
+        n += 1;
+        Some(())
+    };
+    for e in t.exact.iter() {
+        let (ifi, can_id) = ((e.key >> 32) as u32 as i32, e.key as u32);
+        if ifi == 0 || ifi == ifindex {
+            // An exact key is a fully compared mainline filter.
+            let mask = if can_id & rcan_core::arb::CAN_EFF_FLAG != 0 {
+                rcan_core::arb::CAN_EFF_MASK
+            } else {
+                rcan_core::arb::CAN_SFF_MASK
+            } | rcan_core::arb::CAN_EFF_FLAG
+                | rcan_core::arb::CAN_RTR_FLAG;
+            put(Filter::Id {
+                id: can_id,
+                mask,
+                inv: false,
+            })?;
+        }
+    }
+    for m in t.masked.iter() {
+        if m.ifindex == 0 || m.ifindex == ifindex {
+            let first = m.first as usize;
+            for f in t.filters.get(first..first + m.count as usize)? {
+                put(*f)?;
+            }
+        }
+    }
+    Some(n)
+}
+
+#[no_mangle]
+extern "C" fn rcan_rx_filters(ifindex: i32, out: *mut Filter, cap: usize) -> isize {
+    let out = if cap == 0 || out.is_null() {
+        &mut [][..]
+    } else {
+        // SAFETY: the caller passes room for `cap` filters (rcan_api
+        // contract); `Filter` is plain `Copy` data, so overwriting is fine.
+        unsafe { core::slice::from_raw_parts_mut(out, cap) }
+    };
+    match rx_filters(ifindex, out) {
+        Some(n) => n as isize,
+        None => -1,
     }
 }
 
@@ -711,8 +820,9 @@ impl Drop for PfCan {
         }
         let old = {
             let mut reg = WRITERS.lock();
-            // Statics are never dropped: free the (empty) registry's buffer.
+            // Statics are never dropped: free the (empty) registry's buffers.
             reg.recs = KVec::new();
+            reg.listeners = KVec::new();
             RX.replace(core::ptr::null_mut())
         };
         synchronize_rcu();

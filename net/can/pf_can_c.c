@@ -23,9 +23,13 @@ void rcan_proto_unregister(void);
 void rcan_rx_set(void);
 void rcan_send(void);
 void rcan_rx_set_kernel(void);
+void rcan_rx_listen(void);
+void rcan_rx_filters(void);
 
 EXPORT_SYMBOL_GPL(rcan_proto_register);
 EXPORT_SYMBOL_GPL(rcan_proto_unregister);
 EXPORT_SYMBOL_GPL(rcan_rx_set);
 EXPORT_SYMBOL_GPL(rcan_send);
 EXPORT_SYMBOL_GPL(rcan_rx_set_kernel);
+EXPORT_SYMBOL_GPL(rcan_rx_listen);
+EXPORT_SYMBOL_GPL(rcan_rx_filters);

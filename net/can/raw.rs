@@ -10,7 +10,8 @@
 //! (can-utils, python-can, the `socketcan` crate) run unchanged. Every
 //! errno is mainline's for the same input; see
 //! Documentation/networking/rcan/can-raw.rst for the reference and for the
-//! few deliberate differences (no CAN FD/XL: this stack is classic only).
+//! few deliberate differences (classic CAN only: the FD/XL options are
+//! accepted as mainline accepts them, but every rcan device has MTU 16).
 //!
 //! Contexts and locks:
 //!
@@ -26,6 +27,7 @@
 //!   registration's `cookie`), never the socket lock.
 //! * `SOCKETS`, every open socket (for the notifier), is protected by RTNL.
 
+use core::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use kernel::ffi;
 use kernel::prelude::*;
 
@@ -38,10 +40,10 @@ use glue::bindings;
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::skb::Skb;
-use glue::sock::{Msg, OptIn, OptOut, ProtoReg, Sock};
-use glue::sync::{CCell, Rtnl, RtnlLocked};
+use glue::sock::{Msg, OptIn, OptOut, Sock};
+use glue::sync::{Rtnl, RtnlLocked};
 use kernel::c_str;
-use rcan_api::{CanProto, RxFilter, CAN_RAW, RX_FILTER_CAN_ID};
+use rcan_api::{ProtoModule, RxFilter, CAN_RAW, RX_FILTER_CAN_ID};
 use rcan_core::frame::CAN_FRAME_LEN;
 use rcan_core::rxtable::CAN_ERR_MASK;
 
@@ -114,6 +116,21 @@ struct RawSock {
     loopback: i32,
     recv_own_msgs: i32,
     join_filters: i32,
+    /// CAN_RAW_FD_FRAMES / CAN_RAW_XL_FRAMES as set. Accepted and kept as
+    /// mainline does, but no frame other than a classic one is ever sent
+    /// or received: every rcan device is a classic CAN device (MTU 16).
+    fd_frames: i32,
+    xl_frames: i32,
+}
+
+/// What sendmsg needs, readable without the socket lock (mainline reads
+/// these fields unlocked too). Written under the socket lock, together
+/// with the copies in [`RawSock`].
+struct RawShared {
+    /// The bound interface (0 = unbound or all).
+    ifindex: AtomicI32,
+    /// CAN_RAW_LOOPBACK is on.
+    loopback: AtomicBool,
 }
 
 impl RawSock {
@@ -135,7 +152,13 @@ impl RawSock {
 
 struct RawProto;
 
-static PROTO: ProtoReg<RawProto> = ProtoReg::new();
+/// This module's registrations (proto, CAN protocol, notifier).
+static MODULE: ProtoModule<RawProto> = ProtoModule::new(
+    CAN_RAW,
+    bindings::sock_type_SOCK_RAW as i32,
+    raw_create,
+    raw_notifier,
+);
 
 /// Every open socket, so the notifier can find those bound to a device.
 /// Protected by RTNL.
@@ -290,6 +313,14 @@ fn update(sk: &S, change: Change) -> Result {
 
 impl glue::sock::Proto for RawProto {
     type Data = RawSock;
+    type Shared = RawShared;
+
+    fn new_shared() -> RawShared {
+        RawShared {
+            ifindex: AtomicI32::new(0),
+            loopback: AtomicBool::new(true),
+        }
+    }
 
     fn new_data() -> RawSock {
         RawSock {
@@ -300,6 +331,8 @@ impl glue::sock::Proto for RawProto {
             loopback: 1,
             recv_own_msgs: 0,
             join_filters: 0,
+            fd_frames: 0,
+            xl_frames: 0,
         }
     }
 
@@ -313,6 +346,7 @@ impl glue::sock::Proto for RawProto {
         s.bound = false;
         s.ifindex = 0;
         s.filters = None;
+        sk.shared().ifindex.store(0, Ordering::Relaxed);
     }
 
     fn bind(sk: &S, addr: &[u8]) -> Result {
@@ -339,6 +373,7 @@ impl glue::sock::Proto for RawProto {
                 (s.bound, s.ifindex) = old;
                 return Err(e);
             }
+            sk.shared().ifindex.store(ifindex, Ordering::Relaxed);
         }
         if enetdown {
             sk.report_error(bindings::ENETDOWN as i32);
@@ -365,10 +400,13 @@ impl glue::sock::Proto for RawProto {
         if !(MIN_WRITE..=MAX_WRITE).contains(&len) {
             return Err(EINVAL);
         }
-        let (bound_ifindex, loopback) = {
-            let s = sk.lock();
-            (s.ifindex, s.loopback != 0)
-        };
+        // No socket lock on the send path (as mainline): a racing bind or
+        // setsockopt is seen before or after, either is fine.
+        let sh = sk.shared();
+        let (bound_ifindex, loopback) = (
+            sh.ifindex.load(Ordering::Relaxed),
+            sh.loopback.load(Ordering::Relaxed),
+        );
         let ifindex = match msg.name() {
             Some(name) => parse_addr(name)?,
             None => bound_ifindex,
@@ -453,7 +491,9 @@ impl glue::sock::Proto for RawProto {
             }
             CAN_RAW_LOOPBACK => {
                 let v = read_int(opt)?;
-                sk.lock().loopback = v;
+                let mut s = sk.lock();
+                s.loopback = v;
+                sk.shared().loopback.store(v != 0, Ordering::Relaxed);
                 Ok(())
             }
             CAN_RAW_RECV_OWN_MSGS => {
@@ -464,11 +504,27 @@ impl glue::sock::Proto for RawProto {
                 let v = read_int(opt)?;
                 update(sk, Change::Join(v))
             }
-            // Classic CAN only: "off" is accepted, "on" is not available.
-            CAN_RAW_FD_FRAMES | CAN_RAW_XL_FRAMES => match read_int(opt)? {
-                0 => Ok(()),
-                _ => Err(neterr::ENOPROTOOPT()),
-            },
+            // Mainline accepts these on any interface; they only widen
+            // what may be written and read, and our devices are classic.
+            CAN_RAW_FD_FRAMES => {
+                let v = read_int(opt)?;
+                let mut s = sk.lock();
+                // Enabling CAN XL includes CAN FD.
+                if s.xl_frames != 0 && v == 0 {
+                    return Err(EINVAL);
+                }
+                s.fd_frames = v;
+                Ok(())
+            }
+            CAN_RAW_XL_FRAMES => {
+                let v = read_int(opt)?;
+                let mut s = sk.lock();
+                s.xl_frames = v;
+                if v != 0 {
+                    s.fd_frames = v;
+                }
+                Ok(())
+            }
             _ => Err(neterr::ENOPROTOOPT()),
         }
     }
@@ -506,7 +562,8 @@ impl glue::sock::Proto for RawProto {
             CAN_RAW_LOOPBACK => s.loopback,
             CAN_RAW_RECV_OWN_MSGS => s.recv_own_msgs,
             CAN_RAW_JOIN_FILTERS => s.join_filters,
-            CAN_RAW_FD_FRAMES | CAN_RAW_XL_FRAMES => 0,
+            CAN_RAW_FD_FRAMES => s.fd_frames,
+            CAN_RAW_XL_FRAMES => s.xl_frames,
             _ => return Err(neterr::ENOPROTOOPT()),
         };
         drop(s);
@@ -524,7 +581,7 @@ unsafe extern "C" fn raw_create(
     kern: ffi::c_int,
 ) -> ffi::c_int {
     // SAFETY: called by pf_can's create with the socket layer's arguments.
-    if let Err(e) = unsafe { PROTO.create(net, sock, protocol, kern) } {
+    if let Err(e) = unsafe { MODULE.proto.create(net, sock, protocol, kern) } {
         return e.to_errno();
     }
     // SAFETY: create succeeded, so `sock->sk` is our new sock.
@@ -537,13 +594,6 @@ unsafe extern "C" fn raw_create(
     }
     0
 }
-
-static RAW_PROTO: CCell<CanProto> = CCell::new(CanProto {
-    protocol: CAN_RAW,
-    type_: bindings::sock_type_SOCK_RAW as i32,
-    owner: core::ptr::null_mut(),
-    create: raw_create,
-});
 
 /// Netdevice notifier (mainline `raw_notify`). Process context, RTNL held.
 /// Sockets bound to a device that goes away lose their filters and get
@@ -577,6 +627,7 @@ unsafe extern "C" fn raw_notifier(
             unregister(&sk);
             s.bound = false;
             s.ifindex = 0;
+            sk.shared().ifindex.store(0, Ordering::Relaxed);
             // Mainline forgets the filters too: a new bind receives
             // nothing until CAN_RAW_FILTER is set again.
             s.filters = Some(KVec::new());
@@ -590,33 +641,11 @@ unsafe extern "C" fn raw_notifier(
     bindings::NOTIFY_DONE as ffi::c_int
 }
 
-static NOTIFIER: CCell<bindings::notifier_block> = CCell::new(bindings::notifier_block {
-    notifier_call: Some(raw_notifier),
-    next: core::ptr::null_mut(),
-    priority: 0,
-});
-
 struct RawModule;
 
 impl kernel::Module for RawModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        PROTO.register(c_str!("CAN_RAW"), bindings::PF_CAN as i32)?;
-        // SAFETY: module init: nothing else sees RAW_PROTO yet.
-        unsafe { (*RAW_PROTO.get()).owner = glue::this_module() };
-        // SAFETY: static notifier, unregistered in Drop.
-        if let Err(e) =
-            glue::to_result(unsafe { bindings::register_netdevice_notifier(NOTIFIER.get()) })
-        {
-            PROTO.unregister();
-            return Err(e);
-        }
-        // SAFETY: static CanProto, unregistered in Drop.
-        if let Err(e) = glue::to_result(unsafe { rcan_api::rcan_proto_register(RAW_PROTO.get()) }) {
-            // SAFETY: registered just above.
-            unsafe { bindings::unregister_netdevice_notifier(NOTIFIER.get()) };
-            PROTO.unregister();
-            return Err(e);
-        }
+        MODULE.register(c_str!("CAN_RAW"))?;
         pr_info!("CAN_RAW ({}) registered\n", CAN_RAW);
         Ok(RawModule)
     }
@@ -624,13 +653,7 @@ impl kernel::Module for RawModule {
 
 impl Drop for RawModule {
     fn drop(&mut self) {
-        // Every socket holds a reference on this module, so none is left.
-        // SAFETY: registered in init.
-        unsafe {
-            rcan_api::rcan_proto_unregister(RAW_PROTO.get());
-            bindings::unregister_netdevice_notifier(NOTIFIER.get());
-        }
-        PROTO.unregister();
+        MODULE.unregister();
         // Statics are never dropped: free the (empty) list's buffer.
         let mut rtnl = Rtnl::lock();
         *SOCKETS.get(&mut rtnl) = KVec::new();

@@ -87,7 +87,23 @@ pub(crate) type RxFn = unsafe extern "C" fn(
     owned: bool,
 );
 
+/// Called after every change of the receive table (process context, may
+/// not sleep for long; must not call back into the registry functions).
+pub(crate) type ListenFn = unsafe extern "C" fn(data: *mut ffi::c_void);
+
 extern "C" {
+    /// Adds (`add`) or removes the listener (`func`, `data`), called after
+    /// every change of the receive table. Removal returns only after any
+    /// running call has finished. Process context. ENOMEM.
+    pub(crate) fn rcan_rx_listen(func: ListenFn, data: *mut ffi::c_void, add: bool) -> ffi::c_int;
+    /// Copies into `out` (room for `cap`) every filter that applies to
+    /// frames received on `ifindex`; returns how many, or -1 if there are
+    /// more than `cap` (then a driver must not filter). Any context.
+    pub(crate) fn rcan_rx_filters(
+        ifindex: i32,
+        out: *mut crate::rcan_core::rxtable::Filter,
+        cap: usize,
+    ) -> isize;
     /// Registers a protocol. Process context. EEXIST if the number is
     /// taken, EINVAL if out of range.
     pub(crate) fn rcan_proto_register(cp: *const CanProto) -> ffi::c_int;
@@ -168,8 +184,248 @@ pub(crate) fn send(
     dev: &crate::glue::netdev::DevRef,
     loopback: bool,
 ) -> kernel::error::Result {
-    skb.set_can(dev, bindings::PACKET_HOST as u8);
+    skb.set_dev(dev);
     // SAFETY: rcan_send consumes the skb in every case; skb->dev is `dev`,
     // whose reference the caller holds until after the call returns.
     crate::glue::to_result(unsafe { rcan_send(skb.into_raw(), loopback) }).map(|_| ())
 }
+
+/// A receiver inside the kernel (no socket), registered with
+/// [`rx_set_kernel`]. `rx` runs in NET_RX softirq under RCU for every
+/// matching frame, with the skb borrowed and its receiving device, both
+/// valid for the call; it must not sleep.
+pub(crate) trait KernelRx: Sync + 'static {
+    fn rx(&self, skb: &crate::glue::skb::Skb, dev: &crate::glue::netdev::NetDev);
+}
+
+/// The [`RxFn`] of a [`KernelRx`].
+///
+/// # Safety
+///
+/// Called by pf_can's dispatcher as [`RxFn`] says, with the `owner` that
+/// [`rx_set_kernel`] registered: a `&'static T`.
+unsafe extern "C" fn kernel_rx<T: KernelRx>(
+    skb: *mut bindings::sk_buff,
+    owner: *mut ffi::c_void,
+    _cookie: u32,
+    owned: bool,
+) {
+    // SAFETY: a valid skb, our reference if `owned`, else borrowed for the
+    // call (RxFn contract); ManuallyDrop keeps a borrowed one unfreed.
+    let Some(skb) = (unsafe { crate::glue::skb::Skb::from_raw(skb) }) else {
+        return;
+    };
+    let skb = core::mem::ManuallyDrop::new(skb);
+    // CAST: `owner` is the `&'static T` that rx_set_kernel registered.
+    let rx = owner as *const T;
+    // SAFETY: that static outlives the registration, and removing the
+    // registration waits for running callbacks (rcan_rx_set_kernel).
+    let rx = unsafe { &*rx };
+    // SAFETY: the receive path holds the receiving device for the call.
+    if let Some(dev) = unsafe { skb.dev() } {
+        rx.rx(&skb, dev);
+    }
+    if owned {
+        core::mem::ManuallyDrop::into_inner(skb).consume();
+    }
+}
+
+/// A registered [`KernelRx`]; dropping it removes the receiver and waits
+/// for running callbacks (process context; sleeps).
+pub(crate) struct KernelRxReg<T: KernelRx>(&'static T);
+
+impl<T: KernelRx> Drop for KernelRxReg<T> {
+    fn drop(&mut self) {
+        // SAFETY: removal (NULL spec) of the receiver registered with this
+        // func and data; never fails.
+        unsafe {
+            rcan_rx_set_kernel(
+                kernel_rx::<T>,
+                self.0 as *const T as *mut ffi::c_void,
+                0,
+                core::ptr::null(),
+            )
+        };
+    }
+}
+
+/// Safe wrapper of [`rcan_rx_set_kernel`]: registers `rx` for frames on
+/// `ifindex` (0: every CAN interface) passing any of `filters` (at least
+/// one). The registration lasts until the returned guard is dropped.
+/// Process context; may sleep.
+pub(crate) fn rx_set_kernel<T: KernelRx>(
+    rx: &'static T,
+    ifindex: i32,
+    filters: &[RxFilter],
+) -> kernel::error::Result<KernelRxReg<T>> {
+    if filters.is_empty() {
+        return Err(kernel::error::code::EINVAL);
+    }
+    let spec = RxSpec {
+        ifindex,
+        join: false,
+        err_mask: 0,
+        filters: filters.as_ptr(),
+        nfilters: filters.len(),
+    };
+    // SAFETY: `spec` and the filters live for the call. `rx` is 'static:
+    // a static of the calling module, which keeps the guard in its module
+    // object, so the registration is removed at module exit at the latest.
+    let ret =
+        unsafe { rcan_rx_set_kernel(kernel_rx::<T>, rx as *const T as *mut ffi::c_void, 0, &spec) };
+    crate::glue::to_result(ret).map(|_| KernelRxReg(rx))
+}
+
+/// A driver whose hardware filter follows the sockets (DESIGN decision 7).
+pub(crate) trait FilterListener: crate::glue::netdev::Driver {
+    /// The receive table changed. Process context, may not sleep for long
+    /// (pf_can's writers' mutex is held).
+    fn filters_changed(dev: &crate::glue::netdev::Dev<Self>, priv_: &Self::Priv);
+}
+
+unsafe extern "C" fn listen_trampoline<T: FilterListener>(data: *mut ffi::c_void) {
+    // SAFETY: `data` is the device of a live Registration<T>: the
+    // Listening guard that registered it removes it (waiting for a running
+    // call) before that registration can be dropped.
+    let (dev, p) = unsafe { crate::glue::netdev::from_cookie::<T>(data.cast()) };
+    T::filters_changed(dev, p);
+}
+
+/// Calls `T::filters_changed` for one device whenever the receive table
+/// changes; stops when dropped. Must be dropped before the device's
+/// Registration (declare it after the registration in a struct, or drop it
+/// explicitly).
+pub(crate) struct Listening<T: FilterListener> {
+    dev: *mut bindings::net_device,
+    _t: core::marker::PhantomData<T>,
+}
+
+// SAFETY: only used to unregister the listener, from any thread.
+unsafe impl<T: FilterListener> Send for Listening<T> {}
+// SAFETY: no shared access.
+unsafe impl<T: FilterListener> Sync for Listening<T> {}
+
+impl<T: FilterListener> Listening<T> {
+    /// Starts listening for `reg`'s device. Process context.
+    pub(crate) fn new(reg: &crate::glue::netdev::Registration<T>) -> kernel::error::Result<Self> {
+        let dev = reg.dev().as_ptr();
+        // SAFETY: the trampoline's cookie is the registered device; the
+        // registration outlives this guard (documented contract), whose
+        // Drop removes the listener.
+        crate::glue::to_result(unsafe {
+            rcan_rx_listen(listen_trampoline::<T>, dev.cast(), true)
+        })?;
+        Ok(Listening {
+            dev,
+            _t: core::marker::PhantomData,
+        })
+    }
+}
+
+impl<T: FilterListener> Drop for Listening<T> {
+    fn drop(&mut self) {
+        // SAFETY: removal of the listener added in new(); returns after a
+        // running call finished.
+        unsafe { rcan_rx_listen(listen_trampoline::<T>, self.dev.cast(), false) };
+    }
+}
+
+/// Safe wrapper of [`rcan_rx_filters`]: the filters that apply to frames
+/// received on `ifindex`, in `out`; `None` if there are more than fit.
+/// Any context.
+pub(crate) fn rx_filters(
+    ifindex: i32,
+    out: &mut [crate::rcan_core::rxtable::Filter],
+) -> Option<usize> {
+    // SAFETY: `out` has room for `out.len()` filters.
+    let n = unsafe { rcan_rx_filters(ifindex, out.as_mut_ptr(), out.len()) };
+    usize::try_from(n).ok()
+}
+
+/// Netdevice notifier callback (`notifier_block.notifier_call`).
+pub(crate) type NotifierFn = unsafe extern "C" fn(
+    nb: *mut bindings::notifier_block,
+    event: ffi::c_ulong,
+    info: *mut ffi::c_void,
+) -> ffi::c_int;
+
+/// Everything a CAN protocol module registers, in one static: its
+/// `struct proto` (sock allocator), its entry in pf_can's protocol table
+/// and its netdevice notifier. [`ProtoModule::register`] in module init,
+/// [`ProtoModule::unregister`] in module exit.
+pub(crate) struct ProtoModule<T: crate::glue::sock::Proto> {
+    /// The sock allocator; `create` trampolines call its `create`.
+    pub(crate) proto: crate::glue::sock::ProtoReg<T>,
+    canproto: crate::glue::sync::CCell<CanProto>,
+    notifier: crate::glue::sync::CCell<bindings::notifier_block>,
+}
+
+impl<T: crate::glue::sock::Proto> ProtoModule<T> {
+    /// Protocol `protocol` of socket type `type_` (SOCK_RAW, ...), whose
+    /// sockets `create` makes and whose devices `notifier` watches.
+    pub(crate) const fn new(
+        protocol: i32,
+        type_: i32,
+        create: unsafe extern "C" fn(
+            net: *mut bindings::net,
+            sock: *mut bindings::socket,
+            protocol: ffi::c_int,
+            kern: ffi::c_int,
+        ) -> ffi::c_int,
+        notifier: NotifierFn,
+    ) -> Self {
+        ProtoModule {
+            proto: crate::glue::sock::ProtoReg::new(),
+            canproto: crate::glue::sync::CCell::new(CanProto {
+                protocol,
+                type_,
+                owner: core::ptr::null_mut(),
+                create,
+            }),
+            notifier: crate::glue::sync::CCell::new(bindings::notifier_block {
+                notifier_call: Some(notifier),
+                next: core::ptr::null_mut(),
+                priority: 0,
+            }),
+        }
+    }
+
+    /// Registers the proto, the notifier and the protocol, in that order;
+    /// undoes what was done on failure. Module init only.
+    pub(crate) fn register(&self, name: &'static kernel::str::CStr) -> kernel::error::Result {
+        self.proto.register(name, bindings::PF_CAN as i32)?;
+        // SAFETY: module init: nothing else sees the CanProto yet.
+        unsafe { (*self.canproto.get()).owner = crate::glue::this_module() };
+        // SAFETY: a static notifier, unregistered in `unregister`.
+        let ret = unsafe { bindings::register_netdevice_notifier(self.notifier.get()) };
+        if let Err(e) = crate::glue::to_result(ret) {
+            self.proto.unregister();
+            return Err(e);
+        }
+        // SAFETY: a static CanProto, unregistered in `unregister`.
+        if let Err(e) = crate::glue::to_result(unsafe { rcan_proto_register(self.canproto.get()) })
+        {
+            // SAFETY: registered just above.
+            unsafe { bindings::unregister_netdevice_notifier(self.notifier.get()) };
+            self.proto.unregister();
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// Undoes `register`. Module exit only: every socket holds a reference
+    /// on the module, so none is left.
+    pub(crate) fn unregister(&self) {
+        // SAFETY: registered by `register`; rcan_proto_unregister returns
+        // after a grace period, so no socket creation still sees it.
+        unsafe {
+            rcan_proto_unregister(self.canproto.get());
+            bindings::unregister_netdevice_notifier(self.notifier.get());
+        }
+        self.proto.unregister();
+    }
+}
+
+// SAFETY: the C structs are written only in `register` (module init) and
+// afterwards owned by the kernel's registries.
+unsafe impl<T: crate::glue::sock::Proto> Sync for ProtoModule<T> {}

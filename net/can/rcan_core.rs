@@ -15,5 +15,9 @@ pub(crate) mod filter;
 pub(crate) mod frame;
 #[path = "core/src/rxtable.rs"]
 pub(crate) mod rxtable;
+#[path = "core/src/sja1000.rs"]
+pub(crate) mod sja1000;
 #[path = "core/src/sockaddr.rs"]
 pub(crate) mod sockaddr;
+#[path = "core/src/timesvc.rs"]
+pub(crate) mod timesvc;

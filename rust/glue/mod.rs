@@ -11,7 +11,8 @@
 //!
 //! One file per kernel concept: [`sync`] (RCU, RTNL, C-defined mutexes),
 //! [`skb`] (owned socket buffers), [`sock`] (socket protocols from a Rust
-//! trait), [`netdev`] (network devices from a Rust trait).
+//! trait), [`netdev`] (network devices from a Rust trait), [`hrtimer`]
+//! (high-resolution timers in statics).
 #![allow(dead_code)]
 
 #[allow(
@@ -35,7 +36,9 @@ pub(crate) mod bindings {
     pub type __kernel_ptrdiff_t = isize;
 }
 
+pub(crate) mod hrtimer;
 pub(crate) mod netdev;
+pub(crate) mod pci;
 pub(crate) mod skb;
 pub(crate) mod sock;
 pub(crate) mod sync;

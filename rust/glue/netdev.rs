@@ -12,6 +12,7 @@ use super::bindings;
 use super::skb::Skb;
 use core::marker::PhantomData;
 use core::ptr::NonNull;
+use core::sync::atomic::{AtomicU32, Ordering};
 use kernel::error::{code, Result};
 use kernel::prelude::*;
 
@@ -99,6 +100,31 @@ impl NetDev {
         unsafe { bindings::rcan_dev_stats_rx_dropped(self.as_ptr()) };
     }
 
+    /// Restarts a stopped transmit queue (`netif_wake_queue`). Any context.
+    pub(crate) fn wake_queue(&self) {
+        // SAFETY: valid device.
+        unsafe { bindings::rcan_netif_wake_queue(self.as_ptr()) };
+    }
+
+    /// `netif_carrier_on`/`off`.
+    pub(crate) fn set_carrier(&self, on: bool) {
+        // SAFETY: valid device.
+        unsafe { bindings::rcan_netif_carrier(self.as_ptr(), on) };
+    }
+
+    /// Counts an error of kind `which` (`Stat`).
+    pub(crate) fn stats_err(&self, which: Stat) {
+        // SAFETY: valid device; DEV_STATS_* are atomic.
+        unsafe { bindings::rcan_dev_stats_err(self.as_ptr(), which as i32) };
+    }
+
+    /// IFF_PROMISC: a packet socket wants every frame.
+    pub(crate) fn is_promisc(&self) -> bool {
+        // SAFETY: valid device; a racy read of flags, rechecked on every
+        // ndo_set_rx_mode.
+        unsafe { (*self.as_ptr()).flags & bindings::net_device_flags_IFF_PROMISC != 0 }
+    }
+
     pub(crate) fn start_queue(&self) {
         // SAFETY: valid device.
         unsafe { bindings::rcan_netif_start_queue(self.as_ptr()) };
@@ -119,6 +145,18 @@ impl NetDev {
 
 use kernel::ffi;
 
+/// Error counters of `struct net_device_stats` (see `rcan_dev_stats_err`).
+#[derive(Clone, Copy)]
+#[repr(i32)]
+pub(crate) enum Stat {
+    RxErrors = bindings::RCAN_STAT_RX_ERRORS as i32,
+    /// Also counts an rx error.
+    RxOverErrors = bindings::RCAN_STAT_RX_OVER_ERRORS as i32,
+    TxErrors = bindings::RCAN_STAT_TX_ERRORS as i32,
+    /// Also counts a tx error.
+    TxAborted = bindings::RCAN_STAT_TX_ABORTED as i32,
+}
+
 /// A counted reference to a network device.
 ///
 /// # Invariants
@@ -134,6 +172,13 @@ impl DevRef {
     pub(crate) fn by_index(ifindex: i32) -> Option<DevRef> {
         // SAFETY: returns a held device or NULL.
         NonNull::new(unsafe { bindings::rcan_dev_get_by_index(ifindex) }).map(DevRef)
+    }
+
+    /// `dev_get_by_name(&init_net, name)`. Process or softirq context.
+    pub(crate) fn by_name(name: &kernel::str::CStr) -> Option<DevRef> {
+        // SAFETY: `name` is NUL-terminated and lives for the call; the
+        // function returns a held device or NULL.
+        NonNull::new(unsafe { bindings::rcan_dev_get_by_name(name.as_char_ptr()) }).map(DevRef)
     }
 
     /// The CAN device (ARPHRD_CAN) with the smallest ifindex above `after`.
@@ -168,6 +213,9 @@ pub(crate) struct Setup {
     pub(crate) mtu: u32,
     pub(crate) hard_header_len: u16,
     pub(crate) tx_queue_len: u32,
+    /// IFF_NO_QUEUE: no qdisc (`noqueue`), for virtual devices whose
+    /// `start_xmit` never stops the queue.
+    pub(crate) no_queue: bool,
 }
 
 /// What `ndo_start_xmit` did with the frame.
@@ -180,15 +228,151 @@ pub(crate) enum Xmit {
 ///
 /// Contexts: `open`/`stop` run in process context under RTNL; `start_xmit`
 /// runs in softirq or process context with BH disabled, serialised per
-/// queue by the kernel's TX lock.
+/// queue by the kernel's TX lock; `set_rx_mode` runs with BH disabled
+/// under the device's address lock; `irq` in hardirq context.
 pub(crate) trait Driver: Sized + 'static {
     /// Per-device private data, in the netdev's private area.
     type Priv: Send + Sync;
+    /// Whether `set_rx_mode` is implemented (fills `ndo_set_rx_mode`).
+    const HAS_SET_RX_MODE: bool = false;
 
     fn setup() -> Setup;
-    fn open(dev: &NetDev, priv_: &Self::Priv) -> Result;
-    fn stop(dev: &NetDev, priv_: &Self::Priv) -> Result;
-    fn start_xmit(skb: Skb, dev: &NetDev, priv_: &Self::Priv) -> Xmit;
+    fn open(dev: &Dev<Self>, priv_: &Self::Priv) -> Result;
+    fn stop(dev: &Dev<Self>, priv_: &Self::Priv) -> Result;
+    fn start_xmit(skb: Skb, dev: &Dev<Self>, priv_: &Self::Priv) -> Xmit;
+    /// The receive mode changed (IFF_PROMISC, ...). Atomic context.
+    fn set_rx_mode(_dev: &Dev<Self>, _priv: &Self::Priv) {}
+    /// Whether `private_ioctl` is implemented (fills
+    /// `ndo_siocdevprivate`).
+    const HAS_PRIVATE_IOCTL: bool = false;
+    /// A device-private ioctl (`SIOCDEVPRIVATE` + 0..15; `cmd` is the
+    /// full number), `data` the user's `ifr_data`. Process context, RTNL
+    /// not held.
+    fn private_ioctl(_dev: &Dev<Self>, _priv: &Self::Priv, _cmd: u32, _data: &UserBuf) -> Result {
+        Err(super::neterr::EOPNOTSUPP())
+    }
+    /// Interrupt handler for a line requested with [`Dev::request_irq`].
+    /// Hardirq context. Returns whether the device raised the interrupt.
+    fn irq(_dev: &Dev<Self>, _priv: &Self::Priv) -> bool {
+        false
+    }
+}
+
+/// A device of driver `T`, borrowed inside one of `T`'s callbacks.
+#[repr(transparent)]
+pub(crate) struct Dev<T: Driver>(NetDev, PhantomData<T>);
+
+impl<T: Driver> core::ops::Deref for Dev<T> {
+    type Target = NetDev;
+    fn deref(&self) -> &NetDev {
+        &self.0
+    }
+}
+
+impl<T: Driver> Dev<T> {
+    /// # Safety
+    ///
+    /// `ptr` is a valid device registered by [`Registration`] for `T` that
+    /// outlives `'a`.
+    unsafe fn from_raw<'a>(ptr: *mut bindings::net_device) -> &'a Dev<T> {
+        // SAFETY: transparent over NetDev, which is transparent over the C
+        // struct; validity per the contract.
+        unsafe { &*ptr.cast::<Dev<T>>() }
+    }
+
+    fn state(&self) -> &PrivBox<T::Priv> {
+        // SAFETY: a device of `T` holds an initialised PrivBox (invariant
+        // of Registration).
+        unsafe { &*bindings::rcan_netdev_priv(self.as_ptr()).cast::<PrivBox<T::Priv>>() }
+    }
+
+    /// Requests interrupt line `irq` (shared) for this device; `T::irq`
+    /// handles it until [`Dev::free_irq`] (or unregistration, as a safety
+    /// net). Process context (`open`); EBUSY if one is already requested.
+    pub(crate) fn request_irq(&self, irq: u32) -> Result {
+        let st = self.state();
+        if st.irq.load(Ordering::Acquire) != 0 {
+            return Err(code::EBUSY);
+        }
+        // SAFETY: the handler gets this device as its cookie; the device
+        // outlives the registration (freed in free_irq, called by `stop`
+        // or by Registration's Drop before free_netdev). The name is the
+        // device name, which lives in the device.
+        let ret = unsafe {
+            bindings::request_threaded_irq(
+                irq,
+                Some(Adapter::<T>::irq),
+                None,
+                bindings::IRQF_SHARED as ffi::c_ulong,
+                (*self.as_ptr()).name.as_ptr(),
+                self.as_ptr().cast(),
+            )
+        };
+        super::to_result(ret)?;
+        st.irq.store(irq, Ordering::Release);
+        Ok(())
+    }
+
+    /// Frees the line requested with [`Dev::request_irq`]; waits for a
+    /// running handler. Process context.
+    pub(crate) fn free_irq(&self) {
+        let irq = self.state().irq.swap(0, Ordering::AcqRel);
+        if irq != 0 {
+            // SAFETY: requested by request_irq with this cookie.
+            unsafe { bindings::free_irq(irq, self.as_ptr().cast()) };
+        }
+    }
+}
+
+/// The device and driver data behind a cookie handed out as
+/// `Registration::dev().as_ptr()`.
+///
+/// # Safety
+///
+/// `ptr` is a device registered by [`Registration`] for `T`, and stays
+/// registered (its Registration alive) for `'a`.
+pub(crate) unsafe fn from_cookie<'a, T: Driver>(
+    ptr: *mut bindings::net_device,
+) -> (&'a Dev<T>, &'a T::Priv) {
+    // SAFETY: per the contract.
+    unsafe { (Dev::<T>::from_raw(ptr), Adapter::<T>::priv_of(ptr)) }
+}
+
+/// A user-space buffer of an ioctl (`ifr_data`).
+pub(crate) struct UserBuf(*mut ffi::c_void);
+
+impl UserBuf {
+    /// Copies `dst.len()` bytes from user space; EFAULT on a bad pointer.
+    pub(crate) fn read(&self, dst: &mut [u8]) -> Result {
+        // SAFETY: `dst` is writable; copy_from_user checks the user pointer.
+        let ret = unsafe {
+            bindings::rcan_copy_from_user(dst.as_mut_ptr().cast(), self.0, dst.len() as _)
+        };
+        super::to_result(ret).map(|_| ())
+    }
+
+    /// Copies `src` to user space; EFAULT on a bad pointer.
+    pub(crate) fn write(&self, src: &[u8]) -> Result {
+        // SAFETY: `src` is readable; copy_to_user checks the user pointer.
+        let ret =
+            unsafe { bindings::rcan_copy_to_user(self.0, src.as_ptr().cast(), src.len() as _) };
+        super::to_result(ret).map(|_| ())
+    }
+}
+
+/// Whether the calling task has CAP_NET_ADMIN (in the initial user
+/// namespace). Process context.
+pub(crate) fn capable_net_admin() -> bool {
+    // SAFETY: capable() only inspects the current task's credentials.
+    unsafe { bindings::rcan_capable_net_admin() }
+}
+
+/// What the netdev private area holds: the driver's data and the glue's
+/// bookkeeping.
+struct PrivBox<P> {
+    /// Requested interrupt line, 0 = none.
+    irq: AtomicU32,
+    inner: P,
 }
 
 struct Adapter<T: Driver>(PhantomData<T>);
@@ -198,6 +382,16 @@ impl<T: Driver> Adapter<T> {
         ndo_open: Some(Self::open),
         ndo_stop: Some(Self::stop),
         ndo_start_xmit: Some(Self::start_xmit),
+        ndo_siocdevprivate: if T::HAS_PRIVATE_IOCTL {
+            Some(Self::siocdevprivate)
+        } else {
+            None
+        },
+        ndo_set_rx_mode: if T::HAS_SET_RX_MODE {
+            Some(Self::set_rx_mode)
+        } else {
+            None
+        },
         // SAFETY: all-zero is a valid net_device_ops (every hook NULL).
         ..unsafe { core::mem::zeroed() }
     };
@@ -206,9 +400,42 @@ impl<T: Driver> Adapter<T> {
     ///
     /// `dev` was allocated by [`Registration::register`] for `T`.
     unsafe fn priv_of<'a>(dev: *mut bindings::net_device) -> &'a T::Priv {
-        // SAFETY: the private area holds an initialised `T::Priv` from
-        // registration until free (see Registration).
-        unsafe { &*bindings::rcan_netdev_priv(dev).cast::<T::Priv>() }
+        // SAFETY: the private area holds an initialised `PrivBox<T::Priv>`
+        // from registration until free (see Registration).
+        unsafe { &(*bindings::rcan_netdev_priv(dev).cast::<PrivBox<T::Priv>>()).inner }
+    }
+
+    unsafe extern "C" fn siocdevprivate(
+        dev: *mut bindings::net_device,
+        _ifr: *mut bindings::ifreq,
+        data: *mut ffi::c_void,
+        cmd: ffi::c_int,
+    ) -> ffi::c_int {
+        // SAFETY: the kernel passes a registered device of ours; `data` is
+        // the caller's user pointer, only used through uaccess helpers.
+        let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
+        match T::private_ioctl(d, p, cmd as u32, &UserBuf(data)) {
+            Ok(()) => 0,
+            Err(e) => e.to_errno(),
+        }
+    }
+
+    unsafe extern "C" fn set_rx_mode(dev: *mut bindings::net_device) {
+        // SAFETY: the kernel passes a registered device of ours.
+        let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
+        T::set_rx_mode(d, p);
+    }
+
+    unsafe extern "C" fn irq(_irq: ffi::c_int, cookie: *mut ffi::c_void) -> bindings::irqreturn_t {
+        let dev = cookie.cast::<bindings::net_device>();
+        // SAFETY: the cookie is the device given to request_threaded_irq,
+        // alive until free_irq returns.
+        let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
+        if T::irq(d, p) {
+            bindings::irqreturn_IRQ_HANDLED
+        } else {
+            bindings::irqreturn_IRQ_NONE
+        }
     }
 
     unsafe extern "C" fn setup(dev: *mut bindings::net_device) {
@@ -223,13 +450,16 @@ impl<T: Driver> Adapter<T> {
             d.max_mtu = s.mtu;
             d.hard_header_len = s.hard_header_len;
             d.tx_queue_len = s.tx_queue_len;
+            if s.no_queue {
+                bindings::rcan_netdev_set_no_queue(dev);
+            }
             d.netdev_ops = &Self::OPS;
         }
     }
 
     unsafe extern "C" fn open(dev: *mut bindings::net_device) -> ffi::c_int {
         // SAFETY: the kernel passes a registered device of ours.
-        let (d, p) = unsafe { (NetDev::from_raw(dev), Self::priv_of(dev)) };
+        let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
         match T::open(d, p) {
             Ok(()) => 0,
             Err(e) => e.to_errno(),
@@ -238,7 +468,7 @@ impl<T: Driver> Adapter<T> {
 
     unsafe extern "C" fn stop(dev: *mut bindings::net_device) -> ffi::c_int {
         // SAFETY: as in open().
-        let (d, p) = unsafe { (NetDev::from_raw(dev), Self::priv_of(dev)) };
+        let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
         match T::stop(d, p) {
             Ok(()) => 0,
             Err(e) => e.to_errno(),
@@ -253,7 +483,7 @@ impl<T: Driver> Adapter<T> {
         // device of ours.
         let (skb, d, p) = unsafe {
             match Skb::from_raw(skb) {
-                Some(s) => (s, NetDev::from_raw(dev), Self::priv_of(dev)),
+                Some(s) => (s, Dev::<T>::from_raw(dev), Self::priv_of(dev)),
                 None => return bindings::netdev_tx_NETDEV_TX_OK,
             }
         };
@@ -286,7 +516,7 @@ impl<T: Driver> Registration<T> {
         // SAFETY: `name` is NUL-terminated; setup is our trampoline.
         let dev = unsafe {
             bindings::alloc_netdev_mqs(
-                core::mem::size_of::<T::Priv>() as i32,
+                core::mem::size_of::<PrivBox<T::Priv>>() as i32,
                 name.as_char_ptr(),
                 bindings::NET_NAME_ENUM as u8,
                 Some(Adapter::<T>::setup),
@@ -296,11 +526,14 @@ impl<T: Driver> Registration<T> {
         };
         let dev = NonNull::new(dev).ok_or(code::ENOMEM)?;
         // SAFETY: the private area is sized and aligned (NETDEV_ALIGN) for
-        // `T::Priv`, and nothing reads it before registration.
+        // `PrivBox<T::Priv>`, and nothing reads it before registration.
         unsafe {
             bindings::rcan_netdev_priv(dev.as_ptr())
-                .cast::<T::Priv>()
-                .write(priv_)
+                .cast::<PrivBox<T::Priv>>()
+                .write(PrivBox {
+                    irq: AtomicU32::new(0),
+                    inner: priv_,
+                })
         };
         // SAFETY: a fully set-up, unregistered device.
         let ret = unsafe { bindings::register_netdev(dev.as_ptr()) };
@@ -308,7 +541,7 @@ impl<T: Driver> Registration<T> {
             // SAFETY: never registered: drop the private data, free it.
             unsafe {
                 core::ptr::drop_in_place(
-                    bindings::rcan_netdev_priv(dev.as_ptr()).cast::<T::Priv>(),
+                    bindings::rcan_netdev_priv(dev.as_ptr()).cast::<PrivBox<T::Priv>>(),
                 );
                 bindings::free_netdev(dev.as_ptr());
             }
@@ -321,9 +554,10 @@ impl<T: Driver> Registration<T> {
         })
     }
 
-    pub(crate) fn dev(&self) -> &NetDev {
-        // SAFETY: registered device (type invariant) living as long as self.
-        unsafe { NetDev::from_raw(self.dev.as_ptr()) }
+    pub(crate) fn dev(&self) -> &Dev<T> {
+        // SAFETY: registered device of `T` (type invariant) living as long
+        // as self.
+        unsafe { Dev::from_raw(self.dev.as_ptr()) }
     }
 
     pub(crate) fn priv_data(&self) -> &T::Priv {
@@ -334,13 +568,17 @@ impl<T: Driver> Registration<T> {
 
 impl<T: Driver> Drop for Registration<T> {
     fn drop(&mut self) {
-        // SAFETY: registered by us; unregister_netdev waits until no ops
-        // run and every reference is gone, after which the private data can
-        // be dropped and the device freed.
+        // SAFETY: registered by us; unregister_netdev closes the device
+        // (`stop`) and waits until no ops run and every reference is gone.
+        unsafe { bindings::unregister_netdev(self.dev.as_ptr()) };
+        // A driver that left its interrupt requested: free it before the
+        // device goes.
+        self.dev().free_irq();
+        // SAFETY: unregistered, no handler or op can run any more: drop
+        // the private data and free the device.
         unsafe {
-            bindings::unregister_netdev(self.dev.as_ptr());
             core::ptr::drop_in_place(
-                bindings::rcan_netdev_priv(self.dev.as_ptr()).cast::<T::Priv>(),
+                bindings::rcan_netdev_priv(self.dev.as_ptr()).cast::<PrivBox<T::Priv>>(),
             );
             bindings::free_netdev(self.dev.as_ptr());
         }

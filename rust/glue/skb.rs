@@ -174,21 +174,22 @@ impl Skb {
     /// Writes `src` into the control buffer at `off` (clamped to its 48
     /// bytes).
     pub(crate) fn cb_write(&mut self, off: usize, src: &[u8]) {
-        // SAFETY: valid skb we own; bounds checked by slicing.
-        let cb = unsafe { &mut (*self.as_ptr()).cb };
-        let end = (off + src.len()).min(cb.len());
-        for (d, s) in cb.get_mut(off..end).unwrap_or(&mut []).iter_mut().zip(src) {
-            *d = *s as _;
+        // SAFETY: valid skb we own; the copy is clamped to the 48-byte cb.
+        unsafe {
+            let cb = &mut (*self.as_ptr()).cb;
+            let n = src.len().min(cb.len().saturating_sub(off));
+            core::ptr::copy_nonoverlapping(src.as_ptr(), cb.as_mut_ptr().add(off).cast::<u8>(), n);
         }
     }
 
-    /// Reads `dst.len()` bytes of the control buffer from `off`.
+    /// Reads `dst.len()` bytes of the control buffer from `off` (bytes
+    /// beyond its 48 are left as they are).
     pub(crate) fn cb_read(&self, off: usize, dst: &mut [u8]) {
-        // SAFETY: valid skb; bounds checked by slicing.
-        let cb = unsafe { &(*self.as_ptr()).cb };
-        let end = (off + dst.len()).min(cb.len());
-        for (d, s) in dst.iter_mut().zip(cb.get(off..end).unwrap_or(&[])) {
-            *d = *s as u8;
+        // SAFETY: valid skb; the copy is clamped to the 48-byte cb.
+        unsafe {
+            let cb = &(*self.as_ptr()).cb;
+            let n = dst.len().min(cb.len().saturating_sub(off));
+            core::ptr::copy_nonoverlapping(cb.as_ptr().add(off).cast::<u8>(), dst.as_mut_ptr(), n);
         }
     }
 
@@ -243,6 +244,15 @@ impl Skb {
                 Some(super::netdev::NetDev::from_raw(dev))
             }
         }
+    }
+
+    /// Sets `skb->dev` only (`rcan_send` marks the rest).
+    ///
+    /// The caller holds a reference on `dev` for as long as the skb may use
+    /// it.
+    pub(crate) fn set_dev(&mut self, dev: &super::netdev::NetDev) {
+        // SAFETY: valid skb we own; `dev` is a live device.
+        unsafe { bindings::rcan_skb_set_dev(self.as_ptr(), dev.as_ptr()) };
     }
 
     /// Frees as successfully consumed (not a drop in drop monitors).

@@ -21,19 +21,29 @@ use kernel::ffi;
 
 /// The object sk_alloc() allocates for protocol `T`.
 #[repr(C)]
-struct SockObj<D> {
+struct SockObj<D, S> {
     sk: bindings::sock,
+    shared: S,
     data: D,
 }
+
+/// The sock object of protocol `T`.
+type ObjOf<T> = SockObj<<T as Proto>::Data, <T as Proto>::Shared>;
 
 /// A socket protocol. All methods run in process context, called through
 /// the socket layer on behalf of a system call, and may sleep.
 pub(crate) trait Proto: Sized + 'static {
     /// Per-socket state, protected by the socket lock.
     type Data: Send;
+    /// Per-socket state read without the socket lock (atomics): what a
+    /// hot path such as sendmsg needs, as mainline reads its option
+    /// fields without the lock. Writers still hold the socket lock.
+    type Shared: Send + Sync;
 
     /// Initial state of a new socket.
     fn new_data() -> Self::Data;
+    /// Initial shared state of a new socket.
+    fn new_shared() -> Self::Shared;
     /// The socket is being closed. Undo everything that makes other code
     /// reach the sock (receivers, lists) before returning.
     fn release(sk: &Sock<Self>);
@@ -137,6 +147,14 @@ impl<T: Proto> Sock<T> {
         self.sk
     }
 
+    /// The state readable without the socket lock.
+    pub(crate) fn shared(&self) -> &T::Shared {
+        // SAFETY: a live sock created by `create` for `T` (type
+        // invariant), so it is an `ObjOf<T>` with initialised shared state,
+        // which is `Sync`.
+        unsafe { &(*self.sk.cast::<ObjOf<T>>()).shared }
+    }
+
     /// Takes the socket lock (`lock_sock`). Process context; sleeps.
     pub(crate) fn lock(&self) -> SockGuard<'_, T> {
         // SAFETY: live sock (type invariant); released in the guard's Drop.
@@ -224,15 +242,15 @@ impl<T: Proto> core::ops::Deref for SockGuard<'_, T> {
     type Target = T::Data;
     fn deref(&self) -> &T::Data {
         // SAFETY: the sock was created by `create` for `T`, so it is a
-        // `SockObj<T::Data>` with initialised data; the socket lock is held.
-        unsafe { &(*self.sock.sk.cast::<SockObj<T::Data>>()).data }
+        // `ObjOf<T>` with initialised data; the socket lock is held.
+        unsafe { &(*self.sock.sk.cast::<ObjOf<T>>()).data }
     }
 }
 
 impl<T: Proto> core::ops::DerefMut for SockGuard<'_, T> {
     fn deref_mut(&mut self) -> &mut T::Data {
         // SAFETY: as above; the socket lock gives exclusive access.
-        unsafe { &mut (*self.sock.sk.cast::<SockObj<T::Data>>()).data }
+        unsafe { &mut (*self.sock.sk.cast::<ObjOf<T>>()).data }
     }
 }
 
@@ -356,7 +374,7 @@ impl<T: Proto> ProtoReg<T> {
                 p.name[i] = *b as ffi::c_char;
             }
             p.owner = super::this_module();
-            p.obj_size = core::mem::size_of::<SockObj<T::Data>>() as u32;
+            p.obj_size = core::mem::size_of::<ObjOf<T>>() as u32;
             let o = &mut *self.ops.get();
             *o = proto_ops_template::<T>();
             o.family = family;
@@ -402,7 +420,8 @@ impl<T: Proto> ProtoReg<T> {
             }
             bindings::sock_init_data(sock, sk);
             (*sk).sk_protocol = protocol as u16;
-            core::ptr::addr_of_mut!((*sk.cast::<SockObj<T::Data>>()).data).write(T::new_data());
+            core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).data).write(T::new_data());
+            core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).shared).write(T::new_shared());
             (*sk).sk_destruct = Some(destruct::<T>);
         }
         Ok(())
@@ -416,9 +435,8 @@ unsafe extern "C" fn destruct<T: Proto>(sk: *mut bindings::sock) {
     // initialised data; nothing can reach it any more.
     unsafe {
         bindings::rcan_sk_purge_queues(sk);
-        core::ptr::drop_in_place(core::ptr::addr_of_mut!(
-            (*sk.cast::<SockObj<T::Data>>()).data
-        ));
+        core::ptr::drop_in_place(core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).data));
+        core::ptr::drop_in_place(core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).shared));
     }
 }
 

@@ -232,3 +232,88 @@ impl<T> CCell<T> {
         self.0.get()
     }
 }
+
+/// Data protected by a spinlock taken with interrupts disabled
+/// (`spin_lock_irqsave`): for state shared with a hardirq handler. Usable
+/// in every context; never sleep while holding it.
+///
+/// The `spinlock_t` lives in its own small allocation (made and
+/// initialised by a C helper), so the value can be moved freely before it
+/// is shared.
+///
+/// # Invariants
+///
+/// `lock` is an initialised spinlock allocated by `rcan_spinlock_alloc`,
+/// freed in Drop.
+pub(crate) struct IrqSpinLock<T> {
+    lock: core::ptr::NonNull<bindings::spinlock_t>,
+    data: UnsafeCell<T>,
+}
+
+// SAFETY: `data` is only reached through a guard holding the lock.
+unsafe impl<T: Send> Sync for IrqSpinLock<T> {}
+// SAFETY: the lock allocation may be freed from any thread.
+unsafe impl<T: Send> Send for IrqSpinLock<T> {}
+
+impl<T> IrqSpinLock<T> {
+    /// A new unlocked lock. Process context (allocates with GFP_KERNEL).
+    pub(crate) fn new(data: T) -> kernel::error::Result<Self> {
+        // SAFETY: allocates and initialises a spinlock, or returns NULL.
+        let lock = unsafe { bindings::rcan_spinlock_alloc() };
+        let lock = core::ptr::NonNull::new(lock).ok_or(kernel::error::code::ENOMEM)?;
+        // INVARIANT: just allocated and initialised.
+        Ok(IrqSpinLock {
+            lock,
+            data: UnsafeCell::new(data),
+        })
+    }
+
+    /// Takes the lock, disabling local interrupts. Any context.
+    pub(crate) fn lock(&self) -> IrqSpinGuard<'_, T> {
+        // SAFETY: an initialised spinlock (invariant).
+        let flags = unsafe { bindings::rcan_spin_lock_irqsave(self.lock.as_ptr()) };
+        IrqSpinGuard {
+            l: self,
+            flags,
+            _not_send: PhantomData,
+        }
+    }
+}
+
+impl<T> Drop for IrqSpinLock<T> {
+    fn drop(&mut self) {
+        // SAFETY: nobody can hold the lock (we have `&mut self`); allocated
+        // by rcan_spinlock_alloc (invariant).
+        unsafe { bindings::rcan_spinlock_free(self.lock.as_ptr()) };
+    }
+}
+
+/// A held [`IrqSpinLock`].
+pub(crate) struct IrqSpinGuard<'a, T> {
+    l: &'a IrqSpinLock<T>,
+    flags: kernel::ffi::c_ulong,
+    _not_send: PhantomData<*mut ()>,
+}
+
+impl<T> Deref for IrqSpinGuard<'_, T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        // SAFETY: the lock is held while the guard lives.
+        unsafe { &*self.l.data.get() }
+    }
+}
+
+impl<T> DerefMut for IrqSpinGuard<'_, T> {
+    fn deref_mut(&mut self) -> &mut T {
+        // SAFETY: the lock is held while the guard lives, exclusively.
+        unsafe { &mut *self.l.data.get() }
+    }
+}
+
+impl<T> Drop for IrqSpinGuard<'_, T> {
+    fn drop(&mut self) {
+        // SAFETY: locked in IrqSpinLock::lock with these flags, on this CPU
+        // (the guard is not Send).
+        unsafe { bindings::rcan_spin_unlock_irqrestore(self.l.lock.as_ptr(), self.flags) };
+    }
+}

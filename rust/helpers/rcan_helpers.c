@@ -5,13 +5,17 @@
  * so that every module has its own private copy.
  */
 #include <linux/can.h>
+#include <linux/capability.h>
 #include <linux/can/skb.h>
 #include <linux/if_arp.h>
 #include <linux/module.h>
 #include <linux/mutex.h>
 #include <linux/netdevice.h>
 #include <linux/random.h>
+#include <linux/pci.h>
 #include <linux/rcupdate.h>
+#include <linux/slab.h>
+#include <linux/spinlock.h>
 #include <linux/rtnetlink.h>
 #include <linux/skbuff.h>
 #include <linux/sockptr.h>
@@ -96,6 +100,11 @@ void rcan_skb_reset_headers(struct sk_buff *skb)
 struct net_device *rcan_skb_dev(const struct sk_buff *skb)
 {
 	return skb->dev;
+}
+
+void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev)
+{
+	skb->dev = dev;
 }
 
 u8 rcan_skb_pkt_type(const struct sk_buff *skb)
@@ -239,6 +248,11 @@ struct net_device *rcan_dev_get_by_index(int ifindex)
 	return dev_get_by_index(&init_net, ifindex);
 }
 
+struct net_device *rcan_dev_get_by_name(const char *name)
+{
+	return dev_get_by_name(&init_net, name);
+}
+
 /*
  * The CAN device with the smallest ifindex above @after_ifindex, with a
  * reference held, or NULL. Lets Rust walk the device list without holding
@@ -330,7 +344,94 @@ int rcan_put_user_int(int __user *p, int val)
 	return put_user(val, p);
 }
 
+int rcan_copy_from_user(void *dst, const void __user *src, unsigned long n)
+{
+	return copy_from_user(dst, src, n) ? -EFAULT : 0;
+}
+
+bool rcan_capable_net_admin(void)
+{
+	return capable(CAP_NET_ADMIN);
+}
+
 int rcan_copy_to_user(void __user *dst, const void *src, unsigned long n)
 {
 	return copy_to_user(dst, src, n) ? -EFAULT : 0;
+}
+
+/* A spinlock in its own allocation, for Rust values that move. */
+spinlock_t *rcan_spinlock_alloc(void)
+{
+	spinlock_t *l = kmalloc(sizeof(*l), GFP_KERNEL);
+
+	if (l)
+		spin_lock_init(l);
+	return l;
+}
+
+void rcan_spinlock_free(spinlock_t *lock)
+{
+	kfree(lock);
+}
+
+unsigned long rcan_spin_lock_irqsave(spinlock_t *lock)
+{
+	unsigned long flags;
+
+	spin_lock_irqsave(lock, flags);
+	return flags;
+}
+
+void rcan_spin_unlock_irqrestore(spinlock_t *lock, unsigned long flags)
+{
+	spin_unlock_irqrestore(lock, flags);
+}
+
+void rcan_pci_set_drvdata(struct pci_dev *pdev, void *data)
+{
+	pci_set_drvdata(pdev, data);
+}
+
+void *rcan_pci_get_drvdata(struct pci_dev *pdev)
+{
+	return pci_get_drvdata(pdev);
+}
+
+void rcan_netdev_set_no_queue(struct net_device *dev)
+{
+	dev->priv_flags |= IFF_NO_QUEUE;
+}
+
+void rcan_netif_wake_queue(struct net_device *dev)
+{
+	netif_wake_queue(dev);
+}
+
+void rcan_netif_carrier(struct net_device *dev, bool on)
+{
+	if (on)
+		netif_carrier_on(dev);
+	else
+		netif_carrier_off(dev);
+}
+
+/* Error counters of struct net_device_stats, by RCAN_STAT_* number. */
+void rcan_dev_stats_err(struct net_device *dev, int which)
+{
+	switch (which) {
+	case RCAN_STAT_RX_ERRORS:
+		DEV_STATS_INC(dev, rx_errors);
+		break;
+	case RCAN_STAT_RX_OVER_ERRORS:
+		DEV_STATS_INC(dev, rx_over_errors);
+		DEV_STATS_INC(dev, rx_errors);
+		break;
+	case RCAN_STAT_TX_ERRORS:
+		DEV_STATS_INC(dev, tx_errors);
+		break;
+	case RCAN_STAT_TX_ABORTED:
+		DEV_STATS_INC(dev, tx_aborted_errors);
+		DEV_STATS_INC(dev, tx_errors);
+		break;
+	}
 }

@@ -11,6 +11,7 @@
 
 #include <linux/types.h>
 #include <linux/sockptr.h>
+#include <linux/spinlock_types.h>
 
 struct sk_buff;
 struct sock;
@@ -42,6 +43,7 @@ unsigned int rcan_skb_headroom(const struct sk_buff *skb);
 void rcan_skb_reset_headers(struct sk_buff *skb);
 struct net_device *rcan_skb_dev(const struct sk_buff *skb);
 u8 rcan_skb_pkt_type(const struct sk_buff *skb);
+void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev);
 void rcan_skb_set_can(struct sk_buff *skb, struct net_device *dev, u8 pkt_type);
 struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp);
 bool rcan_skb_shared(const struct sk_buff *skb);
@@ -72,6 +74,7 @@ void rcan_netif_stop_queue(struct net_device *dev);
 void rcan_dev_hold(struct net_device *dev);
 void rcan_dev_put(struct net_device *dev);
 struct net_device *rcan_dev_get_by_index(int ifindex);
+struct net_device *rcan_dev_get_by_name(const char *name);
 struct net_device *rcan_next_can_dev(int after_ifindex);
 int rcan_dev_queue_xmit(struct sk_buff *skb);
 struct net_device *rcan_netdev_notifier_dev(void *info);
@@ -87,6 +90,31 @@ int rcan_copy_from_sockptr(void *dst, sockptr_t src, size_t size);
 int rcan_get_user_int(int __user *p, int *val);
 int rcan_put_user_int(int __user *p, int val);
 int rcan_copy_to_user(void __user *dst, const void *src, unsigned long n);
+int rcan_copy_from_user(void *dst, const void __user *src, unsigned long n);
+bool rcan_capable_net_admin(void);
+
+/* spinlocks for Rust values that move */
+spinlock_t *rcan_spinlock_alloc(void);
+void rcan_spinlock_free(spinlock_t *lock);
+unsigned long rcan_spin_lock_irqsave(spinlock_t *lock);
+void rcan_spin_unlock_irqrestore(spinlock_t *lock, unsigned long flags);
+
+/* PCI */
+struct pci_dev;
+void rcan_pci_set_drvdata(struct pci_dev *pdev, void *data);
+void *rcan_pci_get_drvdata(struct pci_dev *pdev);
+
+/* net_device queue, carrier and error counters */
+void rcan_netif_wake_queue(struct net_device *dev);
+void rcan_netdev_set_no_queue(struct net_device *dev);
+void rcan_netif_carrier(struct net_device *dev, bool on);
+enum {
+	RCAN_STAT_RX_ERRORS,
+	RCAN_STAT_RX_OVER_ERRORS,
+	RCAN_STAT_TX_ERRORS,
+	RCAN_STAT_TX_ABORTED,
+};
+void rcan_dev_stats_err(struct net_device *dev, int which);
 
 /* module references */
 bool rcan_try_module_get(struct module *mod);

@@ -26,7 +26,7 @@ mod glue;
 mod rcan_core;
 
 use glue::bindings;
-use glue::netdev::{Driver, NetDev, Registration, Setup, Xmit};
+use glue::netdev::{Dev, Driver, Registration, Setup, Xmit};
 use glue::skb::Skb;
 use kernel::c_str;
 use rcan_core::canloop::{DropRate, FrameDump};
@@ -79,21 +79,24 @@ impl Driver for LoopDriver {
             flags: bindings::net_device_flags_IFF_NOARP | bindings::net_device_flags_IFF_ECHO,
             mtu: CAN_FRAME_LEN as u32,
             hard_header_len: 0,
-            tx_queue_len: 10,
+            tx_queue_len: 0,
+            // start_xmit never stops the queue: a qdisc would only add
+            // work per frame.
+            no_queue: true,
         }
     }
 
-    fn open(dev: &NetDev, _p: &()) -> Result {
+    fn open(dev: &Dev<Self>, _p: &()) -> Result {
         dev.start_queue();
         Ok(())
     }
 
-    fn stop(dev: &NetDev, _p: &()) -> Result {
+    fn stop(dev: &Dev<Self>, _p: &()) -> Result {
         dev.stop_queue();
         Ok(())
     }
 
-    fn start_xmit(skb: Skb, dev: &NetDev, _p: &()) -> Xmit {
+    fn start_xmit(skb: Skb, dev: &Dev<Self>, _p: &()) -> Xmit {
         let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
             // Not a classic CAN frame (e.g. a packet socket's garbage).
             dev.stats_tx_dropped();

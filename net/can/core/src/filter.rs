@@ -9,6 +9,7 @@ use super::arb::{Arb, ArbError, ARB_UNUSED};
 /// A pattern and a mask over the arbitration field of figure 5-5.
 ///
 /// Invariants: bit 0 of `arb` is clear and bit 0 of `mask` is set.
+#[repr(C)]
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct ArbFilter {
     arb: u32,

@@ -16,3 +16,4 @@ pub mod frame;
 pub mod rxtable;
 pub mod sja1000;
 pub mod sockaddr;
+pub mod timesvc;

@@ -44,7 +44,9 @@ pub const CAN_ERR_MASK: u32 = 0x1FFF_FFFF;
 
 const EFF_RTR: u32 = CAN_EFF_FLAG | CAN_RTR_FLAG;
 
-/// One filter, in the form the receive path evaluates.
+/// One filter, in the form the receive path evaluates. `repr(C)`: drivers
+/// receive arrays of it from `rcan_pf` across module boundaries.
+#[repr(C)]
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub enum Filter {
     /// Thesis filter over the arbitration field (5.2.4): mask bit 1 =

@@ -381,17 +381,32 @@ impl<R: Regs> Chip<R> {
         self.regs.write(reg::TXERR, 0);
         self.regs.write(reg::RXERR, 0);
         let _ = self.regs.read(reg::ECC);
-        let _ = self.regs.read(reg::IR);
-        self.regs.write(reg::IER, irq::ENABLED);
         let afm = if filter.single { mode::AFM } else { 0 };
+        let mut operating = false;
         for _ in 0..MODE_POLLS {
             if self.regs.read(reg::MOD) & mode::RM == 0 {
-                self.state = State::Active;
-                return Ok(());
+                operating = true;
+                break;
             }
             self.regs.write(reg::MOD, afm);
         }
-        Err(Sja1000Error::ModeTimeout)
+        if !operating {
+            return Err(Sja1000Error::ModeTimeout);
+        }
+        // Frames left in the receive FIFO from before the reset belong to
+        // nobody (a real chip clears the FIFO in reset mode; QEMU's model
+        // does not): release them before interrupts are enabled.
+        for _ in 0..64 {
+            if self.regs.read(reg::SR) & status::RBS == 0 {
+                break;
+            }
+            self.regs.write(reg::CMR, cmd::RRB);
+        }
+        self.regs.write(reg::CMR, cmd::CDO);
+        let _ = self.regs.read(reg::IR);
+        self.regs.write(reg::IER, irq::ENABLED);
+        self.state = State::Active;
+        Ok(())
     }
 
     /// Stops the chip (thesis: `stop`): reset mode, interrupts off.
@@ -507,9 +522,10 @@ pub struct HwFilter {
 }
 
 impl HwFilter {
-    /// Accepts every frame.
+    /// Accepts every frame (dual mode, every bit "don't care", as
+    /// mainline's driver programs the chip).
     pub const OPEN: HwFilter = HwFilter {
-        single: true,
+        single: false,
         acr: [0; 4],
         amr: [0xFF; 4],
     };
@@ -589,6 +605,202 @@ impl HwFilter {
             let mask2 = u32::from(self.amr[2]) << 4 | u32::from(self.amr[3] >> 4);
             let f2 = pass(code2, mask2, id_rtr, 0xFFF);
             f1 || f2
+        }
+    }
+}
+
+/// Mainline `<linux/can/error.h>` classes and details used by
+/// [`error_frame`].
+pub mod err {
+    /// Lost arbitration (data[0]: bit number).
+    pub const LOSTARB: u32 = 0x0002;
+    /// Controller problems (data[1]).
+    pub const CRTL: u32 = 0x0004;
+    /// Bus-off.
+    pub const BUSOFF: u32 = 0x0040;
+    /// Controller restarted.
+    pub const RESTARTED: u32 = 0x0100;
+    /// data[6]/data[7] hold the TX/RX error counters.
+    pub const CNT: u32 = 0x0200;
+    /// data[1]: receive FIFO overflow.
+    pub const CRTL_RX_OVERFLOW: u8 = 0x01;
+    /// data[1]: RX warning level.
+    pub const CRTL_RX_WARNING: u8 = 0x04;
+    /// data[1]: TX warning level.
+    pub const CRTL_TX_WARNING: u8 = 0x08;
+    /// data[1]: RX error passive.
+    pub const CRTL_RX_PASSIVE: u8 = 0x10;
+    /// data[1]: TX error passive.
+    pub const CRTL_TX_PASSIVE: u8 = 0x20;
+    /// data[1]: back to error active.
+    pub const CRTL_ACTIVE: u8 = 0x40;
+}
+
+/// The mainline-format error frame (`CAN_ERR_FLAG`, DLC 8) that reports
+/// `ev` to sockets with a matching `CAN_RAW_ERR_FILTER`; `None` for events
+/// that are not errors.
+pub fn error_frame(ev: &Event) -> Option<CanFrame> {
+    let mut f = CanFrame {
+        len: 8,
+        ..CanFrame::default()
+    };
+    let class = match *ev {
+        Event::Overrun => {
+            f.data[1] = err::CRTL_RX_OVERFLOW;
+            err::CRTL
+        }
+        Event::ArbitrationLost { bit } => {
+            f.data[0] = bit;
+            err::LOSTARB
+        }
+        Event::State {
+            state,
+            rxerr,
+            txerr,
+        } => {
+            f.data[6] = txerr;
+            f.data[7] = rxerr;
+            let (rx, tx) = (rxerr >= txerr, txerr >= rxerr);
+            let bits = |r: u8, t: u8| (if rx { r } else { 0 }) | (if tx { t } else { 0 });
+            match state {
+                State::BusOff => err::BUSOFF | err::CNT,
+                State::Passive => {
+                    f.data[1] = bits(err::CRTL_RX_PASSIVE, err::CRTL_TX_PASSIVE);
+                    err::CRTL | err::CNT
+                }
+                State::Warning => {
+                    f.data[1] = bits(err::CRTL_RX_WARNING, err::CRTL_TX_WARNING);
+                    err::CRTL | err::CNT
+                }
+                State::Active => {
+                    f.data[1] = err::CRTL_ACTIVE;
+                    err::CRTL | err::CNT
+                }
+            }
+        }
+        Event::Rx(_) | Event::TxDone | Event::TxAborted => return None,
+    };
+    f.can_id = CAN_ERR_FLAG | class;
+    Some(f)
+}
+
+/// The error frame sent after an automatic restart from bus-off.
+pub fn restarted_frame() -> CanFrame {
+    CanFrame {
+        can_id: CAN_ERR_FLAG | err::RESTARTED,
+        len: 8,
+        ..CanFrame::default()
+    }
+}
+
+/// Bit rate of bus timing `btr0`/`btr1` on a chip with crystal `xtal_hz`
+/// (datasheet 6.5.1: tq = 2 (BRP + 1) / fXTAL, bit = (1 + TSEG1+1 +
+/// TSEG2+1) tq).
+pub fn bitrate(btr0: u8, btr1: u8, xtal_hz: u32) -> u32 {
+    let brp = u32::from(btr0 & 0x3F) + 1;
+    let tseg1 = u32::from(btr1 & 0x0F) + 1;
+    let tseg2 = u32::from((btr1 >> 4) & 0x07) + 1;
+    xtal_hz / (2 * brp * (1 + tseg1 + tseg2))
+}
+
+/// Bus timing for `bitrate` on a chip with crystal `xtal_hz`: the exact
+/// setting with the most time quanta per bit (8..25) and a sample point
+/// nearest 87.5 %, SJW 1, one sample. `None` if no setting gives the
+/// bit rate exactly.
+pub fn timing_for(bitrate: u32, xtal_hz: u32) -> Option<(u8, u8)> {
+    if bitrate == 0 {
+        return None;
+    }
+    let mut best: Option<(u32, u32, u8, u8)> = None;
+    for tq in (8u32..=25).rev() {
+        let div = 2 * tq * bitrate;
+        if !xtal_hz.is_multiple_of(div) {
+            continue;
+        }
+        let brp = xtal_hz / div;
+        if brp == 0 || brp > 64 {
+            continue;
+        }
+        // Sample point after 1 + TSEG1 quanta; TSEG1 1..16, TSEG2 1..8.
+        for tseg2 in 1u32..=8 {
+            let Some(tseg1) = (tq - 1).checked_sub(tseg2) else {
+                continue;
+            };
+            if !(1..=16).contains(&tseg1) {
+                continue;
+            }
+            let sp = (1 + tseg1) * 1000 / tq;
+            let err = sp.abs_diff(875);
+            let better = match best {
+                None => true,
+                Some((btq, berr, _, _)) => tq > btq || (tq == btq && err < berr),
+            };
+            if better {
+                let btr0 = (brp - 1) as u8;
+                let btr1 = (((tseg2 - 1) << 4) | (tseg1 - 1)) as u8;
+                best = Some((tq, err, btr0, btr1));
+            }
+        }
+        if best.is_some() {
+            break;
+        }
+    }
+    best.map(|(_, _, b0, b1)| (b0, b1))
+}
+
+/// The controller setup exchanged with user space by the
+/// `SIOCRCANSJA1000GET`/`SET` device ioctls (`sja1000config`), laid out as
+/// `struct rcan_sja1000_setup` in `<linux/can/rcan_sja1000.h>`.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub struct Setup {
+    /// Bus timing register 0.
+    pub btr0: u8,
+    /// Bus timing register 1.
+    pub btr1: u8,
+    /// Output control register.
+    pub ocr: u8,
+    /// Clock divider register (without the PeliCAN bit).
+    pub cdr: u8,
+    /// Error state: 0 active, 1 warning, 2 passive, 3 bus-off (GET only).
+    pub state: u8,
+    /// Receive error counter (GET only).
+    pub rxerr: u8,
+    /// Transmit error counter (GET only).
+    pub txerr: u8,
+    /// Automatic restarts after bus-off (GET only).
+    pub restarts: u32,
+    /// Crystal frequency in Hz (GET only).
+    pub xtal_hz: u32,
+}
+
+/// Size of `struct rcan_sja1000_setup`.
+pub const SETUP_LEN: usize = 16;
+
+impl Setup {
+    /// The C layout: seven bytes, one pad byte, then two native-endian
+    /// 32-bit words.
+    pub fn to_bytes(&self) -> [u8; SETUP_LEN] {
+        let mut b = [0u8; SETUP_LEN];
+        b[..7].copy_from_slice(&[
+            self.btr0, self.btr1, self.ocr, self.cdr, self.state, self.rxerr, self.txerr,
+        ]);
+        b[8..12].copy_from_slice(&self.restarts.to_ne_bytes());
+        b[12..16].copy_from_slice(&self.xtal_hz.to_ne_bytes());
+        b
+    }
+
+    /// Parses the C layout.
+    pub fn from_bytes(b: &[u8; SETUP_LEN]) -> Setup {
+        Setup {
+            btr0: b[0],
+            btr1: b[1],
+            ocr: b[2],
+            cdr: b[3],
+            state: b[4],
+            rxerr: b[5],
+            txerr: b[6],
+            restarts: u32::from_ne_bytes([b[8], b[9], b[10], b[11]]),
+            xtal_hz: u32::from_ne_bytes([b[12], b[13], b[14], b[15]]),
         }
     }
 }
@@ -805,11 +1017,29 @@ pub fn hw_filter(wanted: &[Wanted], promisc: bool) -> HwFilter {
             amr: [mask[0], mask[1], mask[0], mask[1]],
         };
     };
+    // Single filter mode only when no standard frame is wanted: QEMU's
+    // model of the chip (hw/net/can/can_sja1000.c, can_sja_single_filter)
+    // shifts AMR1 the wrong way for standard frames and then compares
+    // identifier bits 2..0 exactly, whatever the mask says. Dual mode is
+    // modelled correctly, and it is what mainline's driver uses.
+    let any_sff = cubes[..n].iter().flatten().any(|p| p.sff);
     let single_f = to_single(single);
     if n < 2 {
-        return single_f;
+        if !any_sff {
+            return single_f;
+        }
+        let p = cubes[0].unwrap_or(Placed {
+            cube: Cube::new(0, 0),
+            sff: true,
+        });
+        let d = dual_bits(p.cube, p.sff);
+        return to_dual(d, d, p.sff);
     }
-    let best_single = cost_single(single);
+    let best_single = if any_sff {
+        u64::MAX
+    } else {
+        cost_single(single)
+    };
     let placed = &cubes[..n];
     let mut best: Option<(u64, [Cube; 2], bool)> = None;
     let mut consider = |groups: [Option<(Cube, bool)>; 2]| {
@@ -884,7 +1114,7 @@ pub fn hw_filter(wanted: &[Wanted], promisc: bool) -> HwFilter {
         consider(g);
     }
     match best {
-        Some((cost, [a, b], sff_in_a)) if cost < best_single => to_dual(a, b, sff_in_a),
+        Some((cost, [a, b], sff_in_a)) if cost < best_single || any_sff => to_dual(a, b, sff_in_a),
         _ => single_f,
     }
 }
@@ -961,6 +1191,7 @@ mod tests {
     #[test]
     fn exact_sff_filter_is_tight() {
         let hw = hw_filter(&[Wanted::of(&raw(0x123, EXACT_SFF))], false);
+        assert!(!hw.single, "standard frames wanted: dual mode (QEMU)");
         assert!(hw.accepts(&frame(0x123, &[1, 2])));
         assert!(!hw.accepts(&frame(0x124, &[])));
         assert!(!hw.accepts(&frame(0x123 | CAN_RTR_FLAG, &[])));
@@ -978,6 +1209,52 @@ mod tests {
         assert!(hw.accepts(&frame(0x7F0, &[])));
         assert!(!hw.accepts(&frame(0x101, &[])));
         assert!(!hw.accepts(&frame(0x3F0, &[])));
+    }
+
+    #[test]
+    fn bit_timing() {
+        // The thesis' Kconfig defaults: 500 kbit/s with a 16 MHz crystal.
+        assert_eq!(bitrate(0x01, 0x14, 16_000_000), 500_000);
+        for rate in [
+            10_000, 20_000, 50_000, 100_000, 125_000, 250_000, 500_000, 800_000, 1_000_000,
+        ] {
+            let (b0, b1) = timing_for(rate, 16_000_000).unwrap();
+            assert_eq!(bitrate(b0, b1, 16_000_000), rate, "{rate}");
+        }
+        assert_eq!(timing_for(0, 16_000_000), None);
+        assert_eq!(timing_for(333_333, 16_000_000), None);
+        let s = Setup {
+            btr0: 1,
+            btr1: 0x14,
+            restarts: 7,
+            xtal_hz: 16_000_000,
+            ..Setup::default()
+        };
+        assert_eq!(Setup::from_bytes(&s.to_bytes()), s);
+    }
+
+    #[test]
+    fn error_frames() {
+        let f = error_frame(&Event::State {
+            state: State::BusOff,
+            rxerr: 0,
+            txerr: 255,
+        })
+        .unwrap();
+        assert_eq!(f.can_id, CAN_ERR_FLAG | err::BUSOFF | err::CNT);
+        assert_eq!((f.data[6], f.data[7]), (255, 0));
+        let f = error_frame(&Event::State {
+            state: State::Warning,
+            rxerr: 0,
+            txerr: 100,
+        })
+        .unwrap();
+        assert_eq!(f.data[1], err::CRTL_TX_WARNING);
+        assert_eq!(
+            error_frame(&Event::Overrun).unwrap().data[1],
+            err::CRTL_RX_OVERFLOW
+        );
+        assert_eq!(error_frame(&Event::TxDone), None);
     }
 
     #[test]

@@ -180,3 +180,15 @@ fn hardware_filter_keeps_unwanted_frames_out() {
     assert_eq!(c.regs.mode & mode::RM, 0);
     assert!(c.regs.deliver(&frame(0x300, &[])));
 }
+
+#[test]
+fn start_discards_stale_frames() {
+    let mut c = running(&HwFilter::OPEN);
+    assert!(c.regs.deliver(&frame(0x111, &[1])));
+    c.stop().unwrap();
+    // A model of QEMU's behaviour: the FIFO survives reset mode.
+    assert_eq!(c.regs.fifo.len(), 1);
+    c.start(&HwFilter::OPEN).unwrap();
+    assert!(c.regs.fifo.is_empty());
+    assert!(events(&mut c).is_empty());
+}

@@ -1,0 +1,132 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! rcan_advantech_pci: front-end of the SJA1000 driver for the two-channel
+//! Advantech PCI cards QEMU emulates: PCM-3680I (PCI 13fe:c002, registers
+//! at byte spacing) and MIOe-3680 (PCI 13fe:c302, registers at 32-bit
+//! spacing). Each channel's SJA1000 is in its own I/O BAR (0 and 1); both
+//! share the card's interrupt line, which needs no gating. Not a thesis
+//! front-end: it exists so that the driver runs on a second card type in
+//! the VM.
+//!
+//! Contexts: probe/remove in process context (PCI core); register access
+//! from every context the driver uses, serialised by the chip lock.
+
+use kernel::prelude::*;
+
+#[path = "../../../../rust/glue/mod.rs"]
+mod glue;
+#[path = "../../../../net/can/rcan_api.rs"]
+mod rcan_api;
+#[path = "../../../../net/can/rcan_core.rs"]
+mod rcan_core;
+#[path = "sja1000.rs"]
+mod sja1000;
+
+use glue::pci;
+use kernel::c_str;
+use rcan_core::sja1000::{Config, CDR_CBP};
+use sja1000::{add_channel, Channel, IoRegs};
+
+module! {
+    type: AdvantechPciModule,
+    name: "rcan_advantech_pci",
+    author: "rcan developers",
+    description: "SJA1000 front-end for Advantech PCM-3680I / MIOe-3680 PCI cards",
+    license: "GPL",
+}
+
+const CHANNELS: usize = 2;
+/// Output control: TX0 push-pull, normal mode (what these boards use).
+const ADVANTECH_OCR: u8 = 0xDA;
+/// Clock divider: comparator bypass, clock out off.
+const ADVANTECH_CDR: u8 = CDR_CBP | rcan_core::sja1000::CDR_CLK_OFF;
+
+extern "C" {
+    fn rcan_advantech_btr(which: i32) -> u8;
+}
+
+fn config() -> Config {
+    // SAFETY: reads the module parameters (READ_ONCE); any index is valid.
+    let (btr0, btr1) = unsafe { (rcan_advantech_btr(0), rcan_advantech_btr(1)) };
+    Config {
+        btr0,
+        btr1,
+        ocr: ADVANTECH_OCR,
+        cdr: ADVANTECH_CDR,
+    }
+}
+
+/// Crystal of the SJA1000s on the card.
+const XTAL_HZ: u32 = 16_000_000;
+
+struct Card {
+    channels: KVec<Channel<IoRegs>>,
+    _enabled: pci::Enabled,
+}
+
+/// Register spacing (shift) by PCI device id.
+fn shift_of(device: u16) -> u32 {
+    if device == 0xc302 {
+        2
+    } else {
+        0
+    }
+}
+
+struct AdvantechPci;
+
+impl pci::Driver for AdvantechPci {
+    type Data = Card;
+
+    fn probe(dev: &pci::Device) -> Result<KBox<Card>> {
+        let enabled = dev.enable()?;
+        let shift = shift_of(dev.device_id());
+        let mut card = Card {
+            channels: KVec::new(),
+            _enabled: enabled,
+        };
+        for ch in 0..CHANNELS {
+            let regs = IoRegs {
+                io: dev.iomap(ch as i32, 0x20 << shift)?,
+                base: 0,
+                shift,
+            };
+            let what = format_args!("channel {ch} of an Advantech {:04x} card", dev.device_id());
+            if let Some(c) = add_channel(regs, config(), dev.irq(), XTAL_HZ, what)? {
+                card.channels.push(c, GFP_KERNEL)?;
+            }
+        }
+        if card.channels.is_empty() {
+            pr_err!("advantech_pci: no SJA1000 found\n");
+            return Err(ENODEV);
+        }
+        Ok(KBox::new(card, GFP_KERNEL)?)
+    }
+
+    fn remove(card: KBox<Card>) {
+        drop(card);
+    }
+}
+
+static IDS: [glue::bindings::pci_device_id; 3] = [
+    pci::id(0x13fe, 0xc002),
+    pci::id(0x13fe, 0xc302),
+    pci::ID_END,
+];
+
+static DRIVER: pci::Registration<AdvantechPci> = pci::Registration::new();
+
+struct AdvantechPciModule;
+
+impl kernel::Module for AdvantechPciModule {
+    fn init(_module: &'static ThisModule) -> Result<Self> {
+        DRIVER.register(c_str!("rcan_advantech_pci"), &IDS)?;
+        Ok(AdvantechPciModule)
+    }
+}
+
+impl Drop for AdvantechPciModule {
+    fn drop(&mut self) {
+        DRIVER.unregister();
+    }
+}

@@ -1,0 +1,427 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The abstract SJA1000 network driver (thesis 5.3.6, module `sja1000`):
+//! everything but register access and probing, which the front-ends
+//! supply through [`Regs`] (thesis: read/write/readn/writen).
+//!
+//! This file is compiled into each front-end module (`#[path]`), so a
+//! front-end and the driver it drives are one module; the chip logic
+//! itself is the pure, host-tested `rcan_core::sja1000`.
+//!
+//! Per device ([`Sja1000Priv`]):
+//!
+//! * `chip`: the chip, the echo skb of the frame in the TX buffer, the
+//!   programmed hardware filter and the running flag, behind an
+//!   [`IrqSpinLock`]: the interrupt handler (hardirq), `start_xmit`
+//!   (softirq/process, BH off), `open`/`stop` (process, RTNL),
+//!   `set_rx_mode` (BH off) and the filter listener (process) all touch the
+//!   chip's registers, which must not interleave.
+//! * The TX queue is stopped from `start_xmit` until the chip reports the
+//!   frame sent or aborted (one TX buffer, thesis 5.3.6).
+//!
+//! Echo (IFF_ECHO): the sent skb is kept until transmission completes and
+//! then fed back into the receive path if its sender asked for loopback
+//! (`PACKET_LOOPBACK`), so local sockets see frames only once they are
+//! really on the bus.
+//!
+//! Bus-off recovery: the chip enters reset mode by itself; the interrupt
+//! handler restarts it at once (clearing the error counters), and the chip
+//! then waits for 128 occurrences of 11 recessive bits before it takes
+//! part in bus traffic again. Each restart is counted and reported to
+//! sockets as a `CAN_ERR_RESTARTED` error frame after the
+//! `CAN_ERR_BUSOFF` one.
+
+use crate::glue::bindings;
+use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
+use crate::glue::skb::Skb;
+use crate::glue::sync::IrqSpinLock;
+use crate::rcan_api::{self, FilterListener};
+use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use crate::rcan_core::rxtable::Filter;
+use crate::rcan_core::sja1000::{
+    bitrate, error_frame, hw_filter, restarted_frame, Chip, Config, Event, HwFilter, Regs, Setup,
+    State, Wanted, CDR_PELICAN, SETUP_LEN,
+};
+use core::marker::PhantomData;
+use kernel::prelude::*;
+
+/// Register access through one mapped PCI BAR: register `r` at byte
+/// `base + (r << shift)` (shift 0: byte spacing, 2: 32-bit spacing). The
+/// access code the PCI front-ends share.
+pub(crate) struct IoRegs {
+    pub(crate) io: crate::glue::pci::IoMem,
+    pub(crate) base: usize,
+    pub(crate) shift: u32,
+}
+
+impl Regs for IoRegs {
+    fn read(&mut self, reg: u8) -> u8 {
+        self.io.read8(self.base + (usize::from(reg) << self.shift))
+    }
+    fn write(&mut self, reg: u8, val: u8) {
+        self.io
+            .write8(self.base + (usize::from(reg) << self.shift), val);
+    }
+}
+
+/// Interrupt causes handled per interrupt before returning (mainline
+/// `SJA1000_MAX_IRQ`): bounds the time spent in hardirq on a babbling bus.
+const MAX_IRQ_ROUNDS: usize = 20;
+
+/// Most filters taken into account for the hardware filter; with more the
+/// filter stays open (sound, just not tight). Stack use in atomic context
+/// bounds it.
+const MAX_FILTERS: usize = 24;
+
+/// Transmit queue length: longer than the number of frames a socket's
+/// default send buffer holds (about 280 skbs of ~750 bytes in 212992), so
+/// a fast sender blocks in sendmsg (thesis 5.2.3) instead of getting
+/// ENOBUFS from a full queue, as it would with mainline's 10.
+const TX_QUEUE_LEN: u32 = 1000;
+
+/// Headroom for mainline's `struct can_skb_priv` in received skbs.
+const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
+
+/// The chip and what goes with it, under the device's lock.
+pub(crate) struct ChipState<R: Regs> {
+    pub(crate) chip: Chip<R>,
+    /// The frame in the TX buffer, kept for the echo.
+    echo: Option<Skb>,
+    /// The acceptance filter programmed (or to program at open).
+    filter: HwFilter,
+    running: bool,
+    /// Automatic restarts after bus-off.
+    restarts: u32,
+}
+
+/// Per-device driver data.
+pub(crate) struct Sja1000Priv<R: Regs> {
+    pub(crate) chip: IrqSpinLock<ChipState<R>>,
+    /// Interrupt line (shared).
+    irq: u32,
+    /// Crystal frequency of the board, for bit rates in logs and GET.
+    xtal_hz: u32,
+}
+
+impl<R: Regs + Send + 'static> Sja1000Priv<R> {
+    /// Driver data for a probed chip on interrupt line `irq`. Process
+    /// context.
+    pub(crate) fn new(chip: Chip<R>, irq: u32, xtal_hz: u32) -> Result<Self> {
+        Ok(Sja1000Priv {
+            chip: IrqSpinLock::new(ChipState {
+                chip,
+                echo: None,
+                filter: HwFilter::OPEN,
+                running: false,
+                restarts: 0,
+            })?,
+            irq,
+            xtal_hz,
+        })
+    }
+}
+
+/// One registered channel: its network device and the filter listener
+/// pointing into it (declared first, so it is dropped first).
+pub(crate) struct Channel<R: Regs + Send + 'static> {
+    _listen: rcan_api::Listening<Sja1000<R>>,
+    _reg: crate::glue::netdev::Registration<Sja1000<R>>,
+}
+
+/// Probes the chip behind `regs` and, if one answers, registers a `can%d`
+/// device for it on interrupt line `irq`; `None` if there is no chip.
+/// Logs the device name with `what` (the card and channel). Process
+/// context (front-end probe).
+pub(crate) fn add_channel<R: Regs + Send + 'static>(
+    regs: R,
+    cfg: Config,
+    irq: u32,
+    xtal_hz: u32,
+    what: core::fmt::Arguments<'_>,
+) -> Result<Option<Channel<R>>> {
+    let mut chip = Chip::new(regs, cfg);
+    if chip.probe().is_err() {
+        return Ok(None);
+    }
+    let prv = Sja1000Priv::new(chip, irq, xtal_hz)?;
+    let reg =
+        crate::glue::netdev::Registration::<Sja1000<R>>::register(kernel::c_str!("can%d"), prv)?;
+    pr_info!("{}: SJA1000, {}, irq {}\n", reg.dev().name(), what, irq);
+    let listen = rcan_api::Listening::new(&reg)?;
+    Ok(Some(Channel {
+        _listen: listen,
+        _reg: reg,
+    }))
+}
+
+/// The SJA1000 driver for register access `R`.
+pub(crate) struct Sja1000<R>(PhantomData<R>);
+
+/// The tightest hardware filter for what the sockets bound to `dev` (or
+/// to every interface) want. Any context.
+fn wanted_filter(dev: &NetDev) -> HwFilter {
+    if dev.is_promisc() {
+        return HwFilter::OPEN;
+    }
+    let mut fs = [Filter::Id {
+        id: 0,
+        mask: 0,
+        inv: false,
+    }; MAX_FILTERS];
+    let Some(n) = rcan_api::rx_filters(dev.ifindex(), &mut fs) else {
+        return HwFilter::OPEN;
+    };
+    let mut w = [Wanted::ALL; MAX_FILTERS];
+    for (o, f) in w.iter_mut().zip(&fs[..n]) {
+        *o = Wanted::of(f);
+    }
+    hw_filter(&w[..n], false)
+}
+
+/// Reprograms the hardware filter if it changed. Any context; takes the
+/// chip lock.
+fn refilter<R: Regs + Send + 'static>(dev: &NetDev, p: &Sja1000Priv<R>) {
+    let f = wanted_filter(dev);
+    let mut st = p.chip.lock();
+    if st.filter == f {
+        return;
+    }
+    st.filter = f;
+    if st.running {
+        if st.chip.set_filter(&f, true).is_err() {
+            pr_warn!("{}: cannot reprogram the acceptance filter\n", dev.name());
+        }
+    }
+}
+
+/// Hands a frame to the network stack. Any context.
+fn rx_frame(dev: &NetDev, frame: &CanFrame) {
+    let Some(mut skb) = Skb::alloc(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, crate::glue::GFP_ATOMIC)
+    else {
+        dev.stats_rx_dropped();
+        return;
+    };
+    skb.reserve(SKB_PRIV_LEN);
+    let mut prv = [0u8; SKB_PRIV_LEN as usize];
+    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
+    if !skb.write_headroom(&prv) || !skb.put_data(&frame.to_bytes()) {
+        dev.stats_rx_dropped();
+        return;
+    }
+    skb.set_can(dev, bindings::PACKET_HOST as u8);
+    if frame.can_id & crate::rcan_core::arb::CAN_ERR_FLAG == 0 {
+        dev.stats_rx(frame.dlc() as u32);
+    }
+    dev.rx(skb);
+}
+
+/// `SIOCDEVPRIVATE`: the first device-private ioctl number.
+const SIOCDEVPRIVATE: u32 = 0x89F0;
+/// Reads `struct rcan_sja1000_setup` (`<linux/can/rcan_sja1000.h>`).
+const SIOCRCANSJA1000GET: u32 = SIOCDEVPRIVATE;
+/// Writes the bit timing and output control of a stopped device
+/// (CAP_NET_ADMIN; EBUSY while the interface is up).
+const SIOCRCANSJA1000SET: u32 = SIOCDEVPRIVATE + 1;
+
+impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
+    type Priv = Sja1000Priv<R>;
+    const HAS_SET_RX_MODE: bool = true;
+    const HAS_PRIVATE_IOCTL: bool = true;
+
+    fn private_ioctl(dev: &Dev<Self>, p: &Self::Priv, cmd: u32, data: &UserBuf) -> Result {
+        match cmd {
+            SIOCRCANSJA1000GET => {
+                let s = {
+                    let mut st = p.chip.lock();
+                    let cfg = st.chip.cfg;
+                    let rxerr = st.chip.regs.read(crate::rcan_core::sja1000::reg::RXERR);
+                    let txerr = st.chip.regs.read(crate::rcan_core::sja1000::reg::TXERR);
+                    Setup {
+                        btr0: cfg.btr0,
+                        btr1: cfg.btr1,
+                        ocr: cfg.ocr,
+                        cdr: cfg.cdr,
+                        state: st.chip.state() as u8,
+                        rxerr,
+                        txerr,
+                        restarts: st.restarts,
+                        xtal_hz: p.xtal_hz,
+                    }
+                };
+                data.write(&s.to_bytes())
+            }
+            SIOCRCANSJA1000SET => {
+                if !capable_net_admin() {
+                    return Err(EPERM);
+                }
+                let mut b = [0u8; SETUP_LEN];
+                data.read(&mut b)?;
+                let s = Setup::from_bytes(&b);
+                // The registers can only be written in reset mode; a
+                // running bus is not reconfigured under its users.
+                if dev.is_up() {
+                    return Err(EBUSY);
+                }
+                let mut st = p.chip.lock();
+                st.chip.cfg.btr0 = s.btr0;
+                st.chip.cfg.btr1 = s.btr1;
+                st.chip.cfg.ocr = s.ocr;
+                st.chip.cfg.cdr = s.cdr & !CDR_PELICAN;
+                drop(st);
+                pr_info!(
+                    "{}: bit timing btr0 {:#04x} btr1 {:#04x} ({} bit/s)\n",
+                    dev.name(),
+                    s.btr0,
+                    s.btr1,
+                    bitrate(s.btr0, s.btr1, p.xtal_hz)
+                );
+                Ok(())
+            }
+            _ => Err(crate::glue::neterr::EOPNOTSUPP()),
+        }
+    }
+
+    fn setup() -> crate::glue::netdev::Setup {
+        crate::glue::netdev::Setup {
+            type_: bindings::ARPHRD_CAN as u16,
+            flags: bindings::net_device_flags_IFF_NOARP | bindings::net_device_flags_IFF_ECHO,
+            mtu: CAN_FRAME_LEN as u32,
+            hard_header_len: 0,
+            tx_queue_len: TX_QUEUE_LEN,
+            no_queue: false,
+        }
+    }
+
+    fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        let f = wanted_filter(dev);
+        dev.request_irq(p.irq)?;
+        let started = {
+            let mut st = p.chip.lock();
+            st.filter = f;
+            let ok = st.chip.init(&f).and_then(|()| st.chip.start(&f)).is_ok();
+            st.running = ok;
+            ok
+        };
+        if !started {
+            dev.free_irq();
+            pr_err!("{}: SJA1000 does not leave reset mode\n", dev.name());
+            return Err(EIO);
+        }
+        dev.set_carrier(true);
+        dev.start_queue();
+        Ok(())
+    }
+
+    fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        dev.stop_queue();
+        let echo = {
+            let mut st = p.chip.lock();
+            st.running = false;
+            let _ = st.chip.stop();
+            st.echo.take()
+        };
+        drop(echo);
+        dev.free_irq();
+        dev.set_carrier(false);
+        Ok(())
+    }
+
+    fn start_xmit(skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
+        let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
+            dev.stats_tx_dropped();
+            drop(skb);
+            return Xmit::Ok;
+        };
+        let frame = CanFrame::from_bytes(bytes);
+        // One TX buffer: no next frame until this one is done.
+        dev.stop_queue();
+        let mut st = p.chip.lock();
+        match st.chip.xmit(&frame) {
+            Ok(()) => st.echo = Some(skb),
+            Err(_) => {
+                // Error frames cannot be sent; a busy buffer cannot happen
+                // with the queue stopped. Drop it and go on.
+                drop(st);
+                dev.stats_tx_dropped();
+                drop(skb);
+                dev.wake_queue();
+            }
+        }
+        Xmit::Ok
+    }
+
+    fn set_rx_mode(dev: &Dev<Self>, p: &Self::Priv) {
+        refilter(dev, p);
+    }
+
+    fn irq(dev: &Dev<Self>, p: &Self::Priv) -> bool {
+        // Hardirq context; the line may be shared with the other channels
+        // of the card and with other devices.
+        let mut st = p.chip.lock();
+        let ChipState {
+            chip,
+            echo,
+            filter,
+            running,
+            restarts,
+        } = &mut *st;
+        if !*running {
+            return false;
+        }
+        let mut bus_off = false;
+        let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| {
+            match ev {
+                Event::Rx(f) => rx_frame(dev, &f),
+                Event::TxDone => {
+                    if let Some(mut skb) = echo.take() {
+                        if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) {
+                            dev.stats_tx(CanFrame::from_bytes(b).dlc() as u32);
+                        }
+                        if skb.pkt_type() == bindings::PACKET_LOOPBACK as u8 {
+                            skb.set_can(dev, bindings::PACKET_LOOPBACK as u8);
+                            dev.rx(skb);
+                        } else {
+                            skb.consume();
+                        }
+                    }
+                    dev.wake_queue();
+                }
+                Event::TxAborted => {
+                    drop(echo.take());
+                    dev.stats_err(Stat::TxAborted);
+                    dev.wake_queue();
+                }
+                Event::Overrun => dev.stats_err(Stat::RxOverErrors),
+                Event::State {
+                    state: State::BusOff,
+                    ..
+                } => bus_off = true,
+                Event::State { .. } | Event::ArbitrationLost { .. } => {}
+            }
+            if let Some(ef) = error_frame(&ev) {
+                rx_frame(dev, &ef);
+            }
+        });
+        if bus_off {
+            // The frame in the TX buffer is lost with the reset.
+            if echo.take().is_some() {
+                dev.stats_err(Stat::TxErrors);
+            }
+            let f = *filter;
+            if chip.start(&f).is_ok() {
+                *restarts += 1;
+                rx_frame(dev, &restarted_frame());
+            } else {
+                *running = false;
+            }
+            dev.wake_queue();
+        }
+        handled
+    }
+}
+
+impl<R: Regs + Send + 'static> FilterListener for Sja1000<R> {
+    fn filters_changed(dev: &Dev<Self>, p: &Self::Priv) {
+        refilter(dev, p);
+    }
+}

@@ -1,0 +1,117 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! rcan_rtime: the redundant DSOR time service (thesis 5.3.3,
+//! `net/can/dsor/rtime.c`; section 3.2, `CONFIG_DSOR_RTIME`).
+//!
+//! Listens for the time frame (standard identifier `vehicle`) on the
+//! interface `dev`. While another source sends it, the service is silent;
+//! when none has arrived for `timeout_ms`, it sends the time frame (source
+//! 2) at every second like `rcan_time`, and it stops at the first second
+//! after the other source's frame is back. The decision is
+//! `rcan_core::timesvc::Takeover`; the timers and the sending are in
+//! `ticker.rs`. See Documentation/networking/rcan/time.rst.
+//!
+//! Parameters (C side, `rtime_c.c`): `vehicle` (default 0xc0), `dev`
+//! (default "can0"), both fixed at load; `timeout_ms` (default 2500,
+//! 1200-60000), writable at run time.
+//!
+//! Contexts: the receiver ([`TimeRx`]) runs in NET_RX softirq under RCU
+//! and only stores the frame's monotonic arrival time
+//! (`ticker::saw_foreign`, an atomic); the ticker's realtime timer
+//! callback owns the state machine.
+
+use kernel::prelude::*;
+
+#[path = "../../../rust/glue/mod.rs"]
+mod glue;
+#[path = "../rcan_api.rs"]
+mod rcan_api;
+#[path = "../rcan_core.rs"]
+mod rcan_core;
+mod ticker;
+
+use glue::bindings;
+use glue::netdev::NetDev;
+use glue::skb::Skb;
+use rcan_api::{KernelRx, KernelRxReg, RxFilter, RX_FILTER_CAN_ID};
+use rcan_core::arb::{CAN_EFF_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK};
+use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use rcan_core::timesvc::{is_time_id, TimeFrame, SOURCE_RTIME};
+
+module! {
+    type: RtimeModule,
+    name: "rcan_rtime",
+    author: "rcan developers",
+    description: "Redundant DSOR time service: sends the time CAN frame while the usual source is silent (thesis dsor/rtime)",
+    license: "GPL",
+}
+
+/// The receiver of time frames from every interface.
+struct TimeRx;
+
+impl KernelRx for TimeRx {
+    /// Every standard data frame with the time identifier on `dev` counts
+    /// as another source, whatever its payload, except this service's own
+    /// frames: sent by this host's kernel (no sending socket, looped back)
+    /// with source 2. Frames from the bus, from user-space sockets and from
+    /// `rcan_time` on this host all count.
+    fn rx(&self, skb: &Skb, dev: &NetDev) {
+        let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
+            return;
+        };
+        let frame = CanFrame::from_bytes(bytes);
+        let p = ticker::params();
+        if !is_time_id(&frame, p.vehicle) || dev.name().as_bytes() != p.dev.as_bytes() {
+            return;
+        }
+        let from_this_kernel =
+            skb.sk_ptr().is_null() && skb.pkt_type() == bindings::PACKET_LOOPBACK as u8;
+        let ours = TimeFrame::decode(&frame, p.vehicle).is_some_and(|t| t.source == SOURCE_RTIME);
+        if from_this_kernel && ours {
+            return;
+        }
+        ticker::saw_foreign(glue::hrtimer::ktime_get_mono_ns());
+    }
+}
+
+static RX: TimeRx = TimeRx;
+
+struct RtimeModule {
+    /// Dropped after `drop()` has stopped the ticker.
+    _rx: KernelRxReg<TimeRx>,
+}
+
+impl kernel::Module for RtimeModule {
+    fn init(_module: &'static ThisModule) -> Result<Self> {
+        let p = ticker::params();
+        // Exactly the standard data frame `vehicle`.
+        let filter = RxFilter {
+            kind: RX_FILTER_CAN_ID,
+            id: p.vehicle,
+            mask: CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG,
+        };
+        let rx = rcan_api::rx_set_kernel(&RX, 0, &[filter])?;
+        ticker::start(true)?;
+        pr_info!(
+            "{}: redundant time service for frame {:03x}: passive, takeover after {} ms of silence\n",
+            p.dev.as_str(),
+            p.vehicle,
+            ticker::timeout_ms()
+        );
+        Ok(RtimeModule { _rx: rx })
+    }
+}
+
+impl Drop for RtimeModule {
+    fn drop(&mut self) {
+        ticker::stop();
+        let s = ticker::stats();
+        pr_info!(
+            "stopped: {} frames sent, {} seconds skipped, {} takeovers, {} backward clock steps caught\n",
+            s.sent,
+            s.skipped,
+            s.takeovers,
+            s.steps_back
+        );
+    }
+}

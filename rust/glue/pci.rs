@@ -1,0 +1,261 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! PCI drivers and their I/O regions.
+//!
+//! * [`Driver`] + [`Registration`]: a `struct pci_driver` from a Rust
+//!   trait. `probe` returns the device's driver data (boxed, kept as the
+//!   PCI drvdata); `remove` gets it back. Both run in process context.
+//! * [`Device`]: the `struct pci_dev` a probe is for; [`Enabled`] keeps it
+//!   enabled (`pci_disable_device` on drop); [`IoMem`] is one mapped BAR
+//!   (port or memory space, through the kernel's `ioread*`/`iowrite*`),
+//!   unmapped on drop.
+//!
+//! Modelled on upstream's `rust/kernel/pci.rs` (Adapter + id table +
+//! drvdata), with 6.12's C API.
+
+use super::bindings;
+use core::cell::UnsafeCell;
+use core::marker::PhantomData;
+use core::ptr::NonNull;
+use kernel::error::{code, Result};
+use kernel::ffi;
+use kernel::prelude::*;
+
+/// A PCI device id table entry (vendor, device; any subsystem).
+pub(crate) const fn id(vendor: u16, device: u16) -> bindings::pci_device_id {
+    bindings::pci_device_id {
+        vendor: vendor as u32,
+        device: device as u32,
+        subvendor: !0,
+        subdevice: !0,
+        class: 0,
+        class_mask: 0,
+        driver_data: 0,
+        override_only: 0,
+    }
+}
+
+/// The all-zero entry that ends an id table.
+pub(crate) const ID_END: bindings::pci_device_id = id(0, 0);
+
+/// A PCI driver.
+pub(crate) trait Driver: Sized + 'static {
+    /// What a bound device keeps (freed after `remove`).
+    type Data: Send + Sync;
+    /// A device matched the id table. Process context; may sleep.
+    fn probe(dev: &Device) -> Result<KBox<Self::Data>>;
+    /// The device goes away (driver unload or hot unplug). Process
+    /// context; may sleep.
+    fn remove(data: KBox<Self::Data>);
+}
+
+/// The device being probed.
+pub(crate) struct Device(NonNull<bindings::pci_dev>);
+
+impl Device {
+    pub(crate) fn as_ptr(&self) -> *mut bindings::pci_dev {
+        self.0.as_ptr()
+    }
+
+    /// `pci_enable_device`; disabled again when the guard is dropped.
+    pub(crate) fn enable(&self) -> Result<Enabled> {
+        // SAFETY: a live device during probe.
+        super::to_result(unsafe { bindings::pci_enable_device(self.as_ptr()) })?;
+        Ok(Enabled(self.0))
+    }
+
+    /// Maps `len` bytes of BAR `bar` (`pci_iomap`).
+    pub(crate) fn iomap(&self, bar: i32, len: usize) -> Result<IoMem> {
+        // SAFETY: a live, enabled device; NULL on failure.
+        let p = unsafe { bindings::pci_iomap(self.as_ptr(), bar, len as ffi::c_ulong) };
+        let addr = NonNull::new(p).ok_or(code::ENOMEM)?;
+        // INVARIANT: a mapping of `len` bytes, unmapped in Drop.
+        Ok(IoMem {
+            addr,
+            len,
+            pdev: self.0,
+        })
+    }
+
+    /// The PCI device id.
+    pub(crate) fn device_id(&self) -> u16 {
+        // SAFETY: a live device; set at enumeration.
+        unsafe { (*self.as_ptr()).device }
+    }
+
+    /// The interrupt line.
+    pub(crate) fn irq(&self) -> u32 {
+        // SAFETY: a live device; `irq` is set before probe.
+        unsafe { (*self.as_ptr()).irq }
+    }
+}
+
+/// Keeps a PCI device enabled.
+pub(crate) struct Enabled(NonNull<bindings::pci_dev>);
+
+// SAFETY: only used to disable the device in Drop, from any thread.
+unsafe impl Send for Enabled {}
+// SAFETY: no shared access at all.
+unsafe impl Sync for Enabled {}
+
+impl Drop for Enabled {
+    fn drop(&mut self) {
+        // SAFETY: enabled by Device::enable; the device outlives its
+        // driver data (dropped in remove at the latest).
+        unsafe { bindings::pci_disable_device(self.0.as_ptr()) };
+    }
+}
+
+/// One mapped PCI BAR.
+///
+/// # Invariants
+///
+/// `addr` is a `pci_iomap` cookie for `len` bytes of `pdev`, valid until
+/// Drop.
+pub(crate) struct IoMem {
+    addr: NonNull<ffi::c_void>,
+    len: usize,
+    pdev: NonNull<bindings::pci_dev>,
+}
+
+// SAFETY: I/O accessors may be used from any thread and context; callers
+// serialise access to the device registers themselves.
+unsafe impl Send for IoMem {}
+// SAFETY: as above.
+unsafe impl Sync for IoMem {}
+
+impl IoMem {
+    fn at(&self, off: usize, width: usize) -> Option<*mut ffi::c_void> {
+        if off.checked_add(width)? > self.len {
+            return None;
+        }
+        // SAFETY: `off + width <= len`, inside the mapping (invariant);
+        // the result is an iomap cookie the accessors understand.
+        Some(unsafe { self.addr.as_ptr().cast::<u8>().add(off).cast() })
+    }
+
+    /// `ioread8` at `off`; an offset outside the mapping reads 0xFF (as
+    /// absent hardware does).
+    pub(crate) fn read8(&self, off: usize) -> u8 {
+        match self.at(off, 1) {
+            // SAFETY: inside the mapping.
+            Some(p) => unsafe { bindings::ioread8(p) as u8 },
+            None => 0xFF,
+        }
+    }
+
+    /// `iowrite8` at `off`; ignored outside the mapping.
+    pub(crate) fn write8(&self, off: usize, val: u8) {
+        if let Some(p) = self.at(off, 1) {
+            // SAFETY: inside the mapping.
+            unsafe { bindings::iowrite8(val, p) };
+        }
+    }
+
+    /// `ioread32` at `off`.
+    pub(crate) fn read32(&self, off: usize) -> u32 {
+        match self.at(off, 4) {
+            // SAFETY: inside the mapping.
+            Some(p) => unsafe { bindings::ioread32(p) },
+            None => !0,
+        }
+    }
+
+    /// `iowrite32` at `off`.
+    pub(crate) fn write32(&self, off: usize, val: u32) {
+        if let Some(p) = self.at(off, 4) {
+            // SAFETY: inside the mapping.
+            unsafe { bindings::iowrite32(val, p) };
+        }
+    }
+}
+
+impl Drop for IoMem {
+    fn drop(&mut self) {
+        // SAFETY: mapped by pci_iomap for this device (invariant).
+        unsafe { bindings::pci_iounmap(self.pdev.as_ptr(), self.addr.as_ptr()) };
+    }
+}
+
+/// A registered PCI driver; lives in a static of the module.
+pub(crate) struct Registration<T: Driver> {
+    drv: UnsafeCell<bindings::pci_driver>,
+    _t: PhantomData<T>,
+}
+
+// SAFETY: the C struct is written only in `register` (module init, before
+// the kernel sees it); afterwards the PCI core owns it.
+unsafe impl<T: Driver> Sync for Registration<T> {}
+
+impl<T: Driver> Registration<T> {
+    pub(crate) const fn new() -> Self {
+        Registration {
+            // SAFETY: all-zero is a valid unregistered pci_driver.
+            drv: UnsafeCell::new(unsafe { core::mem::zeroed() }),
+            _t: PhantomData,
+        }
+    }
+
+    /// Registers the driver for `ids` (ending with [`ID_END`]). Module
+    /// init only; probes of present devices run before this returns.
+    pub(crate) fn register(
+        &self,
+        name: &'static kernel::str::CStr,
+        ids: &'static [bindings::pci_device_id],
+    ) -> Result {
+        if !matches!(ids.last(), Some(l) if l.vendor == 0) {
+            return Err(code::EINVAL);
+        }
+        // SAFETY: module init: nothing else references the struct yet.
+        unsafe {
+            let d = &mut *self.drv.get();
+            d.name = name.as_char_ptr();
+            d.id_table = ids.as_ptr();
+            d.probe = Some(probe::<T>);
+            d.remove = Some(remove::<T>);
+            super::to_result(bindings::__pci_register_driver(
+                d,
+                super::this_module(),
+                name.as_char_ptr(),
+            ))?;
+        }
+        Ok(())
+    }
+
+    /// Unregisters (calls `remove` for every bound device). Module exit.
+    pub(crate) fn unregister(&self) {
+        // SAFETY: registered in `register`.
+        unsafe { bindings::pci_unregister_driver(self.drv.get()) };
+    }
+}
+
+unsafe extern "C" fn probe<T: Driver>(
+    pdev: *mut bindings::pci_dev,
+    _id: *const bindings::pci_device_id,
+) -> ffi::c_int {
+    let Some(p) = NonNull::new(pdev) else {
+        return code::EINVAL.to_errno();
+    };
+    let dev = Device(p);
+    match T::probe(&dev) {
+        Ok(data) => {
+            // SAFETY: a live device; drvdata holds the box until remove.
+            unsafe { bindings::rcan_pci_set_drvdata(pdev, KBox::into_raw(data).cast()) };
+            0
+        }
+        Err(e) => e.to_errno(),
+    }
+}
+
+unsafe extern "C" fn remove<T: Driver>(pdev: *mut bindings::pci_dev) {
+    // SAFETY: probe succeeded for this device, so drvdata is our box.
+    let data = unsafe { bindings::rcan_pci_get_drvdata(pdev) }.cast::<T::Data>();
+    if data.is_null() {
+        return;
+    }
+    // SAFETY: set in probe from KBox::into_raw; taken back exactly once.
+    let data = unsafe { KBox::from_raw(data) };
+    // SAFETY: clear the stale pointer.
+    unsafe { bindings::rcan_pci_set_drvdata(pdev, core::ptr::null_mut()) };
+    T::remove(data);
+}
