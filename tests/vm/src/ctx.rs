@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: GPL-2.0
 //! [`Ctx`]: what a test needs from its environment — loading and unloading
-//! the rcan modules, interface state, sysfs counters, the kernel log, and
-//! sockets with sane timeouts.
+//! the rcan modules (or, for the CAN_RAW tests, mainline SocketCAN's),
+//! interface state, sysfs counters, the kernel log, and sockets with sane
+//! timeouts.
 
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, Read, Seek, SeekFrom};
@@ -15,27 +16,81 @@ use rcan_uapi::ArbSocket;
 
 use crate::check::{OrFail, RX_TIMEOUT};
 
-/// One of the three rcan kernel modules.
+/// Which CAN stack the suite runs against.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Stack {
+    /// The rcan modules: every test.
+    Ours,
+    /// Mainline SocketCAN (`can.ko`, `can-raw.ko`, `vcan.ko` of the test
+    /// kernel): only the tests marked portable, which shows that they
+    /// encode mainline behaviour.
+    Mainline,
+}
+
+impl Stack {
+    /// Parses `ours` or `mainline`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "ours" => Ok(Stack::Ours),
+            "mainline" => Ok(Stack::Mainline),
+            _ => Err(format!("unknown stack {s:?} (ours or mainline)")),
+        }
+    }
+
+    /// The name [`Stack::parse`] takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stack::Ours => "ours",
+            Stack::Mainline => "mainline",
+        }
+    }
+}
+
+/// One of the rcan kernel modules.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub enum Module {
     /// Protocol family PF_CAN (`net/can/rcan_pf.ko`).
     Pf,
     /// CANPROTO_CAN (`net/can/rcan_can.ko`).
     Can,
+    /// SocketCAN-compatible CAN_RAW (`net/can/rcan_raw.ko`).
+    Raw,
     /// Loopback driver (`drivers/net/can/rcan_loop.ko`).
     Loop,
+    /// DSOR time service (`net/can/dsor/rcan_time.ko`).
+    Time,
+    /// Redundant DSOR time service (`net/can/dsor/rcan_rtime.ko`).
+    Rtime,
+    /// SJA1000 front-end for Kvaser PCIcan cards.
+    Kvaser,
+    /// SJA1000 front-end for Advantech PCM-3680I / MIOe-3680 cards.
+    Advantech,
 }
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 3] = [Module::Pf, Module::Can, Module::Loop];
+    pub const ALL: [Module; 8] = [
+        Module::Pf,
+        Module::Can,
+        Module::Raw,
+        Module::Loop,
+        Module::Time,
+        Module::Rtime,
+        Module::Kvaser,
+        Module::Advantech,
+    ];
 
     /// Name as shown by `/proc/modules` and taken by `rmmod`.
     pub fn name(self) -> &'static str {
         match self {
             Module::Pf => "rcan_pf",
             Module::Can => "rcan_can",
+            Module::Raw => "rcan_raw",
             Module::Loop => "rcan_loop",
+            Module::Time => "rcan_time",
+            Module::Rtime => "rcan_rtime",
+            Module::Kvaser => "rcan_kvaser_pci",
+            Module::Advantech => "rcan_advantech_pci",
         }
     }
 
@@ -44,27 +99,105 @@ impl Module {
         match self {
             Module::Pf => "net/can/rcan_pf.ko",
             Module::Can => "net/can/rcan_can.ko",
+            Module::Raw => "net/can/rcan_raw.ko",
             Module::Loop => "drivers/net/can/rcan_loop.ko",
+            Module::Time => "net/can/dsor/rcan_time.ko",
+            Module::Rtime => "net/can/dsor/rcan_rtime.ko",
+            Module::Kvaser => "drivers/net/can/sja1000/rcan_kvaser_pci.ko",
+            Module::Advantech => "drivers/net/can/sja1000/rcan_advantech_pci.ko",
         }
     }
 }
 
-/// Test context: repository root and the state of the loaded stack.
+/// One of the mainline SocketCAN modules the test kernel builds.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Mainline {
+    /// PF_CAN core (`net/can/can.ko`).
+    Can,
+    /// CAN_RAW (`net/can/can-raw.ko`).
+    Raw,
+    /// CAN device infrastructure (`drivers/net/can/dev/can-dev.ko`): vcan
+    /// needs its `can_dropped_invalid_skb`.
+    Dev,
+    /// Virtual CAN driver (`drivers/net/can/vcan.ko`).
+    Vcan,
+}
+
+impl Mainline {
+    /// Load order (insmod resolves no dependencies); unload in reverse.
+    pub const ALL: [Mainline; 4] = [Mainline::Can, Mainline::Raw, Mainline::Dev, Mainline::Vcan];
+
+    /// Name as shown by `/proc/modules` (dashes become underscores).
+    pub fn name(self) -> &'static str {
+        match self {
+            Mainline::Can => "can",
+            Mainline::Raw => "can_raw",
+            Mainline::Dev => "can_dev",
+            Mainline::Vcan => "vcan",
+        }
+    }
+
+    /// Path of the `.ko` relative to the kernel build directory.
+    pub fn rel_path(self) -> &'static str {
+        match self {
+            Mainline::Can => "net/can/can.ko",
+            Mainline::Raw => "net/can/can-raw.ko",
+            Mainline::Dev => "drivers/net/can/dev/can-dev.ko",
+            Mainline::Vcan => "drivers/net/can/vcan.ko",
+        }
+    }
+}
+
+/// Test context: where the modules are and the state of the loaded stack.
 pub struct Ctx {
     root: PathBuf,
+    stack: Stack,
+    /// Kernel build directory holding the mainline modules.
+    kbuild: Option<PathBuf>,
     /// Number of canN devices of the loaded rcan_loop (0: not loaded).
     ndev: usize,
+    /// vcan interfaces created by [`Ctx::can_ifaces`] on mainline.
+    vcans: Vec<String>,
 }
 
 impl Ctx {
-    /// A context for the modules under `root`.
-    pub fn new(root: PathBuf) -> Self {
-        Self { root, ndev: 0 }
+    /// A context for the rcan modules under `root`, running against
+    /// `stack`; `kbuild` is the kernel build directory (mainline only).
+    pub fn new(root: PathBuf, stack: Stack, kbuild: Option<PathBuf>) -> Self {
+        Self {
+            root,
+            stack,
+            kbuild,
+            ndev: 0,
+            vcans: Vec::new(),
+        }
     }
 
     /// The repository root.
     pub fn root(&self) -> &Path {
         &self.root
+    }
+
+    /// The stack under test.
+    pub fn stack(&self) -> Stack {
+        self.stack
+    }
+
+    /// The kernel build directory with the mainline modules, if given.
+    pub fn kbuild(&self) -> Option<&Path> {
+        self.kbuild.as_deref()
+    }
+
+    /// Absolute path of mainline module `m` (None: no kernel build
+    /// directory given).
+    pub fn mainline_ko(&self, m: Mainline) -> Option<PathBuf> {
+        self.kbuild.as_ref().map(|k| k.join(m.rel_path()))
+    }
+
+    /// Whether `net/can/rcan_raw.ko` has been built. While it has not, the
+    /// stack loads without it and only the CAN_RAW tests fail.
+    pub fn have_raw(&self) -> bool {
+        self.ko(Module::Raw).is_file()
     }
 
     /// Absolute path of module `m`.
@@ -104,13 +237,71 @@ impl Ctx {
         module_listed(m.name())
     }
 
-    /// Loads rcan_pf, rcan_can and rcan_loop (with `loop_params`, e.g.
+    /// Loads rcan_pf, rcan_can, rcan_raw (if built, see
+    /// [`Ctx::have_raw`]) and rcan_loop (with `loop_params`, e.g.
     /// `["count=2"]`) and sets every canN device up.
     pub fn load_stack(&mut self, loop_params: &[&str]) -> Result<(), String> {
         self.insmod(Module::Pf, &[])?;
         self.insmod(Module::Can, &[])?;
+        if self.have_raw() {
+            self.insmod(Module::Raw, &[])?;
+        }
         self.insmod(Module::Loop, loop_params)?;
         self.links_up()
+    }
+
+    /// Loads the stack under test with CAN_RAW and `n` interfaces can0..,
+    /// all up, that reflect frames sent with loopback into their receive
+    /// path; returns their ifindexes. Ours: [`Ctx::load_stack`] with
+    /// `count=n`. Mainline: can, can-raw, can-dev, `vcan echo=1` and
+    /// `ip link add canI type vcan`, MTU 16 (classic CAN).
+    pub fn can_ifaces(&mut self, n: usize) -> Result<Vec<u32>, String> {
+        match self.stack {
+            Stack::Ours => {
+                if !self.have_raw() {
+                    return Err(format!("{} not built", Module::Raw.rel_path()));
+                }
+                self.load_stack(&[&format!("count={n}")])?;
+            }
+            Stack::Mainline => {
+                for m in Mainline::ALL {
+                    let ko = self
+                        .mainline_ko(m)
+                        .ok_or("no kernel build directory (RCAN_KBUILD or --kbuild)")?;
+                    let mut args = vec![ko.to_string_lossy().into_owned()];
+                    if m == Mainline::Vcan {
+                        // Echo in the driver, like rcan_loop: IFF_ECHO.
+                        args.push("echo=1".into());
+                    }
+                    run("insmod", &args)?;
+                }
+                for i in 0..n {
+                    let name = dev(i);
+                    run(
+                        "ip",
+                        &["link", "add", "dev", &name, "type", "vcan"].map(String::from),
+                    )?;
+                    self.vcans.push(name.clone());
+                    // vcan starts with the CAN FD MTU (72); ours are classic
+                    // CAN interfaces (16), so make mainline's the same.
+                    run("ip", &["link", "set", &name, "mtu", "16"].map(String::from))?;
+                    self.link_up(&name)?;
+                }
+            }
+        }
+        (0..n).map(|i| self.ifindex(&dev(i))).collect()
+    }
+
+    /// Unregisters the interfaces [`Ctx::can_ifaces`] made, under any
+    /// sockets bound to them. Ours: rmmod rcan_loop. Mainline:
+    /// `ip link del` each vcan.
+    pub fn remove_can_ifaces(&mut self) -> Result<(), String> {
+        match self.stack {
+            Stack::Ours => self.rmmod(Module::Loop),
+            Stack::Mainline => std::mem::take(&mut self.vcans)
+                .iter()
+                .try_for_each(|name| run("ip", &["link", "del", "dev", name].map(String::from))),
+        }
     }
 
     /// Sets every canN device of the loaded rcan_loop up.
@@ -121,19 +312,25 @@ impl Ctx {
     /// Unloads whatever of the stack is loaded, in reverse load order.
     /// A module that is not loaded is skipped; one that will not unload is
     /// retried for up to 3 s (sockets may be released a little late).
+    /// Mainline modules and the vcan interfaces made for a test go the same
+    /// way (`ip link del`, then rmmod).
     pub fn unload_all(&mut self) -> Result<(), String> {
         let mut errors = Vec::new();
         for m in Module::ALL.into_iter().rev() {
-            let start = Instant::now();
-            while self.is_loaded(m) {
-                match self.rmmod(m) {
-                    Ok(()) => break,
-                    Err(e) if start.elapsed() > Duration::from_secs(3) => {
-                        errors.push(e);
-                        break;
-                    }
-                    Err(_) => thread::sleep(Duration::from_millis(50)),
+            if let Err(e) = rmmod_retrying(m.name()) {
+                errors.push(e);
+            }
+        }
+        for name in std::mem::take(&mut self.vcans) {
+            if Path::new("/sys/class/net").join(&name).exists() {
+                if let Err(e) = run("ip", &["link", "del", "dev", &name].map(String::from)) {
+                    errors.push(e);
                 }
+            }
+        }
+        for m in Mainline::ALL.into_iter().rev() {
+            if let Err(e) = rmmod_retrying(m.name()) {
+                errors.push(e);
             }
         }
         self.ndev = 0;
@@ -200,6 +397,20 @@ impl Ctx {
     }
 }
 
+/// Unloads module `name` if it is loaded, retrying for up to 3 s: sockets
+/// may be released a little after close.
+fn rmmod_retrying(name: &str) -> Result<(), String> {
+    let start = Instant::now();
+    while module_listed(name) {
+        match run("rmmod", &[name.to_string()]) {
+            Ok(()) => break,
+            Err(e) if start.elapsed() > Duration::from_secs(3) => return Err(e),
+            Err(_) => thread::sleep(Duration::from_millis(50)),
+        }
+    }
+    Ok(())
+}
+
 /// Whether a module called `name` is listed in `/proc/modules`.
 fn module_listed(name: &str) -> bool {
     fs::read_to_string("/proc/modules")
@@ -222,7 +433,7 @@ fn loop_count(params: &[&str]) -> usize {
 }
 
 /// Where the system tools live inside the VM.
-fn tool(name: &str) -> PathBuf {
+pub fn tool(name: &str) -> PathBuf {
     ["/sbin", "/usr/sbin", "/bin", "/usr/bin"]
         .iter()
         .map(|d| Path::new(d).join(name))
@@ -327,14 +538,36 @@ mod tests {
 
     #[test]
     fn module_paths() {
-        let c = Ctx::new(PathBuf::from("/r"));
+        let c = Ctx::new(PathBuf::from("/r"), Stack::Ours, Some(PathBuf::from("/k")));
         assert_eq!(
             c.ko(Module::Loop),
             Path::new("/r/drivers/net/can/rcan_loop.ko")
         );
+        assert_eq!(c.ko(Module::Raw), Path::new("/r/net/can/rcan_raw.ko"));
         assert_eq!(
             Module::ALL.map(Module::name),
-            ["rcan_pf", "rcan_can", "rcan_loop"]
+            [
+                "rcan_pf",
+                "rcan_can",
+                "rcan_raw",
+                "rcan_loop",
+                "rcan_time",
+                "rcan_rtime",
+                "rcan_kvaser_pci",
+                "rcan_advantech_pci"
+            ]
         );
+        assert_eq!(
+            c.mainline_ko(Mainline::Raw).as_deref(),
+            Some(Path::new("/k/net/can/can-raw.ko"))
+        );
+    }
+
+    #[test]
+    fn stack_names() {
+        for s in [Stack::Ours, Stack::Mainline] {
+            assert_eq!(Stack::parse(s.name()), Ok(s));
+        }
+        assert!(Stack::parse("vcan").is_err());
     }
 }

@@ -31,3 +31,8 @@ rcan_kernel_key() {
 
 # Build directory (O=) of the selected kernel variant.
 rcan_kbuild() { echo "$RCAN_CACHE/kernel/$RCAN_KERNEL-$(rcan_kernel_key)"; }
+
+# QEMU's emulated SJA1000 cards on one virtual CAN bus, for the VM test
+# suite: two Kvaser PCIcan (can0/can1 when only rcan_kvaser_pci is loaded),
+# a PCM-3680I and a MIOe-3680 (two channels each).
+RCAN_QEMU_CAN="-object can-bus,id=bus0 -device kvaser_pci,canbus=bus0 -device kvaser_pci,canbus=bus0 -device pcm3680_pci,canbus0=bus0,canbus1=bus0 -device mioe3680_pci,canbus0=bus0,canbus1=bus0"

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: GPL-2.0
 # The test command (make check, called by .ci/run): host tests, then the VM
-# suite on the release kernel and again on the debug kernel (KASAN, lockdep,
+# suite on the release kernel, its CAN_RAW/can-utils subset against mainline
+# SocketCAN (can.ko, can-raw.ko, vcan.ko of the same kernel) in a VM boot of
+# its own, and the suite again on the debug kernel (KASAN, lockdep,
 # kmemleak), each VM run failing on any kernel report. Prints one closing
 # "N passed, M failed" line over all stages.
 #
@@ -52,12 +54,30 @@ vm_stage() {
 		tally "vm-$variant" 1 /dev/null
 		return
 	fi
-	RCAN_KERNEL=$variant bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 -- \
+	RCAN_KERNEL=$variant bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 --qemu-extra "$RCAN_QEMU_CAN" -- \
 		target/release/rcan-vmtest 2>&1 | tee "$log_dir/vm-$variant.log"
 	tally "vm-$variant" "${PIPESTATUS[0]}" "$log_dir/vm-$variant.log"
 }
 
+# The portable tests against mainline: they must pass there, which shows
+# that they encode mainline behaviour. Needs only the kernel (its mainline
+# CAN modules) and rcan-vmtest, not our modules.
+mainline_stage() {
+	local kbuild
+	echo "=== VM suite, CAN_RAW and can-utils tests, against mainline SocketCAN (release kernel)"
+	if ! kbuild=$(RCAN_KERNEL=release bash "$RCAN_ROOT/tools/testing/rcan/build-kernel.sh" 2>"$log_dir/build-mainline.log"); then
+		tail -n 40 "$log_dir/build-mainline.log"
+		tally vm-mainline 1 /dev/null
+		return
+	fi
+	RCAN_KERNEL=release RCAN_KBUILD=$kbuild RCAN_VMTEST_STACK=mainline \
+		bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 --qemu-extra "$RCAN_QEMU_CAN" -- \
+		target/release/rcan-vmtest 2>&1 | tee "$log_dir/vm-mainline.log"
+	tally vm-mainline "${PIPESTATUS[0]}" "$log_dir/vm-mainline.log"
+}
+
 vm_stage release
+mainline_stage
 if [ "${RCAN_SKIP_DEBUG:-0}" != 1 ]; then
 	vm_stage debug
 	# Leave release modules in the tree, as `make modules` would.

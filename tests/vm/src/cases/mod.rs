@@ -1,24 +1,46 @@
 // SPDX-License-Identifier: GPL-2.0
 //! The test cases, grouped by topic. Each file exports a `TESTS` table.
 
+mod canutils;
+mod capture;
 mod errors;
 mod filter;
 mod lifecycle;
 mod loopdrv;
+mod mixed;
 mod modules;
+mod raw_bind;
+mod raw_efault;
+mod raw_filter;
+mod raw_loopback;
+mod raw_recv;
+mod raw_send;
+mod raw_sockopt;
 mod recv;
+mod sja1000;
 mod socket;
+mod timesvc;
 
 use crate::ctx::{dev, Ctx};
 use crate::Test;
 
-/// `test_table![a, b]`: a table of [`Test`]s named after their functions.
+/// `test_table![a, b]`: a table of [`Test`]s named after their functions,
+/// run against our stack only.
 macro_rules! test_table {
     ($($f:ident),* $(,)?) => {
-        &[$(crate::Test { name: stringify!($f), run: $f }),*]
+        &[$(crate::Test { name: stringify!($f), run: $f, portable: false }),*]
     };
 }
 pub(crate) use test_table;
+
+/// `portable_table![a, b]`: like [`test_table`], for tests that also run
+/// against mainline SocketCAN (`--stack mainline`).
+macro_rules! portable_table {
+    ($($f:ident),* $(,)?) => {
+        &[$(crate::Test { name: stringify!($f), run: $f, portable: true }),*]
+    };
+}
+pub(crate) use portable_table;
 
 /// Every test, in running order.
 pub fn all() -> impl Iterator<Item = &'static Test> {
@@ -30,6 +52,18 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         errors::TESTS,
         loopdrv::TESTS,
         lifecycle::TESTS,
+        raw_sockopt::TESTS,
+        raw_filter::TESTS,
+        raw_loopback::TESTS,
+        raw_recv::TESTS,
+        raw_bind::TESTS,
+        raw_send::TESTS,
+        raw_efault::TESTS,
+        canutils::TESTS,
+        capture::TESTS,
+        mixed::TESTS,
+        timesvc::TESTS,
+        sja1000::TESTS,
     ]
     .into_iter()
     .flatten()
@@ -47,8 +81,31 @@ fn stack2(ctx: &mut Ctx) -> Result<(u32, u32), String> {
     Ok((ctx.ifindex(&dev(0))?, ctx.ifindex(&dev(1))?))
 }
 
+/// Loads the stack under test with CAN_RAW and one interface (up);
+/// returns can0's ifindex.
+fn raw1(ctx: &mut Ctx) -> Result<u32, String> {
+    Ok(ctx.can_ifaces(1)?[0])
+}
+
+/// Loads the stack under test with CAN_RAW and two interfaces (up);
+/// returns their ifindexes.
+fn raw2(ctx: &mut Ctx) -> Result<(u32, u32), String> {
+    let i = ctx.can_ifaces(2)?;
+    Ok((i[0], i[1]))
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn portable_names() {
+        // The prefixes say what a test needs: raw_/canutils_ run on both
+        // stacks, everything else (mixed_ included) on ours only.
+        for t in super::all() {
+            let portable = t.name.starts_with("raw_") || t.name.starts_with("canutils_");
+            assert_eq!(t.portable, portable, "{}", t.name);
+        }
+    }
+
     #[test]
     fn names_are_unique() {
         let mut names: Vec<_> = super::all().map(|t| t.name).collect();

@@ -1,0 +1,327 @@
+// SPDX-License-Identifier: GPL-2.0
+//! Binding CAN_RAW sockets: one interface or all of them (ifindex 0) with
+//! two interfaces, rebinding, getsockname, the calls CAN_RAW does not
+//! support, binding to an interface that is down or goes down, and the
+//! errno of every bad bind address.
+
+use socketcan::{CanAddr, CanSocket, Socket, SocketOptions};
+
+use super::{portable_table, raw1, raw2};
+use crate::canraw::{
+    self, addr_bytes, addr_ifindex, expect, expect_quiet, ext, show_wire, std, CAN_MTU, CAN_RAW,
+    MIN_NAMELEN,
+};
+use crate::check::{ensure, expect_errno, OrFail, TestResult};
+use crate::ctx::{dev, Ctx};
+use crate::sys::{self, FILL, SOCKADDR_CAN_LEN};
+use crate::Test;
+use rcan_uapi::raw;
+
+pub const TESTS: &[Test] = portable_table![
+    raw_bind_all_interfaces,
+    raw_bind_rebind,
+    raw_bind_getsockname,
+    raw_bind_errors,
+    raw_bind_interface_down,
+    raw_bind_interface_removed,
+    raw_socket_calls,
+];
+
+const AF_CAN: u16 = libc::AF_CAN as u16;
+
+/// Binds `s` to `ifindex` through the socket the crate wraps.
+fn bind(s: &CanSocket, ifindex: u32) -> TestResult {
+    s.as_raw_socket()
+        .bind(&CanAddr::new(ifindex).into_sock_addr())
+        .or_fail(format_args!("bind to ifindex {ifindex}"))
+}
+
+/// Receives one frame with its source address; returns (frame bytes,
+/// ifindex).
+fn recv_from(s: &CanSocket, who: &str) -> Result<([u8; CAN_MTU], u32), String> {
+    let r = sys::recvmsg(s, CAN_MTU, 0).or_fail(format_args!("{who}: recvmsg"))?;
+    ensure!(r.len == CAN_MTU, "{who}: recvmsg returned {} bytes", r.len);
+    let idx = addr_ifindex(&r.name[..r.namelen.min(SOCKADDR_CAN_LEN)])
+        .map_err(|e| format!("{who}: {e}"))?;
+    Ok((r.data[..CAN_MTU].try_into().unwrap(), idx))
+}
+
+/// With can0 and can1: a socket bound to ifindex 0 receives from both and
+/// the address tells which; one bound to can1 only from can1. A socket
+/// bound to 0 has no interface to write to (ENXIO) but can sendto one.
+fn raw_bind_all_interfaces(ctx: &mut Ctx) -> TestResult {
+    let (i0, i1) = raw2(ctx)?;
+    let all = canraw::open(0)?;
+    let only1 = canraw::open(i1)?;
+    let tx0 = canraw::open(i0)?;
+    let tx1 = canraw::open(i1)?;
+    let f0 = std(0x100, &[0]);
+    let f1 = std(0x101, &[1]);
+    let f2 = ext(0x102, &[2]);
+    canraw::send(&tx0, &f0)?;
+    canraw::send(&tx1, &f1)?;
+    canraw::send(&tx0, &f2)?;
+    // The interfaces are independent: compare without their interleaving.
+    let mut got = Vec::new();
+    for _ in 0..3 {
+        got.push(recv_from(&all, "socket bound to all")?);
+    }
+    got.sort();
+    let mut want = vec![
+        (canraw::wire(&f0), i0),
+        (canraw::wire(&f1), i1),
+        (canraw::wire(&f2), i0),
+    ];
+    want.sort();
+    ensure!(
+        got == want,
+        "socket bound to all received {:?}, expected {:?}",
+        got.iter()
+            .map(|(b, i)| format!("{} on {i}", show_wire(b)))
+            .collect::<Vec<_>>(),
+        want.iter()
+            .map(|(b, i)| format!("{} on {i}", show_wire(b)))
+            .collect::<Vec<_>>()
+    );
+    let (b, i) = recv_from(&only1, "socket bound to can1")?;
+    ensure!(
+        b == canraw::wire(&f1) && i == i1,
+        "socket bound to can1 received {} on {i}, expected {} on {i1}",
+        show_wire(&b),
+        canraw::show(&f1)
+    );
+
+    expect_errno(
+        canraw::write_bytes(&all, &canraw::wire(&f0)),
+        libc::ENXIO,
+        "write on a socket bound to all interfaces",
+    )?;
+    let f3 = std(0x103, &[3]);
+    let n = raw::sendto(&all, &canraw::wire(&f3), 0, Some(&addr_bytes(AF_CAN, i1)))
+        .or_fail("sendto can1 from the socket bound to all")?;
+    ensure!(n == CAN_MTU, "sendto returned {n}");
+    let (b, i) = recv_from(&only1, "socket bound to can1")?;
+    ensure!(
+        b == canraw::wire(&f3) && i == i1,
+        "after sendto can1: socket bound to can1 received {} on {i}",
+        show_wire(&b)
+    );
+    expect_quiet(&[("socket bound to can1", &only1)])
+}
+
+/// Binding again moves the socket to the new interface.
+fn raw_bind_rebind(ctx: &mut Ctx) -> TestResult {
+    let (i0, i1) = raw2(ctx)?;
+    let s = canraw::open(i0)?;
+    let tx0 = canraw::open(i0)?;
+    let tx1 = canraw::open(i1)?;
+    let a = std(0x10, &[1]);
+    canraw::send(&tx0, &a)?;
+    expect(&s, &a, "socket bound to can0")?;
+    bind(&s, i1)?;
+    let b = std(0x11, &[2]);
+    let c = std(0x12, &[3]);
+    canraw::send(&tx0, &b)?;
+    canraw::send(&tx1, &c)?;
+    let (got, i) = recv_from(&s, "socket rebound to can1")?;
+    ensure!(
+        got == canraw::wire(&c) && i == i1,
+        "socket rebound to can1 received {} on {i}, expected {} on {i1}",
+        show_wire(&got),
+        canraw::show(&c)
+    );
+    expect_quiet(&[("socket rebound to can1", &s)])
+}
+
+/// getsockname into 0xAA: length 8, AF_CAN, zero padding, the bound ifindex
+/// (0 when unbound or bound to all), nothing written beyond.
+fn raw_bind_getsockname(ctx: &mut Ctx) -> TestResult {
+    let (_, i1) = raw2(ctx)?;
+    let check = |s: &CanSocket, want: u32, what: &str| -> TestResult {
+        let mut a = [FILL; SOCKADDR_CAN_LEN];
+        let len = raw::getsockname(s, &mut a).or_fail(format_args!("getsockname ({what})"))?;
+        ensure!(
+            len as usize == MIN_NAMELEN,
+            "getsockname ({what}): length {len}, expected {MIN_NAMELEN}"
+        );
+        let idx = addr_ifindex(&a).map_err(|e| format!("getsockname ({what}): {e}"))?;
+        ensure!(
+            idx == want,
+            "getsockname ({what}): ifindex {idx}, expected {want}"
+        );
+        ensure!(
+            a[MIN_NAMELEN..].iter().all(|&b| b == FILL),
+            "getsockname ({what}) wrote past its length: {a:02X?}"
+        );
+        Ok(())
+    };
+    let s = canraw::unbound()?;
+    check(&s, 0, "unbound")?;
+    bind(&s, i1)?;
+    check(&s, i1, "bound to can1")?;
+    check(&canraw::open(0)?, 0, "bound to all")
+}
+
+/// Bad bind addresses: shorter than 8 bytes or not AF_CAN is EINVAL; an
+/// unknown ifindex or a non-CAN interface (lo) is ENODEV. 8 bytes are
+/// enough. A failed bind leaves the socket as it was.
+fn raw_bind_errors(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let lo = ctx.ifindex("lo")?;
+    let s = canraw::unbound()?;
+    let tx = canraw::open(idx)?;
+    let good = addr_bytes(AF_CAN, idx);
+    for len in [0, 2, 4, 7] {
+        expect_errno(
+            raw::bind(&s, &good[..len]),
+            libc::EINVAL,
+            &format!("bind with addrlen {len}"),
+        )?;
+    }
+    for family in [
+        libc::AF_INET as u16,
+        libc::AF_UNSPEC as u16,
+        libc::AF_PACKET as u16,
+    ] {
+        expect_errno(
+            raw::bind(&s, &addr_bytes(family, idx)),
+            libc::EINVAL,
+            &format!("bind with family {family}"),
+        )?;
+    }
+    raw::bind(&s, &good[..MIN_NAMELEN]).or_fail("bind with addrlen 8")?;
+    expect_errno(
+        raw::bind(&s, &addr_bytes(AF_CAN, 999_999)),
+        libc::ENODEV,
+        "bind to unknown ifindex 999999",
+    )?;
+    expect_errno(
+        raw::bind(&s, &addr_bytes(AF_CAN, lo)),
+        libc::ENODEV,
+        "bind to lo",
+    )?;
+    // Still bound to can0.
+    let f = std(0x77, &[7]);
+    canraw::send(&tx, &f)?;
+    expect(&s, &f, "socket after the failed binds")
+}
+
+/// Binding to an interface that is down succeeds and reports ENETDOWN once
+/// (SO_ERROR, or the next receive); sending there is ENETDOWN. A socket bound while
+/// the interface goes down gets ENETDOWN too. After ip link set up, both
+/// work again.
+fn raw_bind_interface_down(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let early = canraw::open(idx)?;
+    ctx.link_down(&dev(0))?;
+    expect_errno(
+        early.read_frame(),
+        libc::ENETDOWN,
+        "read on a socket bound to can0 after it went down",
+    )?;
+    let probe = canraw::open(idx).map_err(|e| format!("bind to can0 while down: {e}"))?;
+    for (want, what) in [(libc::ENETDOWN, "first"), (0, "second")] {
+        let e = probe
+            .get_socket_option_int(libc::SOL_SOCKET, libc::SO_ERROR)
+            .or_fail("SO_ERROR")?;
+        ensure!(
+            e == want,
+            "{what} SO_ERROR after binding to can0 while down: {e}, expected {want}"
+        );
+    }
+    let late = canraw::open(idx).map_err(|e| format!("bind to can0 while down: {e}"))?;
+    expect_errno(
+        late.read_frame(),
+        libc::ENETDOWN,
+        "first read on a socket bound to can0 while down",
+    )?;
+    expect_errno(
+        late.write_frame(&std(0x1, &[1])),
+        libc::ENETDOWN,
+        "write on can0 while down",
+    )?;
+    ctx.link_up(&dev(0))?;
+    let tx = canraw::open(idx)?;
+    let f = std(0x2, &[2]);
+    canraw::send(&tx, &f)?;
+    expect(&early, &f, "socket bound before the interface went down")?;
+    expect(&late, &f, "socket bound while the interface was down")
+}
+
+/// Unregistering the interface a socket is bound to unbinds it: the next
+/// read is ENODEV, getsockname reports ifindex 0, its filters are gone
+/// (zero filters) and a write without an address is ENXIO. A socket bound
+/// to all interfaces gets no error.
+fn raw_bind_interface_removed(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let s = canraw::open(idx)?;
+    let all = canraw::open(0)?;
+    s.set_filters(&[(0x10, 0x7F0), (0x20, 0x7F0)])
+        .or_fail("set two filters")?;
+    ctx.remove_can_ifaces()?;
+    expect_errno(
+        s.read_frame(),
+        libc::ENODEV,
+        "read after the interface was unregistered",
+    )?;
+    let mut a = [FILL; SOCKADDR_CAN_LEN];
+    raw::getsockname(&s, &mut a).or_fail("getsockname")?;
+    let i = addr_ifindex(&a)?;
+    ensure!(
+        i == 0,
+        "getsockname after the interface was unregistered: ifindex {i}, expected 0"
+    );
+    let f = canraw::filters(&s)?;
+    ensure!(
+        f.is_empty(),
+        "filters after the interface was unregistered: {f:08X?}, expected none"
+    );
+    expect_errno(
+        canraw::write_bytes(&s, &canraw::wire(&std(0x10, &[1]))),
+        libc::ENXIO,
+        "write after the interface was unregistered",
+    )?;
+    expect_quiet(&[("socket bound to all interfaces", &all)])
+}
+
+/// socket() with SOCK_DGRAM is EPROTOTYPE; the socket reports its type
+/// and domain (not SO_PROTOCOL: mainline leaves it 0); connect,
+/// getpeername, listen, accept and shutdown are EOPNOTSUPP.
+fn raw_socket_calls(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    expect_errno(
+        raw::socket(libc::PF_CAN, libc::SOCK_DGRAM, CAN_RAW),
+        libc::EPROTOTYPE,
+        "socket(PF_CAN, SOCK_DGRAM, CAN_RAW)",
+    )?;
+    let s = canraw::open(idx)?;
+    for (name, opt, want) in [
+        ("SO_TYPE", libc::SO_TYPE, libc::SOCK_RAW),
+        ("SO_DOMAIN", libc::SO_DOMAIN, libc::AF_CAN),
+    ] {
+        let v = s
+            .get_socket_option_int(libc::SOL_SOCKET, opt)
+            .or_fail(name)?;
+        ensure!(v == want, "{name} is {v}, expected {want}");
+    }
+    let addr = addr_bytes(AF_CAN, idx);
+    expect_errno(raw::connect(&s, &addr), libc::EOPNOTSUPP, "connect")?;
+    let mut peer = [0u8; SOCKADDR_CAN_LEN];
+    expect_errno(
+        raw::getpeername(&s, &mut peer),
+        libc::EOPNOTSUPP,
+        "getpeername",
+    )?;
+    expect_errno(raw::listen(&s, 1), libc::EOPNOTSUPP, "listen")?;
+    expect_errno(raw::accept(&s), libc::EOPNOTSUPP, "accept")?;
+    expect_errno(
+        s.as_raw_socket().shutdown(std::net::Shutdown::Both),
+        libc::EOPNOTSUPP,
+        "shutdown",
+    )?;
+    // Still a working socket.
+    let tx = canraw::open(idx)?;
+    let f = std(0x3, &[3]);
+    canraw::send(&tx, &f)?;
+    expect(&s, &f, "socket after the refused calls")
+}

@@ -1,0 +1,314 @@
+// SPDX-License-Identifier: GPL-2.0
+//! System calls the CAN_RAW tests need and neither the `socketcan` crate
+//! nor `rcan_uapi::raw` offers: `recvmsg` with control messages into
+//! pattern-filled buffers, `SIOCGSTAMP`, `getsockopt` with a chosen
+//! `optlen`, and socket options whose pointers fault. Every `unsafe` block
+//! of the test suite is here.
+
+use std::io;
+use std::mem::{size_of, zeroed};
+use std::os::fd::{AsFd, AsRawFd};
+use std::ptr;
+
+use libc::{c_int, c_void, socklen_t};
+
+/// Byte the receive buffers are filled with before a call, so that a byte
+/// the kernel did not write is recognisable.
+pub const FILL: u8 = 0xAA;
+
+/// `sizeof(struct sockaddr_can)` on x86_64: family, padding, ifindex and the
+/// 16-byte union of the transport protocol addresses.
+pub const SOCKADDR_CAN_LEN: usize = 24;
+
+/// `SIOCGSTAMP` (`SIOCGSTAMP_OLD`, which is the 64-bit time one on x86_64).
+const SIOCGSTAMP: libc::c_ulong = 0x8906;
+/// `SIOCGSTAMPNS` (`SIOCGSTAMPNS_OLD`, likewise).
+const SIOCGSTAMPNS: libc::c_ulong = 0x8907;
+
+fn cvt(r: c_int) -> io::Result<c_int> {
+    if r < 0 {
+        Err(io::Error::last_os_error())
+    } else {
+        Ok(r)
+    }
+}
+
+/// What one `recvmsg` returned.
+#[derive(Clone, Debug)]
+pub struct Received {
+    /// The return value.
+    pub len: usize,
+    /// The data buffer (room for a CAN FD frame): the first `len` bytes are
+    /// the frame, the rest is whatever the call left there ([`FILL`] unless
+    /// the kernel wrote it).
+    pub data: [u8; 72],
+    /// The address buffer, filled with [`FILL`] before the call.
+    pub name: [u8; SOCKADDR_CAN_LEN],
+    /// `msg_namelen` after the call.
+    pub namelen: usize,
+    /// `msg_flags` after the call.
+    pub flags: c_int,
+    /// `SCM_TIMESTAMP` payload, if that control message came.
+    pub timeval: Option<libc::timeval>,
+    /// `SCM_TIMESTAMPNS` payload, if that control message came.
+    pub timespec: Option<libc::timespec>,
+    /// (level, type) of every control message, in order.
+    pub cmsgs: Vec<(c_int, c_int)>,
+}
+
+/// Control message buffer, aligned for `struct cmsghdr`.
+#[repr(C, align(8))]
+struct CmsgBuf([u8; 256]);
+
+/// `recvmsg` of at most `buflen` (<= 72) bytes with `flags`, into buffers
+/// filled with [`FILL`], with room for the timestamp control messages.
+pub fn recvmsg(fd: impl AsFd, buflen: usize, flags: c_int) -> io::Result<Received> {
+    let mut r = Received {
+        len: 0,
+        data: [FILL; 72],
+        name: [FILL; SOCKADDR_CAN_LEN],
+        namelen: 0,
+        flags: 0,
+        timeval: None,
+        timespec: None,
+        cmsgs: Vec::new(),
+    };
+    let mut ctrl = CmsgBuf([0; 256]);
+    let mut iov = libc::iovec {
+        iov_base: r.data.as_mut_ptr().cast(),
+        iov_len: buflen.min(r.data.len()),
+    };
+    // SAFETY: msghdr is plain old data; all-zero is a valid value.
+    let mut msg: libc::msghdr = unsafe { zeroed() };
+    msg.msg_name = r.name.as_mut_ptr().cast();
+    msg.msg_namelen = SOCKADDR_CAN_LEN as socklen_t;
+    msg.msg_iov = &mut iov;
+    msg.msg_iovlen = 1;
+    msg.msg_control = ctrl.0.as_mut_ptr().cast();
+    msg.msg_controllen = ctrl.0.len() as _;
+    // SAFETY: every pointer in msg (address, iovec and its buffer, control
+    // buffer) is writable for the length given next to it and outlives the
+    // call.
+    let n = unsafe { libc::recvmsg(fd.as_fd().as_raw_fd(), &mut msg, flags) };
+    if n < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    r.len = n as usize;
+    r.namelen = msg.msg_namelen as usize;
+    r.flags = msg.msg_flags;
+    // SAFETY: msg describes the control buffer the kernel just filled;
+    // CMSG_FIRSTHDR/CMSG_NXTHDR stay inside msg_controllen, and each payload
+    // is read unaligned only when cmsg_len says it is complete.
+    unsafe {
+        let mut c = libc::CMSG_FIRSTHDR(&msg);
+        while !c.is_null() {
+            let (level, ty, len) = ((*c).cmsg_level, (*c).cmsg_type, (*c).cmsg_len as usize);
+            r.cmsgs.push((level, ty));
+            let data = libc::CMSG_DATA(c);
+            let tv_len = libc::CMSG_LEN(size_of::<libc::timeval>() as u32) as usize;
+            let ts_len = libc::CMSG_LEN(size_of::<libc::timespec>() as u32) as usize;
+            if level == libc::SOL_SOCKET && ty == libc::SCM_TIMESTAMP && len >= tv_len {
+                r.timeval = Some(ptr::read_unaligned(data.cast()));
+            }
+            if level == libc::SOL_SOCKET && ty == libc::SCM_TIMESTAMPNS && len >= ts_len {
+                r.timespec = Some(ptr::read_unaligned(data.cast()));
+            }
+            c = libc::CMSG_NXTHDR(&msg, c);
+        }
+    }
+    Ok(r)
+}
+
+/// `ioctl(fd, SIOCGSTAMP)`: the receive time of the last frame read.
+pub fn siocgstamp(fd: impl AsFd) -> io::Result<libc::timeval> {
+    let mut tv = libc::timeval {
+        tv_sec: 0,
+        tv_usec: 0,
+    };
+    // SAFETY: SIOCGSTAMP writes one struct timeval to the pointer given,
+    // which is `tv`, live and writable.
+    cvt(unsafe { libc::ioctl(fd.as_fd().as_raw_fd(), SIOCGSTAMP, &mut tv) })?;
+    Ok(tv)
+}
+
+/// `ioctl(fd, SIOCGSTAMPNS)`: the same as [`siocgstamp`] in nanoseconds.
+pub fn siocgstampns(fd: impl AsFd) -> io::Result<libc::timespec> {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: SIOCGSTAMPNS writes one struct timespec to the pointer given,
+    // which is `ts`, live and writable.
+    cvt(unsafe { libc::ioctl(fd.as_fd().as_raw_fd(), SIOCGSTAMPNS, &mut ts) })?;
+    Ok(ts)
+}
+
+/// `getsockopt` into `buf` with `optlen` set to `optlen` beforehand, which
+/// may differ from `buf.len()` (but is never larger). Returns the result
+/// and the `optlen` the kernel left, also on failure (`ERANGE` reports the
+/// length needed there).
+pub fn getsockopt_len(
+    fd: impl AsFd,
+    level: c_int,
+    name: c_int,
+    buf: &mut [u8],
+    optlen: c_int,
+) -> (io::Result<()>, c_int) {
+    assert!(optlen < 0 || optlen as usize <= buf.len());
+    let mut len = optlen as socklen_t;
+    // SAFETY: `buf` is writable for at least `optlen` bytes when that is
+    // not negative; a negative optlen must be refused before any write, and
+    // even then the pointer is valid for `buf.len()` bytes.
+    let r = cvt(unsafe {
+        libc::getsockopt(
+            fd.as_fd().as_raw_fd(),
+            level,
+            name,
+            buf.as_mut_ptr().cast(),
+            &mut len,
+        )
+    });
+    (r.map(drop), len as c_int)
+}
+
+/// One mapped, inaccessible page: any kernel access to it faults.
+struct NoAccessPage(*mut c_void);
+
+const PAGE: usize = 4096;
+
+impl NoAccessPage {
+    fn new() -> io::Result<Self> {
+        // SAFETY: an anonymous private mapping at a kernel-chosen address
+        // cannot alias any existing Rust object.
+        let addr = unsafe {
+            libc::mmap(
+                ptr::null_mut(),
+                PAGE,
+                libc::PROT_NONE,
+                libc::MAP_PRIVATE | libc::MAP_ANONYMOUS,
+                -1,
+                0,
+            )
+        };
+        if addr == libc::MAP_FAILED {
+            return Err(io::Error::last_os_error());
+        }
+        Ok(Self(addr))
+    }
+}
+
+impl Drop for NoAccessPage {
+    fn drop(&mut self) {
+        // SAFETY: unmaps exactly the mapping made in new(); nothing points
+        // into it.
+        unsafe { libc::munmap(self.0, PAGE) };
+    }
+}
+
+/// `setsockopt` whose value (`len` bytes) lies in an inaccessible page.
+pub fn setsockopt_fault(fd: impl AsFd, level: c_int, name: c_int, len: usize) -> io::Result<()> {
+    let page = NoAccessPage::new()?;
+    // SAFETY: the value pointer is in a PROT_NONE page owned by `page`; the
+    // kernel can only fail to read it.
+    cvt(unsafe {
+        libc::setsockopt(
+            fd.as_fd().as_raw_fd(),
+            level,
+            name,
+            page.0,
+            len.min(PAGE) as socklen_t,
+        )
+    })
+    .map(drop)
+}
+
+/// `getsockopt` whose value buffer (`len` bytes) is inaccessible.
+pub fn getsockopt_val_fault(
+    fd: impl AsFd,
+    level: c_int,
+    name: c_int,
+    len: usize,
+) -> io::Result<()> {
+    let page = NoAccessPage::new()?;
+    let mut optlen = len.min(PAGE) as socklen_t;
+    // SAFETY: the value pointer is in a PROT_NONE page owned by `page`, so
+    // no memory of ours changes; `optlen` is live and writable.
+    cvt(unsafe { libc::getsockopt(fd.as_fd().as_raw_fd(), level, name, page.0, &mut optlen) })
+        .map(drop)
+}
+
+/// `getsockopt` whose `optlen` pointer is inaccessible.
+pub fn getsockopt_len_fault(fd: impl AsFd, level: c_int, name: c_int) -> io::Result<()> {
+    let page = NoAccessPage::new()?;
+    let mut val = [0u8; 64];
+    // SAFETY: `val` is writable; the optlen pointer is in a PROT_NONE page
+    // owned by `page`, which the kernel can only fail to access.
+    cvt(unsafe {
+        libc::getsockopt(
+            fd.as_fd().as_raw_fd(),
+            level,
+            name,
+            val.as_mut_ptr().cast(),
+            page.0.cast(),
+        )
+    })
+    .map(drop)
+}
+
+/// `write` of `len` bytes from an inaccessible buffer.
+pub fn write_fault(fd: impl AsFd, len: usize) -> io::Result<usize> {
+    let page = NoAccessPage::new()?;
+    // SAFETY: the buffer is in a PROT_NONE page owned by `page`; the kernel
+    // can only fail to read it.
+    let n = unsafe { libc::write(fd.as_fd().as_raw_fd(), page.0, len.min(PAGE)) };
+    usize::try_from(n).map_err(|_| io::Error::last_os_error())
+}
+
+/// `SO_RCVBUFFORCE` (root): a receive buffer of `bytes`, beyond
+/// `rmem_max`.
+pub fn set_rcvbufforce(fd: impl AsFd, bytes: c_int) -> io::Result<()> {
+    // SAFETY: setsockopt with a pointer to a live int of the given size.
+    let rc = unsafe {
+        libc::setsockopt(
+            fd.as_fd().as_raw_fd(),
+            libc::SOL_SOCKET,
+            libc::SO_RCVBUFFORCE,
+            (&bytes as *const c_int).cast(),
+            std::mem::size_of::<c_int>() as libc::socklen_t,
+        )
+    };
+    if rc < 0 {
+        Err(io::Error::last_os_error())
+    } else {
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The helpers against an AF_UNIX datagram pair, which any host has.
+    use super::*;
+    use std::os::unix::net::UnixDatagram;
+
+    #[test]
+    fn recvmsg_fills_and_reports() {
+        let (a, b) = UnixDatagram::pair().unwrap();
+        a.send(&[1, 2, 3]).unwrap();
+        let r = recvmsg(&b, 16, 0).unwrap();
+        assert_eq!(r.len, 3);
+        assert_eq!(&r.data[..4], &[1, 2, 3, FILL]);
+        assert!(r.cmsgs.is_empty());
+        assert!(r.timeval.is_none());
+    }
+
+    #[test]
+    fn faults() {
+        let (a, _b) = UnixDatagram::pair().unwrap();
+        let e = write_fault(&a, 16).unwrap_err();
+        assert_eq!(e.raw_os_error(), Some(libc::EFAULT));
+        let e = setsockopt_fault(&a, libc::SOL_SOCKET, libc::SO_RCVBUF, 4).unwrap_err();
+        assert_eq!(e.raw_os_error(), Some(libc::EFAULT));
+        let e = getsockopt_len_fault(&a, libc::SOL_SOCKET, libc::SO_RCVBUF).unwrap_err();
+        assert_eq!(e.raw_os_error(), Some(libc::EFAULT));
+    }
+}

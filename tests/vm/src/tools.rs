@@ -1,0 +1,220 @@
+// SPDX-License-Identifier: GPL-2.0
+//! Running programs nobody here wrote (can-utils, tcpdump) from the host's
+//! root filesystem: start them in the background, know when they are
+//! listening, collect their output, and never wait on them forever.
+
+use std::fs;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{Arc, Mutex};
+use std::thread::{self, JoinHandle};
+use std::time::Duration;
+
+use crate::check::{wait_for, OrFail};
+use crate::ctx::tool;
+
+/// How long a tool may take to start listening or to finish: generous,
+/// a software-emulated VM loads the binaries over 9p.
+pub const TOOL_LIMIT: Duration = Duration::from_secs(60);
+
+/// System calls a receiving program blocks in once its socket is set up
+/// (x86_64 numbers): read, poll, select, recvfrom, recvmsg, epoll_wait,
+/// pselect6, ppoll, epoll_pwait, recvmmsg, epoll_pwait2.
+const WAITING_SYSCALLS: [u32; 11] = [0, 7, 23, 45, 47, 232, 270, 271, 281, 299, 441];
+
+/// A finished program's exit status and output.
+pub struct Output {
+    /// Exit status.
+    pub status: ExitStatus,
+    /// Everything written to stdout.
+    pub stdout: String,
+    /// Everything written to stderr.
+    pub stderr: String,
+}
+
+/// A program running in the background; killed when dropped.
+pub struct Bg {
+    cmd: String,
+    child: Child,
+    stdout: Arc<Mutex<Vec<u8>>>,
+    stderr: Arc<Mutex<Vec<u8>>>,
+    readers: Vec<JoinHandle<()>>,
+}
+
+/// Copies a pipe into a shared buffer until EOF.
+fn collect(mut pipe: impl Read + Send + 'static, buf: Arc<Mutex<Vec<u8>>>) -> JoinHandle<()> {
+    thread::spawn(move || {
+        let mut chunk = [0u8; 4096];
+        while let Ok(n) = pipe.read(&mut chunk) {
+            if n == 0 {
+                break;
+            }
+            buf.lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .extend_from_slice(&chunk[..n]);
+        }
+    })
+}
+
+/// Starts `name args...` in `dir` (default: the current directory) with
+/// stdin from /dev/null and stdout, stderr collected.
+pub fn spawn(name: &str, args: &[&str], dir: Option<&Path>) -> Result<Bg, String> {
+    let cmd = format!("{name} {}", args.join(" "));
+    let mut c = Command::new(tool(name));
+    c.args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    if let Some(d) = dir {
+        c.current_dir(d);
+    }
+    let mut child = c.spawn().or_fail(&cmd)?;
+    let stdout = Arc::new(Mutex::new(Vec::new()));
+    let stderr = Arc::new(Mutex::new(Vec::new()));
+    let readers = vec![
+        collect(child.stdout.take().expect("piped"), Arc::clone(&stdout)),
+        collect(child.stderr.take().expect("piped"), Arc::clone(&stderr)),
+    ];
+    Ok(Bg {
+        cmd,
+        child,
+        stdout,
+        stderr,
+        readers,
+    })
+}
+
+/// Runs `name args...` to completion (at most [`TOOL_LIMIT`]) and fails
+/// unless it exits with status 0.
+pub fn run_ok(name: &str, args: &[&str]) -> Result<Output, String> {
+    let out = spawn(name, args, None)?.finish(TOOL_LIMIT)?;
+    if !out.status.success() {
+        return Err(format!(
+            "{name} {}: {}: {}",
+            args.join(" "),
+            out.status,
+            out.stderr.trim()
+        ));
+    }
+    Ok(out)
+}
+
+impl Bg {
+    fn text(buf: &Arc<Mutex<Vec<u8>>>) -> String {
+        String::from_utf8_lossy(&buf.lock().unwrap_or_else(|e| e.into_inner())).into_owned()
+    }
+
+    /// What the program wrote to stderr so far.
+    pub fn stderr_now(&self) -> String {
+        Self::text(&self.stderr)
+    }
+
+    /// Fails if the program has already exited, with its output.
+    fn check_alive(&mut self) -> Result<(), String> {
+        if let Some(st) = self.child.try_wait().or_fail(&self.cmd)? {
+            return Err(format!(
+                "{} exited early ({st}): stdout {:?}, stderr {:?}",
+                self.cmd,
+                Self::text(&self.stdout).trim(),
+                Self::text(&self.stderr).trim()
+            ));
+        }
+        Ok(())
+    }
+
+    /// Waits until the program is blocked in a receiving system call
+    /// (/proc/PID/syscall): its sockets are set up then, and every frame
+    /// sent afterwards reaches it.
+    pub fn wait_listening(&mut self) -> Result<(), String> {
+        let path = PathBuf::from(format!("/proc/{}/syscall", self.child.id()));
+        let what = format!("{} to wait for frames", self.cmd);
+        wait_for(TOOL_LIMIT, &what, || {
+            self.check_alive()?;
+            let s = fs::read_to_string(&path).or_fail(path.display())?;
+            let nr = s
+                .split_whitespace()
+                .next()
+                .and_then(|n| n.parse::<u32>().ok());
+            Ok(nr.filter(|n| WAITING_SYSCALLS.contains(n)).map(drop))
+        })
+    }
+
+    /// Waits until stderr contains `text`.
+    pub fn wait_stderr(&mut self, text: &str) -> Result<(), String> {
+        let what = format!("{} to print {text:?}", self.cmd);
+        wait_for(TOOL_LIMIT, &what, || {
+            if self.stderr_now().contains(text) {
+                return Ok(Some(()));
+            }
+            self.check_alive()?;
+            Ok(None)
+        })
+    }
+
+    /// Waits up to `limit` for the program to exit on its own; kills it and
+    /// fails (with its output) if it does not.
+    pub fn finish(mut self, limit: Duration) -> Result<Output, String> {
+        let waited = wait_for(limit, &format!("{} to exit", self.cmd), || {
+            self.child.try_wait().or_fail(&self.cmd)
+        });
+        let status = match waited {
+            Ok(st) => st,
+            Err(e) => {
+                let _ = self.child.kill();
+                let _ = self.child.wait();
+                self.join_readers();
+                return Err(format!(
+                    "{e}; stdout {:?}, stderr {:?}",
+                    Self::text(&self.stdout).trim(),
+                    Self::text(&self.stderr).trim()
+                ));
+            }
+        };
+        self.join_readers();
+        Ok(Output {
+            status,
+            stdout: Self::text(&self.stdout),
+            stderr: Self::text(&self.stderr),
+        })
+    }
+
+    fn join_readers(&mut self) {
+        for r in self.readers.drain(..) {
+            let _ = r.join();
+        }
+    }
+}
+
+impl Drop for Bg {
+    fn drop(&mut self) {
+        if matches!(self.child.try_wait(), Ok(None)) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// A scratch directory in the guest's writable /tmp, removed when dropped.
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    /// Creates `/tmp/rcan-vmtest-TAG-PID`, empty.
+    pub fn new(tag: &str) -> Result<Self, String> {
+        let p = std::env::temp_dir().join(format!("rcan-vmtest-{tag}-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&p);
+        fs::create_dir_all(&p).or_fail(p.display())?;
+        Ok(Self(p))
+    }
+
+    /// Its path.
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = fs::remove_dir_all(&self.0);
+    }
+}

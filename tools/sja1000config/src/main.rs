@@ -1,0 +1,134 @@
+// SPDX-License-Identifier: GPL-2.0
+//! `sja1000config`: the thesis' user-space tool for SJA1000 bit timing
+//! and controller setup (5.3.6), over the rcan driver's device ioctls
+//! (`<linux/can/rcan_sja1000.h>`).
+//!
+//! ```text
+//! sja1000config IFACE                        show setup, state, counters
+//! sja1000config IFACE bitrate N              set the bit rate (bit/s)
+//! sja1000config IFACE btr0 X btr1 Y          set the timing registers
+//!               [ocr X] [cdr X]              ... and output control/clock
+//! ```
+//!
+//! Setting needs CAP_NET_ADMIN and the interface down (`ip link set IFACE
+//! down`): the driver answers EPERM and EBUSY otherwise.
+
+use rcan_core::sja1000::{bitrate, timing_for, Setup, SETUP_LEN};
+use std::io;
+use std::process::ExitCode;
+
+const SIOCDEVPRIVATE: libc::c_ulong = 0x89F0;
+const SIOCRCANSJA1000GET: libc::c_ulong = SIOCDEVPRIVATE;
+const SIOCRCANSJA1000SET: libc::c_ulong = SIOCDEVPRIVATE + 1;
+
+/// Issues one device ioctl on a throw-away datagram socket.
+fn ioctl(iface: &str, cmd: libc::c_ulong, buf: &mut [u8; SETUP_LEN]) -> io::Result<()> {
+    if iface.len() >= libc::IFNAMSIZ {
+        return Err(io::Error::from_raw_os_error(libc::ENODEV));
+    }
+    // SAFETY: plain socket(2) call.
+    let fd = unsafe { libc::socket(libc::AF_UNIX, libc::SOCK_DGRAM, 0) };
+    if fd < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    // SAFETY: an all-zero ifreq is valid.
+    let mut ifr: libc::ifreq = unsafe { std::mem::zeroed() };
+    for (d, s) in ifr.ifr_name.iter_mut().zip(iface.bytes()) {
+        *d = s as libc::c_char;
+    }
+    ifr.ifr_ifru.ifru_data = buf.as_mut_ptr().cast();
+    // SAFETY: `ifr` names the interface and points to SETUP_LEN writable
+    // bytes, as the driver expects; `fd` is ours and closed below.
+    let ret = unsafe { libc::ioctl(fd, cmd, &mut ifr) };
+    let err = io::Error::last_os_error();
+    // SAFETY: closing our own descriptor.
+    unsafe { libc::close(fd) };
+    if ret < 0 {
+        Err(err)
+    } else {
+        Ok(())
+    }
+}
+
+fn get(iface: &str) -> io::Result<Setup> {
+    let mut b = [0u8; SETUP_LEN];
+    ioctl(iface, SIOCRCANSJA1000GET, &mut b)?;
+    Ok(Setup::from_bytes(&b))
+}
+
+fn parse_u8(s: &str) -> Result<u8, String> {
+    let v = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(h) => u8::from_str_radix(h, 16),
+        None => s.parse(),
+    };
+    v.map_err(|_| format!("not a byte value: {s:?}"))
+}
+
+fn show(iface: &str, s: &Setup) {
+    let state = ["error-active", "error-warning", "error-passive", "bus-off"]
+        .get(usize::from(s.state))
+        .unwrap_or(&"?");
+    println!(
+        "{iface}: btr0 {:#04x} btr1 {:#04x} ({} bit/s at {} Hz) ocr {:#04x} cdr {:#04x}",
+        s.btr0,
+        s.btr1,
+        bitrate(s.btr0, s.btr1, s.xtal_hz.max(1)),
+        s.xtal_hz,
+        s.ocr,
+        s.cdr
+    );
+    println!(
+        "{iface}: state {state}, rxerr {}, txerr {}, restarts {}",
+        s.rxerr, s.txerr, s.restarts
+    );
+}
+
+fn run(args: &[String]) -> Result<(), String> {
+    let Some(iface) = args.first() else {
+        return Err(
+            "usage: sja1000config IFACE [bitrate N | btr0 X btr1 Y [ocr X] [cdr X]]".into(),
+        );
+    };
+    let mut s = get(iface).map_err(|e| format!("{iface}: {e}"))?;
+    if args.len() == 1 {
+        show(iface, &s);
+        return Ok(());
+    }
+    let mut it = args[1..].iter();
+    while let Some(k) = it.next() {
+        let v = it.next().ok_or_else(|| format!("{k} needs a value"))?;
+        match k.as_str() {
+            "bitrate" => {
+                let rate: u32 = v.parse().map_err(|_| format!("bad bit rate {v:?}"))?;
+                let (b0, b1) = timing_for(rate, s.xtal_hz).ok_or_else(|| {
+                    format!(
+                        "{rate} bit/s cannot be set exactly with a {} Hz crystal",
+                        s.xtal_hz
+                    )
+                })?;
+                s.btr0 = b0;
+                s.btr1 = b1;
+            }
+            "btr0" => s.btr0 = parse_u8(v)?,
+            "btr1" => s.btr1 = parse_u8(v)?,
+            "ocr" => s.ocr = parse_u8(v)?,
+            "cdr" => s.cdr = parse_u8(v)?,
+            other => return Err(format!("unknown setting {other:?}")),
+        }
+    }
+    let mut b = s.to_bytes();
+    ioctl(iface, SIOCRCANSJA1000SET, &mut b).map_err(|e| format!("{iface}: {e}"))?;
+    show(iface, &get(iface).map_err(|e| format!("{iface}: {e}"))?);
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("sja1000config: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,361 @@
+// SPDX-License-Identifier: GPL-2.0
+//! Minimal `PF_CAN`/`CAN_RAW` sockets through libc, mainline SocketCAN ABI
+//! only (`struct can_frame`, `struct sockaddr_can`, `SOL_CAN_RAW` options),
+//! so that the very same code drives mainline `can-raw.ko` and rcan's
+//! `rcan_raw.ko`.
+//!
+//! Also the other libc calls the benchmark needs (interface index,
+//! `RLIMIT_NOFILE`, CPU affinity). Every `unsafe` block of the benchmark
+//! lives here, each one for a libc call.
+
+use std::ffi::CString;
+use std::io;
+use std::mem;
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+use std::time::Duration;
+
+use libc::{c_int, c_void, socklen_t};
+
+/// Standard (11-bit) identifier mask.
+pub const CAN_SFF_MASK: u32 = 0x0000_07ff;
+/// Extended frame format flag in `can_id`.
+pub const CAN_EFF_FLAG: u32 = 0x8000_0000;
+/// Remote transmission request flag in `can_id`.
+pub const CAN_RTR_FLAG: u32 = 0x4000_0000;
+/// Filter mask for "exactly this 11-bit data frame id": mainline keeps
+/// such filters in a per-identifier table instead of a list.
+pub const EXACT_SFF_MASK: u32 = CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG;
+
+const CAN_RAW: c_int = 1;
+const SOL_CAN_BASE: c_int = 100;
+const SOL_CAN_RAW: c_int = SOL_CAN_BASE + CAN_RAW;
+const CAN_RAW_FILTER: c_int = 1;
+const CAN_RAW_LOOPBACK: c_int = 3;
+/// `sizeof(struct can_frame)`: the only size a classic CAN_RAW socket
+/// reads or writes.
+const CAN_MTU: usize = 16;
+
+/// `struct sockaddr_can` (24 bytes; the protocol-specific union after
+/// `can_ifindex` is 8-byte aligned and unused by CAN_RAW).
+#[repr(C)]
+struct SockaddrCan {
+    can_family: libc::sa_family_t,
+    can_ifindex: c_int,
+    can_addr: [u64; 2],
+}
+
+/// `struct can_filter`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct CanFilter {
+    can_id: u32,
+    can_mask: u32,
+}
+
+/// A classic CAN data frame (`struct can_frame` minus the padding).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Frame {
+    /// `can_id` including the EFF/RTR/ERR flags.
+    pub id: u32,
+    /// Data length, 0..=8.
+    pub len: u8,
+    /// Payload; bytes past `len` are zero.
+    pub data: [u8; 8],
+}
+
+impl Frame {
+    /// An 8-byte data frame with `id` carrying two 32-bit words (little
+    /// endian): the benchmark's sequence number and run tag.
+    pub fn with_words(id: u32, seq: u32, tag: u32) -> Self {
+        let mut data = [0u8; 8];
+        data[..4].copy_from_slice(&seq.to_le_bytes());
+        data[4..].copy_from_slice(&tag.to_le_bytes());
+        Frame { id, len: 8, data }
+    }
+
+    /// The first data word (the sequence number).
+    pub fn seq(&self) -> u32 {
+        u32::from_le_bytes([self.data[0], self.data[1], self.data[2], self.data[3]])
+    }
+
+    /// The second data word (the run tag).
+    pub fn tag(&self) -> u32 {
+        u32::from_le_bytes([self.data[4], self.data[5], self.data[6], self.data[7]])
+    }
+
+    fn encode(&self) -> [u8; CAN_MTU] {
+        let mut buf = [0u8; CAN_MTU];
+        buf[..4].copy_from_slice(&self.id.to_ne_bytes());
+        buf[4] = self.len;
+        buf[8..].copy_from_slice(&self.data);
+        buf
+    }
+
+    fn decode(buf: &[u8; CAN_MTU]) -> Self {
+        let mut data = [0u8; 8];
+        data.copy_from_slice(&buf[8..]);
+        Frame {
+            id: u32::from_ne_bytes([buf[0], buf[1], buf[2], buf[3]]),
+            len: buf[4],
+            data,
+        }
+    }
+}
+
+/// Converts a libc return value (-1 = error in `errno`) into a `Result`.
+fn cvt(ret: isize) -> io::Result<usize> {
+    if ret < 0 {
+        Err(io::Error::last_os_error())
+    } else {
+        Ok(ret as usize)
+    }
+}
+
+/// `if_nametoindex(3)`.
+pub fn ifindex(name: &str) -> io::Result<i32> {
+    let cname = CString::new(name).map_err(|_| io::Error::from(io::ErrorKind::InvalidInput))?;
+    // SAFETY: `cname` is a valid NUL-terminated string that outlives the call.
+    let idx = unsafe { libc::if_nametoindex(cname.as_ptr()) };
+    if idx == 0 {
+        Err(io::Error::last_os_error())
+    } else {
+        Ok(idx as i32)
+    }
+}
+
+/// Raises `RLIMIT_NOFILE` (soft and, if needed, hard) to at least `want`.
+/// Returns the new soft limit.
+pub fn raise_nofile(want: u64) -> io::Result<u64> {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is a valid, writable `struct rlimit`.
+    cvt(unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } as isize)?;
+    if lim.rlim_cur >= want {
+        return Ok(lim.rlim_cur);
+    }
+    lim.rlim_cur = want;
+    lim.rlim_max = lim.rlim_max.max(want);
+    // SAFETY: `lim` is a valid `struct rlimit`; the kernel only reads it.
+    cvt(unsafe { libc::setrlimit(libc::RLIMIT_NOFILE, &lim) } as isize)?;
+    Ok(want)
+}
+
+/// Pins the calling thread to `cpu` (`sched_setaffinity`); threads it
+/// creates afterwards inherit that.
+pub fn pin_current_thread(cpu: usize) -> io::Result<()> {
+    if cpu >= libc::CPU_SETSIZE as usize {
+        return Err(io::Error::from(io::ErrorKind::InvalidInput));
+    }
+    // SAFETY: `cpu_set_t` is a plain bit array, for which all zeroes is a
+    // valid (empty) value.
+    let mut set: libc::cpu_set_t = unsafe { mem::zeroed() };
+    // SAFETY: `set` is a valid `cpu_set_t` and `cpu` is below
+    // `CPU_SETSIZE`, checked above.
+    unsafe { libc::CPU_SET(cpu, &mut set) };
+    // SAFETY: `set` is a valid `cpu_set_t` of the size passed; pid 0 is the
+    // calling thread.
+    let ret = unsafe { libc::sched_setaffinity(0, mem::size_of::<libc::cpu_set_t>(), &set) };
+    cvt(ret as isize).map(drop)
+}
+
+/// A `socket(PF_CAN, SOCK_RAW, CAN_RAW)`.
+pub struct RawSocket {
+    fd: OwnedFd,
+}
+
+impl RawSocket {
+    /// Opens an unbound CAN_RAW socket (blocking).
+    pub fn new() -> io::Result<Self> {
+        // SAFETY: plain system call with constant arguments.
+        let fd =
+            unsafe { libc::socket(libc::PF_CAN, libc::SOCK_RAW | libc::SOCK_CLOEXEC, CAN_RAW) };
+        cvt(fd as isize)?;
+        // SAFETY: `fd` was just returned by socket(2) and is owned by nobody else.
+        Ok(RawSocket {
+            fd: unsafe { OwnedFd::from_raw_fd(fd) },
+        })
+    }
+
+    fn setsockopt_raw(
+        &self,
+        level: c_int,
+        name: c_int,
+        val: *const c_void,
+        len: usize,
+    ) -> io::Result<()> {
+        // SAFETY: `val` points to `len` readable bytes (or `len` is 0) for
+        // the duration of the call; the kernel copies them.
+        let ret =
+            unsafe { libc::setsockopt(self.fd.as_raw_fd(), level, name, val, len as socklen_t) };
+        cvt(ret as isize).map(drop)
+    }
+
+    fn setsockopt<T>(&self, level: c_int, name: c_int, val: &T) -> io::Result<()> {
+        self.setsockopt_raw(level, name, (val as *const T).cast(), mem::size_of::<T>())
+    }
+
+    fn getsockopt_int(&self, level: c_int, name: c_int) -> io::Result<c_int> {
+        let mut val: c_int = 0;
+        let mut len = mem::size_of::<c_int>() as socklen_t;
+        // SAFETY: `val` and `len` are valid and writable; `len` holds the
+        // size of `val`.
+        let ret = unsafe {
+            libc::getsockopt(
+                self.fd.as_raw_fd(),
+                level,
+                name,
+                (&mut val as *mut c_int).cast(),
+                &mut len,
+            )
+        };
+        cvt(ret as isize)?;
+        Ok(val)
+    }
+
+    /// `bind()` to the interface `ifindex` (0: all CAN interfaces).
+    pub fn bind(&self, ifindex: i32) -> io::Result<()> {
+        let addr = SockaddrCan {
+            can_family: libc::AF_CAN as libc::sa_family_t,
+            can_ifindex: ifindex,
+            can_addr: [0; 2],
+        };
+        // SAFETY: `addr` is a complete `struct sockaddr_can` whose size is
+        // passed along; the kernel only reads it.
+        let ret = unsafe {
+            libc::bind(
+                self.fd.as_raw_fd(),
+                (&addr as *const SockaddrCan).cast(),
+                mem::size_of::<SockaddrCan>() as socklen_t,
+            )
+        };
+        cvt(ret as isize).map(drop)
+    }
+
+    /// `CAN_RAW_FILTER` with the given `(can_id, can_mask)` pairs. An empty
+    /// list means "receive nothing" (a pure sender).
+    pub fn set_filters(&self, filters: &[(u32, u32)]) -> io::Result<()> {
+        let f: Vec<CanFilter> = filters
+            .iter()
+            .map(|&(can_id, can_mask)| CanFilter { can_id, can_mask })
+            .collect();
+        self.setsockopt_raw(
+            SOL_CAN_RAW,
+            CAN_RAW_FILTER,
+            f.as_ptr().cast(),
+            mem::size_of_val(f.as_slice()),
+        )
+    }
+
+    /// `CAN_RAW_LOOPBACK` (mainline default: on).
+    pub fn set_loopback(&self, on: bool) -> io::Result<()> {
+        self.setsockopt(SOL_CAN_RAW, CAN_RAW_LOOPBACK, &c_int::from(on))
+    }
+
+    /// Receive buffer of at least `bytes`: `SO_RCVBUFFORCE` (root, ignores
+    /// `rmem_max`), else `SO_RCVBUF`. Returns what the kernel reports.
+    pub fn set_rcvbuf(&self, bytes: usize) -> io::Result<usize> {
+        let val = c_int::try_from(bytes).unwrap_or(c_int::MAX);
+        if self
+            .setsockopt(libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, &val)
+            .is_err()
+        {
+            self.setsockopt(libc::SOL_SOCKET, libc::SO_RCVBUF, &val)?;
+        }
+        Ok(self.getsockopt_int(libc::SOL_SOCKET, libc::SO_RCVBUF)? as usize)
+    }
+
+    /// `SO_RCVTIMEO`: a blocking receive fails with `WouldBlock` after `t`.
+    pub fn set_rcvtimeo(&self, t: Duration) -> io::Result<()> {
+        let tv = libc::timeval {
+            tv_sec: t.as_secs() as libc::time_t,
+            tv_usec: t.subsec_micros() as libc::suseconds_t,
+        };
+        self.setsockopt(libc::SOL_SOCKET, libc::SO_RCVTIMEO, &tv)
+    }
+
+    /// Sends one frame with `send(2)` on the bound interface.
+    pub fn send(&self, frame: &Frame) -> io::Result<()> {
+        let buf = frame.encode();
+        // SAFETY: `buf` is readable for its full length during the call.
+        let n = cvt(unsafe { libc::send(self.fd.as_raw_fd(), buf.as_ptr().cast(), buf.len(), 0) })?;
+        if n != CAN_MTU {
+            return Err(io::Error::other(format!("short send: {n} bytes")));
+        }
+        Ok(())
+    }
+
+    /// Receives one frame; blocking (subject to `SO_RCVTIMEO`) unless
+    /// `dontwait`. No frame: `ErrorKind::WouldBlock`.
+    pub fn recv(&self, dontwait: bool) -> io::Result<Frame> {
+        let mut buf = [0u8; CAN_MTU];
+        let flags = if dontwait { libc::MSG_DONTWAIT } else { 0 };
+        // SAFETY: `buf` is writable for its full length during the call.
+        let n = cvt(unsafe {
+            libc::recv(
+                self.fd.as_raw_fd(),
+                buf.as_mut_ptr().cast(),
+                buf.len(),
+                flags,
+            )
+        })?;
+        if n != CAN_MTU {
+            return Err(io::Error::other(format!(
+                "received {n} bytes, want {CAN_MTU}"
+            )));
+        }
+        Ok(Frame::decode(&buf))
+    }
+
+    /// Reads and discards whatever is queued; returns how many frames.
+    pub fn drain(&self) -> u64 {
+        let mut n = 0;
+        while self.recv(true).is_ok() {
+            n += 1;
+        }
+        n
+    }
+}
+
+/// Sends `frame`, retrying for up to a second while the device queue
+/// pushes back (`ENOBUFS`/`EAGAIN`). Returns how many retries it took.
+pub fn send_retrying(sock: &RawSocket, frame: &Frame) -> io::Result<u64> {
+    let mut retries = 0;
+    loop {
+        match sock.send(frame) {
+            Ok(()) => return Ok(retries),
+            Err(e)
+                if e.raw_os_error() == Some(libc::ENOBUFS)
+                    || e.kind() == io::ErrorKind::WouldBlock =>
+            {
+                retries += 1;
+                if retries > 10_000 {
+                    return Err(e);
+                }
+                std::thread::sleep(Duration::from_micros(100));
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn abi_sizes() {
+        assert_eq!(mem::size_of::<SockaddrCan>(), 24);
+        assert_eq!(mem::size_of::<CanFilter>(), 8);
+    }
+
+    #[test]
+    fn frame_round_trip() {
+        let f = Frame::with_words(0x123, 77, 0xdead_beef);
+        let g = Frame::decode(&f.encode());
+        assert_eq!(f, g);
+        assert_eq!(g.seq(), 77);
+        assert_eq!(g.tag(), 0xdead_beef);
+    }
+}

@@ -1,0 +1,674 @@
+// SPDX-License-Identifier: GPL-2.0
+//! rcan-bench: rcan's CAN_RAW receive path against mainline SocketCAN.
+//!
+//! Run as root inside the test VM (`make bench`, or
+//! `tools/testing/rcan/bench.sh`). In each of `--rounds` rounds it loads
+//! every selected stack in turn (the order alternates between rounds),
+//! brings `can0` up, runs three workloads with the same code (mainline
+//! CAN_RAW ABI only) and removes the stack again:
+//!
+//! - (a) throughput: frames/s from one sender socket to one receiver
+//!   socket, at most `--window` frames in flight, losses counted;
+//! - (b) fan-out: cost per frame with 1, 100 and 1,000 receivers, each
+//!   bound to its own exact 11-bit id, frames sent round-robin over the ids;
+//! - (c) latency: send-to-receive p50/p99/max, one frame in flight.
+//!
+//! Each workload is warmed up, then measured `--reps` times per round. The
+//! summary shows medians over all runs, the ratios ours/mainline and their
+//! range round by round, and the targets met or missed. A missed target is
+//! never an error: the exit status is non-zero only if a stack could not be
+//! set up or a workload could not run. See
+//! `Documentation/networking/rcan/benchmarks.rst`.
+
+mod can;
+mod report;
+mod stack;
+mod workload;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use report::{Fanout, Latency, StackResult, Throughput};
+use stack::{Paths, Stack};
+use workload::median;
+
+const USAGE: &str = "\
+usage: rcan-bench [options]
+  --stack S             mainline, ours or both (default both)
+  --only LIST           workloads to run, comma-separated: a|throughput, b|fanout,
+                        c|latency (default all)
+  --iface NAME          CAN interface (default can0)
+  --no-load             measure the stack already set up on --iface (one --stack
+                        only, used as its label); load and unload nothing
+  --ours-dir DIR        where our modules are: DIR/net/can/rcan_*.ko,
+                        DIR/drivers/net/can/rcan_loop.ko (default: RCAN_ROOT;
+                        a relative DIR is taken from the current directory,
+                        the project root in the VM)
+  --cpu N|any           run the workloads on CPU N (default 0), or anywhere
+  --rx-cpu N            throughput: the receiver thread on CPU N (default: --cpu)
+  --rounds N            rounds (default 5): each loads, measures and unloads every
+                        selected stack in turn; mainline first in odd rounds,
+                        ours first in even ones
+  --reps N              measured runs per figure and round (default 2); the
+                        summary gives the median over all rounds' runs
+  --warmup N            frames per warm-up run (default 2000)
+  --throughput-frames N frames per throughput run (default 100000)
+  --window N            throughput: frames in flight at most (default 256)
+  --fanout-frames N     frames per fan-out run (default 50000)
+  --fanout-receivers L  receiver counts, comma-separated (default 1,100,1000)
+  --batch N             fan-out: frames sent before reading them back (default 64)
+  --latency-frames N    frames per latency run (default 100000)
+  --quick               a tenth of the frames, one run each (smoke test)
+  --summary FILE        also write the summary to FILE
+                        (default $RCAN_OUT/bench-summary.txt if RCAN_OUT is set)
+Environment: RCAN_KBUILD (test kernel build directory: mainline modules),
+RCAN_ROOT (project tree with our modules; default the current directory).";
+
+/// Command line settings.
+struct Config {
+    stacks: Vec<Stack>,
+    iface: String,
+    load: bool,
+    run_a: bool,
+    run_b: bool,
+    run_c: bool,
+    cpu: Option<usize>,
+    rx_cpu: Option<usize>,
+    rounds: usize,
+    reps: usize,
+    warmup: u64,
+    tp_frames: u64,
+    window: u64,
+    fan_frames: u64,
+    fan_counts: Vec<usize>,
+    batch: u64,
+    lat_frames: u64,
+    summary: Option<PathBuf>,
+    paths: Paths,
+}
+
+fn parse_num<T: std::str::FromStr>(opt: &str, v: Option<String>) -> Result<T, String> {
+    let v = v.ok_or(format!("{opt} wants a value"))?;
+    v.replace('_', "")
+        .parse()
+        .map_err(|_| format!("{opt}: bad number '{v}'"))
+}
+
+fn parse_args() -> Result<Config, String> {
+    let env_path = |k: &str| {
+        std::env::var_os(k)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    let mut c = Config {
+        stacks: vec![Stack::Mainline, Stack::Ours],
+        iface: "can0".into(),
+        load: true,
+        run_a: true,
+        run_b: true,
+        run_c: true,
+        cpu: Some(0),
+        rx_cpu: None,
+        rounds: 5,
+        reps: 2,
+        warmup: 2000,
+        tp_frames: 100_000,
+        window: 256,
+        fan_frames: 50_000,
+        fan_counts: vec![1, 100, 1000],
+        batch: 64,
+        lat_frames: 100_000,
+        summary: env_path("RCAN_OUT").map(|d| d.join("bench-summary.txt")),
+        paths: Paths {
+            root: env_path("RCAN_ROOT")
+                .or_else(|| std::env::current_dir().ok())
+                .unwrap_or_else(|| PathBuf::from(".")),
+            kbuild: env_path("RCAN_KBUILD"),
+        },
+    };
+    let mut quick = false;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--stack" => {
+                c.stacks = match args.next().as_deref() {
+                    Some("mainline") => vec![Stack::Mainline],
+                    Some("ours") => vec![Stack::Ours],
+                    Some("both") => vec![Stack::Mainline, Stack::Ours],
+                    other => {
+                        return Err(format!(
+                            "--stack: want mainline, ours or both, got {other:?}"
+                        ))
+                    }
+                }
+            }
+            "--only" => {
+                let v = args.next().ok_or("--only wants a list")?;
+                (c.run_a, c.run_b, c.run_c) = (false, false, false);
+                for w in v.split(',') {
+                    match w.trim() {
+                        "a" | "throughput" => c.run_a = true,
+                        "b" | "fanout" | "fan-out" => c.run_b = true,
+                        "c" | "latency" => c.run_c = true,
+                        other => return Err(format!("--only: unknown workload '{other}'")),
+                    }
+                }
+            }
+            "--iface" => c.iface = args.next().ok_or("--iface wants a name")?,
+            "--no-load" => c.load = false,
+            "--ours-dir" => {
+                c.paths.root = PathBuf::from(args.next().ok_or("--ours-dir wants a directory")?)
+            }
+            "--cpu" => {
+                c.cpu = match args.next().as_deref() {
+                    Some("any") => None,
+                    v => Some(parse_num(&a, v.map(str::to_string))?),
+                }
+            }
+            "--rx-cpu" => c.rx_cpu = Some(parse_num(&a, args.next())?),
+            "--rounds" => c.rounds = parse_num(&a, args.next())?,
+            "--reps" => c.reps = parse_num(&a, args.next())?,
+            "--warmup" => c.warmup = parse_num(&a, args.next())?,
+            "--throughput-frames" => c.tp_frames = parse_num(&a, args.next())?,
+            "--window" => c.window = parse_num(&a, args.next())?,
+            "--fanout-frames" => c.fan_frames = parse_num(&a, args.next())?,
+            "--fanout-receivers" => {
+                let v = args.next().ok_or("--fanout-receivers wants a list")?;
+                c.fan_counts = v
+                    .split(',')
+                    .map(|n| parse_num(&a, Some(n.trim().to_string())))
+                    .collect::<Result<_, _>>()?;
+            }
+            "--batch" => c.batch = parse_num(&a, args.next())?,
+            "--latency-frames" => c.lat_frames = parse_num(&a, args.next())?,
+            "--quick" => quick = true,
+            "--summary" => {
+                c.summary = Some(PathBuf::from(args.next().ok_or("--summary wants a file")?))
+            }
+            "-h" | "--help" => {
+                println!("{USAGE}");
+                std::process::exit(0);
+            }
+            other => return Err(format!("unknown argument '{other}'")),
+        }
+    }
+    if quick {
+        c.rounds = 1;
+        c.reps = 1;
+        c.warmup = (c.warmup / 10).max(100);
+        c.tp_frames = (c.tp_frames / 10).max(100);
+        c.fan_frames = (c.fan_frames / 10).max(100);
+        c.lat_frames = (c.lat_frames / 10).max(100);
+    }
+    if c.rounds == 0 || c.reps == 0 || c.window == 0 || c.batch == 0 || c.fan_counts.contains(&0) {
+        return Err(
+            "--rounds, --reps, --window, --batch and receiver counts must be positive".into(),
+        );
+    }
+    if c.window > u64::from(u32::MAX) || c.tp_frames > u64::from(u32::MAX) {
+        return Err("frame counts must fit in 32 bits".into());
+    }
+    if !c.load && c.stacks.len() != 1 {
+        return Err("--no-load measures one stack: say which with --stack".into());
+    }
+    c.fan_counts.sort_unstable();
+    c.fan_counts.dedup();
+    if c.fan_counts
+        .last()
+        .is_some_and(|&n| n > 0x7ff - workload::FANOUT_BASE_ID as usize)
+    {
+        return Err("too many fan-out receivers for distinct 11-bit ids".into());
+    }
+    Ok(c)
+}
+
+fn median_u64(v: Vec<u64>) -> u64 {
+    median(v.into_iter().map(|x| x as f64).collect()).round() as u64
+}
+
+/// Percentiles of one latency run, in ns.
+#[derive(Clone, Copy, Debug)]
+struct LatencyStats {
+    p50: u64,
+    p99: u64,
+    max: u64,
+    lost: u64,
+    odd: u64,
+}
+
+/// Raw runs of one stack over all rounds (each tagged with its round),
+/// and what stopped working.
+#[derive(Default)]
+struct Samples {
+    tp: Vec<(usize, workload::ThroughputRun)>,
+    fan: Vec<(usize, usize, workload::FanoutRun)>,
+    lat: Vec<(usize, LatencyStats)>,
+    errors: Vec<String>,
+    /// Setup failed: skip the stack in later rounds.
+    broken: bool,
+    /// Workloads that failed: skipped in later rounds.
+    tp_off: bool,
+    fan_off: Vec<usize>,
+    lat_off: bool,
+}
+
+impl Samples {
+    /// Medians over the runs of `round`, or of all rounds.
+    fn result(&self, stack: Stack, round: Option<usize>) -> StackResult {
+        let want = |r: usize| round.is_none_or(|k| k == r);
+        let tp: Vec<_> = self
+            .tp
+            .iter()
+            .filter(|(r, _)| want(*r))
+            .map(|(_, t)| t)
+            .collect();
+        let throughput = (!tp.is_empty()).then(|| Throughput {
+            fps: median(tp.iter().map(|r| r.fps_fast).collect()),
+            fps_run: median(tp.iter().map(|r| r.fps).collect()),
+            lost: tp.iter().map(|r| r.counts.lost).sum(),
+            odd: tp.iter().map(|r| r.counts.odd).sum(),
+            runs: tp.len(),
+        });
+        let fan: Vec<_> = self.fan.iter().filter(|(r, _, _)| want(*r)).collect();
+        let mut counts: Vec<usize> = fan.iter().map(|(_, n, _)| *n).collect();
+        counts.sort_unstable();
+        counts.dedup();
+        let fanout = counts
+            .into_iter()
+            .map(|n| {
+                let runs: Vec<_> = fan
+                    .iter()
+                    .filter(|(_, k, _)| *k == n)
+                    .map(|(_, _, f)| f)
+                    .collect();
+                Fanout {
+                    receivers: n,
+                    ns_per_frame: median(runs.iter().map(|r| r.ns_fast).collect()),
+                    ns_run: median(runs.iter().map(|r| r.ns_per_frame).collect()),
+                    setup_ms: median(runs.iter().map(|r| r.setup.as_secs_f64() * 1e3).collect()),
+                    lost: runs.iter().map(|r| r.counts.lost).sum(),
+                    odd: runs.iter().map(|r| r.counts.odd).sum(),
+                    runs: runs.len(),
+                }
+            })
+            .collect();
+        let lat: Vec<_> = self
+            .lat
+            .iter()
+            .filter(|(r, _)| want(*r))
+            .map(|(_, l)| l)
+            .collect();
+        let latency = (!lat.is_empty()).then(|| Latency {
+            p50: median_u64(lat.iter().map(|l| l.p50).collect()),
+            p99: median_u64(lat.iter().map(|l| l.p99).collect()),
+            max: lat.iter().map(|l| l.max).max().unwrap_or(0),
+            lost: lat.iter().map(|l| l.lost).sum(),
+            odd: lat.iter().map(|l| l.odd).sum(),
+            runs: lat.len(),
+        });
+        StackResult {
+            stack,
+            errors: if round.is_none() {
+                self.errors.clone()
+            } else {
+                Vec::new()
+            },
+            throughput,
+            fanout,
+            latency,
+        }
+    }
+}
+
+/// Workload (a) on `ifindex`: warm-up, then `reps` runs.
+fn bench_throughput(
+    c: &Config,
+    tag: &str,
+    ifindex: i32,
+    round: usize,
+    s: &mut Samples,
+) -> Result<(), String> {
+    let tx = workload::sender(ifindex).map_err(|e| format!("sender socket: {e}"))?;
+    let rx = workload::receiver(ifindex, workload::TP_ID)
+        .map_err(|e| format!("receiver socket: {e}"))?;
+    let w = workload::throughput(&tx, &rx, c.warmup, c.window, c.rx_cpu)
+        .map_err(|e| format!("warm-up: {e}"))?;
+    println!(
+        "{tag} (a) warm-up: {} frames, {:.0} frames/s",
+        w.counts.received, w.fps
+    );
+    for i in 1..=c.reps {
+        let r = workload::throughput(&tx, &rx, c.tp_frames, c.window, c.rx_cpu)
+            .map_err(|e| format!("run {i}: {e}"))?;
+        println!(
+            "{tag} (a) run {i}/{}: {} sent, {} received in {:.3} s = {:.0} frames/s, undisturbed {:.0}; \
+             lost {}, odd {}, send retries {}, stalls {}",
+            c.reps,
+            r.counts.sent,
+            r.counts.received,
+            r.elapsed.as_secs_f64(),
+            r.fps,
+            r.fps_fast,
+            r.counts.lost,
+            r.counts.odd,
+            r.counts.send_retries,
+            r.counts.stalls
+        );
+        s.tp.push((round, r));
+    }
+    Ok(())
+}
+
+/// Workload (b), one run with `n` receivers on `ifindex`: open the sockets,
+/// warm up, measure, close them.
+fn bench_fanout(
+    c: &Config,
+    tag: &str,
+    ifindex: i32,
+    n: usize,
+    run: &str,
+) -> Result<workload::FanoutRun, String> {
+    let tx = workload::sender(ifindex).map_err(|e| format!("sender socket: {e}"))?;
+    let t0 = Instant::now();
+    let rxs = (0..n)
+        .map(|i| workload::receiver(ifindex, workload::FANOUT_BASE_ID + i as u32))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| format!("receiver sockets: {e}"))?;
+    let setup = t0.elapsed();
+    let w = workload::fanout(&tx, &rxs, c.warmup, c.batch).map_err(|e| format!("warm-up: {e}"))?;
+    let mut r = workload::fanout(&tx, &rxs, c.fan_frames, c.batch)
+        .map_err(|e| format!("run {run}: {e}"))?;
+    println!(
+        "{tag} (b) {n} receiver(s), run {run}: {} sent, {} received in {:.3} s = {:.0} ns/frame, undisturbed {:.0}; \
+         lost {}, odd {}, send retries {}, stalls {} (sockets set up in {:.3} s, warm-up {:.0} ns/frame)",
+        r.counts.sent,
+        r.counts.received,
+        r.elapsed.as_secs_f64(),
+        r.ns_per_frame,
+        r.ns_fast,
+        r.counts.lost,
+        r.counts.odd,
+        r.counts.send_retries,
+        r.counts.stalls,
+        setup.as_secs_f64(),
+        w.ns_per_frame
+    );
+    r.setup = setup;
+    Ok(r)
+}
+
+/// Workload (c) on `ifindex`: warm-up, then `reps` runs of `lat_frames`.
+fn bench_latency(
+    c: &Config,
+    tag: &str,
+    ifindex: i32,
+    round: usize,
+    s: &mut Samples,
+) -> Result<(), String> {
+    let tx = workload::sender(ifindex).map_err(|e| format!("sender socket: {e}"))?;
+    let rx = workload::receiver(ifindex, workload::LAT_ID)
+        .map_err(|e| format!("receiver socket: {e}"))?;
+    let w = workload::latency(&tx, &rx, c.warmup).map_err(|e| format!("warm-up: {e}"))?;
+    println!(
+        "{tag} (c) warm-up: p50 {:.1} us",
+        w.percentile(50.0) as f64 / 1e3
+    );
+    for i in 1..=c.reps {
+        let r = workload::latency(&tx, &rx, c.lat_frames).map_err(|e| format!("run {i}: {e}"))?;
+        let us = |p: f64| r.percentile(p) as f64 / 1e3;
+        println!(
+            "{tag} (c) run {i}/{}: {} frames: p50 {:.1} us, p90 {:.1} us, p99 {:.1} us, \
+             p99.9 {:.1} us, max {:.1} us; lost {}, odd {}, stalls {}",
+            c.reps,
+            r.counts.received,
+            us(50.0),
+            us(90.0),
+            us(99.0),
+            us(99.9),
+            us(100.0),
+            r.counts.lost,
+            r.counts.odd,
+            r.counts.stalls
+        );
+        s.lat.push((
+            round,
+            LatencyStats {
+                p50: r.percentile(50.0),
+                p99: r.percentile(99.0),
+                max: r.percentile(100.0),
+                lost: r.counts.lost,
+                odd: r.counts.odd,
+            },
+        ));
+    }
+    Ok(())
+}
+
+/// One round on one stack: load it (unless `--no-load`), run the selected
+/// workloads, remove it again. Failures are recorded in `s` and switch the
+/// failing part off for later rounds.
+fn bench_round(c: &Config, stack: Stack, round: usize, s: &mut Samples) {
+    let tag = if c.rounds > 1 {
+        format!("[{stack} {round}/{}]", c.rounds)
+    } else {
+        format!("[{stack}]")
+    };
+    let fail = |s: &mut Samples, what: String| {
+        println!("{tag} FAILED: {what}");
+        s.errors.push(format!("round {round}: {what}"));
+    };
+    println!("=== {stack} stack, round {round}/{}", c.rounds);
+    if c.load {
+        if let Some(f) = stack::missing_module(stack, &c.paths) {
+            fail(s, format!("module not available: {}", f.display()));
+            s.broken = true;
+            return;
+        }
+        if let Err(e) =
+            stack::unload_all(&c.iface).and_then(|()| stack::load(stack, &c.paths, &c.iface))
+        {
+            fail(s, format!("setup: {e}"));
+            s.broken = true;
+            let _ = stack::unload_all(&c.iface);
+            return;
+        }
+    }
+    let started = Instant::now();
+    match can::ifindex(&c.iface) {
+        Err(e) => {
+            fail(s, format!("{}: {e}", c.iface));
+            s.broken = true;
+        }
+        Ok(ifindex) => {
+            if c.run_a && !s.tp_off {
+                if let Err(e) = bench_throughput(c, &tag, ifindex, round, s) {
+                    fail(s, format!("(a) throughput: {e}"));
+                    s.tp_off = true;
+                }
+            }
+            if c.run_b {
+                // Receiver counts interleaved run by run, so that slow
+                // drifts of the host's load hit all of them alike.
+                for i in 1..=c.reps {
+                    for &n in &c.fan_counts {
+                        if s.fan_off.contains(&n) {
+                            continue;
+                        }
+                        match bench_fanout(c, &tag, ifindex, n, &format!("{i}/{}", c.reps)) {
+                            Ok(r) => s.fan.push((round, n, r)),
+                            Err(e) => {
+                                fail(s, format!("(b) {n} receivers: {e}"));
+                                s.fan_off.push(n);
+                            }
+                        }
+                    }
+                }
+            }
+            if c.run_c && !s.lat_off {
+                if let Err(e) = bench_latency(c, &tag, ifindex, round, s) {
+                    fail(s, format!("(c) latency: {e}"));
+                    s.lat_off = true;
+                }
+            }
+        }
+    }
+    println!(
+        "{tag} workloads took {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+    if c.load {
+        if let Err(e) = stack::unload_all(&c.iface) {
+            fail(s, format!("unload: {e}"));
+            s.broken = true;
+        }
+    }
+}
+
+/// Prints the medians of one stack so far.
+fn print_medians(r: &StackResult) {
+    let tag = format!("[{}]", r.stack);
+    if let Some(t) = r.throughput {
+        println!(
+            "{tag} (a) throughput: median {:.0} frames/s undisturbed, {:.0} whole runs, over {} runs; lost {}",
+            t.fps, t.fps_run, t.runs, t.lost
+        );
+    }
+    for f in &r.fanout {
+        println!(
+            "{tag} (b) {} receiver(s): median {:.0} ns/frame undisturbed, {:.0} whole runs, over {} runs; lost {}",
+            f.receivers, f.ns_per_frame, f.ns_run, f.runs, f.lost
+        );
+    }
+    if let Some((n, x)) = r.fanout_ratio() {
+        println!("{tag} (b) cost per frame, {n} receivers : 1 receiver = {x:.2}");
+    }
+    if let Some(l) = r.latency {
+        println!(
+            "{tag} (c) latency: median p50 {:.1} us, median p99 {:.1} us, max {:.1} us over {} runs; lost {}",
+            l.p50 as f64 / 1e3,
+            l.p99 as f64 / 1e3,
+            l.max as f64 / 1e3,
+            l.runs,
+            l.lost
+        );
+    }
+}
+
+fn cpu_name(cpu: Option<usize>) -> String {
+    cpu.map_or_else(|| "any CPU".to_string(), |n| format!("CPU {n}"))
+}
+
+/// Kernel, CPUs and settings, for the summary's header.
+fn header(c: &Config) -> String {
+    let read = |p: &str| std::fs::read_to_string(p).unwrap_or_default();
+    let cpuinfo = read("/proc/cpuinfo");
+    let model = cpuinfo
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("model name")
+                .and_then(|r| r.split_once(':'))
+                .map(|x| x.1.trim())
+        })
+        .unwrap_or("?");
+    let cpus = std::thread::available_parallelism().map_or(0, |n| n.get());
+    let hv = if cpuinfo.contains(" hypervisor") {
+        ", virtualised"
+    } else {
+        ""
+    };
+    format!(
+        "kernel {} on {cpus} CPU(s) ({model}{hv})\n\
+         workloads on {}; {} round(s) x {} run(s) per figure and stack; medians over all runs\n\
+         (a) {} frames/run, window {}, receiver thread on {}\n\
+         (b) {} frames/run round-robin over the receivers' ids, batch {}\n\
+         (c) {} frames/run, one in flight\n\
+         undisturbed: from the fastest tenth of the {}-frame chunks (a) or {}-frame batches (b) of a run; \
+         whole runs: all frames / all time",
+        read("/proc/sys/kernel/osrelease").trim(),
+        cpu_name(c.cpu),
+        c.rounds,
+        c.reps,
+        c.tp_frames,
+        c.window,
+        cpu_name(c.rx_cpu.or(c.cpu)),
+        c.fan_frames,
+        c.batch,
+        c.lat_frames,
+        workload::CHUNK,
+        c.batch
+    )
+}
+
+fn main() -> ExitCode {
+    let c = match parse_args() {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("rcan-bench: {e}\n{USAGE}");
+            return ExitCode::from(2);
+        }
+    };
+    let hdr = header(&c);
+    println!("rcan-bench: {hdr}");
+    if c.run_b {
+        let want = *c.fan_counts.last().unwrap_or(&1) as u64 + 64;
+        match can::raise_nofile(want) {
+            Ok(n) => println!("rcan-bench: RLIMIT_NOFILE {n}"),
+            Err(e) => println!("rcan-bench: cannot raise RLIMIT_NOFILE to {want}: {e}"),
+        }
+    }
+    if let Some(cpu) = c.cpu {
+        // Threads inherit this, so every workload runs on that CPU.
+        if let Err(e) = can::pin_current_thread(cpu) {
+            eprintln!("rcan-bench: cannot pin to CPU {cpu}: {e}");
+            return ExitCode::from(2);
+        }
+    }
+    let t0 = Instant::now();
+    let mut samples: Vec<(Stack, Samples)> = c
+        .stacks
+        .iter()
+        .map(|&st| (st, Samples::default()))
+        .collect();
+    let results = |samples: &[(Stack, Samples)], round: Option<usize>| -> Vec<StackResult> {
+        samples.iter().map(|(st, s)| s.result(*st, round)).collect()
+    };
+    let summary = |samples: &[(Stack, Samples)]| {
+        let per_round: Vec<_> = (1..=c.rounds).map(|k| results(samples, Some(k))).collect();
+        report::summary(&results(samples, None), &per_round, &hdr)
+    };
+    for round in 1..=c.rounds {
+        // Odd rounds in the given order, even rounds reversed (mainline,
+        // ours, ours, mainline, ...): neither stack always goes first.
+        let mut order: Vec<usize> = (0..samples.len()).collect();
+        if round % 2 == 0 {
+            order.reverse();
+        }
+        for i in order {
+            let (stack, s) = &mut samples[i];
+            if !s.broken {
+                bench_round(&c, *stack, round, s);
+            }
+        }
+        // Written after each round: a later crash keeps the earlier figures.
+        if let Some(p) = &c.summary {
+            if let Err(e) = std::fs::write(p, summary(&samples)) {
+                eprintln!("rcan-bench: {}: {e}", p.display());
+            }
+        }
+    }
+    let all = results(&samples, None);
+    println!();
+    all.iter().for_each(print_medians);
+    println!();
+    print!("{}", summary(&samples));
+    println!("rcan-bench: done in {:.0} s", t0.elapsed().as_secs_f64());
+    if let Some(p) = &c.summary {
+        println!("rcan-bench: summary saved in {}", p.display());
+    }
+    if all.iter().any(|r| !r.errors.is_empty()) {
+        ExitCode::FAILURE
+    } else {
+        ExitCode::SUCCESS
+    }
+}
