@@ -15,5 +15,6 @@ pub mod filter;
 pub mod frame;
 pub mod rxtable;
 pub mod sja1000;
+pub mod sja1000_boards;
 pub mod sockaddr;
 pub mod timesvc;

@@ -174,7 +174,18 @@ impl Regs for Sja1000Model {
             return;
         }
         match r {
-            reg::MOD => self.mode = v,
+            reg::MOD => {
+                let sleeping = !self.in_reset() && self.mode & mode::SM != 0;
+                self.mode = v;
+                // Sleep is refused in reset mode and while an interrupt
+                // is pending; leaving it raises the wake-up interrupt.
+                if v & mode::SM != 0 && (v & mode::RM != 0 || self.irq_pending()) {
+                    self.mode &= !mode::SM;
+                }
+                if sleeping && self.mode & mode::SM == 0 {
+                    self.raise(irq::WUI);
+                }
+            }
             reg::CMR => {
                 if v & cmd::RRB != 0 {
                     self.fifo.pop_front();
