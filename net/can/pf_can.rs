@@ -650,14 +650,25 @@ unsafe extern "C" fn can_rcv(
             None => return bindings::NET_RX_DROP as ffi::c_int,
         }
     };
+    if dispatch(skb, dev) {
+        bindings::NET_RX_SUCCESS as ffi::c_int
+    } else {
+        bindings::NET_RX_DROP as ffi::c_int
+    }
+}
+
+/// Hands a received frame to every receiver that wants it (see
+/// `can_rcv`). BH disabled (NET_RX softirq, or a driver's transmit path for
+/// `rcan_rx_direct`). Returns false if the frame was malformed (dropped).
+fn dispatch(skb: Skb, dev: &NetDev) -> bool {
     let Some(frame) = valid_frame(&skb, dev) else {
         drop(skb); // counted as a drop
-        return bindings::NET_RX_DROP as ffi::c_int;
+        return false;
     };
     let g = RcuReadGuard::new();
     let Some(t) = RX.read(&g) else {
         skb.consume();
-        return bindings::NET_RX_SUCCESS as ffi::c_int;
+        return true;
     };
     let mut pending: Option<&RcvSlot> = None;
     t.view().for_each_match(dev.ifindex(), frame.can_id, |reg| {
@@ -671,7 +682,26 @@ unsafe extern "C" fn can_rcv(
         Some(last) => deliver_last(last, skb),
         None => skb.consume(),
     }
-    bindings::NET_RX_SUCCESS as ffi::c_int
+    true
+}
+
+#[no_mangle]
+extern "C" fn rcan_rx_direct(skb: *mut bindings::sk_buff) -> ffi::c_int {
+    // SAFETY: the caller gives us its reference (rcan_api contract).
+    let Some(mut skb) = (unsafe { Skb::from_raw(skb) }) else {
+        return EINVAL.to_errno();
+    };
+    // SAFETY: the caller is the transmit path of skb->dev, which holds
+    // the device for the call.
+    let Some(dev) = (unsafe { skb.dev() }) else {
+        return ENODEV.to_errno();
+    };
+    skb.stamp_if_unset();
+    if dispatch(skb, dev) {
+        0
+    } else {
+        EINVAL.to_errno()
+    }
 }
 
 /// Calls a receiver with the skb borrowed. Softirq, RCU read side.

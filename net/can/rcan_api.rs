@@ -104,6 +104,14 @@ extern "C" {
         out: *mut crate::rcan_core::rxtable::Filter,
         cap: usize,
     ) -> isize;
+    /// Delivers a frame to the receivers directly, without the network
+    /// core's receive path (for echoing devices with no packet tap: the
+    /// backlog hop, the softirq and the protocol-handler walk are saved).
+    /// `skb->dev` is the receiving device, held by the caller; BH must be
+    /// disabled (a transmit path). Receive callbacks then run inside the
+    /// caller's transmit path, so they must not transmit synchronously on
+    /// that device (none does). Consumes `skb`.
+    pub(crate) fn rcan_rx_direct(skb: *mut bindings::sk_buff) -> ffi::c_int;
     /// Registers a protocol. Process context. EEXIST if the number is
     /// taken, EINVAL if out of range.
     pub(crate) fn rcan_proto_register(cp: *const CanProto) -> ffi::c_int;
@@ -429,3 +437,13 @@ impl<T: crate::glue::sock::Proto> ProtoModule<T> {
 // SAFETY: the C structs are written only in `register` (module init) and
 // afterwards owned by the kernel's registries.
 unsafe impl<T: crate::glue::sock::Proto> Sync for ProtoModule<T> {}
+
+/// Safe wrapper of [`rcan_rx_direct`] for an echoing driver's transmit
+/// path: `skb` (with `skb->dev` set to the transmitting device, which the
+/// transmit path holds) is delivered to the receivers at once. BH is
+/// disabled in every transmit path.
+pub(crate) fn rx_direct(skb: crate::glue::skb::Skb) {
+    // SAFETY: rcan_rx_direct consumes the skb; skb->dev is the device
+    // whose transmit path we are in, held by the core for the call.
+    unsafe { rcan_rx_direct(skb.into_raw()) };
+}

@@ -118,6 +118,13 @@ impl NetDev {
         unsafe { bindings::rcan_dev_stats_err(self.as_ptr(), which as i32) };
     }
 
+    /// Whether a packet socket (tcpdump) taps this device or all devices.
+    pub(crate) fn has_taps(&self) -> bool {
+        // SAFETY: valid device; reads list heads (racy by design, as in
+        // the core's own check).
+        unsafe { bindings::rcan_dev_nit_active(self.as_ptr()) }
+    }
+
     /// IFF_PROMISC: a packet socket wants every frame.
     pub(crate) fn is_promisc(&self) -> bool {
         // SAFETY: valid device; a racy read of flags, rechecked on every

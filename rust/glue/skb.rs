@@ -246,6 +246,13 @@ impl Skb {
         }
     }
 
+    /// Sets the receive timestamp (`__net_timestamp`) unless one is set,
+    /// as the core's receive path does.
+    pub(crate) fn stamp_if_unset(&mut self) {
+        // SAFETY: valid skb we own.
+        unsafe { bindings::rcan_skb_stamp_if_unset(self.as_ptr()) };
+    }
+
     /// Sets `skb->dev` only (`rcan_send` marks the rest).
     ///
     /// The caller holds a reference on `dev` for as long as the skb may use

@@ -107,6 +107,18 @@ void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev)
 	skb->dev = dev;
 }
 
+void rcan_skb_stamp_if_unset(struct sk_buff *skb)
+{
+	if (!skb->tstamp)
+		__net_timestamp(skb);
+}
+
+/* Whether a packet socket taps @dev (or every device). */
+bool rcan_dev_nit_active(struct net_device *dev)
+{
+	return dev_nit_active(dev);
+}
+
 u8 rcan_skb_pkt_type(const struct sk_buff *skb)
 {
 	return skb->pkt_type;

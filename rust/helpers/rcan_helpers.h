@@ -43,6 +43,8 @@ unsigned int rcan_skb_headroom(const struct sk_buff *skb);
 void rcan_skb_reset_headers(struct sk_buff *skb);
 struct net_device *rcan_skb_dev(const struct sk_buff *skb);
 u8 rcan_skb_pkt_type(const struct sk_buff *skb);
+void rcan_skb_stamp_if_unset(struct sk_buff *skb);
+bool rcan_dev_nit_active(struct net_device *dev);
 void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev);
 void rcan_skb_set_can(struct sk_buff *skb, struct net_device *dev, u8 pkt_type);
 struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp);

@@ -22,6 +22,8 @@ use kernel::prelude::*;
 
 #[path = "../../../rust/glue/mod.rs"]
 mod glue;
+#[path = "../../../net/can/rcan_api.rs"]
+mod rcan_api;
 #[path = "../../../net/can/rcan_core.rs"]
 mod rcan_core;
 
@@ -130,7 +132,13 @@ impl Driver for LoopDriver {
         // protocols can tell their own frames).
         let mut skb = skb;
         skb.set_can(dev, bindings::PACKET_LOOPBACK as u8);
-        dev.rx(skb);
+        if dev.has_taps() {
+            // A packet socket wants to see the frame come in: the full
+            // receive path.
+            dev.rx(skb);
+        } else {
+            rcan_api::rx_direct(skb);
+        }
         Xmit::Ok
     }
 }
