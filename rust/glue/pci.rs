@@ -35,8 +35,24 @@ pub(crate) const fn id(vendor: u16, device: u16) -> bindings::pci_device_id {
     }
 }
 
-/// The all-zero entry that ends an id table.
-pub(crate) const ID_END: bindings::pci_device_id = id(0, 0);
+/// The all-zero entry that ends an id table (the PCI core stops at the
+/// first entry whose vendor, subvendor, class mask and override flag are
+/// all zero).
+pub(crate) const ID_END: bindings::pci_device_id = bindings::pci_device_id {
+    vendor: 0,
+    device: 0,
+    subvendor: 0,
+    subdevice: 0,
+    class: 0,
+    class_mask: 0,
+    driver_data: 0,
+    override_only: 0,
+};
+
+/// Whether `e` ends an id table for the PCI core.
+const fn is_end(e: &bindings::pci_device_id) -> bool {
+    e.vendor == 0 && e.subvendor == 0 && e.class_mask == 0 && e.override_only == 0
+}
 
 /// A PCI driver.
 pub(crate) trait Driver: Sized + 'static {
@@ -203,8 +219,11 @@ impl<T: Driver> Registration<T> {
         name: &'static kernel::str::CStr,
         ids: &'static [bindings::pci_device_id],
     ) -> Result {
-        if !matches!(ids.last(), Some(l) if l.vendor == 0) {
-            return Err(code::EINVAL);
+        // Exactly one terminator, at the end: the PCI core walks the
+        // table until it finds one.
+        match ids.split_last() {
+            Some((last, rest)) if is_end(last) && !rest.iter().any(is_end) => {}
+            _ => return Err(code::EINVAL),
         }
         // SAFETY: module init: nothing else references the struct yet.
         unsafe {
