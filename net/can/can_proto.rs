@@ -16,7 +16,7 @@
 //!   `rcan_rx_set`.
 //! * `can_rx` runs in NET_RX softirq under RCU; it only clones (or takes
 //!   over) the skb and queues it on the socket (receive-queue spinlock).
-//! * `SOCKETS` (every open socket, for the netdevice notifier) is protected
+//! * `MODULE.sockets` (every open socket, for the netdevice notifier) is protected
 //!   by RTNL.
 
 use kernel::ffi;
@@ -32,7 +32,7 @@ use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::skb::Skb;
 use glue::sock::{Msg, Sock};
-use glue::sync::{Rtnl, RtnlLocked, RtnlProof};
+use glue::sync::{Rtnl, RtnlProof};
 use kernel::c_str;
 use rcan_api::{ProtoModule, RxFilter, CANPROTO_CAN, RX_FILTER_ARB};
 use rcan_core::arb::{Arb, MAX_DLC};
@@ -65,10 +65,6 @@ static MODULE: ProtoModule<CanProtoOps> = ProtoModule::new(
     can_create,
     can_notifier,
 );
-
-/// Every open socket, so the notifier can find those bound to a vanishing
-/// device. Protected by RTNL.
-static SOCKETS: RtnlLocked<KVec<usize>> = RtnlLocked::new(KVec::new());
 
 type S = Sock<CanProtoOps>;
 
@@ -152,7 +148,7 @@ impl glue::sock::Proto for CanProtoOps {
     fn release(sk: &S) {
         let mut rtnl = Rtnl::lock();
         let me = sk.as_ptr() as usize;
-        glue::kvec_remove_all(SOCKETS.get(&mut rtnl), me);
+        glue::kvec_remove_all(MODULE.sockets.get(&mut rtnl), me);
         let mut s = sk.lock();
         if s.bound.take().is_some() {
             let _ = set_receivers(sk, None);
@@ -319,18 +315,7 @@ unsafe extern "C" fn can_create(
     kern: ffi::c_int,
 ) -> ffi::c_int {
     // SAFETY: called by pf_can's create with the socket layer's arguments.
-    if let Err(e) = unsafe { MODULE.proto.create(net, sock, protocol, kern) } {
-        return e.to_errno();
-    }
-    // SAFETY: create succeeded, so `sock->sk` is our new sock.
-    let sk = unsafe { (*sock).sk } as usize;
-    let mut rtnl = Rtnl::lock();
-    if SOCKETS.get(&mut rtnl).push(sk, GFP_KERNEL).is_err() {
-        // The socket layer calls release on failure, which copes with a
-        // socket missing from the list.
-        return ENOMEM.to_errno();
-    }
-    0
+    unsafe { MODULE.create_socket(net, sock, protocol, kern) }
 }
 
 /// Netdevice notifier: a CAN device is going away. Process context, RTNL
@@ -350,8 +335,8 @@ unsafe extern "C" fn can_notifier(
     }
     let ifindex = dev.ifindex();
     let mut held = Rtnl::assert_held();
-    for &p in SOCKETS.get(&mut held).iter() {
-        // SAFETY: sockets are in SOCKETS from create until release, which
+    for &p in MODULE.sockets.get(&mut held).iter() {
+        // SAFETY: sockets are listed from create until release, which
         // removes them under RTNL (held here), so `p` is alive.
         let sk = unsafe { S::from_raw(p as *mut bindings::sock) };
         let mut s = sk.lock();
@@ -378,8 +363,5 @@ impl kernel::Module for CanProtoModule {
 impl Drop for CanProtoModule {
     fn drop(&mut self) {
         MODULE.unregister();
-        // Statics are never dropped: free the (empty) list's buffer.
-        let mut rtnl = Rtnl::lock();
-        *SOCKETS.get(&mut rtnl) = KVec::new();
     }
 }

@@ -710,11 +710,11 @@ fn deliver_borrowed(slot: &RcvSlot, skb: &Skb) {
     if owner.is_null() {
         return;
     }
-    // SAFETY: the slot is in the published table, so its record (and the
-    // sock reference it holds, and the receiver's module through the sock;
-    // or a kernel receiver's data, whose removal waits for a grace period)
-    // lives until after our RCU read-side section; the skb is valid and
-    // borrowed for the call (RxFn contract, owned = false).
+    // The slot is in the published table, so its record (and the sock
+    // reference it holds, and the receiver's module through the sock; or a
+    // kernel receiver's data, whose removal waits for a grace period) lives
+    // until after our RCU read-side section.
+    // SAFETY: live receiver (above); valid skb, borrowed (owned = false).
     unsafe { (slot.func)(skb.as_ptr(), owner, slot.cookie, false) };
 }
 

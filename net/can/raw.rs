@@ -25,7 +25,8 @@
 //! * `raw_rx`, the receive callback, runs in NET_RX softirq under RCU. It
 //!   reads only its arguments (the socket's receive options travel in the
 //!   registration's `cookie`), never the socket lock.
-//! * `SOCKETS`, every open socket (for the notifier), is protected by RTNL.
+//! * `MODULE.sockets`, every open socket (for the notifier), is protected by
+//!   RTNL.
 
 use core::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use kernel::ffi;
@@ -41,7 +42,7 @@ use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::skb::Skb;
 use glue::sock::{Msg, OptIn, OptOut, Sock};
-use glue::sync::{Rtnl, RtnlLocked};
+use glue::sync::Rtnl;
 use kernel::c_str;
 use rcan_api::{ProtoModule, RxFilter, CAN_RAW, RX_FILTER_CAN_ID};
 use rcan_core::frame::CAN_FRAME_LEN;
@@ -159,10 +160,6 @@ static MODULE: ProtoModule<RawProto> = ProtoModule::new(
     raw_create,
     raw_notifier,
 );
-
-/// Every open socket, so the notifier can find those bound to a device.
-/// Protected by RTNL.
-static SOCKETS: RtnlLocked<KVec<usize>> = RtnlLocked::new(KVec::new());
 
 type S = Sock<RawProto>;
 
@@ -338,7 +335,7 @@ impl glue::sock::Proto for RawProto {
 
     fn release(sk: &S) {
         let mut rtnl = Rtnl::lock();
-        glue::kvec_remove_all(SOCKETS.get(&mut rtnl), sk.as_ptr() as usize);
+        glue::kvec_remove_all(MODULE.sockets.get(&mut rtnl), sk.as_ptr() as usize);
         let mut s = sk.lock();
         if s.bound {
             unregister(sk);
@@ -581,18 +578,7 @@ unsafe extern "C" fn raw_create(
     kern: ffi::c_int,
 ) -> ffi::c_int {
     // SAFETY: called by pf_can's create with the socket layer's arguments.
-    if let Err(e) = unsafe { MODULE.proto.create(net, sock, protocol, kern) } {
-        return e.to_errno();
-    }
-    // SAFETY: create succeeded, so `sock->sk` is our new sock.
-    let sk = unsafe { (*sock).sk } as usize;
-    let mut rtnl = Rtnl::lock();
-    if SOCKETS.get(&mut rtnl).push(sk, GFP_KERNEL).is_err() {
-        // The socket layer calls release on failure, which copes with a
-        // socket missing from the list.
-        return ENOMEM.to_errno();
-    }
-    0
+    unsafe { MODULE.create_socket(net, sock, protocol, kern) }
 }
 
 /// Netdevice notifier (mainline `raw_notify`). Process context, RTNL held.
@@ -615,8 +601,8 @@ unsafe extern "C" fn raw_notifier(
     }
     let ifindex = dev.ifindex();
     let mut held = Rtnl::assert_held();
-    for &p in SOCKETS.get(&mut held).iter() {
-        // SAFETY: sockets are in SOCKETS from create until release, which
+    for &p in MODULE.sockets.get(&mut held).iter() {
+        // SAFETY: sockets are listed from create until release, which
         // removes them under RTNL (held here), so `p` is alive.
         let sk = unsafe { S::from_raw(p as *mut bindings::sock) };
         let mut s = sk.lock();
@@ -654,8 +640,5 @@ impl kernel::Module for RawModule {
 impl Drop for RawModule {
     fn drop(&mut self) {
         MODULE.unregister();
-        // Statics are never dropped: free the (empty) list's buffer.
-        let mut rtnl = Rtnl::lock();
-        *SOCKETS.get(&mut rtnl) = KVec::new();
     }
 }

@@ -276,11 +276,12 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
         filters: filters.as_ptr(),
         nfilters: filters.len(),
     };
-    // SAFETY: `spec` and the filters live for the call. `rx` is 'static:
-    // a static of the calling module, which keeps the guard in its module
-    // object, so the registration is removed at module exit at the latest.
-    let ret =
-        unsafe { rcan_rx_set_kernel(kernel_rx::<T>, rx as *const T as *mut ffi::c_void, 0, &spec) };
+    // `rx` is 'static: a static of the calling module, which keeps the
+    // guard in its module object, so the registration is removed at module
+    // exit at the latest.
+    let data = rx as *const T as *mut ffi::c_void;
+    // SAFETY: `spec` and its filters live for the call; `data` is 'static.
+    let ret = unsafe { rcan_rx_set_kernel(kernel_rx::<T>, data, 0, &spec) };
     crate::glue::to_result(ret).map(|_| KernelRxReg(rx))
 }
 
@@ -362,8 +363,12 @@ pub(crate) type NotifierFn = unsafe extern "C" fn(
 /// and its netdevice notifier. [`ProtoModule::register`] in module init,
 /// [`ProtoModule::unregister`] in module exit.
 pub(crate) struct ProtoModule<T: crate::glue::sock::Proto> {
-    /// The sock allocator; `create` trampolines call its `create`.
+    /// The sock allocator, used by [`ProtoModule::create_socket`].
     pub(crate) proto: crate::glue::sock::ProtoReg<T>,
+    /// Every open socket (as `*mut sock` addresses), for the netdevice
+    /// notifier. Protected by RTNL; a socket is listed from
+    /// `create_socket` until its `release` removes it.
+    pub(crate) sockets: crate::glue::sync::RtnlLocked<kernel::alloc::KVec<usize>>,
     canproto: crate::glue::sync::CCell<CanProto>,
     notifier: crate::glue::sync::CCell<bindings::notifier_block>,
 }
@@ -384,6 +389,7 @@ impl<T: crate::glue::sock::Proto> ProtoModule<T> {
     ) -> Self {
         ProtoModule {
             proto: crate::glue::sock::ProtoReg::new(),
+            sockets: crate::glue::sync::RtnlLocked::new(kernel::alloc::KVec::new()),
             canproto: crate::glue::sync::CCell::new(CanProto {
                 protocol,
                 type_,
@@ -421,6 +427,39 @@ impl<T: crate::glue::sock::Proto> ProtoModule<T> {
         Ok(())
     }
 
+    /// `CanProto.create` of the protocol: allocates the sock and lists it
+    /// in `sockets`. Process context.
+    ///
+    /// # Safety
+    ///
+    /// The arguments are those of pf_can's `create` call (socket layer).
+    pub(crate) unsafe fn create_socket(
+        &self,
+        net: *mut bindings::net,
+        sock: *mut bindings::socket,
+        protocol: ffi::c_int,
+        kern: ffi::c_int,
+    ) -> ffi::c_int {
+        // SAFETY: the socket layer's arguments (this function's contract).
+        if let Err(e) = unsafe { self.proto.create(net, sock, protocol, kern) } {
+            return e.to_errno();
+        }
+        // SAFETY: create succeeded, so `sock->sk` is our new sock.
+        let sk = unsafe { (*sock).sk } as usize;
+        let mut rtnl = crate::glue::sync::Rtnl::lock();
+        if self
+            .sockets
+            .get(&mut rtnl)
+            .push(sk, kernel::alloc::flags::GFP_KERNEL)
+            .is_err()
+        {
+            // The socket layer calls release on failure, which copes with
+            // a socket missing from the list.
+            return kernel::error::code::ENOMEM.to_errno();
+        }
+        0
+    }
+
     /// Undoes `register`. Module exit only: every socket holds a reference
     /// on the module, so none is left.
     pub(crate) fn unregister(&self) {
@@ -431,6 +470,9 @@ impl<T: crate::glue::sock::Proto> ProtoModule<T> {
             bindings::unregister_netdevice_notifier(self.notifier.get());
         }
         self.proto.unregister();
+        // Statics are never dropped: free the (empty) list's buffer.
+        let mut rtnl = crate::glue::sync::Rtnl::lock();
+        *self.sockets.get(&mut rtnl) = kernel::alloc::KVec::new();
     }
 }
 

@@ -141,11 +141,12 @@ impl<H: HrTimerCallback> HrTimer<H> {
         {
             return Err(code::EBUSY);
         }
-        // SAFETY: we own the INITIALISING phase, so nobody else touches the
-        // timer or the state: `start` is a no-op and no callback can run
-        // before READY. hrtimer_init fully initialises the C struct;
-        // `function` is set before the timer can be started. The timer is a
-        // 'static, so the callback's pointer stays valid.
+        // We own the INITIALISING phase, so nobody else touches the timer
+        // or the state: `start` is a no-op and no callback can run before
+        // READY. hrtimer_init fully initialises the C struct; `function` is
+        // set before the timer can be started. The timer is a 'static, so
+        // the callback's pointer stays valid.
+        // SAFETY: exclusive access during INITIALISING (above).
         unsafe {
             (*self.state.get()).write(state);
             bindings::hrtimer_init(self.timer.get(), clock.raw(), mode.raw());
@@ -171,10 +172,11 @@ impl<H: HrTimerCallback> HrTimer<H> {
             return;
         }
         self.armed.store(expires, Ordering::Relaxed);
-        // SAFETY: READY, so the timer is initialised (type invariant) with
-        // the mode passed here, as hrtimer_start_range_ns requires (the
-        // soft bit must match). The core serialises concurrent starts and
-        // cancels with the timer base lock.
+        // READY, so the timer is initialised (type invariant) with the mode
+        // passed here, as hrtimer_start_range_ns requires (the soft bit must
+        // match). The core serialises concurrent starts and cancels with the
+        // timer base lock.
+        // SAFETY: initialised timer, matching mode (above).
         unsafe {
             bindings::hrtimer_start_range_ns(
                 self.timer.get(),
@@ -221,10 +223,10 @@ unsafe extern "C" fn run<H: HrTimerCallback>(
     // SAFETY: `init` installs `run::<H>` only on `HrTimer<H>`s, which are
     // 'static (init takes `&'static self`); shared access is all we need.
     let this: &'static HrTimer<H> = unsafe { &*this };
-    // SAFETY: the timer fired, so it was started, so it is READY: the
-    // state is initialised; callbacks of one timer never overlap and
-    // nothing else uses the state (type invariant), so this is the only
-    // reference to it.
+    // The timer fired, so it was started, so it is READY: the state is
+    // initialised; callbacks of one timer never overlap and nothing else
+    // uses the state (type invariant).
+    // SAFETY: initialised state, and this is its only reference (above).
     let state = unsafe { (*this.state.get()).assume_init_mut() };
     H::run(this, state);
     bindings::hrtimer_restart_HRTIMER_NORESTART

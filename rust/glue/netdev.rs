@@ -301,10 +301,11 @@ impl<T: Driver> Dev<T> {
         if st.irq.load(Ordering::Acquire) != 0 {
             return Err(code::EBUSY);
         }
-        // SAFETY: the handler gets this device as its cookie; the device
-        // outlives the registration (freed in free_irq, called by `stop`
-        // or by Registration's Drop before free_netdev). The name is the
-        // device name, which lives in the device.
+        // The handler gets this device as its cookie; the device outlives
+        // the registration (freed in free_irq, called by `stop` or by
+        // Registration's Drop before free_netdev). The name is the device
+        // name, which lives in the device.
+        // SAFETY: cookie and name outlive the registration (above).
         let ret = unsafe {
             bindings::request_threaded_irq(
                 irq,
