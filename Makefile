@@ -12,7 +12,8 @@ T := tools/testing/rcan
 KDIR ?= $(shell bash $(T)/build-kernel.sh)
 RCAN_CONFIG := CONFIG_RCAN=m CONFIG_RCAN_PF=m CONFIG_RCAN_PROTO_CAN=m CONFIG_RCAN_PROTO_RAW=m \
 	CONFIG_RCAN_LOOP=m CONFIG_RCAN_SJA1000=m CONFIG_RCAN_KVASER_PCI=m CONFIG_RCAN_ADVANTECH_PCI=m \
-	CONFIG_RCAN_DSOR_TIME=m CONFIG_RCAN_DSOR_RTIME=m
+	CONFIG_RCAN_DSOR_TIME=m CONFIG_RCAN_DSOR_RTIME=m \
+	CONFIG_RCAN_PROTO_DSOR=m CONFIG_RCAN_DSOR_NODE_ID=0x00
 BINDINGS := rust/bindings/bindings_generated.rs
 
 .PHONY: all setup kernel modules bindings userspace demo check bench clean

@@ -9,6 +9,8 @@
 pub(crate) mod arb;
 #[path = "core/src/canloop.rs"]
 pub(crate) mod canloop;
+#[path = "core/src/dsor_addr.rs"]
+pub(crate) mod dsor_addr;
 #[path = "core/src/filter.rs"]
 pub(crate) mod filter;
 #[path = "core/src/frame.rs"]

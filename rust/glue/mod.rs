@@ -66,6 +66,12 @@ pub(crate) fn random_u32() -> u32 {
     unsafe { bindings::rcan_get_random_u32() }
 }
 
+/// The jiffies counter. Any context.
+pub(crate) fn jiffies() -> u64 {
+    // SAFETY: reads the global tick counter.
+    unsafe { bindings::rcan_jiffies() as u64 }
+}
+
 /// Converts a negative C return value into an [`Error`].
 pub(crate) fn to_result(ret: i32) -> kernel::error::Result<i32> {
     if ret < 0 {
@@ -99,6 +105,9 @@ pub(crate) mod neterr {
     }
 
     net_errors!(
+        EADDRINUSE,
+        EADDRNOTAVAIL,
+        ECONNREFUSED,
         EAFNOSUPPORT,
         EDESTADDRREQ,
         EMSGSIZE,
@@ -109,6 +118,7 @@ pub(crate) mod neterr {
         EOPNOTSUPP,
         EPROTONOSUPPORT,
         EPROTOTYPE,
+        ETIMEDOUT,
     );
 }
 

@@ -253,6 +253,51 @@ impl Skb {
         unsafe { bindings::rcan_skb_stamp_if_unset(self.as_ptr()) };
     }
 
+    /// The linear data, writable.
+    pub(crate) fn data_mut(&mut self) -> &mut [u8] {
+        // SAFETY: we own a reference; the head holds `len - data_len`
+        // initialised bytes from `data`. A shared skb must not be written:
+        // callers only write skbs they allocated and have not shared.
+        unsafe {
+            let skb = &*self.as_ptr();
+            let head_len = (skb.len - skb.data_len) as usize;
+            if head_len == 0 {
+                return &mut [];
+            }
+            core::slice::from_raw_parts_mut(skb.data, head_len)
+        }
+    }
+
+    /// Appends `len` zero bytes (`skb_put_zero`); false if the skb is not
+    /// linear or has too little tailroom.
+    pub(crate) fn put_zeroed(&mut self, len: u32) -> bool {
+        // SAFETY: we own the skb; the helper checks the room.
+        unsafe { bindings::rcan_skb_put_zero(self.as_ptr(), len) }
+    }
+
+    /// Prepends `len` bytes (`skb_push`) and returns them; `None` if the
+    /// headroom is too small.
+    pub(crate) fn push(&mut self, len: u32) -> Option<&mut [u8]> {
+        // SAFETY: we own the skb; the helper checks the headroom, and the
+        // returned area is `len` bytes inside the head.
+        unsafe {
+            let p = bindings::rcan_skb_push(self.as_ptr(), len) as *mut u8;
+            if p.is_null() {
+                None
+            } else {
+                Some(core::slice::from_raw_parts_mut(p, len as usize))
+            }
+        }
+    }
+
+    /// Marks the skb, which starts with an IPv4 header followed by a
+    /// transport header, as an IPv4 packet received on `dev` with a
+    /// verified checksum.
+    pub(crate) fn set_ipv4_rx(&mut self, dev: &super::netdev::NetDev) {
+        // SAFETY: we own the skb; `dev` is a valid device the caller holds.
+        unsafe { bindings::rcan_skb_set_ipv4_rx(self.as_ptr(), dev.as_ptr()) };
+    }
+
     /// Sets `skb->dev` only (`rcan_send` marks the rest).
     ///
     /// The caller holds a reference on `dev` for as long as the skb may use

@@ -155,6 +155,23 @@ impl<T: Proto> Sock<T> {
         unsafe { &(*self.sk.cast::<ObjOf<T>>()).shared }
     }
 
+    /// A counted reference to this sock (`sock_hold`).
+    pub(crate) fn to_ref(&self) -> SockRef<T> {
+        // SAFETY: live sock (type invariant); SockRef drops the reference.
+        unsafe { bindings::rcan_sock_hold(self.sk) };
+        SockRef {
+            sk: self.sk,
+            _t: PhantomData,
+        }
+    }
+
+    /// The send timeout in jiffies (`sock_sndtimeo`): 0 if `nonblock`,
+    /// else SO_SNDTIMEO (`MAX_SCHEDULE_TIMEOUT` when unset).
+    pub(crate) fn sndtimeo(&self, nonblock: bool) -> i64 {
+        // SAFETY: live sock.
+        unsafe { bindings::rcan_sock_sndtimeo(self.sk, nonblock) as i64 }
+    }
+
     /// Takes the socket lock (`lock_sock`). Process context; sleeps.
     pub(crate) fn lock(&self) -> SockGuard<'_, T> {
         // SAFETY: live sock (type invariant); released in the guard's Drop.
@@ -229,6 +246,38 @@ impl<T: Proto> Sock<T> {
         // SAFETY: live sock and a valid msghdr of the current recvmsg.
         let ret = unsafe { bindings::sock_recv_errqueue(self.sk, msg.0, len as i32, level, type_) };
         super::to_result(ret).map(|n| n as usize)
+    }
+}
+
+/// A counted reference to a sock of protocol `T` (`sock_hold`); dropping
+/// it is `sock_put` (any context).
+///
+/// # Invariants
+///
+/// Holds one reference on a sock created by [`create`] for `T`.
+pub(crate) struct SockRef<T: Proto> {
+    sk: *mut bindings::sock,
+    _t: PhantomData<T>,
+}
+
+// SAFETY: sock references may be dropped from any thread and context.
+unsafe impl<T: Proto> Send for SockRef<T> {}
+
+impl<T: Proto> SockRef<T> {
+    /// The sock, borrowed for as long as this reference lives.
+    pub(crate) fn sock(&self) -> Sock<T> {
+        // INVARIANT: our reference keeps the sock alive while `self` does.
+        Sock {
+            sk: self.sk,
+            _t: PhantomData,
+        }
+    }
+}
+
+impl<T: Proto> Drop for SockRef<T> {
+    fn drop(&mut self) {
+        // SAFETY: we own one reference (type invariant).
+        unsafe { bindings::rcan_sock_put(self.sk) };
     }
 }
 

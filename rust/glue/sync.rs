@@ -16,6 +16,7 @@ use core::cell::UnsafeCell;
 use core::marker::PhantomData;
 use core::ops::{Deref, DerefMut};
 use core::sync::atomic::{AtomicPtr, Ordering};
+use kernel::ffi;
 
 /// An RCU read-side critical section; ends when dropped. Not `Send`: it must
 /// end on the CPU and in the context that started it.
@@ -315,5 +316,128 @@ impl<T> Drop for IrqSpinGuard<'_, T> {
         // SAFETY: locked in IrqSpinLock::lock with these flags, on this CPU
         // (the guard is not Send).
         unsafe { bindings::rcan_spin_unlock_irqrestore(self.l.lock.as_ptr(), self.flags) };
+    }
+}
+
+/// Data protected by a spinlock defined in C with `DEFINE_SPINLOCK`, taken
+/// with bottom halves disabled (`spin_lock_bh`): for state shared between
+/// process context and softirqs (receive path, soft hrtimers), never with a
+/// hardirq handler. Usable in process and softirq context, and in a
+/// transmit path (BH already disabled); never sleep while holding it.
+pub(crate) struct BhSpinLock<T> {
+    lock: fn() -> *mut bindings::spinlock_t,
+    data: UnsafeCell<T>,
+}
+
+// SAFETY: `data` is only reached through a guard holding the lock.
+unsafe impl<T: Send> Sync for BhSpinLock<T> {}
+
+impl<T> BhSpinLock<T> {
+    /// `lock` returns the address of the C spinlock.
+    pub(crate) const fn new(lock: fn() -> *mut bindings::spinlock_t, data: T) -> Self {
+        BhSpinLock {
+            lock,
+            data: UnsafeCell::new(data),
+        }
+    }
+
+    /// Takes the lock with bottom halves disabled.
+    pub(crate) fn lock(&self) -> BhSpinGuard<'_, T> {
+        // SAFETY: the pointer is a statically defined, initialised spinlock.
+        unsafe { bindings::rcan_spin_lock_bh((self.lock)()) };
+        BhSpinGuard {
+            l: self,
+            _not_send: PhantomData,
+        }
+    }
+}
+
+/// A held [`BhSpinLock`].
+pub(crate) struct BhSpinGuard<'a, T> {
+    l: &'a BhSpinLock<T>,
+    _not_send: PhantomData<*mut ()>,
+}
+
+impl<T> Deref for BhSpinGuard<'_, T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        // SAFETY: the lock is held while the guard lives.
+        unsafe { &*self.l.data.get() }
+    }
+}
+
+impl<T> DerefMut for BhSpinGuard<'_, T> {
+    fn deref_mut(&mut self) -> &mut T {
+        // SAFETY: the lock is held while the guard lives, exclusively.
+        unsafe { &mut *self.l.data.get() }
+    }
+}
+
+impl<T> Drop for BhSpinGuard<'_, T> {
+    fn drop(&mut self) {
+        // SAFETY: locked in BhSpinLock::lock on this CPU (not Send).
+        unsafe { bindings::rcan_spin_unlock_bh((self.l.lock)()) };
+    }
+}
+
+/// How [`CWaitQueue::wait`] ended.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Waited {
+    /// The condition became true.
+    Ready,
+    /// The timeout passed first.
+    TimedOut,
+    /// A signal arrived first.
+    Interrupted,
+}
+
+/// A wait queue defined in C with `DECLARE_WAIT_QUEUE_HEAD`.
+pub(crate) struct CWaitQueue {
+    wq: fn() -> *mut bindings::wait_queue_head,
+}
+
+struct WaitCond<'a> {
+    f: &'a dyn Fn() -> bool,
+}
+
+unsafe extern "C" fn wait_cond(arg: *mut ffi::c_void) -> bool {
+    // SAFETY: `arg` is the `WaitCond` that `CWaitQueue::wait` passes, alive
+    // for the whole wait.
+    let c = unsafe { &*arg.cast::<WaitCond<'_>>() };
+    (c.f)()
+}
+
+impl CWaitQueue {
+    /// `wq` returns the address of the C wait queue head.
+    pub(crate) const fn new(wq: fn() -> *mut bindings::wait_queue_head) -> Self {
+        CWaitQueue { wq }
+    }
+
+    /// Sleeps (interruptibly) until `cond` is true, for at most `timeo`
+    /// jiffies (`MAX_SCHEDULE_TIMEOUT`: forever). `cond` is evaluated in
+    /// process context, possibly several times; it may take spinlocks but
+    /// must not sleep. Process context.
+    pub(crate) fn wait(&self, timeo: i64, cond: &dyn Fn() -> bool) -> Waited {
+        let c = WaitCond { f: cond };
+        let arg = &c as *const WaitCond<'_> as *mut ffi::c_void;
+        // SAFETY: a static, initialised wait queue; `arg` outlives the call.
+        let ret = unsafe { bindings::rcan_wait_event_timeout((self.wq)(), Some(wait_cond), arg, timeo as _) };
+        if ret > 0 {
+            Waited::Ready
+        } else if ret == 0 {
+            if cond() {
+                Waited::Ready
+            } else {
+                Waited::TimedOut
+            }
+        } else {
+            Waited::Interrupted
+        }
+    }
+
+    /// Wakes every waiter (they re-check their conditions). Any context.
+    pub(crate) fn wake_all(&self) {
+        // SAFETY: a static, initialised wait queue.
+        unsafe { bindings::rcan_wake_up_all((self.wq)()) };
     }
 }

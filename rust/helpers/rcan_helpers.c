@@ -8,6 +8,7 @@
 #include <linux/capability.h>
 #include <linux/can/skb.h>
 #include <linux/if_arp.h>
+#include <linux/ip.h>
 #include <linux/module.h>
 #include <linux/mutex.h>
 #include <linux/netdevice.h>
@@ -20,6 +21,7 @@
 #include <linux/skbuff.h>
 #include <linux/sockptr.h>
 #include <linux/uaccess.h>
+#include <linux/wait.h>
 #include <net/sock.h>
 
 #include "rcan_helpers.h"
@@ -446,4 +448,61 @@ void rcan_dev_stats_err(struct net_device *dev, int which)
 		DEV_STATS_INC(dev, tx_errors);
 		break;
 	}
+}
+
+void rcan_spin_lock_bh(spinlock_t *lock)
+{
+	spin_lock_bh(lock);
+}
+
+void rcan_spin_unlock_bh(spinlock_t *lock)
+{
+	spin_unlock_bh(lock);
+}
+
+long rcan_wait_event_timeout(struct wait_queue_head *wq,
+			     bool (*cond)(void *arg), void *arg, long timeo)
+{
+	return wait_event_interruptible_timeout(*wq, cond(arg), timeo);
+}
+
+void rcan_wake_up_all(struct wait_queue_head *wq)
+{
+	wake_up_all(wq);
+}
+
+long rcan_sock_sndtimeo(const struct sock *sk, bool nonblock)
+{
+	return sock_sndtimeo(sk, nonblock);
+}
+
+bool rcan_skb_put_zero(struct sk_buff *skb, unsigned int len)
+{
+	if (skb_is_nonlinear(skb) || skb_tailroom(skb) < len)
+		return false;
+	skb_put_zero(skb, len);
+	return true;
+}
+
+void *rcan_skb_push(struct sk_buff *skb, unsigned int len)
+{
+	if (skb_headroom(skb) < len)
+		return NULL;
+	return skb_push(skb, len);
+}
+
+void rcan_skb_set_ipv4_rx(struct sk_buff *skb, struct net_device *dev)
+{
+	skb->dev = dev;
+	skb->protocol = htons(ETH_P_IP);
+	skb->pkt_type = PACKET_HOST;
+	skb->ip_summed = CHECKSUM_UNNECESSARY;
+	skb_reset_network_header(skb);
+	skb_set_transport_header(skb, sizeof(struct iphdr));
+	skb_reset_mac_header(skb);
+}
+
+unsigned long rcan_jiffies(void)
+{
+	return jiffies;
 }

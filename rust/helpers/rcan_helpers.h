@@ -126,3 +126,20 @@ void rcan_module_put(struct module *mod);
 u32 rcan_get_random_u32(void);
 
 #endif /* _RCAN_HELPERS_H */
+
+/* bottom-half spinlocks defined in C (DEFINE_SPINLOCK) */
+void rcan_spin_lock_bh(spinlock_t *lock);
+void rcan_spin_unlock_bh(spinlock_t *lock);
+
+/* wait queues defined in C (DECLARE_WAIT_QUEUE_HEAD) */
+struct wait_queue_head;
+long rcan_wait_event_timeout(struct wait_queue_head *wq,
+			     bool (*cond)(void *arg), void *arg, long timeo);
+void rcan_wake_up_all(struct wait_queue_head *wq);
+long rcan_sock_sndtimeo(const struct sock *sk, bool nonblock);
+
+/* skb data and IPv4 delivery */
+bool rcan_skb_put_zero(struct sk_buff *skb, unsigned int len);
+void *rcan_skb_push(struct sk_buff *skb, unsigned int len);
+void rcan_skb_set_ipv4_rx(struct sk_buff *skb, struct net_device *dev);
+unsigned long rcan_jiffies(void);

@@ -1,0 +1,182 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! `canip0`: UDP/IP over DSOR (thesis 5.3.3, `dsor/udpip.c`).
+//!
+//! A virtual device (ARPHRD_VOID, IFF_POINTOPOINT, IFF_NOARP, no link
+//! header). IPv4 UDP datagrams routed to it become DSOR UDP/IP messages
+//! (header: length, destination port, destination address) to node
+//! `daddr & 0x7f`; everything else is dropped and counted (`tx_dropped`).
+//! Received UDP/IP messages get rebuilt IPv4 and UDP headers (source
+//! address: parameter `udp_saddr`, source port 0, correct checksums) and
+//! go up the IP stack through `netif_rx`.
+//!
+//! Contexts: `start_xmit` runs with BH disabled (qdisc or direct
+//! transmit) and only starts a transfer under the engine lock;
+//! [`deliver`] runs under the engine lock in the receive path.
+//! [`DEV`] is the registered device: set after registration, cleared
+//! before unregistration, read under the engine lock or in the device's
+//! own callbacks.
+
+use core::sync::atomic::{AtomicPtr, AtomicU16, Ordering};
+use kernel::alloc::KVec;
+use kernel::prelude::*;
+
+use super::glue::bindings;
+use super::glue::netdev::{Dev, Driver, NetDev, Registration, Setup, Xmit};
+use super::glue::skb::Skb;
+use super::rcan_core::dsor_addr::udp_node;
+use super::rcan_core::dsor_udp::{self, HDR_LEN};
+use super::rcan_core::dsor_wire::{Header, MsgKind};
+use kernel::c_str;
+
+/// The registered canip device, or NULL.
+static DEV: AtomicPtr<bindings::net_device> = AtomicPtr::new(core::ptr::null_mut());
+/// IPv4 identification of rebuilt headers.
+static IP_ID: AtomicU16 = AtomicU16::new(1);
+
+pub(crate) struct CanipDriver;
+
+/// The registered device; unregistered when dropped.
+pub(crate) struct Canip {
+    reg: Option<Registration<CanipDriver>>,
+}
+
+impl Canip {
+    /// Registers `canip%d`. Process context.
+    pub(crate) fn register() -> Result<Canip> {
+        let reg = Registration::<CanipDriver>::register(c_str!("canip%d"), ())?;
+        DEV.store(reg.dev().as_ptr(), Ordering::Release);
+        pr_info!("{}: UDP/IP over DSOR\n", reg.dev().name());
+        Ok(Canip { reg: Some(reg) })
+    }
+}
+
+impl Drop for Canip {
+    fn drop(&mut self) {
+        // The receive callback is gone before this runs (see DsorModule),
+        // and it read DEV only under the engine lock.
+        {
+            let _g = super::ENGINE.lock();
+            DEV.store(core::ptr::null_mut(), Ordering::Release);
+        }
+        self.reg = None;
+    }
+}
+
+fn dev() -> Option<&'static NetDev> {
+    let p = DEV.load(Ordering::Acquire);
+    if p.is_null() {
+        return None;
+    }
+    // SAFETY: DEV is a registered device until Canip's drop clears it
+    // under the engine lock, before unregistering; callers hold that lock
+    // or run in the device's own callbacks.
+    Some(unsafe { NetDev::from_raw(p) })
+}
+
+/// Whether canip0 exists and is up (engine lock held).
+pub(crate) fn is_up() -> bool {
+    dev().is_some_and(|d| d.is_up())
+}
+
+/// Counts a UDP/IP message that could not be delivered to its peer.
+pub(crate) fn count_tx_error() {
+    if let Some(d) = dev() {
+        d.stats_tx_dropped();
+    }
+}
+
+/// Rebuilds the IPv4/UDP headers in front of a received UDP/IP message
+/// (whose skb has the headroom) and hands it to the IP stack. Engine lock
+/// held (softirq or transmit path). Returns false if it was dropped.
+pub(crate) fn deliver(mut skb: Skb, _src: u8, saddr: u32, daddr: u32, dport: u16) -> bool {
+    let Some(d) = dev() else { return false };
+    if !d.is_up() {
+        d.stats_rx_dropped();
+        return false;
+    }
+    let mut hdr = [0u8; HDR_LEN];
+    let id = IP_ID.fetch_add(1, Ordering::Relaxed);
+    dsor_udp::build_inbound(&mut hdr, saddr, daddr, 0, dport, id, skb.data());
+    let len = skb.len();
+    match skb.push(HDR_LEN as u32) {
+        Some(h) => h.copy_from_slice(&hdr),
+        None => {
+            d.stats_rx_dropped();
+            return false;
+        }
+    }
+    skb.set_ipv4_rx(d);
+    d.stats_rx(len);
+    d.rx(skb);
+    true
+}
+
+impl Driver for CanipDriver {
+    type Priv = ();
+
+    fn setup() -> Setup {
+        Setup {
+            type_: bindings::ARPHRD_VOID as u16,
+            flags: bindings::net_device_flags_IFF_POINTOPOINT
+                | bindings::net_device_flags_IFF_NOARP,
+            // No IP fragments: a datagram of any length the protocol
+            // carries fits. The transmit path refuses longer ones.
+            mtu: 65535,
+            hard_header_len: 0,
+            tx_queue_len: 100,
+            no_queue: false,
+        }
+    }
+
+    fn open(dev: &Dev<Self>, _p: &()) -> Result {
+        dev.set_carrier(true);
+        dev.start_queue();
+        Ok(())
+    }
+
+    fn stop(dev: &Dev<Self>, _p: &()) -> Result {
+        dev.stop_queue();
+        Ok(())
+    }
+
+    /// BH disabled. Takes the datagram's payload into a new transfer.
+    fn start_xmit(skb: Skb, dev: &Dev<Self>, _p: &()) -> Xmit {
+        let pkt = skb.data();
+        if pkt.len() as u32 != skb.len() {
+            dev.stats_tx_dropped();
+            return Xmit::Ok;
+        }
+        let max = {
+            let g = super::ENGINE.lock();
+            g.as_ref().map_or(0, |e| usize::from(e.cfg.limits_max_len))
+        };
+        let out = match dsor_udp::parse_outbound(pkt, max) {
+            Ok(o) => o,
+            Err(_) => {
+                dev.stats_tx_dropped();
+                return Xmit::Ok;
+            }
+        };
+        let payload = &pkt[out.payload_off..out.payload_off + out.payload_len];
+        let mut msg = KVec::new();
+        if msg.extend_from_slice(payload, super::glue::GFP_ATOMIC).is_err() {
+            dev.stats_tx_dropped();
+            return Xmit::Ok;
+        }
+        let header = Header {
+            len: out.payload_len as u16,
+            kind: MsgKind::Udp {
+                dport: out.dport,
+                daddr: out.daddr,
+            },
+        };
+        if super::start_udp(udp_node(out.daddr), header, msg) {
+            dev.stats_tx(out.payload_len as u32);
+        } else {
+            dev.stats_tx_dropped();
+        }
+        skb.consume();
+        Xmit::Ok
+    }
+}
