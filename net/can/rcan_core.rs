@@ -9,6 +9,12 @@
 pub(crate) mod arb;
 #[path = "core/src/canloop.rs"]
 pub(crate) mod canloop;
+#[path = "core/src/dsor_rx.rs"]
+pub(crate) mod dsor_rx;
+#[path = "core/src/dsor_tx.rs"]
+pub(crate) mod dsor_tx;
+#[path = "core/src/dsor_wire.rs"]
+pub(crate) mod dsor_wire;
 #[path = "core/src/filter.rs"]
 pub(crate) mod filter;
 #[path = "core/src/frame.rs"]
