@@ -11,6 +11,12 @@ pub(crate) mod arb;
 pub(crate) mod canloop;
 #[path = "core/src/dsor_addr.rs"]
 pub(crate) mod dsor_addr;
+#[path = "core/src/dsor_rx.rs"]
+pub(crate) mod dsor_rx;
+#[path = "core/src/dsor_tx.rs"]
+pub(crate) mod dsor_tx;
+#[path = "core/src/dsor_wire.rs"]
+pub(crate) mod dsor_wire;
 #[path = "core/src/filter.rs"]
 pub(crate) mod filter;
 #[path = "core/src/frame.rs"]

@@ -12,6 +12,9 @@
 pub mod arb;
 pub mod canloop;
 pub mod dsor_addr;
+pub mod dsor_rx;
+pub mod dsor_tx;
+pub mod dsor_wire;
 pub mod filter;
 pub mod frame;
 pub mod rxtable;

@@ -1,0 +1,481 @@
+// SPDX-License-Identifier: GPL-2.0
+//! DSOR receiver: the reassembly table of one node (thesis 5.3.3,
+//! `canisr_receive_header` and the body/ack handling of
+//! `net/can/dsor/protocol.c`; `Documentation/networking/rcan/dsor-wire.rst`,
+//! "Receiver").
+//!
+//! The table has `N` fixed slots, one per (source node, channel) with a
+//! state. Buffers are of the caller's type `B` (a kernel vector, a host
+//! `Vec<u8>`, ...), obtained from the `accept` callback only for a new
+//! header that passed all limits, and handed back on delivery.
+
+use super::dsor_wire::{
+    body_count, body_dlc, Ack, AckStatus, DsorId, Frame, FrameType, Header, Timers, MAX_LEN,
+};
+
+/// Receiver limits (dsor-wire.rst, "Timers and limits").
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Limits {
+    /// Largest message length accepted; longer headers get TOO_LONG.
+    pub max_len: u16,
+    /// Concurrent partial messages from one source node; more get
+    /// NO_MEMORY.
+    pub max_per_peer: u8,
+    /// Sum of the lengths of all partial messages; more gets NO_MEMORY.
+    pub max_bytes_total: usize,
+}
+
+impl Limits {
+    /// 65535 bytes, 16 per peer, 1 MiB in total.
+    pub const DEFAULT: Limits = Limits {
+        max_len: MAX_LEN as u16,
+        max_per_peer: 16,
+        max_bytes_total: 1 << 20,
+    };
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits::DEFAULT
+    }
+}
+
+/// A new message the receiver is asked to accept.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Incoming<'a> {
+    /// Source node.
+    pub src: u8,
+    /// Priority of the header frame.
+    pub prio: u8,
+    /// The header.
+    pub header: &'a Header,
+}
+
+/// A completely received message.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Delivered<B> {
+    /// Source node.
+    pub src: u8,
+    /// Priority of the header frame.
+    pub prio: u8,
+    /// The header.
+    pub header: Header,
+    /// The buffer from `accept`, all `header.len` bytes filled.
+    pub buf: B,
+}
+
+/// Result of one received frame.
+#[derive(Debug)]
+pub struct RxOutput<B> {
+    /// Ack to send (29-bit identifier, no `CAN_EFF_FLAG`).
+    pub ack: Option<Frame>,
+    /// Message completed by this frame (at most once per message).
+    pub delivered: Option<Delivered<B>>,
+}
+
+impl<B> RxOutput<B> {
+    const NONE: RxOutput<B> = RxOutput {
+        ack: None,
+        delivered: None,
+    };
+}
+
+#[derive(Debug)]
+enum St<B> {
+    Free,
+    Receiving {
+        header: Header,
+        hq: bool,
+        prio: u8,
+        /// Next expected body index, 1..=n.
+        next: u16,
+        buf: B,
+    },
+    Done {
+        header: Header,
+        hq: bool,
+        last_q: bool,
+        last_index: u16,
+        status: AckStatus,
+    },
+}
+
+#[derive(Debug)]
+struct Slot<B> {
+    src: u8,
+    chan: u8,
+    deadline: u64,
+    st: St<B>,
+}
+
+impl<B> Slot<B> {
+    const FREE: Slot<B> = Slot {
+        src: 0,
+        chan: 0,
+        deadline: 0,
+        st: St::Free,
+    };
+
+    fn is_free(&self) -> bool {
+        matches!(self.st, St::Free)
+    }
+
+    fn is(&self, src: u8, chan: u8) -> bool {
+        !self.is_free() && self.src == src && self.chan == chan
+    }
+}
+
+/// The reassembly table of node `local` with `N` slots.
+#[derive(Debug)]
+pub struct Reassembler<B: AsMut<[u8]>, const N: usize> {
+    local: u8,
+    limits: Limits,
+    reasm_ms: u64,
+    slots: [Slot<B>; N],
+}
+
+fn ack_frame(id: &DsorId, index: u16, status: AckStatus) -> Option<Frame> {
+    Some(Frame::ack(&id.ack_id(), &Ack { index, status }))
+}
+
+impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
+    /// An empty table for node `local`.
+    pub const fn new(local: u8, limits: Limits, timers: &Timers) -> Self {
+        Reassembler {
+            local,
+            limits,
+            reasm_ms: timers.reasm_timeout_ms as u64,
+            slots: [Slot::FREE; N],
+        }
+    }
+
+    /// The node this table receives for.
+    pub fn local(&self) -> u8 {
+        self.local
+    }
+
+    /// The limits in force.
+    pub fn limits(&self) -> Limits {
+        self.limits
+    }
+
+    /// Change the limits (applies to headers received from now on).
+    pub fn set_limits(&mut self, limits: Limits) {
+        self.limits = limits;
+    }
+
+    fn find(&self, src: u8, chan: u8) -> Option<usize> {
+        self.slots.iter().position(|s| s.is(src, chan))
+    }
+
+    /// A slot for a new state: a free one, else the oldest Done one.
+    fn grab(&self) -> Option<usize> {
+        if let Some(i) = self.slots.iter().position(|s| s.is_free()) {
+            return Some(i);
+        }
+        self.slots
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| matches!(s.st, St::Done { .. }))
+            .min_by_key(|(_, s)| s.deadline)
+            .map(|(i, _)| i)
+    }
+
+    /// One received frame (29-bit identifier already split; `data` is the
+    /// DLC bytes). Frames not addressed to the local node, acks, reserved
+    /// and malformed frames give nothing. `accept` is called only for a
+    /// new message header that passed the limits; it returns a buffer of
+    /// exactly `header.len` bytes (any other length counts as NO_MEMORY)
+    /// or the status to refuse with.
+    pub fn on_frame<F: FnMut(&Incoming<'_>) -> Result<B, AckStatus>>(
+        &mut self,
+        id: &DsorId,
+        data: &[u8],
+        now_ms: u64,
+        accept: F,
+    ) -> RxOutput<B> {
+        if id.dst != self.local {
+            return RxOutput::NONE;
+        }
+        match id.ftype {
+            FrameType::Header => self.on_header(id, data, now_ms, accept),
+            FrameType::Body => self.on_body(id, data, now_ms),
+            FrameType::Ack => RxOutput::NONE,
+        }
+    }
+
+    fn on_header<F: FnMut(&Incoming<'_>) -> Result<B, AckStatus>>(
+        &mut self,
+        id: &DsorId,
+        data: &[u8],
+        now_ms: u64,
+        mut accept: F,
+    ) -> RxOutput<B> {
+        let Some(h) = Header::decode(data) else {
+            return RxOutput::NONE;
+        };
+        let deadline = now_ms + self.reasm_ms;
+        let existing = self.find(id.src, id.chan);
+        if let Some(i) = existing {
+            let slot = &mut self.slots[i];
+            let dup = match slot.st {
+                St::Receiving {
+                    header, hq, next, ..
+                } if next == 1 && hq == id.seq && header == h => Some(AckStatus::Ok),
+                St::Done {
+                    header,
+                    hq,
+                    last_index: 0,
+                    status,
+                    ..
+                } if hq == id.seq && header == h => Some(status),
+                _ => None,
+            };
+            if let Some(status) = dup {
+                slot.deadline = deadline;
+                return RxOutput {
+                    ack: ack_frame(id, 0, status),
+                    delivered: None,
+                };
+            }
+            // A new message on this stream: drop whatever was there.
+            slot.st = St::Free;
+        }
+        let peer = self
+            .slots
+            .iter()
+            .filter(|s| s.src == id.src && matches!(s.st, St::Receiving { .. }))
+            .count();
+        let slot = existing.or_else(|| self.grab());
+        let mut got = None;
+        let status = if h.len > self.limits.max_len {
+            AckStatus::TooLong
+        } else if peer >= self.limits.max_per_peer as usize
+            || self.bytes_in_use() + h.len as usize > self.limits.max_bytes_total
+            || slot.is_none()
+        {
+            AckStatus::NoMemory
+        } else {
+            let inc = Incoming {
+                src: id.src,
+                prio: id.prio,
+                header: &h,
+            };
+            match accept(&inc) {
+                Ok(mut b) => {
+                    if b.as_mut().len() == h.len as usize {
+                        got = Some(b);
+                        AckStatus::Ok
+                    } else {
+                        AckStatus::NoMemory
+                    }
+                }
+                Err(AckStatus::Ok) => AckStatus::Refused,
+                Err(s) => s,
+            }
+        };
+        let ack = ack_frame(id, 0, status);
+        let Some(i) = slot else {
+            // No slot to remember the refusal in.
+            return RxOutput {
+                ack,
+                delivered: None,
+            };
+        };
+        let slot = &mut self.slots[i];
+        slot.src = id.src;
+        slot.chan = id.chan;
+        slot.deadline = deadline;
+        let done = St::Done {
+            header: h,
+            hq: id.seq,
+            last_q: id.seq,
+            last_index: 0,
+            status,
+        };
+        match got {
+            Some(buf) if h.len == 0 => {
+                slot.st = done;
+                RxOutput {
+                    ack,
+                    delivered: Some(Delivered {
+                        src: id.src,
+                        prio: id.prio,
+                        header: h,
+                        buf,
+                    }),
+                }
+            }
+            Some(buf) => {
+                slot.st = St::Receiving {
+                    header: h,
+                    hq: id.seq,
+                    prio: id.prio,
+                    next: 1,
+                    buf,
+                };
+                RxOutput {
+                    ack,
+                    delivered: None,
+                }
+            }
+            None => {
+                slot.st = done;
+                RxOutput {
+                    ack,
+                    delivered: None,
+                }
+            }
+        }
+    }
+
+    fn on_body(&mut self, id: &DsorId, data: &[u8], now_ms: u64) -> RxOutput<B> {
+        let Some(i) = self.find(id.src, id.chan) else {
+            return RxOutput::NONE;
+        };
+        let deadline = now_ms + self.reasm_ms;
+        let slot = &mut self.slots[i];
+        match &mut slot.st {
+            St::Free => RxOutput::NONE,
+            St::Done {
+                header,
+                last_q,
+                last_index,
+                ..
+            } => {
+                if *last_index == 0
+                    || id.seq != *last_q
+                    || data.len() != body_dlc(header.len, *last_index) as usize
+                {
+                    return RxOutput::NONE;
+                }
+                slot.deadline = deadline;
+                RxOutput {
+                    ack: ack_frame(id, *last_index, AckStatus::Ok),
+                    delivered: None,
+                }
+            }
+            St::Receiving {
+                header,
+                hq,
+                next,
+                buf,
+                ..
+            } => {
+                let expect_q = *hq ^ (*next & 1 == 1);
+                if id.seq != expect_q {
+                    // The previous frame's Q: a retransmission of body
+                    // next-1 whose ack was lost (none if next == 1).
+                    if *next < 2 || data.len() != body_dlc(header.len, *next - 1) as usize {
+                        return RxOutput::NONE;
+                    }
+                    slot.deadline = deadline;
+                    return RxOutput {
+                        ack: ack_frame(id, *next - 1, AckStatus::Ok),
+                        delivered: None,
+                    };
+                }
+                let dlc = body_dlc(header.len, *next) as usize;
+                if data.len() != dlc {
+                    return RxOutput::NONE;
+                }
+                let off = 8 * (*next as usize - 1);
+                let k = *next;
+                match buf.as_mut().get_mut(off..off + dlc) {
+                    Some(dst) => dst.copy_from_slice(data),
+                    // Cannot happen: the buffer has header.len bytes.
+                    None => return RxOutput::NONE,
+                }
+                slot.deadline = deadline;
+                let ack = ack_frame(id, k, AckStatus::Ok);
+                if k < body_count(header.len) {
+                    *next = k + 1;
+                    return RxOutput {
+                        ack,
+                        delivered: None,
+                    };
+                }
+                let h = *header;
+                let done = St::Done {
+                    header: h,
+                    hq: *hq,
+                    last_q: id.seq,
+                    last_index: k,
+                    status: AckStatus::Ok,
+                };
+                match core::mem::replace(&mut slot.st, done) {
+                    St::Receiving { prio, buf, .. } => RxOutput {
+                        ack,
+                        delivered: Some(Delivered {
+                            src: id.src,
+                            prio,
+                            header: h,
+                            buf,
+                        }),
+                    },
+                    _ => RxOutput {
+                        ack,
+                        delivered: None,
+                    },
+                }
+            }
+        }
+    }
+
+    /// Free every state whose deadline is at or before `now_ms`; returns how
+    /// many partial messages were dropped (their buffers are dropped).
+    pub fn on_timer(&mut self, now_ms: u64) -> usize {
+        let mut dropped = 0;
+        for s in self.slots.iter_mut() {
+            if !s.is_free() && s.deadline <= now_ms {
+                if matches!(s.st, St::Receiving { .. }) {
+                    dropped += 1;
+                }
+                s.st = St::Free;
+            }
+        }
+        dropped
+    }
+
+    /// The earliest deadline of any state, if any.
+    pub fn next_deadline(&self) -> Option<u64> {
+        self.slots
+            .iter()
+            .filter(|s| !s.is_free())
+            .map(|s| s.deadline)
+            .min()
+    }
+
+    /// Drop every state and buffer.
+    pub fn clear(&mut self) {
+        for s in self.slots.iter_mut() {
+            s.st = St::Free;
+        }
+    }
+
+    /// Bytes of reassembly buffers held (sum of the lengths of the partial
+    /// messages).
+    pub fn bytes_in_use(&self) -> usize {
+        self.slots
+            .iter()
+            .map(|s| match s.st {
+                St::Receiving { header, .. } => header.len as usize,
+                _ => 0,
+            })
+            .sum()
+    }
+
+    /// Number of partial messages being reassembled.
+    pub fn active(&self) -> usize {
+        self.slots
+            .iter()
+            .filter(|s| matches!(s.st, St::Receiving { .. }))
+            .count()
+    }
+
+    /// Number of slots in use (partial messages and remembered completed or
+    /// refused transfers).
+    pub fn states(&self) -> usize {
+        self.slots.iter().filter(|s| !s.is_free()).count()
+    }
+}
