@@ -9,6 +9,8 @@
 pub(crate) mod arb;
 #[path = "core/src/canloop.rs"]
 pub(crate) mod canloop;
+#[path = "core/src/dsor_udp.rs"]
+pub(crate) mod dsor_udp;
 #[path = "core/src/filter.rs"]
 pub(crate) mod filter;
 #[path = "core/src/frame.rs"]

@@ -11,6 +11,7 @@
 
 pub mod arb;
 pub mod canloop;
+pub mod dsor_udp;
 pub mod filter;
 pub mod frame;
 pub mod rxtable;
