@@ -15,6 +15,8 @@ pub(crate) mod dsor_addr;
 pub(crate) mod dsor_rx;
 #[path = "core/src/dsor_tx.rs"]
 pub(crate) mod dsor_tx;
+#[path = "core/src/dsor_udp.rs"]
+pub(crate) mod dsor_udp;
 #[path = "core/src/dsor_wire.rs"]
 pub(crate) mod dsor_wire;
 #[path = "core/src/filter.rs"]

@@ -14,6 +14,7 @@ pub mod canloop;
 pub mod dsor_addr;
 pub mod dsor_rx;
 pub mod dsor_tx;
+pub mod dsor_udp;
 pub mod dsor_wire;
 pub mod filter;
 pub mod frame;

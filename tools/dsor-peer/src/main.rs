@@ -1,0 +1,517 @@
+// SPDX-License-Identifier: GPL-2.0
+//! `dsor-peer`: a DSOR node over a CAN_RAW socket, for testing rcan's DSOR
+//! against an implementation written from the wire specification alone.
+//! See Documentation/networking/rcan/dsor-peer.rst for the command line.
+
+use dsor_peer::node::{Config, Event, Node, SendError};
+use dsor_peer::wire::{fmt_ipv4, fnv1a64, parse_ipv4, pattern, Frame, Kind};
+use socketcan::{CanFrame, CanSocket, Socket};
+use std::collections::{HashMap, VecDeque};
+use std::io::ErrorKind;
+use std::process::exit;
+use std::time::{Duration, Instant};
+
+const USAGE: &str = "\
+usage: dsor-peer --if IFACE --node N [--ack-timeout-ms 100] [--retx 10] [--reasm-ms 2000]
+                 [--drop PERCENT --seed S] [--linger-ms MS] [--max-len L] [--max-per-peer N]
+                 [--max-bytes B] [--verbose] MODE
+  recv --count K [--timeout-s 30] [--refuse]
+  send --to NODE --prio P (--segm ID | --port DPORT:SPORT | --udp DPORT:A.B.C.D) --len L
+       [--count 1] [--pattern SEED] [--window 1]
+  echo --count K [--timeout-s 30]";
+
+fn usage(msg: &str) -> ! {
+    eprintln!("dsor-peer: {msg}\n{USAGE}");
+    exit(2)
+}
+
+fn num(s: &str, what: &str) -> u64 {
+    let r = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(h) => u64::from_str_radix(h, 16),
+        None => s.parse(),
+    };
+    r.unwrap_or_else(|_| usage(&format!("bad number for {what}: {s}")))
+}
+
+fn num_max(s: &str, what: &str, max: u64) -> u64 {
+    let v = num(s, what);
+    if v > max {
+        usage(&format!("{what} {s} above {max:#x}"));
+    }
+    v
+}
+
+enum Mode {
+    Recv,
+    Send {
+        to: u8,
+        prio: u8,
+        kind: Kind,
+        len: usize,
+        seed: u64,
+        window: usize,
+    },
+    Echo,
+}
+
+struct Args {
+    ifname: String,
+    cfg: Config,
+    drop_pct: f64,
+    seed: u64,
+    linger_ms: Option<u64>,
+    verbose: bool,
+    count: u64,
+    timeout_s: u64,
+    mode: Mode,
+}
+
+fn parse_args() -> Args {
+    let argv: Vec<String> = std::env::args().skip(1).collect();
+    let mut o: HashMap<&str, String> = HashMap::new();
+    let mut flags = Vec::new();
+    let mut mode = None;
+    let mut i = 0;
+    while i < argv.len() {
+        let a = argv[i].as_str();
+        match a {
+            "--refuse" | "--verbose" => flags.push(a),
+            "-h" | "--help" => {
+                println!("{USAGE}");
+                exit(0)
+            }
+            "recv" | "send" | "echo" if mode.is_none() => mode = Some(a),
+            _ if a.starts_with("--") => {
+                const KNOWN: &[&str] = &[
+                    "--if",
+                    "--node",
+                    "--ack-timeout-ms",
+                    "--retx",
+                    "--reasm-ms",
+                    "--drop",
+                    "--seed",
+                    "--linger-ms",
+                    "--max-len",
+                    "--max-per-peer",
+                    "--max-bytes",
+                    "--count",
+                    "--timeout-s",
+                    "--to",
+                    "--prio",
+                    "--segm",
+                    "--port",
+                    "--udp",
+                    "--len",
+                    "--pattern",
+                    "--window",
+                ];
+                let Some(k) = KNOWN.iter().find(|k| **k == a) else {
+                    usage(&format!("unknown option {a}"))
+                };
+                i += 1;
+                let Some(v) = argv.get(i) else {
+                    usage(&format!("{a} needs a value"))
+                };
+                o.insert(k, v.clone());
+            }
+            _ => usage(&format!("unexpected argument {a}")),
+        }
+        i += 1;
+    }
+    let req = |k: &str| {
+        o.get(k)
+            .cloned()
+            .unwrap_or_else(|| usage(&format!("{k} is required")))
+    };
+    let node = num_max(&req("--node"), "--node", 0x7f) as u8;
+    let mut cfg = Config::new(node);
+    if let Some(v) = o.get("--ack-timeout-ms") {
+        cfg.t_ack = num(v, "--ack-timeout-ms").max(1);
+    }
+    if let Some(v) = o.get("--retx") {
+        cfg.n_retx = num_max(v, "--retx", 1000) as u32;
+    }
+    if let Some(v) = o.get("--reasm-ms") {
+        cfg.t_reasm = num(v, "--reasm-ms");
+    }
+    if let Some(v) = o.get("--max-len") {
+        cfg.max_len = num_max(v, "--max-len", 65535) as u16;
+    }
+    if let Some(v) = o.get("--max-per-peer") {
+        cfg.max_per_peer = num(v, "--max-per-peer") as usize;
+    }
+    if let Some(v) = o.get("--max-bytes") {
+        cfg.max_bytes_total = num(v, "--max-bytes") as usize;
+    }
+    cfg.refuse = flags.contains(&"--refuse");
+    let drop_pct: f64 = match o.get("--drop") {
+        Some(v) => v
+            .parse()
+            .ok()
+            .filter(|p| (0.0..=100.0).contains(p))
+            .unwrap_or_else(|| usage("--drop wants 0..100")),
+        None => 0.0,
+    };
+    let count_default = if mode == Some("send") {
+        Some("1".to_string())
+    } else {
+        None
+    };
+    let count = num(
+        &o.get("--count")
+            .cloned()
+            .or(count_default)
+            .unwrap_or_else(|| usage("--count is required")),
+        "--count",
+    );
+    let mode = match mode {
+        Some("recv") => Mode::Recv,
+        Some("echo") => Mode::Echo,
+        Some("send") => {
+            let to = num_max(&req("--to"), "--to", 0x7f) as u8;
+            let prio = num_max(&req("--prio"), "--prio", 0xff) as u8;
+            let kinds: Vec<Kind> = [
+                o.get("--segm").map(|v| Kind::Segm {
+                    id: num_max(v, "--segm", 0xffff_ffff) as u32,
+                }),
+                o.get("--port").map(|v| {
+                    let (d, s) = v
+                        .split_once(':')
+                        .unwrap_or_else(|| usage("--port wants DPORT:SPORT"));
+                    Kind::Port {
+                        dport: num_max(d, "--port", 0xff) as u8,
+                        sport: num_max(s, "--port", 0xff) as u8,
+                    }
+                }),
+                o.get("--udp").map(|v| {
+                    let (p, a) = v
+                        .split_once(':')
+                        .unwrap_or_else(|| usage("--udp wants DPORT:A.B.C.D"));
+                    Kind::Udp {
+                        dport: num_max(p, "--udp", 0xffff) as u16,
+                        daddr: parse_ipv4(a).unwrap_or_else(|| usage("--udp: bad IPv4 address")),
+                    }
+                }),
+            ]
+            .into_iter()
+            .flatten()
+            .collect();
+            if kinds.len() != 1 {
+                usage("send wants exactly one of --segm, --port, --udp");
+            }
+            Mode::Send {
+                to,
+                prio,
+                kind: kinds[0],
+                len: num(&req("--len"), "--len") as usize,
+                seed: o.get("--pattern").map_or(0, |v| num(v, "--pattern")),
+                window: o
+                    .get("--window")
+                    .map_or(1, |v| num_max(v, "--window", 16).max(1) as usize),
+            }
+        }
+        _ => usage("no MODE (recv, send, echo)"),
+    };
+    Args {
+        ifname: req("--if"),
+        cfg,
+        drop_pct,
+        seed: o.get("--seed").map_or(0, |v| num(v, "--seed")),
+        linger_ms: o.get("--linger-ms").map(|v| num(v, "--linger-ms")),
+        verbose: flags.contains(&"--verbose"),
+        count,
+        timeout_s: o.get("--timeout-s").map_or(30, |v| num(v, "--timeout-s")),
+        mode,
+    }
+}
+
+/// splitmix64: a small deterministic generator for `--drop`.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// True with probability `pct` percent.
+    fn chance(&mut self, pct: f64) -> bool {
+        pct > 0.0 && ((self.next() % 1_000_000) as f64) < pct * 10_000.0
+    }
+}
+
+fn show(f: &Frame) -> String {
+    let d: String = f.bytes().iter().map(|b| format!("{b:02X}")).collect();
+    format!("{:08X}#{d}", f.id)
+}
+
+fn kind_str(k: &Kind) -> String {
+    match k {
+        Kind::Segm { id } => format!("kind=segm id={id:#010x}"),
+        Kind::Port { dport, sport } => format!("kind=port dport={dport:#04x} sport={sport:#04x}"),
+        Kind::Udp { dport, daddr } => format!("kind=udp dport={dport} daddr={}", fmt_ipv4(*daddr)),
+    }
+}
+
+struct Io {
+    sock: CanSocket,
+    rng: Rng,
+    drop_pct: f64,
+    verbose: bool,
+}
+
+impl Io {
+    fn write(&mut self, f: &Frame) {
+        if self.rng.chance(self.drop_pct) {
+            if self.verbose {
+                eprintln!("drop {}", show(f));
+            }
+            return;
+        }
+        if self.verbose {
+            eprintln!("tx   {}", show(f));
+        }
+        let mut c = socketcan::frame::can_frame_default();
+        c.can_id = f.id | libc::CAN_EFF_FLAG;
+        c.can_dlc = f.dlc;
+        c.data = f.data;
+        let cf = CanFrame::from(c);
+        for _ in 0..1000 {
+            match self.sock.write_frame(&cf) {
+                Ok(()) => return,
+                // Transmit queue full: wait for it to drain.
+                Err(e)
+                    if e.raw_os_error() == Some(libc::ENOBUFS)
+                        || e.kind() == ErrorKind::WouldBlock =>
+                {
+                    std::thread::sleep(Duration::from_millis(1))
+                }
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) => {
+                    eprintln!("dsor-peer: write: {e}");
+                    exit(3)
+                }
+            }
+        }
+        eprintln!(
+            "dsor-peer: write: queue full for 1 s, frame lost: {}",
+            show(f)
+        );
+    }
+
+    /// Waits up to `wait` for a DSOR frame (extended data frame).
+    fn read(&mut self, wait: Duration) -> Option<Frame> {
+        match self.sock.read_frame_timeout(wait) {
+            Ok(cf) => {
+                let c: &libc::can_frame = cf.as_ref();
+                let flags = c.can_id & !libc::CAN_EFF_MASK;
+                if flags != libc::CAN_EFF_FLAG || c.can_dlc > 8 {
+                    return None; // standard, remote or error frame
+                }
+                let f = Frame {
+                    id: c.can_id & libc::CAN_EFF_MASK,
+                    dlc: c.can_dlc,
+                    data: c.data,
+                };
+                if self.verbose {
+                    eprintln!("rx   {}", show(&f));
+                }
+                Some(f)
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
+                ) =>
+            {
+                None
+            }
+            Err(e) => {
+                eprintln!("dsor-peer: read: {e}");
+                exit(3)
+            }
+        }
+    }
+}
+
+/// A message waiting for a free channel, with its output tag `n`.
+struct Pending {
+    dst: u8,
+    prio: u8,
+    kind: Kind,
+    payload: Vec<u8>,
+    n: u64,
+}
+
+fn main() {
+    let a = parse_args();
+    let sock = CanSocket::open(&a.ifname).unwrap_or_else(|e| {
+        eprintln!("dsor-peer: {}: {e}", a.ifname);
+        exit(3)
+    });
+    let mut io = Io {
+        sock,
+        rng: Rng(a.seed),
+        drop_pct: a.drop_pct,
+        verbose: a.verbose,
+    };
+    // Without loss the last ack goes out before we exit; with --drop it may be
+    // lost, so stay to re-ack the sender's retransmissions.
+    let linger = a
+        .linger_ms
+        .unwrap_or(if a.drop_pct > 0.0 { 3000 } else { 0 });
+    let start = Instant::now();
+    let now = || start.elapsed().as_millis() as u64;
+    let mut node = Node::new(a.cfg.clone());
+    let mut queue: VecDeque<Pending> = VecDeque::new();
+    let mut inflight: HashMap<u64, (u64, usize, u64)> = HashMap::new(); // handle -> (n, len, sha)
+    let (mut received, mut sent_ok, mut sent_fail, mut started) = (0u64, 0u64, 0u64, 0u64);
+    let deadline = match a.mode {
+        Mode::Send { .. } => None,
+        _ => Some(a.timeout_s.saturating_mul(1000)),
+    };
+    let window = match a.mode {
+        Mode::Send { window, .. } => window,
+        _ => 16,
+    };
+    let mut done_at: Option<u64> = None;
+    loop {
+        // Start what the window allows.
+        if let Mode::Send {
+            to,
+            prio,
+            kind,
+            len,
+            seed,
+            ..
+        } = a.mode
+        {
+            while started < a.count && queue.len() < window {
+                queue.push_back(Pending {
+                    dst: to,
+                    prio,
+                    kind,
+                    payload: pattern(len, started, seed),
+                    n: started,
+                });
+                started += 1;
+            }
+        }
+        while inflight.len() < window {
+            let Some(p) = queue.pop_front() else { break };
+            let (len, sha) = (p.payload.len(), fnv1a64(&p.payload));
+            match node.send(now(), p.dst, p.prio, p.kind, p.payload.clone()) {
+                Ok(h) => {
+                    inflight.insert(h, (p.n, len, sha));
+                }
+                Err(SendError::Busy) => {
+                    queue.push_front(p);
+                    break;
+                }
+                Err(e) => {
+                    let reason = if e == SendError::TooLong {
+                        "toolong"
+                    } else {
+                        "badnode"
+                    };
+                    println!("TX fail reason={reason} len={len} sha={sha:016x} n={}", p.n);
+                    sent_fail += 1;
+                }
+            }
+        }
+        while let Some(f) = node.pop_frame() {
+            io.write(&f);
+        }
+        let mut progressed = false;
+        while let Some(ev) = node.pop_event() {
+            progressed = true;
+            match ev {
+                Event::Delivered(d) => {
+                    println!(
+                        "RX src={:#04x} prio={:#04x} {} len={} sha={:016x} chan={}",
+                        d.src,
+                        d.prio,
+                        kind_str(&d.kind),
+                        d.payload.len(),
+                        fnv1a64(&d.payload),
+                        d.chan
+                    );
+                    if matches!(a.mode, Mode::Echo) && received < a.count {
+                        let kind = match d.kind {
+                            Kind::Port { dport, sport } => Kind::Port {
+                                dport: sport,
+                                sport: dport,
+                            },
+                            k => k,
+                        };
+                        queue.push_back(Pending {
+                            dst: d.src,
+                            prio: d.prio,
+                            kind,
+                            payload: d.payload,
+                            n: received,
+                        });
+                    }
+                    received += 1;
+                }
+                Event::Sent { handle, result, .. } => {
+                    let (n, len, sha) = inflight.remove(&handle).expect("handle");
+                    match result {
+                        Ok(()) => {
+                            sent_ok += 1;
+                            println!("TX ok len={len} sha={sha:016x} n={n}");
+                        }
+                        Err(f) => {
+                            sent_fail += 1;
+                            println!(
+                                "TX fail reason={} len={len} sha={sha:016x} n={n}",
+                                f.reason()
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        if progressed {
+            continue; // events may have queued messages or frames
+        }
+        let finished = match a.mode {
+            Mode::Recv => received >= a.count,
+            Mode::Send { .. } => sent_ok + sent_fail >= a.count,
+            Mode::Echo => received >= a.count && sent_ok + sent_fail >= a.count,
+        };
+        let t = now();
+        if finished && done_at.is_none() {
+            done_at = Some(t + linger);
+        }
+        if let Some(d) = done_at {
+            if t >= d {
+                break;
+            }
+        }
+        if let Some(d) = deadline {
+            if t >= d && done_at.is_none() {
+                eprintln!("dsor-peer: timeout: received {received} of {}", a.count);
+                exit(1)
+            }
+        }
+        let mut until = [node.next_deadline(), done_at, deadline]
+            .into_iter()
+            .flatten()
+            .min()
+            .unwrap_or(t + 1000);
+        until = until.clamp(t + 1, t + 1000);
+        if let Some(f) = io.read(Duration::from_millis(until - t)) {
+            node.on_frame(now(), &f);
+        }
+        node.poll(now());
+    }
+    let ok = match a.mode {
+        Mode::Recv => true,
+        _ => sent_fail == 0,
+    };
+    exit(if ok { 0 } else { 1 })
+}

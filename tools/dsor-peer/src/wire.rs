@@ -1,0 +1,322 @@
+// SPDX-License-Identifier: GPL-2.0
+//! DSOR frames: the 29-bit identifier and the header, body and ack payloads
+//! (Documentation/networking/rcan/dsor-wire.rst; thesis 5.3.3).
+//!
+//! ```text
+//! id = P<<21 | D<<14 | S<<7 | T<<5 | Q<<4 | C
+//!      P priority 8 bits, D/S destination/source node 7 bits,
+//!      T 0 header 1 body 2 ack 3 reserved, Q sequence bit, C channel 4 bits
+//! ```
+
+/// An extended CAN data frame (IDE 1, RTR 0): 29-bit id, DLC 0..=8.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Frame {
+    /// 29-bit identifier.
+    pub id: u32,
+    /// Data length 0..=8.
+    pub dlc: u8,
+    /// Data; bytes past `dlc` are zero.
+    pub data: [u8; 8],
+}
+
+impl Frame {
+    /// A frame with the first `bytes.len()` (at most 8) data bytes.
+    pub fn new(id: u32, bytes: &[u8]) -> Frame {
+        let mut data = [0u8; 8];
+        data[..bytes.len()].copy_from_slice(bytes);
+        Frame {
+            id: id & 0x1fff_ffff,
+            dlc: bytes.len() as u8,
+            data,
+        }
+    }
+
+    /// The data bytes.
+    pub fn bytes(&self) -> &[u8] {
+        &self.data[..usize::from(self.dlc.min(8))]
+    }
+}
+
+/// Frame type (identifier bits 6..5).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Type {
+    /// First frame of a message: length and addressing.
+    Header,
+    /// Up to 8 message bytes.
+    Body,
+    /// Acknowledgement from the receiver.
+    Ack,
+    /// Type 3: ignored.
+    Reserved,
+}
+
+/// The fields of a DSOR identifier.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Id {
+    /// Priority, lower wins arbitration.
+    pub prio: u8,
+    /// Destination node 0..=0x7f.
+    pub dst: u8,
+    /// Source node 0..=0x7f.
+    pub src: u8,
+    /// Frame type.
+    pub typ: Type,
+    /// Sequence bit.
+    pub q: bool,
+    /// Channel 0..=15.
+    pub chan: u8,
+}
+
+impl Id {
+    /// Packs the fields into a 29-bit identifier.
+    pub fn encode(&self) -> u32 {
+        let t = match self.typ {
+            Type::Header => 0,
+            Type::Body => 1,
+            Type::Ack => 2,
+            Type::Reserved => 3,
+        };
+        u32::from(self.prio) << 21
+            | u32::from(self.dst & 0x7f) << 14
+            | u32::from(self.src & 0x7f) << 7
+            | t << 5
+            | u32::from(self.q) << 4
+            | u32::from(self.chan & 0x0f)
+    }
+
+    /// Splits a 29-bit identifier.
+    pub fn decode(id: u32) -> Id {
+        Id {
+            prio: (id >> 21) as u8,
+            dst: ((id >> 14) & 0x7f) as u8,
+            src: ((id >> 7) & 0x7f) as u8,
+            typ: match (id >> 5) & 3 {
+                0 => Type::Header,
+                1 => Type::Body,
+                2 => Type::Ack,
+                _ => Type::Reserved,
+            },
+            q: id & 0x10 != 0,
+            chan: (id & 0x0f) as u8,
+        }
+    }
+}
+
+/// Addressing of a message (the header's DLC tells which).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Kind {
+    /// DLC 6: segmented message with a 32-bit message id.
+    Segm {
+        /// Message id.
+        id: u32,
+    },
+    /// DLC 4: port message with destination and source sub-ports.
+    Port {
+        /// Destination sub-port.
+        dport: u8,
+        /// Source sub-port.
+        sport: u8,
+    },
+    /// DLC 8: UDP/IP message.
+    Udp {
+        /// Destination UDP port.
+        dport: u16,
+        /// Destination IPv4 address, `a.b.c.d` = `a<<24 | b<<16 | c<<8 | d`.
+        daddr: u32,
+    },
+}
+
+/// A decoded header frame payload.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Header {
+    /// Message length in bytes.
+    pub len: u16,
+    /// Addressing.
+    pub kind: Kind,
+}
+
+impl Header {
+    /// Header payload bytes (DLC 6, 4 or 8).
+    pub fn encode(&self) -> ([u8; 8], u8) {
+        let mut b = [0u8; 8];
+        b[..2].copy_from_slice(&self.len.to_be_bytes());
+        let dlc = match self.kind {
+            Kind::Segm { id } => {
+                b[2..6].copy_from_slice(&id.to_be_bytes());
+                6
+            }
+            Kind::Port { dport, sport } => {
+                b[2] = dport;
+                b[3] = sport;
+                4
+            }
+            Kind::Udp { dport, daddr } => {
+                b[2..4].copy_from_slice(&dport.to_be_bytes());
+                b[4..8].copy_from_slice(&daddr.to_be_bytes());
+                8
+            }
+        };
+        (b, dlc)
+    }
+
+    /// Parses header payload bytes; `None` for a DLC other than 4, 6, 8.
+    pub fn decode(b: &[u8]) -> Option<Header> {
+        let len = match b {
+            [h, l, ..] => u16::from_be_bytes([*h, *l]),
+            _ => return None,
+        };
+        let kind = match b.len() {
+            6 => Kind::Segm {
+                id: u32::from_be_bytes([b[2], b[3], b[4], b[5]]),
+            },
+            4 => Kind::Port {
+                dport: b[2],
+                sport: b[3],
+            },
+            8 => Kind::Udp {
+                dport: u16::from_be_bytes([b[2], b[3]]),
+                daddr: u32::from_be_bytes([b[4], b[5], b[6], b[7]]),
+            },
+            _ => return None,
+        };
+        Some(Header { len, kind })
+    }
+}
+
+/// Ack status (byte 2 of an ack; absent = OK).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Status {
+    /// 0: accepted.
+    Ok,
+    /// 1: nobody wants this message (ECONNREFUSED at the sender).
+    Refused,
+    /// 2: receiver out of reassembly memory or slots (ENOBUFS).
+    NoMemory,
+    /// 3: message longer than the receiver accepts (EMSGSIZE).
+    TooLong,
+    /// 4..=255: not defined by the spec; ends the transfer like any non-zero status.
+    Other(u8),
+}
+
+impl Status {
+    /// Wire value.
+    pub fn code(self) -> u8 {
+        match self {
+            Status::Ok => 0,
+            Status::Refused => 1,
+            Status::NoMemory => 2,
+            Status::TooLong => 3,
+            Status::Other(c) => c,
+        }
+    }
+
+    /// From a wire value.
+    pub fn from_code(c: u8) -> Status {
+        match c {
+            0 => Status::Ok,
+            1 => Status::Refused,
+            2 => Status::NoMemory,
+            3 => Status::TooLong,
+            c => Status::Other(c),
+        }
+    }
+}
+
+/// A decoded ack payload.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Ack {
+    /// Index of the acknowledged frame: 0 header, k body k.
+    pub index: u16,
+    /// Status.
+    pub status: Status,
+}
+
+impl Ack {
+    /// Ack payload: DLC 2 for OK (the short form), DLC 3 otherwise.
+    pub fn encode(&self) -> ([u8; 8], u8) {
+        let mut b = [0u8; 8];
+        b[..2].copy_from_slice(&self.index.to_be_bytes());
+        if self.status == Status::Ok {
+            (b, 2)
+        } else {
+            b[2] = self.status.code();
+            (b, 3)
+        }
+    }
+
+    /// Parses an ack payload; `None` unless DLC is 2 or 3.
+    pub fn decode(b: &[u8]) -> Option<Ack> {
+        match b {
+            [h, l] => Some(Ack {
+                index: u16::from_be_bytes([*h, *l]),
+                status: Status::Ok,
+            }),
+            [h, l, s] => Some(Ack {
+                index: u16::from_be_bytes([*h, *l]),
+                status: Status::from_code(*s),
+            }),
+            _ => None,
+        }
+    }
+}
+
+/// Number of body frames of a message of `len` bytes.
+pub fn bodies(len: u16) -> u16 {
+    len.div_ceil(8)
+}
+
+/// DLC of body `k` (1-based) of a message of `len` bytes.
+pub fn body_dlc(len: u16, k: u16) -> u8 {
+    let start = 8 * usize::from(k - 1);
+    (usize::from(len) - start).min(8) as u8
+}
+
+/// Deterministic test content: byte `i` of message `j` is
+/// `(i*31 + j*7 + seed) & 0xff`.
+pub fn pattern(len: usize, j: u64, seed: u64) -> Vec<u8> {
+    (0..len as u64)
+        .map(|i| {
+            (i.wrapping_mul(31)
+                .wrapping_add(j.wrapping_mul(7))
+                .wrapping_add(seed)
+                & 0xff) as u8
+        })
+        .collect()
+}
+
+/// 64-bit FNV-1a hash (offset basis 0xcbf29ce484222325, prime
+/// 0x100000001b3), printed as `sha=` (16 hex digits).
+pub fn fnv1a64(b: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &x in b {
+        h ^= u64::from(x);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// Formats an IPv4 address number as `a.b.c.d`.
+pub fn fmt_ipv4(a: u32) -> String {
+    let b = a.to_be_bytes();
+    format!("{}.{}.{}.{}", b[0], b[1], b[2], b[3])
+}
+
+/// Parses `a.b.c.d`.
+pub fn parse_ipv4(s: &str) -> Option<u32> {
+    let parts: Vec<&str> = s.split('.').collect();
+    if parts.len() != 4 {
+        return None;
+    }
+    let mut a = 0u32;
+    for p in parts {
+        if p.is_empty() || p.len() > 3 || !p.bytes().all(|c| c.is_ascii_digit()) {
+            return None;
+        }
+        let v: u32 = p.parse().ok()?;
+        if v > 255 {
+            return None;
+        }
+        a = a << 8 | v;
+    }
+    Some(a)
+}
