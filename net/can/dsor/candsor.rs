@@ -59,9 +59,9 @@ use kernel::c_str;
 use rcan_api::{KernelRx, KernelRxReg, ProtoModule, RxFilter, RX_FILTER_CAN_ID};
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG};
 use rcan_core::dsor_addr::{self, DsorAddr, DSOR_EPHEMERAL_MIN};
-use rcan_core::dsor_rx::{AckStatus, Delivered, Incoming, Limits, Reassembler};
+use rcan_core::dsor_rx::{Delivered, Incoming, Limits, Reassembler};
 use rcan_core::dsor_tx::{Transfer, TxError, TxStep, TxStreams};
-use rcan_core::dsor_wire::{self, DsorId, Frame, FrameType, Header, MsgKind, Timers};
+use rcan_core::dsor_wire::{self, AckStatus, DsorId, Frame, FrameType, Header, MsgKind, Timers};
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 
 module! {
@@ -631,7 +631,7 @@ impl HrTimerCallback for Tick {
             }
             let mut batch: [Option<Frame>; BATCH] = Default::default();
             let mut n = 0;
-            let mut ifname = Name([0; 16]);
+            let ifname;
             {
                 let mut g = ENGINE.lock();
                 let Some(e) = g.as_mut() else { return };
@@ -803,7 +803,7 @@ fn add_bind(sk: &S, addr: DsorAddr) -> Result {
                 sk: sk.as_ptr() as usize,
                 addr,
             },
-            glue::GFP_ATOMIC,
+            kernel::alloc::flags::GFP_ATOMIC,
         )
         .map_err(|_| ENOMEM)
 }
@@ -1066,7 +1066,7 @@ fn can_start(dst: u8) -> bool {
     let g = ENGINE.lock();
     match g.as_ref() {
         Some(e) => {
-            e.tx.iter().any(|x| matches!(x, TxEntry::Free)) && e.streams.has_free(dst)
+            e.tx.iter().any(|x| matches!(x, TxEntry::Free)) && e.streams.in_use(dst) < u32::from(dsor_wire::CHANNELS)
         }
         None => true,
     }

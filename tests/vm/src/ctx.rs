@@ -61,6 +61,8 @@ pub enum Module {
     Time,
     /// Redundant DSOR time service (`net/can/dsor/rcan_rtime.ko`).
     Rtime,
+    /// DSOR protocol and canip0 (`net/can/dsor/rcan_dsor.ko`).
+    Dsor,
     /// SJA1000 front-end for Kvaser PCIcan cards.
     Kvaser,
     /// SJA1000 front-end for Advantech PCM-3680I / MIOe-3680 cards.
@@ -69,13 +71,14 @@ pub enum Module {
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 8] = [
+    pub const ALL: [Module; 9] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
         Module::Loop,
         Module::Time,
         Module::Rtime,
+        Module::Dsor,
         Module::Kvaser,
         Module::Advantech,
     ];
@@ -89,6 +92,7 @@ impl Module {
             Module::Loop => "rcan_loop",
             Module::Time => "rcan_time",
             Module::Rtime => "rcan_rtime",
+            Module::Dsor => "rcan_dsor",
             Module::Kvaser => "rcan_kvaser_pci",
             Module::Advantech => "rcan_advantech_pci",
         }
@@ -103,6 +107,7 @@ impl Module {
             Module::Loop => "drivers/net/can/rcan_loop.ko",
             Module::Time => "net/can/dsor/rcan_time.ko",
             Module::Rtime => "net/can/dsor/rcan_rtime.ko",
+            Module::Dsor => "net/can/dsor/rcan_dsor.ko",
             Module::Kvaser => "drivers/net/can/sja1000/rcan_kvaser_pci.ko",
             Module::Advantech => "drivers/net/can/sja1000/rcan_advantech_pci.ko",
         }

@@ -3,6 +3,7 @@
 
 mod canutils;
 mod capture;
+mod dsor;
 mod errors;
 mod filter;
 mod lifecycle;
@@ -63,6 +64,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         capture::TESTS,
         mixed::TESTS,
         timesvc::TESTS,
+        dsor::TESTS,
         sja1000::TESTS,
     ]
     .into_iter()

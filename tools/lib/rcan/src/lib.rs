@@ -21,6 +21,7 @@
 //! and deliberately faulting pointers, for tests of the kernel's error paths.
 //! All `unsafe` code of the crate lives in [`raw`].
 
+pub mod dsor;
 pub mod raw;
 mod socket;
 

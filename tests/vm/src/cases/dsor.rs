@@ -1,0 +1,737 @@
+// SPDX-License-Identifier: GPL-2.0
+//! The DSOR higher-layer protocol, `rcan_dsor` (thesis 5.2.6 and 5.3.3;
+//! Documentation/networking/rcan/dsor.rst and dsor-wire.rst), over the
+//! loopback driver: both addressings with every interesting length up to
+//! the maximum, concurrent senders, simulated loss (canloop `droprate`),
+//! errors, teardown during transfers, malformed frames injected from a
+//! CAN_RAW socket, an independent user-space node (`dsor-peer`, written
+//! from the wire specification alone) in both directions, and UDP over
+//! CAN with plain AF_INET sockets.
+//!
+//! The host is node 0 on can0; `dsor-peer` is node 5 on the same canloop
+//! interface (canloop echoes every frame to all local sockets, so the
+//! peer's raw socket and the kernel see each other's frames).
+
+use std::collections::HashMap;
+use std::io;
+use std::net::UdpSocket;
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use rcan_uapi::dsor::{dsor_port, DsorAddr, DsorSocket, DSOR_ID_ANY, DSOR_NODE_ANY};
+
+use super::test_table;
+use crate::canraw;
+use crate::check::{ensure, errno_of, expect_errno, OrFail, TestResult};
+use crate::ctx::{tool, Ctx, Module};
+use crate::Test;
+
+pub const TESTS: &[Test] = test_table![
+    dsor_segm_all_lengths,
+    dsor_port_both_ways,
+    dsor_concurrent_senders,
+    dsor_droprate,
+    dsor_errors,
+    dsor_nonblocking_error,
+    dsor_teardown,
+    dsor_bad_input,
+    dsor_peer_exchange,
+    dsor_udp_over_can,
+];
+
+/// Node of the peer program.
+const PEER: u8 = 5;
+
+/// Loads the stack with one canloop interface and rcan_dsor on it.
+fn dsor_stack(ctx: &mut Ctx, params: &[&str]) -> Result<u32, String> {
+    ctx.load_stack(&[])?;
+    let mut p = vec!["ifname=can0"];
+    p.extend_from_slice(params);
+    ctx.insmod(Module::Dsor, &p)?;
+    ctx.ifindex("can0")
+}
+
+fn is_debug() -> bool {
+    std::env::var("RCAN_KERNEL").is_ok_and(|k| k == "debug")
+}
+
+/// The dsor-peer pattern: byte i of message j.
+fn pattern(len: usize, j: u64, seed: u64) -> Vec<u8> {
+    (0..len as u64)
+        .map(|i| (i.wrapping_mul(31).wrapping_add(j * 7).wrapping_add(seed) & 0xff) as u8)
+        .collect()
+}
+
+/// dsor-peer's `sha=`: 64-bit FNV-1a.
+fn fnv1a64(b: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &x in b {
+        h ^= u64::from(x);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+fn sock() -> Result<DsorSocket, String> {
+    let s = DsorSocket::new().or_fail("socket(PF_CAN, SOCK_DGRAM, CANPROTO_DSOR)")?;
+    s.set_rcvtimeo(Duration::from_secs(20)).or_fail("SO_RCVTIMEO")?;
+    Ok(s)
+}
+
+fn recv_msg(s: &DsorSocket) -> Result<(Vec<u8>, Option<DsorAddr>), String> {
+    let mut buf = vec![0u8; 70000];
+    let (n, a) = s.recv_from(&mut buf).or_fail("recvfrom")?;
+    buf.truncate(n);
+    Ok((buf, a))
+}
+
+/// Segmented messages of every length class, 0 to 65535 bytes, checked
+/// byte for byte, with the source address; also send/write after
+/// connect, and MSG_TRUNC on a short buffer.
+fn dsor_segm_all_lengths(ctx: &mut Ctx) -> TestResult {
+    dsor_stack(ctx, &[])?;
+    let rx = sock()?;
+    rx.bind(&DsorAddr::Segm { prio: 0, node: DSOR_NODE_ANY, id: 0x1234_5678 })
+        .or_fail("bind")?;
+    let tx = sock()?;
+    let to = DsorAddr::Segm { prio: 0x40, node: 0, id: 0x1234_5678 };
+    let mut lens = vec![0usize, 1, 7, 8, 9, 15, 16, 17, 63, 64, 65, 1000, 4096, 65535];
+    if is_debug() {
+        // KASAN and lockdep make each frame ~10x slower: the longest
+        // message alone would take minutes.
+        lens.retain(|&l| l <= 4096);
+        lens.push(20000);
+    }
+    for (j, &len) in lens.iter().enumerate() {
+        let msg = pattern(len, j as u64, 3);
+        let t0 = Instant::now();
+        let n = tx.send_to(&msg, &to).or_fail(&format!("sendto {len} bytes"))?;
+        ensure!(n == len, "sendto returned {n} for {len} bytes");
+        let (got, from) = recv_msg(&rx)?;
+        ensure!(got == msg, "{len}-byte message arrived as {} bytes, content differs", got.len());
+        ensure!(
+            from == Some(DsorAddr::Segm { prio: 0x40, node: 0, id: 0x1234_5678 }),
+            "source address {from:?}"
+        );
+        if len >= 4096 {
+            let el = t0.elapsed();
+            ctx.note(format!(
+                "{len} bytes ({} frames + acks) in {:.2} s: {:.1} KiB/s",
+                1 + len.div_ceil(8),
+                el.as_secs_f64(),
+                len as f64 / 1024.0 / el.as_secs_f64()
+            ));
+        }
+    }
+    // connect + send/write.
+    tx.connect(&to).or_fail("connect")?;
+    tx.send(b"via send").or_fail("send")?;
+    tx.write(b"via write").or_fail("write")?;
+    ensure!(recv_msg(&rx)?.0 == b"via send", "send after connect");
+    ensure!(recv_msg(&rx)?.0 == b"via write", "write after connect");
+    // A short buffer truncates (datagram semantics).
+    tx.send(&[7u8; 100]).or_fail("send 100")?;
+    let mut small = [0u8; 10];
+    let (n, _) = rx.recv_from_flags(&mut small, libc::MSG_TRUNC).or_fail("recv MSG_TRUNC")?;
+    ensure!(n == 100 && small == [7u8; 10], "MSG_TRUNC recv gave {n}");
+    Ok(())
+}
+
+/// Port addressing both ways: the source port reported by recvfrom is
+/// where the reply goes; an unbound sender gets an ephemeral port.
+fn dsor_port_both_ways(ctx: &mut Ctx) -> TestResult {
+    dsor_stack(ctx, &[])?;
+    let a = sock()?;
+    a.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 7) }).or_fail("bind 0:7")?;
+    let b = sock()?;
+    b.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 8) }).or_fail("bind 0:8")?;
+    for (j, len) in [0usize, 1, 8, 9, 300, 5000].into_iter().enumerate() {
+        let msg = pattern(len, j as u64, 9);
+        b.send_to(&msg, &DsorAddr::Port { prio: 0x20, port: dsor_port(0, 7) })
+            .or_fail("b -> a")?;
+        let (got, from) = recv_msg(&a)?;
+        ensure!(got == msg, "port message of {len} bytes corrupted");
+        ensure!(
+            from == Some(DsorAddr::Port { prio: 0x20, port: dsor_port(0, 8) }),
+            "source {from:?}"
+        );
+        let reply = pattern(len, j as u64, 10);
+        a.send_to(&reply, &from.unwrap()).or_fail("reply a -> b")?;
+        let (got, from) = recv_msg(&b)?;
+        ensure!(got == reply, "reply corrupted");
+        ensure!(
+            matches!(from, Some(DsorAddr::Port { port, .. }) if port == dsor_port(0, 7)),
+            "reply source {from:?}"
+        );
+    }
+    // Unbound sender: autobound to an ephemeral port.
+    let c = sock()?;
+    c.send_to(b"hello", &DsorAddr::Port { prio: 1, port: dsor_port(0, 7) })
+        .or_fail("unbound sendto")?;
+    let (got, from) = recv_msg(&a)?;
+    ensure!(got == b"hello", "message from unbound socket");
+    let Some(DsorAddr::Port { port, .. }) = from else {
+        return Err(format!("source {from:?}"));
+    };
+    ensure!((port & 0xff) >= 128, "ephemeral port {port:#06x}");
+    ensure!(
+        c.local_addr().or_fail("getsockname")? == Some(DsorAddr::Port { prio: 0, port }),
+        "getsockname does not show the ephemeral port"
+    );
+    Ok(())
+}
+
+/// Several sockets send at once (different channels); every message
+/// arrives exactly once and intact.
+fn dsor_concurrent_senders(ctx: &mut Ctx) -> TestResult {
+    dsor_stack(ctx, &[])?;
+    let rx = sock()?;
+    rx.bind(&DsorAddr::Segm { prio: 0, node: 0, id: DSOR_ID_ANY }).or_fail("bind")?;
+    let senders = 8u32;
+    let per = if is_debug() { 5 } else { 20 };
+    let mut handles = Vec::new();
+    for s in 0..senders {
+        handles.push(thread::spawn(move || -> Result<(), String> {
+            let tx = sock()?;
+            for j in 0..per {
+                let len = ((s as usize * 97 + j as usize * 131) % 1500) + 1;
+                let msg = pattern(len, u64::from(j), u64::from(s));
+                tx.send_to(&msg, &DsorAddr::Segm { prio: 0x10, node: 0, id: s << 16 | j })
+                    .or_fail(&format!("sender {s} message {j}"))?;
+            }
+            Ok(())
+        }));
+    }
+    let mut seen: HashMap<u32, usize> = HashMap::new();
+    for _ in 0..senders * per {
+        let (got, from) = recv_msg(&rx)?;
+        let Some(DsorAddr::Segm { id, .. }) = from else {
+            return Err(format!("source {from:?}"));
+        };
+        let (s, j) = (id >> 16, id & 0xffff);
+        let len = ((s as usize * 97 + j as usize * 131) % 1500) + 1;
+        ensure!(got == pattern(len, u64::from(j), u64::from(s)), "message {s}/{j} corrupted");
+        *seen.entry(id).or_default() += 1;
+    }
+    for h in handles {
+        h.join().map_err(|_| "sender panicked".to_string())??;
+    }
+    ensure!(seen.len() == (senders * per) as usize, "{} distinct messages", seen.len());
+    ensure!(seen.values().all(|&c| c == 1), "a message arrived twice");
+    rx.set_rcvtimeo(Duration::from_millis(500)).or_fail("SO_RCVTIMEO")?;
+    let mut buf = [0u8; 16];
+    expect_errno(rx.recv_from(&mut buf), libc::EAGAIN, "no extra message")?;
+    Ok(())
+}
+
+/// Loss: canloop drops 10, 30 and 50 % of all frames. Every message is
+/// delivered intact at most once; every message whose send succeeded was
+/// delivered exactly once; a failed send (ETIMEDOUT) was delivered only
+/// if the failure came after its last frame (every ack of it lost).
+fn dsor_droprate(ctx: &mut Ctx) -> TestResult {
+    // Short timers keep the test short; the protocol is the same.
+    dsor_stack(ctx, &["ack_timeout_ms=20", "reasm_timeout_ms=1000"])?;
+    let rx = sock()?;
+    rx.bind(&DsorAddr::Segm { prio: 0, node: 0, id: DSOR_ID_ANY }).or_fail("bind")?;
+    rx.set_rcvtimeo(Duration::from_millis(100)).or_fail("SO_RCVTIMEO")?;
+    let tx = sock()?;
+    for (rate, count, len) in [(10u32, 40u32, 200usize), (30, 30, 100), (50, 20, 40)] {
+        set_droprate(rate)?;
+        let (mut ok, mut failed) = (0, Vec::new());
+        let mut delivered: HashMap<u32, usize> = HashMap::new();
+        for j in 0..count {
+            let id = rate << 16 | j;
+            let msg = pattern(len, u64::from(j), u64::from(rate));
+            match tx.send_to(&msg, &DsorAddr::Segm { prio: 0x30, node: 0, id }) {
+                Ok(_) => ok += 1,
+                Err(e) if errno_of(&e) == libc::ETIMEDOUT => failed.push(id),
+                Err(e) => {
+                    set_droprate(0)?;
+                    return Err(format!("droprate {rate}: message {j}: {e}"));
+                }
+            }
+            drain(&rx, &mut delivered, len, rate)?;
+        }
+        set_droprate(0)?;
+        thread::sleep(Duration::from_millis(300));
+        drain(&rx, &mut delivered, len, rate)?;
+        ensure!(delivered.values().all(|&c| c == 1), "droprate {rate}: a message was delivered twice");
+        let failed_but_delivered = failed.iter().filter(|id| delivered.contains_key(id)).count();
+        for j in 0..count {
+            let id = rate << 16 | j;
+            if !failed.contains(&id) {
+                ensure!(delivered.contains_key(&id), "droprate {rate}: message {j} acknowledged but never delivered");
+            }
+        }
+        ctx.note(format!(
+            "droprate {rate}%: {count} messages of {len} bytes: {ok} sent, {} failed (ETIMEDOUT; {failed_but_delivered} of them delivered anyway: every ack of the last frame lost), {} delivered, 0 duplicates, 0 corrupted",
+            failed.len(),
+            delivered.len()
+        ));
+    }
+    Ok(())
+}
+
+fn set_droprate(rate: u32) -> TestResult {
+    std::fs::write("/sys/module/rcan_loop/parameters/droprate", format!("{rate}\n"))
+        .or_fail("write droprate")
+}
+
+/// Receives whatever is queued; checks content by the id's (rate, j).
+fn drain(rx: &DsorSocket, seen: &mut HashMap<u32, usize>, len: usize, rate: u32) -> TestResult {
+    loop {
+        let mut buf = vec![0u8; 70000];
+        match rx.recv_from(&mut buf) {
+            Ok((n, Some(DsorAddr::Segm { id, .. }))) => {
+                ensure!(id >> 16 == rate, "message {id:#x} from another round");
+                ensure!(
+                    buf[..n] == pattern(len, u64::from(id & 0xffff), u64::from(rate)),
+                    "message {id:#x} corrupted"
+                );
+                *seen.entry(id).or_default() += 1;
+            }
+            Ok((_, a)) => return Err(format!("unexpected source {a:?}")),
+            Err(e) if errno_of(&e) == libc::EAGAIN => return Ok(()),
+            Err(e) => return Err(format!("recvfrom: {e}")),
+        }
+    }
+}
+
+/// Errno values a user meets.
+fn dsor_errors(ctx: &mut Ctx) -> TestResult {
+    dsor_stack(ctx, &["ack_timeout_ms=20", "reasm_timeout_ms=1000"])?;
+    let s = sock()?;
+    // Addresses.
+    let fd_len7 = {
+        let mut b = DsorAddr::Segm { prio: 0, node: 1, id: 1 }.to_bytes();
+        b.pop();
+        b
+    };
+    expect_errno(
+        rcan_uapi::raw::sendto(&s, b"x", 0, Some(&fd_len7)),
+        libc::EINVAL,
+        "sendto with a 7-byte address",
+    )?;
+    let mut wrong_family = DsorAddr::Segm { prio: 0, node: 1, id: 1 }.to_bytes();
+    wrong_family[0] = 2;
+    wrong_family[1] = 0;
+    expect_errno(
+        rcan_uapi::raw::sendto(&s, b"x", 0, Some(&wrong_family)),
+        libc::EAFNOSUPPORT,
+        "sendto with AF_INET family",
+    )?;
+    expect_errno(s.send(b"x"), libc::EDESTADDRREQ, "send without connect")?;
+    expect_errno(
+        s.send_to(&[0u8; 65536], &DsorAddr::Segm { prio: 0, node: 0, id: 1 }),
+        libc::EMSGSIZE,
+        "65536-byte message",
+    )?;
+    expect_errno(
+        s.send_to(b"x", &DsorAddr::Segm { prio: 0, node: DSOR_NODE_ANY, id: 1 }),
+        libc::EINVAL,
+        "send to the wildcard node",
+    )?;
+    // Nobody bound on node 0: the receiver refuses at once.
+    expect_errno(
+        s.send_to(b"nobody", &DsorAddr::Segm { prio: 0, node: 0, id: 99 }),
+        libc::ECONNREFUSED,
+        "send to an id nobody bound",
+    )?;
+    // No node 9 on the bus: ETIMEDOUT after the retransmissions.
+    expect_errno(
+        s.send_to(b"void", &DsorAddr::Segm { prio: 0, node: 9, id: 1 }),
+        libc::ETIMEDOUT,
+        "send to an absent node",
+    )?;
+    // SO_SNDTIMEO cuts the wait short.
+    s.set_sndtimeo(Duration::from_millis(50)).or_fail("SO_SNDTIMEO")?;
+    expect_errno(
+        s.send_to(&[1u8; 64], &DsorAddr::Segm { prio: 0, node: 9, id: 1 }),
+        libc::ETIMEDOUT,
+        "send with SO_SNDTIMEO to an absent node",
+    )?;
+    // Binds.
+    let p = sock()?;
+    expect_errno(
+        p.bind(&DsorAddr::Port { prio: 0, port: dsor_port(3, 1) }),
+        libc::EADDRNOTAVAIL,
+        "bind a port of another node",
+    )?;
+    p.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 1) }).or_fail("bind 0:1")?;
+    expect_errno(
+        p.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 2) }),
+        libc::EINVAL,
+        "second bind",
+    )?;
+    let q = sock()?;
+    expect_errno(
+        q.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 1) }),
+        libc::EADDRINUSE,
+        "bind a taken port",
+    )?;
+    // Interface down / absent.
+    ctx.link_down("can0")?;
+    expect_errno(
+        q.send_to(b"x", &DsorAddr::Port { prio: 0, port: dsor_port(0, 1) }),
+        libc::ENETDOWN,
+        "send with can0 down",
+    )?;
+    ctx.link_up("can0")?;
+    ctx.rmmod(Module::Dsor).err();
+    drop((s, p, q));
+    thread::sleep(Duration::from_millis(200));
+    ctx.rmmod(Module::Dsor)?;
+    ctx.insmod(Module::Dsor, &["ifname=can9"])?;
+    let r = sock()?;
+    expect_errno(
+        r.send_to(b"x", &DsorAddr::Segm { prio: 0, node: 0, id: 1 }),
+        libc::ENODEV,
+        "send with ifname=can9 (no such interface)",
+    )?;
+    // Bad parameters refuse the load.
+    drop(r);
+    thread::sleep(Duration::from_millis(200));
+    ctx.rmmod(Module::Dsor)?;
+    for bad in ["node=0x80", "ack_timeout_ms=5", "max_len=70000", "reasm_timeout_ms=500", "udp_saddr=1.2.3"] {
+        ensure!(ctx.insmod(Module::Dsor, &[bad]).is_err(), "insmod rcan_dsor {bad} succeeded");
+    }
+    Ok(())
+}
+
+/// A non-blocking send returns at once; its later failure shows as
+/// POLLERR and SO_ERROR (ETIMEDOUT).
+fn dsor_nonblocking_error(ctx: &mut Ctx) -> TestResult {
+    dsor_stack(ctx, &["ack_timeout_ms=20", "reasm_timeout_ms=1000"])?;
+    let rx = sock()?;
+    rx.bind(&DsorAddr::Segm { prio: 0, node: 0, id: 5 }).or_fail("bind")?;
+    let s = sock()?;
+    s.set_nonblocking(true).or_fail("O_NONBLOCK")?;
+    // Success path: returns the length, the message arrives.
+    let n = s.send_to(&[3u8; 500], &DsorAddr::Segm { prio: 0, node: 0, id: 5 }).or_fail("nonblocking send")?;
+    ensure!(n == 500, "nonblocking send returned {n}");
+    ensure!(recv_msg(&rx)?.0 == [3u8; 500], "nonblocking message");
+    ensure!(s.take_error().or_fail("SO_ERROR")? == 0, "SO_ERROR after success");
+    // Failure path.
+    s.send_to(b"lost", &DsorAddr::Segm { prio: 0, node: 9, id: 5 }).or_fail("nonblocking send to absent node")?;
+    let mut pfd = libc::pollfd { fd: std::os::fd::AsRawFd::as_raw_fd(&std::os::fd::AsFd::as_fd(&s)), events: libc::POLLIN, revents: 0 };
+    // SAFETY: one valid pollfd.
+    let r = unsafe { libc::poll(&mut pfd, 1, 20_000) };
+    ensure!(r == 1 && pfd.revents & libc::POLLERR != 0, "poll: {r}, revents {:#x}", pfd.revents);
+    let err = s.take_error().or_fail("SO_ERROR")?;
+    ensure!(err == libc::ETIMEDOUT, "SO_ERROR {err}, want ETIMEDOUT");
+    Ok(())
+}
+
+/// Teardown during transfers: the interface goes down under blocking
+/// senders (ENETDOWN, no hang); a receiver closes mid-stream; rmmod is
+/// refused while sockets exist and succeeds once they are closed, with
+/// transfers from canip0 and non-blocking sockets still running.
+fn dsor_teardown(ctx: &mut Ctx) -> TestResult {
+    dsor_stack(ctx, &[])?;
+    let rx = Arc::new(Mutex::new(Some(sock()?)));
+    rx.lock().unwrap().as_ref().unwrap()
+        .bind(&DsorAddr::Segm { prio: 0, node: 0, id: DSOR_ID_ANY }).or_fail("bind")?;
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let mut senders = Vec::new();
+    for t in 0..4u32 {
+        let stop = Arc::clone(&stop);
+        senders.push(thread::spawn(move || -> Result<(u32, u32), String> {
+            let s = sock()?;
+            let (mut ok, mut err) = (0, 0);
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                match s.send_to(&vec![t as u8; 3000], &DsorAddr::Segm { prio: 0, node: 0, id: t }) {
+                    Ok(_) => ok += 1,
+                    Err(e) if [libc::ENETDOWN, libc::ETIMEDOUT, libc::ECONNREFUSED].contains(&errno_of(&e)) => err += 1,
+                    Err(e) => return Err(format!("sender {t}: {e}")),
+                }
+            }
+            Ok((ok, err))
+        }));
+    }
+    // A reader that drains, then closes mid-stream.
+    let rx2 = Arc::clone(&rx);
+    let reader = thread::spawn(move || {
+        let mut buf = vec![0u8; 4000];
+        for _ in 0..5 {
+            if let Some(s) = rx2.lock().unwrap().as_ref() {
+                let _ = s.recv_from(&mut buf);
+            }
+        }
+        rx2.lock().unwrap().take();
+    });
+    thread::sleep(Duration::from_millis(1500));
+    reader.join().map_err(|_| "reader panicked")?;
+    ctx.link_down("can0")?;
+    thread::sleep(Duration::from_millis(500));
+    ctx.link_up("can0")?;
+    // rmmod while sockets are open: refused (the sockets hold the module).
+    ensure!(ctx.rmmod(Module::Dsor).is_err(), "rmmod rcan_dsor succeeded with open sockets");
+    thread::sleep(Duration::from_millis(500));
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let mut total = (0, 0);
+    for h in senders {
+        let (ok, err) = h.join().map_err(|_| "sender panicked")??;
+        total = (total.0 + ok, total.1 + err);
+    }
+    ctx.note(format!("{} messages sent, {} failed during ifdown/close", total.0, total.1));
+    // Non-blocking sends to an absent node still running at rmmod.
+    let nb = sock()?;
+    nb.set_nonblocking(true).or_fail("O_NONBLOCK")?;
+    for _ in 0..4 {
+        let _ = nb.send_to(&[0u8; 2000], &DsorAddr::Segm { prio: 0, node: 9, id: 1 });
+    }
+    drop(nb);
+    // UDP through canip0 to an absent node, then rmmod at once.
+    run_ip(&["addr", "add", "10.9.0.1/24", "dev", "canip0"])?;
+    run_ip(&["link", "set", "canip0", "up"])?;
+    let u = UdpSocket::bind("10.9.0.1:0").or_fail("udp bind")?;
+    for _ in 0..4 {
+        let _ = u.send_to(&[1u8; 1000], "10.9.0.9:4000");
+    }
+    drop(u);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        match ctx.rmmod(Module::Dsor) {
+            Ok(()) => break,
+            Err(e) if Instant::now() > deadline => return Err(format!("rmmod after close: {e}")),
+            Err(_) => thread::sleep(Duration::from_millis(200)),
+        }
+    }
+    ensure!(!std::path::Path::new("/sys/class/net/canip0").exists(), "canip0 left behind");
+    Ok(())
+}
+
+fn run_ip(args: &[&str]) -> TestResult {
+    let out = Command::new(tool("ip")).args(args).output().or_fail("ip")?;
+    ensure!(out.status.success(), "ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr).trim());
+    Ok(())
+}
+
+/// Sends one raw extended frame on can0.
+fn raw_frame(s: &socketcan::CanSocket, id: u32, data: &[u8]) -> TestResult {
+    canraw::send(s, &canraw::ext(id, data))
+}
+
+const fn dsor_id(prio: u32, dst: u32, src: u32, ty: u32, q: u32, chan: u32) -> u32 {
+    prio << 21 | dst << 14 | src << 7 | ty << 5 | q << 4 | chan
+}
+
+/// Malformed, truncated, out-of-order and duplicated frames from a raw
+/// socket (pretending to be node 5) are never delivered as messages and
+/// break nothing; a correct message with every frame duplicated arrives
+/// once; normal traffic still works afterwards.
+fn dsor_bad_input(ctx: &mut Ctx) -> TestResult {
+    let idx = dsor_stack(ctx, &["reasm_timeout_ms=1500"])?;
+    let rx = sock()?;
+    rx.bind(&DsorAddr::Segm { prio: 0, node: DSOR_NODE_ANY, id: DSOR_ID_ANY }).or_fail("bind")?;
+    rx.set_rcvtimeo(Duration::from_millis(500)).or_fail("SO_RCVTIMEO")?;
+    let raw = canraw::open(idx)?;
+    let h = |q, ch| dsor_id(0x40, 0, PEER as u32, 0, q, ch);
+    let b = |q, ch| dsor_id(0x40, 0, PEER as u32, 1, q, ch);
+    // Headers with bad DLCs (5, 7, 3), a reserved frame type, an ack for
+    // nothing, bodies with no header, remote and standard frames.
+    raw_frame(&raw, h(0, 0), &[0, 10, 1, 2, 3])?;
+    raw_frame(&raw, h(0, 0), &[0, 10, 1, 2, 3, 4, 5])?;
+    raw_frame(&raw, h(0, 0), &[0, 10, 1])?;
+    raw_frame(&raw, dsor_id(0x40, 0, PEER as u32, 3, 0, 0), &[1, 2])?;
+    raw_frame(&raw, dsor_id(0x40, 0, PEER as u32, 2, 0, 0), &[0, 0])?;
+    raw_frame(&raw, b(1, 1), &[9; 8])?;
+    // Truncated: header for 20 bytes, one body, then nothing.
+    raw_frame(&raw, h(0, 2), &[0, 20, 0, 0, 0, 1])?;
+    raw_frame(&raw, b(1, 2), &[1; 8])?;
+    // Out of order: header, then body 2's Q before body 1, wrong DLC.
+    raw_frame(&raw, h(0, 3), &[0, 12, 0, 0, 0, 2])?;
+    raw_frame(&raw, b(0, 3), &[2; 4])?;
+    raw_frame(&raw, b(1, 3), &[2; 3])?;
+    // Oversized DLC body in a 12-byte message (last body must be 4).
+    raw_frame(&raw, b(1, 3), &[2; 8])?;
+    raw_frame(&raw, b(0, 3), &[2; 8])?;
+    let mut buf = [0u8; 100];
+    match rx.recv_from(&mut buf) {
+        Err(e) if errno_of(&e) == libc::EAGAIN => {}
+        Ok((n, a)) => return Err(format!("garbage delivered: {n} bytes from {a:?}")),
+        Err(e) => return Err(format!("recvfrom: {e}")),
+    }
+    // A correct 12-byte message on channel 4, every frame sent twice.
+    let msg: Vec<u8> = (0..12).collect();
+    for _ in 0..2 {
+        raw_frame(&raw, h(0, 4), &[0, 12, 0xab, 0xcd, 0, 1])?;
+    }
+    for _ in 0..2 {
+        raw_frame(&raw, b(1, 4), &msg[..8])?;
+    }
+    for _ in 0..2 {
+        raw_frame(&raw, b(0, 4), &msg[8..])?;
+    }
+    let (got, from) = recv_msg(&rx)?;
+    ensure!(got == msg, "duplicated-frame message arrived as {got:?}");
+    ensure!(
+        from == Some(DsorAddr::Segm { prio: 0x40, node: PEER, id: 0xabcd_0001 }),
+        "source {from:?}"
+    );
+    expect_errno(rx.recv_from(&mut buf), libc::EAGAIN, "the duplicate delivered again")?;
+    // Random garbage addressed to node 0 for a while.
+    let mut x: u32 = 0x1234_5678;
+    for _ in 0..2000 {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        let id = (x & 0x1fff_ffff & !(0x7f << 14)) | (0 << 14);
+        let len = (x >> 29) as usize + ((x >> 8) & 1) as usize;
+        raw_frame(&raw, id, &x.to_be_bytes().repeat(2)[..len.min(8)])?;
+    }
+    thread::sleep(Duration::from_millis(2000));
+    while rx.recv_from(&mut [0u8; 70000]).is_ok() {}
+    // Still works.
+    let tx = sock()?;
+    tx.send_to(b"after the garbage", &DsorAddr::Segm { prio: 0, node: 0, id: 42 })
+        .or_fail("send after garbage")?;
+    ensure!(recv_msg(&rx)?.0 == b"after the garbage", "message after the garbage");
+    Ok(())
+}
+
+/// Runs dsor-peer with `args` (node 5 on can0), stdout captured.
+fn peer(args: &[&str]) -> Result<Child, String> {
+    let bin = std::env::current_exe()
+        .or_fail("current_exe")?
+        .with_file_name("dsor-peer");
+    Command::new(&bin)
+        .args(["--if", "can0", "--node", "5"])
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("{}: {e}", bin.display()))
+}
+
+fn peer_output(c: Child, what: &str) -> Result<Vec<String>, String> {
+    let out = c.wait_with_output().or_fail("dsor-peer")?;
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    ensure!(
+        out.status.success(),
+        "dsor-peer {what}: {}: {} / {}",
+        out.status,
+        stdout.trim(),
+        String::from_utf8_lossy(&out.stderr).lines().rev().take(5).collect::<Vec<_>>().join(" / ")
+    );
+    Ok(stdout.lines().map(String::from).collect())
+}
+
+fn field<'a>(line: &'a str, key: &str) -> Option<&'a str> {
+    line.split_whitespace().find_map(|w| w.strip_prefix(key))
+}
+
+/// The kernel and the independent user-space node exchange segmented and
+/// port messages both ways, once with the peer dropping 20 % of its own
+/// frames (so the kernel sees retransmissions and lost acks).
+fn dsor_peer_exchange(ctx: &mut Ctx) -> TestResult {
+    dsor_stack(ctx, &["ack_timeout_ms=50", "reasm_timeout_ms=2000"])?;
+    let s = sock()?;
+    s.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 3) }).or_fail("bind 0:3")?;
+    let segrx = sock()?;
+    segrx.bind(&DsorAddr::Segm { prio: 0, node: PEER, id: DSOR_ID_ANY }).or_fail("bind segm")?;
+    for drop_pct in ["0", "20"] {
+        // Kernel -> peer: segmented and port messages.
+        let count = 6;
+        let rxp = peer(&["--drop", drop_pct, "--seed", "7", "--ack-timeout-ms", "50", "recv", "--count", &(2 * count).to_string(), "--timeout-s", "60"])?;
+        thread::sleep(Duration::from_millis(300));
+        let mut sent = Vec::new();
+        for j in 0..count {
+            let len = [0usize, 5, 8, 100, 1000, 3000][j];
+            let m = pattern(len, j as u64, 1);
+            s.send_to(&m, &DsorAddr::Segm { prio: 0x11, node: PEER, id: 0x100 + j as u32 })
+                .or_fail(&format!("segm {len} -> peer"))?;
+            sent.push((format!("kind=segm"), len, fnv1a64(&m)));
+            let m = pattern(len, j as u64, 2);
+            s.send_to(&m, &DsorAddr::Port { prio: 0x12, port: dsor_port(PEER, 9) })
+                .or_fail(&format!("port {len} -> peer"))?;
+            sent.push((format!("kind=port"), len, fnv1a64(&m)));
+        }
+        let lines = peer_output(rxp, "recv")?;
+        let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
+        ensure!(rx.len() == sent.len(), "peer received {} of {} messages: {lines:?}", rx.len(), sent.len());
+        for (l, (kind, len, sha)) in rx.iter().zip(&sent) {
+            ensure!(l.contains(kind.as_str()), "peer line {l}: want {kind}");
+            ensure!(field(l, "len=") == Some(&len.to_string()), "peer line {l}: want len {len}");
+            ensure!(field(l, "sha=") == Some(&format!("{sha:016x}")), "peer line {l}: content differs");
+            ensure!(field(l, "src=") == Some("0x00"), "peer line {l}: source");
+        }
+        // Peer -> kernel.
+        let txp = peer(&["--drop", drop_pct, "--seed", "8", "--ack-timeout-ms", "50", "send", "--to", "0", "--prio", "0x21", "--segm", "0x77", "--len", "777", "--count", "4", "--pattern", "5"])?;
+        for j in 0..4u64 {
+            let (got, from) = recv_msg(&segrx)?;
+            ensure!(got == pattern(777, j, 5), "segmented message {j} from the peer corrupted");
+            ensure!(from == Some(DsorAddr::Segm { prio: 0x21, node: PEER, id: 0x77 }), "source {from:?}");
+        }
+        peer_output(txp, "send segm")?;
+        let txp = peer(&["--drop", drop_pct, "--seed", "9", "--ack-timeout-ms", "50", "send", "--to", "0", "--prio", "0x22", "--port", "3:4", "--len", "20", "--count", "3"])?;
+        for j in 0..3u64 {
+            let (got, from) = recv_msg(&s)?;
+            ensure!(got == pattern(20, j, 0), "port message {j} from the peer corrupted");
+            ensure!(from == Some(DsorAddr::Port { prio: 0x22, port: dsor_port(PEER, 4) }), "source {from:?}");
+        }
+        peer_output(txp, "send port")?;
+        ctx.note(format!("peer drop {drop_pct}%: 12 messages to the peer, 7 from it, all intact"));
+    }
+    Ok(())
+}
+
+/// UDP over CAN with plain AF_INET sockets: a datagram to 10.9.0.5 goes
+/// out of canip0 as a DSOR UDP/IP message to node 5 (the peer checks it);
+/// UDP/IP messages from the peer arrive at a UDP socket on 10.9.0.1 with
+/// the source address given by `udp_saddr`; non-UDP traffic is dropped and
+/// counted.
+fn dsor_udp_over_can(ctx: &mut Ctx) -> TestResult {
+    dsor_stack(ctx, &["udp_saddr=10.9.0.5", "ack_timeout_ms=50"])?;
+    run_ip(&["addr", "add", "10.9.0.1/24", "dev", "canip0"])?;
+    run_ip(&["link", "set", "canip0", "up"])?;
+    // Outbound.
+    let rxp = peer(&["recv", "--count", "3", "--timeout-s", "60"])?;
+    thread::sleep(Duration::from_millis(300));
+    let u = UdpSocket::bind("10.9.0.1:0").or_fail("udp bind")?;
+    let mut sent = Vec::new();
+    for (j, len) in [1usize, 100, 1400].into_iter().enumerate() {
+        let m = pattern(len, j as u64, 4);
+        u.send_to(&m, "10.9.0.5:5000").or_fail("udp send_to")?;
+        sent.push((len, fnv1a64(&m)));
+    }
+    let lines = peer_output(rxp, "recv udp")?;
+    let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
+    ensure!(rx.len() == 3, "peer got {} UDP messages: {lines:?}", rx.len());
+    for (l, (len, sha)) in rx.iter().zip(&sent) {
+        ensure!(
+            l.contains("kind=udp") && l.contains("dport=5000") && l.contains("daddr=10.9.0.5"),
+            "peer line {l}"
+        );
+        ensure!(field(l, "len=") == Some(&len.to_string()), "peer line {l}: want len {len}");
+        ensure!(field(l, "sha=") == Some(&format!("{sha:016x}")), "peer line {l}: content differs");
+    }
+    // Inbound.
+    let srv = UdpSocket::bind("10.9.0.1:4000").or_fail("udp bind 4000")?;
+    srv.set_read_timeout(Some(Duration::from_secs(20))).or_fail("timeout")?;
+    let txp = peer(&["send", "--to", "0", "--prio", "0x80", "--udp", "4000:10.9.0.1", "--len", "333", "--count", "3", "--pattern", "6"])?;
+    for j in 0..3u64 {
+        let mut buf = [0u8; 2000];
+        let (n, from) = srv.recv_from(&mut buf).or_fail("udp recv_from")?;
+        ensure!(buf[..n] == pattern(333, j, 6), "UDP datagram {j} corrupted ({n} bytes)");
+        ensure!(from.ip().to_string() == "10.9.0.5", "UDP source {from}");
+    }
+    peer_output(txp, "send udp")?;
+    // Non-UDP (ICMP ping) is dropped and counted.
+    let before = ctx.stat("canip0", "tx_dropped")?;
+    let _ = Command::new(tool("ping")).args(["-c", "1", "-W", "1", "10.9.0.7"]).output();
+    let raw_ip = rcan_uapi::raw::socket(libc::AF_INET, libc::SOCK_RAW, libc::IPPROTO_ICMP);
+    if let Ok(fd) = raw_ip {
+        let mut dst = [0u8; 16];
+        dst[..2].copy_from_slice(&(libc::AF_INET as u16).to_ne_bytes());
+        dst[4..8].copy_from_slice(&[10, 9, 0, 7]);
+        let _ = rcan_uapi::raw::sendto(&fd, &[8, 0, 0xf7, 0xff, 0, 0, 0, 0], 0, Some(&dst));
+    }
+    thread::sleep(Duration::from_millis(300));
+    let after = ctx.stat("canip0", "tx_dropped")?;
+    ensure!(after > before, "ICMP through canip0 not counted as dropped ({before} -> {after})");
+    let _: io::Result<()> = Ok(());
+    Ok(())
+}
