@@ -576,7 +576,13 @@ fn accept(binds: &[Bind], canip_up: bool, inc: &Incoming<'_>) -> core::result::R
         MsgKind::Port { dport, .. } => binds.iter().any(|b| {
             matches!(b.addr, DsorAddr::Port { port, .. } if dsor_addr::port_sub(port) == dport)
         }),
-        MsgKind::Udp { .. } => canip_up,
+        MsgKind::Udp { .. } => {
+            // The rebuilt IPv4 + UDP headers must fit in 65535 bytes.
+            if usize::from(inc.header.len) > rcan_core::dsor_udp::MAX_PAYLOAD {
+                return Err(AckStatus::TooLong);
+            }
+            canip_up
+        }
     };
     if !wanted {
         return Err(AckStatus::Refused);

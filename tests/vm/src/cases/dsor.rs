@@ -39,6 +39,7 @@ pub const TESTS: &[Test] = test_table![
     dsor_bad_input,
     dsor_peer_exchange,
     dsor_udp_over_can,
+    dsor_sja1000_two_interfaces,
 ];
 
 /// Node of the peer program.
@@ -476,6 +477,21 @@ fn dsor_teardown(ctx: &mut Ctx) -> TestResult {
         total = (total.0 + ok, total.1 + err);
     }
     ctx.note(format!("{} messages sent, {} failed during ifdown/close", total.0, total.1));
+    // The interface's driver is unloaded under a blocking sender that is
+    // retransmitting to an absent node: ENETDOWN, not a hang.
+    let waiter = thread::spawn(|| -> Result<i32, String> {
+        let s = sock()?;
+        match s.send_to(&[5u8; 4000], &DsorAddr::Segm { prio: 0, node: 9, id: 1 }) {
+            Ok(_) => Err("send to an absent node succeeded".into()),
+            Err(e) => Ok(errno_of(&e)),
+        }
+    });
+    thread::sleep(Duration::from_millis(300));
+    ctx.rmmod(Module::Loop)?;
+    let e = waiter.join().map_err(|_| "sender panicked")??;
+    ensure!(e == libc::ENETDOWN || e == libc::ENODEV, "send under rmmod rcan_loop: errno {e}");
+    ctx.insmod(Module::Loop, &[])?;
+    ctx.link_up("can0")?;
     // Non-blocking sends to an absent node still running at rmmod.
     let nb = sock()?;
     nb.set_nonblocking(true).or_fail("O_NONBLOCK")?;
@@ -594,11 +610,16 @@ fn dsor_bad_input(ctx: &mut Ctx) -> TestResult {
 
 /// Runs dsor-peer with `args` (node 5 on can0), stdout captured.
 fn peer(args: &[&str]) -> Result<Child, String> {
+    peer_on("can0", args)
+}
+
+/// Runs dsor-peer with `args` as node 5 on `ifname`, stdout captured.
+fn peer_on(ifname: &str, args: &[&str]) -> Result<Child, String> {
     let bin = std::env::current_exe()
         .or_fail("current_exe")?
         .with_file_name("dsor-peer");
     Command::new(&bin)
-        .args(["--if", "can0", "--node", "5"])
+        .args(["--if", ifname, "--node", "5"])
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -733,5 +754,40 @@ fn dsor_udp_over_can(ctx: &mut Ctx) -> TestResult {
     let after = ctx.stat("canip0", "tx_dropped")?;
     ensure!(after > before, "ICMP through canip0 not counted as dropped ({before} -> {after})");
     let _: io::Result<()> = Ok(());
+    Ok(())
+}
+
+/// DSOR between two interfaces on QEMU's SJA1000 bus: the kernel's DSOR
+/// runs on can0 (a kvaser_pci card), dsor-peer (node 5) on can1 (the other
+/// card), so every frame crosses the emulated bus and both SJA1000 drivers
+/// and their hardware filters.
+fn dsor_sja1000_two_interfaces(ctx: &mut Ctx) -> TestResult {
+    super::sja1000::kvaser2(ctx)?;
+    ctx.insmod(Module::Dsor, &["ifname=can0", "ack_timeout_ms=50"])?;
+    let s = sock()?;
+    let rxp = peer_on("can1", &["--ack-timeout-ms", "50", "recv", "--count", "4", "--timeout-s", "60"])?;
+    thread::sleep(Duration::from_millis(300));
+    let mut sent = Vec::new();
+    for (j, len) in [0usize, 9, 500, 3000].into_iter().enumerate() {
+        let m = pattern(len, j as u64, 11);
+        s.send_to(&m, &DsorAddr::Segm { prio: 0x33, node: PEER, id: 0x55 })
+            .or_fail(&format!("{len} bytes can0 -> can1"))?;
+        sent.push((len, fnv1a64(&m)));
+    }
+    let lines = peer_output(rxp, "recv on can1")?;
+    let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
+    ensure!(rx.len() == sent.len(), "peer received {} of {}: {lines:?}", rx.len(), sent.len());
+    for (l, (len, sha)) in rx.iter().zip(&sent) {
+        ensure!(field(l, "len=") == Some(&len.to_string()), "peer line {l}: want len {len}");
+        ensure!(field(l, "sha=") == Some(&format!("{sha:016x}")), "peer line {l}: content differs");
+    }
+    let r = sock()?;
+    r.bind(&DsorAddr::Segm { prio: 0, node: PEER, id: 0x66 }).or_fail("bind")?;
+    let txp = peer_on("can1", &["--ack-timeout-ms", "50", "send", "--to", "0", "--prio", "0x44", "--segm", "0x66", "--len", "2000", "--count", "3", "--pattern", "12"])?;
+    for j in 0..3u64 {
+        let (got, _) = recv_msg(&r)?;
+        ensure!(got == pattern(2000, j, 12), "message {j} from can1 corrupted");
+    }
+    peer_output(txp, "send on can1")?;
     Ok(())
 }
