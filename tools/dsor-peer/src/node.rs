@@ -227,7 +227,7 @@ impl Node {
         let chan = (0..16u8)
             .find(|c| !self.tx.contains_key(&(dst, *c)))
             .ok_or(SendError::Busy)?;
-        let q = self.last_q.get(&(dst, chan)).map_or(false, |q| !q);
+        let q = self.last_q.get(&(dst, chan)).is_some_and(|q| !q);
         let handle = self.next_handle;
         self.next_handle += 1;
         let t = TxTransfer {

@@ -33,6 +33,9 @@ struct Stats {
     duplicated: u64,
 }
 
+/// A finished message: number, result, whether its last frame was sent.
+type Outcome = (u64, Result<(), Fail>, bool);
+
 const LENS: [usize; 9] = [0, 1, 7, 8, 9, 16, 17, 64, 300];
 
 fn message(j: u64, seed: u64) -> (Kind, Vec<u8>) {
@@ -45,7 +48,10 @@ fn message(j: u64, seed: u64) -> (Kind, Vec<u8>) {
 /// `max_delay` the largest extra latency of a frame in ms.
 fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64) -> Stats {
     let mut rng = Rng(seed | 1);
-    let cfg = |n| Config { t_reasm: 3000, ..Config::new(n) };
+    let cfg = |n| Config {
+        t_reasm: 3000,
+        ..Config::new(n)
+    };
     let mut nodes = [Node::new(cfg(3)), Node::new(cfg(0x40))];
     let addr = [3u8, 0x40];
     // Per sender: handle -> message number; next message number.
@@ -54,7 +60,7 @@ fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64
     let mut finished = [0u64; 2];
     // Per receiver: message number -> deliveries.
     let mut delivered: [HashMap<u64, u32>; 2] = [HashMap::new(), HashMap::new()];
-    let mut outcomes: [Vec<(u64, Result<(), Fail>, bool)>; 2] = [Vec::new(), Vec::new()];
+    let mut outcomes: [Vec<Outcome>; 2] = [Vec::new(), Vec::new()];
     let mut bus: VecDeque<(u64, usize, Frame)> = VecDeque::new();
     let mut last_arrival = 0u64;
     let mut st = Stats::default();
@@ -64,7 +70,9 @@ fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64
         for i in 0..2 {
             while inflight[i].len() < window && next[i] < count {
                 let (kind, payload) = message(next[i], i as u64);
-                let h = nodes[i].send(now, addr[1 - i], prio[i], kind, payload).unwrap();
+                let h = nodes[i]
+                    .send(now, addr[1 - i], prio[i], kind, payload)
+                    .unwrap();
                 inflight[i].insert(h, next[i]);
                 next[i] += 1;
             }
@@ -83,7 +91,11 @@ fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64
                     1
                 };
                 for _ in 0..copies {
-                    let delay = if max_delay > 0 { rng.next() % (max_delay + 1) } else { 0 };
+                    let delay = if max_delay > 0 {
+                        rng.next() % (max_delay + 1)
+                    } else {
+                        0
+                    };
                     last_arrival = last_arrival.max(now + delay);
                     bus.push_back((last_arrival, i, f));
                 }
@@ -95,12 +107,22 @@ fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64
                     Event::Delivered(d) => {
                         assert_eq!(d.src, addr[1 - i]);
                         assert_eq!(d.prio, prio[1 - i]);
-                        let Kind::Segm { id } = d.kind else { panic!("kind {:?}", d.kind) };
+                        let Kind::Segm { id } = d.kind else {
+                            panic!("kind {:?}", d.kind)
+                        };
                         let j = u64::from(id);
-                        assert_eq!(d.payload, message(j, 1 - i as u64).1, "message {j} corrupted");
+                        assert_eq!(
+                            d.payload,
+                            message(j, 1 - i as u64).1,
+                            "message {j} corrupted"
+                        );
                         *delivered[i].entry(j).or_default() += 1;
                     }
-                    Event::Sent { handle, result, last_frame_sent } => {
+                    Event::Sent {
+                        handle,
+                        result,
+                        last_frame_sent,
+                    } => {
                         let j = inflight[i].remove(&handle).unwrap();
                         finished[i] += 1;
                         if result.is_ok() {
@@ -118,7 +140,9 @@ fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64
         }
         let t_bus = bus.front().map(|b| b.0);
         let t_node = nodes.iter().filter_map(|n| n.next_deadline()).min();
-        let Some(t) = [t_bus, t_node].into_iter().flatten().min() else { break };
+        let Some(t) = [t_bus, t_node].into_iter().flatten().min() else {
+            break;
+        };
         now = now.max(t);
         while bus.front().is_some_and(|b| b.0 <= now) {
             let (_, from, f) = bus.pop_front().unwrap();
@@ -135,13 +159,21 @@ fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64
     for i in 0..2 {
         let rx = &delivered[1 - i];
         for (j, n) in rx {
-            assert_eq!(*n, 1, "message {j} from node {} delivered {n} times", addr[i]);
+            assert_eq!(
+                *n, 1,
+                "message {j} from node {} delivered {n} times",
+                addr[i]
+            );
         }
         for &(j, result, last_frame_sent) in &outcomes[i] {
             match result {
                 Ok(()) => assert_eq!(rx.get(&j), Some(&1), "success of {j} not delivered"),
                 Err(Fail::Timeout) if !last_frame_sent => {
-                    assert_eq!(rx.get(&j), None, "{j} failed before its last frame but was delivered")
+                    assert_eq!(
+                        rx.get(&j),
+                        None,
+                        "{j} failed before its last frame but was delivered"
+                    )
                 }
                 Err(Fail::Timeout) => {} // outcome unknown to the sender (two generals)
                 Err(e) => panic!("unexpected failure {e:?}"),
@@ -202,7 +234,8 @@ fn hostile_bus_guarantees_hold() {
 fn frame_ids_are_ours() {
     // Frames on the bus carry the sender's node as S.
     let mut a = Node::new(Config::new(0x11));
-    a.send(0, 0x22, 0xab, Kind::Segm { id: 1 }, vec![1; 20]).unwrap();
+    a.send(0, 0x22, 0xab, Kind::Segm { id: 1 }, vec![1; 20])
+        .unwrap();
     let f = a.pop_frame().unwrap();
     let id = Id::decode(f.id);
     assert_eq!((id.src, id.dst, id.prio), (0x11, 0x22, 0xab));

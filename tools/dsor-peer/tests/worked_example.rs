@@ -19,41 +19,113 @@ fn events(n: &mut Node) -> Vec<Event> {
 
 #[test]
 fn identifier_fields() {
-    let id = Id { prio: 0x40, dst: 0, src: 5, typ: Type::Header, q: false, chan: 0 };
+    let id = Id {
+        prio: 0x40,
+        dst: 0,
+        src: 5,
+        typ: Type::Header,
+        q: false,
+        chan: 0,
+    };
     assert_eq!(id.encode(), 0x0800_0280);
     assert_eq!(Id::decode(0x0800_0280), id);
-    let ack = Id { prio: 0x40, dst: 5, src: 0, typ: Type::Ack, q: false, chan: 0 };
+    let ack = Id {
+        prio: 0x40,
+        dst: 5,
+        src: 0,
+        typ: Type::Ack,
+        q: false,
+        chan: 0,
+    };
     assert_eq!(ack.encode(), 0x0801_4040);
-    assert_eq!(Id::decode(0x1fff_ffff), Id { prio: 0xff, dst: 0x7f, src: 0x7f, typ: Type::Reserved, q: true, chan: 15 });
-    for raw in [0u32, 1, 0x10, 0x20, 0x40, 0x60, 0x3f80, 0x1fc000, 0x1fe0_0000, 0x1234_5678] {
+    assert_eq!(
+        Id::decode(0x1fff_ffff),
+        Id {
+            prio: 0xff,
+            dst: 0x7f,
+            src: 0x7f,
+            typ: Type::Reserved,
+            q: true,
+            chan: 15
+        }
+    );
+    for raw in [
+        0u32,
+        1,
+        0x10,
+        0x20,
+        0x40,
+        0x60,
+        0x3f80,
+        0x1fc000,
+        0x1fe0_0000,
+        0x1234_5678,
+    ] {
         assert_eq!(Id::decode(raw).encode(), raw);
     }
 }
 
 #[test]
 fn header_and_ack_payloads() {
-    let h = Header { len: 10, kind: Kind::Segm { id: 0x1234_5678 } };
+    let h = Header {
+        len: 10,
+        kind: Kind::Segm { id: 0x1234_5678 },
+    };
     let (b, n) = h.encode();
     assert_eq!(&b[..n as usize], &[0x00, 0x0A, 0x12, 0x34, 0x56, 0x78]);
     assert_eq!(Header::decode(&b[..6]), Some(h));
-    let p = Header { len: 0x0102, kind: Kind::Port { dport: 0x21, sport: 0x43 } };
+    let p = Header {
+        len: 0x0102,
+        kind: Kind::Port {
+            dport: 0x21,
+            sport: 0x43,
+        },
+    };
     let (b, n) = p.encode();
     assert_eq!(&b[..n as usize], &[1, 2, 0x21, 0x43]);
     assert_eq!(Header::decode(&b[..4]), Some(p));
-    let u = Header { len: 65535, kind: Kind::Udp { dport: 5000, daddr: 0x0a00_0001 } };
+    let u = Header {
+        len: 65535,
+        kind: Kind::Udp {
+            dport: 5000,
+            daddr: 0x0a00_0001,
+        },
+    };
     let (b, n) = u.encode();
     assert_eq!(&b[..n as usize], &[0xff, 0xff, 0x13, 0x88, 10, 0, 0, 1]);
     assert_eq!(Header::decode(&b[..8]), Some(u));
     for bad in [0usize, 1, 2, 3, 5, 7] {
         assert_eq!(Header::decode(&[0u8; 8][..bad]), None, "DLC {bad}");
     }
-    assert_eq!(Ack::decode(&[0, 2]), Some(Ack { index: 2, status: Status::Ok }));
-    assert_eq!(Ack::decode(&[1, 0, 3]), Some(Ack { index: 256, status: Status::TooLong }));
-    assert_eq!(Ack::decode(&[0, 0, 0]), Some(Ack { index: 0, status: Status::Ok }));
+    assert_eq!(
+        Ack::decode(&[0, 2]),
+        Some(Ack {
+            index: 2,
+            status: Status::Ok
+        })
+    );
+    assert_eq!(
+        Ack::decode(&[1, 0, 3]),
+        Some(Ack {
+            index: 256,
+            status: Status::TooLong
+        })
+    );
+    assert_eq!(
+        Ack::decode(&[0, 0, 0]),
+        Some(Ack {
+            index: 0,
+            status: Status::Ok
+        })
+    );
     for bad in [0usize, 1, 4, 8] {
         assert_eq!(Ack::decode(&[0u8; 8][..bad]), None, "DLC {bad}");
     }
-    let (b, n) = Ack { index: 0, status: Status::Refused }.encode();
+    let (b, n) = Ack {
+        index: 0,
+        status: Status::Refused,
+    }
+    .encode();
     assert_eq!(&b[..n as usize], &[0, 0, 1]);
     assert_eq!(bodies(0), 0);
     assert_eq!(bodies(8), 1);
@@ -69,7 +141,7 @@ fn header_and_ack_payloads() {
 fn pattern_and_hash() {
     assert_eq!(pattern(4, 0, 0), vec![0, 31, 62, 93]);
     assert_eq!(pattern(3, 2, 1), vec![15, 46, 77]);
-    assert_eq!(pattern(10, 0, 0)[9], (9 * 31 & 0xff) as u8);
+    assert_eq!(pattern(10, 0, 0)[9], ((9 * 31) & 0xff) as u8);
     // FNV-1a 64 reference values.
     assert_eq!(fnv1a64(b""), 0xcbf2_9ce4_8422_2325);
     assert_eq!(fnv1a64(b"a"), 0xaf63_dc4c_8601_ec8c);
@@ -86,10 +158,17 @@ fn worked_example() {
     let mut a = Node::new(Config::new(5));
     let mut b = Node::new(Config::new(0));
     let msg: Vec<u8> = (0..10).collect();
-    a.send(0, 0, 0x40, Kind::Segm { id: 0x1234_5678 }, msg.clone()).unwrap();
+    a.send(0, 0, 0x40, Kind::Segm { id: 0x1234_5678 }, msg.clone())
+        .unwrap();
     let expect = [
-        (f(0x0800_0280, &[0x00, 0x0A, 0x12, 0x34, 0x56, 0x78]), f(0x0801_4040, &[0, 0])),
-        (f(0x0800_02B0, &[0, 1, 2, 3, 4, 5, 6, 7]), f(0x0801_4050, &[0, 1])),
+        (
+            f(0x0800_0280, &[0x00, 0x0A, 0x12, 0x34, 0x56, 0x78]),
+            f(0x0801_4040, &[0, 0]),
+        ),
+        (
+            f(0x0800_02B0, &[0, 1, 2, 3, 4, 5, 6, 7]),
+            f(0x0801_4050, &[0, 1]),
+        ),
         (f(0x0800_02A0, &[8, 9]), f(0x0801_4040, &[0, 2])),
     ];
     for (data, ack) in expect {
@@ -101,13 +180,27 @@ fn worked_example() {
     assert!(frames(&mut a).is_empty());
     assert_eq!(
         events(&mut b),
-        vec![Event::Delivered(Delivery { src: 5, prio: 0x40, chan: 0, kind: Kind::Segm { id: 0x1234_5678 }, payload: msg })]
+        vec![Event::Delivered(Delivery {
+            src: 5,
+            prio: 0x40,
+            chan: 0,
+            kind: Kind::Segm { id: 0x1234_5678 },
+            payload: msg
+        })]
     );
-    assert!(matches!(events(&mut a)[..], [Event::Sent { result: Ok(()), last_frame_sent: true, .. }]));
+    assert!(matches!(
+        events(&mut a)[..],
+        [Event::Sent {
+            result: Ok(()),
+            last_frame_sent: true,
+            ..
+        }]
+    ));
 
     // The next message on the stream starts with Q = NOT(last Q) = 1 on
     // channel 0 again; zero length: the header is the whole message.
-    a.send(2, 0, 0x40, Kind::Port { dport: 1, sport: 2 }, vec![]).unwrap();
+    a.send(2, 0, 0x40, Kind::Port { dport: 1, sport: 2 }, vec![])
+        .unwrap();
     let h = frames(&mut a);
     assert_eq!(h, vec![f(0x0800_0290, &[0, 0, 1, 2])]);
     b.on_frame(3, &h[0]);
@@ -126,11 +219,17 @@ fn parallel_channels() {
     a.send(0, 9, 1, Kind::Segm { id: 1 }, vec![1]).unwrap();
     a.send(0, 9, 1, Kind::Segm { id: 2 }, vec![2]).unwrap();
     let fr = frames(&mut a);
-    assert_eq!(fr.iter().map(|f| Id::decode(f.id).chan).collect::<Vec<_>>(), vec![0, 1]);
+    assert_eq!(
+        fr.iter().map(|f| Id::decode(f.id).chan).collect::<Vec<_>>(),
+        vec![0, 1]
+    );
     for c in 2..16 {
         a.send(0, 9, 1, Kind::Segm { id: c }, vec![]).unwrap();
     }
-    assert_eq!(a.send(0, 9, 1, Kind::Segm { id: 99 }, vec![]), Err(dsor_peer::node::SendError::Busy));
+    assert_eq!(
+        a.send(0, 9, 1, Kind::Segm { id: 99 }, vec![]),
+        Err(dsor_peer::node::SendError::Busy)
+    );
     // Another destination still has all channels.
     assert!(a.send(0, 10, 1, Kind::Segm { id: 99 }, vec![]).is_ok());
 }
@@ -141,7 +240,8 @@ fn retransmission_and_timeout() {
     cfg.t_ack = 100;
     cfg.n_retx = 3;
     let mut a = Node::new(cfg);
-    a.send(0, 2, 7, Kind::Segm { id: 0 }, vec![1, 2, 3]).unwrap();
+    a.send(0, 2, 7, Kind::Segm { id: 0 }, vec![1, 2, 3])
+        .unwrap();
     let first = frames(&mut a);
     assert_eq!(first.len(), 1);
     a.poll(99);
@@ -154,7 +254,14 @@ fn retransmission_and_timeout() {
     assert!(events(&mut a).is_empty());
     a.poll(400);
     assert!(frames(&mut a).is_empty());
-    assert_eq!(events(&mut a), vec![Event::Sent { handle: 0, result: Err(Fail::Timeout), last_frame_sent: false }]);
+    assert_eq!(
+        events(&mut a),
+        vec![Event::Sent {
+            handle: 0,
+            result: Err(Fail::Timeout),
+            last_frame_sent: false
+        }]
+    );
     // The failed header had Q 0, so the next message's header has Q 1.
     a.send(500, 2, 7, Kind::Segm { id: 0 }, vec![]).unwrap();
     assert!(Id::decode(frames(&mut a)[0].id).q);
@@ -167,42 +274,203 @@ fn stale_acks_ignored_and_status_fails() {
     frames(&mut a);
     // Wrong Q, wrong index, wrong channel, wrong source, malformed DLC.
     for ack in [
-        f(Id { prio: 7, dst: 1, src: 2, typ: Type::Ack, q: true, chan: 0 }.encode(), &[0, 0]),
-        f(Id { prio: 7, dst: 1, src: 2, typ: Type::Ack, q: false, chan: 0 }.encode(), &[0, 1]),
-        f(Id { prio: 7, dst: 1, src: 2, typ: Type::Ack, q: false, chan: 1 }.encode(), &[0, 0]),
-        f(Id { prio: 7, dst: 1, src: 3, typ: Type::Ack, q: false, chan: 0 }.encode(), &[0, 0]),
-        f(Id { prio: 7, dst: 1, src: 2, typ: Type::Ack, q: false, chan: 0 }.encode(), &[0]),
-        f(Id { prio: 7, dst: 1, src: 2, typ: Type::Ack, q: false, chan: 0 }.encode(), &[0, 0, 0, 0]),
-        f(Id { prio: 7, dst: 4, src: 2, typ: Type::Ack, q: false, chan: 0 }.encode(), &[0, 0]),
+        f(
+            Id {
+                prio: 7,
+                dst: 1,
+                src: 2,
+                typ: Type::Ack,
+                q: true,
+                chan: 0,
+            }
+            .encode(),
+            &[0, 0],
+        ),
+        f(
+            Id {
+                prio: 7,
+                dst: 1,
+                src: 2,
+                typ: Type::Ack,
+                q: false,
+                chan: 0,
+            }
+            .encode(),
+            &[0, 1],
+        ),
+        f(
+            Id {
+                prio: 7,
+                dst: 1,
+                src: 2,
+                typ: Type::Ack,
+                q: false,
+                chan: 1,
+            }
+            .encode(),
+            &[0, 0],
+        ),
+        f(
+            Id {
+                prio: 7,
+                dst: 1,
+                src: 3,
+                typ: Type::Ack,
+                q: false,
+                chan: 0,
+            }
+            .encode(),
+            &[0, 0],
+        ),
+        f(
+            Id {
+                prio: 7,
+                dst: 1,
+                src: 2,
+                typ: Type::Ack,
+                q: false,
+                chan: 0,
+            }
+            .encode(),
+            &[0],
+        ),
+        f(
+            Id {
+                prio: 7,
+                dst: 1,
+                src: 2,
+                typ: Type::Ack,
+                q: false,
+                chan: 0,
+            }
+            .encode(),
+            &[0, 0, 0, 0],
+        ),
+        f(
+            Id {
+                prio: 7,
+                dst: 4,
+                src: 2,
+                typ: Type::Ack,
+                q: false,
+                chan: 0,
+            }
+            .encode(),
+            &[0, 0],
+        ),
     ] {
         a.on_frame(1, &ack);
-        assert!(frames(&mut a).is_empty() && events(&mut a).is_empty(), "{ack:?}");
+        assert!(
+            frames(&mut a).is_empty() && events(&mut a).is_empty(),
+            "{ack:?}"
+        );
     }
     // Priority is not matched: an ack with another P counts.
-    a.on_frame(1, &f(Id { prio: 9, dst: 1, src: 2, typ: Type::Ack, q: false, chan: 0 }.encode(), &[0, 0]));
+    a.on_frame(
+        1,
+        &f(
+            Id {
+                prio: 9,
+                dst: 1,
+                src: 2,
+                typ: Type::Ack,
+                q: false,
+                chan: 0,
+            }
+            .encode(),
+            &[0, 0],
+        ),
+    );
     assert_eq!(frames(&mut a).len(), 1);
-    for (st, fail) in [(1u8, Fail::Refused), (2, Fail::NoMemory), (3, Fail::TooLong), (9, Fail::Status(9))] {
+    for (st, fail) in [
+        (1u8, Fail::Refused),
+        (2, Fail::NoMemory),
+        (3, Fail::TooLong),
+        (9, Fail::Status(9)),
+    ] {
         let mut a = Node::new(Config::new(1));
         a.send(0, 2, 7, Kind::Segm { id: 0 }, vec![0; 9]).unwrap();
         frames(&mut a);
-        a.on_frame(1, &f(Id { prio: 7, dst: 1, src: 2, typ: Type::Ack, q: false, chan: 0 }.encode(), &[0, 0, st]));
+        a.on_frame(
+            1,
+            &f(
+                Id {
+                    prio: 7,
+                    dst: 1,
+                    src: 2,
+                    typ: Type::Ack,
+                    q: false,
+                    chan: 0,
+                }
+                .encode(),
+                &[0, 0, st],
+            ),
+        );
         assert!(frames(&mut a).is_empty());
-        assert_eq!(events(&mut a), vec![Event::Sent { handle: 0, result: Err(fail), last_frame_sent: false }]);
+        assert_eq!(
+            events(&mut a),
+            vec![Event::Sent {
+                handle: 0,
+                result: Err(fail),
+                last_frame_sent: false
+            }]
+        );
     }
 }
 
 fn hdr(src: u8, dst: u8, q: bool, chan: u8, len: u16) -> Frame {
-    let (b, n) = Header { len, kind: Kind::Segm { id: 7 } }.encode();
-    f(Id { prio: 3, dst, src, typ: Type::Header, q, chan }.encode(), &b[..n as usize])
+    let (b, n) = Header {
+        len,
+        kind: Kind::Segm { id: 7 },
+    }
+    .encode();
+    f(
+        Id {
+            prio: 3,
+            dst,
+            src,
+            typ: Type::Header,
+            q,
+            chan,
+        }
+        .encode(),
+        &b[..n as usize],
+    )
 }
 
 fn body(src: u8, dst: u8, q: bool, chan: u8, b: &[u8]) -> Frame {
-    f(Id { prio: 3, dst, src, typ: Type::Body, q, chan }.encode(), b)
+    f(
+        Id {
+            prio: 3,
+            dst,
+            src,
+            typ: Type::Body,
+            q,
+            chan,
+        }
+        .encode(),
+        b,
+    )
 }
 
 fn ack(src: u8, dst: u8, q: bool, chan: u8, index: u16, st: u8) -> Frame {
-    let (b, n) = Ack { index, status: Status::from_code(st) }.encode();
-    f(Id { prio: 3, dst, src, typ: Type::Ack, q, chan }.encode(), &b[..n as usize])
+    let (b, n) = Ack {
+        index,
+        status: Status::from_code(st),
+    }
+    .encode();
+    f(
+        Id {
+            prio: 3,
+            dst,
+            src,
+            typ: Type::Ack,
+            q,
+            chan,
+        }
+        .encode(),
+        &b[..n as usize],
+    )
 }
 
 #[test]
@@ -213,8 +481,36 @@ fn receiver_duplicates_and_malformed() {
     assert!(frames(&mut b).is_empty());
     // Header for another node: ignored. Malformed DLC: ignored.
     b.on_frame(0, &hdr(5, 1, false, 0, 9));
-    b.on_frame(0, &f(Id { prio: 3, dst: 0, src: 5, typ: Type::Header, q: false, chan: 0 }.encode(), &[0, 9, 0]));
-    b.on_frame(0, &f(Id { prio: 3, dst: 0, src: 5, typ: Type::Reserved, q: false, chan: 0 }.encode(), &[0, 9, 0, 0]));
+    b.on_frame(
+        0,
+        &f(
+            Id {
+                prio: 3,
+                dst: 0,
+                src: 5,
+                typ: Type::Header,
+                q: false,
+                chan: 0,
+            }
+            .encode(),
+            &[0, 9, 0],
+        ),
+    );
+    b.on_frame(
+        0,
+        &f(
+            Id {
+                prio: 3,
+                dst: 0,
+                src: 5,
+                typ: Type::Reserved,
+                q: false,
+                chan: 0,
+            }
+            .encode(),
+            &[0, 9, 0, 0],
+        ),
+    );
     assert!(frames(&mut b).is_empty());
     let h = hdr(5, 0, false, 0, 9);
     b.on_frame(0, &h);
@@ -266,7 +562,9 @@ fn receiver_new_header_discards_partial_and_expires() {
     assert_eq!(b.rx_bytes(), 4);
     frames(&mut b);
     b.on_frame(2, &body(5, 0, false, 3, &[1, 2, 3, 4]));
-    assert!(matches!(&events(&mut b)[..], [Event::Delivered(d)] if d.payload == [1, 2, 3, 4] && d.chan == 3));
+    assert!(
+        matches!(&events(&mut b)[..], [Event::Delivered(d)] if d.payload == [1, 2, 3, 4] && d.chan == 3)
+    );
     // Partial message without progress is dropped after T_reasm.
     b.on_frame(10, &hdr(6, 0, false, 0, 20));
     b.poll(2009);
@@ -317,7 +615,17 @@ fn receiver_limits() {
 #[test]
 fn self_talk() {
     let mut a = Node::new(Config::new(7));
-    a.send(0, 7, 0, Kind::Udp { dport: 53, daddr: 0x7f00_0001 }, vec![5; 17]).unwrap();
+    a.send(
+        0,
+        7,
+        0,
+        Kind::Udp {
+            dport: 53,
+            daddr: 0x7f00_0001,
+        },
+        vec![5; 17],
+    )
+    .unwrap();
     for _ in 0..20 {
         while let Some(fr) = a.pop_frame() {
             a.on_frame(0, &fr);
@@ -325,6 +633,10 @@ fn self_talk() {
     }
     let ev = events(&mut a);
     assert_eq!(ev.len(), 2, "{ev:?}");
-    assert!(ev.iter().any(|e| matches!(e, Event::Delivered(d) if d.payload == [5; 17] && d.src == 7)));
-    assert!(ev.iter().any(|e| matches!(e, Event::Sent { result: Ok(()), .. })));
+    assert!(ev
+        .iter()
+        .any(|e| matches!(e, Event::Delivered(d) if d.payload == [5; 17] && d.src == 7)));
+    assert!(ev
+        .iter()
+        .any(|e| matches!(e, Event::Sent { result: Ok(()), .. })));
 }
