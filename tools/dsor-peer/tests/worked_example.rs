@@ -146,6 +146,9 @@ fn pattern_and_hash() {
     assert_eq!(fnv1a64(b""), 0xcbf2_9ce4_8422_2325);
     assert_eq!(fnv1a64(b"a"), 0xaf63_dc4c_8601_ec8c);
     assert_eq!(fnv1a64(b"foobar"), 0x8594_4171_f739_67e8);
+    // The example in Documentation/networking/rcan/dsor-peer.rst (computed
+    // there with an independent script).
+    assert_eq!(fnv1a64(&pattern(10, 0, 0)), 0x938c_f491_198f_7900);
     assert_eq!(parse_ipv4("10.0.0.1"), Some(0x0a00_0001));
     assert_eq!(parse_ipv4("10.0.0.256"), None);
     assert_eq!(fmt_ipv4(0xc0a8_0102), "192.168.1.2");
