@@ -735,7 +735,7 @@ fn body_with_header_q_ignored() {
 /// flight only to occupy lower channels) are dropped.
 fn exchange(a: &mut Node, b: &mut Node, chan: u8, expect: &[(u32, &[u8])], lose: Option<usize>) {
     let mut now = 1000;
-    let mut pop = |n: &mut Node| loop {
+    let pop = |n: &mut Node| loop {
         let fr = n.pop_frame()?;
         if Id::decode(fr.id).chan == chan {
             return Some(fr);
