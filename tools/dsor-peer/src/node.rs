@@ -59,19 +59,16 @@ pub enum Fail {
     NoMemory,
     /// Ack status TOO_LONG (EMSGSIZE), or longer than 65535 bytes.
     TooLong,
-    /// An ack status the spec does not define.
-    Status(u8),
 }
 
 impl Fail {
     /// The word printed after `reason=`.
-    pub fn reason(&self) -> String {
+    pub fn reason(&self) -> &'static str {
         match self {
-            Fail::Timeout => "timeout".into(),
-            Fail::Refused => "refused".into(),
-            Fail::NoMemory => "nomem".into(),
-            Fail::TooLong => "toolong".into(),
-            Fail::Status(s) => format!("status{s}"),
+            Fail::Timeout => "timeout",
+            Fail::Refused => "refused",
+            Fail::NoMemory => "nomem",
+            Fail::TooLong => "toolong",
         }
     }
 }
@@ -148,12 +145,15 @@ enum RxState {
         expect_q: bool,
         deadline: u64,
     },
+    /// Delivered, or the header was refused (last index 0, non-zero status).
     Done {
-        prio: u8,
         last_q: bool,
         last_index: u16,
-        /// The header if the message had length 0.
-        zero_hdr: Option<(bool, Vec<u8>)>,
+        /// Q and bytes of the header if it is the last frame acked
+        /// (zero-length message or refused header).
+        hdr0: Option<(bool, Vec<u8>)>,
+        /// The status the header was answered with.
+        hdr_status: Status,
         deadline: u64,
     },
 }
@@ -227,7 +227,7 @@ impl Node {
         let chan = (0..16u8)
             .find(|c| !self.tx.contains_key(&(dst, *c)))
             .ok_or(SendError::Busy)?;
-        let q = self.last_q.get(&(dst, chan)).map_or(false, |q| !q);
+        let q = self.last_q.get(&(dst, chan)).is_some_and(|q| !q);
         let handle = self.next_handle;
         self.next_handle += 1;
         let t = TxTransfer {
@@ -309,7 +309,6 @@ impl Node {
             Status::Refused => Some(Fail::Refused),
             Status::NoMemory => Some(Fail::NoMemory),
             Status::TooLong => Some(Fail::TooLong),
-            Status::Other(s) => Some(Fail::Status(s)),
         };
         if let Some(fail) = fail {
             self.finish(key.0, key.1, Err(fail));
@@ -346,19 +345,33 @@ impl Node {
     fn on_header(&mut self, now: u64, id: Id, b: &[u8]) {
         let Some(h) = Header::decode(b) else { return };
         let key = (id.src, id.chan);
-        let duplicate = match self.rx.get(&key) {
+        let refresh = now + self.cfg.t_reasm;
+        // A retransmitted header whose ack was lost: answer it as before.
+        let duplicate = match self.rx.get_mut(&key) {
             Some(RxState::Receiving {
-                hdr_q, hdr, next, ..
-            }) => *next == 1 && *hdr_q == id.q && hdr == b,
+                hdr_q,
+                hdr,
+                next,
+                deadline,
+                ..
+            }) if *next == 1 && *hdr_q == id.q && hdr == b => {
+                *deadline = refresh;
+                Some(Status::Ok)
+            }
             Some(RxState::Done {
                 last_index: 0,
-                zero_hdr: Some((q, hdr)),
+                hdr0: Some((q, hdr)),
+                hdr_status,
+                deadline,
                 ..
-            }) => *q == id.q && hdr == b,
-            _ => false,
+            }) if *q == id.q && hdr == b => {
+                *deadline = refresh;
+                Some(*hdr_status)
+            }
+            _ => None,
         };
-        if duplicate {
-            self.ack(id.prio, id.src, id.chan, id.q, 0, Status::Ok);
+        if let Some(status) = duplicate {
+            self.ack(id.prio, id.src, id.chan, id.q, 0, status);
             return;
         }
         self.drop_rx(key);
@@ -380,21 +393,23 @@ impl Node {
             Status::Ok
         };
         self.ack(id.prio, id.src, id.chan, id.q, 0, status);
-        if status != Status::Ok {
-            return;
-        }
         let deadline = now + self.cfg.t_reasm;
-        if h.len == 0 {
+        if status != Status::Ok || h.len == 0 {
+            // Remember the answer so that a retransmission of this header
+            // gets the same one (a refused message is never delivered).
             self.rx.insert(
                 key,
                 RxState::Done {
-                    prio: id.prio,
                     last_q: id.q,
                     last_index: 0,
-                    zero_hdr: Some((id.q, b.to_vec())),
+                    hdr0: Some((id.q, b.to_vec())),
+                    hdr_status: status,
                     deadline,
                 },
             );
+            if status != Status::Ok {
+                return;
+            }
             self.events.push_back(Event::Delivered(Delivery {
                 src: id.src,
                 prio: id.prio,
@@ -427,15 +442,14 @@ impl Node {
         let reack = match self.rx.get_mut(&key) {
             None => return,
             Some(RxState::Done {
-                prio,
-                last_q,
-                last_index,
-                ..
+                last_q, last_index, ..
             }) => {
-                if *last_q != id.q {
+                // Only a retransmitted last body is answered; after a
+                // header-only transfer no body belongs to it.
+                if *last_q != id.q || *last_index == 0 {
                     return;
                 }
-                (*prio, *last_index)
+                *last_index
             }
             Some(RxState::Receiving {
                 prio,
@@ -448,8 +462,12 @@ impl Node {
                 ..
             }) => {
                 if id.q != *expect_q {
-                    // The previous frame again: its ack was lost.
-                    (*prio, *next - 1)
+                    // The previous body again (its ack was lost); with
+                    // next == 1 no body was received yet: ignore.
+                    if *next == 1 {
+                        return;
+                    }
+                    *next - 1
                 } else {
                     if b.len() != usize::from(body_dlc(*len, *next)) {
                         return;
@@ -462,14 +480,14 @@ impl Node {
                         self.rx.insert(
                             key,
                             RxState::Done {
-                                prio,
                                 last_q: id.q,
                                 last_index: k,
-                                zero_hdr: None,
+                                hdr0: None,
+                                hdr_status: Status::Ok,
                                 deadline: now + t_reasm,
                             },
                         );
-                        self.ack(prio, id.src, id.chan, id.q, k, Status::Ok);
+                        self.ack(id.prio, id.src, id.chan, id.q, k, Status::Ok);
                         self.events.push_back(Event::Delivered(Delivery {
                             src: id.src,
                             prio,
@@ -481,13 +499,13 @@ impl Node {
                         *next += 1;
                         *expect_q = !*expect_q;
                         *deadline = now + t_reasm;
-                        self.ack(prio, id.src, id.chan, id.q, k, Status::Ok);
+                        self.ack(id.prio, id.src, id.chan, id.q, k, Status::Ok);
                     }
                     return;
                 }
             }
         };
-        self.ack(reack.0, id.src, id.chan, id.q, reack.1, Status::Ok);
+        self.ack(id.prio, id.src, id.chan, id.q, reack, Status::Ok);
     }
 
     /// Runs the timers: retransmissions, send timeouts, reassembly expiry.

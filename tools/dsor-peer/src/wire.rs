@@ -194,8 +194,6 @@ pub enum Status {
     NoMemory,
     /// 3: message longer than the receiver accepts (EMSGSIZE).
     TooLong,
-    /// 4..=255: not defined by the spec; ends the transfer like any non-zero status.
-    Other(u8),
 }
 
 impl Status {
@@ -206,18 +204,17 @@ impl Status {
             Status::Refused => 1,
             Status::NoMemory => 2,
             Status::TooLong => 3,
-            Status::Other(c) => c,
         }
     }
 
-    /// From a wire value.
-    pub fn from_code(c: u8) -> Status {
+    /// From a wire value; 4..=255 are undefined (the ack is malformed).
+    pub fn from_code(c: u8) -> Option<Status> {
         match c {
-            0 => Status::Ok,
-            1 => Status::Refused,
-            2 => Status::NoMemory,
-            3 => Status::TooLong,
-            c => Status::Other(c),
+            0 => Some(Status::Ok),
+            1 => Some(Status::Refused),
+            2 => Some(Status::NoMemory),
+            3 => Some(Status::TooLong),
+            _ => None,
         }
     }
 }
@@ -244,7 +241,8 @@ impl Ack {
         }
     }
 
-    /// Parses an ack payload; `None` unless DLC is 2 or 3.
+    /// Parses an ack payload; `None` unless DLC is 2 or 3 and the status
+    /// is defined.
     pub fn decode(b: &[u8]) -> Option<Ack> {
         match b {
             [h, l] => Some(Ack {
@@ -253,7 +251,7 @@ impl Ack {
             }),
             [h, l, s] => Some(Ack {
                 index: u16::from_be_bytes([*h, *l]),
-                status: Status::from_code(*s),
+                status: Status::from_code(*s)?,
             }),
             _ => None,
         }
