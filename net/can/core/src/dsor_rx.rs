@@ -168,11 +168,8 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
         self.slots.iter().position(|s| s.is(src, chan))
     }
 
-    /// A slot for a new state: a free one, else the oldest Done one.
-    fn grab(&self) -> Option<usize> {
-        if let Some(i) = self.slots.iter().position(|s| s.is_free()) {
-            return Some(i);
-        }
+    /// The oldest Done state (the one to reuse when no slot is free).
+    fn oldest_done(&self) -> Option<usize> {
         self.slots
             .iter()
             .enumerate()
@@ -246,7 +243,10 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             .iter()
             .filter(|s| s.src == id.src && matches!(s.st, St::Receiving { .. }))
             .count();
-        let slot = existing.or_else(|| self.grab());
+        // A refusal is remembered in a free slot (or the stream's own); an
+        // accepted message may also take the slot of the oldest Done state.
+        let free = existing.or_else(|| self.slots.iter().position(|s| s.is_free()));
+        let slot = free.or_else(|| self.oldest_done());
         let mut got = None;
         let status = if h.len > self.limits.max_len {
             AckStatus::TooLong
@@ -275,6 +275,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             }
         };
         let ack = ack_frame(id, 0, status);
+        let slot = if got.is_some() { slot } else { free };
         let Some(i) = slot else {
             // No slot to remember the refusal in.
             return RxOutput {

@@ -992,6 +992,10 @@ fn limits_slots_per_peer_too_long() {
                                                                         // 3 slots: two Receiving + the Done of the refusal above (evictable).
     assert_eq!(st(&mut rx, 3, 0, 0, 4), (AckStatus::Ok, true));
     assert_eq!(rx.states(), 3);
+    // A refusal does not evict a Done state to be remembered: the
+    // duplicate of the zero-length header is still recognised.
+    assert_eq!(st(&mut rx, 6, 0, 101, 4), (AckStatus::TooLong, false));
+    assert_eq!(st(&mut rx, 3, 0, 0, 4), (AckStatus::Ok, false));
     assert_eq!(st(&mut rx, 3, 1, 10, 5), (AckStatus::Ok, false)); // evicts Done (3,0)
     assert_eq!(st(&mut rx, 4, 0, 10, 6), (AckStatus::NoMemory, false)); // no slot
                                                                         // A new header on a Receiving stream replaces the partial message.
