@@ -168,11 +168,8 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
         self.slots.iter().position(|s| s.is(src, chan))
     }
 
-    /// A slot for a new state: a free one, else the oldest Done one.
-    fn grab(&self) -> Option<usize> {
-        if let Some(i) = self.slots.iter().position(|s| s.is_free()) {
-            return Some(i);
-        }
+    /// The oldest Done state (the one to reuse when no slot is free).
+    fn oldest_done(&self) -> Option<usize> {
         self.slots
             .iter()
             .enumerate()
@@ -246,7 +243,10 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             .iter()
             .filter(|s| s.src == id.src && matches!(s.st, St::Receiving { .. }))
             .count();
-        let slot = existing.or_else(|| self.grab());
+        // A refusal is remembered in a free slot (or the stream's own); an
+        // accepted message may also take the slot of the oldest Done state.
+        let free = existing.or_else(|| self.slots.iter().position(|s| s.is_free()));
+        let slot = free.or_else(|| self.oldest_done());
         let mut got = None;
         let status = if h.len > self.limits.max_len {
             AckStatus::TooLong
@@ -275,6 +275,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             }
         };
         let ack = ack_frame(id, 0, status);
+        let slot = if got.is_some() { slot } else { free };
         let Some(i) = slot else {
             // No slot to remember the refusal in.
             return RxOutput {
@@ -477,5 +478,96 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
     /// refused transfers).
     pub fn states(&self) -> usize {
         self.slots.iter().filter(|s| !s.is_free()).count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::dsor_wire::MsgKind;
+    use super::*;
+
+    type Rx = Reassembler<[u8; 9], 2>;
+
+    fn id(ftype: FrameType, seq: bool, dst: u8) -> DsorId {
+        DsorId {
+            prio: 7,
+            dst,
+            src: 4,
+            ftype,
+            seq,
+            chan: 1,
+        }
+    }
+
+    fn ack_of(out: &RxOutput<[u8; 9]>) -> Option<(bool, Ack)> {
+        let f = out.ack?;
+        let i = DsorId::from_can_id(f.id)?;
+        assert_eq!(
+            (i.src, i.dst, i.chan, i.prio, i.ftype),
+            (2, 4, 1, 7, FrameType::Ack)
+        );
+        Some((i.seq, Ack::decode(f.payload())?))
+    }
+
+    #[test]
+    fn every_unexpected_frame() {
+        let tm = Timers::default();
+        let mut rx = Rx::new(2, Limits::default(), &tm);
+        let h = Header {
+            len: 9,
+            kind: MsgKind::Port { dport: 1, sport: 2 },
+        };
+        let mut hb = [0; 8];
+        let dlc = h.encode(&mut hb) as usize;
+        let ok = |i| {
+            Some((
+                false,
+                Ack {
+                    index: i,
+                    status: AckStatus::Ok,
+                },
+            ))
+        };
+        let acc = |_: &Incoming<'_>| Ok([0u8; 9]);
+        // Body with no transfer, ack, other destination, bad header DLC.
+        assert!(ack_of(&rx.on_frame(&id(FrameType::Body, true, 2), &[1; 8], 0, acc)).is_none());
+        assert!(ack_of(&rx.on_frame(&id(FrameType::Ack, false, 2), &[0, 0], 0, acc)).is_none());
+        assert!(
+            ack_of(&rx.on_frame(&id(FrameType::Header, false, 3), &hb[..dlc], 0, acc)).is_none()
+        );
+        assert!(ack_of(&rx.on_frame(&id(FrameType::Header, false, 2), &hb[..5], 0, acc)).is_none());
+        assert_eq!(rx.states(), 0);
+        // Header (Q 0), its duplicate, then body 1 must have Q 1.
+        let hdr = id(FrameType::Header, false, 2);
+        assert_eq!(ack_of(&rx.on_frame(&hdr, &hb[..dlc], 0, acc)), ok(0));
+        assert_eq!(ack_of(&rx.on_frame(&hdr, &hb[..dlc], 1, acc)), ok(0));
+        assert!(ack_of(&rx.on_frame(&id(FrameType::Body, false, 2), &[1; 8], 2, acc)).is_none());
+        assert!(ack_of(&rx.on_frame(&id(FrameType::Body, true, 2), &[1; 7], 2, acc)).is_none());
+        let b1 = id(FrameType::Body, true, 2);
+        let o = rx.on_frame(&b1, &[1; 8], 3, acc);
+        assert_eq!(ack_of(&o).map(|a| a.1.index), Some(1));
+        // The header is no longer a duplicate once body 1 arrived, and a
+        // repeated body 1 is re-acked without being stored again.
+        let o = rx.on_frame(&b1, &[9; 8], 4, acc);
+        assert_eq!(ack_of(&o).map(|a| a.1.index), Some(1));
+        assert!(ack_of(&rx.on_frame(&id(FrameType::Body, false, 2), &[2; 2], 5, acc)).is_none());
+        let o = rx.on_frame(&id(FrameType::Body, false, 2), &[2], 5, acc);
+        assert_eq!(ack_of(&o), ok(2));
+        let d = o.delivered.unwrap();
+        assert_eq!((d.src, d.prio, d.buf), (4, 7, [1, 1, 1, 1, 1, 1, 1, 1, 2]));
+        // Done: last body re-acked, nothing delivered; others ignored.
+        let o = rx.on_frame(&id(FrameType::Body, false, 2), &[2], 6, acc);
+        assert_eq!((ack_of(&o), o.delivered.is_none()), (ok(2), true));
+        assert!(ack_of(&rx.on_frame(&b1, &[1; 8], 6, acc)).is_none());
+        assert_eq!(rx.active(), 0);
+        assert_eq!(rx.next_deadline(), Some(2006));
+        assert_eq!(rx.on_timer(2006), 0);
+        assert_eq!(rx.states(), 0);
+        // A partial message times out.
+        rx.on_frame(&hdr, &hb[..dlc], 10, acc);
+        assert_eq!((rx.active(), rx.bytes_in_use()), (1, 9));
+        assert_eq!(rx.on_timer(2009), 0);
+        assert_eq!(rx.on_timer(2010), 1);
+        assert_eq!(rx.bytes_in_use(), 0);
     }
 }

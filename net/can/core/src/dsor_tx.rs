@@ -352,7 +352,7 @@ mod tests {
             kind: MsgKind::Segm { id: 1 },
         };
         let mut t = Transfer::new(5, 3, 5, 0x20, h, true, &Timers::default());
-        assert_eq!(t.next_q(), true);
+        assert!(t.next_q());
         let f = t.start(&msg, 0);
         assert_eq!(f.id, 0x0400_C295);
         assert_eq!(t.deadline(), Some(100));
@@ -376,7 +376,7 @@ mod tests {
             assert_eq!(t.on_timer(&msg, 202 + 100 * i), TxStep::Send(b2));
         }
         assert_eq!(t.on_timer(&msg, 1202), TxStep::Failed(TxError::TimedOut));
-        assert_eq!(t.next_q(), false);
+        assert!(!t.next_q());
         assert_eq!(t.deadline(), None);
     }
 

@@ -24,7 +24,7 @@ const T_SHIFT: u32 = 5;
 const Q_SHIFT: u32 = 4;
 
 /// Frame type, identifier bits 6-5.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
 pub enum FrameType {
     /// 0: header frame, starts a message.
     Header,
@@ -57,7 +57,7 @@ impl FrameType {
 
 /// The fields of a DSOR identifier:
 /// `P << 21 | D << 14 | S << 7 | T << 5 | Q << 4 | C`.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
 pub struct DsorId {
     /// Priority (8 bits, lower wins arbitration).
     pub prio: u8,
@@ -119,7 +119,7 @@ impl DsorId {
 }
 
 /// Message type and addressing, told by the header frame's DLC.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
 pub enum MsgKind {
     /// DLC 6: segmented message with a 32-bit message id
     /// (`sockaddr_cansegm`).
@@ -156,7 +156,7 @@ impl MsgKind {
 }
 
 /// Contents of a header frame.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
 pub struct Header {
     /// Message length in bytes.
     pub len: u16,
@@ -212,7 +212,7 @@ impl Header {
 }
 
 /// Status byte of an ack.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
 pub enum AckStatus {
     /// 0: frame received.
     Ok,
@@ -248,7 +248,7 @@ impl AckStatus {
 }
 
 /// Contents of an ack frame.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
 pub struct Ack {
     /// Index of the acknowledged frame: 0 the header, k body k.
     pub index: u16,
@@ -290,7 +290,7 @@ impl Ack {
 
 /// A CAN frame as DSOR sends it: extended data frame, 29-bit identifier
 /// without `CAN_EFF_FLAG`.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
 pub struct Frame {
     /// 29-bit identifier (no `CAN_EFF_FLAG`).
     pub id: u32,
@@ -331,7 +331,7 @@ impl Frame {
 
 /// Number of body frames of an `len`-byte message: ceil(len / 8).
 pub const fn body_count(len: u16) -> u16 {
-    ((len as u32 + 7) / 8) as u16
+    (len as u32).div_ceil(8) as u16
 }
 
 /// DLC of body `k` (1-based) of an `len`-byte message: min(8, len - 8(k-1));
@@ -360,7 +360,7 @@ pub const fn rx_filter(local: u8) -> (u32, u32) {
 }
 
 /// Protocol timers (dsor-wire.rst, "Timers and limits").
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
 pub struct Timers {
     /// T_ack: sender's wait for an ack before retransmitting (ms).
     pub ack_timeout_ms: u32,
