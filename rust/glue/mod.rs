@@ -72,6 +72,12 @@ pub(crate) fn jiffies() -> u64 {
     unsafe { bindings::rcan_jiffies() as u64 }
 }
 
+/// `msecs_to_jiffies`. Any context.
+pub(crate) fn msecs_to_jiffies(ms: u32) -> i64 {
+    // SAFETY: a pure conversion.
+    unsafe { bindings::rcan_msecs_to_jiffies(ms) as i64 }
+}
+
 /// Converts a negative C return value into an [`Error`].
 pub(crate) fn to_result(ret: i32) -> kernel::error::Result<i32> {
     if ret < 0 {

@@ -506,3 +506,8 @@ unsigned long rcan_jiffies(void)
 {
 	return jiffies;
 }
+
+unsigned long rcan_msecs_to_jiffies(unsigned int ms)
+{
+	return msecs_to_jiffies(ms);
+}

@@ -143,3 +143,4 @@ bool rcan_skb_put_zero(struct sk_buff *skb, unsigned int len);
 void *rcan_skb_push(struct sk_buff *skb, unsigned int len);
 void rcan_skb_set_ipv4_rx(struct sk_buff *skb, struct net_device *dev);
 unsigned long rcan_jiffies(void);
+unsigned long rcan_msecs_to_jiffies(unsigned int ms);

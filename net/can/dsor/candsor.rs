@@ -292,6 +292,8 @@ fn waitq() -> *mut bindings::wait_queue_head {
 
 /// Set by module exit: the timer neither sends nor re-arms.
 static STOPPING: AtomicBool = AtomicBool::new(false);
+/// When the module was loaded (monotonic ms), for [`restart_hold`].
+static LOADED_MS: AtomicU64 = AtomicU64::new(0);
 /// The local node, for lock-free checks.
 static NODE: AtomicU32 = AtomicU32::new(0);
 /// Frames received that were not for DSOR's interface (cheap counter).
@@ -958,6 +960,9 @@ impl glue::sock::Proto for DsorProto {
             kind,
         };
         check_device()?;
+        if len == 0 {
+            restart_hold(timeo)?;
+        }
         let owner = if timeo == 0 {
             Owner::Sock(sk.to_ref())
         } else {
@@ -1064,6 +1069,32 @@ impl glue::sock::Proto for DsorProto {
         } else {
             n
         })
+    }
+}
+
+/// The restart rule of the wire specification ("Sequence bit"): every
+/// stream starts at Q = 0 after a load, so during the first
+/// `reasm_timeout_ms` a receiver may still remember a zero-length message
+/// with Q = 0 that the previous instance of this module sent, and would
+/// take an identical new one for its retransmission. Zero-length messages
+/// therefore wait until that time has passed (longer messages cannot be
+/// mistaken: a receiver restarts on every header it has not acknowledged
+/// as the last frame). EAGAIN for a non-blocking sender.
+fn restart_hold(timeo: i64) -> Result {
+    let until = LOADED_MS.load(Ordering::Relaxed) + u64::from(param(Param::ReasmTimeoutMs));
+    let wait_ms = until.saturating_sub(now_ms());
+    if wait_ms == 0 {
+        return Ok(());
+    }
+    if timeo == 0 {
+        return Err(EAGAIN);
+    }
+    let j = glue::msecs_to_jiffies(wait_ms as u32).min(timeo);
+    match WAITQ.wait(j, &|| now_ms() >= until) {
+        Waited::Interrupted => Err(EINTR),
+        Waited::Ready => Ok(()),
+        Waited::TimedOut if now_ms() >= until => Ok(()),
+        Waited::TimedOut => Err(neterr::ETIMEDOUT()),
     }
 }
 
@@ -1258,6 +1289,7 @@ impl kernel::Module for DsorModule {
         let (node, canip, ifname) = (cfg.node, cfg.canip, cfg.ifname);
         let engine = new_engine(cfg)?;
         NODE.store(u32::from(node), Ordering::Relaxed);
+        LOADED_MS.store(now_ms(), Ordering::Relaxed);
         TIMER.init(ClockId::Monotonic, HrTimerMode::AbsoluteSoft, ())?;
         *ENGINE.lock() = Some(engine);
         match register_all(node, canip) {
