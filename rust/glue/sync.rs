@@ -421,7 +421,9 @@ impl CWaitQueue {
         let c = WaitCond { f: cond };
         let arg = &c as *const WaitCond<'_> as *mut ffi::c_void;
         // SAFETY: a static, initialised wait queue; `arg` outlives the call.
-        let ret = unsafe { bindings::rcan_wait_event_timeout((self.wq)(), Some(wait_cond), arg, timeo as _) };
+        let ret = unsafe {
+            bindings::rcan_wait_event_timeout((self.wq)(), Some(wait_cond), arg, timeo as _)
+        };
         if ret > 0 {
             Waited::Ready
         } else if ret == 0 {

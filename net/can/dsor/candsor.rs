@@ -241,7 +241,10 @@ enum TxEntry {
     Running(TxRun),
     /// Finished; kept until its blocking sender collects the result
     /// (0 or a negative errno).
-    Finished { gen: u32, result: i32 },
+    Finished {
+        gen: u32,
+        result: i32,
+    },
 }
 
 /// A bound socket.
@@ -341,7 +344,12 @@ impl Engine {
             self.stats.tx_failed += 1;
         }
         match run.owner {
-            Owner::Waiter => self.tx[i] = TxEntry::Finished { gen: run.gen, result },
+            Owner::Waiter => {
+                self.tx[i] = TxEntry::Finished {
+                    gen: run.gen,
+                    result,
+                }
+            }
             Owner::Sock(sk) => {
                 if result != 0 {
                     sk.sock().report_error(-result);
@@ -501,9 +509,12 @@ impl Engine {
                 cb[2] = 1;
                 cb[3] = sport;
                 let want = dsor_addr::make_port(self.cfg.node, dport);
-                let ok = queue_to(&self.binds, skb, &cb, |a| {
-                    matches!(*a, DsorAddr::Port { port, .. } if port == want)
-                });
+                let ok = queue_to(
+                    &self.binds,
+                    skb,
+                    &cb,
+                    |a| matches!(*a, DsorAddr::Port { port, .. } if port == want),
+                );
                 self.count_delivery(ok);
             }
         }
@@ -572,12 +583,16 @@ fn queue_to(binds: &[Bind], mut skb: Skb, cb: &[u8; 12], want: impl Fn(&DsorAddr
 }
 
 /// The acceptance decision for a new incoming message (under ENGINE).
-fn accept(binds: &[Bind], canip_up: bool, inc: &Incoming<'_>) -> core::result::Result<RxBuf, AckStatus> {
+fn accept(
+    binds: &[Bind],
+    canip_up: bool,
+    inc: &Incoming<'_>,
+) -> core::result::Result<RxBuf, AckStatus> {
     let wanted = match inc.header.kind {
         MsgKind::Segm { id } => binds.iter().any(|b| b.addr.segm_accepts(inc.src, id)),
-        MsgKind::Port { dport, .. } => binds.iter().any(|b| {
-            matches!(b.addr, DsorAddr::Port { port, .. } if dsor_addr::port_sub(port) == dport)
-        }),
+        MsgKind::Port { dport, .. } => binds.iter().any(
+            |b| matches!(b.addr, DsorAddr::Port { port, .. } if dsor_addr::port_sub(port) == dport),
+        ),
         MsgKind::Udp { .. } => {
             // The rebuilt IPv4 + UDP headers must fit in 65535 bytes.
             if usize::from(inc.header.len) > rcan_core::dsor_udp::MAX_PAYLOAD {
@@ -797,8 +812,7 @@ fn add_bind(sk: &S, addr: DsorAddr) -> Result {
     let mut g = ENGINE.lock();
     let e = g.as_mut().ok_or(ENODEV)?;
     if let DsorAddr::Port { port, .. } = addr {
-        if e
-            .binds
+        if e.binds
             .iter()
             .any(|b| matches!(b.addr, DsorAddr::Port { port: p, .. } if p == port))
         {
@@ -875,7 +889,8 @@ impl glue::sock::Proto for DsorProto {
 
     fn bind(sk: &S, addr: &[u8]) -> Result {
         let a = DsorAddr::parse(addr).map_err(errno)?;
-        a.check_bind(NODE.load(Ordering::Relaxed) as u8).map_err(errno)?;
+        a.check_bind(NODE.load(Ordering::Relaxed) as u8)
+            .map_err(errno)?;
         let mut s = sk.lock();
         if s.bound.is_some() {
             return Err(EINVAL);
@@ -1103,7 +1118,8 @@ fn can_start(dst: u8) -> bool {
     let g = ENGINE.lock();
     match g.as_ref() {
         Some(e) => {
-            e.tx.iter().any(|x| matches!(x, TxEntry::Free)) && e.streams.in_use(dst) < u32::from(dsor_wire::CHANNELS)
+            e.tx.iter().any(|x| matches!(x, TxEntry::Free))
+                && e.streams.in_use(dst) < u32::from(dsor_wire::CHANNELS)
         }
         None => true,
     }

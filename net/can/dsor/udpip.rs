@@ -160,7 +160,10 @@ impl Driver for CanipDriver {
         };
         let payload = &pkt[out.payload_off..out.payload_off + out.payload_len];
         let mut msg = KVec::new();
-        if msg.extend_from_slice(payload, kernel::alloc::flags::GFP_ATOMIC).is_err() {
+        if msg
+            .extend_from_slice(payload, kernel::alloc::flags::GFP_ATOMIC)
+            .is_err()
+        {
             dev.stats_tx_dropped();
             return Xmit::Ok;
         }

@@ -558,6 +558,7 @@ mod tests {
                 "rcan_loop",
                 "rcan_time",
                 "rcan_rtime",
+                "rcan_dsor",
                 "rcan_kvaser_pci",
                 "rcan_advantech_pci"
             ]

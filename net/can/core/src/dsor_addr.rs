@@ -172,13 +172,23 @@ mod tests {
         let s = segm(0x40, 5, 0x1234_5678);
         assert_eq!(
             DsorAddr::parse(&s),
-            Ok(DsorAddr::Segm { prio: 0x40, node: 5, id: 0x1234_5678 })
+            Ok(DsorAddr::Segm {
+                prio: 0x40,
+                node: 5,
+                id: 0x1234_5678
+            })
         );
         let mut p = [0u8; 6];
         p[..2].copy_from_slice(&AF_CAN.to_ne_bytes());
         p[2..4].copy_from_slice(&0x0507u16.to_ne_bytes());
         p[4] = 9;
-        assert_eq!(DsorAddr::parse(&p), Ok(DsorAddr::Port { prio: 9, port: 0x0507 }));
+        assert_eq!(
+            DsorAddr::parse(&p),
+            Ok(DsorAddr::Port {
+                prio: 9,
+                port: 0x0507
+            })
+        );
         assert_eq!(DsorAddr::parse(&s[..7]), Err(EINVAL));
         assert_eq!(DsorAddr::parse(&[0u8; 16]), Err(EAFNOSUPPORT));
         assert_eq!(DsorAddr::parse(&s[..1]), Err(EINVAL));
@@ -187,8 +197,15 @@ mod tests {
     #[test]
     fn encode_round_trips() {
         for a in [
-            DsorAddr::Segm { prio: 1, node: 0x7f, id: 7 },
-            DsorAddr::Port { prio: 0xff, port: 0x7fff },
+            DsorAddr::Segm {
+                prio: 1,
+                node: 0x7f,
+                id: 7,
+            },
+            DsorAddr::Port {
+                prio: 0xff,
+                port: 0x7fff,
+            },
         ] {
             let (b, n) = a.encode();
             assert_eq!(DsorAddr::parse(&b[..n]), Ok(a));
@@ -197,19 +214,45 @@ mod tests {
 
     #[test]
     fn bind_and_dest_rules() {
-        let any = DsorAddr::Segm { prio: 0, node: DSOR_NODE_ANY, id: DSOR_ID_ANY };
+        let any = DsorAddr::Segm {
+            prio: 0,
+            node: DSOR_NODE_ANY,
+            id: DSOR_ID_ANY,
+        };
         assert_eq!(any.check_bind(0), Ok(()));
         assert_eq!(any.check_dest(), Err(EINVAL));
         assert!(any.segm_accepts(3, 99));
-        let one = DsorAddr::Segm { prio: 0, node: 3, id: 99 };
+        let one = DsorAddr::Segm {
+            prio: 0,
+            node: 3,
+            id: 99,
+        };
         assert!(one.segm_accepts(3, 99));
         assert!(!one.segm_accepts(4, 99));
         assert!(!one.segm_accepts(3, 98));
-        assert_eq!(DsorAddr::Segm { prio: 0, node: 0x80, id: 0 }.check_bind(0), Err(EINVAL));
-        let p = DsorAddr::Port { prio: 0, port: make_port(2, 7) };
+        assert_eq!(
+            DsorAddr::Segm {
+                prio: 0,
+                node: 0x80,
+                id: 0
+            }
+            .check_bind(0),
+            Err(EINVAL)
+        );
+        let p = DsorAddr::Port {
+            prio: 0,
+            port: make_port(2, 7),
+        };
         assert_eq!(p.check_bind(2), Ok(()));
         assert_eq!(p.check_bind(3), Err(EADDRNOTAVAIL));
-        assert_eq!(DsorAddr::Port { prio: 0, port: 0x8001 }.check_dest(), Err(EINVAL));
+        assert_eq!(
+            DsorAddr::Port {
+                prio: 0,
+                port: 0x8001
+            }
+            .check_dest(),
+            Err(EINVAL)
+        );
         assert_eq!(udp_node(0x0a00_0085), 5);
     }
 }

@@ -83,7 +83,8 @@ fn fnv1a64(b: &[u8]) -> u64 {
 
 fn sock() -> Result<DsorSocket, String> {
     let s = DsorSocket::new().or_fail("socket(PF_CAN, SOCK_DGRAM, CANPROTO_DSOR)")?;
-    s.set_rcvtimeo(Duration::from_secs(20)).or_fail("SO_RCVTIMEO")?;
+    s.set_rcvtimeo(Duration::from_secs(20))
+        .or_fail("SO_RCVTIMEO")?;
     Ok(s)
 }
 
@@ -100,11 +101,21 @@ fn recv_msg(s: &DsorSocket) -> Result<(Vec<u8>, Option<DsorAddr>), String> {
 fn dsor_segm_all_lengths(ctx: &mut Ctx) -> TestResult {
     dsor_stack(ctx, &[])?;
     let rx = sock()?;
-    rx.bind(&DsorAddr::Segm { prio: 0, node: DSOR_NODE_ANY, id: 0x1234_5678 })
-        .or_fail("bind")?;
+    rx.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: DSOR_NODE_ANY,
+        id: 0x1234_5678,
+    })
+    .or_fail("bind")?;
     let tx = sock()?;
-    let to = DsorAddr::Segm { prio: 0x40, node: 0, id: 0x1234_5678 };
-    let mut lens = vec![0usize, 1, 7, 8, 9, 15, 16, 17, 63, 64, 65, 1000, 4096, 65535];
+    let to = DsorAddr::Segm {
+        prio: 0x40,
+        node: 0,
+        id: 0x1234_5678,
+    };
+    let mut lens = vec![
+        0usize, 1, 7, 8, 9, 15, 16, 17, 63, 64, 65, 1000, 4096, 65535,
+    ];
     if is_debug() {
         // KASAN and lockdep make each frame ~10x slower: the longest
         // message alone would take minutes.
@@ -114,12 +125,22 @@ fn dsor_segm_all_lengths(ctx: &mut Ctx) -> TestResult {
     for (j, &len) in lens.iter().enumerate() {
         let msg = pattern(len, j as u64, 3);
         let t0 = Instant::now();
-        let n = tx.send_to(&msg, &to).or_fail(&format!("sendto {len} bytes"))?;
+        let n = tx
+            .send_to(&msg, &to)
+            .or_fail(format!("sendto {len} bytes"))?;
         ensure!(n == len, "sendto returned {n} for {len} bytes");
         let (got, from) = recv_msg(&rx)?;
-        ensure!(got == msg, "{len}-byte message arrived as {} bytes, content differs", got.len());
         ensure!(
-            from == Some(DsorAddr::Segm { prio: 0x40, node: 0, id: 0x1234_5678 }),
+            got == msg,
+            "{len}-byte message arrived as {} bytes, content differs",
+            got.len()
+        );
+        ensure!(
+            from == Some(DsorAddr::Segm {
+                prio: 0x40,
+                node: 0,
+                id: 0x1234_5678
+            }),
             "source address {from:?}"
         );
         if len >= 4096 {
@@ -141,7 +162,9 @@ fn dsor_segm_all_lengths(ctx: &mut Ctx) -> TestResult {
     // A short buffer truncates (datagram semantics).
     tx.send(&[7u8; 100]).or_fail("send 100")?;
     let mut small = [0u8; 10];
-    let (n, _) = rx.recv_from_flags(&mut small, libc::MSG_TRUNC).or_fail("recv MSG_TRUNC")?;
+    let (n, _) = rx
+        .recv_from_flags(&mut small, libc::MSG_TRUNC)
+        .or_fail("recv MSG_TRUNC")?;
     ensure!(n == 100 && small == [7u8; 10], "MSG_TRUNC recv gave {n}");
     Ok(())
 }
@@ -151,17 +174,34 @@ fn dsor_segm_all_lengths(ctx: &mut Ctx) -> TestResult {
 fn dsor_port_both_ways(ctx: &mut Ctx) -> TestResult {
     dsor_stack(ctx, &[])?;
     let a = sock()?;
-    a.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 7) }).or_fail("bind 0:7")?;
+    a.bind(&DsorAddr::Port {
+        prio: 0,
+        port: dsor_port(0, 7),
+    })
+    .or_fail("bind 0:7")?;
     let b = sock()?;
-    b.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 8) }).or_fail("bind 0:8")?;
+    b.bind(&DsorAddr::Port {
+        prio: 0,
+        port: dsor_port(0, 8),
+    })
+    .or_fail("bind 0:8")?;
     for (j, len) in [0usize, 1, 8, 9, 300, 5000].into_iter().enumerate() {
         let msg = pattern(len, j as u64, 9);
-        b.send_to(&msg, &DsorAddr::Port { prio: 0x20, port: dsor_port(0, 7) })
-            .or_fail("b -> a")?;
+        b.send_to(
+            &msg,
+            &DsorAddr::Port {
+                prio: 0x20,
+                port: dsor_port(0, 7),
+            },
+        )
+        .or_fail("b -> a")?;
         let (got, from) = recv_msg(&a)?;
         ensure!(got == msg, "port message of {len} bytes corrupted");
         ensure!(
-            from == Some(DsorAddr::Port { prio: 0x20, port: dsor_port(0, 8) }),
+            from == Some(DsorAddr::Port {
+                prio: 0x20,
+                port: dsor_port(0, 8)
+            }),
             "source {from:?}"
         );
         let reply = pattern(len, j as u64, 10);
@@ -175,8 +215,14 @@ fn dsor_port_both_ways(ctx: &mut Ctx) -> TestResult {
     }
     // Unbound sender: autobound to an ephemeral port.
     let c = sock()?;
-    c.send_to(b"hello", &DsorAddr::Port { prio: 1, port: dsor_port(0, 7) })
-        .or_fail("unbound sendto")?;
+    c.send_to(
+        b"hello",
+        &DsorAddr::Port {
+            prio: 1,
+            port: dsor_port(0, 7),
+        },
+    )
+    .or_fail("unbound sendto")?;
     let (got, from) = recv_msg(&a)?;
     ensure!(got == b"hello", "message from unbound socket");
     let Some(DsorAddr::Port { port, .. }) = from else {
@@ -195,7 +241,12 @@ fn dsor_port_both_ways(ctx: &mut Ctx) -> TestResult {
 fn dsor_concurrent_senders(ctx: &mut Ctx) -> TestResult {
     dsor_stack(ctx, &[])?;
     let rx = sock()?;
-    rx.bind(&DsorAddr::Segm { prio: 0, node: 0, id: DSOR_ID_ANY }).or_fail("bind")?;
+    rx.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: 0,
+        id: DSOR_ID_ANY,
+    })
+    .or_fail("bind")?;
     let senders = 8u32;
     let per = if is_debug() { 3 } else { 20 };
     let mut handles = Vec::new();
@@ -205,8 +256,15 @@ fn dsor_concurrent_senders(ctx: &mut Ctx) -> TestResult {
             for j in 0..per {
                 let len = ((s as usize * 97 + j as usize * 131) % 1500) + 1;
                 let msg = pattern(len, u64::from(j), u64::from(s));
-                tx.send_to(&msg, &DsorAddr::Segm { prio: 0x10, node: 0, id: s << 16 | j })
-                    .or_fail(&format!("sender {s} message {j}"))?;
+                tx.send_to(
+                    &msg,
+                    &DsorAddr::Segm {
+                        prio: 0x10,
+                        node: 0,
+                        id: s << 16 | j,
+                    },
+                )
+                .or_fail(format!("sender {s} message {j}"))?;
             }
             Ok(())
         }));
@@ -219,15 +277,23 @@ fn dsor_concurrent_senders(ctx: &mut Ctx) -> TestResult {
         };
         let (s, j) = (id >> 16, id & 0xffff);
         let len = ((s as usize * 97 + j as usize * 131) % 1500) + 1;
-        ensure!(got == pattern(len, u64::from(j), u64::from(s)), "message {s}/{j} corrupted");
+        ensure!(
+            got == pattern(len, u64::from(j), u64::from(s)),
+            "message {s}/{j} corrupted"
+        );
         *seen.entry(id).or_default() += 1;
     }
     for h in handles {
         h.join().map_err(|_| "sender panicked".to_string())??;
     }
-    ensure!(seen.len() == (senders * per) as usize, "{} distinct messages", seen.len());
+    ensure!(
+        seen.len() == (senders * per) as usize,
+        "{} distinct messages",
+        seen.len()
+    );
     ensure!(seen.values().all(|&c| c == 1), "a message arrived twice");
-    rx.set_rcvtimeo(Duration::from_millis(500)).or_fail("SO_RCVTIMEO")?;
+    rx.set_rcvtimeo(Duration::from_millis(500))
+        .or_fail("SO_RCVTIMEO")?;
     let mut buf = [0u8; 16];
     expect_errno(rx.recv_from(&mut buf), libc::EAGAIN, "no extra message")?;
     Ok(())
@@ -241,8 +307,14 @@ fn dsor_droprate(ctx: &mut Ctx) -> TestResult {
     // Short timers keep the test short; the protocol is the same.
     dsor_stack(ctx, &["ack_timeout_ms=20", "reasm_timeout_ms=1000"])?;
     let rx = sock()?;
-    rx.bind(&DsorAddr::Segm { prio: 0, node: 0, id: DSOR_ID_ANY }).or_fail("bind")?;
-    rx.set_rcvtimeo(Duration::from_millis(100)).or_fail("SO_RCVTIMEO")?;
+    rx.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: 0,
+        id: DSOR_ID_ANY,
+    })
+    .or_fail("bind")?;
+    rx.set_rcvtimeo(Duration::from_millis(100))
+        .or_fail("SO_RCVTIMEO")?;
     let tx = sock()?;
     for (rate, count, len) in [(10u32, 40u32, 200usize), (30, 30, 100), (50, 20, 40)] {
         set_droprate(rate)?;
@@ -251,7 +323,14 @@ fn dsor_droprate(ctx: &mut Ctx) -> TestResult {
         for j in 0..count {
             let id = rate << 16 | j;
             let msg = pattern(len, u64::from(j), u64::from(rate));
-            match tx.send_to(&msg, &DsorAddr::Segm { prio: 0x30, node: 0, id }) {
+            match tx.send_to(
+                &msg,
+                &DsorAddr::Segm {
+                    prio: 0x30,
+                    node: 0,
+                    id,
+                },
+            ) {
                 Ok(_) => ok += 1,
                 Err(e) if errno_of(&e) == libc::ETIMEDOUT => failed.push(id),
                 Err(e) => {
@@ -264,12 +343,21 @@ fn dsor_droprate(ctx: &mut Ctx) -> TestResult {
         set_droprate(0)?;
         thread::sleep(Duration::from_millis(300));
         drain(&rx, &mut delivered, len, rate)?;
-        ensure!(delivered.values().all(|&c| c == 1), "droprate {rate}: a message was delivered twice");
-        let failed_but_delivered = failed.iter().filter(|id| delivered.contains_key(id)).count();
+        ensure!(
+            delivered.values().all(|&c| c == 1),
+            "droprate {rate}: a message was delivered twice"
+        );
+        let failed_but_delivered = failed
+            .iter()
+            .filter(|id| delivered.contains_key(id))
+            .count();
         for j in 0..count {
             let id = rate << 16 | j;
             if !failed.contains(&id) {
-                ensure!(delivered.contains_key(&id), "droprate {rate}: message {j} acknowledged but never delivered");
+                ensure!(
+                    delivered.contains_key(&id),
+                    "droprate {rate}: message {j} acknowledged but never delivered"
+                );
             }
         }
         ctx.note(format!(
@@ -282,8 +370,11 @@ fn dsor_droprate(ctx: &mut Ctx) -> TestResult {
 }
 
 fn set_droprate(rate: u32) -> TestResult {
-    std::fs::write("/sys/module/rcan_loop/parameters/droprate", format!("{rate}\n"))
-        .or_fail("write droprate")
+    std::fs::write(
+        "/sys/module/rcan_loop/parameters/droprate",
+        format!("{rate}\n"),
+    )
+    .or_fail("write droprate")
 }
 
 /// Receives whatever is queued; checks content by the id's (rate, j).
@@ -312,7 +403,12 @@ fn dsor_errors(ctx: &mut Ctx) -> TestResult {
     let s = sock()?;
     // Addresses.
     let fd_len7 = {
-        let mut b = DsorAddr::Segm { prio: 0, node: 1, id: 1 }.to_bytes();
+        let mut b = DsorAddr::Segm {
+            prio: 0,
+            node: 1,
+            id: 1,
+        }
+        .to_bytes();
         b.pop();
         b
     };
@@ -321,7 +417,12 @@ fn dsor_errors(ctx: &mut Ctx) -> TestResult {
         libc::EINVAL,
         "sendto with a 7-byte address",
     )?;
-    let mut wrong_family = DsorAddr::Segm { prio: 0, node: 1, id: 1 }.to_bytes();
+    let mut wrong_family = DsorAddr::Segm {
+        prio: 0,
+        node: 1,
+        id: 1,
+    }
+    .to_bytes();
     wrong_family[0] = 2;
     wrong_family[1] = 0;
     expect_errno(
@@ -331,57 +432,112 @@ fn dsor_errors(ctx: &mut Ctx) -> TestResult {
     )?;
     expect_errno(s.send(b"x"), libc::EDESTADDRREQ, "send without connect")?;
     expect_errno(
-        s.send_to(&[0u8; 65536], &DsorAddr::Segm { prio: 0, node: 0, id: 1 }),
+        s.send_to(
+            &[0u8; 65536],
+            &DsorAddr::Segm {
+                prio: 0,
+                node: 0,
+                id: 1,
+            },
+        ),
         libc::EMSGSIZE,
         "65536-byte message",
     )?;
     expect_errno(
-        s.send_to(b"x", &DsorAddr::Segm { prio: 0, node: DSOR_NODE_ANY, id: 1 }),
+        s.send_to(
+            b"x",
+            &DsorAddr::Segm {
+                prio: 0,
+                node: DSOR_NODE_ANY,
+                id: 1,
+            },
+        ),
         libc::EINVAL,
         "send to the wildcard node",
     )?;
     // Nobody bound on node 0: the receiver refuses at once.
     expect_errno(
-        s.send_to(b"nobody", &DsorAddr::Segm { prio: 0, node: 0, id: 99 }),
+        s.send_to(
+            b"nobody",
+            &DsorAddr::Segm {
+                prio: 0,
+                node: 0,
+                id: 99,
+            },
+        ),
         libc::ECONNREFUSED,
         "send to an id nobody bound",
     )?;
     // No node 9 on the bus: ETIMEDOUT after the retransmissions.
     expect_errno(
-        s.send_to(b"void", &DsorAddr::Segm { prio: 0, node: 9, id: 1 }),
+        s.send_to(
+            b"void",
+            &DsorAddr::Segm {
+                prio: 0,
+                node: 9,
+                id: 1,
+            },
+        ),
         libc::ETIMEDOUT,
         "send to an absent node",
     )?;
     // SO_SNDTIMEO cuts the wait short.
-    s.set_sndtimeo(Duration::from_millis(50)).or_fail("SO_SNDTIMEO")?;
+    s.set_sndtimeo(Duration::from_millis(50))
+        .or_fail("SO_SNDTIMEO")?;
     expect_errno(
-        s.send_to(&[1u8; 64], &DsorAddr::Segm { prio: 0, node: 9, id: 1 }),
+        s.send_to(
+            &[1u8; 64],
+            &DsorAddr::Segm {
+                prio: 0,
+                node: 9,
+                id: 1,
+            },
+        ),
         libc::ETIMEDOUT,
         "send with SO_SNDTIMEO to an absent node",
     )?;
     // Binds.
     let p = sock()?;
     expect_errno(
-        p.bind(&DsorAddr::Port { prio: 0, port: dsor_port(3, 1) }),
+        p.bind(&DsorAddr::Port {
+            prio: 0,
+            port: dsor_port(3, 1),
+        }),
         libc::EADDRNOTAVAIL,
         "bind a port of another node",
     )?;
-    p.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 1) }).or_fail("bind 0:1")?;
+    p.bind(&DsorAddr::Port {
+        prio: 0,
+        port: dsor_port(0, 1),
+    })
+    .or_fail("bind 0:1")?;
     expect_errno(
-        p.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 2) }),
+        p.bind(&DsorAddr::Port {
+            prio: 0,
+            port: dsor_port(0, 2),
+        }),
         libc::EINVAL,
         "second bind",
     )?;
     let q = sock()?;
     expect_errno(
-        q.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 1) }),
+        q.bind(&DsorAddr::Port {
+            prio: 0,
+            port: dsor_port(0, 1),
+        }),
         libc::EADDRINUSE,
         "bind a taken port",
     )?;
     // Interface down / absent.
     ctx.link_down("can0")?;
     expect_errno(
-        q.send_to(b"x", &DsorAddr::Port { prio: 0, port: dsor_port(0, 1) }),
+        q.send_to(
+            b"x",
+            &DsorAddr::Port {
+                prio: 0,
+                port: dsor_port(0, 1),
+            },
+        ),
         libc::ENETDOWN,
         "send with can0 down",
     )?;
@@ -393,7 +549,14 @@ fn dsor_errors(ctx: &mut Ctx) -> TestResult {
     ctx.insmod(Module::Dsor, &["ifname=can9"])?;
     let r = sock()?;
     expect_errno(
-        r.send_to(b"x", &DsorAddr::Segm { prio: 0, node: 0, id: 1 }),
+        r.send_to(
+            b"x",
+            &DsorAddr::Segm {
+                prio: 0,
+                node: 0,
+                id: 1,
+            },
+        ),
         libc::ENODEV,
         "send with ifname=can9 (no such interface)",
     )?;
@@ -401,8 +564,17 @@ fn dsor_errors(ctx: &mut Ctx) -> TestResult {
     drop(r);
     thread::sleep(Duration::from_millis(200));
     ctx.rmmod(Module::Dsor)?;
-    for bad in ["node=0x80", "ack_timeout_ms=5", "max_len=70000", "reasm_timeout_ms=500", "udp_saddr=1.2.3"] {
-        ensure!(ctx.insmod(Module::Dsor, &[bad]).is_err(), "insmod rcan_dsor {bad} succeeded");
+    for bad in [
+        "node=0x80",
+        "ack_timeout_ms=5",
+        "max_len=70000",
+        "reasm_timeout_ms=500",
+        "udp_saddr=1.2.3",
+    ] {
+        ensure!(
+            ctx.insmod(Module::Dsor, &[bad]).is_err(),
+            "insmod rcan_dsor {bad} succeeded"
+        );
     }
     Ok(())
 }
@@ -412,20 +584,53 @@ fn dsor_errors(ctx: &mut Ctx) -> TestResult {
 fn dsor_nonblocking_error(ctx: &mut Ctx) -> TestResult {
     dsor_stack(ctx, &["ack_timeout_ms=20", "reasm_timeout_ms=1000"])?;
     let rx = sock()?;
-    rx.bind(&DsorAddr::Segm { prio: 0, node: 0, id: 5 }).or_fail("bind")?;
+    rx.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: 0,
+        id: 5,
+    })
+    .or_fail("bind")?;
     let s = sock()?;
     s.set_nonblocking(true).or_fail("O_NONBLOCK")?;
     // Success path: returns the length, the message arrives.
-    let n = s.send_to(&[3u8; 500], &DsorAddr::Segm { prio: 0, node: 0, id: 5 }).or_fail("nonblocking send")?;
+    let n = s
+        .send_to(
+            &[3u8; 500],
+            &DsorAddr::Segm {
+                prio: 0,
+                node: 0,
+                id: 5,
+            },
+        )
+        .or_fail("nonblocking send")?;
     ensure!(n == 500, "nonblocking send returned {n}");
     ensure!(recv_msg(&rx)?.0 == [3u8; 500], "nonblocking message");
-    ensure!(s.take_error().or_fail("SO_ERROR")? == 0, "SO_ERROR after success");
+    ensure!(
+        s.take_error().or_fail("SO_ERROR")? == 0,
+        "SO_ERROR after success"
+    );
     // Failure path.
-    s.send_to(b"lost", &DsorAddr::Segm { prio: 0, node: 9, id: 5 }).or_fail("nonblocking send to absent node")?;
-    let mut pfd = libc::pollfd { fd: std::os::fd::AsRawFd::as_raw_fd(&std::os::fd::AsFd::as_fd(&s)), events: libc::POLLIN, revents: 0 };
+    s.send_to(
+        b"lost",
+        &DsorAddr::Segm {
+            prio: 0,
+            node: 9,
+            id: 5,
+        },
+    )
+    .or_fail("nonblocking send to absent node")?;
+    let mut pfd = libc::pollfd {
+        fd: std::os::fd::AsRawFd::as_raw_fd(&std::os::fd::AsFd::as_fd(&s)),
+        events: libc::POLLIN,
+        revents: 0,
+    };
     // SAFETY: one valid pollfd.
     let r = unsafe { libc::poll(&mut pfd, 1, 20_000) };
-    ensure!(r == 1 && pfd.revents & libc::POLLERR != 0, "poll: {r}, revents {:#x}", pfd.revents);
+    ensure!(
+        r == 1 && pfd.revents & libc::POLLERR != 0,
+        "poll: {r}, revents {:#x}",
+        pfd.revents
+    );
     let err = s.take_error().or_fail("SO_ERROR")?;
     ensure!(err == libc::ETIMEDOUT, "SO_ERROR {err}, want ETIMEDOUT");
     Ok(())
@@ -438,8 +643,16 @@ fn dsor_nonblocking_error(ctx: &mut Ctx) -> TestResult {
 fn dsor_teardown(ctx: &mut Ctx) -> TestResult {
     dsor_stack(ctx, &[])?;
     let rx = Arc::new(Mutex::new(Some(sock()?)));
-    rx.lock().unwrap().as_ref().unwrap()
-        .bind(&DsorAddr::Segm { prio: 0, node: 0, id: DSOR_ID_ANY }).or_fail("bind")?;
+    rx.lock()
+        .unwrap()
+        .as_ref()
+        .unwrap()
+        .bind(&DsorAddr::Segm {
+            prio: 0,
+            node: 0,
+            id: DSOR_ID_ANY,
+        })
+        .or_fail("bind")?;
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let mut senders = Vec::new();
     for t in 0..4u32 {
@@ -448,9 +661,21 @@ fn dsor_teardown(ctx: &mut Ctx) -> TestResult {
             let s = sock()?;
             let (mut ok, mut err) = (0, 0);
             while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                match s.send_to(&vec![t as u8; 3000], &DsorAddr::Segm { prio: 0, node: 0, id: t }) {
+                match s.send_to(
+                    &vec![t as u8; 3000],
+                    &DsorAddr::Segm {
+                        prio: 0,
+                        node: 0,
+                        id: t,
+                    },
+                ) {
                     Ok(_) => ok += 1,
-                    Err(e) if [libc::ENETDOWN, libc::ETIMEDOUT, libc::ECONNREFUSED].contains(&errno_of(&e)) => err += 1,
+                    Err(e)
+                        if [libc::ENETDOWN, libc::ETIMEDOUT, libc::ECONNREFUSED]
+                            .contains(&errno_of(&e)) =>
+                    {
+                        err += 1
+                    }
                     Err(e) => return Err(format!("sender {t}: {e}")),
                 }
             }
@@ -474,7 +699,10 @@ fn dsor_teardown(ctx: &mut Ctx) -> TestResult {
     thread::sleep(Duration::from_millis(500));
     ctx.link_up("can0")?;
     // rmmod while sockets are open: refused (the sockets hold the module).
-    ensure!(ctx.rmmod(Module::Dsor).is_err(), "rmmod rcan_dsor succeeded with open sockets");
+    ensure!(
+        ctx.rmmod(Module::Dsor).is_err(),
+        "rmmod rcan_dsor succeeded with open sockets"
+    );
     thread::sleep(Duration::from_millis(500));
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
     let mut total = (0, 0);
@@ -482,12 +710,22 @@ fn dsor_teardown(ctx: &mut Ctx) -> TestResult {
         let (ok, err) = h.join().map_err(|_| "sender panicked")??;
         total = (total.0 + ok, total.1 + err);
     }
-    ctx.note(format!("{} messages sent, {} failed during ifdown/close", total.0, total.1));
+    ctx.note(format!(
+        "{} messages sent, {} failed during ifdown/close",
+        total.0, total.1
+    ));
     // The interface's driver is unloaded under a blocking sender that is
     // retransmitting to an absent node: ENETDOWN, not a hang.
     let waiter = thread::spawn(|| -> Result<i32, String> {
         let s = sock()?;
-        match s.send_to(&[5u8; 4000], &DsorAddr::Segm { prio: 0, node: 9, id: 1 }) {
+        match s.send_to(
+            &[5u8; 4000],
+            &DsorAddr::Segm {
+                prio: 0,
+                node: 9,
+                id: 1,
+            },
+        ) {
             Ok(_) => Err("send to an absent node succeeded".into()),
             Err(e) => Ok(errno_of(&e)),
         }
@@ -495,14 +733,24 @@ fn dsor_teardown(ctx: &mut Ctx) -> TestResult {
     thread::sleep(Duration::from_millis(300));
     ctx.rmmod(Module::Loop)?;
     let e = waiter.join().map_err(|_| "sender panicked")??;
-    ensure!(e == libc::ENETDOWN || e == libc::ENODEV, "send under rmmod rcan_loop: errno {e}");
+    ensure!(
+        e == libc::ENETDOWN || e == libc::ENODEV,
+        "send under rmmod rcan_loop: errno {e}"
+    );
     ctx.insmod(Module::Loop, &[])?;
     ctx.link_up("can0")?;
     // Non-blocking sends to an absent node still running at rmmod.
     let nb = sock()?;
     nb.set_nonblocking(true).or_fail("O_NONBLOCK")?;
     for _ in 0..4 {
-        let _ = nb.send_to(&[0u8; 2000], &DsorAddr::Segm { prio: 0, node: 9, id: 1 });
+        let _ = nb.send_to(
+            &[0u8; 2000],
+            &DsorAddr::Segm {
+                prio: 0,
+                node: 9,
+                id: 1,
+            },
+        );
     }
     drop(nb);
     // UDP through canip0 to an absent node, then rmmod at once.
@@ -521,13 +769,21 @@ fn dsor_teardown(ctx: &mut Ctx) -> TestResult {
             Err(_) => thread::sleep(Duration::from_millis(200)),
         }
     }
-    ensure!(!std::path::Path::new("/sys/class/net/canip0").exists(), "canip0 left behind");
+    ensure!(
+        !std::path::Path::new("/sys/class/net/canip0").exists(),
+        "canip0 left behind"
+    );
     Ok(())
 }
 
 fn run_ip(args: &[&str]) -> TestResult {
     let out = Command::new(tool("ip")).args(args).output().or_fail("ip")?;
-    ensure!(out.status.success(), "ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr).trim());
+    ensure!(
+        out.status.success(),
+        "ip {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr).trim()
+    );
     Ok(())
 }
 
@@ -547,8 +803,14 @@ const fn dsor_id(prio: u32, dst: u32, src: u32, ty: u32, q: u32, chan: u32) -> u
 fn dsor_bad_input(ctx: &mut Ctx) -> TestResult {
     let idx = dsor_stack(ctx, &["reasm_timeout_ms=1500"])?;
     let rx = sock()?;
-    rx.bind(&DsorAddr::Segm { prio: 0, node: DSOR_NODE_ANY, id: DSOR_ID_ANY }).or_fail("bind")?;
-    rx.set_rcvtimeo(Duration::from_millis(500)).or_fail("SO_RCVTIMEO")?;
+    rx.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: DSOR_NODE_ANY,
+        id: DSOR_ID_ANY,
+    })
+    .or_fail("bind")?;
+    rx.set_rcvtimeo(Duration::from_millis(500))
+        .or_fail("SO_RCVTIMEO")?;
     let raw = canraw::open(idx)?;
     let h = |q, ch| dsor_id(0x40, 0, PEER as u32, 0, q, ch);
     let b = |q, ch| dsor_id(0x40, 0, PEER as u32, 1, q, ch);
@@ -590,17 +852,25 @@ fn dsor_bad_input(ctx: &mut Ctx) -> TestResult {
     let (got, from) = recv_msg(&rx)?;
     ensure!(got == msg, "duplicated-frame message arrived as {got:?}");
     ensure!(
-        from == Some(DsorAddr::Segm { prio: 0x40, node: PEER, id: 0xabcd_0001 }),
+        from == Some(DsorAddr::Segm {
+            prio: 0x40,
+            node: PEER,
+            id: 0xabcd_0001
+        }),
         "source {from:?}"
     );
-    expect_errno(rx.recv_from(&mut buf), libc::EAGAIN, "the duplicate delivered again")?;
+    expect_errno(
+        rx.recv_from(&mut buf),
+        libc::EAGAIN,
+        "the duplicate delivered again",
+    )?;
     // Random garbage addressed to node 0 for a while.
     let mut x: u32 = 0x1234_5678;
     for _ in 0..2000 {
         x ^= x << 13;
         x ^= x >> 17;
         x ^= x << 5;
-        let id = (x & 0x1fff_ffff & !(0x7f << 14)) | (0 << 14);
+        let id = x & 0x1fff_ffff & !(0x7f << 14);
         let len = (x >> 29) as usize + ((x >> 8) & 1) as usize;
         raw_frame(&raw, id, &x.to_be_bytes().repeat(2)[..len.min(8)])?;
     }
@@ -608,9 +878,19 @@ fn dsor_bad_input(ctx: &mut Ctx) -> TestResult {
     while rx.recv_from(&mut [0u8; 70000]).is_ok() {}
     // Still works.
     let tx = sock()?;
-    tx.send_to(b"after the garbage", &DsorAddr::Segm { prio: 0, node: 0, id: 42 })
-        .or_fail("send after garbage")?;
-    ensure!(recv_msg(&rx)?.0 == b"after the garbage", "message after the garbage");
+    tx.send_to(
+        b"after the garbage",
+        &DsorAddr::Segm {
+            prio: 0,
+            node: 0,
+            id: 42,
+        },
+    )
+    .or_fail("send after garbage")?;
+    ensure!(
+        recv_msg(&rx)?.0 == b"after the garbage",
+        "message after the garbage"
+    );
     Ok(())
 }
 
@@ -641,7 +921,12 @@ fn peer_output(c: Child, what: &str) -> Result<Vec<String>, String> {
         "dsor-peer {what}: {}: {} / {}",
         out.status,
         stdout.trim(),
-        String::from_utf8_lossy(&out.stderr).lines().rev().take(5).collect::<Vec<_>>().join(" / ")
+        String::from_utf8_lossy(&out.stderr)
+            .lines()
+            .rev()
+            .take(5)
+            .collect::<Vec<_>>()
+            .join(" / ")
     );
     Ok(stdout.lines().map(String::from).collect())
 }
@@ -656,51 +941,162 @@ fn field<'a>(line: &'a str, key: &str) -> Option<&'a str> {
 fn dsor_peer_exchange(ctx: &mut Ctx) -> TestResult {
     dsor_stack(ctx, &PEER_TIMERS)?;
     let s = sock()?;
-    s.bind(&DsorAddr::Port { prio: 0, port: dsor_port(0, 3) }).or_fail("bind 0:3")?;
+    s.bind(&DsorAddr::Port {
+        prio: 0,
+        port: dsor_port(0, 3),
+    })
+    .or_fail("bind 0:3")?;
     let segrx = sock()?;
-    segrx.bind(&DsorAddr::Segm { prio: 0, node: PEER, id: DSOR_ID_ANY }).or_fail("bind segm")?;
+    segrx
+        .bind(&DsorAddr::Segm {
+            prio: 0,
+            node: PEER,
+            id: DSOR_ID_ANY,
+        })
+        .or_fail("bind segm")?;
     for drop_pct in ["0", "20"] {
         // Kernel -> peer: segmented and port messages.
         let count = 6;
-        let rxp = peer(&["--drop", drop_pct, "--seed", "7", "--ack-timeout-ms", "200", "--reasm-ms", "5000", "recv", "--count", &(2 * count).to_string(), "--timeout-s", "60"])?;
+        let rxp = peer(&[
+            "--drop",
+            drop_pct,
+            "--seed",
+            "7",
+            "--ack-timeout-ms",
+            "200",
+            "--reasm-ms",
+            "5000",
+            "recv",
+            "--count",
+            &(2 * count).to_string(),
+            "--timeout-s",
+            "60",
+        ])?;
         thread::sleep(PEER_START);
         let mut sent = Vec::new();
         for j in 0..count {
             let len = [0usize, 5, 8, 100, 1000, 3000][j];
             let m = pattern(len, j as u64, 1);
-            s.send_to(&m, &DsorAddr::Segm { prio: 0x11, node: PEER, id: 0x100 + j as u32 })
-                .or_fail(&format!("segm {len} -> peer"))?;
-            sent.push((format!("kind=segm"), len, fnv1a64(&m)));
+            s.send_to(
+                &m,
+                &DsorAddr::Segm {
+                    prio: 0x11,
+                    node: PEER,
+                    id: 0x100 + j as u32,
+                },
+            )
+            .or_fail(format!("segm {len} -> peer"))?;
+            sent.push(("kind=segm".to_string(), len, fnv1a64(&m)));
             let m = pattern(len, j as u64, 2);
-            s.send_to(&m, &DsorAddr::Port { prio: 0x12, port: dsor_port(PEER, 9) })
-                .or_fail(&format!("port {len} -> peer"))?;
-            sent.push((format!("kind=port"), len, fnv1a64(&m)));
+            s.send_to(
+                &m,
+                &DsorAddr::Port {
+                    prio: 0x12,
+                    port: dsor_port(PEER, 9),
+                },
+            )
+            .or_fail(format!("port {len} -> peer"))?;
+            sent.push(("kind=port".to_string(), len, fnv1a64(&m)));
         }
         let lines = peer_output(rxp, "recv")?;
         let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
-        ensure!(rx.len() == sent.len(), "peer received {} of {} messages: {lines:?}", rx.len(), sent.len());
+        ensure!(
+            rx.len() == sent.len(),
+            "peer received {} of {} messages: {lines:?}",
+            rx.len(),
+            sent.len()
+        );
         for (l, (kind, len, sha)) in rx.iter().zip(&sent) {
             ensure!(l.contains(kind.as_str()), "peer line {l}: want {kind}");
-            ensure!(field(l, "len=") == Some(&len.to_string()), "peer line {l}: want len {len}");
-            ensure!(field(l, "sha=") == Some(&format!("{sha:016x}")), "peer line {l}: content differs");
+            ensure!(
+                field(l, "len=") == Some(&len.to_string()),
+                "peer line {l}: want len {len}"
+            );
+            ensure!(
+                field(l, "sha=") == Some(&format!("{sha:016x}")),
+                "peer line {l}: content differs"
+            );
             ensure!(field(l, "src=") == Some("0x00"), "peer line {l}: source");
         }
         // Peer -> kernel.
-        let txp = peer(&["--drop", drop_pct, "--seed", "8", "--ack-timeout-ms", "200", "--reasm-ms", "5000", "send", "--to", "0", "--prio", "0x21", "--segm", "0x77", "--len", "777", "--count", "4", "--pattern", "5"])?;
+        let txp = peer(&[
+            "--drop",
+            drop_pct,
+            "--seed",
+            "8",
+            "--ack-timeout-ms",
+            "200",
+            "--reasm-ms",
+            "5000",
+            "send",
+            "--to",
+            "0",
+            "--prio",
+            "0x21",
+            "--segm",
+            "0x77",
+            "--len",
+            "777",
+            "--count",
+            "4",
+            "--pattern",
+            "5",
+        ])?;
         for j in 0..4u64 {
             let (got, from) = recv_msg(&segrx)?;
-            ensure!(got == pattern(777, j, 5), "segmented message {j} from the peer corrupted");
-            ensure!(from == Some(DsorAddr::Segm { prio: 0x21, node: PEER, id: 0x77 }), "source {from:?}");
+            ensure!(
+                got == pattern(777, j, 5),
+                "segmented message {j} from the peer corrupted"
+            );
+            ensure!(
+                from == Some(DsorAddr::Segm {
+                    prio: 0x21,
+                    node: PEER,
+                    id: 0x77
+                }),
+                "source {from:?}"
+            );
         }
         peer_output(txp, "send segm")?;
-        let txp = peer(&["--drop", drop_pct, "--seed", "9", "--ack-timeout-ms", "200", "--reasm-ms", "5000", "send", "--to", "0", "--prio", "0x22", "--port", "3:4", "--len", "20", "--count", "3"])?;
+        let txp = peer(&[
+            "--drop",
+            drop_pct,
+            "--seed",
+            "9",
+            "--ack-timeout-ms",
+            "200",
+            "--reasm-ms",
+            "5000",
+            "send",
+            "--to",
+            "0",
+            "--prio",
+            "0x22",
+            "--port",
+            "3:4",
+            "--len",
+            "20",
+            "--count",
+            "3",
+        ])?;
         for j in 0..3u64 {
             let (got, from) = recv_msg(&s)?;
-            ensure!(got == pattern(20, j, 0), "port message {j} from the peer corrupted");
-            ensure!(from == Some(DsorAddr::Port { prio: 0x22, port: dsor_port(PEER, 4) }), "source {from:?}");
+            ensure!(
+                got == pattern(20, j, 0),
+                "port message {j} from the peer corrupted"
+            );
+            ensure!(
+                from == Some(DsorAddr::Port {
+                    prio: 0x22,
+                    port: dsor_port(PEER, 4)
+                }),
+                "source {from:?}"
+            );
         }
         peer_output(txp, "send port")?;
-        ctx.note(format!("peer drop {drop_pct}%: 12 messages to the peer, 7 from it, all intact"));
+        ctx.note(format!(
+            "peer drop {drop_pct}%: 12 messages to the peer, 7 from it, all intact"
+        ));
     }
     Ok(())
 }
@@ -715,7 +1111,17 @@ fn dsor_udp_over_can(ctx: &mut Ctx) -> TestResult {
     run_ip(&["addr", "add", "10.9.0.1/24", "dev", "canip0"])?;
     run_ip(&["link", "set", "canip0", "up"])?;
     // Outbound.
-    let rxp = peer(&["--ack-timeout-ms", "200", "--reasm-ms", "5000", "recv", "--count", "3", "--timeout-s", "60"])?;
+    let rxp = peer(&[
+        "--ack-timeout-ms",
+        "200",
+        "--reasm-ms",
+        "5000",
+        "recv",
+        "--count",
+        "3",
+        "--timeout-s",
+        "60",
+    ])?;
     thread::sleep(PEER_START);
     let u = UdpSocket::bind("10.9.0.1:0").or_fail("udp bind")?;
     let mut sent = Vec::new();
@@ -726,29 +1132,59 @@ fn dsor_udp_over_can(ctx: &mut Ctx) -> TestResult {
     }
     let lines = peer_output(rxp, "recv udp")?;
     let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
-    ensure!(rx.len() == 3, "peer got {} UDP messages: {lines:?}", rx.len());
+    ensure!(
+        rx.len() == 3,
+        "peer got {} UDP messages: {lines:?}",
+        rx.len()
+    );
     for (l, (len, sha)) in rx.iter().zip(&sent) {
         ensure!(
             l.contains("kind=udp") && l.contains("dport=5000") && l.contains("daddr=10.9.0.5"),
             "peer line {l}"
         );
-        ensure!(field(l, "len=") == Some(&len.to_string()), "peer line {l}: want len {len}");
-        ensure!(field(l, "sha=") == Some(&format!("{sha:016x}")), "peer line {l}: content differs");
+        ensure!(
+            field(l, "len=") == Some(&len.to_string()),
+            "peer line {l}: want len {len}"
+        );
+        ensure!(
+            field(l, "sha=") == Some(&format!("{sha:016x}")),
+            "peer line {l}: content differs"
+        );
     }
     // Inbound.
     let srv = UdpSocket::bind("10.9.0.1:4000").or_fail("udp bind 4000")?;
-    srv.set_read_timeout(Some(Duration::from_secs(20))).or_fail("timeout")?;
-    let txp = peer(&["send", "--to", "0", "--prio", "0x80", "--udp", "4000:10.9.0.1", "--len", "333", "--count", "3", "--pattern", "6"])?;
+    srv.set_read_timeout(Some(Duration::from_secs(20)))
+        .or_fail("timeout")?;
+    let txp = peer(&[
+        "send",
+        "--to",
+        "0",
+        "--prio",
+        "0x80",
+        "--udp",
+        "4000:10.9.0.1",
+        "--len",
+        "333",
+        "--count",
+        "3",
+        "--pattern",
+        "6",
+    ])?;
     for j in 0..3u64 {
         let mut buf = [0u8; 2000];
         let (n, from) = srv.recv_from(&mut buf).or_fail("udp recv_from")?;
-        ensure!(buf[..n] == pattern(333, j, 6), "UDP datagram {j} corrupted ({n} bytes)");
+        ensure!(
+            buf[..n] == pattern(333, j, 6),
+            "UDP datagram {j} corrupted ({n} bytes)"
+        );
         ensure!(from.ip().to_string() == "10.9.0.5", "UDP source {from}");
     }
     peer_output(txp, "send udp")?;
     // Non-UDP (ICMP ping) is dropped and counted.
     let before = ctx.stat("canip0", "tx_dropped")?;
-    let _ = Command::new(tool("ping")).args(["-c", "1", "-W", "1", "10.9.0.7"]).output();
+    let _ = Command::new(tool("ping"))
+        .args(["-c", "1", "-W", "1", "10.9.0.7"])
+        .output();
     let raw_ip = rcan_uapi::raw::socket(libc::AF_INET, libc::SOCK_RAW, libc::IPPROTO_ICMP);
     if let Ok(fd) = raw_ip {
         let mut dst = [0u8; 16];
@@ -758,7 +1194,10 @@ fn dsor_udp_over_can(ctx: &mut Ctx) -> TestResult {
     }
     thread::sleep(Duration::from_millis(300));
     let after = ctx.stat("canip0", "tx_dropped")?;
-    ensure!(after > before, "ICMP through canip0 not counted as dropped ({before} -> {after})");
+    ensure!(
+        after > before,
+        "ICMP through canip0 not counted as dropped ({before} -> {after})"
+    );
     let _: io::Result<()> = Ok(());
     Ok(())
 }
@@ -769,30 +1208,93 @@ fn dsor_udp_over_can(ctx: &mut Ctx) -> TestResult {
 /// and their hardware filters.
 fn dsor_sja1000_two_interfaces(ctx: &mut Ctx) -> TestResult {
     super::sja1000::kvaser2(ctx)?;
-    ctx.insmod(Module::Dsor, &["ifname=can0", PEER_TIMERS[0], PEER_TIMERS[1]])?;
+    ctx.insmod(
+        Module::Dsor,
+        &["ifname=can0", PEER_TIMERS[0], PEER_TIMERS[1]],
+    )?;
     let s = sock()?;
-    let rxp = peer_on("can1", &["--ack-timeout-ms", "200", "--reasm-ms", "5000", "recv", "--count", "4", "--timeout-s", "60"])?;
+    let rxp = peer_on(
+        "can1",
+        &[
+            "--ack-timeout-ms",
+            "200",
+            "--reasm-ms",
+            "5000",
+            "recv",
+            "--count",
+            "4",
+            "--timeout-s",
+            "60",
+        ],
+    )?;
     thread::sleep(PEER_START);
     let mut sent = Vec::new();
     for (j, len) in [0usize, 9, 500, 3000].into_iter().enumerate() {
         let m = pattern(len, j as u64, 11);
-        s.send_to(&m, &DsorAddr::Segm { prio: 0x33, node: PEER, id: 0x55 })
-            .or_fail(&format!("{len} bytes can0 -> can1"))?;
+        s.send_to(
+            &m,
+            &DsorAddr::Segm {
+                prio: 0x33,
+                node: PEER,
+                id: 0x55,
+            },
+        )
+        .or_fail(format!("{len} bytes can0 -> can1"))?;
         sent.push((len, fnv1a64(&m)));
     }
     let lines = peer_output(rxp, "recv on can1")?;
     let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
-    ensure!(rx.len() == sent.len(), "peer received {} of {}: {lines:?}", rx.len(), sent.len());
+    ensure!(
+        rx.len() == sent.len(),
+        "peer received {} of {}: {lines:?}",
+        rx.len(),
+        sent.len()
+    );
     for (l, (len, sha)) in rx.iter().zip(&sent) {
-        ensure!(field(l, "len=") == Some(&len.to_string()), "peer line {l}: want len {len}");
-        ensure!(field(l, "sha=") == Some(&format!("{sha:016x}")), "peer line {l}: content differs");
+        ensure!(
+            field(l, "len=") == Some(&len.to_string()),
+            "peer line {l}: want len {len}"
+        );
+        ensure!(
+            field(l, "sha=") == Some(&format!("{sha:016x}")),
+            "peer line {l}: content differs"
+        );
     }
     let r = sock()?;
-    r.bind(&DsorAddr::Segm { prio: 0, node: PEER, id: 0x66 }).or_fail("bind")?;
-    let txp = peer_on("can1", &["--ack-timeout-ms", "200", "--reasm-ms", "5000", "send", "--to", "0", "--prio", "0x44", "--segm", "0x66", "--len", "2000", "--count", "3", "--pattern", "12"])?;
+    r.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: PEER,
+        id: 0x66,
+    })
+    .or_fail("bind")?;
+    let txp = peer_on(
+        "can1",
+        &[
+            "--ack-timeout-ms",
+            "200",
+            "--reasm-ms",
+            "5000",
+            "send",
+            "--to",
+            "0",
+            "--prio",
+            "0x44",
+            "--segm",
+            "0x66",
+            "--len",
+            "2000",
+            "--count",
+            "3",
+            "--pattern",
+            "12",
+        ],
+    )?;
     for j in 0..3u64 {
         let (got, _) = recv_msg(&r)?;
-        ensure!(got == pattern(2000, j, 12), "message {j} from can1 corrupted");
+        ensure!(
+            got == pattern(2000, j, 12),
+            "message {j} from can1 corrupted"
+        );
     }
     peer_output(txp, "send on can1")?;
     Ok(())
