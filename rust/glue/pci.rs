@@ -168,6 +168,23 @@ impl IoMem {
         }
     }
 
+    /// `ioread16` at `off` (little-endian).
+    pub(crate) fn read16(&self, off: usize) -> u16 {
+        match self.at(off, 2) {
+            // SAFETY: inside the mapping.
+            Some(p) => unsafe { bindings::ioread16(p) as u16 },
+            None => !0,
+        }
+    }
+
+    /// `iowrite16` at `off` (little-endian).
+    pub(crate) fn write16(&self, off: usize, val: u16) {
+        if let Some(p) = self.at(off, 2) {
+            // SAFETY: inside the mapping.
+            unsafe { bindings::iowrite16(val, p) };
+        }
+    }
+
     /// `ioread32` at `off`.
     pub(crate) fn read32(&self, off: usize) -> u32 {
         match self.at(off, 4) {

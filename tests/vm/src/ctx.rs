@@ -65,11 +65,17 @@ pub enum Module {
     Kvaser,
     /// SJA1000 front-end for Advantech PCM-3680I / MIOe-3680 cards.
     Advantech,
+    /// SJA1000 front-end for memory-mapped ISA cards.
+    Isa,
+    /// SJA1000 front-end for PEAK PCAN-PCI cards.
+    Pcan,
+    /// SJA1000 front-end for TS-CAN1 PC/104 boards.
+    Tscan1,
 }
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 8] = [
+    pub const ALL: [Module; 11] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
@@ -78,6 +84,9 @@ impl Module {
         Module::Rtime,
         Module::Kvaser,
         Module::Advantech,
+        Module::Isa,
+        Module::Pcan,
+        Module::Tscan1,
     ];
 
     /// Name as shown by `/proc/modules` and taken by `rmmod`.
@@ -91,6 +100,9 @@ impl Module {
             Module::Rtime => "rcan_rtime",
             Module::Kvaser => "rcan_kvaser_pci",
             Module::Advantech => "rcan_advantech_pci",
+            Module::Isa => "rcan_sja1000_isa",
+            Module::Pcan => "rcan_pcan_pci",
+            Module::Tscan1 => "rcan_tscan1",
         }
     }
 
@@ -105,6 +117,9 @@ impl Module {
             Module::Rtime => "net/can/dsor/rcan_rtime.ko",
             Module::Kvaser => "drivers/net/can/sja1000/rcan_kvaser_pci.ko",
             Module::Advantech => "drivers/net/can/sja1000/rcan_advantech_pci.ko",
+            Module::Isa => "drivers/net/can/sja1000/rcan_sja1000_isa.ko",
+            Module::Pcan => "drivers/net/can/sja1000/rcan_pcan_pci.ko",
+            Module::Tscan1 => "drivers/net/can/sja1000/rcan_tscan1.ko",
         }
     }
 }

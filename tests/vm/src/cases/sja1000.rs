@@ -33,6 +33,9 @@ pub const TESTS: &[crate::Test] = test_table![
     sja1000_ifdown_during_traffic,
     sja1000_rmmod_during_traffic,
     sja1000_config_tool,
+    sja1000_isa_absent,
+    sja1000_tscan1_absent,
+    sja1000_pcan_pci_no_device,
 ];
 
 /// Loads rcan_pf, rcan_can, rcan_raw and rcan_kvaser_pci (two cards:
@@ -433,4 +436,129 @@ fn sja1000_config_tool(ctx: &mut Ctx) -> TestResult {
     let (tx, rx) = (canraw::open(i0)?, canraw::open(i1)?);
     canraw::send(&tx, &sff(0x7, &[7]))?;
     canraw::expect(&rx, &sff(0x7, &[7]), "can1")
+}
+
+/// Lines of a /proc resource file (`/proc/iomem`, `/proc/ioports`).
+fn resources(file: &str) -> Result<String, String> {
+    std::fs::read_to_string(file).or_fail(file)
+}
+
+/// insmod of module `m` with `params` must fail with ENODEV, log a line
+/// containing every one of `why`, and leave `file` (/proc/iomem or
+/// /proc/ioports) as it was, with nothing named after the module.
+fn absent(ctx: &mut Ctx, m: Module, params: &[&str], why: &[&str], file: &str) -> TestResult {
+    let before = resources(file)?;
+    let mut kmsg = ctx.kmsg()?;
+    let err = match ctx.insmod(m, params) {
+        Ok(()) => return Err(format!("{} loaded without hardware", m.name())),
+        Err(e) => e,
+    };
+    ensure!(
+        err.contains("No such device"),
+        "{} did not fail with ENODEV: {err}",
+        m.name()
+    );
+    ensure!(
+        !ctx.is_loaded(m),
+        "{} listed after a failed insmod",
+        m.name()
+    );
+    let log = kmsg.read_new()?;
+    ensure!(
+        log.iter().any(|l| why.iter().all(|w| l.contains(w))),
+        "no log line with {why:?}: {log:?}"
+    );
+    let after = resources(file)?;
+    ensure!(
+        !after.contains(m.name()),
+        "{file} still names {} after the failed insmod",
+        m.name()
+    );
+    ensure!(before == after, "{file} changed by the failed insmod");
+    ctx.note(format!("{}: {}", m.name(), err));
+    Ok(())
+}
+
+/// rcan_sja1000_isa with an address where no card is: ENODEV, the reason
+/// in the log, no memory region left claimed; twice (the first attempt
+/// left nothing that makes the second differ), with and without `irq`.
+/// Without `iomem` the module refuses to load (EINVAL).
+fn sja1000_isa_absent(ctx: &mut Ctx) -> TestResult {
+    let iomem = resources("/proc/iomem")?;
+    if let Some(l) = iomem
+        .lines()
+        .find(|l| l.trim_start().starts_with("000d0000"))
+    {
+        ctx.note(format!("/proc/iomem at 0xd0000: {l}"));
+    }
+    for params in [
+        &["iomem=0xd0000"][..],
+        &["iomem=0xd0000"],
+        &["iomem=0xd0000", "irq=5"],
+    ] {
+        absent(
+            ctx,
+            Module::Isa,
+            params,
+            &["sja1000_isa", "0xd0000"],
+            "/proc/iomem",
+        )?;
+    }
+    let err = ctx
+        .insmod(Module::Isa, &[])
+        .err()
+        .ok_or("rcan_sja1000_isa loaded without iomem=")?;
+    ensure!(err.contains("Invalid argument"), "without iomem=: {err}");
+    Ok(())
+}
+
+/// rcan_tscan1 with no board: ENODEV, the reason in the log, the four PLD
+/// port ranges released again (twice).
+fn sja1000_tscan1_absent(ctx: &mut Ctx) -> TestResult {
+    for _ in 0..2 {
+        absent(
+            ctx,
+            Module::Tscan1,
+            &[],
+            &["tscan1", "no TS-CAN1 board"],
+            "/proc/ioports",
+        )?;
+    }
+    Ok(())
+}
+
+/// rcan_pcan_pci with no PCAN-PCI card (QEMU has none): loads, binds no
+/// device, creates no interface, unloads cleanly.
+fn sja1000_pcan_pci_no_device(ctx: &mut Ctx) -> TestResult {
+    let before: Vec<_> = std::fs::read_dir("/sys/class/net")
+        .or_fail("/sys/class/net")?
+        .filter_map(|e| e.ok().map(|e| e.file_name()))
+        .collect();
+    ctx.insmod(Module::Pf, &[])?;
+    ctx.insmod(Module::Can, &[])?;
+    ctx.insmod(Module::Pcan, &[])?;
+    let drv = std::path::Path::new("/sys/bus/pci/drivers/rcan_pcan_pci");
+    ensure!(
+        drv.is_dir(),
+        "{} missing: driver not registered",
+        drv.display()
+    );
+    let bound: Vec<_> = std::fs::read_dir(drv)
+        .or_fail(drv.display())?
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(':'))
+        .collect();
+    ensure!(bound.is_empty(), "rcan_pcan_pci bound {bound:?}");
+    let after: Vec<_> = std::fs::read_dir("/sys/class/net")
+        .or_fail("/sys/class/net")?
+        .filter_map(|e| e.ok().map(|e| e.file_name()))
+        .collect();
+    ensure!(
+        before.len() == after.len(),
+        "interfaces appeared: {after:?}"
+    );
+    ctx.rmmod(Module::Pcan)?;
+    ensure!(!drv.exists(), "driver directory left after rmmod");
+    Ok(())
 }
