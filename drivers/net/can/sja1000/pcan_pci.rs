@@ -148,7 +148,7 @@ impl pci::Driver for PcanPci {
             card.channels.push(c, GFP_KERNEL)?;
         }
         if card.channels.is_empty() {
-            pr_err!("pcan_pci: no SJA1000 found behind the PITA\n");
+            pr_err!("no SJA1000 found behind the PITA\n");
             return Err(ENODEV);
         }
         card.irq_enable(true);

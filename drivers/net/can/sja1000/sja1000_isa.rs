@@ -89,12 +89,12 @@ fn autoprobe(chip: &mut Chip<IsaRegs>, addr: usize) -> Result<u32> {
         match line {
             Some(Ok(n)) if woke => return Ok(n),
             Some(Err(())) => {
-                pr_warn!("sja1000_isa: {addr:#x}: several lines fired in the autoprobe, retrying\n")
+                pr_warn!("{addr:#x}: several lines fired in the autoprobe, retrying\n")
             }
             _ => {}
         }
     }
-    pr_err!("sja1000_isa: {addr:#x}: no interrupt line found by the autoprobe; give irq=\n");
+    pr_err!("{addr:#x}: no interrupt line found by the autoprobe; give irq=\n");
     Err(ENODEV)
 }
 
@@ -103,7 +103,7 @@ fn add_board(addr: usize, line: i32) -> Result<Channel<IsaRegs>> {
     let win = match IoWindow::request(Space::Mem, addr, WINDOW_BYTES, c_str!("rcan_sja1000_isa")) {
         Ok(w) => w,
         Err(e) => {
-            pr_err!("sja1000_isa: iomem {addr:#x}: memory region busy or not mappable\n");
+            pr_err!("iomem {addr:#x}: memory region busy or not mappable\n");
             return Err(e);
         }
     };
@@ -117,7 +117,7 @@ fn add_board(addr: usize, line: i32) -> Result<Channel<IsaRegs>> {
     );
     if chip.probe().is_err() {
         // Dropping the chip unmaps and releases the window.
-        pr_err!("sja1000_isa: iomem {addr:#x}: no SJA1000 answers (reset mode not entered)\n");
+        pr_err!("iomem {addr:#x}: no SJA1000 answers (reset mode not entered)\n");
         return Err(ENODEV);
     }
     // The reset-mode check alone cannot tell the chip from plain memory
@@ -126,9 +126,7 @@ fn add_board(addr: usize, line: i32) -> Result<Channel<IsaRegs>> {
     // nothing.
     chip.regs.write(reg::CMR, 0);
     if chip.regs.read(reg::CMR) != 0xFF {
-        pr_err!(
-            "sja1000_isa: iomem {addr:#x}: memory, not an SJA1000 (command register reads back)\n"
-        );
+        pr_err!("iomem {addr:#x}: memory, not an SJA1000 (command register reads back)\n");
         return Err(ENODEV);
     }
     let irq = if line > 0 {
@@ -153,7 +151,7 @@ impl kernel::Module for IsaModule {
         // SAFETY: reads the module parameters.
         let n = unsafe { rcan_isa_boards() };
         if n == 0 {
-            pr_err!("sja1000_isa: no card given (iomem=ADDR[,ADDR...])\n");
+            pr_err!("no card given (iomem=ADDR[,ADDR...])\n");
             return Err(EINVAL);
         }
         let mut boards = KVec::new();

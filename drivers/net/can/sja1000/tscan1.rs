@@ -100,14 +100,14 @@ fn probe_board(n: usize) -> Result<Option<Board>> {
     let port = TSCAN1_PLD + n * TSCAN1_PLD_SIZE;
     let Ok(pld) = IoWindow::request(Space::Port, port, TSCAN1_PLD_SIZE, c_str!("rcan_tscan1"))
     else {
-        pr_info!("tscan1: PLD ports {port:#x} owned by another driver, skipped\n");
+        pr_info!("PLD ports {port:#x} owned by another driver, skipped\n");
         return Ok(None);
     };
     let info = match tscan1_identify(&mut PldPorts(&pld), n) {
         Ok(i) => i,
         Err(Tscan1Error::NoBoard) => return Ok(None),
         Err(Tscan1Error::NoIrq) => {
-            pr_err!("tscan1: board at {port:#x}: jumpers JP4/JP5 select no interrupt line\n");
+            pr_err!("board at {port:#x}: jumpers JP4/JP5 select no interrupt line\n");
             return Ok(None);
         }
     };
@@ -135,7 +135,7 @@ fn probe_board(n: usize) -> Result<Option<Board>> {
             })),
             Ok(None) => {
                 tscan1_unmap(&mut PldPorts(&pld), &info);
-                pr_err!("tscan1: board at {port:#x}: no SJA1000 answers at {mapped:#x}\n");
+                pr_err!("board at {port:#x}: no SJA1000 answers at {mapped:#x}\n");
                 Ok(None)
             }
             Err(e) => {
@@ -144,7 +144,7 @@ fn probe_board(n: usize) -> Result<Option<Board>> {
             }
         };
     }
-    pr_err!("tscan1: board at {port:#x}: all SJA1000 addresses owned by other drivers\n");
+    pr_err!("board at {port:#x}: all SJA1000 addresses owned by other drivers\n");
     Ok(None)
 }
 
@@ -162,7 +162,7 @@ impl kernel::Module for Tscan1Module {
         }
         if boards.is_empty() {
             pr_err!(
-                "tscan1: no TS-CAN1 board (no PLD identification at {:#x}..{:#x})\n",
+                "no TS-CAN1 board (no PLD identification at {:#x}..{:#x})\n",
                 TSCAN1_PLD,
                 TSCAN1_PLD + (TSCAN1_MAX_BOARDS - 1) * TSCAN1_PLD_SIZE
             );
