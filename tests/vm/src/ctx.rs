@@ -569,7 +569,10 @@ mod tests {
                 "rcan_time",
                 "rcan_rtime",
                 "rcan_kvaser_pci",
-                "rcan_advantech_pci"
+                "rcan_advantech_pci",
+                "rcan_sja1000_isa",
+                "rcan_pcan_pci",
+                "rcan_tscan1"
             ]
         );
         assert_eq!(
