@@ -5,7 +5,9 @@
 # round frames seconds"), then the trace (file 2). A phase is the span
 # between a write of <start> and of <end> to QEMU's pci-conf-idx port;
 # every access to a kvaser_pci-* region inside it counts. Prints one line
-# per phase and per stack: accesses, accesses per frame, frames/s.
+# per phase (accesses, per frame, frames/s) and per stack (accesses per
+# frame, median of the phases' frames/s: the host's load makes single
+# phases slow at random).
 FNR == NR {
 	if ($1 == "SJA-MARKERS") { s = $2; e = $3 }
 	if ($1 == "SJA-PHASE") {
@@ -29,13 +31,30 @@ END {
 	for (p = 0; p < nph; p++) {
 		f = frames[p]; if (f == 0) continue
 		printf "%-6d %-9s %6d %9d %10.2f %8.2f %10.0f\n", p, stack[p], f, n[p], n[p] / f, r[p] / f, f / secs[p]
-		ta[stack[p]] += n[p]; tf[stack[p]] += f; ts[stack[p]] += secs[p]
+		k = stack[p]
+		ta[k] += n[p]; tf[k] += f
+		rate[k, ++nr[k]] = f / secs[p]
 	}
 	print ""
-	printf "%-9s %8s %10s %10s\n", "stack", "frames", "acc/frame", "frames/s"
-	for (k in tf) printf "%-9s %8d %10.2f %10.0f\n", k, tf[k], ta[k] / tf[k], tf[k] / ts[k]
+	printf "%-9s %8s %10s %16s\n", "stack", "frames", "acc/frame", "frames/s median"
+	for (k in tf) {
+		med[k] = median(k)
+		printf "%-9s %8d %10.2f %16.0f\n", k, tf[k], ta[k] / tf[k], med[k]
+	}
 	if (tf["ours"] && tf["mainline"])
-		printf "ours/mainline: accesses per frame %.3f, throughput %.3f\n",
+		printf "ours/mainline: accesses per frame %.3f, throughput (medians) %.3f\n",
 			(ta["ours"] / tf["ours"]) / (ta["mainline"] / tf["mainline"]),
-			(tf["ours"] / ts["ours"]) / (tf["mainline"] / ts["mainline"])
+			med["ours"] / med["mainline"]
+}
+
+# Median of the phase rates of stack k (insertion sort; a handful).
+function median(k,    i, j, t, a, m) {
+	m = nr[k]
+	for (i = 1; i <= m; i++) a[i] = rate[k, i]
+	for (i = 2; i <= m; i++) {
+		t = a[i]
+		for (j = i - 1; j >= 1 && a[j] > t; j--) a[j + 1] = a[j]
+		a[j + 1] = t
+	}
+	return m % 2 ? a[(m + 1) / 2] : (a[m / 2] + a[m / 2 + 1]) / 2
 }
