@@ -29,7 +29,7 @@
 mod can;
 
 use can::{Frame, RawSocket};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -85,7 +85,7 @@ fn unload() -> Result<(), String> {
     Ok(())
 }
 
-fn load(s: Stack, root: &PathBuf, kb: &PathBuf) -> Result<(), String> {
+fn load(s: Stack, root: &Path, kb: &Path) -> Result<(), String> {
     match s {
         Stack::Mainline => {
             insmod(kb.join("net/can/can.ko"))?;
@@ -150,11 +150,18 @@ fn kvaser_config() -> Result<(PathBuf, u32), String> {
         let rd = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
         if rd("vendor").trim() == "0x10e8" && rd("device").trim() == "0x8406" {
             // "0000:00:03.0"
-            let name = d.file_name().unwrap_or_default().to_string_lossy().into_owned();
+            let name = d
+                .file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned();
             let p: Vec<&str> = name.split([':', '.']).collect();
             let num = |s: &str| u32::from_str_radix(s, 16).map_err(|e| format!("{name}: {e}"));
             let (bus, dev, func) = (num(p[1])?, num(p[2])?, num(p[3])?);
-            return Ok((d.join("config"), 0x8000_0000 | bus << 16 | dev << 11 | func << 8));
+            return Ok((
+                d.join("config"),
+                0x8000_0000 | bus << 16 | dev << 11 | func << 8,
+            ));
         }
     }
     Err("no Kvaser PCIcan (10e8:8406) in the VM".into())
@@ -223,7 +230,11 @@ fn real_main() -> Result<(), String> {
     let mut rounds = 2usize;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
-        let mut num = || args.next().and_then(|v| v.parse().ok()).ok_or(format!("{a}: number"));
+        let mut num = || {
+            args.next()
+                .and_then(|v| v.parse().ok())
+                .ok_or(format!("{a}: number"))
+        };
         match a.as_str() {
             "--frames" => frames = num()? as u32,
             "--rounds" => rounds = num()?,
@@ -235,11 +246,7 @@ fn real_main() -> Result<(), String> {
     let kb = env("RCAN_KBUILD").ok_or("RCAN_KBUILD not set")?;
     can::pin_current_thread(0).map_err(|e| e.to_string())?;
     let (config, cf8) = kvaser_config()?;
-    println!(
-        "SJA-MARKERS {:#x} {:#x}",
-        cf8 | MARK_START,
-        cf8 | MARK_END
-    );
+    println!("SJA-MARKERS {:#x} {:#x}", cf8 | MARK_START, cf8 | MARK_END);
     unload()?;
     let mut n = 0;
     for round in 0..rounds {
