@@ -28,7 +28,7 @@ mod sja1000;
 
 use glue::isa::{self, IoWindow, Space};
 use kernel::c_str;
-use rcan_core::sja1000::{reg, Chip, Config, Regs, CDR_CBP};
+use rcan_core::sja1000::{cmd, reg, Chip, Config, Regs, CDR_CBP};
 use rcan_core::sja1000_boards::{autoprobe_ack, autoprobe_arm, autoprobe_fire, SpacedRegs};
 use sja1000::{add_probed, Channel};
 
@@ -122,10 +122,10 @@ fn add_board(addr: usize, line: i32) -> Result<Channel<IsaRegs>> {
     }
     // The reset-mode check alone cannot tell the chip from plain memory
     // (RAM in the ISA hole echoes every write). The command register is
-    // write-only and reads 0xFF on the SJA1000; writing 0 to it requests
-    // nothing.
-    chip.regs.write(reg::CMR, 0);
-    if chip.regs.read(reg::CMR) != 0xFF {
+    // write-only (PeliCAN mode reads 0x00, BasicCAN 0xFF); "clear data
+    // overrun" is harmless in reset mode. Memory reads it back.
+    chip.regs.write(reg::CMR, cmd::CDO);
+    if chip.regs.read(reg::CMR) == cmd::CDO {
         pr_err!("iomem {addr:#x}: memory, not an SJA1000 (command register reads back)\n");
         return Err(ENODEV);
     }
