@@ -409,7 +409,9 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             restarts,
         } = &mut *st;
         if !*running {
-            return false;
+            // A board latch left over from before `stop` (PCAN-PCI's PITA)
+            // is still acknowledged, or a shared line would keep firing.
+            return chip.regs.irq_done();
         }
         let mut bus_off = false;
         let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| {
