@@ -413,6 +413,11 @@ void *rcan_pci_get_drvdata(struct pci_dev *pdev)
 	return pci_get_drvdata(pdev);
 }
 
+unsigned long rcan_pci_resource_len(struct pci_dev *pdev, int bar)
+{
+	return pci_resource_len(pdev, bar);
+}
+
 bool rcan_request_mem_region(unsigned long start, unsigned long n, const char *name)
 {
 	return request_mem_region(start, n, name) != NULL;

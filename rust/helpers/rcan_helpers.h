@@ -105,6 +105,7 @@ void rcan_spin_unlock_irqrestore(spinlock_t *lock, unsigned long flags);
 struct pci_dev;
 void rcan_pci_set_drvdata(struct pci_dev *pdev, void *data);
 void *rcan_pci_get_drvdata(struct pci_dev *pdev);
+unsigned long rcan_pci_resource_len(struct pci_dev *pdev, int bar);
 
 /* ISA-style I/O windows: memory (request_mem_region + ioremap) and ports
  * (request_region + ioport_map), accessed with ioread8/iowrite8. */

@@ -55,6 +55,19 @@ const PCAN_CDR: u8 = CDR_CBP | 0x08;
 /// Crystal of the SJA1000s on the card.
 const XTAL_HZ: u32 = 16_000_000;
 
+/// PEAK's PCI configuration register cleared at probe.
+const PCAN_CFG_44: i32 = 0x44;
+
+/// Channels on the card, from its PCI subsystem id (PEAK's numbering).
+fn channels_of(subsystem: u16) -> usize {
+    match subsystem {
+        12.. => 4,
+        10..=11 => 3,
+        4..=9 => 2,
+        _ => 1,
+    }
+}
+
 extern "C" {
     fn rcan_pcan_pci_btr(which: i32) -> u8;
 }
@@ -112,6 +125,10 @@ impl pci::Driver for PcanPci {
 
     fn probe(dev: &pci::Device) -> Result<KBox<Card>> {
         let enabled = dev.enable()?;
+        // PEAK's configuration register 0x44 cleared (as PEAK's and
+        // mainline's drivers do) before the PITA is touched.
+        dev.write_config_word(PCAN_CFG_44, 0)?;
+        let channels = channels_of(dev.subsystem_id());
         let mut pita = dev.iomap(0, PITA_BYTES)?;
         pita_init(&mut pita);
         // Interrupts of all channels off until their devices exist.
@@ -123,18 +140,18 @@ impl pci::Driver for PcanPci {
             pita,
             _enabled: enabled,
         };
-        for ch in 0..PCAN_MAX_CHANNELS {
+        for ch in 0..channels {
             let regs = PcanRegs {
                 sja: SpacedRegs {
-                    io: dev.iomap(1, PCAN_MAX_CHANNELS * PCAN_CHAN_SIZE)?,
+                    io: dev.iomap(1, channels * PCAN_CHAN_SIZE)?,
                     base: ch * PCAN_CHAN_SIZE,
                     shift: 2,
                 },
                 pita: dev.iomap(0, PITA_BYTES)?,
                 ch,
             };
-            // The channels are contiguous: the first empty slot ends the
-            // card.
+            // A channel the subsystem id promises but that does not
+            // answer ends the card.
             let Some(c) = add_channel(
                 regs,
                 config(),
