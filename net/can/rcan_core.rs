@@ -27,6 +27,8 @@ pub(crate) mod frame;
 pub(crate) mod rxtable;
 #[path = "core/src/sja1000.rs"]
 pub(crate) mod sja1000;
+#[path = "core/src/sja1000_boards.rs"]
+pub(crate) mod sja1000_boards;
 #[path = "core/src/sockaddr.rs"]
 pub(crate) mod sockaddr;
 #[path = "core/src/timesvc.rs"]

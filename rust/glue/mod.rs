@@ -12,7 +12,8 @@
 //! One file per kernel concept: [`sync`] (RCU, RTNL, C-defined mutexes),
 //! [`skb`] (owned socket buffers), [`sock`] (socket protocols from a Rust
 //! trait), [`netdev`] (network devices from a Rust trait), [`hrtimer`]
-//! (high-resolution timers in statics).
+//! (high-resolution timers in statics), [`pci`] (PCI drivers and BARs),
+//! [`isa`] (claimed memory/port windows, interrupt autoprobe).
 #![allow(dead_code)]
 
 #[allow(
@@ -37,6 +38,7 @@ pub(crate) mod bindings {
 }
 
 pub(crate) mod hrtimer;
+pub(crate) mod isa;
 pub(crate) mod netdev;
 pub(crate) mod pci;
 pub(crate) mod skb;

@@ -80,8 +80,16 @@ impl Device {
         Ok(Enabled(self.0))
     }
 
-    /// Maps `len` bytes of BAR `bar` (`pci_iomap`).
+    /// Maps the first `len` bytes of BAR `bar` (`pci_iomap`), or the
+    /// whole BAR if it is shorter (accesses past it then read 0xFF and
+    /// are dropped, see [`IoMem`]); ENODEV if the BAR is absent.
     pub(crate) fn iomap(&self, bar: i32, len: usize) -> Result<IoMem> {
+        // SAFETY: a live device; reads its resource table.
+        let have = unsafe { bindings::rcan_pci_resource_len(self.as_ptr(), bar) } as usize;
+        if have == 0 {
+            return Err(code::ENODEV);
+        }
+        let len = len.min(have);
         // SAFETY: a live, enabled device; NULL on failure.
         let p = unsafe { bindings::pci_iomap(self.as_ptr(), bar, len as ffi::c_ulong) };
         let addr = NonNull::new(p).ok_or(code::ENOMEM)?;
@@ -91,6 +99,19 @@ impl Device {
             len,
             pdev: self.0,
         })
+    }
+
+    /// The PCI subsystem device id.
+    pub(crate) fn subsystem_id(&self) -> u16 {
+        // SAFETY: a live device; set at enumeration.
+        unsafe { (*self.as_ptr()).subsystem_device }
+    }
+
+    /// Writes a 16-bit word of configuration space (`pci_write_config_word`).
+    pub(crate) fn write_config_word(&self, off: i32, val: u16) -> Result {
+        // SAFETY: a live device during probe; the PCI core checks `off`.
+        super::to_result(unsafe { bindings::pci_write_config_word(self.as_ptr(), off, val) })?;
+        Ok(())
     }
 
     /// The PCI device id.
@@ -165,6 +186,23 @@ impl IoMem {
         if let Some(p) = self.at(off, 1) {
             // SAFETY: inside the mapping.
             unsafe { bindings::iowrite8(val, p) };
+        }
+    }
+
+    /// `ioread16` at `off` (little-endian).
+    pub(crate) fn read16(&self, off: usize) -> u16 {
+        match self.at(off, 2) {
+            // SAFETY: inside the mapping.
+            Some(p) => unsafe { bindings::ioread16(p) as u16 },
+            None => !0,
+        }
+    }
+
+    /// `iowrite16` at `off` (little-endian).
+    pub(crate) fn write16(&self, off: usize, val: u16) {
+        if let Some(p) = self.at(off, 2) {
+            // SAFETY: inside the mapping.
+            unsafe { bindings::iowrite16(val, p) };
         }
     }
 

@@ -9,6 +9,10 @@
 #include <linux/can/skb.h>
 #include <linux/if_arp.h>
 #include <linux/ip.h>
+#include <linux/delay.h>
+#include <linux/interrupt.h>
+#include <linux/io.h>
+#include <linux/ioport.h>
 #include <linux/module.h>
 #include <linux/mutex.h>
 #include <linux/netdevice.h>
@@ -409,6 +413,66 @@ void rcan_pci_set_drvdata(struct pci_dev *pdev, void *data)
 void *rcan_pci_get_drvdata(struct pci_dev *pdev)
 {
 	return pci_get_drvdata(pdev);
+}
+
+unsigned long rcan_pci_resource_len(struct pci_dev *pdev, int bar)
+{
+	return pci_resource_len(pdev, bar);
+}
+
+bool rcan_request_mem_region(unsigned long start, unsigned long n, const char *name)
+{
+	return request_mem_region(start, n, name) != NULL;
+}
+
+void rcan_release_mem_region(unsigned long start, unsigned long n)
+{
+	release_mem_region(start, n);
+}
+
+bool rcan_request_region(unsigned long start, unsigned long n, const char *name)
+{
+	return request_region(start, n, name) != NULL;
+}
+
+void rcan_release_region(unsigned long start, unsigned long n)
+{
+	release_region(start, n);
+}
+
+void __iomem *rcan_ioremap(unsigned long start, unsigned long n)
+{
+	return ioremap(start, n);
+}
+
+void rcan_iounmap(void __iomem *addr)
+{
+	iounmap(addr);
+}
+
+void __iomem *rcan_ioport_map(unsigned long port, unsigned int n)
+{
+	return ioport_map(port, n);
+}
+
+void rcan_ioport_unmap(void __iomem *addr)
+{
+	ioport_unmap(addr);
+}
+
+unsigned long rcan_probe_irq_on(void)
+{
+	return probe_irq_on();
+}
+
+int rcan_probe_irq_off(unsigned long mask)
+{
+	return probe_irq_off(mask);
+}
+
+void rcan_udelay(unsigned long usecs)
+{
+	udelay(usecs);
 }
 
 void rcan_netdev_set_no_queue(struct net_device *dev)

@@ -105,6 +105,23 @@ void rcan_spin_unlock_irqrestore(spinlock_t *lock, unsigned long flags);
 struct pci_dev;
 void rcan_pci_set_drvdata(struct pci_dev *pdev, void *data);
 void *rcan_pci_get_drvdata(struct pci_dev *pdev);
+unsigned long rcan_pci_resource_len(struct pci_dev *pdev, int bar);
+
+/* ISA-style I/O windows: memory (request_mem_region + ioremap) and ports
+ * (request_region + ioport_map), accessed with ioread8/iowrite8. */
+bool rcan_request_mem_region(unsigned long start, unsigned long n, const char *name);
+void rcan_release_mem_region(unsigned long start, unsigned long n);
+bool rcan_request_region(unsigned long start, unsigned long n, const char *name);
+void rcan_release_region(unsigned long start, unsigned long n);
+void __iomem *rcan_ioremap(unsigned long start, unsigned long n);
+void rcan_iounmap(void __iomem *addr);
+void __iomem *rcan_ioport_map(unsigned long port, unsigned int n);
+void rcan_ioport_unmap(void __iomem *addr);
+
+/* interrupt autoprobe (ISA) */
+unsigned long rcan_probe_irq_on(void);
+int rcan_probe_irq_off(unsigned long mask);
+void rcan_udelay(unsigned long usecs);
 
 /* net_device queue, carrier and error counters */
 void rcan_netif_wake_queue(struct net_device *dev);

@@ -67,11 +67,17 @@ pub enum Module {
     Kvaser,
     /// SJA1000 front-end for Advantech PCM-3680I / MIOe-3680 cards.
     Advantech,
+    /// SJA1000 front-end for memory-mapped ISA cards.
+    Isa,
+    /// SJA1000 front-end for PEAK PCAN-PCI cards.
+    Pcan,
+    /// SJA1000 front-end for TS-CAN1 PC/104 boards.
+    Tscan1,
 }
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 9] = [
+    pub const ALL: [Module; 12] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
@@ -81,6 +87,9 @@ impl Module {
         Module::Dsor,
         Module::Kvaser,
         Module::Advantech,
+        Module::Isa,
+        Module::Pcan,
+        Module::Tscan1,
     ];
 
     /// Name as shown by `/proc/modules` and taken by `rmmod`.
@@ -95,6 +104,9 @@ impl Module {
             Module::Dsor => "rcan_dsor",
             Module::Kvaser => "rcan_kvaser_pci",
             Module::Advantech => "rcan_advantech_pci",
+            Module::Isa => "rcan_sja1000_isa",
+            Module::Pcan => "rcan_pcan_pci",
+            Module::Tscan1 => "rcan_tscan1",
         }
     }
 
@@ -110,6 +122,9 @@ impl Module {
             Module::Dsor => "net/can/dsor/rcan_dsor.ko",
             Module::Kvaser => "drivers/net/can/sja1000/rcan_kvaser_pci.ko",
             Module::Advantech => "drivers/net/can/sja1000/rcan_advantech_pci.ko",
+            Module::Isa => "drivers/net/can/sja1000/rcan_sja1000_isa.ko",
+            Module::Pcan => "drivers/net/can/sja1000/rcan_pcan_pci.ko",
+            Module::Tscan1 => "drivers/net/can/sja1000/rcan_tscan1.ko",
         }
     }
 }
@@ -560,7 +575,10 @@ mod tests {
                 "rcan_rtime",
                 "rcan_dsor",
                 "rcan_kvaser_pci",
-                "rcan_advantech_pci"
+                "rcan_advantech_pci",
+                "rcan_sja1000_isa",
+                "rcan_pcan_pci",
+                "rcan_tscan1"
             ]
         );
         assert_eq!(

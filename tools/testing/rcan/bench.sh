@@ -39,4 +39,32 @@ if [ -s "$out/bench-summary.txt" ]; then
 else
 	log "no summary written (see $out/console.log)"
 fi
+
+# SJA1000 section (RCAN_BENCH_SJA=0 skips it): a second boot with two QEMU
+# kvaser_pci cards on one bus and QEMU's memory-region trace on; in it
+# rcan-bench-sja runs mainline sja1000+kvaser_pci and rcan_kvaser_pci in
+# alternating rounds, and sja-count.awk counts each driver's register
+# accesses in the trace (the same emulator code counts both).
+if [ "${RCAN_BENCH_SJA:-1}" != 0 ]; then
+	[ -x target/release/rcan-bench-sja ] || die "target/release/rcan-bench-sja missing; run make bench (or make userspace)"
+	sja="$out/sja1000"
+	mkdir -p "$sja"
+	log "SJA1000 section: ours vs mainline on two emulated Kvaser PCIcan cards"
+	src=0
+	# shellcheck disable=SC2086
+	bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 1800 --out "$sja" \
+		--qemu-extra "-object can-bus,id=bus0 -device kvaser_pci,canbus=bus0 -device kvaser_pci,canbus=bus0 -trace memory_region_ops_read -trace memory_region_ops_write -D $sja/trace.log" \
+		-- target/release/rcan-bench-sja ${RCAN_BENCH_SJA_ARGS:---frames 4000 --rounds 3} |
+		tee "$sja/phases.txt" || src=$?
+	if grep -q '^SJA-PHASE' "$sja/phases.txt" 2>/dev/null; then
+		awk -f "$RCAN_ROOT/tools/testing/rcan/bench/sja-count.awk" "$sja/phases.txt" "$sja/trace.log" |
+			tee "$sja/summary.txt"
+		log "SJA1000 summary saved in $sja/summary.txt"
+		# The trace is large (tens of MB per thousand frames).
+		rm -f "$sja/trace.log"
+	else
+		log "SJA1000 section produced no phases (see $sja/console.log)"
+	fi
+	[ "$src" = 0 ] || rc=$src
+fi
 exit "$rc"

@@ -64,6 +64,35 @@ impl Regs for IoRegs {
     }
 }
 
+/// Register access through a claimed ISA/PC/104 window
+/// ([`crate::glue::isa::IoWindow`]) for the board logic of
+/// `rcan_core::sja1000_boards`.
+impl crate::rcan_core::sja1000_boards::Io for crate::glue::isa::IoWindow {
+    fn inb(&mut self, off: usize) -> u8 {
+        self.read8(off)
+    }
+    fn outb(&mut self, off: usize, val: u8) {
+        self.write8(off, val);
+    }
+}
+
+/// The same for a mapped PCI BAR (the PITA of a PCAN-PCI), with real
+/// 16-bit accesses.
+impl crate::rcan_core::sja1000_boards::Io for crate::glue::pci::IoMem {
+    fn inb(&mut self, off: usize) -> u8 {
+        self.read8(off)
+    }
+    fn outb(&mut self, off: usize, val: u8) {
+        self.write8(off, val);
+    }
+    fn inw(&mut self, off: usize) -> u16 {
+        self.read16(off)
+    }
+    fn outw(&mut self, off: usize, val: u16) {
+        self.write16(off, val);
+    }
+}
+
 /// Interrupt causes handled per interrupt before returning (mainline
 /// `SJA1000_MAX_IRQ`): bounds the time spent in hardirq on a babbling bus.
 const MAX_IRQ_ROUNDS: usize = 20;
@@ -132,6 +161,9 @@ pub(crate) struct Channel<R: Regs + Send + 'static> {
 /// device for it on interrupt line `irq`; `None` if there is no chip.
 /// Logs the device name with `what` (the card and channel). Process
 /// context (front-end probe).
+// The ISA front-end probes itself (interrupt autoprobe) and uses
+// `add_probed`.
+#[allow(dead_code)]
 pub(crate) fn add_channel<R: Regs + Send + 'static>(
     regs: R,
     cfg: Config,
@@ -143,15 +175,26 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
     if chip.probe().is_err() {
         return Ok(None);
     }
+    add_probed(chip, irq, xtal_hz, what).map(Some)
+}
+
+/// Registers a `can%d` device for a chip the front-end has already
+/// probed (and, e.g., autoprobed the interrupt line of). Process context.
+pub(crate) fn add_probed<R: Regs + Send + 'static>(
+    chip: Chip<R>,
+    irq: u32,
+    xtal_hz: u32,
+    what: core::fmt::Arguments<'_>,
+) -> Result<Channel<R>> {
     let prv = Sja1000Priv::new(chip, irq, xtal_hz)?;
     let reg =
         crate::glue::netdev::Registration::<Sja1000<R>>::register(kernel::c_str!("can%d"), prv)?;
     pr_info!("{}: SJA1000, {}, irq {}\n", reg.dev().name(), what, irq);
     let listen = rcan_api::Listening::new(&reg)?;
-    Ok(Some(Channel {
+    Ok(Channel {
         _listen: listen,
         _reg: reg,
-    }))
+    })
 }
 
 /// The SJA1000 driver for register access `R`.
@@ -366,7 +409,9 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             restarts,
         } = &mut *st;
         if !*running {
-            return false;
+            // A board latch left over from before `stop` (PCAN-PCI's PITA)
+            // is still acknowledged, or a shared line would keep firing.
+            return chip.regs.irq_done();
         }
         let mut bus_off = false;
         let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| {
@@ -416,7 +461,10 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             }
             dev.wake_queue();
         }
-        handled
+        // The board's acknowledgement (PITA on PCAN-PCI) comes after the
+        // chip's causes are cleared, or the line would fire again at once.
+        let board = chip.regs.irq_done();
+        handled || board
     }
 }
 

@@ -157,6 +157,13 @@ pub trait Regs {
             self.write(reg + i as u8, *b);
         }
     }
+    /// Board hook after the driver handled the chip's interrupt causes,
+    /// e.g. acknowledging the interrupt in a bridge in front of the chip
+    /// (PCAN-PCI's PITA); returns whether the board had an interrupt
+    /// pending. Default: nothing to do.
+    fn irq_done(&mut self) -> bool {
+        false
+    }
 }
 
 /// Encodes `frame` into the 13-byte TX buffer image (FI, identifier,
