@@ -13,6 +13,8 @@ pub mod arb;
 pub mod canloop;
 pub mod filter;
 pub mod frame;
+pub mod i82527;
+pub mod i82527_model;
 pub mod rxtable;
 pub mod sja1000;
 pub mod sja1000_boards;
