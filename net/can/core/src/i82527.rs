@@ -144,7 +144,7 @@ pub mod bits {
 
     /// A control byte that changes only the field at `shift` to `v`.
     pub const fn only(shift: u8, v: u8) -> u8 {
-        (0xFF & !(0b11 << shift)) | (v << shift)
+        !(0b11 << shift) | (v << shift)
     }
 
     /// A control byte from four fields, high to low.
@@ -289,6 +289,8 @@ pub enum Event {
     Rx(CanFrame),
     /// The transmit object's frame was sent.
     TxDone,
+    /// The transmit object's frame was dropped unsent (bus-off).
+    TxAborted,
     /// A receive object was overwritten before the host read it (MsgLst):
     /// frames were lost.
     Overrun {
@@ -693,9 +695,17 @@ impl<R: Regs> Chip<R> {
         let (s, r, k) = (bits::SET, bits::RES, bits::KEEP);
         let base = reg::obj(TX_OBJ);
         // MsgVal reset while arbitration and configuration change; TXIE
-        // for the completion interrupt; RXIE off (a remote request's
-        // answer goes to the receive objects).
-        ctl(&mut self.regs, TX_OBJ, reg::CTRL0, bits::byte(r, s, r, r));
+        // for the completion interrupt. A remote request leaves the object
+        // in receive direction, where it takes the answer if no lower
+        // object (object 1) does, and before object 15 would: RXIE, so
+        // the answer is read from it (tx_object).
+        let rxie = if rtr { s } else { r };
+        ctl(
+            &mut self.regs,
+            TX_OBJ,
+            reg::CTRL0,
+            bits::byte(r, s, rxie, r),
+        );
         ctl(&mut self.regs, TX_OBJ, reg::CTRL1, bits::byte(r, r, s, r));
         self.regs
             .writen(base + reg::ARB, &arb_bytes(frame.can_id, ext));
@@ -857,6 +867,19 @@ impl<R: Regs> Chip<R> {
     /// does not make it answer (re-send) a remote frame, and a remote
     /// request it sent does not catch the answer.
     fn tx_object(&mut self, ev: &mut impl FnMut(Event)) {
+        let base = reg::obj(TX_OBJ);
+        let c1 = self.regs.read(base + reg::CTRL1);
+        let cfg = self.regs.read(base + reg::CFG);
+        if cfg & mcfg::DIR == 0 && bits::is_set(c1, bits::NEWDAT) {
+            // The answer to our remote request landed here.
+            let mut arb = [0u8; 4];
+            self.regs.readn(base + reg::ARB, &mut arb);
+            let cfg = self.regs.read(base + reg::CFG);
+            let mut data = [0u8; 8];
+            let dlc = usize::from(cfg >> mcfg::DLC_SHIFT).min(MAX_DLC);
+            self.regs.readn(base + reg::DATA, &mut data[..dlc]);
+            ev(Event::Rx(decode(arb, cfg, &data)));
+        }
         self.invalidate(TX_OBJ);
         if self.tx_busy {
             self.tx_busy = false;
@@ -892,7 +915,7 @@ impl<R: Regs> Chip<R> {
             self.invalidate(TX_OBJ);
             if self.tx_busy {
                 self.tx_busy = false;
-                ev(Event::TxDone);
+                ev(Event::TxAborted);
             }
             self.regs.write(reg::CONTROL, ctrl::IE | ctrl::EIE);
         } else if was == State::BusOff {
@@ -944,7 +967,7 @@ pub fn error_frame(ev: &Event) -> Option<CanFrame> {
             err::CRTL
         }
         Event::Restarted => err::RESTARTED,
-        Event::Rx(_) | Event::TxDone => return None,
+        Event::Rx(_) | Event::TxDone | Event::TxAborted => return None,
     };
     f.can_id = CAN_ERR_FLAG | class;
     Some(f)

@@ -468,6 +468,16 @@ impl I82527Model {
     }
 }
 
+impl super::i82527::Regs for I82527Model {
+    fn read(&mut self, reg: u8) -> u8 {
+        I82527Model::read(self, reg)
+    }
+
+    fn write(&mut self, reg: u8, val: u8) {
+        I82527Model::write(self, reg, val)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
