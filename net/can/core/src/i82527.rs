@@ -570,8 +570,10 @@ impl<R: Regs> Chip<R> {
     }
 
     /// Probes for a chip: a floating bus reads 0xFF everywhere; a chip
-    /// leaves hardware reset (RSTST clear) and keeps INIT in its control
-    /// register after it is set. Leaves the chip in INIT.
+    /// leaves hardware reset (RSTST clear), keeps INIT in its control
+    /// register after it is set, and merges writes to a message object's
+    /// two-bit control fields (memory would store them). Leaves the chip
+    /// in INIT.
     pub fn probe(&mut self) -> Result<(), I82527Error> {
         let mut out_of_reset = false;
         for _ in 0..RESET_POLLS {
@@ -590,6 +592,18 @@ impl<R: Regs> Chip<R> {
         self.regs.write(reg::CONTROL, ctrl::INIT | ctrl::CCE);
         let c = self.regs.read(reg::CONTROL);
         if c & (ctrl::INIT | ctrl::CCE) != ctrl::INIT | ctrl::CCE || c == 0xFF {
+            return Err(I82527Error::NoChip);
+        }
+        // Plain memory (an ISA hole backed by RAM) would pass the above.
+        // The two-bit control fields do not store what is written: after
+        // "all reset", "set MsgVal, keep the rest" reads back as MsgVal set
+        // and the rest reset.
+        let (s, r, k) = (bits::SET, bits::RES, bits::KEEP);
+        ctl(&mut self.regs, STD_RX, reg::CTRL0, bits::byte(r, r, r, r));
+        ctl(&mut self.regs, STD_RX, reg::CTRL0, bits::byte(s, k, k, k));
+        let v = self.regs.read(reg::obj(STD_RX) + reg::CTRL0);
+        self.invalidate(STD_RX);
+        if v != bits::byte(s, r, r, r) {
             return Err(I82527Error::NoChip);
         }
         Ok(())

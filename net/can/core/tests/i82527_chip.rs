@@ -105,6 +105,18 @@ fn probe_finds_the_chip_or_nothing() {
     let mut c = Chip::new(I82527Model::new(), Config::DEFAULT);
     assert_eq!(c.probe(), Ok(()));
     assert!(c.regs.in_init());
+    // Plain memory that keeps what is written is not an 82527.
+    struct Ram([u8; 256]);
+    impl Regs for Ram {
+        fn read(&mut self, reg: u8) -> u8 {
+            self.0[usize::from(reg)]
+        }
+        fn write(&mut self, reg: u8, val: u8) {
+            self.0[usize::from(reg)] = val;
+        }
+    }
+    let mut c = Chip::new(Ram([0; 256]), Config::DEFAULT);
+    assert_eq!(c.probe(), Err(I82527Error::NoChip));
 }
 
 #[test]
