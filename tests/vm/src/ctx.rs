@@ -65,11 +65,15 @@ pub enum Module {
     Kvaser,
     /// SJA1000 front-end for Advantech PCM-3680I / MIOe-3680 cards.
     Advantech,
+    /// Simulated Intel 82527 cards on a simulated bus.
+    I82527Sim,
+    /// Intel 82527 front-end for memory-mapped ISA cards.
+    I82527Isa,
 }
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 8] = [
+    pub const ALL: [Module; 10] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
@@ -78,6 +82,8 @@ impl Module {
         Module::Rtime,
         Module::Kvaser,
         Module::Advantech,
+        Module::I82527Sim,
+        Module::I82527Isa,
     ];
 
     /// Name as shown by `/proc/modules` and taken by `rmmod`.
@@ -91,6 +97,8 @@ impl Module {
             Module::Rtime => "rcan_rtime",
             Module::Kvaser => "rcan_kvaser_pci",
             Module::Advantech => "rcan_advantech_pci",
+            Module::I82527Sim => "rcan_i82527_sim",
+            Module::I82527Isa => "rcan_i82527_isa",
         }
     }
 
@@ -105,6 +113,8 @@ impl Module {
             Module::Rtime => "net/can/dsor/rcan_rtime.ko",
             Module::Kvaser => "drivers/net/can/sja1000/rcan_kvaser_pci.ko",
             Module::Advantech => "drivers/net/can/sja1000/rcan_advantech_pci.ko",
+            Module::I82527Sim => "drivers/net/can/i82527/rcan_i82527_sim.ko",
+            Module::I82527Isa => "drivers/net/can/i82527/rcan_i82527_isa.ko",
         }
     }
 }
@@ -554,7 +564,9 @@ mod tests {
                 "rcan_time",
                 "rcan_rtime",
                 "rcan_kvaser_pci",
-                "rcan_advantech_pci"
+                "rcan_advantech_pci",
+                "rcan_i82527_sim",
+                "rcan_i82527_isa"
             ]
         );
         assert_eq!(

@@ -5,6 +5,7 @@ mod canutils;
 mod capture;
 mod errors;
 mod filter;
+mod i82527;
 mod lifecycle;
 mod loopdrv;
 mod mixed;
@@ -64,6 +65,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         mixed::TESTS,
         timesvc::TESTS,
         sja1000::TESTS,
+        i82527::TESTS,
     ]
     .into_iter()
     .flatten()
