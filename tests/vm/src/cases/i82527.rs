@@ -16,7 +16,7 @@ use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant};
 
-use socketcan::{CanFrame, Socket, SocketOptions as _};
+use socketcan::{CanFrame, Socket};
 
 use super::test_table;
 use crate::canraw::{self, ext, rtr_ext, rtr_std, std as sff};
