@@ -1029,6 +1029,20 @@ impl Setup {
         b[8..12].copy_from_slice(&self.restarts.to_ne_bytes());
         b
     }
+
+    /// Parses the C layout.
+    pub fn from_bytes(b: &[u8; SETUP_LEN]) -> Setup {
+        Setup {
+            cpu_if: b[0],
+            clkout: b[1],
+            bus_cfg: b[2],
+            bt0: b[3],
+            bt1: b[4],
+            state: b[5],
+            std_answers_exact: b[6],
+            restarts: u32::from_ne_bytes([b[8], b[9], b[10], b[11]]),
+        }
+    }
 }
 
 /// One remote-answer request exchanged by the `SIOCRCANI82527ANSWER`

@@ -282,7 +282,19 @@ fn burst_one(
     for seq in 0..n {
         canraw::send(tx, &frame(seq))?;
     }
-    let got = recv.join().map_err(|_| "receiver panicked".to_string())??;
+    let got = recv.join().map_err(|_| "receiver panicked".to_string())?;
+    let got = got.map_err(|e| {
+        // Where a frame went missing: the counters of both ends and the
+        // softnet backlog drops.
+        let c = |d: &str, n: &str| ctx.stat(d, n).map_or(-1, |v| v as i64);
+        let softnet = std::fs::read_to_string("/proc/net/softnet_stat").unwrap_or_default();
+        format!(
+            "{e}; can0 tx {} tx_dropped {} rx {} rx_dropped {} rx_over {}; can1 tx {} tx_dropped {} rx {} rx_dropped {} rx_over {}; softnet {:?}",
+            c("can0", "tx_packets"), c("can0", "tx_dropped"), c("can0", "rx_packets"), c("can0", "rx_dropped"), c("can0", "rx_over_errors"),
+            c("can1", "tx_packets"), c("can1", "tx_dropped"), c("can1", "rx_packets"), c("can1", "rx_dropped"), c("can1", "rx_over_errors"),
+            softnet.lines().collect::<Vec<_>>()
+        )
+    })?;
     let secs = start.elapsed().as_secs_f64();
     ctx.note(format!(
         "burst {what}: {got}/{n} frames in {secs:.1} s ({:.0} frames/s)",
