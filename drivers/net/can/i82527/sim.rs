@@ -309,6 +309,17 @@ impl Drop for SimModule {
         // Unregisters the devices (stop, then free).
         drop(core::mem::replace(&mut self.channels, KVec::new()));
         TIMER.cancel();
-        drop(self.bus.take());
+        if let Some(bus) = self.bus.take() {
+            let b = bus.lock();
+            for (i, m) in b.models.iter().enumerate().take(b.n) {
+                pr_info!(
+                    "rcan_i82527_sim: card {}: {} frames sent, {} answered, {} not taken\n",
+                    i,
+                    m.sent,
+                    m.answered,
+                    m.not_taken
+                );
+            }
+        }
     }
 }

@@ -59,6 +59,8 @@ pub struct I82527Model {
     pub sent: u64,
     /// Remote frames it answered by itself.
     pub answered: u64,
+    /// Data frames from the bus no object took (masks, INIT).
+    pub not_taken: u64,
 }
 
 impl Default for I82527Model {
@@ -108,6 +110,7 @@ impl I82527Model {
             absent: false,
             sent: 0,
             answered: 0,
+            not_taken: 0,
         };
         m.mem[usize::from(reg::CONTROL)] = ctrl::INIT;
         for n in 1..=15u8 {
@@ -323,7 +326,11 @@ impl I82527Model {
     /// took it: stored (data frame) or answer requested (remote frame).
     /// Nothing happens in INIT (off the bus).
     pub fn receive(&mut self, f: &CanFrame) -> bool {
-        if self.absent || self.in_init() || f.can_id & CAN_ERR_FLAG != 0 {
+        if self.absent || f.can_id & CAN_ERR_FLAG != 0 {
+            return false;
+        }
+        if self.in_init() {
+            self.not_taken += 1;
             return false;
         }
         let ext = f.can_id & CAN_EFF_FLAG != 0;
@@ -365,6 +372,7 @@ impl I82527Model {
             }
             return true;
         }
+        self.not_taken += 1;
         false
     }
 
