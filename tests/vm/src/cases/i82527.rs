@@ -266,24 +266,30 @@ fn burst_one(
             sff((seq & 0x7FF) as u16, &d)
         }
     };
-    let recv = thread::spawn(move || -> Result<u32, String> {
+    // The receiver hands its socket back even on failure: closing it would
+    // change the masks (nobody wants anything) and blur where a frame went
+    // missing (the simulated cards report "not taken" frames at unload).
+    let recv = thread::spawn(move || -> (Result<u32, String>, socketcan::CanSocket) {
         let mut next = 0u32;
         while next < n {
-            let f = canraw::recv(&rx)?;
-            ensure!(
-                canraw::same(&f, &frame(next)),
-                "frame {next}: got {}",
-                canraw::show(&f)
-            );
+            let f = match canraw::recv(&rx) {
+                Ok(f) => f,
+                Err(e) => return (Err(e), rx),
+            };
+            if !canraw::same(&f, &frame(next)) {
+                return (Err(format!("frame {next}: got {}", canraw::show(&f))), rx);
+            }
             next += 1;
         }
-        Ok(next)
+        (Ok(next), rx)
     });
     for seq in 0..n {
         canraw::send(tx, &frame(seq))?;
     }
-    let got = recv.join().map_err(|_| "receiver panicked".to_string())?;
+    let (got, _rx) = recv.join().map_err(|_| "receiver panicked".to_string())?;
     let got = got.map_err(|e| {
+        // Let the queued frames go out while the receiver still listens.
+        thread::sleep(Duration::from_secs(3));
         // Where a frame went missing: the counters of both ends and the
         // softnet backlog drops.
         let c = |d: &str, n: &str| ctx.stat(d, n).map_or(-1, |v| v as i64);
