@@ -65,6 +65,12 @@ pub(crate) struct I82527Priv<R: Regs> {
     /// Interrupt line; 0: the front-end calls the handler itself (the
     /// simulated card).
     irq: u32,
+    /// Hand received frames to pf_can at once (`rcan_rx_direct`) instead
+    /// of through `netif_rx`'s per-CPU backlog: for a front-end whose
+    /// "interrupt" runs in softirq context on varying CPUs (the simulated
+    /// card's hrtimer), where two backlogs could reorder frames. A real
+    /// interrupt line has one CPU (its affinity) and uses `netif_rx`.
+    direct_rx: bool,
 }
 
 /// One registered channel: its network device and the filter listener
@@ -91,6 +97,7 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
     regs: R,
     cfg: Config,
     irq: u32,
+    direct_rx: bool,
     xtal_hz: u32,
     what: core::fmt::Arguments<'_>,
 ) -> Result<Option<Channel<R>>> {
@@ -105,6 +112,7 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
             running: false,
         })?,
         irq,
+        direct_rx,
     };
     let reg =
         crate::glue::netdev::Registration::<I82527<R>>::register(kernel::c_str!("can%d"), prv)?;
@@ -160,8 +168,19 @@ fn remask<R: Regs + Send + 'static>(dev: &NetDev, p: &I82527Priv<R>) {
     }
 }
 
-/// Hands a frame to the network stack. Any context.
-fn rx_frame(dev: &NetDev, frame: &CanFrame) {
+/// Hands a received skb to the stack: at once (`direct`, BH disabled, the
+/// device held by its registration) or through `netif_rx`.
+fn deliver(dev: &NetDev, skb: Skb, direct: bool) {
+    if direct {
+        rcan_api::rx_direct(skb);
+    } else {
+        dev.rx(skb);
+    }
+}
+
+/// Hands a frame to the network stack. Any context (`direct`: BH
+/// disabled).
+fn rx_frame(dev: &NetDev, frame: &CanFrame, direct: bool) {
     let Some(mut skb) = Skb::alloc(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, crate::glue::GFP_ATOMIC)
     else {
         dev.stats_rx_dropped();
@@ -178,7 +197,7 @@ fn rx_frame(dev: &NetDev, frame: &CanFrame) {
     if frame.can_id & crate::rcan_core::arb::CAN_ERR_FLAG == 0 {
         dev.stats_rx(frame.dlc() as u32);
     }
-    dev.rx(skb);
+    deliver(dev, skb, direct);
 }
 
 /// `SIOCDEVPRIVATE`: the first device-private ioctl number.
@@ -304,9 +323,10 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
         if !*running {
             return false;
         }
+        let direct = p.direct_rx;
         chip.irq(MAX_IRQ_ROUNDS, |ev| {
             match ev {
-                Event::Rx(f) => rx_frame(dev, &f),
+                Event::Rx(f) => rx_frame(dev, &f, direct),
                 Event::TxDone => {
                     if let Some(mut skb) = echo.take() {
                         if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) {
@@ -314,7 +334,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                         }
                         if skb.pkt_type() == bindings::PACKET_LOOPBACK as u8 {
                             skb.set_can(dev, bindings::PACKET_LOOPBACK as u8);
-                            dev.rx(skb);
+                            deliver(dev, skb, direct);
                         } else {
                             skb.consume();
                         }
@@ -330,7 +350,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                 Event::State(_) | Event::Restarted => {}
             }
             if let Some(ef) = error_frame(&ev) {
-                rx_frame(dev, &ef);
+                rx_frame(dev, &ef, direct);
             }
         })
     }

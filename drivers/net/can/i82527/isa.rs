@@ -126,6 +126,7 @@ impl kernel::Module for IsaModule {
             regs,
             cfg,
             irq as u32,
+            false,
             XTAL_HZ,
             format_args!("ISA at {iomem:#x}"),
         )? {

@@ -14,7 +14,11 @@
 //! then calls the driver's interrupt handler of each card whose
 //! interrupt output is raised, and repeats until nothing moves, or re-arms
 //! itself after [`FRAMES_PER_RUN`] frames. Frames take no bus time; each
-//! frame's receivers are served before the next frame goes out.
+//! frame's receivers are served before the next frame goes out. The
+//! callback may run on either CPU from one run to the next, so the driver
+//! hands received frames to pf_can directly (`rcan_rx_direct`) rather
+//! than through `netif_rx`, whose per-CPU backlogs would reorder them; a
+//! real card's interrupt has one CPU.
 //!
 //! Module parameter `cards` (default 2, at most [`MAX_CARDS`]).
 //!
@@ -282,6 +286,7 @@ impl kernel::Module for SimModule {
                 regs,
                 Config::DEFAULT,
                 0,
+                true,
                 XTAL_HZ,
                 format_args!("simulated card {i}"),
             )?
