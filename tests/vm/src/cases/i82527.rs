@@ -22,6 +22,7 @@ use super::test_table;
 use crate::canraw::{self, ext, rtr_ext, rtr_std, std as sff};
 use crate::check::{ensure, OrFail, TestResult};
 use crate::ctx::{dev, Ctx, Module};
+use crate::tools;
 
 pub const TESTS: &[crate::Test] = test_table![
     i82527_frames_both_ways,
@@ -30,6 +31,7 @@ pub const TESTS: &[crate::Test] = test_table![
     i82527_burst,
     i82527_rmmod_during_traffic,
     i82527_isa_no_card,
+    i82527_config_tool,
 ];
 
 /// Loads rcan_pf, rcan_can, rcan_raw and rcan_i82527_sim (two cards:
@@ -417,6 +419,37 @@ fn i82527_isa_no_card(ctx: &mut Ctx) -> TestResult {
     ensure!(
         !std::path::Path::new("/sys/class/net/can0").exists(),
         "a device appeared"
+    );
+    Ok(())
+}
+
+/// i82527config: shows the setup; publishes an answer that the other card
+/// then receives for its remote frame; withdraws it; refuses a bad slot.
+fn i82527_config_tool(ctx: &mut Ctx) -> TestResult {
+    let (i0, _i1) = sim2(ctx)?;
+    let tool = ctx.root().join("target/release/i82527config");
+    let tool = tool.to_string_lossy().into_owned();
+    let out = tools::run_ok(&tool, &["can1"])?;
+    ensure!(
+        out.stdout
+            .contains("bt0 0x00 bt1 0x2b cpu_if 0x40 (500000 bit/s"),
+        "setup not shown: {}",
+        out.stdout
+    );
+    tools::run_ok(&tool, &["can1", "answer", "0", "1ABCDEF0#CAFE"])?;
+    let s0 = canraw::open(i0)?;
+    canraw::send(&s0, &rtr_ext(0x1ABC_DEF0, 2))?;
+    canraw::expect(&s0, &ext(0x1ABC_DEF0, &[0xCA, 0xFE]), "can0")?;
+    tools::run_ok(&tool, &["can1", "withdraw", "0"])?;
+    canraw::send(&s0, &rtr_ext(0x1ABC_DEF0, 2))?;
+    canraw::expect_quiet(&[("can0", &s0)])?;
+    let bad = tools::spawn(&tool, &["can1", "answer", "12", "123#00"], None)?
+        .finish(tools::TOOL_LIMIT)?;
+    ensure!(
+        !bad.status.success() && bad.stderr.contains("slot 12"),
+        "slot 12: {} {}",
+        bad.status,
+        bad.stderr
     );
     Ok(())
 }
