@@ -23,6 +23,10 @@ pub(crate) mod dsor_wire;
 pub(crate) mod filter;
 #[path = "core/src/frame.rs"]
 pub(crate) mod frame;
+#[path = "core/src/i82527.rs"]
+pub(crate) mod i82527;
+#[path = "core/src/i82527_model.rs"]
+pub(crate) mod i82527_model;
 #[path = "core/src/rxtable.rs"]
 pub(crate) mod rxtable;
 #[path = "core/src/sja1000.rs"]

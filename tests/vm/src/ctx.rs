@@ -73,11 +73,15 @@ pub enum Module {
     Pcan,
     /// SJA1000 front-end for TS-CAN1 PC/104 boards.
     Tscan1,
+    /// Simulated Intel 82527 cards on a simulated bus.
+    I82527Sim,
+    /// Intel 82527 front-end for memory-mapped ISA cards.
+    I82527Isa,
 }
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 12] = [
+    pub const ALL: [Module; 14] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
@@ -90,6 +94,8 @@ impl Module {
         Module::Isa,
         Module::Pcan,
         Module::Tscan1,
+        Module::I82527Sim,
+        Module::I82527Isa,
     ];
 
     /// Name as shown by `/proc/modules` and taken by `rmmod`.
@@ -107,6 +113,8 @@ impl Module {
             Module::Isa => "rcan_sja1000_isa",
             Module::Pcan => "rcan_pcan_pci",
             Module::Tscan1 => "rcan_tscan1",
+            Module::I82527Sim => "rcan_i82527_sim",
+            Module::I82527Isa => "rcan_i82527_isa",
         }
     }
 
@@ -125,6 +133,8 @@ impl Module {
             Module::Isa => "drivers/net/can/sja1000/rcan_sja1000_isa.ko",
             Module::Pcan => "drivers/net/can/sja1000/rcan_pcan_pci.ko",
             Module::Tscan1 => "drivers/net/can/sja1000/rcan_tscan1.ko",
+            Module::I82527Sim => "drivers/net/can/i82527/rcan_i82527_sim.ko",
+            Module::I82527Isa => "drivers/net/can/i82527/rcan_i82527_isa.ko",
         }
     }
 }
@@ -578,7 +588,9 @@ mod tests {
                 "rcan_advantech_pci",
                 "rcan_sja1000_isa",
                 "rcan_pcan_pci",
-                "rcan_tscan1"
+                "rcan_tscan1",
+                "rcan_i82527_sim",
+                "rcan_i82527_isa"
             ]
         );
         assert_eq!(

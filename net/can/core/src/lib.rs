@@ -18,6 +18,8 @@ pub mod dsor_udp;
 pub mod dsor_wire;
 pub mod filter;
 pub mod frame;
+pub mod i82527;
+pub mod i82527_model;
 pub mod rxtable;
 pub mod sja1000;
 pub mod sja1000_boards;

@@ -6,6 +6,7 @@ mod capture;
 mod dsor;
 mod errors;
 mod filter;
+mod i82527;
 mod lifecycle;
 mod loopdrv;
 mod mixed;
@@ -66,6 +67,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         timesvc::TESTS,
         dsor::TESTS,
         sja1000::TESTS,
+        i82527::TESTS,
     ]
     .into_iter()
     .flatten()

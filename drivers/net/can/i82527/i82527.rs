@@ -1,0 +1,363 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The abstract Intel 82527 network driver (thesis 5.3.10, module
+//! `i82527`): everything but register access, which the front-ends supply
+//! through [`Regs`] (5.3.11: readb/writeb/memcpy_fromio/memcpy_toio).
+//!
+//! This file is compiled into each front-end module (`#[path]`), like the
+//! SJA1000 driver; the chip logic (message-object allocation, masks,
+//! interrupt handling) is the pure, host-tested `rcan_core::i82527`.
+//!
+//! Per device ([`I82527Priv`]): the chip, the echo skb of the frame in
+//! the transmit object, the programmed masks and the running flag behind
+//! an [`IrqSpinLock`]: the interrupt handler (hardirq on a real card,
+//! softirq on the simulated one), `start_xmit`, `open`/`stop`,
+//! `set_rx_mode`, the filter listener and the ioctls all touch the chip.
+//! The TX queue is stopped from `start_xmit` until the transmit object's
+//! completion: exactly one object transmits (thesis 5.3.10).
+//!
+//! Bus-off recovery: the chip sets INIT by itself; the interrupt handler
+//! (core) clears it at once, the chip then waits for 128 occurrences of
+//! 11 recessive bits and rejoins the bus; sockets see `CAN_ERR_BUSOFF`
+//! and then `CAN_ERR_RESTARTED`.
+
+use crate::glue::bindings;
+use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
+use crate::glue::skb::Skb;
+use crate::glue::sync::IrqSpinLock;
+use crate::rcan_api::{self, FilterListener};
+use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use crate::rcan_core::i82527::{
+    bitrate, error_frame, masks_for, AnswerReq, Chip, Config, Event, I82527Error, Masks, Regs,
+    ANSWER_LEN,
+};
+use crate::rcan_core::rxtable::Filter;
+use crate::rcan_core::sja1000::Wanted;
+use core::marker::PhantomData;
+use kernel::prelude::*;
+
+/// Interrupt-register reads per interrupt: bounds the time spent in the
+/// handler on a busy bus.
+const MAX_IRQ_ROUNDS: usize = 32;
+
+/// Most filters taken into account for the masks; with more the masks
+/// open (sound, not tight). Stack use in atomic context bounds it.
+const MAX_FILTERS: usize = 24;
+
+/// Transmit queue length (see the SJA1000 driver: a fast sender blocks in
+/// sendmsg rather than getting ENOBUFS).
+const TX_QUEUE_LEN: u32 = 1000;
+
+/// Headroom for mainline's `struct can_skb_priv` in received skbs.
+const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
+
+/// The chip and what goes with it, under the device's lock.
+pub(crate) struct ChipState<R: Regs> {
+    pub(crate) chip: Chip<R>,
+    /// The frame in the transmit object, kept for the echo.
+    echo: Option<Skb>,
+    running: bool,
+}
+
+/// Per-device driver data.
+pub(crate) struct I82527Priv<R: Regs> {
+    pub(crate) chip: IrqSpinLock<ChipState<R>>,
+    /// Interrupt line; 0: the front-end calls the handler itself (the
+    /// simulated card).
+    irq: u32,
+    /// Hand received frames to pf_can at once (`rcan_rx_direct`) instead
+    /// of through `netif_rx`'s per-CPU backlog: for a front-end whose
+    /// "interrupt" runs in softirq context on varying CPUs (the simulated
+    /// card's hrtimer), where two backlogs could reorder frames. A real
+    /// interrupt line has one CPU (its affinity) and uses `netif_rx`.
+    direct_rx: bool,
+}
+
+/// One registered channel: its network device and the filter listener
+/// pointing into it (declared first, so it is dropped first).
+pub(crate) struct Channel<R: Regs + Send + 'static> {
+    _listen: rcan_api::Listening<I82527<R>>,
+    reg: crate::glue::netdev::Registration<I82527<R>>,
+}
+
+impl<R: Regs + Send + 'static> Channel<R> {
+    /// The device, as a cookie for [`crate::glue::netdev::from_cookie`]
+    /// (the simulated card's interrupt delivery; the ISA front-end has a
+    /// real line).
+    #[allow(dead_code)]
+    pub(crate) fn dev_ptr(&self) -> *mut bindings::net_device {
+        self.reg.dev().as_ptr()
+    }
+}
+
+/// Probes the chip behind `regs` and, if one answers, registers a `can%d`
+/// device for it on interrupt line `irq` (0: none, see [`I82527Priv`]);
+/// `None` if there is no chip. Process context.
+pub(crate) fn add_channel<R: Regs + Send + 'static>(
+    regs: R,
+    cfg: Config,
+    irq: u32,
+    direct_rx: bool,
+    xtal_hz: u32,
+    what: core::fmt::Arguments<'_>,
+) -> Result<Option<Channel<R>>> {
+    let mut chip = Chip::new(regs, cfg);
+    if chip.probe().is_err() {
+        return Ok(None);
+    }
+    let prv = I82527Priv {
+        chip: IrqSpinLock::new(ChipState {
+            chip,
+            echo: None,
+            running: false,
+        })?,
+        irq,
+        direct_rx,
+    };
+    let reg =
+        crate::glue::netdev::Registration::<I82527<R>>::register(kernel::c_str!("can%d"), prv)?;
+    pr_info!(
+        "{}: Intel 82527, {}, irq {}, {} bit/s\n",
+        reg.dev().name(),
+        what,
+        irq,
+        bitrate(cfg.bt0, cfg.bt1, cfg.cpu_if, xtal_hz)
+    );
+    let listen = rcan_api::Listening::new(&reg)?;
+    Ok(Some(Channel {
+        _listen: listen,
+        reg,
+    }))
+}
+
+/// The 82527 driver for register access `R`.
+pub(crate) struct I82527<R>(PhantomData<R>);
+
+/// The tightest masks for what the sockets bound to `dev` (or to every
+/// interface) want. Any context.
+fn wanted_masks(dev: &NetDev) -> Masks {
+    if dev.is_promisc() {
+        return Masks::OPEN;
+    }
+    let mut fs = [Filter::Id {
+        id: 0,
+        mask: 0,
+        inv: false,
+    }; MAX_FILTERS];
+    let Some(n) = rcan_api::rx_filters(dev.ifindex(), &mut fs) else {
+        return Masks::OPEN;
+    };
+    let mut w = [Wanted::ALL; MAX_FILTERS];
+    for (o, f) in w.iter_mut().zip(&fs[..n]) {
+        *o = Wanted::of(f);
+    }
+    masks_for(&w[..n], false)
+}
+
+/// Reprograms the masks if they changed. Any context; takes the chip lock.
+fn remask<R: Regs + Send + 'static>(dev: &NetDev, p: &I82527Priv<R>) {
+    let m = wanted_masks(dev);
+    let mut st = p.chip.lock();
+    if st.chip.masks == m {
+        return;
+    }
+    if st.running {
+        st.chip.set_masks(&m);
+    } else {
+        st.chip.masks = m;
+    }
+}
+
+/// Hands a received skb to the stack: at once (`direct`, BH disabled, the
+/// device held by its registration) or through `netif_rx`.
+fn deliver(dev: &NetDev, skb: Skb, direct: bool) {
+    if direct {
+        rcan_api::rx_direct(skb);
+    } else {
+        dev.rx(skb);
+    }
+}
+
+/// Hands a frame to the network stack. Any context (`direct`: BH
+/// disabled).
+fn rx_frame(dev: &NetDev, frame: &CanFrame, direct: bool) {
+    let Some(mut skb) = Skb::alloc(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, crate::glue::GFP_ATOMIC)
+    else {
+        dev.stats_rx_dropped();
+        return;
+    };
+    skb.reserve(SKB_PRIV_LEN);
+    let mut prv = [0u8; SKB_PRIV_LEN as usize];
+    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
+    if !skb.write_headroom(&prv) || !skb.put_data(&frame.to_bytes()) {
+        dev.stats_rx_dropped();
+        return;
+    }
+    skb.set_can(dev, bindings::PACKET_HOST as u8);
+    if frame.can_id & crate::rcan_core::arb::CAN_ERR_FLAG == 0 {
+        dev.stats_rx(frame.dlc() as u32);
+    }
+    deliver(dev, skb, direct);
+}
+
+/// `SIOCDEVPRIVATE`: the first device-private ioctl number.
+const SIOCDEVPRIVATE: u32 = 0x89F0;
+/// Reads `struct rcan_i82527_setup` (`<linux/can/rcan_i82527.h>`).
+const SIOCRCANI82527GET: u32 = SIOCDEVPRIVATE;
+/// Publishes or withdraws a remote-frame answer (`struct
+/// rcan_i82527_answer`; CAP_NET_ADMIN).
+const SIOCRCANI82527ANSWER: u32 = SIOCDEVPRIVATE + 2;
+
+impl<R: Regs + Send + 'static> Driver for I82527<R> {
+    type Priv = I82527Priv<R>;
+    const HAS_SET_RX_MODE: bool = true;
+    const HAS_PRIVATE_IOCTL: bool = true;
+
+    fn private_ioctl(_dev: &Dev<Self>, p: &Self::Priv, cmd: u32, data: &UserBuf) -> Result {
+        match cmd {
+            SIOCRCANI82527GET => {
+                let s = p.chip.lock().chip.setup();
+                data.write(&s.to_bytes())
+            }
+            SIOCRCANI82527ANSWER => {
+                if !capable_net_admin() {
+                    return Err(EPERM);
+                }
+                let mut b = [0u8; ANSWER_LEN];
+                data.read(&mut b)?;
+                let req = AnswerReq::from_bytes(&b);
+                let slot = usize::try_from(req.slot).map_err(|_| EINVAL)?;
+                let mut st = p.chip.lock();
+                match st.chip.set_answer(slot, req.frame.as_ref()) {
+                    Ok(()) => Ok(()),
+                    Err(I82527Error::BadSlot) => Err(ERANGE),
+                    Err(_) => Err(EINVAL),
+                }
+            }
+            _ => Err(crate::glue::neterr::EOPNOTSUPP()),
+        }
+    }
+
+    fn setup() -> crate::glue::netdev::Setup {
+        crate::glue::netdev::Setup {
+            type_: bindings::ARPHRD_CAN as u16,
+            flags: bindings::net_device_flags_IFF_NOARP | bindings::net_device_flags_IFF_ECHO,
+            mtu: CAN_FRAME_LEN as u32,
+            hard_header_len: 0,
+            tx_queue_len: TX_QUEUE_LEN,
+            no_queue: false,
+        }
+    }
+
+    fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        let m = wanted_masks(dev);
+        if p.irq != 0 {
+            dev.request_irq(p.irq)?;
+        }
+        {
+            let mut st = p.chip.lock();
+            st.chip.init(&m);
+            st.chip.start();
+            st.running = true;
+        }
+        dev.set_carrier(true);
+        dev.start_queue();
+        Ok(())
+    }
+
+    fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        dev.stop_queue();
+        let echo = {
+            let mut st = p.chip.lock();
+            st.running = false;
+            st.chip.stop();
+            st.echo.take()
+        };
+        drop(echo);
+        dev.free_irq();
+        dev.set_carrier(false);
+        Ok(())
+    }
+
+    fn start_xmit(skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
+        let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
+            dev.stats_tx_dropped();
+            drop(skb);
+            return Xmit::Ok;
+        };
+        let frame = CanFrame::from_bytes(bytes);
+        // One transmit object: no next frame until this one is done.
+        dev.stop_queue();
+        let mut st = p.chip.lock();
+        if !st.running {
+            drop(st);
+            dev.stats_tx_dropped();
+            drop(skb);
+            return Xmit::Ok;
+        }
+        match st.chip.xmit(&frame) {
+            Ok(()) => st.echo = Some(skb),
+            Err(_) => {
+                // Error frames cannot be sent; a busy object cannot happen
+                // with the queue stopped. Drop it and go on.
+                drop(st);
+                dev.stats_tx_dropped();
+                drop(skb);
+                dev.wake_queue();
+            }
+        }
+        Xmit::Ok
+    }
+
+    fn set_rx_mode(dev: &Dev<Self>, p: &Self::Priv) {
+        remask(dev, p);
+    }
+
+    fn irq(dev: &Dev<Self>, p: &Self::Priv) -> bool {
+        let mut st = p.chip.lock();
+        let ChipState {
+            chip,
+            echo,
+            running,
+        } = &mut *st;
+        if !*running {
+            return false;
+        }
+        let direct = p.direct_rx;
+        chip.irq(MAX_IRQ_ROUNDS, |ev| {
+            match ev {
+                Event::Rx(f) => rx_frame(dev, &f, direct),
+                Event::TxDone => {
+                    if let Some(mut skb) = echo.take() {
+                        if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) {
+                            dev.stats_tx(CanFrame::from_bytes(b).dlc() as u32);
+                        }
+                        if skb.pkt_type() == bindings::PACKET_LOOPBACK as u8 {
+                            skb.set_can(dev, bindings::PACKET_LOOPBACK as u8);
+                            deliver(dev, skb, direct);
+                        } else {
+                            skb.consume();
+                        }
+                    }
+                    dev.wake_queue();
+                }
+                Event::TxAborted => {
+                    drop(echo.take());
+                    dev.stats_err(Stat::TxAborted);
+                    dev.wake_queue();
+                }
+                Event::Overrun { .. } => dev.stats_err(Stat::RxOverErrors),
+                Event::State(_) | Event::Restarted => {}
+            }
+            if let Some(ef) = error_frame(&ev) {
+                rx_frame(dev, &ef, direct);
+            }
+        })
+    }
+}
+
+impl<R: Regs + Send + 'static> FilterListener for I82527<R> {
+    fn filters_changed(dev: &Dev<Self>, p: &Self::Priv) {
+        remask(dev, p);
+    }
+}
