@@ -99,10 +99,11 @@ fn read_snap(iface: &str) -> io::Result<Snap> {
             })
             .unwrap_or(0)
     };
-    let tx_frames = std::fs::read_to_string(format!("/sys/class/net/{iface}/statistics/tx_packets"))
-        .ok()
-        .and_then(|s| s.trim().parse().ok())
-        .unwrap_or(0);
+    let tx_frames =
+        std::fs::read_to_string(format!("/sys/class/net/{iface}/statistics/tx_packets"))
+            .ok()
+            .and_then(|s| s.trim().parse().ok())
+            .unwrap_or(0);
     let (_, ru_sys) = can::rusage_self()?;
     Ok(Snap {
         system: f(2),
@@ -432,7 +433,9 @@ fn round(
             *broken = true;
             return;
         }
-        if let Err(e) = stack::unload_all(&c.iface).and_then(|()| stack::load_proto(proto, paths, &c.iface)) {
+        if let Err(e) =
+            stack::unload_all(&c.iface).and_then(|()| stack::load_proto(proto, paths, &c.iface))
+        {
             fail(s, format!("setup: {e}"));
             *broken = true;
             let _ = stack::unload_all(&c.iface);
@@ -524,7 +527,15 @@ pub fn bench(c: &Config, paths: &Paths, write_summary: &dyn Fn(&Samples)) -> Sam
         }
         for i in order {
             if !broken[i] {
-                round(c, paths, c.protos[i], r, &mut s, &mut broken[i], soaker.as_ref());
+                round(
+                    c,
+                    paths,
+                    c.protos[i],
+                    r,
+                    &mut s,
+                    &mut broken[i],
+                    soaker.as_ref(),
+                );
             }
         }
         write_summary(&s);
@@ -603,7 +614,8 @@ pub fn summary(c: &Config, s: &Samples, header: &str) -> String {
         o,
         "one message in flight, sender and receiver in one thread on {}; {} round(s), \
          runs of >= {} s and >= {} messages after {} warm-up messages; medians over rounds",
-        c.cpu.map_or_else(|| "any CPU".to_string(), |n| format!("CPU {n}")),
+        c.cpu
+            .map_or_else(|| "any CPU".to_string(), |n| format!("CPU {n}")),
         c.rounds,
         c.secs,
         c.min_msgs,
@@ -639,7 +651,9 @@ pub fn summary(c: &Config, s: &Samples, header: &str) -> String {
         ("goodput, KiB/s", 1, &|m| Some(m.kib_per_s())),
         ("CPU (soaker), us/KiB", 0, &|m| m.soak_us_per_kib()),
         ("kernel CPU, us/KiB", 0, &|m| Some(m.kernel_us_per_kib())),
-        ("  of which softirq, us/KiB", 0, &|m| Some(m.softirq_us_per_kib())),
+        ("  of which softirq, us/KiB", 0, &|m| {
+            Some(m.softirq_us_per_kib())
+        }),
         ("process sys, us/KiB", 0, &|m| Some(m.proc_sys_us_per_kib())),
         ("CAN frames/KiB", 1, &|m| Some(m.frames_per_kib())),
         ("kernel CPU, ns/frame", 0, &|m| m.kernel_ns_per_frame()),
