@@ -282,7 +282,7 @@ fn parse_args() -> Result<Config, String> {
     if c.window > u64::from(u32::MAX) || c.tp_frames > u64::from(u32::MAX) {
         return Err("frame counts must fit in 32 bits".into());
     }
-    if !c.load && c.stacks.len() != 1 {
+    if !c.load && c.run_raw && c.stacks.len() != 1 {
         return Err("--no-load measures one stack: say which with --stack".into());
     }
     if !c.load && c.run_dsor && c.protos.len() != 1 {
