@@ -47,7 +47,7 @@ check: setup modules userspace
 
 # Benchmarks, not tests: ours vs mainline SocketCAN in one VM boot.
 bench: setup modules userspace
-	bash $(T)/bench.sh
+	bash $(T)/bench.sh $(BENCH_ARGS)
 
 clean:
 	$(MAKE) -C $(KDIR) M=$(CURDIR) clean || true

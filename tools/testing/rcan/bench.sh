@@ -5,10 +5,13 @@
 # can-raw.ko, vcan echo=1) and our stack (rcan_pf, rcan_can, rcan_raw,
 # rcan_loop), one after the other in alternating rounds, with the same
 # CAN_RAW programs -- throughput, fan-out cost, latency -- and prints the
-# figures, the ratios ours/mainline and a summary table. Never fails on a
-# missed target. See Documentation/networking/rcan/benchmarks.rst.
+# figures, the ratios ours/mainline and a summary table; then (dsor part)
+# our DSOR message protocol (rcan_dsor over rcan_loop) against mainline
+# ISO-TP (can-isotp over vcan): goodput and CPU time per KiB. Never fails
+# on a missed target. See Documentation/networking/rcan/benchmarks.rst.
 #
-#   bench.sh [rcan-bench options]     e.g. --stack mainline, --quick
+#   bench.sh [rcan-bench options]     e.g. --stack mainline, --quick,
+#                                     --part dsor (make bench BENCH_ARGS=...)
 #
 # Expects the modules and target/release/rcan-bench to be built (make bench
 # does that). The summary is saved as bench-summary.txt in the VM output
@@ -22,8 +25,8 @@ if [ "$RCAN_KERNEL" != release ]; then
 	log "warning: RCAN_KERNEL=$RCAN_KERNEL: figures from a debug kernel measure its checkers, not the stacks"
 fi
 [ -x target/release/rcan-bench ] || die "target/release/rcan-bench missing; run make bench (or make userspace)"
-# The guest finds mainline's can.ko, can-raw.ko and vcan.ko here (vm-run.sh
-# forwards every RCAN_* variable).
+# The guest finds mainline's can.ko, can-raw.ko, can-isotp.ko and vcan.ko
+# here (vm-run.sh forwards every RCAN_* variable).
 RCAN_KBUILD=$(bash "$RCAN_ROOT/tools/testing/rcan/build-kernel.sh")
 export RCAN_KBUILD
 out=${RCAN_BENCH_OUT:-$(mktemp -d "${TMPDIR:-/tmp}/rcan-bench.XXXXXX")}

@@ -318,6 +318,176 @@ impl RawSocket {
     }
 }
 
+/// `CAN_ISOTP`: protocol number of mainline's `can-isotp.ko`.
+const CAN_ISOTP: c_int = 6;
+/// `CAN_ISOTP_OPTS` at level `SOL_CAN_ISOTP`.
+const CAN_ISOTP_OPTS: c_int = 1;
+/// `frame_txtime` value meaning "no gap" (0 means "default").
+const CAN_ISOTP_FRAME_TXTIME_ZERO: u32 = 0xffff_ffff;
+
+/// `struct sockaddr_can` with the `can_addr.tp` member of ISO-TP.
+#[repr(C)]
+struct SockaddrCanTp {
+    can_family: libc::sa_family_t,
+    can_ifindex: c_int,
+    rx_id: u32,
+    tx_id: u32,
+    /// Rest of the 16-byte, 8-byte aligned union.
+    _pad: u64,
+}
+
+/// A mainline `socket(PF_CAN, SOCK_DGRAM, CAN_ISOTP)` with default options
+/// (no `CAN_ISOTP_OPTS`/`CAN_ISOTP_RECV_FC` set: block size 0, STmin 0, no
+/// padding, no extended addressing).
+pub struct IsotpSocket {
+    fd: OwnedFd,
+}
+
+impl IsotpSocket {
+    /// Opens an unbound ISO-TP socket (blocking).
+    pub fn new() -> io::Result<Self> {
+        // SAFETY: plain system call with constant arguments.
+        let fd = unsafe {
+            libc::socket(
+                libc::PF_CAN,
+                libc::SOCK_DGRAM | libc::SOCK_CLOEXEC,
+                CAN_ISOTP,
+            )
+        };
+        cvt(fd as isize)?;
+        // SAFETY: `fd` was just returned by socket(2) and is owned by nobody else.
+        Ok(IsotpSocket {
+            fd: unsafe { OwnedFd::from_raw_fd(fd) },
+        })
+    }
+
+    /// `bind()` to `ifindex`: receive PDUs on `rx_id`, send on `tx_id`
+    /// (`can_id` values, `CAN_EFF_FLAG` for 29-bit identifiers).
+    pub fn bind(&self, ifindex: i32, rx_id: u32, tx_id: u32) -> io::Result<()> {
+        let addr = SockaddrCanTp {
+            can_family: libc::AF_CAN as libc::sa_family_t,
+            can_ifindex: ifindex,
+            rx_id,
+            tx_id,
+            _pad: 0,
+        };
+        // SAFETY: `addr` is a complete `struct sockaddr_can` whose size is
+        // passed along; the kernel only reads it.
+        let ret = unsafe {
+            libc::bind(
+                self.fd.as_raw_fd(),
+                (&addr as *const SockaddrCanTp).cast(),
+                mem::size_of::<SockaddrCanTp>() as socklen_t,
+            )
+        };
+        cvt(ret as isize).map(drop)
+    }
+
+    /// `CAN_ISOTP_OPTS` with all defaults except `frame_txtime` = 0
+    /// (`CAN_ISOTP_FRAME_TXTIME_ZERO`): consecutive frames in a burst,
+    /// each sent from the echo of the previous one, instead of one every
+    /// 50 us (`CAN_ISOTP_DEFAULT_FRAME_TXTIME`) from a timer.
+    pub fn set_no_frame_gap(&self) -> io::Result<()> {
+        // struct can_isotp_options: flags, frame_txtime, ext_address,
+        // txpad_content, rxpad_content, rx_ext_address (12 bytes).
+        #[repr(C)]
+        struct Opts {
+            flags: u32,
+            frame_txtime: u32,
+            ext_address: u8,
+            txpad_content: u8,
+            rxpad_content: u8,
+            rx_ext_address: u8,
+        }
+        let o = Opts {
+            flags: 0,
+            frame_txtime: CAN_ISOTP_FRAME_TXTIME_ZERO,
+            ext_address: 0,
+            txpad_content: 0xcc,
+            rxpad_content: 0xcc,
+            rx_ext_address: 0,
+        };
+        // SAFETY: `o` is a valid `struct can_isotp_options` whose size is
+        // passed; the kernel only reads it.
+        let ret = unsafe {
+            libc::setsockopt(
+                self.fd.as_raw_fd(),
+                SOL_CAN_BASE + CAN_ISOTP,
+                CAN_ISOTP_OPTS,
+                (&o as *const Opts).cast(),
+                mem::size_of::<Opts>() as socklen_t,
+            )
+        };
+        cvt(ret as isize).map(drop)
+    }
+
+    /// `SO_RCVTIMEO` and `SO_SNDTIMEO`.
+    pub fn set_timeouts(&self, t: Duration) -> io::Result<()> {
+        let tv = libc::timeval {
+            tv_sec: t.as_secs() as libc::time_t,
+            tv_usec: t.subsec_micros() as libc::suseconds_t,
+        };
+        for name in [libc::SO_RCVTIMEO, libc::SO_SNDTIMEO] {
+            // SAFETY: `tv` is a valid `struct timeval` whose size is
+            // passed; the kernel only reads it.
+            let ret = unsafe {
+                libc::setsockopt(
+                    self.fd.as_raw_fd(),
+                    libc::SOL_SOCKET,
+                    name,
+                    (&tv as *const libc::timeval).cast(),
+                    mem::size_of::<libc::timeval>() as socklen_t,
+                )
+            };
+            cvt(ret as isize)?;
+        }
+        Ok(())
+    }
+
+    /// Sends one PDU (`write(2)`); returns the bytes taken.
+    pub fn send(&self, data: &[u8]) -> io::Result<usize> {
+        // SAFETY: `data` is readable for its full length during the call.
+        cvt(unsafe { libc::write(self.fd.as_raw_fd(), data.as_ptr().cast(), data.len()) })
+    }
+
+    /// Receives one PDU (`read(2)`); returns its length.
+    pub fn recv(&self, buf: &mut [u8]) -> io::Result<usize> {
+        // SAFETY: `buf` is writable for its full length during the call.
+        cvt(unsafe { libc::read(self.fd.as_raw_fd(), buf.as_mut_ptr().cast(), buf.len()) })
+    }
+}
+
+/// User and system CPU time of this process (all threads), from
+/// `getrusage(RUSAGE_SELF)`.
+pub fn rusage_self() -> io::Result<(Duration, Duration)> {
+    // SAFETY: all-zero is a valid `struct rusage`.
+    let mut ru: libc::rusage = unsafe { mem::zeroed() };
+    // SAFETY: `ru` is a valid, writable `struct rusage`.
+    cvt(unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut ru) } as isize)?;
+    let tv = |t: libc::timeval| Duration::new(t.tv_sec as u64, t.tv_usec as u32 * 1000);
+    Ok((tv(ru.ru_utime), tv(ru.ru_stime)))
+}
+
+/// Makes the calling thread `SCHED_IDLE`: it runs only when nothing else
+/// on its CPU wants to.
+pub fn set_sched_idle() -> io::Result<()> {
+    let p = libc::sched_param { sched_priority: 0 };
+    // SAFETY: `p` is a valid `struct sched_param`; pid 0 is the calling
+    // thread.
+    cvt(unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &p) } as isize).map(drop)
+}
+
+/// `sysconf(_SC_CLK_TCK)`: the unit of `/proc/stat` (USER_HZ).
+pub fn clk_tck() -> u64 {
+    // SAFETY: plain library call with a constant argument.
+    let v = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    if v > 0 {
+        v as u64
+    } else {
+        100
+    }
+}
+
 /// Sends `frame`, retrying for up to a second while the device queue
 /// pushes back (`ENOBUFS`/`EAGAIN`). Returns how many retries it took.
 pub fn send_retrying(sock: &RawSocket, frame: &Frame) -> io::Result<u64> {
@@ -348,6 +518,7 @@ mod tests {
     fn abi_sizes() {
         assert_eq!(mem::size_of::<SockaddrCan>(), 24);
         assert_eq!(mem::size_of::<CanFilter>(), 8);
+        assert_eq!(mem::size_of::<SockaddrCanTp>(), 24);
     }
 
     #[test]

@@ -19,8 +19,14 @@
 //! never an error: the exit status is non-zero only if a stack could not be
 //! set up or a workload could not run. See
 //! `Documentation/networking/rcan/benchmarks.rst`.
+//!
+//! A second part (`--part dsor`, see `dsor.rs`) measures messages instead
+//! of frames: rcan's DSOR protocol against mainline ISO-TP, goodput and
+//! kernel CPU time per KiB. `--part raw,dsor` (the default) runs both,
+//! the CAN_RAW part first.
 
 mod can;
+mod dsor;
 mod report;
 mod stack;
 mod workload;
@@ -30,11 +36,13 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use report::{Fanout, Latency, StackResult, Throughput};
-use stack::{Paths, Stack};
+use stack::{Paths, Proto, Stack};
 use workload::median;
 
 const USAGE: &str = "\
 usage: rcan-bench [options]
+  --part LIST           parts to run, comma-separated: raw (CAN_RAW, mainline vs
+                        ours), dsor (DSOR vs mainline ISO-TP) (default raw,dsor)
   --stack S             mainline, ours or both (default both)
   --only LIST           workloads to run, comma-separated: a|throughput, b|fanout,
                         c|latency (default all)
@@ -59,6 +67,13 @@ usage: rcan-bench [options]
   --fanout-receivers L  receiver counts, comma-separated (default 1,100,1000)
   --batch N             fan-out: frames sent before reading them back (default 64)
   --latency-frames N    frames per latency run (default 100000)
+  --proto LIST          dsor part: protocols, comma-separated: isotp (ISO-TP,
+                        default options), isotp0 (ISO-TP, frame_txtime 0), dsor
+                        (default isotp,isotp0,dsor)
+  --msg-sizes L         dsor part: message sizes in bytes (default 1024,4096)
+  --msg-secs S          dsor part: seconds per measured run at least (default 2)
+  --msg-min N           dsor part: messages per measured run at least (default 20)
+  --msg-warmup N        dsor part: messages per warm-up run (default 5)
   --quick               a tenth of the frames, one run each (smoke test)
   --summary FILE        also write the summary to FILE
                         (default $RCAN_OUT/bench-summary.txt if RCAN_OUT is set)
@@ -67,6 +82,13 @@ RCAN_ROOT (project tree with our modules; default the current directory).";
 
 /// Command line settings.
 struct Config {
+    run_raw: bool,
+    run_dsor: bool,
+    protos: Vec<Proto>,
+    msg_sizes: Vec<usize>,
+    msg_secs: f64,
+    msg_min: u64,
+    msg_warmup: u64,
     stacks: Vec<Stack>,
     iface: String,
     load: bool,
@@ -102,6 +124,13 @@ fn parse_args() -> Result<Config, String> {
             .map(PathBuf::from)
     };
     let mut c = Config {
+        run_raw: true,
+        run_dsor: true,
+        protos: vec![Proto::Isotp, Proto::IsotpNoGap, Proto::Dsor],
+        msg_sizes: vec![1024, 4096],
+        msg_secs: 2.0,
+        msg_min: 20,
+        msg_warmup: 5,
         stacks: vec![Stack::Mainline, Stack::Ours],
         iface: "can0".into(),
         load: true,
@@ -131,6 +160,42 @@ fn parse_args() -> Result<Config, String> {
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
+            "--part" => {
+                let v = args.next().ok_or("--part wants a list")?;
+                (c.run_raw, c.run_dsor) = (false, false);
+                for w in v.split(',') {
+                    match w.trim() {
+                        "raw" => c.run_raw = true,
+                        "dsor" => c.run_dsor = true,
+                        other => return Err(format!("--part: unknown part '{other}'")),
+                    }
+                }
+            }
+            "--proto" => {
+                let v = args.next().ok_or("--proto wants a list")?;
+                c.protos.clear();
+                for w in v.split(',') {
+                    let p = match w.trim() {
+                        "isotp" => Proto::Isotp,
+                        "isotp0" => Proto::IsotpNoGap,
+                        "dsor" => Proto::Dsor,
+                        other => return Err(format!("--proto: unknown protocol '{other}'")),
+                    };
+                    if !c.protos.contains(&p) {
+                        c.protos.push(p);
+                    }
+                }
+            }
+            "--msg-sizes" => {
+                let v = args.next().ok_or("--msg-sizes wants a list")?;
+                c.msg_sizes = v
+                    .split(',')
+                    .map(|n| parse_num(&a, Some(n.trim().to_string())))
+                    .collect::<Result<_, _>>()?;
+            }
+            "--msg-secs" => c.msg_secs = parse_num(&a, args.next())?,
+            "--msg-min" => c.msg_min = parse_num(&a, args.next())?,
+            "--msg-warmup" => c.msg_warmup = parse_num(&a, args.next())?,
             "--stack" => {
                 c.stacks = match args.next().as_deref() {
                     Some("mainline") => vec![Stack::Mainline],
@@ -200,6 +265,14 @@ fn parse_args() -> Result<Config, String> {
         c.tp_frames = (c.tp_frames / 10).max(100);
         c.fan_frames = (c.fan_frames / 10).max(100);
         c.lat_frames = (c.lat_frames / 10).max(100);
+        c.msg_secs = c.msg_secs.min(0.5);
+        c.msg_min = c.msg_min.min(5);
+        c.msg_warmup = c.msg_warmup.min(2);
+    }
+    // ISO-TP needs more than a single frame; DSOR and ISO-TP (mainline's
+    // default max_pdu_size) both take 8300 bytes.
+    if c.msg_sizes.is_empty() || c.msg_sizes.iter().any(|&n| !(8..=8300).contains(&n)) {
+        return Err("--msg-sizes: sizes from 8 to 8300 bytes".into());
     }
     if c.rounds == 0 || c.reps == 0 || c.window == 0 || c.batch == 0 || c.fan_counts.contains(&0) {
         return Err(
@@ -209,8 +282,11 @@ fn parse_args() -> Result<Config, String> {
     if c.window > u64::from(u32::MAX) || c.tp_frames > u64::from(u32::MAX) {
         return Err("frame counts must fit in 32 bits".into());
     }
-    if !c.load && c.stacks.len() != 1 {
+    if !c.load && c.run_raw && c.stacks.len() != 1 {
         return Err("--no-load measures one stack: say which with --stack".into());
+    }
+    if !c.load && c.run_dsor && c.protos.len() != 1 {
+        return Err("--no-load measures one protocol: say which with --proto".into());
     }
     c.fan_counts.sort_unstable();
     c.fan_counts.dedup();
@@ -610,7 +686,7 @@ fn main() -> ExitCode {
     };
     let hdr = header(&c);
     println!("rcan-bench: {hdr}");
-    if c.run_b {
+    if c.run_raw && c.run_b {
         let want = *c.fan_counts.last().unwrap_or(&1) as u64 + 64;
         match can::raise_nofile(want) {
             Ok(n) => println!("rcan-bench: RLIMIT_NOFILE {n}"),
@@ -637,7 +713,8 @@ fn main() -> ExitCode {
         let per_round: Vec<_> = (1..=c.rounds).map(|k| results(samples, Some(k))).collect();
         report::summary(&results(samples, None), &per_round, &hdr)
     };
-    for round in 1..=c.rounds {
+    let raw_rounds = if c.run_raw { c.rounds } else { 0 };
+    for round in 1..=raw_rounds {
         // Odd rounds in the given order, even rounds reversed (mainline,
         // ours, ours, mainline, ...): neither stack always goes first.
         let mut order: Vec<usize> = (0..samples.len()).collect();
@@ -658,15 +735,48 @@ fn main() -> ExitCode {
         }
     }
     let all = results(&samples, None);
-    println!();
-    all.iter().for_each(print_medians);
-    println!();
-    print!("{}", summary(&samples));
+    let mut failed = all.iter().any(|r| !r.errors.is_empty());
+    let raw_text = if c.run_raw {
+        println!();
+        all.iter().for_each(print_medians);
+        println!();
+        let t = summary(&samples);
+        print!("{t}");
+        t + "\n"
+    } else {
+        String::new()
+    };
+    if c.run_dsor {
+        let dc = dsor::Config {
+            protos: c.protos.clone(),
+            sizes: c.msg_sizes.clone(),
+            rounds: c.rounds,
+            secs: c.msg_secs,
+            min_msgs: c.msg_min,
+            warmup: c.msg_warmup,
+            iface: c.iface.clone(),
+            load: c.load,
+            cpu: c.cpu,
+        };
+        let dhdr = hdr.lines().next().unwrap_or_default().to_string();
+        let write = |s: &dsor::Samples| {
+            if let Some(p) = &c.summary {
+                let text = raw_text.clone() + &dsor::summary(&dc, s, &dhdr);
+                if let Err(e) = std::fs::write(p, text) {
+                    eprintln!("rcan-bench: {}: {e}", p.display());
+                }
+            }
+        };
+        let ds = dsor::bench(&dc, &c.paths, &write);
+        println!();
+        print!("{}", dsor::summary(&dc, &ds, &dhdr));
+        failed |= !ds.errors.is_empty();
+    }
     println!("rcan-bench: done in {:.0} s", t0.elapsed().as_secs_f64());
     if let Some(p) = &c.summary {
         println!("rcan-bench: summary saved in {}", p.display());
     }
-    if all.iter().any(|r| !r.errors.is_empty()) {
+    if failed {
         ExitCode::FAILURE
     } else {
         ExitCode::SUCCESS

@@ -180,6 +180,98 @@ pub fn load(stack: Stack, paths: &Paths, iface: &str) -> Result<(), String> {
     run("ip", &["link", "set", iface, "up"])
 }
 
+/// The message protocols of the DSOR part (`--part dsor`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Proto {
+    /// Mainline ISO-TP: `can.ko` + `can-isotp.ko` + `vcan.ko echo=1`,
+    /// default socket options.
+    Isotp,
+    /// The same with `frame_txtime` 0: consecutive frames in a burst.
+    IsotpNoGap,
+    /// rcan DSOR: `rcan_pf` + `rcan_can` + `rcan_loop` + `rcan_dsor`.
+    Dsor,
+}
+
+impl fmt::Display for Proto {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Proto::Isotp => "ISO-TP",
+            Proto::IsotpNoGap => "ISO-TP/0",
+            Proto::Dsor => "DSOR",
+        })
+    }
+}
+
+/// Module files `proto` needs, relative to the kernel build directory
+/// (ISO-TP) or the project tree (DSOR).
+fn proto_files(proto: Proto) -> &'static [&'static str] {
+    match proto {
+        Proto::Isotp | Proto::IsotpNoGap => &[
+            "net/can/can.ko",
+            "net/can/can-isotp.ko",
+            "drivers/net/can/vcan.ko",
+        ],
+        Proto::Dsor => &[
+            "net/can/rcan_pf.ko",
+            "net/can/rcan_can.ko",
+            "drivers/net/can/rcan_loop.ko",
+            "net/can/dsor/rcan_dsor.ko",
+        ],
+    }
+}
+
+fn proto_dir(proto: Proto, paths: &Paths) -> Result<&Path, String> {
+    match proto {
+        Proto::Isotp | Proto::IsotpNoGap => paths
+            .kbuild
+            .as_deref()
+            .ok_or_else(|| "RCAN_KBUILD is not set: cannot find can-isotp.ko".to_string()),
+        Proto::Dsor => Ok(&paths.root),
+    }
+}
+
+/// The first module file of `proto` that does not exist.
+pub fn missing_proto_module(proto: Proto, paths: &Paths) -> Option<PathBuf> {
+    let Ok(dir) = proto_dir(proto, paths) else {
+        return Some(PathBuf::from("$RCAN_KBUILD/net/can/can-isotp.ko"));
+    };
+    proto_files(proto)
+        .iter()
+        .map(|f| dir.join(f))
+        .find(|f| !f.is_file())
+}
+
+/// Loads the stack of `proto` on `iface` and brings it up. Call
+/// `unload_all` first. ISO-TP: can, can-isotp, (can-dev,) `vcan echo=1`,
+/// `ip link add IFACE type vcan`. DSOR: rcan_pf, rcan_can, rcan_loop
+/// (creates can0), link up, then `rcan_dsor ifname=IFACE` (node 0).
+pub fn load_proto(proto: Proto, paths: &Paths, iface: &str) -> Result<(), String> {
+    let dir = proto_dir(proto, paths)?;
+    match proto {
+        Proto::Isotp | Proto::IsotpNoGap => {
+            insmod(&dir.join("net/can/can.ko"), &[])?;
+            insmod(&dir.join("net/can/can-isotp.ko"), &[])?;
+            let vcan = dir.join("drivers/net/can/vcan.ko");
+            if vcan_needs_can_dev(&vcan) {
+                insmod(&dir.join("drivers/net/can/dev/can-dev.ko"), &[])?;
+            }
+            insmod(&vcan, &["echo=1"])?;
+            run("ip", &["link", "add", "dev", iface, "type", "vcan"])?;
+            run("ip", &["link", "set", iface, "up"])
+        }
+        Proto::Dsor => {
+            insmod(&dir.join("net/can/rcan_pf.ko"), &[])?;
+            insmod(&dir.join("net/can/rcan_can.ko"), &[])?;
+            insmod(&dir.join("drivers/net/can/rcan_loop.ko"), &[])?;
+            run("ip", &["link", "set", iface, "up"])?;
+            insmod(
+                &dir.join("net/can/dsor/rcan_dsor.ko"),
+                &[&format!("ifname={iface}")],
+            )
+        }
+    }
+}
+
 /// Whether `vcan.ko`'s `depends=` names `can-dev` (it does when vcan uses
 /// the shared skb helpers of the CAN device layer).
 fn vcan_needs_can_dev(vcan: &Path) -> bool {
