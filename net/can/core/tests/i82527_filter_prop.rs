@@ -8,76 +8,16 @@
 //! every frame. Remote frames are never stored by receive objects on an
 //! 82527 (documented limitation), so only data frames are required.
 
+mod common;
+
+use common::filters::{can_id, filter};
 use proptest::prelude::*;
 use rcan_core::arb::*;
-use rcan_core::filter::ArbFilter;
 use rcan_core::frame::CanFrame;
 use rcan_core::i82527::{masks_for, Chip, Config, Event, Masks};
 use rcan_core::i82527_model::I82527Model;
-use rcan_core::rxtable::{frame_key, CanFilterKind, Filter};
+use rcan_core::rxtable::frame_key;
 use rcan_core::sja1000::Wanted;
-
-/// Ids drawn near a few values so that filters and frames collide often.
-fn can_id() -> impl Strategy<Value = u32> {
-    let id = prop_oneof![
-        0u32..8,
-        0x120u32..0x128,
-        0x7F0u32..0x800,
-        0u32..=CAN_EFF_MASK
-    ];
-    (id, any::<bool>(), any::<bool>(), any::<u32>()).prop_map(|(id, eff, rtr, noise)| {
-        let mut c = if eff {
-            // Extended ids near standard ones shifted into the base id.
-            if noise & 1 == 0 {
-                ((id & CAN_SFF_MASK) << 18 | (noise >> 14 & 0x3FFFF)) | CAN_EFF_FLAG
-            } else {
-                id | CAN_EFF_FLAG
-            }
-        } else {
-            id & CAN_SFF_MASK
-        };
-        if rtr {
-            c |= CAN_RTR_FLAG;
-        }
-        c
-    })
-}
-
-fn filter() -> impl Strategy<Value = Filter> {
-    let masks = prop::sample::select(vec![
-        0,
-        CAN_SFF_MASK,
-        CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG,
-        CAN_EFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG,
-        0x7F0,
-        CAN_EFF_FLAG,
-        0x1FFF_0000 | CAN_EFF_FLAG,
-    ]);
-    let mainline = (
-        can_id(),
-        prop_oneof![masks, any::<u32>()],
-        prop::bool::weighted(0.1),
-    )
-        .prop_map(|(id, mask, inv)| {
-            let id = if inv { id | 0x2000_0000 } else { id };
-            match Filter::from_can_filter(id, mask & !CAN_ERR_FLAG) {
-                CanFilterKind::Frames(f) => f,
-                CanFilterKind::Errors(_) => unreachable!(),
-            }
-        });
-    let thesis = (
-        can_id(),
-        prop_oneof![
-            prop::sample::select(vec![1u32, 3, 5, 7, 0x00FF_FFFF, 0x001F_FFFF, u32::MAX]),
-            any::<u32>()
-        ],
-    )
-        .prop_map(|(id, mask)| {
-            let arb = Arb::from_can_id(id).unwrap().raw();
-            Filter::Arb(ArbFilter::new(arb, mask).unwrap())
-        });
-    prop_oneof![mainline, thesis]
-}
 
 fn data_frame(can_id: u32, len: u8, data: [u8; 8]) -> CanFrame {
     let mut f = CanFrame {
