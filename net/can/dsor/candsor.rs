@@ -299,8 +299,6 @@ static STOPPING: AtomicBool = AtomicBool::new(false);
 static LOADED_MS: AtomicU64 = AtomicU64::new(0);
 /// The local node, for lock-free checks.
 static NODE: AtomicU32 = AtomicU32::new(0);
-/// Frames received that were not for DSOR's interface (cheap counter).
-static OTHER_IF: AtomicU64 = AtomicU64::new(0);
 
 fn now_ms() -> u64 {
     (ktime_get_mono_ns() / 1_000_000) as u64
@@ -329,8 +327,8 @@ impl Engine {
     }
 
     /// Ends the transfer in slot `i` with `result` (0 or a negative errno):
-    /// frees its channel, tells its owner. Returns whether waiters must be
-    /// woken (always: a channel was freed).
+    /// frees its channel, tells its owner. Callers wake [`WAITQ`] after
+    /// dropping the lock (a channel was freed).
     fn finish(&mut self, i: usize, result: i32) {
         let entry = core::mem::replace(&mut self.tx[i], TxEntry::Free);
         let TxEntry::Running(run) = entry else {
@@ -764,7 +762,6 @@ impl KernelRx for DsorRx {
         let mut g = ENGINE.lock();
         let Some(e) = g.as_mut() else { return };
         if dev.name().as_bytes() != e.cfg.ifname.bytes() {
-            OTHER_IF.fetch_add(1, Ordering::Relaxed);
             return;
         }
         let finished_before = e.stats.tx_ok + e.stats.tx_failed;
@@ -788,7 +785,7 @@ static RX: DsorRx = DsorRx;
 struct DsorSock {
     /// The bound address (also in `Engine::binds` while set).
     bound: Option<DsorAddr>,
-    /// Whether `bound` was chosen by an automatic port bind.
+    /// The default destination given to connect.
     peer: Option<DsorAddr>,
 }
 
