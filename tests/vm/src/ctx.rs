@@ -448,6 +448,23 @@ fn module_listed(name: &str) -> bool {
         .unwrap_or(false)
 }
 
+/// Whether the suite runs on the debug kernel (KASAN, lockdep, kmemleak;
+/// under TCG some ten to a hundred times slower per frame than the release
+/// kernel), as `RCAN_KERNEL=debug` tells (vm-run.sh passes it into the VM).
+pub fn debug_kernel() -> bool {
+    std::env::var("RCAN_KERNEL").is_ok_and(|k| k == "debug")
+}
+
+/// A test's workload size: the environment variable `env` if it is set to
+/// a number, else `release` on the release kernel and `debug` on the debug
+/// kernel.
+pub fn sized(env: &str, release: u32, debug: u32) -> u32 {
+    std::env::var(env)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(if debug_kernel() { debug } else { release })
+}
+
 /// Name of the `i`-th loopback device.
 pub fn dev(i: usize) -> String {
     format!("can{i}")

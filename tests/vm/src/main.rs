@@ -29,18 +29,20 @@
 //!   counted.
 //! - `--kbuild DIR`: kernel build directory with the mainline modules
 //!   (default: `$RCAN_KBUILD`); needed for `--stack mainline`.
-//! - `--timeout SECS`: per-test watchdog (default 180). A test that takes
-//!   longer is reported as hung and the run ends there.
+//! - `--timeout SECS`: per-test watchdog (default 180, or 360 on the debug
+//!   kernel, `RCAN_KERNEL=debug`). A test that takes longer is reported as
+//!   hung and the run ends there.
 //! - `FILTER`: run only the tests whose name contains it, or one of its
 //!   comma-separated parts (`raw_bind,mixed_`).
 //!
-//! Output, one line per test, then one summary line; exit status 1 if any
-//! test failed:
+//! Output, one line per test with the seconds it took (guest time, for
+//! finding the slow tests, never checked), then one summary line; exit
+//! status 1 if any test failed:
 //!
 //! ```text
 //! # informational note
-//! ok - roundtrip_std_sendto
-//! not ok - filter_exact_ext: expected STD 6AF ... got ...
+//! ok - roundtrip_std_sendto # 0.4 s
+//! not ok - filter_exact_ext: expected STD 6AF ... got ... # 0.6 s
 //! 45 passed, 1 failed
 //! ```
 //!
@@ -119,7 +121,7 @@ fn parse_args() -> Result<Options, String> {
             .map(PathBuf::from),
         filter: None,
         list: false,
-        timeout: Duration::from_secs(180),
+        timeout: Duration::from_secs(if ctx::debug_kernel() { 360 } else { 180 }),
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -277,18 +279,24 @@ fn main() -> ExitCode {
         ));
     }
     for t in tests {
-        lock().current = Some((t.name, Instant::now()));
+        let start = Instant::now();
+        lock().current = Some((t.name, start));
         let r = run_one(&mut ctx, t);
         let mut p = lock();
         p.current = None;
+        let secs = start.elapsed().as_secs_f64();
         match r {
             Ok(()) => {
                 p.passed += 1;
-                println!("ok - {}", t.name);
+                println!("ok - {} # {secs:.1} s", t.name);
             }
             Err(e) => {
                 p.failed += 1;
-                println!("not ok - {}: {}", t.name, e.replace('\n', "; "));
+                println!(
+                    "not ok - {}: {} # {secs:.1} s",
+                    t.name,
+                    e.replace('\n', "; ")
+                );
             }
         }
     }

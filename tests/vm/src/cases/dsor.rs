@@ -25,7 +25,7 @@ use rcan_uapi::dsor::{dsor_port, DsorAddr, DsorSocket, DSOR_ID_ANY, DSOR_NODE_AN
 use super::test_table;
 use crate::canraw;
 use crate::check::{ensure, errno_of, expect_errno, OrFail, TestResult};
-use crate::ctx::{tool, Ctx, Module};
+use crate::ctx::{debug_kernel, tool, Ctx, Module};
 use crate::Test;
 
 pub const TESTS: &[Test] = test_table![
@@ -58,10 +58,6 @@ fn dsor_stack(ctx: &mut Ctx, params: &[&str]) -> Result<u32, String> {
     p.extend_from_slice(params);
     ctx.insmod(Module::Dsor, &p)?;
     ctx.ifindex("can0")
-}
-
-fn is_debug() -> bool {
-    std::env::var("RCAN_KERNEL").is_ok_and(|k| k == "debug")
 }
 
 /// The dsor-peer pattern: byte i of message j.
@@ -116,7 +112,7 @@ fn dsor_segm_all_lengths(ctx: &mut Ctx) -> TestResult {
     let mut lens = vec![
         0usize, 1, 7, 8, 9, 15, 16, 17, 63, 64, 65, 1000, 4096, 65535,
     ];
-    if is_debug() {
+    if debug_kernel() {
         // KASAN and lockdep make each frame ~10x slower: the longest
         // message alone would take minutes.
         lens.retain(|&l| l <= 4096);
@@ -248,7 +244,7 @@ fn dsor_concurrent_senders(ctx: &mut Ctx) -> TestResult {
     })
     .or_fail("bind")?;
     let senders = 8u32;
-    let per = if is_debug() { 3 } else { 20 };
+    let per = if debug_kernel() { 3 } else { 20 };
     let mut handles = Vec::new();
     for s in 0..senders {
         handles.push(thread::spawn(move || -> Result<(), String> {
@@ -976,7 +972,7 @@ fn dsor_peer_exchange(ctx: &mut Ctx) -> TestResult {
         // Under the debug kernel a frame takes tens of ms and every frame
         // the peer drops costs an ack timeout: keep the round well inside
         // the peer's timeout and the runner's watchdog.
-        let lens = if is_debug() {
+        let lens = if debug_kernel() {
             [0usize, 5, 8, 100, 300, 600]
         } else {
             [0usize, 5, 8, 100, 1000, 3000]

@@ -21,7 +21,7 @@ use socketcan::{CanFrame, Socket};
 use super::test_table;
 use crate::canraw::{self, ext, rtr_ext, rtr_std, std as sff};
 use crate::check::{ensure, OrFail, TestResult};
-use crate::ctx::{dev, Ctx, Module};
+use crate::ctx::{dev, sized, Ctx, Module};
 use crate::tools;
 
 pub const TESTS: &[crate::Test] = test_table![
@@ -237,15 +237,7 @@ fn i82527_remote_answer(ctx: &mut Ctx) -> TestResult {
 /// Frames per direction in [`i82527_burst`] (`RCAN_I82527_BURST`; default
 /// 100,000, 2,000 on the debug kernel, as for the SJA1000 burst).
 fn burst_len() -> u32 {
-    let default = if std::env::var("RCAN_KERNEL").as_deref() == Ok("debug") {
-        2_000
-    } else {
-        100_000
-    };
-    std::env::var("RCAN_I82527_BURST")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
+    sized("RCAN_I82527_BURST", 100_000, 2_000)
 }
 
 /// One direction of the burst: `n` numbered frames, standard and extended

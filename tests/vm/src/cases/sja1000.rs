@@ -21,7 +21,7 @@ use socketcan::{CanFilter, CanFrame, EmbeddedFrame, Frame, Socket, SocketOptions
 use super::test_table;
 use crate::canraw::{self, ext, rtr_ext, rtr_std, std as sff};
 use crate::check::{ensure, OrFail, TestResult};
-use crate::ctx::{dev, Ctx, Module};
+use crate::ctx::{dev, sized, Ctx, Module};
 use crate::tools;
 
 pub const TESTS: &[crate::Test] = test_table![
@@ -194,15 +194,7 @@ fn pin_to_cpu0(devs: &[&str]) -> TestResult {
 /// TCG make each frame some hundred times slower and 20,000 did not fit
 /// the runner's 180 s per test).
 fn burst_len() -> u32 {
-    let default = if std::env::var("RCAN_KERNEL").as_deref() == Ok("debug") {
-        2_000
-    } else {
-        100_000
-    };
-    std::env::var("RCAN_SJA_BURST")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
+    sized("RCAN_SJA_BURST", 100_000, 2_000)
 }
 
 /// One direction of the burst: `n` numbered extended frames from `tx` to
@@ -594,15 +586,7 @@ fn irq_affinity(dev: &str, mask: &str) -> Result<Vec<String>, String> {
 /// Frames in [`sja1000_overrun`] (`RCAN_SJA_OVERRUN`; default 20,000, or
 /// 2,000 on the debug kernel).
 fn overrun_len() -> u32 {
-    let default = if std::env::var("RCAN_KERNEL").as_deref() == Ok("debug") {
-        2_000
-    } else {
-        20_000
-    };
-    std::env::var("RCAN_SJA_OVERRUN")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
+    sized("RCAN_SJA_OVERRUN", 20_000, 2_000)
 }
 
 /// Receive FIFO overrun on real traffic. With the sender and can0's
