@@ -10,9 +10,10 @@
 //! send a message, receive it on the other socket of the same node,
 //! compare it byte for byte, repeat for at least `--msg-secs` seconds and
 //! `--msg-min` messages. CPU time comes from `/proc/stat` (all CPUs:
-//! system + irq + softirq, in USER_HZ ticks), cross-checked with
-//! `getrusage()` of the process (its system time only: softirq work that
-//! runs in a timer interrupt or ksoftirqd is not in it). Frames and
+//! system + irq + softirq; irq and softirq exact with the test kernel's
+//! `CONFIG_IRQ_TIME_ACCOUNTING`, system time tick-sampled) and, in a
+//! second run, from a CPU soaker ([`Soaker`]); `getrusage()` of the
+//! process is printed too. Frames and
 //! softirqs per KiB (`/sys/class/net/IF/statistics`, `/proc/softirqs`)
 //! show where the time goes.
 //!
@@ -630,7 +631,7 @@ pub fn summary(c: &Config, s: &Samples, header: &str) -> String {
     let _ = writeln!(
         o,
         "CPU (soaker) = time of the benchmark's CPU a SCHED_IDLE spinner did not get; \
-         kernel CPU = system + irq + softirq over all {cpus} CPU(s) from /proc/stat (tick-sampled); \
+         kernel CPU = system + irq + softirq over all {cpus} CPU(s) from /proc/stat; \
          process sys = getrusage; ratios: DSOR/ISO-TP, DSOR/ISO-TP/0 (range over rounds)"
     );
     let isos: Vec<Proto> = [Proto::Isotp, Proto::IsotpNoGap]
