@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 use rcan_uapi::ArbSocket;
 
 use crate::check::{OrFail, RX_TIMEOUT};
+use crate::sys;
 
 /// Which CAN stack the suite runs against.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -238,15 +239,15 @@ impl Ctx {
     /// `insmod` module `m` with `params`.
     pub fn insmod(&mut self, m: Module, params: &[&str]) -> Result<(), String> {
         let ko = self.ko(m);
-        let mut args = vec![ko.to_string_lossy().into_owned()];
-        args.extend(params.iter().map(|p| p.to_string()));
-        run("insmod", &args).map_err(|e| {
-            if m == Module::Pf && module_listed("can") {
-                format!("{e} (mainline can.ko is loaded and owns PF_CAN: rmmod it)")
-            } else {
-                e
-            }
-        })?;
+        sys::finit_module(&ko, params)
+            .map_err(|e| format!("insmod {} {}: {e}", ko.display(), params.join(" ")))
+            .map_err(|e| {
+                if m == Module::Pf && module_listed("can") {
+                    format!("{e} (mainline can.ko is loaded and owns PF_CAN: rmmod it)")
+                } else {
+                    e
+                }
+            })?;
         if m == Module::Loop {
             self.ndev = loop_count(params);
         }
@@ -255,7 +256,7 @@ impl Ctx {
 
     /// `rmmod` module `m` (no retries).
     pub fn rmmod(&mut self, m: Module) -> Result<(), String> {
-        run("rmmod", &[m.name().to_string()])?;
+        rmmod(m.name())?;
         if m == Module::Loop {
             self.ndev = 0;
         }
@@ -298,12 +299,14 @@ impl Ctx {
                     let ko = self
                         .mainline_ko(m)
                         .ok_or("no kernel build directory (RCAN_KBUILD or --kbuild)")?;
-                    let mut args = vec![ko.to_string_lossy().into_owned()];
-                    if m == Mainline::Vcan {
-                        // Echo in the driver, like rcan_loop: IFF_ECHO.
-                        args.push("echo=1".into());
-                    }
-                    run("insmod", &args)?;
+                    // vcan: echo in the driver, like rcan_loop (IFF_ECHO).
+                    let params: &[&str] = if m == Mainline::Vcan {
+                        &["echo=1"]
+                    } else {
+                        &[]
+                    };
+                    sys::finit_module(&ko, params)
+                        .map_err(|e| format!("insmod {}: {e}", ko.display()))?;
                 }
                 for i in 0..n {
                     let name = dev(i);
@@ -376,14 +379,14 @@ impl Ctx {
         self.ndev
     }
 
-    /// `ip link set DEV up`.
+    /// `ip link set DEV up` (by ioctl, see [`sys::set_link_up`]).
     pub fn link_up(&self, dev: &str) -> Result<(), String> {
-        run("ip", &["link", "set", dev, "up"].map(String::from))
+        sys::set_link_up(dev, true).map_err(|e| format!("ip link set {dev} up: {e}"))
     }
 
-    /// `ip link set DEV down`.
+    /// `ip link set DEV down` (by ioctl).
     pub fn link_down(&self, dev: &str) -> Result<(), String> {
-        run("ip", &["link", "set", dev, "down"].map(String::from))
+        sys::set_link_up(dev, false).map_err(|e| format!("ip link set {dev} down: {e}"))
     }
 
     /// Interface index of `dev`.
@@ -432,13 +435,18 @@ impl Ctx {
 fn rmmod_retrying(name: &str) -> Result<(), String> {
     let start = Instant::now();
     while module_listed(name) {
-        match run("rmmod", &[name.to_string()]) {
+        match rmmod(name) {
             Ok(()) => break,
             Err(e) if start.elapsed() > Duration::from_secs(3) => return Err(e),
             Err(_) => thread::sleep(Duration::from_millis(50)),
         }
     }
     Ok(())
+}
+
+/// `rmmod NAME` (by syscall, see [`sys::delete_module`]).
+fn rmmod(name: &str) -> Result<(), String> {
+    sys::delete_module(name).map_err(|e| format!("rmmod {name}: {e}"))
 }
 
 /// Whether a module called `name` is listed in `/proc/modules`.

@@ -2,12 +2,18 @@
 //! System calls the CAN_RAW tests need and neither the `socketcan` crate
 //! nor `rcan_uapi::raw` offers: `recvmsg` with control messages into
 //! pattern-filled buffers, `SIOCGSTAMP`, `getsockopt` with a chosen
-//! `optlen`, and socket options whose pointers fault. Every `unsafe` block
-//! of the test suite is here.
+//! `optlen`, and socket options whose pointers fault; and the module and
+//! interface calls the runner makes between every two tests
+//! (`finit_module`, `delete_module`, `SIOCSIFFLAGS`), which on the debug
+//! kernel under TCG cost a fraction of an `insmod`/`rmmod`/`ip` process
+//! each. Every `unsafe` block of the test suite is here.
 
+use std::ffi::CString;
+use std::fs::File;
 use std::io;
 use std::mem::{size_of, zeroed};
-use std::os::fd::{AsFd, AsRawFd};
+use std::os::fd::{AsFd, AsRawFd, FromRawFd, OwnedFd};
+use std::path::Path;
 use std::ptr;
 
 use libc::{c_int, c_void, socklen_t};
@@ -282,6 +288,79 @@ pub fn set_rcvbufforce(fd: impl AsFd, bytes: c_int) -> io::Result<()> {
     } else {
         Ok(())
     }
+}
+
+fn cstring(s: &str) -> io::Result<CString> {
+    CString::new(s).map_err(|_| io::Error::from_raw_os_error(libc::EINVAL))
+}
+
+/// `insmod KO PARAMS...`: `finit_module(2)` with the parameters joined by
+/// spaces, as insmod passes them.
+pub fn finit_module(ko: &Path, params: &[&str]) -> io::Result<()> {
+    let file = File::open(ko)?;
+    let params = cstring(&params.join(" "))?;
+    // SAFETY: `file` is an open descriptor and `params` a NUL-terminated
+    // string, both alive for the call; flags 0.
+    let r = unsafe {
+        libc::syscall(
+            libc::SYS_finit_module,
+            file.as_raw_fd(),
+            params.as_ptr(),
+            0 as c_int,
+        )
+    };
+    if r < 0 {
+        Err(io::Error::last_os_error())
+    } else {
+        Ok(())
+    }
+}
+
+/// `rmmod NAME`: `delete_module(2)` with `O_NONBLOCK`, as rmmod calls it
+/// (fails with EWOULDBLOCK while the module is in use).
+pub fn delete_module(name: &str) -> io::Result<()> {
+    let name = cstring(name)?;
+    // SAFETY: `name` is a NUL-terminated string alive for the call.
+    let r = unsafe { libc::syscall(libc::SYS_delete_module, name.as_ptr(), libc::O_NONBLOCK) };
+    if r < 0 {
+        Err(io::Error::last_os_error())
+    } else {
+        Ok(())
+    }
+}
+
+/// `ip link set DEV up` or `down`: `SIOCGIFFLAGS`, then `SIOCSIFFLAGS`
+/// with `IFF_UP` set or cleared, through an AF_INET datagram socket.
+pub fn set_link_up(dev: &str, up: bool) -> io::Result<()> {
+    if dev.is_empty() || dev.len() >= libc::IFNAMSIZ {
+        return Err(io::Error::from_raw_os_error(libc::ENODEV));
+    }
+    // SAFETY: plain socket(2) call; the result is checked before use.
+    let fd = cvt(unsafe { libc::socket(libc::AF_INET, libc::SOCK_DGRAM | libc::SOCK_CLOEXEC, 0) })?;
+    // SAFETY: `fd` was just returned by socket(2) and is owned by nobody else.
+    let sock = unsafe { OwnedFd::from_raw_fd(fd) };
+    // SAFETY: all-zero bytes are a valid `ifreq` (a name and a union of
+    // plain integers and pointers).
+    let mut ifr: libc::ifreq = unsafe { zeroed() };
+    for (d, s) in ifr.ifr_name.iter_mut().zip(dev.bytes()) {
+        *d = s as libc::c_char;
+    }
+    // SAFETY: `ifr` is a valid, writable `ifreq` with a NUL-terminated name
+    // (the buffer is zeroed and the name shorter than IFNAMSIZ).
+    cvt(unsafe { libc::ioctl(sock.as_raw_fd(), libc::SIOCGIFFLAGS, &mut ifr) })?;
+    // SAFETY: SIOCGIFFLAGS filled in `ifru_flags`, the union member read
+    // and written here.
+    unsafe {
+        let flags = &mut ifr.ifr_ifru.ifru_flags;
+        if up {
+            *flags |= libc::IFF_UP as libc::c_short;
+        } else {
+            *flags &= !(libc::IFF_UP as libc::c_short);
+        }
+    }
+    // SAFETY: as for SIOCGIFFLAGS; the kernel only reads `ifr`.
+    cvt(unsafe { libc::ioctl(sock.as_raw_fd(), libc::SIOCSIFFLAGS, &ifr) })?;
+    Ok(())
 }
 
 #[cfg(test)]
