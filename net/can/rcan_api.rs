@@ -351,6 +351,37 @@ pub(crate) fn rx_filters(
     usize::try_from(n).ok()
 }
 
+/// Most filters [`wanted`] takes into account; with more, a driver's
+/// hardware filter stays open (sound, just not tight). Stack use in atomic
+/// context bounds it.
+pub(crate) const MAX_WANTED: usize = 24;
+
+/// What the sockets bound to `dev` (or to every interface) want, as
+/// [`Wanted`](crate::rcan_core::sja1000::Wanted) sets handed to `derive`,
+/// which computes a driver's hardware filter from them. `None` when the
+/// hardware filter must be open: `dev` is promiscuous, or more than
+/// [`MAX_WANTED`] filters apply. Any context.
+pub(crate) fn wanted<T>(
+    dev: &crate::glue::netdev::NetDev,
+    derive: impl FnOnce(&[crate::rcan_core::sja1000::Wanted]) -> T,
+) -> Option<T> {
+    use crate::rcan_core::{rxtable::Filter, sja1000::Wanted};
+    if dev.is_promisc() {
+        return None;
+    }
+    let mut fs = [Filter::Id {
+        id: 0,
+        mask: 0,
+        inv: false,
+    }; MAX_WANTED];
+    let n = rx_filters(dev.ifindex(), &mut fs)?;
+    let mut w = [Wanted::ALL; MAX_WANTED];
+    for (o, f) in w.iter_mut().zip(&fs[..n]) {
+        *o = Wanted::of(f);
+    }
+    Some(derive(&w[..n]))
+}
+
 /// Netdevice notifier callback (`notifier_block.notifier_call`).
 pub(crate) type NotifierFn = unsafe extern "C" fn(
     nb: *mut bindings::notifier_block,

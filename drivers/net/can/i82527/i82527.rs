@@ -31,18 +31,12 @@ use crate::rcan_core::i82527::{
     bitrate, error_frame, masks_for, AnswerReq, Chip, Config, Event, I82527Error, Masks, Regs,
     ANSWER_LEN,
 };
-use crate::rcan_core::rxtable::Filter;
-use crate::rcan_core::sja1000::Wanted;
 use core::marker::PhantomData;
 use kernel::prelude::*;
 
 /// Interrupt-register reads per interrupt: bounds the time spent in the
 /// handler on a busy bus.
 const MAX_IRQ_ROUNDS: usize = 32;
-
-/// Most filters taken into account for the masks; with more the masks
-/// open (sound, not tight). Stack use in atomic context bounds it.
-const MAX_FILTERS: usize = 24;
 
 /// Transmit queue length (see the SJA1000 driver: a fast sender blocks in
 /// sendmsg rather than getting ENOBUFS).
@@ -136,22 +130,7 @@ pub(crate) struct I82527<R>(PhantomData<R>);
 /// The tightest masks for what the sockets bound to `dev` (or to every
 /// interface) want. Any context.
 fn wanted_masks(dev: &NetDev) -> Masks {
-    if dev.is_promisc() {
-        return Masks::OPEN;
-    }
-    let mut fs = [Filter::Id {
-        id: 0,
-        mask: 0,
-        inv: false,
-    }; MAX_FILTERS];
-    let Some(n) = rcan_api::rx_filters(dev.ifindex(), &mut fs) else {
-        return Masks::OPEN;
-    };
-    let mut w = [Wanted::ALL; MAX_FILTERS];
-    for (o, f) in w.iter_mut().zip(&fs[..n]) {
-        *o = Wanted::of(f);
-    }
-    masks_for(&w[..n], false)
+    rcan_api::wanted(dev, |w| masks_for(w, false)).unwrap_or(Masks::OPEN)
 }
 
 /// Reprograms the masks if they changed. Any context; takes the chip lock.

@@ -37,10 +37,9 @@ use crate::glue::skb::Skb;
 use crate::glue::sync::IrqSpinLock;
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
-use crate::rcan_core::rxtable::Filter;
 use crate::rcan_core::sja1000::{
     bitrate, error_frame, hw_filter, restarted_frame, Chip, Config, Event, HwFilter, Regs, Setup,
-    State, Wanted, CDR_PELICAN, SETUP_LEN,
+    State, CDR_PELICAN, SETUP_LEN,
 };
 use core::marker::PhantomData;
 use kernel::prelude::*;
@@ -96,11 +95,6 @@ impl crate::rcan_core::sja1000_boards::Io for crate::glue::pci::IoMem {
 /// Interrupt causes handled per interrupt before returning (mainline
 /// `SJA1000_MAX_IRQ`): bounds the time spent in hardirq on a babbling bus.
 const MAX_IRQ_ROUNDS: usize = 20;
-
-/// Most filters taken into account for the hardware filter; with more the
-/// filter stays open (sound, just not tight). Stack use in atomic context
-/// bounds it.
-const MAX_FILTERS: usize = 24;
 
 /// Transmit queue length: longer than the number of frames a socket's
 /// default send buffer holds (about 280 skbs of ~750 bytes in 212992), so
@@ -203,22 +197,7 @@ pub(crate) struct Sja1000<R>(PhantomData<R>);
 /// The tightest hardware filter for what the sockets bound to `dev` (or
 /// to every interface) want. Any context.
 fn wanted_filter(dev: &NetDev) -> HwFilter {
-    if dev.is_promisc() {
-        return HwFilter::OPEN;
-    }
-    let mut fs = [Filter::Id {
-        id: 0,
-        mask: 0,
-        inv: false,
-    }; MAX_FILTERS];
-    let Some(n) = rcan_api::rx_filters(dev.ifindex(), &mut fs) else {
-        return HwFilter::OPEN;
-    };
-    let mut w = [Wanted::ALL; MAX_FILTERS];
-    for (o, f) in w.iter_mut().zip(&fs[..n]) {
-        *o = Wanted::of(f);
-    }
-    hw_filter(&w[..n], false)
+    rcan_api::wanted(dev, |w| hw_filter(w, false)).unwrap_or(HwFilter::OPEN)
 }
 
 /// Reprograms the hardware filter if it changed. Any context; takes the
