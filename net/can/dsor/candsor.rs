@@ -1093,7 +1093,7 @@ impl glue::sock::Proto for DsorProto {
 /// mistaken: a receiver restarts on every header it has not acknowledged
 /// as the last frame). EAGAIN for a non-blocking sender.
 fn restart_hold(timeo: i64) -> Result {
-    let until = LOADED_MS.load(Ordering::Relaxed) + u64::from(param(Param::ReasmTimeoutMs));
+    let until = restart_over_ms();
     let wait_ms = until.saturating_sub(now_ms());
     if wait_ms == 0 {
         return Ok(());
@@ -1108,6 +1108,12 @@ fn restart_hold(timeo: i64) -> Result {
         Waited::TimedOut if now_ms() >= until => Ok(()),
         Waited::TimedOut => Err(neterr::ETIMEDOUT()),
     }
+}
+
+/// When the restart rule ([`restart_hold`]) stops holding zero-length
+/// messages (monotonic ms). Any context.
+fn restart_over_ms() -> u64 {
+    LOADED_MS.load(Ordering::Relaxed) + u64::from(param(Param::ReasmTimeoutMs))
 }
 
 /// Whether a transfer to `dst` could start now (wait condition).
@@ -1148,8 +1154,13 @@ fn check_device() -> Result {
 }
 
 /// Starts a UDP/IP message for canip0 (its transmit path, BH disabled).
-/// Returns false when no slot or channel is free.
+/// Returns false when no slot or channel is free, and for an empty
+/// datagram while the restart rule holds (see [`restart_hold`]; this
+/// path cannot wait, and UDP may drop).
 fn start_udp(dst: u8, header: Header, payload: KVec<u8>) -> bool {
+    if payload.is_empty() && now_ms() < restart_over_ms() {
+        return false;
+    }
     let mut g = ENGINE.lock();
     let Some(e) = g.as_mut() else { return false };
     let prio = e.cfg.udp_prio;

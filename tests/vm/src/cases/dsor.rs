@@ -13,8 +13,10 @@
 //! peer's raw socket and the kernel see each other's frames).
 
 use std::collections::HashMap;
+use std::fs;
 use std::io;
 use std::net::UdpSocket;
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::thread;
@@ -24,7 +26,7 @@ use rcan_uapi::dsor::{dsor_port, DsorAddr, DsorSocket, DSOR_ID_ANY, DSOR_NODE_AN
 
 use super::test_table;
 use crate::canraw;
-use crate::check::{ensure, errno_of, expect_errno, OrFail, TestResult};
+use crate::check::{ensure, errno_of, expect_errno, wait_for, OrFail, TestResult};
 use crate::ctx::{debug_kernel, tool, Ctx, Module};
 use crate::Test;
 
@@ -1108,12 +1110,62 @@ fn dsor_peer_exchange(ctx: &mut Ctx) -> TestResult {
 /// out of canip0 as a DSOR UDP/IP message to node 5 (the peer checks it);
 /// UDP/IP messages from the peer arrive at a UDP socket on 10.9.0.1 with
 /// the source address given by `udp_saddr`; non-UDP traffic is dropped and
-/// counted.
+/// counted. An empty datagram is dropped during the restart rule's first
+/// `reasm_timeout_ms` after load, and carried after it.
 fn dsor_udp_over_can(ctx: &mut Ctx) -> TestResult {
-    dsor_stack(ctx, &["udp_saddr=10.9.0.5", PEER_TIMERS[0], PEER_TIMERS[1]])?;
+    ctx.load_stack(&[])?;
+    let loaded = Instant::now();
+    ctx.insmod(
+        Module::Dsor,
+        &[
+            "ifname=can0",
+            "udp_saddr=10.9.0.5",
+            PEER_TIMERS[0],
+            PEER_TIMERS[1],
+        ],
+    )?;
+    let inserted = Instant::now();
+    // No IPv6 chatter (MLD, DAD) in canip0's counters.
+    let v6 = "/proc/sys/net/ipv6/conf/canip0/disable_ipv6";
+    if Path::new(v6).exists() {
+        fs::write(v6, "1").or_fail(v6)?;
+    }
     run_ip(&["addr", "add", "10.9.0.1/24", "dev", "canip0"])?;
     run_ip(&["link", "set", "canip0", "up"])?;
-    // Outbound.
+    let u = UdpSocket::bind("10.9.0.1:0").or_fail("udp bind")?;
+    // Restart rule: reasm_timeout_ms=5000 counts from inside the insmod,
+    // so an empty datagram sent before `loaded` + 5 s must be dropped, and
+    // one sent after `inserted` + 5 s carried.
+    let counts = || -> Result<(u64, u64), String> {
+        Ok((
+            ctx.stat("canip0", "tx_dropped")?,
+            ctx.stat("canip0", "tx_packets")?,
+        ))
+    };
+    let before = counts()?;
+    u.send_to(&[], "10.9.0.5:5000")
+        .or_fail("udp send_to (empty)")?;
+    let early = loaded.elapsed();
+    let after = wait_for(
+        Duration::from_secs(10),
+        "canip0 to count the datagram",
+        || {
+            let c = counts()?;
+            Ok((c != before).then_some(c))
+        },
+    )?;
+    if early < Duration::from_secs(5) {
+        ensure!(
+            after == (before.0 + 1, before.1),
+            "empty datagram {early:?} after load not dropped \
+             ((tx_dropped, tx_packets) {before:?} -> {after:?})"
+        );
+    } else {
+        ctx.note(format!(
+            "restart rule not checked: the empty datagram went {early:?} after load"
+        ));
+    }
+    // Outbound, from 5 s after load on.
     let rxp = peer(&[
         "--ack-timeout-ms",
         "200",
@@ -1121,14 +1173,13 @@ fn dsor_udp_over_can(ctx: &mut Ctx) -> TestResult {
         "5000",
         "recv",
         "--count",
-        "3",
+        "4",
         "--timeout-s",
         "60",
     ])?;
-    thread::sleep(PEER_START);
-    let u = UdpSocket::bind("10.9.0.1:0").or_fail("udp bind")?;
+    thread::sleep(PEER_START.max(Duration::from_secs(5).saturating_sub(inserted.elapsed())));
     let mut sent = Vec::new();
-    for (j, len) in [1usize, 100, 1400].into_iter().enumerate() {
+    for (j, len) in [0usize, 1, 100, 1400].into_iter().enumerate() {
         let m = pattern(len, j as u64, 4);
         u.send_to(&m, "10.9.0.5:5000").or_fail("udp send_to")?;
         sent.push((len, fnv1a64(&m)));
@@ -1136,7 +1187,7 @@ fn dsor_udp_over_can(ctx: &mut Ctx) -> TestResult {
     let lines = peer_output(rxp, "recv udp")?;
     let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
     ensure!(
-        rx.len() == 3,
+        rx.len() == 4,
         "peer got {} UDP messages: {lines:?}",
         rx.len()
     );
