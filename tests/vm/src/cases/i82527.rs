@@ -11,12 +11,10 @@
 //! Chip-level behaviour (allocation, overrun, bus-off, masks) is covered
 //! by the host tests (net/can/core/tests/i82527_*.rs).
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant};
 
-use socketcan::{CanFrame, Socket};
+use socketcan::CanFrame;
 
 use super::test_table;
 use crate::canraw::{self, ext, rtr_ext, rtr_std, std as sff};
@@ -337,51 +335,7 @@ fn i82527_burst(ctx: &mut Ctx) -> TestResult {
 /// (checked by the VM runner).
 fn i82527_rmmod_during_traffic(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = sim2(ctx)?;
-    let tx = canraw::open(i0)?;
-    let rx = canraw::open(i1)?;
-    rx.set_read_timeout(Duration::from_millis(200))
-        .or_fail("SO_RCVTIMEO")?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let send = {
-        let stop = stop.clone();
-        thread::spawn(move || {
-            let mut n = 0u64;
-            while !stop.load(Ordering::Relaxed) && tx.write_frame(&sff(0x55, &[n as u8])).is_ok() {
-                n += 1;
-            }
-            n
-        })
-    };
-    let recv = {
-        let stop = stop.clone();
-        thread::spawn(move || {
-            let mut n = 0u64;
-            while !stop.load(Ordering::Relaxed) {
-                if rx.read_frame().is_ok() {
-                    n += 1;
-                }
-            }
-            n
-        })
-    };
-    thread::sleep(Duration::from_millis(500));
-    ctx.rmmod(Module::I82527Sim)?;
-    thread::sleep(Duration::from_millis(300));
-    stop.store(true, Ordering::Relaxed);
-    let sent = send.join().map_err(|_| "sender panicked".to_string())?;
-    let got = recv.join().map_err(|_| "receiver panicked".to_string())?;
-    ctx.note(format!(
-        "{sent} frames sent, {got} received before and during rmmod"
-    ));
-    ensure!(
-        sent > 0 && got > 0,
-        "no traffic before rmmod (sent {sent}, received {got})"
-    );
-    ensure!(
-        !std::path::Path::new("/sys/class/net/can0").exists(),
-        "can0 still there after rmmod"
-    );
-    Ok(())
+    super::rmmod_card_during_traffic(ctx, Module::I82527Sim, i0, i1)
 }
 
 /// rcan_i82527_isa where there is no card (QEMU emulates none): loading
