@@ -16,44 +16,15 @@
 use rcan_core::arb::CAN_EFF_FLAG;
 use rcan_core::frame::CanFrame;
 use rcan_core::i82527::{bitrate, AnswerReq, Setup, ANSWERS, ANSWER_LEN, SETUP_LEN};
-use std::io;
 use std::process::ExitCode;
 
-const SIOCDEVPRIVATE: libc::c_ulong = 0x89F0;
+use rcan_uapi::{dev_ioctl, SIOCDEVPRIVATE};
+
 const SIOCRCANI82527GET: libc::c_ulong = SIOCDEVPRIVATE;
 const SIOCRCANI82527ANSWER: libc::c_ulong = SIOCDEVPRIVATE + 2;
 
 /// Crystal assumed when showing the bit rate.
 const XTAL_HZ: u32 = 16_000_000;
-
-/// Issues one device ioctl on a throw-away datagram socket.
-fn ioctl(iface: &str, cmd: libc::c_ulong, buf: &mut [u8]) -> io::Result<()> {
-    if iface.len() >= libc::IFNAMSIZ {
-        return Err(io::Error::from_raw_os_error(libc::ENODEV));
-    }
-    // SAFETY: plain socket(2) call.
-    let fd = unsafe { libc::socket(libc::AF_UNIX, libc::SOCK_DGRAM, 0) };
-    if fd < 0 {
-        return Err(io::Error::last_os_error());
-    }
-    // SAFETY: an all-zero ifreq is valid.
-    let mut ifr: libc::ifreq = unsafe { std::mem::zeroed() };
-    for (d, s) in ifr.ifr_name.iter_mut().zip(iface.bytes()) {
-        *d = s as libc::c_char;
-    }
-    ifr.ifr_ifru.ifru_data = buf.as_mut_ptr().cast();
-    // SAFETY: `ifr` names the interface and points to `buf`, as large as
-    // the command's structure; `fd` is ours and closed below.
-    let ret = unsafe { libc::ioctl(fd, cmd, &mut ifr) };
-    let err = io::Error::last_os_error();
-    // SAFETY: closing our own descriptor.
-    unsafe { libc::close(fd) };
-    if ret < 0 {
-        Err(err)
-    } else {
-        Ok(())
-    }
-}
 
 /// Parses `ID#DATA` (cansend syntax, data frames only).
 fn parse_frame(s: &str) -> Result<CanFrame, String> {
@@ -89,7 +60,7 @@ fn parse_slot(s: &str) -> Result<u32, String> {
 
 fn show(iface: &str) -> Result<(), String> {
     let mut b = [0u8; SETUP_LEN];
-    ioctl(iface, SIOCRCANI82527GET, &mut b).map_err(|e| format!("{iface}: {e}"))?;
+    dev_ioctl(iface, SIOCRCANI82527GET, &mut b).map_err(|e| format!("{iface}: {e}"))?;
     let s = Setup::from_bytes(&b);
     let state = match s.state {
         0 => "error active",
@@ -121,7 +92,7 @@ fn show(iface: &str) -> Result<(), String> {
 
 fn set_answer(iface: &str, slot: u32, frame: Option<CanFrame>) -> Result<(), String> {
     let mut b: [u8; ANSWER_LEN] = AnswerReq { slot, frame }.to_bytes();
-    ioctl(iface, SIOCRCANI82527ANSWER, &mut b).map_err(|e| format!("{iface}: {e}"))
+    dev_ioctl(iface, SIOCRCANI82527ANSWER, &mut b).map_err(|e| format!("{iface}: {e}"))
 }
 
 fn run(args: &[String]) -> Result<(), String> {

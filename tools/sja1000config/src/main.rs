@@ -17,42 +17,14 @@ use rcan_core::sja1000::{bitrate, timing_for, Setup, SETUP_LEN};
 use std::io;
 use std::process::ExitCode;
 
-const SIOCDEVPRIVATE: libc::c_ulong = 0x89F0;
+use rcan_uapi::{dev_ioctl, SIOCDEVPRIVATE};
+
 const SIOCRCANSJA1000GET: libc::c_ulong = SIOCDEVPRIVATE;
 const SIOCRCANSJA1000SET: libc::c_ulong = SIOCDEVPRIVATE + 1;
 
-/// Issues one device ioctl on a throw-away datagram socket.
-fn ioctl(iface: &str, cmd: libc::c_ulong, buf: &mut [u8; SETUP_LEN]) -> io::Result<()> {
-    if iface.len() >= libc::IFNAMSIZ {
-        return Err(io::Error::from_raw_os_error(libc::ENODEV));
-    }
-    // SAFETY: plain socket(2) call.
-    let fd = unsafe { libc::socket(libc::AF_UNIX, libc::SOCK_DGRAM, 0) };
-    if fd < 0 {
-        return Err(io::Error::last_os_error());
-    }
-    // SAFETY: an all-zero ifreq is valid.
-    let mut ifr: libc::ifreq = unsafe { std::mem::zeroed() };
-    for (d, s) in ifr.ifr_name.iter_mut().zip(iface.bytes()) {
-        *d = s as libc::c_char;
-    }
-    ifr.ifr_ifru.ifru_data = buf.as_mut_ptr().cast();
-    // SAFETY: `ifr` names the interface and points to SETUP_LEN writable
-    // bytes, as the driver expects; `fd` is ours and closed below.
-    let ret = unsafe { libc::ioctl(fd, cmd, &mut ifr) };
-    let err = io::Error::last_os_error();
-    // SAFETY: closing our own descriptor.
-    unsafe { libc::close(fd) };
-    if ret < 0 {
-        Err(err)
-    } else {
-        Ok(())
-    }
-}
-
 fn get(iface: &str) -> io::Result<Setup> {
     let mut b = [0u8; SETUP_LEN];
-    ioctl(iface, SIOCRCANSJA1000GET, &mut b)?;
+    dev_ioctl(iface, SIOCRCANSJA1000GET, &mut b)?;
     Ok(Setup::from_bytes(&b))
 }
 
@@ -117,7 +89,7 @@ fn run(args: &[String]) -> Result<(), String> {
         }
     }
     let mut b = s.to_bytes();
-    ioctl(iface, SIOCRCANSJA1000SET, &mut b).map_err(|e| format!("{iface}: {e}"))?;
+    dev_ioctl(iface, SIOCRCANSJA1000SET, &mut b).map_err(|e| format!("{iface}: {e}"))?;
     show(iface, &get(iface).map_err(|e| format!("{iface}: {e}"))?);
     Ok(())
 }

@@ -28,6 +28,7 @@ mod socket;
 pub use socket::{ArbSocket, RecvMsg};
 
 use std::io;
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 
 /// Address family of CAN sockets (`AF_CAN`), as stored in `sa_family_t`.
 pub const AF_CAN: u16 = 29;
@@ -191,6 +192,43 @@ pub fn ifindex(name: &str) -> io::Result<u32> {
 /// Name of the network interface with index `ifindex` (`if_indextoname`).
 pub fn ifname(ifindex: u32) -> io::Result<String> {
     raw::if_indextoname(ifindex)
+}
+
+/// `SIOCDEVPRIVATE`, the first of the device-private ioctl commands.
+pub const SIOCDEVPRIVATE: libc::c_ulong = 0x89F0;
+
+/// A device-private ioctl (`SIOCDEVPRIVATE + n`, as the rcan drivers'
+/// setup ioctls) on interface `iface`: `ifr_data` points to `buf`, which
+/// must be as large as the command's structure. Issued on a throw-away
+/// AF_UNIX datagram socket.
+pub fn dev_ioctl(iface: &str, cmd: libc::c_ulong, buf: &mut [u8]) -> io::Result<()> {
+    if iface.is_empty() || iface.len() >= libc::IFNAMSIZ {
+        return Err(io::Error::from_raw_os_error(libc::ENODEV));
+    }
+    // SAFETY: plain socket(2) call; the result is checked before use.
+    let fd = unsafe { libc::socket(libc::AF_UNIX, libc::SOCK_DGRAM | libc::SOCK_CLOEXEC, 0) };
+    if fd < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    // SAFETY: `fd` was just returned by socket(2) and is owned by nobody
+    // else; dropping the OwnedFd closes it.
+    let sock = unsafe { OwnedFd::from_raw_fd(fd) };
+    // SAFETY: an all-zero ifreq (a name and a union of integers and
+    // pointers) is valid.
+    let mut ifr: libc::ifreq = unsafe { std::mem::zeroed() };
+    for (d, s) in ifr.ifr_name.iter_mut().zip(iface.bytes()) {
+        *d = s as libc::c_char;
+    }
+    ifr.ifr_ifru.ifru_data = buf.as_mut_ptr().cast();
+    // SAFETY: `ifr` holds a NUL-terminated name (shorter than IFNAMSIZ in
+    // a zeroed buffer) and points to `buf`, writable for its length, which
+    // the caller sized for `cmd`.
+    let ret = unsafe { libc::ioctl(sock.as_raw_fd(), cmd, &mut ifr) };
+    if ret < 0 {
+        Err(io::Error::last_os_error())
+    } else {
+        Ok(())
+    }
 }
 
 #[cfg(test)]
