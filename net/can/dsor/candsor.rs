@@ -82,6 +82,12 @@ const TX_SLOTS: usize = 64;
 const OUT_LEN: usize = 256;
 /// Frames sent per batch (taken from the queue under the lock).
 const BATCH: usize = 16;
+/// Frames one run of [`Tick`] sends at most before it re-arms itself for
+/// "now" and returns, so that one long message (which, with the direct
+/// echo, is acked within the same run: the queue then holds one frame at a
+/// time) does not hold the softirq for its whole length. About the 2 ms
+/// the kernel gives one softirq pass at ~2 us per frame (~8 ms under TCG).
+const FRAMES_PER_RUN: usize = 1024;
 /// Headroom for mainline's `struct can_skb_priv`.
 const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 /// Headroom of reassembly buffers: rebuilt IPv4 + UDP headers of canip0.
@@ -277,6 +283,10 @@ struct Engine {
     out_len: usize,
     binds: KVec<Bind>,
     stats: Stats,
+    /// [`Tick`] is running and will take every frame queued before it
+    /// finds the queue empty (it checks and clears this in one critical
+    /// section), so queuing a frame needs no [`kick`].
+    draining: bool,
 }
 
 /// All protocol state; `None` outside the module's lifetime.
@@ -305,6 +315,14 @@ fn now_ms() -> u64 {
 }
 
 impl Engine {
+    /// Kicks [`Tick`] to send what was queued, unless it is draining the
+    /// queue anyway. Called with ENGINE held (it is the `&mut self`).
+    fn kick(&self) {
+        if !self.draining {
+            kick();
+        }
+    }
+
     fn push_out(&mut self, f: Frame) {
         if self.out_len == OUT_LEN {
             // The protocol recovers by retransmission.
@@ -639,12 +657,16 @@ impl HrTimerCallback for Tick {
     type State = ();
 
     /// HRTIMER_SOFTIRQ. Takes frames from the queue in batches under
-    /// ENGINE and sends them without it; when the queue is empty, re-arms
-    /// for the next deadline under ENGINE, so that a concurrent kick (also
-    /// under ENGINE) is never lost.
+    /// ENGINE and sends them without it (on one device reference for the
+    /// whole run); when the queue is empty, clears `draining` and re-arms
+    /// for the next deadline in the same critical section, so that a frame
+    /// queued concurrently (also under ENGINE) is never left unsent. After
+    /// [`FRAMES_PER_RUN`] frames it re-arms for "now" instead.
     fn run(timer: &'static HrTimer<Self>, _state: &mut ()) {
         let mut first = true;
         let mut wake = false;
+        let mut dev: Option<DevRef> = None;
+        let mut sent = 0;
         loop {
             if wake {
                 WAITQ.wake_all();
@@ -660,10 +682,20 @@ impl HrTimerCallback for Tick {
                     return;
                 }
                 if first {
+                    e.draining = true;
                     let before = e.stats.tx_ok + e.stats.tx_failed;
                     e.on_timer(now_ms());
                     wake = e.stats.tx_ok + e.stats.tx_failed != before;
                     first = false;
+                }
+                if sent >= FRAMES_PER_RUN {
+                    e.draining = false;
+                    kick();
+                    drop(g);
+                    if wake {
+                        WAITQ.wake_all();
+                    }
+                    return;
                 }
                 while n < BATCH {
                     match e.pop_out() {
@@ -676,6 +708,7 @@ impl HrTimerCallback for Tick {
                 }
                 ifname = e.cfg.ifname;
                 if n == 0 {
+                    e.draining = false;
                     if let Some(d) = e.next_deadline() {
                         timer.start((d as i64).saturating_mul(1_000_000));
                     }
@@ -686,7 +719,14 @@ impl HrTimerCallback for Tick {
                     return;
                 }
             }
-            let errors = send_batch(&ifname, &batch[..n]);
+            sent += n;
+            if dev.is_none() {
+                dev = DevRef::by_name(ifname.as_cstr());
+            }
+            let errors = match &dev {
+                Some(d) => send_batch(d, &batch[..n]),
+                None => n as u64,
+            };
             if errors != 0 {
                 if let Some(e) = ENGINE.lock().as_mut() {
                     e.stats.send_errors += errors;
@@ -697,13 +737,10 @@ impl HrTimerCallback for Tick {
 }
 
 /// Sends frames on the DSOR interface; returns how many failed. Softirq.
-fn send_batch(ifname: &Name, frames: &[Option<Frame>]) -> u64 {
-    let Some(dev) = DevRef::by_name(ifname.as_cstr()) else {
-        return frames.len() as u64;
-    };
+fn send_batch(dev: &DevRef, frames: &[Option<Frame>]) -> u64 {
     let mut errors = 0;
     for f in frames.iter().flatten() {
-        if send_frame(&dev, f).is_err() {
+        if send_frame(dev, f).is_err() {
             errors += 1;
         }
     }
@@ -766,7 +803,7 @@ impl KernelRx for DsorRx {
         }
         let finished_before = e.stats.tx_ok + e.stats.tx_failed;
         if e.on_frame(&id, &cf.data[..len], now) {
-            kick();
+            e.kick();
         }
         if e.stats.tx_ok + e.stats.tx_failed != finished_before {
             drop(g);
@@ -991,7 +1028,7 @@ impl glue::sock::Proto for DsorProto {
                 let e = g.as_mut().ok_or(ENODEV)?;
                 match e.start(dst, prio, header.clone(), data, owner) {
                     Ok(slot) => {
-                        kick();
+                        e.kick();
                         started = Some(slot);
                     }
                     Err(back) => pending = Some(back),
@@ -1092,21 +1129,32 @@ impl glue::sock::Proto for DsorProto {
 /// therefore wait until that time has passed (longer messages cannot be
 /// mistaken: a receiver restarts on every header it has not acknowledged
 /// as the last frame). EAGAIN for a non-blocking sender.
+/// A sleep can end up to a jiffy before `until` (the first jiffy of a
+/// timeout is already partly over), so it loops until the hold is over
+/// or the sender's own timeout `timeo` (jiffies, `i64::MAX` for none) is
+/// used up. Process context.
 fn restart_hold(timeo: i64) -> Result {
     let until = restart_over_ms();
-    let wait_ms = until.saturating_sub(now_ms());
-    if wait_ms == 0 {
-        return Ok(());
-    }
-    if timeo == 0 {
-        return Err(EAGAIN);
-    }
-    let j = glue::msecs_to_jiffies(wait_ms as u32).min(timeo);
-    match WAITQ.wait(j, &|| now_ms() >= until) {
-        Waited::Interrupted => Err(EINTR),
-        Waited::Ready => Ok(()),
-        Waited::TimedOut if now_ms() >= until => Ok(()),
-        Waited::TimedOut => Err(neterr::ETIMEDOUT()),
+    let mut remaining = timeo;
+    loop {
+        let wait_ms = until.saturating_sub(now_ms());
+        if wait_ms == 0 {
+            return Ok(());
+        }
+        if timeo == 0 {
+            return Err(EAGAIN);
+        }
+        if remaining <= 0 {
+            return Err(neterr::ETIMEDOUT());
+        }
+        let j = glue::msecs_to_jiffies(wait_ms as u32).clamp(1, remaining);
+        let t0 = glue::jiffies();
+        if let Waited::Interrupted = WAITQ.wait(j, &|| now_ms() >= until) {
+            return Err(EINTR);
+        }
+        if remaining != i64::MAX {
+            remaining -= glue::jiffies().wrapping_sub(t0) as i64;
+        }
     }
 }
 
@@ -1166,7 +1214,7 @@ fn start_udp(dst: u8, header: Header, payload: KVec<u8>) -> bool {
     let prio = e.cfg.udp_prio;
     match e.start(dst, prio, header, payload, Owner::Canip) {
         Ok(_) => {
-            kick();
+            e.kick();
             true
         }
         Err(_) => false,
@@ -1282,6 +1330,7 @@ fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
             out_len: 0,
             binds: KVec::new(),
             stats: Stats::default(),
+            draining: false,
         },
         GFP_KERNEL,
     )?)
