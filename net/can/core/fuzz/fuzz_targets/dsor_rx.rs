@@ -1,89 +1,12 @@
 // SPDX-License-Identifier: GPL-2.0
-//! Fuzz the DSOR receive path: arbitrary frames into a `Reassembler` (and
-//! into a sender's `on_ack`), checking that nothing panics and that the
-//! limits and delivery invariants hold.
-//!
-//! Input: records of `id (4 bytes, LE) | dlc (1 byte, low 4 bits, max 8) |
-//! data (dlc bytes) | dt (1 byte, ms)`; `dt` 255 also fires the timers.
+//! Fuzz the DSOR receive path (coverage-guided); the check itself is in
+//! `../dsor_rx_check.rs`, which the host test `tests/dsor_rx_fuzz_replay.rs`
+//! also runs.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use rcan_core::dsor_rx::{Limits, Reassembler};
-use rcan_core::dsor_tx::Transfer;
-use rcan_core::dsor_wire::{Ack, DsorId, FrameType, Header, MsgKind, Timers};
 
-const LOCAL: u8 = 1;
+#[path = "../dsor_rx_check.rs"]
+mod dsor_rx_check;
 
-fuzz_target!(|input: &[u8]| {
-    let tm = Timers {
-        ack_timeout_ms: 10,
-        max_retx: 3,
-        reasm_timeout_ms: 100,
-    };
-    let limits = Limits {
-        max_len: 600,
-        max_per_peer: 2,
-        max_bytes_total: 1000,
-    };
-    let mut rx: Reassembler<Vec<u8>, 4> = Reassembler::new(LOCAL, limits, &tm);
-    let h = Header {
-        len: 20,
-        kind: MsgKind::Segm { id: 0 },
-    };
-    let msg = [0x55u8; 20];
-    let mut tx = Transfer::new(LOCAL, 2, 0, 0, h, false, &tm);
-    tx.start(&msg, 0);
-    let mut now = 0u64;
-    let mut rest = input;
-    while rest.len() >= 6 {
-        // Map the fuzzer's id mostly onto node LOCAL's few streams.
-        let raw = u32::from_le_bytes([rest[0], rest[1], rest[2], rest[3]]);
-        let id29 = if raw & 0x8000_0000 != 0 {
-            raw & 0x1fff_ffff
-        } else {
-            (raw & 0x1fe0_007f) | (LOCAL as u32) << 14 | ((raw >> 7) & 3) << 7
-        };
-        let dlc = ((rest[4] & 0xf) as usize).min(8);
-        if rest.len() < 5 + dlc + 1 {
-            break;
-        }
-        let data = &rest[5..5 + dlc];
-        let dt = rest[5 + dlc];
-        rest = &rest[6 + dlc..];
-        now += dt as u64;
-        if dt == 255 {
-            rx.on_timer(now);
-            let _ = tx.on_timer(&msg, now);
-        }
-        let Some(id) = DsorId::from_can_id(id29) else {
-            continue;
-        };
-        let out = rx.on_frame(&id, data, now, |inc| {
-            assert!(inc.header.len <= limits.max_len);
-            if inc.header.len % 5 == 4 {
-                Err(rcan_core::dsor_wire::AckStatus::Refused)
-            } else {
-                Ok(vec![0; inc.header.len as usize])
-            }
-        });
-        if id.dst != LOCAL || id.ftype == FrameType::Ack {
-            assert!(out.ack.is_none() && out.delivered.is_none());
-        }
-        if let Some(a) = out.ack {
-            let aid = DsorId::from_can_id(a.id).unwrap();
-            assert_eq!(
-                (aid.src, aid.dst, aid.chan, aid.seq, aid.ftype),
-                (id.dst, id.src, id.chan, id.seq, FrameType::Ack)
-            );
-            assert!(Ack::decode(a.payload()).is_some());
-        }
-        if let Some(d) = out.delivered {
-            assert_eq!(d.buf.len(), d.header.len as usize);
-        }
-        assert!(rx.bytes_in_use() <= limits.max_bytes_total);
-        assert!(rx.active() <= 4);
-        let _ = tx.on_ack(&id, data, &msg, now);
-    }
-    rx.clear();
-    assert_eq!(rx.bytes_in_use(), 0);
-});
+fuzz_target!(|input: &[u8]| dsor_rx_check::check(input));
