@@ -6,7 +6,8 @@
 //! interface calls the runner makes between every two tests
 //! (`finit_module`, `delete_module`, `SIOCSIFFLAGS`), which on the debug
 //! kernel under TCG cost a fraction of an `insmod`/`rmmod`/`ip` process
-//! each. Every `unsafe` block of the test suite is here.
+//! each; CPU pinning and a one-descriptor `poll`. Every `unsafe` block of
+//! the test suite is here.
 
 use std::ffi::CString;
 use std::fs::File;
@@ -361,6 +362,35 @@ pub fn set_link_up(dev: &str, up: bool) -> io::Result<()> {
     // SAFETY: as for SIOCGIFFLAGS; the kernel only reads `ifr`.
     cvt(unsafe { libc::ioctl(sock.as_raw_fd(), libc::SIOCSIFFLAGS, &ifr) })?;
     Ok(())
+}
+
+/// Pins the calling thread to CPU 0 (`sched_setaffinity`).
+pub fn pin_to_cpu0() -> io::Result<()> {
+    // SAFETY: an all-zero cpu_set_t is empty; CPU_SET and
+    // sched_setaffinity only touch the set we own.
+    let rc = unsafe {
+        let mut set: libc::cpu_set_t = zeroed();
+        libc::CPU_SET(0, &mut set);
+        libc::sched_setaffinity(0, size_of::<libc::cpu_set_t>(), &set)
+    };
+    cvt(rc).map(drop)
+}
+
+/// `poll` on one descriptor for `events`, up to `timeout_ms`; returns
+/// `revents` (0 on timeout).
+pub fn poll_one(
+    fd: impl AsFd,
+    events: libc::c_short,
+    timeout_ms: c_int,
+) -> io::Result<libc::c_short> {
+    let mut pfd = libc::pollfd {
+        fd: fd.as_fd().as_raw_fd(),
+        events,
+        revents: 0,
+    };
+    // SAFETY: one valid, writable pollfd for the call.
+    cvt(unsafe { libc::poll(&mut pfd, 1, timeout_ms) })?;
+    Ok(pfd.revents)
 }
 
 #[cfg(test)]

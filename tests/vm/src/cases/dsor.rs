@@ -622,17 +622,10 @@ fn dsor_nonblocking_error(ctx: &mut Ctx) -> TestResult {
         },
     )
     .or_fail("nonblocking send to absent node")?;
-    let mut pfd = libc::pollfd {
-        fd: std::os::fd::AsRawFd::as_raw_fd(&std::os::fd::AsFd::as_fd(&s)),
-        events: libc::POLLIN,
-        revents: 0,
-    };
-    // SAFETY: one valid pollfd.
-    let r = unsafe { libc::poll(&mut pfd, 1, 20_000) };
+    let revents = crate::sys::poll_one(&s, libc::POLLIN, 20_000).or_fail("poll")?;
     ensure!(
-        r == 1 && pfd.revents & libc::POLLERR != 0,
-        "poll: {r}, revents {:#x}",
-        pfd.revents
+        revents & libc::POLLERR != 0,
+        "poll: revents {revents:#x}, want POLLERR"
     );
     let err = s.take_error().or_fail("SO_ERROR")?;
     ensure!(err == libc::ETIMEDOUT, "SO_ERROR {err}, want ETIMEDOUT");

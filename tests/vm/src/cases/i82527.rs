@@ -21,6 +21,7 @@ use crate::canraw::{self, ext, rtr_ext, rtr_std, std as sff};
 use crate::check::{ensure, OrFail, TestResult};
 use crate::ctx::{dev, sized, Ctx, Module};
 use crate::tools;
+use rcan_uapi::{dev_ioctl, SIOCDEVPRIVATE};
 
 pub const TESTS: &[crate::Test] = test_table![
     i82527_frames_both_ways,
@@ -49,35 +50,8 @@ fn sim2(ctx: &mut Ctx) -> Result<(u32, u32), String> {
     Ok((ctx.ifindex(&dev(0))?, ctx.ifindex(&dev(1))?))
 }
 
-const SIOCDEVPRIVATE: libc::c_ulong = 0x89F0;
 const SIOCRCANI82527GET: libc::c_ulong = SIOCDEVPRIVATE;
 const SIOCRCANI82527ANSWER: libc::c_ulong = SIOCDEVPRIVATE + 2;
-
-/// One device ioctl on a throw-away datagram socket; `buf` is ifr_data.
-fn dev_ioctl(iface: &str, cmd: libc::c_ulong, buf: &mut [u8]) -> std::io::Result<()> {
-    // SAFETY: plain socket(2).
-    let fd = unsafe { libc::socket(libc::AF_INET, libc::SOCK_DGRAM, 0) };
-    if fd < 0 {
-        return Err(std::io::Error::last_os_error());
-    }
-    // SAFETY: an all-zero ifreq is valid.
-    let mut ifr: libc::ifreq = unsafe { std::mem::zeroed() };
-    for (d, s) in ifr.ifr_name.iter_mut().zip(iface.bytes()) {
-        *d = s as libc::c_char;
-    }
-    ifr.ifr_ifru.ifru_data = buf.as_mut_ptr().cast();
-    // SAFETY: ifr names the interface and points to `buf`, which outlives
-    // the call and is as large as the command's structure.
-    let ret = unsafe { libc::ioctl(fd, cmd, &mut ifr) };
-    let err = std::io::Error::last_os_error();
-    // SAFETY: our descriptor.
-    unsafe { libc::close(fd) };
-    if ret < 0 {
-        Err(err)
-    } else {
-        Ok(())
-    }
-}
 
 /// Publishes (`Some`) or withdraws the answer of slot `slot` on `iface`
 /// (`struct rcan_i82527_answer`).

@@ -174,18 +174,7 @@ fn pin_to_cpu0(devs: &[&str]) -> TestResult {
         std::fs::write(format!("/proc/irq/{irq}/smp_affinity"), "1")
             .or_fail(format_args!("pin irq {irq} ({d})"))?;
     }
-    // SAFETY: an all-zero cpu_set_t is empty; CPU_SET and
-    // sched_setaffinity only touch the set we own.
-    let rc = unsafe {
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        libc::CPU_SET(0, &mut set);
-        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set)
-    };
-    ensure!(
-        rc == 0,
-        "sched_setaffinity: {}",
-        std::io::Error::last_os_error()
-    );
+    crate::sys::pin_to_cpu0().or_fail("sched_setaffinity")?;
     Ok(())
 }
 
@@ -563,18 +552,7 @@ fn sja1000_overrun(ctx: &mut Ctx) -> TestResult {
     if tx_lines.iter().any(|l| rx_lines.contains(l)) {
         ctx.note("can0 and can1 share an interrupt line: the CPU split is not effective");
     }
-    // SAFETY: an all-zero cpu_set_t is empty; CPU_SET and
-    // sched_setaffinity only touch the set we own.
-    let rc = unsafe {
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        libc::CPU_SET(0, &mut set);
-        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set)
-    };
-    ensure!(
-        rc == 0,
-        "sched_setaffinity: {}",
-        std::io::Error::last_os_error()
-    );
+    crate::sys::pin_to_cpu0().or_fail("sched_setaffinity")?;
     let over0 = ctx.stat("can1", "rx_over_errors")?;
     let rx = canraw::open(i1)?;
     crate::sys::set_rcvbufforce(&rx, 64 << 20).or_fail("SO_RCVBUFFORCE")?;
