@@ -16,6 +16,8 @@
 //! from any context.
 
 use super::bindings;
+use super::iomap::IoRange;
+use core::ops::Deref;
 use core::ptr::NonNull;
 use kernel::error::{code, Result};
 use kernel::ffi;
@@ -34,20 +36,21 @@ pub(crate) enum Space {
 /// # Invariants
 ///
 /// `start..start + len` of `space` is claimed by this window
-/// (`request_mem_region`/`request_region`) and `addr` is an iomap cookie
+/// (`request_mem_region`/`request_region`) and `io` holds an iomap cookie
 /// for all of it, both until Drop.
 pub(crate) struct IoWindow {
-    addr: NonNull<ffi::c_void>,
+    io: IoRange,
     start: usize,
-    len: usize,
     space: Space,
 }
 
-// SAFETY: the I/O accessors may be used from any thread and context;
-// callers serialise access to the device registers themselves.
-unsafe impl Send for IoWindow {}
-// SAFETY: as above.
-unsafe impl Sync for IoWindow {}
+impl Deref for IoWindow {
+    type Target = IoRange;
+
+    fn deref(&self) -> &IoRange {
+        &self.io
+    }
+}
 
 impl IoWindow {
     /// Claims `len` bytes of `space` at `start` for `name` and maps them.
@@ -88,9 +91,10 @@ impl IoWindow {
         };
         // INVARIANT: claimed and mapped above.
         Ok(IoWindow {
-            addr,
+            // SAFETY: `addr` maps `len` bytes until IoWindow's Drop unmaps
+            // it, after the IoRange is last used.
+            io: unsafe { IoRange::new(addr, len) },
             start,
-            len,
             space,
         })
     }
@@ -98,38 +102,6 @@ impl IoWindow {
     /// First address (or port) of the window.
     pub(crate) fn start(&self) -> usize {
         self.start
-    }
-
-    /// Length of the window.
-    pub(crate) fn len(&self) -> usize {
-        self.len
-    }
-
-    fn at(&self, off: usize, width: usize) -> Option<*mut ffi::c_void> {
-        if off.checked_add(width)? > self.len {
-            return None;
-        }
-        // SAFETY: `off + width <= len`, inside the mapping (invariant);
-        // the result is an iomap cookie the accessors understand.
-        Some(unsafe { self.addr.as_ptr().cast::<u8>().add(off).cast() })
-    }
-
-    /// `ioread8` at `off`; outside the window reads 0xFF (as absent
-    /// hardware does).
-    pub(crate) fn read8(&self, off: usize) -> u8 {
-        match self.at(off, 1) {
-            // SAFETY: inside the mapping.
-            Some(p) => unsafe { bindings::ioread8(p) as u8 },
-            None => 0xFF,
-        }
-    }
-
-    /// `iowrite8` at `off`; ignored outside the window.
-    pub(crate) fn write8(&self, off: usize, val: u8) {
-        if let Some(p) = self.at(off, 1) {
-            // SAFETY: inside the mapping.
-            unsafe { bindings::iowrite8(val, p) };
-        }
     }
 }
 
@@ -154,12 +126,12 @@ impl Drop for IoWindow {
         // SAFETY: mapped in `request` (invariant), unmapped once here.
         unsafe {
             match self.space {
-                Space::Mem => bindings::rcan_iounmap(self.addr.as_ptr()),
-                Space::Port => bindings::rcan_ioport_unmap(self.addr.as_ptr()),
+                Space::Mem => bindings::rcan_iounmap(self.io.cookie()),
+                Space::Port => bindings::rcan_ioport_unmap(self.io.cookie()),
             }
         }
         // SAFETY: claimed in `request` (invariant) and unmapped above.
-        unsafe { release(self.space, self.start as _, self.len as _) };
+        unsafe { release(self.space, self.start as _, self.io.len() as _) };
     }
 }
 

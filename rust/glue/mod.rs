@@ -38,6 +38,7 @@ pub(crate) mod bindings {
 }
 
 pub(crate) mod hrtimer;
+pub(crate) mod iomap;
 pub(crate) mod isa;
 pub(crate) mod netdev;
 pub(crate) mod pci;

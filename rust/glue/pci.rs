@@ -14,8 +14,10 @@
 //! drvdata), with 6.12's C API.
 
 use super::bindings;
+use super::iomap::IoRange;
 use core::cell::UnsafeCell;
 use core::marker::PhantomData;
+use core::ops::Deref;
 use core::ptr::NonNull;
 use kernel::error::{code, Result};
 use kernel::ffi;
@@ -95,8 +97,9 @@ impl Device {
         let addr = NonNull::new(p).ok_or(code::ENOMEM)?;
         // INVARIANT: a mapping of `len` bytes, unmapped in Drop.
         Ok(IoMem {
-            addr,
-            len,
+            // SAFETY: `addr` maps `len` bytes until IoMem's Drop unmaps it,
+            // after the IoRange is last used.
+            io: unsafe { IoRange::new(addr, len) },
             pdev: self.0,
         })
     }
@@ -147,87 +150,31 @@ impl Drop for Enabled {
 ///
 /// # Invariants
 ///
-/// `addr` is a `pci_iomap` cookie for `len` bytes of `pdev`, valid until
+/// `io` holds a `pci_iomap` cookie for its length of `pdev`, valid until
 /// Drop.
 pub(crate) struct IoMem {
-    addr: NonNull<ffi::c_void>,
-    len: usize,
+    io: IoRange,
     pdev: NonNull<bindings::pci_dev>,
 }
 
-// SAFETY: I/O accessors may be used from any thread and context; callers
-// serialise access to the device registers themselves.
+// SAFETY: the accessors are IoRange's (any thread and context); `pdev` is
+// only used to unmap in Drop.
 unsafe impl Send for IoMem {}
 // SAFETY: as above.
 unsafe impl Sync for IoMem {}
 
-impl IoMem {
-    fn at(&self, off: usize, width: usize) -> Option<*mut ffi::c_void> {
-        if off.checked_add(width)? > self.len {
-            return None;
-        }
-        // SAFETY: `off + width <= len`, inside the mapping (invariant);
-        // the result is an iomap cookie the accessors understand.
-        Some(unsafe { self.addr.as_ptr().cast::<u8>().add(off).cast() })
-    }
+impl Deref for IoMem {
+    type Target = IoRange;
 
-    /// `ioread8` at `off`; an offset outside the mapping reads 0xFF (as
-    /// absent hardware does).
-    pub(crate) fn read8(&self, off: usize) -> u8 {
-        match self.at(off, 1) {
-            // SAFETY: inside the mapping.
-            Some(p) => unsafe { bindings::ioread8(p) as u8 },
-            None => 0xFF,
-        }
-    }
-
-    /// `iowrite8` at `off`; ignored outside the mapping.
-    pub(crate) fn write8(&self, off: usize, val: u8) {
-        if let Some(p) = self.at(off, 1) {
-            // SAFETY: inside the mapping.
-            unsafe { bindings::iowrite8(val, p) };
-        }
-    }
-
-    /// `ioread16` at `off` (little-endian).
-    pub(crate) fn read16(&self, off: usize) -> u16 {
-        match self.at(off, 2) {
-            // SAFETY: inside the mapping.
-            Some(p) => unsafe { bindings::ioread16(p) as u16 },
-            None => !0,
-        }
-    }
-
-    /// `iowrite16` at `off` (little-endian).
-    pub(crate) fn write16(&self, off: usize, val: u16) {
-        if let Some(p) = self.at(off, 2) {
-            // SAFETY: inside the mapping.
-            unsafe { bindings::iowrite16(val, p) };
-        }
-    }
-
-    /// `ioread32` at `off`.
-    pub(crate) fn read32(&self, off: usize) -> u32 {
-        match self.at(off, 4) {
-            // SAFETY: inside the mapping.
-            Some(p) => unsafe { bindings::ioread32(p) },
-            None => !0,
-        }
-    }
-
-    /// `iowrite32` at `off`.
-    pub(crate) fn write32(&self, off: usize, val: u32) {
-        if let Some(p) = self.at(off, 4) {
-            // SAFETY: inside the mapping.
-            unsafe { bindings::iowrite32(val, p) };
-        }
+    fn deref(&self) -> &IoRange {
+        &self.io
     }
 }
 
 impl Drop for IoMem {
     fn drop(&mut self) {
         // SAFETY: mapped by pci_iomap for this device (invariant).
-        unsafe { bindings::pci_iounmap(self.pdev.as_ptr(), self.addr.as_ptr()) };
+        unsafe { bindings::pci_iounmap(self.pdev.as_ptr(), self.io.cookie()) };
     }
 }
 
