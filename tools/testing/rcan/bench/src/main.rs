@@ -20,15 +20,21 @@
 //! set up or a workload could not run. See
 //! `Documentation/networking/rcan/benchmarks.rst`.
 //!
-//! A second part (`--part dsor`, see `dsor.rs`) measures messages instead
+//! A second part (`--part table`, see `table.rs`) measures what many
+//! sockets cost on both stacks: bind and close of 1,000 and 10,000
+//! sockets, the cost of a frame nobody wants with that many filters, 1,000
+//! against 1 receivers, two senders on two CPUs, memory per socket.
+//!
+//! A third part (`--part dsor`, see `dsor.rs`) measures messages instead
 //! of frames: rcan's DSOR protocol against mainline ISO-TP, goodput and
-//! kernel CPU time per KiB. `--part raw,dsor` (the default) runs both,
-//! the CAN_RAW part first.
+//! kernel CPU time per KiB. `--part raw,table,dsor` (the default) runs all
+//! three in that order.
 
 mod can;
 mod dsor;
 mod report;
 mod stack;
+mod table;
 mod workload;
 
 use std::path::PathBuf;
@@ -42,8 +48,9 @@ use workload::median;
 const USAGE: &str = "\
 usage: rcan-bench [options]
   --part LIST           parts to run, comma-separated: raw (CAN_RAW, mainline vs
-                        ours), dsor (DSOR vs mainline ISO-TP) (default raw,dsor)
-  --stack S             mainline, ours or both (default both)
+                        ours), table (many sockets, mainline vs ours), dsor (DSOR
+                        vs mainline ISO-TP) (default raw,table,dsor)
+  --stack S             raw and table parts: mainline, ours or both (default both)
   --only LIST           workloads to run, comma-separated: a|throughput, b|fanout,
                         c|latency (default all)
   --iface NAME          CAN interface (default can0)
@@ -74,6 +81,18 @@ usage: rcan-bench [options]
   --msg-secs S          dsor part: seconds per measured run at least (default 2)
   --msg-min N           dsor part: messages per measured run at least (default 20)
   --msg-warmup N        dsor part: messages per warm-up run (default 5)
+  --table-rounds N      table part: rounds (default 3)
+  --table-sockets L     table part: socket counts (default 1000,10000)
+  --table-kinds L       table part: filter kinds, comma-separated: exact (one
+                        exact id each), same (all one id), masked (id:7F0),
+                        masks (many distinct masks) (default all four)
+  --table-masks M       table part: distinct masks of kind masks (1-255, default 64)
+  --table-frames N      table part: unwanted frames per run (default 6400)
+  --table-secs S        table part: seconds per two-sender run (default 2)
+  --table-only LIST     table part: workloads, comma-separated: sockets (bind,
+                        close, unwanted frame, memory), fanout (1000 : 1
+                        receivers), pair (two senders) (default all)
+  --iface2 NAME         table part: the second device (default can1)
   --quick               a tenth of the frames, one run each (smoke test)
   --summary FILE        also write the summary to FILE
                         (default $RCAN_OUT/bench-summary.txt if RCAN_OUT is set)
@@ -83,7 +102,9 @@ RCAN_ROOT (project tree with our modules; default the current directory).";
 /// Command line settings.
 struct Config {
     run_raw: bool,
+    run_table: bool,
     run_dsor: bool,
+    table: table::Config,
     protos: Vec<Proto>,
     msg_sizes: Vec<usize>,
     msg_secs: f64,
@@ -125,7 +146,25 @@ fn parse_args() -> Result<Config, String> {
     };
     let mut c = Config {
         run_raw: true,
+        run_table: true,
         run_dsor: true,
+        table: table::Config {
+            counts: vec![1000, 10_000],
+            kinds: table::Kind::ALL.to_vec(),
+            masks: 64,
+            rounds: 3,
+            frames: 6400,
+            warmup: 640,
+            batch: 64,
+            fan_frames: 50_000,
+            sockets: true,
+            fan: true,
+            secs: 2.0,
+            pair: true,
+            iface: "can0".into(),
+            iface2: "can1".into(),
+            load: true,
+        },
         protos: vec![Proto::Isotp, Proto::IsotpNoGap, Proto::Dsor],
         msg_sizes: vec![1024, 4096],
         msg_secs: 2.0,
@@ -162,10 +201,11 @@ fn parse_args() -> Result<Config, String> {
         match a.as_str() {
             "--part" => {
                 let v = args.next().ok_or("--part wants a list")?;
-                (c.run_raw, c.run_dsor) = (false, false);
+                (c.run_raw, c.run_table, c.run_dsor) = (false, false, false);
                 for w in v.split(',') {
                     match w.trim() {
                         "raw" => c.run_raw = true,
+                        "table" => c.run_table = true,
                         "dsor" => c.run_dsor = true,
                         other => return Err(format!("--part: unknown part '{other}'")),
                     }
@@ -196,6 +236,49 @@ fn parse_args() -> Result<Config, String> {
             "--msg-secs" => c.msg_secs = parse_num(&a, args.next())?,
             "--msg-min" => c.msg_min = parse_num(&a, args.next())?,
             "--msg-warmup" => c.msg_warmup = parse_num(&a, args.next())?,
+            "--table-rounds" => c.table.rounds = parse_num(&a, args.next())?,
+            "--table-sockets" => {
+                let v = args.next().ok_or("--table-sockets wants a list")?;
+                c.table.counts = v
+                    .split(',')
+                    .map(|n| parse_num(&a, Some(n.trim().to_string())))
+                    .collect::<Result<_, _>>()?;
+                if c.table.counts.contains(&0) {
+                    return Err("--table-sockets: counts must be at least 1".into());
+                }
+            }
+            "--table-kinds" => {
+                let v = args.next().ok_or("--table-kinds wants a list")?;
+                c.table.kinds.clear();
+                for w in v.split(',') {
+                    let k = table::Kind::parse(w.trim())
+                        .ok_or_else(|| format!("--table-kinds: unknown kind '{}'", w.trim()))?;
+                    if !c.table.kinds.contains(&k) {
+                        c.table.kinds.push(k);
+                    }
+                }
+            }
+            "--table-masks" => {
+                c.table.masks = parse_num(&a, args.next())?;
+                if !(1..=255).contains(&c.table.masks) {
+                    return Err("--table-masks wants 1 to 255".into());
+                }
+            }
+            "--table-frames" => c.table.frames = parse_num(&a, args.next())?,
+            "--table-secs" => c.table.secs = parse_num(&a, args.next())?,
+            "--table-only" => {
+                let v = args.next().ok_or("--table-only wants a list")?;
+                (c.table.sockets, c.table.fan, c.table.pair) = (false, false, false);
+                for w in v.split(',') {
+                    match w.trim() {
+                        "sockets" => c.table.sockets = true,
+                        "fanout" => c.table.fan = true,
+                        "pair" => c.table.pair = true,
+                        other => return Err(format!("--table-only: unknown workload '{other}'")),
+                    }
+                }
+            }
+            "--iface2" => c.table.iface2 = args.next().ok_or("--iface2 wants a name")?,
             "--stack" => {
                 c.stacks = match args.next().as_deref() {
                     Some("mainline") => vec![Stack::Mainline],
@@ -268,7 +351,16 @@ fn parse_args() -> Result<Config, String> {
         c.msg_secs = c.msg_secs.min(0.5);
         c.msg_min = c.msg_min.min(5);
         c.msg_warmup = c.msg_warmup.min(2);
+        c.table.rounds = 1;
+        c.table.frames = (c.table.frames / 10).max(c.table.batch);
+        c.table.warmup = (c.table.warmup / 10).max(c.table.batch);
+        c.table.secs = c.table.secs.min(0.5);
     }
+    // The table part shares these with the raw part.
+    c.table.iface = c.iface.clone();
+    c.table.load = c.load;
+    c.table.batch = c.batch.max(1);
+    c.table.fan_frames = c.fan_frames;
     // ISO-TP needs more than a single frame; DSOR and ISO-TP (mainline's
     // default max_pdu_size) both take 8300 bytes.
     if c.msg_sizes.is_empty() || c.msg_sizes.iter().any(|&n| !(8..=8300).contains(&n)) {
@@ -685,9 +777,18 @@ fn main() -> ExitCode {
         }
     };
     let hdr = header(&c);
+    // The kernel and CPU line, for the other parts' summaries.
+    let hdr1 = hdr.lines().next().unwrap_or_default().to_string();
     println!("rcan-bench: {hdr}");
+    let mut want = 0u64;
     if c.run_raw && c.run_b {
-        let want = *c.fan_counts.last().unwrap_or(&1) as u64 + 64;
+        want = *c.fan_counts.iter().max().unwrap_or(&1) as u64 + 64;
+    }
+    if c.run_table {
+        let most = c.table.counts.iter().copied().max().unwrap_or(0).max(1000);
+        want = want.max(most as u64 + 64);
+    }
+    if want > 0 {
         match can::raise_nofile(want) {
             Ok(n) => println!("rcan-bench: RLIMIT_NOFILE {n}"),
             Err(e) => println!("rcan-bench: cannot raise RLIMIT_NOFILE to {want}: {e}"),
@@ -746,6 +847,24 @@ fn main() -> ExitCode {
     } else {
         String::new()
     };
+    let table_text = if c.run_table {
+        let write = |s: &table::Samples| {
+            if let Some(p) = &c.summary {
+                let text = raw_text.clone() + &table::summary(&c.table, s, &hdr1);
+                if let Err(e) = std::fs::write(p, text) {
+                    eprintln!("rcan-bench: {}: {e}", p.display());
+                }
+            }
+        };
+        let ts = table::bench(&c.table, &c.stacks, &c.paths, &write);
+        println!();
+        let t = table::summary(&c.table, &ts, &hdr1);
+        print!("{t}");
+        failed |= !ts.errors.is_empty();
+        raw_text.clone() + &t + "\n"
+    } else {
+        raw_text.clone()
+    };
     if c.run_dsor {
         let dc = dsor::Config {
             protos: c.protos.clone(),
@@ -758,10 +877,10 @@ fn main() -> ExitCode {
             load: c.load,
             cpu: c.cpu,
         };
-        let dhdr = hdr.lines().next().unwrap_or_default().to_string();
+        let dhdr = hdr1.clone();
         let write = |s: &dsor::Samples| {
             if let Some(p) = &c.summary {
-                let text = raw_text.clone() + &dsor::summary(&dc, s, &dhdr);
+                let text = table_text.clone() + &dsor::summary(&dc, s, &dhdr);
                 if let Err(e) = std::fs::write(p, text) {
                     eprintln!("rcan-bench: {}: {e}", p.display());
                 }

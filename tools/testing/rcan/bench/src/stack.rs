@@ -10,6 +10,9 @@
 //! - ours: `rcan_pf`, `rcan_can`, `rcan_raw` and `rcan_loop` from the
 //!   project tree; `rcan_loop` creates `can0` itself.
 //!
+//! The table part loads two devices (`load_devices`): a second `vcan`
+//! device, or `rcan_loop count=2` (`can0` and `can1`).
+//!
 //! Both devices echo (`IFF_ECHO`): a frame sent with `CAN_RAW_LOOPBACK` on
 //! comes back into the receive path through the driver.
 
@@ -154,6 +157,15 @@ pub fn unload_all(iface: &str) -> Result<(), String> {
 
 /// Loads `stack` and brings `iface` up. Call `unload_all` first.
 pub fn load(stack: Stack, paths: &Paths, iface: &str) -> Result<(), String> {
+    load_devices(stack, paths, &[iface])
+}
+
+/// Loads `stack` with one device per name in `ifaces` and brings them all
+/// up. Mainline: one `ip link add dev NAME type vcan` each; ours:
+/// `rcan_loop count=N`, whose devices are named `can0`, `can1`, ... by the
+/// kernel, so `ifaces` must be those names (checked). Call `unload_all`
+/// first.
+pub fn load_devices(stack: Stack, paths: &Paths, ifaces: &[&str]) -> Result<(), String> {
     match stack {
         Stack::Mainline => {
             let kb = paths
@@ -167,17 +179,41 @@ pub fn load(stack: Stack, paths: &Paths, iface: &str) -> Result<(), String> {
                 insmod(&kb.join("drivers/net/can/dev/can-dev.ko"), &[])?;
             }
             insmod(&vcan, &["echo=1"])?;
-            run("ip", &["link", "add", "dev", iface, "type", "vcan"])?;
+            for iface in ifaces {
+                run("ip", &["link", "add", "dev", iface, "type", "vcan"])?;
+            }
         }
         Stack::Ours => {
+            if let Some((i, iface)) = ifaces
+                .iter()
+                .enumerate()
+                .find(|(i, f)| **f != format!("can{i}"))
+            {
+                return Err(format!(
+                    "rcan_loop names its devices can0, can1, ...: device {i} cannot be {iface}"
+                ));
+            }
             let r = &paths.root;
             insmod(&r.join("net/can/rcan_pf.ko"), &[])?;
             insmod(&r.join("net/can/rcan_can.ko"), &[])?;
             insmod(&r.join("net/can/rcan_raw.ko"), &[])?;
-            insmod(&r.join("drivers/net/can/rcan_loop.ko"), &[])?;
+            let count = format!("count={}", ifaces.len());
+            let params: &[&str] = if ifaces.len() > 1 { &[&count] } else { &[] };
+            insmod(&r.join("drivers/net/can/rcan_loop.ko"), params)?;
         }
     }
-    run("ip", &["link", "set", iface, "up"])
+    for iface in ifaces {
+        run("ip", &["link", "set", iface, "up"])?;
+    }
+    Ok(())
+}
+
+/// Deletes the vcan device `iface`, if vcan is loaded (rcan_loop's
+/// devices go with the module).
+pub fn del_link(iface: &str) {
+    if loaded_modules().iter().any(|m| m == "vcan") {
+        run_quiet("ip", &["link", "del", "dev", iface]);
+    }
 }
 
 /// The message protocols of the DSOR part (`--part dsor`).

@@ -42,7 +42,7 @@ const MAX_LOST: u64 = 10;
 
 /// A fresh tag per run, so that frames of an earlier (aborted) run are
 /// recognised as stale.
-fn next_tag() -> u32 {
+pub fn next_tag() -> u32 {
     static TAG: AtomicU64 = AtomicU64::new(1);
     TAG.fetch_add(1, Ordering::Relaxed) as u32
 }
@@ -87,7 +87,7 @@ pub struct Counts {
 
 /// Blocking receive on `rx` that tolerates `STALLS_PER_LOSS - 1` timeouts
 /// (counted in `c.stalls`); `None` if nothing came at all.
-fn recv_patient(rx: &RawSocket, c: &mut Counts) -> io::Result<Option<Frame>> {
+pub fn recv_patient(rx: &RawSocket, c: &mut Counts) -> io::Result<Option<Frame>> {
     for _ in 0..STALLS_PER_LOSS {
         match rx.recv(false) {
             Ok(f) => return Ok(Some(f)),
