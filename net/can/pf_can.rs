@@ -16,21 +16,20 @@
 //! * `PROTOS`: the protocol table. Read under RCU (`pf_can_create`, process
 //!   context); written under `WRITERS` (register/unregister, process
 //!   context). The thesis uses a spinlock for writers; a mutex serves the
-//!   same purpose here because every writer is in process context and the
-//!   receive table's writers, which share it, must allocate.
-//! * `WRITERS` (`rcan_pf_mutex`) protects the registry: every receiver
-//!   registration ([`Record`]), the authoritative copy from which receive
-//!   tables are built.
-//! * `RX`: the receive table, an immutable snapshot ([`RxTable`]) published
-//!   under RCU. Read without locks in softirq (`can_rcv`); rebuilt and
-//!   replaced under `WRITERS` by `rcan_rx_set` (process context); replaced
-//!   snapshots and removed records are freed by `call_rcu` callbacks
-//!   (softirq), so neither writers nor `close()` wait for a grace period.
-//!   Each record holds a reference on its socket until that callback.
+//!   same purpose here because every writer is in process context.
+//! * `WRITERS` (`rcan_pf_mutex`) also protects the list of drivers that
+//!   follow the receive table ([`Listener`]); they are called under it.
+//! * `TABLE`: the receive table (`glue::can::rx::RxTable`), read without
+//!   locks in NET_RX softirq (`can_rcv`) and changed incrementally, one
+//!   receiver at a time, under its own mutex (`rcan_rx_mutex`) by
+//!   `rcan_rx_set` (process context). Removed registrations are freed by
+//!   `call_rcu` callbacks, so neither writers nor `close()` wait for a grace
+//!   period; each socket receiver holds a reference on its socket until
+//!   then.
 //!
-//! Lock order (outermost first): RTNL, socket lock, `WRITERS`.
+//! Lock order (outermost first): RTNL, socket lock, `rcan_rx_mutex`;
+//! `WRITERS` is never held together with `rcan_rx_mutex`.
 
-use core::sync::atomic::{AtomicPtr, Ordering};
 use kernel::ffi;
 use kernel::prelude::*;
 
@@ -40,6 +39,7 @@ mod rcan_api;
 mod rcan_core;
 
 use glue::bindings;
+use glue::can::rx::{Receiver, RxTable, Spec};
 use glue::netdev::NetDev;
 use glue::skb::Skb;
 use glue::sync::{rcu_barrier, synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard};
@@ -48,9 +48,7 @@ use rcan_api::{
 };
 use rcan_core::filter::ArbFilter;
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
-use rcan_core::rxtable::{
-    self, CanFilterKind, ErrEntry, ExactEntry, Filter, MaskedEntry, RegSpec, Table, TableSink,
-};
+use rcan_core::rxtable::{self, CanFilterKind, Filter};
 
 module! {
     type: PfCan,
@@ -62,6 +60,7 @@ module! {
 
 extern "C" {
     fn rcan_pf_mutex_ptr() -> *mut bindings::mutex;
+    fn rcan_rx_mutex_ptr() -> *mut bindings::mutex;
 }
 
 fn pf_mutex() -> *mut bindings::mutex {
@@ -69,57 +68,57 @@ fn pf_mutex() -> *mut bindings::mutex {
     unsafe { rcan_pf_mutex_ptr() }
 }
 
-/// One receiver registration (one socket of one protocol). Owned by the
-/// registry under `WRITERS`; once removed, freed by `free_record` after a
-/// grace period, which also drops the socket reference.
-#[repr(C)]
-struct Record {
-    /// For call_rcu; first so the callback can find the record.
-    rcu: bindings::callback_head,
-    /// The receiver's socket (held with `sock_hold` from registration until
-    /// `free_record`), or for a kernel receiver its opaque data pointer.
-    owner: *mut ffi::c_void,
-    /// `owner` is a `struct sock` (else a kernel receiver, whose removal
-    /// waits for a grace period instead of counting references).
-    is_sock: bool,
+fn rx_mutex() -> *mut bindings::mutex {
+    // SAFETY: returns the address of a statically defined mutex.
+    unsafe { rcan_rx_mutex_ptr() }
+}
+
+/// A receiver in the receive table: a protocol's socket (holding a
+/// reference on it, dropped with the receiver after a grace period) or an
+/// in-kernel receiver's data (whose removal waits for a grace period
+/// instead).
+struct Target {
     func: RxFn,
-    cookie: u32,
-    ifindex: i32,
-    join: bool,
-    err_mask: u32,
-    filters: KVec<Filter>,
-    /// Index of this record in the `rcvs` of the published table.
-    slot: usize,
+    owner: *mut ffi::c_void,
+    is_sock: bool,
 }
 
 // SAFETY: `owner` is a counted sock reference or a kernel receiver's data
-// that outlives the record; both are usable from any CPU. The rest is plain
-// data.
-unsafe impl Send for Record {}
+// that outlives the registration; both are usable from any CPU.
+unsafe impl Send for Target {}
+// SAFETY: as above; shared access only reads.
+unsafe impl Sync for Target {}
 
-impl Record {
-    fn spec(&self) -> RegSpec<'_> {
-        RegSpec {
-            ifindex: self.ifindex,
-            filters: &self.filters,
-            join: self.join,
-            err_mask: self.err_mask,
+impl Receiver for Target {
+    /// One registration per owner (a socket belongs to one protocol; a
+    /// kernel receiver's data to one module).
+    fn id(&self) -> usize {
+        self.owner as usize
+    }
+}
+
+impl Drop for Target {
+    /// Runs in a `call_rcu` callback (softirq) or in the writer's process
+    /// context; the final `sock_put` may free the sock.
+    fn drop(&mut self) {
+        if self.is_sock {
+            // SAFETY: the reference taken in `rx_set` for this Target.
+            unsafe { bindings::rcan_sock_put(self.owner.cast()) };
         }
     }
 }
 
-/// A driver that wants to know when the receive table changes (to
-/// recompute its hardware filter, DESIGN decision 7).
+/// A driver that wants to know when the receive table changes for its
+/// interface (to recompute its hardware filter, DESIGN decision 7).
 #[derive(Clone, Copy)]
 struct Listener {
     func: ListenFn,
     data: *mut ffi::c_void,
+    ifindex: i32,
 }
 
-/// The registry: every live record, and the drivers listening for
-/// changes. Protected by `WRITERS`.
+/// What `WRITERS` protects besides `PROTOS`.
 struct Registry {
-    recs: KVec<KBox<Record>>,
     listeners: KVec<Listener>,
 }
 
@@ -127,12 +126,11 @@ struct Registry {
 // callbacks; the owners guarantee their validity (rcan_api contracts).
 unsafe impl Send for Registry {}
 
-/// Serialises all writers of `PROTOS` and `RX` and protects the registry.
-/// Process context.
+/// Serialises the writers of `PROTOS` and protects the listeners. Process
+/// context.
 static WRITERS: CMutex<Registry> = CMutex::new(
     pf_mutex,
     Registry {
-        recs: KVec::new(),
         listeners: KVec::new(),
     },
 );
@@ -140,145 +138,9 @@ static WRITERS: CMutex<Registry> = CMutex::new(
 /// The protocol table (RCU readers, `WRITERS` for writers).
 static PROTOS: [RcuPtr<CanProto>; CANPROTO_MAX] = [const { RcuPtr::null() }; CANPROTO_MAX];
 
-/// Where the receive path finds a receiver: a copy of its record's
-/// callback, with the socket pointer cleared in place if the record had to
-/// be removed without a rebuild (allocation failure).
-struct RcvSlot {
-    owner: AtomicPtr<ffi::c_void>,
-    func: RxFn,
-    cookie: u32,
-}
-
-/// A snapshot of all receivers, published through `RX`; immutable once
-/// published (but for `RcvSlot::owner`).
-#[repr(C)]
-struct RxTable {
-    /// For call_rcu; first so the callback can find the table.
-    rcu: bindings::callback_head,
-    exact: KVec<ExactEntry>,
-    starts: KVec<u32>,
-    masked: KVec<MaskedEntry>,
-    filters: KVec<Filter>,
-    err: KVec<ErrEntry>,
-    /// Indexed by registration number.
-    rcvs: KVec<RcvSlot>,
-}
-
-// SAFETY: the owner pointers are counted references (or kernel receivers'
-// data) held by the records, which outlive every table that names them
-// (both freed after a grace period); the rest is plain data.
-unsafe impl Send for RxTable {}
-// SAFETY: as above; shared access only reads, `RcvSlot::owner` is atomic.
-unsafe impl Sync for RxTable {}
-
-impl RxTable {
-    fn new() -> RxTable {
-        RxTable {
-            // SAFETY: an all-zero callback_head is what call_rcu expects.
-            rcu: unsafe { core::mem::zeroed() },
-            exact: KVec::new(),
-            starts: KVec::new(),
-            masked: KVec::new(),
-            filters: KVec::new(),
-            err: KVec::new(),
-            rcvs: KVec::new(),
-        }
-    }
-
-    fn view(&self) -> Table<'_> {
-        Table {
-            exact: &self.exact,
-            starts: &self.starts,
-            masked: &self.masked,
-            filters: &self.filters,
-            err: &self.err,
-        }
-    }
-}
-
-impl TableSink for RxTable {
-    type Error = kernel::alloc::AllocError;
-    fn exact(&mut self, e: ExactEntry) -> Result<(), Self::Error> {
-        self.exact.push(e, GFP_KERNEL)
-    }
-    fn masked(&mut self, e: MaskedEntry) -> Result<(), Self::Error> {
-        self.masked.push(e, GFP_KERNEL)
-    }
-    fn filter(&mut self, f: Filter) -> Result<(), Self::Error> {
-        self.filters.push(f, GFP_KERNEL)
-    }
-    fn filters_len(&self) -> usize {
-        self.filters.len()
-    }
-    fn err(&mut self, e: ErrEntry) -> Result<(), Self::Error> {
-        self.err.push(e, GFP_KERNEL)
-    }
-}
-
-/// The receive table (RCU readers in softirq, `WRITERS` for writers).
-static RX: RcuPtr<RxTable> = RcuPtr::null();
-
-/// `call_rcu` callback freeing a replaced table (softirq context).
-unsafe extern "C" fn free_table(head: *mut bindings::callback_head) {
-    // SAFETY: `head` is the first field of an `RxTable` leaked from a KBox
-    // by `publish`; the grace period has ended, so no reader is left.
-    drop(unsafe { KBox::from_raw(head.cast::<RxTable>()) });
-}
-
-/// `call_rcu` callback freeing a removed record and dropping its socket
-/// reference (softirq context; the final `sock_put` may free the sock).
-unsafe extern "C" fn free_record(head: *mut bindings::callback_head) {
-    // SAFETY: `head` is the first field of a `Record` leaked from a KBox by
-    // `retire`; no table published after its removal names it, and the
-    // grace period ended, so no receive path uses it any more.
-    let rec = unsafe { KBox::from_raw(head.cast::<Record>()) };
-    if rec.is_sock {
-        // SAFETY: the reference taken in `rx_set` when the record was made.
-        unsafe { bindings::rcan_sock_put(rec.owner.cast()) };
-    }
-}
-
-/// Frees a removed record after a grace period. Caller holds `WRITERS`.
-fn retire(rec: KBox<Record>) {
-    let p = KBox::into_raw(rec);
-    // SAFETY: `p` is a valid record we own; free_record frees it once
-    // every reader that could have seen it has finished.
-    unsafe { bindings::call_rcu(core::ptr::addr_of_mut!((*p).rcu), Some(free_record)) };
-}
-
-/// Builds a table from the registry (registration number = index).
-/// Process context, `WRITERS` held; allocates.
-fn build(recs: &[KBox<Record>]) -> Result<KBox<RxTable>> {
-    let mut t = RxTable::new();
-    for (i, r) in recs.iter().enumerate() {
-        t.rcvs.push(
-            RcvSlot {
-                owner: AtomicPtr::new(r.owner),
-                func: r.func,
-                cookie: r.cookie,
-            },
-            GFP_KERNEL,
-        )?;
-        rxtable::add_registration(&mut t, i as u32, &r.spec())?;
-    }
-    if !t.exact.is_empty() {
-        let nbuckets = rxtable::bucket_count(t.exact.len());
-        t.starts = KVec::from_elem(0u32, nbuckets + 1, GFP_KERNEL)?;
-        let kept = rxtable::build_index(&mut t.exact, &mut t.starts);
-        glue::kvec_truncate(&mut t.exact, kept);
-    }
-    Ok(KBox::new(t, GFP_KERNEL)?)
-}
-
-/// Publishes `table` and retires the old one. Caller holds `WRITERS`.
-fn publish(table: KBox<RxTable>) {
-    let old = RX.replace(KBox::into_raw(table));
-    if !old.is_null() {
-        // SAFETY: `old` was published by us and is now unreachable for new
-        // readers; free_table runs after the current readers are done.
-        unsafe { bindings::call_rcu(core::ptr::addr_of_mut!((*old).rcu), Some(free_table)) };
-    }
-}
+/// The receive table (RCU readers in softirq, `rcan_rx_mutex` for
+/// writers).
+static TABLE: RxTable<Target> = RxTable::new(rx_mutex);
 
 /// Converts the C filters of a spec.
 fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<KVec<Filter>> {
@@ -300,7 +162,7 @@ fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<KVec<Filter>> 
 }
 
 /// See [`rcan_api::rcan_rx_set`]. Process context; sleeps (allocates,
-/// takes `WRITERS`).
+/// takes the table's mutex, then `WRITERS` to tell the drivers).
 fn rx_set(
     func: RxFn,
     owner: *mut ffi::c_void,
@@ -308,8 +170,7 @@ fn rx_set(
     cookie: u32,
     spec: Option<&RxSpec>,
 ) -> Result {
-    // Allocate before locking.
-    let new = match spec {
+    let changed = match spec {
         Some(spec) => {
             let filters = if spec.nfilters == 0 || spec.filters.is_null() {
                 &[][..]
@@ -320,106 +181,32 @@ fn rx_set(
             };
             let mut err_mask = spec.err_mask & rxtable::CAN_ERR_MASK;
             let filters = filters_of(filters, &mut err_mask)?;
-            if filters.is_empty() && err_mask == 0 {
-                None
-            } else {
-                Some(KBox::new(
-                    Record {
-                        // SAFETY: an all-zero callback_head is what
-                        // call_rcu expects.
-                        rcu: unsafe { core::mem::zeroed() },
-                        owner,
-                        is_sock,
-                        func,
-                        cookie,
-                        ifindex: spec.ifindex,
-                        join: spec.join,
-                        err_mask,
-                        filters,
-                        slot: 0,
-                    },
-                    GFP_KERNEL,
-                )?)
+            let s = Spec {
+                ifindex: spec.ifindex,
+                filters: &filters,
+                join: spec.join,
+                err_mask,
+                cookie,
+            };
+            if is_sock {
+                // SAFETY: the caller's `owner` is a live sock; the Target
+                // keeps this reference until it is dropped.
+                unsafe { bindings::rcan_sock_hold(owner.cast()) };
             }
+            let t = Target {
+                func,
+                owner,
+                is_sock,
+            };
+            TABLE.set(owner as usize, Some((&s, t)))?
         }
-        None => None,
+        None => TABLE.set(owner as usize, None)?,
     };
-    let removal_only = new.is_none();
-
-    let mut reg = WRITERS.lock();
-    let old = reg
-        .recs
-        .iter()
-        .position(|r| r.owner == owner && r.func as usize == func as usize)
-        .and_then(|i| glue::kvec_swap_remove(&mut reg.recs, i));
-    if old.is_none() && removal_only {
-        return Ok(());
-    }
-    let mut added = false;
-    if let Some(n) = new {
-        if let Err(e) = reg.recs.push(n, GFP_KERNEL) {
-            if let Some(o) = old {
-                // Capacity for it is there: it was just removed.
-                let _ = reg.recs.push(o, GFP_KERNEL);
-            }
-            return Err(e.into());
-        }
-        if is_sock {
-            // SAFETY: the caller's `owner` is a live sock; the record keeps
-            // this reference until free_record.
-            unsafe { bindings::rcan_sock_hold(owner.cast()) };
-        }
-        added = true;
-    }
-    match build(&reg.recs) {
-        Ok(t) => {
-            publish(t);
-            for (i, r) in reg.recs.iter_mut().enumerate() {
-                r.slot = i;
-            }
-            notify(&reg.listeners);
-        }
-        Err(e) => {
-            if added {
-                let last = reg.recs.len() - 1;
-                if let Some(n) = glue::kvec_swap_remove(&mut reg.recs, last) {
-                    // Never published: no reader can see it.
-                    if n.is_sock {
-                        // SAFETY: the reference taken above.
-                        unsafe { bindings::rcan_sock_put(n.owner.cast()) };
-                    }
-                }
-            }
-            let Some(o) = old else { return Err(e) };
-            if !removal_only {
-                let _ = reg.recs.push(o, GFP_KERNEL);
-                return Err(e);
-            }
-            // Removal must not fail: silence the receiver in the current
-            // table instead; the next rebuild leaves it out.
-            let g = RcuReadGuard::new();
-            if let Some(t) = RX.read(&g) {
-                if let Some(s) = t.rcvs.get(o.slot) {
-                    s.owner.store(core::ptr::null_mut(), Ordering::Release);
-                }
-            }
-            drop(g);
-            retire(o);
-            drop(reg);
-            if !is_sock {
-                synchronize_rcu();
-            }
-            return Ok(());
-        }
-    }
-    if let Some(o) = old {
-        retire(o);
-        drop(reg);
-        if !is_sock {
-            // A kernel receiver's data may be freed by the caller once we
-            // return: wait out every callback that may still use it.
-            synchronize_rcu();
-        }
+    notify(&changed.ifindex);
+    if changed.removed && !is_sock {
+        // A kernel receiver's data may be freed by the caller once we
+        // return: wait out every callback that may still use it.
+        synchronize_rcu();
     }
     Ok(())
 }
@@ -461,19 +248,34 @@ extern "C" fn rcan_rx_set_kernel(
     }
 }
 
-/// Tells every listening driver that the receive table changed. Process
-/// context, `WRITERS` held (so a listener being removed is not called
-/// after its removal returns).
-fn notify(listeners: &[Listener]) {
-    for l in listeners {
-        // SAFETY: a registered listener's data stays valid until
-        // rcan_rx_listen removes it, which needs `WRITERS` (held here).
-        unsafe { (l.func)(l.data) };
+/// Tells the drivers of the interfaces in `ifindexes` (0: all of them)
+/// that their wanted filters changed. Process context; takes `WRITERS` (so
+/// a listener being removed is not called after its removal returns).
+fn notify(ifindexes: &[Option<i32>]) {
+    if ifindexes.iter().all(|i| i.is_none()) {
+        return;
+    }
+    let reg = WRITERS.lock();
+    for l in reg.listeners.iter() {
+        if ifindexes
+            .iter()
+            .flatten()
+            .any(|&i| i == 0 || i == l.ifindex)
+        {
+            // SAFETY: a registered listener's data stays valid until
+            // rcan_rx_listen removes it, which needs `WRITERS` (held here).
+            unsafe { (l.func)(l.data) };
+        }
     }
 }
 
 #[no_mangle]
-extern "C" fn rcan_rx_listen(func: ListenFn, data: *mut ffi::c_void, add: bool) -> ffi::c_int {
+extern "C" fn rcan_rx_listen(
+    func: ListenFn,
+    data: *mut ffi::c_void,
+    ifindex: i32,
+    add: bool,
+) -> ffi::c_int {
     let mut reg = WRITERS.lock();
     if let Some(i) = reg
         .listeners
@@ -483,53 +285,18 @@ extern "C" fn rcan_rx_listen(func: ListenFn, data: *mut ffi::c_void, add: bool) 
         glue::kvec_swap_remove(&mut reg.listeners, i);
     }
     if add {
-        if let Err(e) = reg.listeners.push(Listener { func, data }, GFP_KERNEL) {
+        if let Err(e) = reg.listeners.push(
+            Listener {
+                func,
+                data,
+                ifindex,
+            },
+            GFP_KERNEL,
+        ) {
             return Error::from(e).to_errno();
         }
     }
     0
-}
-
-/// Collects the filters that apply to frames received on `ifindex`
-/// (registrations on it and on "all interfaces"), for drivers computing a
-/// hardware filter. Any context (RCU read side).
-fn rx_filters(ifindex: i32, out: &mut [Filter]) -> Option<usize> {
-    let g = RcuReadGuard::new();
-    let Some(t) = RX.read(&g) else {
-        return Some(0);
-    };
-    let mut n = 0;
-    let mut put = |f: Filter| -> Option<()> {
-        *out.get_mut(n)? = f;
-        n += 1;
-        Some(())
-    };
-    for e in t.exact.iter() {
-        let (ifi, can_id) = ((e.key >> 32) as u32 as i32, e.key as u32);
-        if ifi == 0 || ifi == ifindex {
-            // An exact key is a fully compared mainline filter.
-            let mask = if can_id & rcan_core::arb::CAN_EFF_FLAG != 0 {
-                rcan_core::arb::CAN_EFF_MASK
-            } else {
-                rcan_core::arb::CAN_SFF_MASK
-            } | rcan_core::arb::CAN_EFF_FLAG
-                | rcan_core::arb::CAN_RTR_FLAG;
-            put(Filter::Id {
-                id: can_id,
-                mask,
-                inv: false,
-            })?;
-        }
-    }
-    for m in t.masked.iter() {
-        if m.ifindex == 0 || m.ifindex == ifindex {
-            let first = m.first as usize;
-            for f in t.filters.get(first..first + m.count as usize)? {
-                put(*f)?;
-            }
-        }
-    }
-    Some(n)
 }
 
 #[no_mangle]
@@ -541,7 +308,7 @@ extern "C" fn rcan_rx_filters(ifindex: i32, out: *mut Filter, cap: usize) -> isi
         // contract); `Filter` is plain `Copy` data, so overwriting is fine.
         unsafe { core::slice::from_raw_parts_mut(out, cap) }
     };
-    match rx_filters(ifindex, out) {
+    match TABLE.filters(ifindex, out) {
         Some(n) => n as isize,
         None => -1,
     }
@@ -666,16 +433,10 @@ fn dispatch(skb: Skb, dev: &NetDev) -> bool {
         return false;
     };
     let g = RcuReadGuard::new();
-    let Some(t) = RX.read(&g) else {
-        skb.consume();
-        return true;
-    };
-    let mut pending: Option<&RcvSlot> = None;
-    t.view().for_each_match(dev.ifindex(), frame.can_id, |reg| {
-        if let Some(slot) = t.rcvs.get(reg as usize) {
-            if let Some(prev) = pending.replace(slot) {
-                deliver_borrowed(prev, &skb);
-            }
+    let mut pending: Option<(&Target, u32)> = None;
+    TABLE.for_each_match(&g, dev.ifindex(), frame.can_id, |t, cookie| {
+        if let Some(prev) = pending.replace((t, cookie)) {
+            deliver_borrowed(prev, &skb);
         }
     });
     match pending {
@@ -705,35 +466,26 @@ extern "C" fn rcan_rx_direct(skb: *mut bindings::sk_buff) -> ffi::c_int {
 }
 
 /// Calls a receiver with the skb borrowed. Softirq, RCU read side.
-fn deliver_borrowed(slot: &RcvSlot, skb: &Skb) {
-    let owner = slot.owner.load(Ordering::Acquire);
-    if owner.is_null() {
-        return;
-    }
-    // The slot is in the published table, so its record (and the sock
-    // reference it holds, and the receiver's module through the sock; or a
-    // kernel receiver's data, whose removal waits for a grace period) lives
-    // until after our RCU read-side section.
+fn deliver_borrowed((t, cookie): (&Target, u32), skb: &Skb) {
+    // The receiver was found in the table inside our read-side section,
+    // so it (with the sock reference it holds, and the receiver's module
+    // through the sock; or a kernel receiver's data, whose removal waits
+    // for a grace period) lives until the section ends.
     // SAFETY: live receiver (above); valid skb, borrowed (owned = false).
-    unsafe { (slot.func)(skb.as_ptr(), owner, slot.cookie, false) };
+    unsafe { (t.func)(skb.as_ptr(), t.owner, cookie, false) };
 }
 
 /// Calls the last receiver, handing it our reference when nobody else
 /// holds one. Softirq, RCU read side.
-fn deliver_last(slot: &RcvSlot, skb: Skb) {
-    let owner = slot.owner.load(Ordering::Acquire);
-    if owner.is_null() {
-        skb.consume();
-        return;
-    }
+fn deliver_last((t, cookie): (&Target, u32), skb: Skb) {
     if skb.is_shared() {
-        deliver_borrowed(slot, &skb);
+        deliver_borrowed((t, cookie), &skb);
         skb.consume();
         return;
     }
     // SAFETY: as in deliver_borrowed; the callee takes our (only)
     // reference (RxFn contract, owned = true).
-    unsafe { (slot.func)(skb.into_raw(), owner, slot.cookie, true) };
+    unsafe { (t.func)(skb.into_raw(), t.owner, cookie, true) };
 }
 
 /// The frame in `skb` if it is a well-formed classic CAN frame from a CAN
@@ -848,19 +600,10 @@ impl Drop for PfCan {
             bindings::dev_remove_pack(PACKET.get());
             bindings::sock_unregister(bindings::PF_CAN as i32);
         }
-        let old = {
-            let mut reg = WRITERS.lock();
-            // Statics are never dropped: free the (empty) registry's buffers.
-            reg.recs = KVec::new();
-            reg.listeners = KVec::new();
-            RX.replace(core::ptr::null_mut())
-        };
-        synchronize_rcu();
-        if !old.is_null() {
-            // SAFETY: unpublished and past a grace period.
-            drop(unsafe { KBox::from_raw(old) });
-        }
-        // Let pending free_table/free_record callbacks finish before our
+        TABLE.shutdown();
+        // Statics are never dropped: free the (empty) listener list.
+        WRITERS.lock().listeners = KVec::new();
+        // Let pending call_rcu callbacks of the table finish before our
         // code goes.
         rcu_barrier();
         pr_info!("PF_CAN protocol family unregistered\n");

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: GPL-2.0
 /*
- * C side of rcan_pf: the writers' mutex and the export table of the
+ * C side of rcan_pf: the writers' mutexes and the export table of the
  * functions defined in pf_can.rs (Rust cannot emit EXPORT_SYMBOL itself).
  * The prototypes are placeholders for the export table only; the real
  * signatures are in rcan_api.rs.
@@ -16,6 +16,15 @@ struct mutex *rcan_pf_mutex_ptr(void);
 struct mutex *rcan_pf_mutex_ptr(void)
 {
 	return &rcan_pf_mutex;
+}
+
+/* The receive table's writers (its own lock class). */
+static DEFINE_MUTEX(rcan_rx_mutex);
+
+struct mutex *rcan_rx_mutex_ptr(void);
+struct mutex *rcan_rx_mutex_ptr(void)
+{
+	return &rcan_rx_mutex;
 }
 
 void rcan_proto_register(void);

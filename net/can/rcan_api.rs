@@ -87,15 +87,22 @@ pub(crate) type RxFn = unsafe extern "C" fn(
     owned: bool,
 );
 
-/// Called after every change of the receive table (process context, may
-/// not sleep for long; must not call back into the registry functions).
+/// Called after every change of the filters wanted on the listener's
+/// interface (process context, under pf_can's `WRITERS` mutex: may not
+/// sleep for long; must not call back into the registry functions).
 pub(crate) type ListenFn = unsafe extern "C" fn(data: *mut ffi::c_void);
 
 extern "C" {
     /// Adds (`add`) or removes the listener (`func`, `data`), called after
-    /// every change of the receive table. Removal returns only after any
-    /// running call has finished. Process context. ENOMEM.
-    pub(crate) fn rcan_rx_listen(func: ListenFn, data: *mut ffi::c_void, add: bool) -> ffi::c_int;
+    /// every change of the filters that apply to interface `ifindex`
+    /// (registrations on it or on every interface). Removal returns only
+    /// after any running call has finished. Process context. ENOMEM.
+    pub(crate) fn rcan_rx_listen(
+        func: ListenFn,
+        data: *mut ffi::c_void,
+        ifindex: i32,
+        add: bool,
+    ) -> ffi::c_int;
     /// Copies into `out` (room for `cap`) every filter that applies to
     /// frames received on `ifindex`; returns how many, or -1 if there are
     /// more than `cap` (then a driver must not filter). Any context.
@@ -287,8 +294,8 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
 
 /// A driver whose hardware filter follows the sockets (DESIGN decision 7).
 pub(crate) trait FilterListener: crate::glue::netdev::Driver {
-    /// The receive table changed. Process context, may not sleep for long
-    /// (pf_can's writers' mutex is held).
+    /// The filters wanted on this device's interface changed. Process
+    /// context, may not sleep for long (pf_can's writers' mutex is held).
     fn filters_changed(dev: &crate::glue::netdev::Dev<Self>, priv_: &Self::Priv);
 }
 
@@ -306,6 +313,7 @@ unsafe extern "C" fn listen_trampoline<T: FilterListener>(data: *mut ffi::c_void
 /// explicitly).
 pub(crate) struct Listening<T: FilterListener> {
     dev: *mut bindings::net_device,
+    ifindex: i32,
     _t: core::marker::PhantomData<T>,
 }
 
@@ -318,14 +326,16 @@ impl<T: FilterListener> Listening<T> {
     /// Starts listening for `reg`'s device. Process context.
     pub(crate) fn new(reg: &crate::glue::netdev::Registration<T>) -> kernel::error::Result<Self> {
         let dev = reg.dev().as_ptr();
+        let ifindex = reg.dev().ifindex();
         // SAFETY: the trampoline's cookie is the registered device; the
         // registration outlives this guard (documented contract), whose
         // Drop removes the listener.
         crate::glue::to_result(unsafe {
-            rcan_rx_listen(listen_trampoline::<T>, dev.cast(), true)
+            rcan_rx_listen(listen_trampoline::<T>, dev.cast(), ifindex, true)
         })?;
         Ok(Listening {
             dev,
+            ifindex,
             _t: core::marker::PhantomData,
         })
     }
@@ -335,7 +345,7 @@ impl<T: FilterListener> Drop for Listening<T> {
     fn drop(&mut self) {
         // SAFETY: removal of the listener added in new(); returns after a
         // running call finished.
-        unsafe { rcan_rx_listen(listen_trampoline::<T>, self.dev.cast(), false) };
+        unsafe { rcan_rx_listen(listen_trampoline::<T>, self.dev.cast(), self.ifindex, false) };
     }
 }
 

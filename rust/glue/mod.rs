@@ -13,7 +13,8 @@
 //! [`skb`] (owned socket buffers), [`sock`] (socket protocols from a Rust
 //! trait), [`netdev`] (network devices from a Rust trait), [`hrtimer`]
 //! (high-resolution timers in statics), [`pci`] (PCI drivers and BARs),
-//! [`isa`] (claimed memory/port windows, interrupt autoprobe).
+//! [`isa`] (claimed memory/port windows, interrupt autoprobe), [`percpu`]
+//! (per-CPU counters), [`can`] (the CAN framework: the receive table).
 #![allow(dead_code)]
 
 #[allow(
@@ -37,11 +38,13 @@ pub(crate) mod bindings {
     pub type __kernel_ptrdiff_t = isize;
 }
 
+pub(crate) mod can;
 pub(crate) mod hrtimer;
 pub(crate) mod iomap;
 pub(crate) mod isa;
 pub(crate) mod netdev;
 pub(crate) mod pci;
+pub(crate) mod percpu;
 pub(crate) mod skb;
 pub(crate) mod sock;
 pub(crate) mod sync;

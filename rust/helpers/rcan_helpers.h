@@ -161,3 +161,9 @@ void *rcan_skb_push(struct sk_buff *skb, unsigned int len);
 void rcan_skb_set_ipv4_rx(struct sk_buff *skb, struct net_device *dev);
 unsigned long rcan_jiffies(void);
 unsigned long rcan_msecs_to_jiffies(unsigned int ms);
+
+/* per-CPU counters (the receive table's "seen" marks) */
+u64 *rcan_percpu_u64_alloc(void);
+void rcan_percpu_u64_free(u64 *p);
+u64 rcan_percpu_u64_xchg(u64 *p, u64 v);
+u64 rcan_rx_serial_next(void);

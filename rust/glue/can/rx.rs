@@ -1,0 +1,701 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The incremental receive table (mainline `af_can.c`'s receive lists):
+//! which receivers want a frame. One [`RxTable`] exists, a static of
+//! `rcan_pf`; every protocol's sockets and every in-kernel receiver are
+//! registrations in it.
+//!
+//! Layout (where each filter goes is pure logic, `rcan_core::rxtable`,
+//! host-tested against a naive model):
+//!
+//! * `buckets`: hashed filters, one [`Node`] each, in `1 << BUCKET_BITS`
+//!   RCU lists keyed by `(ifindex, mask, id & mask)`. `groups` (an
+//!   RCU-published snapshot) lists the distinct `(ifindex, mask)` pairs in
+//!   use, so a frame costs one probe per group of its interface and of
+//!   "all interfaces", not one test per socket.
+//! * `scanned`: per registration, at most one node holding its filters
+//!   that cannot be hashed (or all of them, joined), tested one by one.
+//! * `err`: per registration, at most one node with its error mask.
+//! * `by_if`: per registration with frame filters, one node hashed by
+//!   interface, for drivers computing their hardware filter.
+//!
+//! Each registration belongs to a *receiver* ([`Receiver::id`]); a
+//! receiver has at most one live registration, and replacing it links the
+//! new nodes before unlinking the old, so no frame that both want is
+//! missed. A receiver's per-CPU "seen" mark, shared by its successive
+//! registrations, makes every frame reach a receiver at most once, however
+//! many of its nodes match (mainline's raw.c keeps the same mark per
+//! socket).
+//!
+//! Concurrency:
+//!
+//! * Readers ([`RxTable::for_each_match`], [`RxTable::filters`]) take no
+//!   lock: they walk the lists inside an RCU read-side section.
+//! * Writers ([`RxTable::set`], process context) are serialised by the
+//!   table's own mutex (`writer`, a `DEFINE_MUTEX` of the owning module's C
+//!   file, so it has a lockdep class of its own). They link and unlink
+//!   nodes with release stores; unlinked registrations (with their nodes)
+//!   and replaced group snapshots are freed by `call_rcu` callbacks
+//!   (softirq), so no writer waits for a grace period.
+//! * A registration is reached from a node only while the node is
+//!   reachable or a grace period has not passed since it was unlinked; the
+//!   receiver outlives all of its registrations (freed with the last).
+
+use super::super::bindings;
+use super::super::percpu::{rx_serial_next, PerCpuU64};
+use super::super::sync::{CMutex, RcuPtr, RcuReadGuard};
+use crate::rcan_core::arb::CAN_ERR_FLAG;
+use crate::rcan_core::rxtable::{self, frame_key, Filter, Place, BUCKET_BITS};
+use core::cell::Cell;
+use core::ptr::{self, NonNull};
+use core::sync::atomic::{AtomicPtr, Ordering};
+use kernel::alloc::{flags::GFP_KERNEL, KBox, KVec};
+use kernel::error::{code, Result};
+
+const NBUCKETS: usize = 1 << BUCKET_BITS;
+/// Interface lists for [`RxTable::filters`] (a power of two).
+const IF_BUCKETS: usize = 64;
+/// Receiver map buckets of the writer side (a power of two).
+const ID_BUCKETS: usize = 1024;
+
+/// What the table's user keeps per receiver: typically the callback and
+/// its owner. Dropped when the receiver's last registration is freed: in
+/// a `call_rcu` callback (softirq) once it was published, else in the
+/// writer's process context.
+pub(crate) trait Receiver: Send + Sync + 'static {
+    /// The receiver's identity: at most one live registration per id.
+    fn id(&self) -> usize;
+}
+
+/// What a registration asks for.
+pub(crate) struct Spec<'a> {
+    /// Interface, 0 = all.
+    pub(crate) ifindex: i32,
+    /// Filters for data and remote frames (none: no such frames).
+    pub(crate) filters: &'a [Filter],
+    /// Deliver only frames that pass every filter.
+    pub(crate) join: bool,
+    /// Error classes wanted (0: no error frames).
+    pub(crate) err_mask: u32,
+    /// Handed to the receiver with every frame.
+    pub(crate) cookie: u32,
+}
+
+/// What a [`RxTable::set`] changed, for the drivers that follow the
+/// filters of their interface.
+#[derive(Clone, Copy, Default)]
+pub(crate) struct Changed {
+    /// Interfaces whose wanted filters changed (0 = all interfaces).
+    pub(crate) ifindex: [Option<i32>; 2],
+    /// A receiver was removed entirely (its last registration retired).
+    pub(crate) removed: bool,
+}
+
+/// Which list a node is on.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Hashed,
+    Scanned,
+    Err,
+    ByIf,
+}
+
+/// A list entry. Lives inside its registration's `nodes` (allocated with
+/// its final capacity before linking, so never moved while linked).
+struct Node<R: Receiver> {
+    /// Next node (RCU: readers follow it with acquire loads).
+    next: AtomicPtr<Node<R>>,
+    /// Writer side only (under `writer`): the link that points at us.
+    pprev: Cell<*const AtomicPtr<Node<R>>>,
+    kind: Kind,
+    ifindex: i32,
+    /// Hashed: group mask; Err: error mask.
+    mask: u32,
+    /// Hashed: `id & mask`.
+    value: u32,
+    reg: *const Reg<R>,
+}
+
+/// An RCU list of nodes (the kernel's `hlist` discipline: readers only
+/// follow `next`; writers, serialised, keep `pprev`).
+struct List<R: Receiver> {
+    first: AtomicPtr<Node<R>>,
+}
+
+impl<R: Receiver> List<R> {
+    const fn new() -> Self {
+        List {
+            first: AtomicPtr::new(ptr::null_mut()),
+        }
+    }
+
+    /// The nodes, for as long as the read-side section lasts.
+    fn iter<'g>(&'g self, _g: &'g RcuReadGuard) -> impl Iterator<Item = &'g Node<R>> + 'g {
+        let mut p = self.first.load(Ordering::Acquire);
+        core::iter::from_fn(move || {
+            // SAFETY: `p` was read from a link reachable in this read-side
+            // section: nodes are published with release stores after they
+            // are initialised and freed only a grace period after being
+            // unlinked, which `_g` prevents from ending.
+            let n = unsafe { p.as_ref() }?;
+            p = n.next.load(Ordering::Acquire);
+            Some(n)
+        })
+    }
+
+    /// Links `n` at the head.
+    ///
+    /// # Safety
+    ///
+    /// The caller holds the table's writer mutex; `n` is initialised, not
+    /// linked, and stays at its address until a grace period after it is
+    /// unlinked.
+    unsafe fn push(&self, n: &Node<R>) {
+        let first = self.first.load(Ordering::Relaxed);
+        n.next.store(first, Ordering::Relaxed);
+        n.pprev.set(&self.first);
+        // SAFETY: `first` is NULL or a linked node; writers are serialised
+        // (caller), so its `pprev` is ours to change.
+        if let Some(f) = unsafe { first.as_ref() } {
+            f.pprev.set(&n.next);
+        }
+        // rcu_assign_pointer: the node's fields before the link.
+        self.first
+            .store(n as *const Node<R> as *mut Node<R>, Ordering::Release);
+    }
+
+    /// Unlinks `n` (`hlist_del_rcu`); readers on it may still follow its
+    /// `next`.
+    ///
+    /// # Safety
+    ///
+    /// The caller holds the table's writer mutex and `n` is linked.
+    unsafe fn unlink(n: &Node<R>) {
+        let next = n.next.load(Ordering::Relaxed);
+        // SAFETY: `pprev` points at the live link to `n` (list head or the
+        // previous node's `next`), maintained under the writer mutex.
+        unsafe { (*n.pprev.get()).store(next, Ordering::Release) };
+        // SAFETY: `next` is NULL or a linked node (writer mutex held).
+        if let Some(x) = unsafe { next.as_ref() } {
+            x.pprev.set(n.pprev.get());
+        }
+    }
+}
+
+/// A receiver: the user's data and its per-CPU "seen" mark.
+struct Rcv<R: Receiver> {
+    data: R,
+    seen: PerCpuU64,
+}
+
+/// One registration of a receiver.
+#[repr(C)]
+struct Reg<R: Receiver> {
+    /// For call_rcu; first, so the callback finds the registration.
+    rcu: bindings::callback_head,
+    rcv: NonNull<Rcv<R>>,
+    /// Set when retired as its receiver's last registration: the RCU
+    /// callback then frees the receiver too.
+    last: Cell<bool>,
+    cookie: u32,
+    ifindex: i32,
+    /// Every frame filter, for [`RxTable::filters`].
+    filters: KVec<Filter>,
+    /// The scanned node's filters.
+    scanned: KVec<Filter>,
+    /// The scanned node's filters must all pass.
+    join: bool,
+    nodes: KVec<Node<R>>,
+}
+
+impl<R: Receiver> Reg<R> {
+    fn rcv(&self) -> &Rcv<R> {
+        // SAFETY: the receiver is freed only with (after) its last
+        // registration.
+        unsafe { self.rcv.as_ref() }
+    }
+}
+
+/// The published list of hashed groups `(ifindex, mask)`.
+#[repr(C)]
+struct Groups {
+    rcu: bindings::callback_head,
+    list: KVec<(i32, u32)>,
+}
+
+/// The writer side, under `writer`.
+struct Writer<R: Receiver> {
+    /// Receiver id -> its live registration (`ID_BUCKETS` vectors once
+    /// the first registration arrives).
+    regs: KVec<KVec<NonNull<Reg<R>>>>,
+    /// Hashed groups with their number of nodes; mirrors `groups` but for
+    /// groups whose count fell to 0 and are still published.
+    groups: KVec<(i32, u32, usize)>,
+}
+
+/// The receive table. See the module documentation.
+pub(crate) struct RxTable<R: Receiver> {
+    writer: CMutex<Writer<R>>,
+    buckets: [List<R>; NBUCKETS],
+    scanned: List<R>,
+    err: List<R>,
+    by_if: [List<R>; IF_BUCKETS],
+    groups: RcuPtr<Groups>,
+}
+
+// SAFETY: the raw pointers in `Writer` name registrations the table owns
+// (freed by the writer or its RCU callbacks); `R: Send`.
+unsafe impl<R: Receiver> Send for Writer<R> {}
+// SAFETY: shared access to nodes, registrations and receivers is read-only
+// (but for the atomic links and the per-CPU marks); `R: Sync`. Writer-only
+// cells (`pprev`, `last`) are touched under the writer mutex only.
+unsafe impl<R: Receiver> Sync for RxTable<R> {}
+// SAFETY: plain data once published; freed by an RCU callback.
+unsafe impl Send for Groups {}
+// SAFETY: read-only once published.
+unsafe impl Sync for Groups {}
+
+fn if_bucket(ifindex: i32) -> usize {
+    (ifindex as u32 as usize) & (IF_BUCKETS - 1)
+}
+
+fn id_bucket(id: usize) -> usize {
+    ((id as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> (64 - ID_BUCKETS.trailing_zeros())) as usize
+}
+
+/// `call_rcu` callback: frees a retired registration, its nodes and, if it
+/// was the last one, its receiver. Softirq context.
+unsafe extern "C" fn free_reg<R: Receiver>(head: *mut bindings::callback_head) {
+    // SAFETY: `head` is the first field of a `Reg<R>` leaked from a KBox
+    // by `retire`; its nodes were unlinked before, and the grace period
+    // since then has ended, so no reader can still reach it.
+    let reg = unsafe { KBox::from_raw(head.cast::<Reg<R>>()) };
+    if reg.last.get() {
+        // SAFETY: leaked from a KBox when the receiver was made; this was
+        // its last registration, so nothing else refers to it.
+        drop(unsafe { KBox::from_raw(reg.rcv.as_ptr()) });
+    }
+}
+
+/// `call_rcu` callback: frees a replaced group snapshot. Softirq context.
+unsafe extern "C" fn free_groups(head: *mut bindings::callback_head) {
+    // SAFETY: `head` is the first field of a `Groups` leaked from a KBox
+    // by `publish_groups`, unreachable for a grace period now.
+    drop(unsafe { KBox::from_raw(head.cast::<Groups>()) });
+}
+
+/// Hands `p` to `call_rcu`.
+///
+/// # Safety
+///
+/// `head` is the `rcu` field of an object that is unreachable for new
+/// readers and that `func` frees.
+unsafe fn defer(
+    head: *mut bindings::callback_head,
+    func: unsafe extern "C" fn(*mut bindings::callback_head),
+) {
+    // SAFETY: per the caller's contract.
+    unsafe { bindings::call_rcu(head, Some(func)) };
+}
+
+impl<R: Receiver> RxTable<R> {
+    /// An empty table whose writers are serialised by the C mutex `lock`
+    /// returns (the table's own: it must guard nothing else).
+    pub(crate) const fn new(lock: fn() -> *mut bindings::mutex) -> Self {
+        RxTable {
+            writer: CMutex::new(
+                lock,
+                Writer {
+                    regs: KVec::new(),
+                    groups: KVec::new(),
+                },
+            ),
+            buckets: [const { List::new() }; NBUCKETS],
+            scanned: List::new(),
+            err: List::new(),
+            by_if: [const { List::new() }; IF_BUCKETS],
+            groups: RcuPtr::null(),
+        }
+    }
+
+    /// Calls `f(receiver, cookie)` once for every receiver that wants the
+    /// frame `can_id` received on `ifindex`. NET_RX softirq context only
+    /// (the per-CPU marks assume one frame at a time per CPU); `f` runs
+    /// inside the read-side section of `g`.
+    pub(crate) fn for_each_match<'g>(
+        &'g self,
+        g: &'g RcuReadGuard,
+        ifindex: i32,
+        can_id: u32,
+        mut f: impl FnMut(&'g R, u32),
+    ) {
+        let serial = rx_serial_next();
+        let mut hit = |reg: *const Reg<R>| {
+            // SAFETY: a node reachable in this read-side section names a
+            // registration freed only a grace period after the node was
+            // unlinked.
+            let reg: &'g Reg<R> = unsafe { &*reg };
+            let rcv = reg.rcv();
+            if rcv.seen.xchg(serial) != serial {
+                f(&rcv.data, reg.cookie);
+            }
+        };
+        let on_if = |i: i32| i == 0 || i == ifindex;
+        if can_id & CAN_ERR_FLAG != 0 {
+            for n in self.err.iter(g) {
+                if on_if(n.ifindex) && can_id & n.mask != 0 {
+                    hit(n.reg);
+                }
+            }
+            return;
+        }
+        let key = frame_key(can_id);
+        if let Some(groups) = self.groups.read(g) {
+            for &(gi, gm) in groups.list.iter() {
+                if !on_if(gi) {
+                    continue;
+                }
+                let v = key & gm;
+                for n in self.buckets[rxtable::bucket(gi, gm, v)].iter(g) {
+                    if n.value == v && n.mask == gm && n.ifindex == gi {
+                        hit(n.reg);
+                    }
+                }
+            }
+        }
+        for n in self.scanned.iter(g) {
+            if !on_if(n.ifindex) {
+                continue;
+            }
+            // SAFETY: as in `hit`.
+            let reg = unsafe { &*n.reg };
+            let pass = if reg.join {
+                reg.scanned.iter().all(|f| f.matches(key))
+            } else {
+                reg.scanned.iter().any(|f| f.matches(key))
+            };
+            if pass {
+                hit(n.reg);
+            }
+        }
+    }
+
+    /// Copies into `out` every frame filter that applies to frames
+    /// received on `ifindex` (registrations on it and on every interface);
+    /// `None` if they do not fit. Any context.
+    pub(crate) fn filters(&self, ifindex: i32, out: &mut [Filter]) -> Option<usize> {
+        let g = RcuReadGuard::new();
+        let mut n = 0;
+        let mut scan = |bucket: &List<R>, want: i32| -> Option<()> {
+            for node in bucket.iter(&g) {
+                if node.ifindex != want {
+                    continue;
+                }
+                // SAFETY: as in `for_each_match`.
+                let reg = unsafe { &*node.reg };
+                for f in reg.filters.iter() {
+                    *out.get_mut(n)? = *f;
+                    n += 1;
+                }
+            }
+            Some(())
+        };
+        scan(&self.by_if[if_bucket(ifindex)], ifindex)?;
+        if ifindex != 0 {
+            scan(&self.by_if[if_bucket(0)], 0)?;
+        }
+        Some(n)
+    }
+
+    /// Sets the registration of receiver `id`: `new` is the spec and the
+    /// receiver's data (used only if the receiver has no registration yet;
+    /// else dropped here), `None` removes the receiver. A spec that wants
+    /// nothing (no filters, no error mask) removes it too. On error (ENOMEM)
+    /// the previous registration stays; removal never fails. Process
+    /// context; sleeps.
+    pub(crate) fn set(&self, id: usize, new: Option<(&Spec<'_>, R)>) -> Result<Changed> {
+        let new = new.filter(|(s, _)| !s.filters.is_empty() || s.err_mask != 0);
+        // Allocate before locking.
+        let mut prepared = match new {
+            Some((spec, data)) => {
+                let rcv = KBox::new(
+                    Rcv {
+                        data,
+                        seen: PerCpuU64::new()?,
+                    },
+                    GFP_KERNEL,
+                )?;
+                Some((Self::make_reg(spec)?, rcv))
+            }
+            None => None,
+        };
+        let mut w = self.writer.lock();
+        if w.regs.is_empty() {
+            for _ in 0..ID_BUCKETS {
+                w.regs.push(KVec::new(), GFP_KERNEL)?;
+            }
+        }
+        let b = id_bucket(id);
+        let old_pos = w.regs[b].iter().position(|r| {
+            // SAFETY: live registrations of the map (writer mutex held).
+            unsafe { r.as_ref() }.rcv().data.id() == id
+        });
+        let mut changed = Changed::default();
+        let Some((mut reg, spare)) = prepared.take() else {
+            // Removal.
+            let Some(i) = old_pos else {
+                return Ok(changed);
+            };
+            let old = super::super::kvec_swap_remove(&mut w.regs[b], i).ok_or(code::EINVAL)?;
+            // SAFETY: a live registration of the map.
+            let o = unsafe { old.as_ref() };
+            changed.ifindex[0] = (!o.filters.is_empty()).then_some(o.ifindex);
+            changed.removed = true;
+            self.unlink_reg(&mut *w, o);
+            self.shrink_groups(&mut *w);
+            o.last.set(true);
+            // SAFETY: unlinked above and out of the map: unreachable for
+            // new readers; free_reg frees it.
+            unsafe { defer(old.as_ptr().cast(), free_reg::<R>) };
+            return Ok(changed);
+        };
+        // The receiver: the existing one, or the one allocated above.
+        let rcv = match old_pos {
+            // SAFETY: a live registration of the map.
+            Some(i) => unsafe { w.regs[b][i].as_ref() }.rcv,
+            None => NonNull::from(&*spare),
+        };
+        reg.rcv = rcv;
+        // Room in the map before anything is linked, so nothing can fail
+        // half way.
+        if old_pos.is_none() {
+            w.regs[b].push(NonNull::dangling(), GFP_KERNEL)?;
+            let last = w.regs[b].len() - 1;
+            super::super::kvec_swap_remove(&mut w.regs[b], last);
+        }
+        self.grow_groups(&mut *w, &reg)?;
+        for n in reg.nodes.iter() {
+            // SAFETY: writer mutex held; the nodes are initialised, not
+            // linked, and stay put inside the boxed registration until
+            // free_reg.
+            unsafe { self.list_of(n).push(n) };
+        }
+        let reg = NonNull::from(KBox::leak(reg));
+        changed.ifindex[0] = {
+            // SAFETY: just leaked, owned by the map from now on.
+            let r = unsafe { reg.as_ref() };
+            (!r.filters.is_empty()).then_some(r.ifindex)
+        };
+        match old_pos {
+            Some(i) => {
+                let old = core::mem::replace(&mut w.regs[b][i], reg);
+                // SAFETY: the replaced registration, still linked.
+                let o = unsafe { old.as_ref() };
+                if !o.filters.is_empty() && Some(o.ifindex) != changed.ifindex[0] {
+                    changed.ifindex[1] = Some(o.ifindex);
+                }
+                self.unlink_reg(&mut *w, o);
+                // SAFETY: unlinked and out of the map; the receiver lives
+                // on in the new registration (`last` stays false).
+                unsafe { defer(old.as_ptr().cast(), free_reg::<R>) };
+                drop(spare);
+            }
+            None => {
+                // The room was reserved above.
+                let _ = w.regs[b].push(reg, GFP_KERNEL);
+                // The receiver now belongs to its registrations.
+                let _ = KBox::into_raw(spare);
+            }
+        }
+        self.shrink_groups(&mut *w);
+        Ok(changed)
+    }
+
+    /// Builds an unlinked registration for `spec` (receiver still unset).
+    fn make_reg(spec: &Spec<'_>) -> Result<KBox<Reg<R>>> {
+        let join = rxtable::join_scanned(spec.filters, spec.join);
+        let mut filters = KVec::with_capacity(spec.filters.len(), GFP_KERNEL)?;
+        let mut scanned = KVec::new();
+        let mut hashed = 0;
+        for f in spec.filters {
+            filters.push(*f, GFP_KERNEL)?;
+            match f.place() {
+                Place::Hashed { .. } if !join => hashed += 1,
+                _ => scanned.push(*f, GFP_KERNEL)?,
+            }
+        }
+        let count = hashed
+            + usize::from(!scanned.is_empty())
+            + usize::from(spec.err_mask != 0)
+            + usize::from(!filters.is_empty());
+        let mut reg = KBox::new(
+            Reg {
+                // SAFETY: an all-zero callback_head is what call_rcu expects.
+                rcu: unsafe { core::mem::zeroed() },
+                rcv: NonNull::dangling(),
+                last: Cell::new(false),
+                cookie: spec.cookie,
+                ifindex: spec.ifindex,
+                filters,
+                scanned,
+                join,
+                nodes: KVec::with_capacity(count, GFP_KERNEL)?,
+            },
+            GFP_KERNEL,
+        )?;
+        let regp: *const Reg<R> = &*reg;
+        let node = |kind, mask, value| Node {
+            next: AtomicPtr::new(ptr::null_mut()),
+            pprev: Cell::new(ptr::null()),
+            kind,
+            ifindex: spec.ifindex,
+            mask,
+            value,
+            reg: regp,
+        };
+        // Pushes stay within the capacity reserved above: the nodes never
+        // move.
+        if !join {
+            for f in spec.filters {
+                if let Place::Hashed { mask, value } = f.place() {
+                    reg.nodes
+                        .push(node(Kind::Hashed, mask, value), GFP_KERNEL)?;
+                }
+            }
+        }
+        if !reg.scanned.is_empty() {
+            reg.nodes.push(node(Kind::Scanned, 0, 0), GFP_KERNEL)?;
+        }
+        if spec.err_mask != 0 {
+            reg.nodes
+                .push(node(Kind::Err, spec.err_mask, 0), GFP_KERNEL)?;
+        }
+        if !reg.filters.is_empty() {
+            reg.nodes.push(node(Kind::ByIf, 0, 0), GFP_KERNEL)?;
+        }
+        Ok(reg)
+    }
+
+    /// The list a node belongs on.
+    fn list_of(&self, n: &Node<R>) -> &List<R> {
+        match n.kind {
+            Kind::Hashed => &self.buckets[rxtable::bucket(n.ifindex, n.mask, n.value)],
+            Kind::Scanned => &self.scanned,
+            Kind::Err => &self.err,
+            Kind::ByIf => &self.by_if[if_bucket(n.ifindex)],
+        }
+    }
+
+    /// Unlinks every node of `reg` and drops its group counts. Writer
+    /// mutex held (`w` is its data).
+    fn unlink_reg(&self, w: &mut Writer<R>, reg: &Reg<R>) {
+        for n in reg.nodes.iter() {
+            // SAFETY: writer mutex held (`w` is its data); `reg` is linked.
+            unsafe { List::unlink(n) };
+            if n.kind == Kind::Hashed {
+                if let Some(g) = w
+                    .groups
+                    .iter_mut()
+                    .find(|g| g.0 == n.ifindex && g.1 == n.mask)
+                {
+                    g.2 -= 1;
+                }
+            }
+        }
+    }
+
+    /// Counts `reg`'s hashed nodes in their groups, publishing a new group
+    /// snapshot first if a group is new. ENOMEM leaves the counts as they
+    /// were. Writer mutex held.
+    fn grow_groups(&self, w: &mut Writer<R>, reg: &Reg<R>) -> Result {
+        let hashed = || reg.nodes.iter().filter(|n| n.kind == Kind::Hashed);
+        let missing = |w: &Writer<R>, n: &Node<R>| {
+            !w.groups.iter().any(|g| g.0 == n.ifindex && g.1 == n.mask)
+        };
+        if hashed().any(|n| missing(w, n)) {
+            let mut grown = KVec::with_capacity(w.groups.len() + reg.nodes.len(), GFP_KERNEL)?;
+            for g in w.groups.iter() {
+                grown.push(*g, GFP_KERNEL)?;
+            }
+            for n in hashed() {
+                if !grown.iter().any(|g| g.0 == n.ifindex && g.1 == n.mask) {
+                    grown.push((n.ifindex, n.mask, 0), GFP_KERNEL)?;
+                }
+            }
+            self.publish_groups(&grown)?;
+            w.groups = grown;
+        }
+        for n in hashed() {
+            if let Some(g) = w
+                .groups
+                .iter_mut()
+                .find(|g| g.0 == n.ifindex && g.1 == n.mask)
+            {
+                g.2 += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// Drops groups without nodes from the published snapshot; on ENOMEM
+    /// they stay (a probe of an empty group costs time, not correctness).
+    /// Writer mutex held.
+    fn shrink_groups(&self, w: &mut Writer<R>) {
+        if !w.groups.iter().any(|g| g.2 == 0) {
+            return;
+        }
+        let Ok(mut kept) = KVec::with_capacity(w.groups.len(), GFP_KERNEL) else {
+            return;
+        };
+        for g in w.groups.iter().filter(|g| g.2 > 0) {
+            // Within capacity.
+            let _ = kept.push(*g, GFP_KERNEL);
+        }
+        if self.publish_groups(&kept).is_ok() {
+            w.groups = kept;
+        }
+    }
+
+    /// Publishes a snapshot of `groups` and retires the old one. Writer
+    /// mutex held.
+    fn publish_groups(&self, groups: &[(i32, u32, usize)]) -> Result {
+        let mut list = KVec::with_capacity(groups.len(), GFP_KERNEL)?;
+        for g in groups {
+            list.push((g.0, g.1), GFP_KERNEL)?;
+        }
+        let snap = KBox::new(
+            Groups {
+                // SAFETY: an all-zero callback_head is what call_rcu expects.
+                rcu: unsafe { core::mem::zeroed() },
+                list,
+            },
+            GFP_KERNEL,
+        )?;
+        let old = self.groups.replace(KBox::into_raw(snap));
+        if !old.is_null() {
+            // SAFETY: replaced above, so unreachable for new readers;
+            // free_groups frees it.
+            unsafe { defer(old.cast(), free_groups) };
+        }
+        Ok(())
+    }
+
+    /// Module exit, once every receiver is removed: frees the writer's
+    /// bookkeeping and the group snapshot. Process context; sleeps. The
+    /// caller runs `rcu_barrier` afterwards.
+    pub(crate) fn shutdown(&self) {
+        let old = {
+            let mut w = self.writer.lock();
+            if w.regs.iter().any(|b| !b.is_empty()) {
+                kernel::pr_warn!("receive table not empty at exit: registrations leaked\n");
+            }
+            w.regs = KVec::new();
+            w.groups = KVec::new();
+            self.groups.replace(ptr::null_mut())
+        };
+        if !old.is_null() {
+            // SAFETY: unpublished above; free_groups frees it.
+            unsafe { defer(old.cast(), free_groups) };
+        }
+    }
+}
