@@ -110,8 +110,11 @@ pub(crate) struct ChipState<R: Regs> {
     pub(crate) chip: Chip<R>,
     /// The frame in the TX buffer, kept for the echo.
     echo: Option<Skb>,
-    /// The acceptance filter programmed (or to program at open).
+    /// The acceptance filter programmed (or to program at open, or once
+    /// the TX buffer is free: `filter_pending`).
     filter: HwFilter,
+    /// `filter` differs from what the chip has.
+    filter_pending: bool,
     running: bool,
     /// Automatic restarts after bus-off.
     restarts: u32,
@@ -135,6 +138,7 @@ impl<R: Regs + Send + 'static> Sja1000Priv<R> {
                 chip,
                 echo: None,
                 filter: HwFilter::OPEN,
+                filter_pending: false,
                 running: false,
                 restarts: 0,
             })?,
@@ -201,18 +205,42 @@ fn wanted_filter(dev: &NetDev) -> HwFilter {
 }
 
 /// Reprograms the hardware filter if it changed. Any context; takes the
-/// chip lock.
+/// chip lock. Frames already accepted are handed up first; while a frame
+/// waits in the TX buffer (a reset would abort it) the change is left to
+/// the transmit-completion interrupt.
 fn refilter<R: Regs + Send + 'static>(dev: &NetDev, p: &Sja1000Priv<R>) {
     let f = wanted_filter(dev);
     let mut st = p.chip.lock();
-    if st.filter == f {
+    if st.filter == f && !st.filter_pending {
         return;
     }
     st.filter = f;
-    if st.running {
-        if st.chip.set_filter(&f, true).is_err() {
-            pr_warn!("{}: cannot reprogram the acceptance filter\n", dev.name());
-        }
+    st.filter_pending = true;
+    apply_pending_filter(dev, &mut st);
+}
+
+/// Programs `st.filter` if a change is pending and the TX buffer is free.
+/// Chip lock held (any context).
+fn apply_pending_filter<R: Regs>(dev: &NetDev, st: &mut ChipState<R>) {
+    if !st.filter_pending || st.echo.is_some() {
+        return;
+    }
+    st.filter_pending = false;
+    if !st.running {
+        // Programmed at the next open.
+        return;
+    }
+    let f = st.filter;
+    if st
+        .chip
+        .set_filter(&f, true, |ev| {
+            if let Event::Rx(fr) = ev {
+                rx_frame(dev, &fr);
+            }
+        })
+        .is_err()
+    {
+        pr_warn!("{}: cannot reprogram the acceptance filter\n", dev.name());
     }
 }
 
@@ -320,6 +348,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         let started = {
             let mut st = p.chip.lock();
             st.filter = f;
+            st.filter_pending = false;
             let ok = st.chip.init(&f).and_then(|()| st.chip.start(&f)).is_ok();
             st.running = ok;
             ok
@@ -384,6 +413,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             chip,
             echo,
             filter,
+            filter_pending,
             running,
             restarts,
         } = &mut *st;
@@ -432,7 +462,19 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
                 dev.stats_err(Stat::TxErrors);
             }
             let f = *filter;
-            if chip.start(&f).is_ok() {
+            let restarted = if *filter_pending {
+                // A filter change waited for the TX buffer: program it
+                // with the restart.
+                *filter_pending = false;
+                chip.set_filter(&f, true, |ev| {
+                    if let Event::Rx(fr) = ev {
+                        rx_frame(dev, &fr);
+                    }
+                })
+            } else {
+                chip.start(&f)
+            };
+            if restarted.is_ok() {
                 *restarts += 1;
                 rx_frame(dev, &restarted_frame());
             } else {
@@ -443,6 +485,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         // The board's acknowledgement (PITA on PCAN-PCI) comes after the
         // chip's causes are cleared, or the line would fire again at once.
         let board = chip.regs.irq_done();
+        // A filter change that waited for the TX buffer.
+        apply_pending_filter(dev, &mut st);
         handled || board
     }
 }

@@ -366,11 +366,23 @@ impl<R: Regs> Chip<R> {
         self.regs.write(reg::MOD, mode::RM | afm);
     }
 
-    /// Reprograms the acceptance filter of a running chip: reset mode,
-    /// filter, back to operating mode (a frame arriving in between is
-    /// lost, as on any SJA1000 filter change). `running` says whether to
-    /// restart.
-    pub fn set_filter(&mut self, filter: &HwFilter, running: bool) -> Result<(), Sja1000Error> {
+    /// Reprograms the acceptance filter: reset mode, filter, and with
+    /// `running` back to operating mode. Frames the chip has already
+    /// accepted are read out of the receive FIFO first and reported as
+    /// [`Event::Rx`] through `ev` (a reset empties the FIFO on a real
+    /// chip); only a frame arriving during the few register writes in
+    /// reset mode is missed, as on any SJA1000 filter change. Entering
+    /// reset mode aborts a transmission in progress: the caller changes
+    /// the filter only while the TX buffer is free.
+    pub fn set_filter(
+        &mut self,
+        filter: &HwFilter,
+        running: bool,
+        mut ev: impl FnMut(Event),
+    ) -> Result<(), Sja1000Error> {
+        if running {
+            self.drain_rx(&mut ev);
+        }
         self.enter_reset()?;
         self.write_filter(filter);
         if running {

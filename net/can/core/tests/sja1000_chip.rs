@@ -176,9 +176,38 @@ fn hardware_filter_keeps_unwanted_frames_out() {
     assert!(!c.regs.deliver(&frame(0x300, &[])));
     assert!(!c.regs.deliver(&frame(0x101, &[2])));
     // Reprogramming on a running chip.
-    c.set_filter(&HwFilter::OPEN, true).unwrap();
+    let mut drained = Vec::new();
+    c.set_filter(&HwFilter::OPEN, true, |e| drained.push(e))
+        .unwrap();
     assert_eq!(c.regs.mode & mode::RM, 0);
     assert!(c.regs.deliver(&frame(0x300, &[])));
+    // The two frames accepted before the change were read out first.
+    assert_eq!(
+        drained,
+        vec![Event::Rx(frame(0x100, &[1])), Event::Rx(frame(0x200, &[]))]
+    );
+}
+
+#[test]
+fn filter_change_loses_no_accepted_frame() {
+    let mut c = running(&HwFilter::OPEN);
+    for i in 0..4u32 {
+        assert!(c.regs.deliver(&frame(0x10 + i, &[i as u8])));
+    }
+    let mut got = Vec::new();
+    c.set_filter(&HwFilter::OPEN, true, |e| got.push(e))
+        .unwrap();
+    // Whatever the irq handler would read next is there too, in order.
+    assert!(c.regs.deliver(&frame(0x20, &[])));
+    got.extend(events(&mut c));
+    let ids: Vec<u32> = got
+        .iter()
+        .filter_map(|e| match e {
+            Event::Rx(f) => Some(f.can_id),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(ids, vec![0x10, 0x11, 0x12, 0x13, 0x20]);
 }
 
 #[test]
