@@ -76,6 +76,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         timesvc::TESTS,
         dsor::TESTS,
         sja1000::TESTS,
+        capture::SJA1000_TESTS,
         i82527::TESTS,
     ]
     .into_iter()
