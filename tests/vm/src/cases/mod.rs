@@ -6,6 +6,7 @@ mod capture;
 mod dsor;
 mod errors;
 mod filter;
+mod gateway;
 mod i82527;
 mod lifecycle;
 mod loopdrv;
@@ -72,6 +73,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         raw_efault::TESTS,
         canutils::TESTS,
         capture::TESTS,
+        gateway::TESTS,
         mixed::TESTS,
         timesvc::TESTS,
         dsor::TESTS,
