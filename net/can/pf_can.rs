@@ -7,7 +7,10 @@
 //!   on that protocol's module while its `create` runs.
 //! * Receives every ETH_P_CAN frame (packet_type handler, NET_RX softirq)
 //!   and dispatches it to the receivers whose filters match, through one
-//!   receive table shared by every protocol (`rcan_core::rxtable`).
+//!   receive table shared by every protocol (`rcan_core::rxtable`). This is
+//!   the only way in: drivers hand up bus frames and echoes alike through
+//!   the network core (`netif_rx` or NAPI), so receive callbacks always run
+//!   in NET_RX softirq, with no driver lock held, and may transmit.
 //! * Sends frames for the protocols (`rcan_send`, mainline `can_send`),
 //!   looping them back to local receivers when the device cannot echo.
 //!
