@@ -14,8 +14,10 @@
 //! * System calls (process context) take RTNL, then the socket lock (the
 //!   order mainline raw.c uses), then pf_can's writers' mutex inside
 //!   `rcan_rx_set`.
-//! * `can_rx` runs in NET_RX softirq under RCU; it only clones (or takes
-//!   over) the skb and queues it on the socket (receive-queue spinlock).
+//! * `can_rx` runs in NET_RX softirq under RCU, for bus frames and echoes
+//!   alike; it only clones (or takes over) the skb and queues it on the
+//!   socket (receive-queue spinlock). (A receive callback may transmit;
+//!   this one has no reason to.)
 //! * `MODULE.sockets` (every open socket, for the netdevice notifier) is protected
 //!   by RTNL.
 
@@ -72,9 +74,9 @@ type S = Sock<CanProtoOps>;
 /// accept our skbs too.
 const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
-/// Receive callback (see `rcan_api::RxFn`): softirq, RCU read side.
-/// Every frame is delivered, the socket's own ones included (on canloop the
-/// sender sees its frames come back, thesis 5.3.5).
+/// Receive callback (see `rcan_api::RxFn`): NET_RX softirq, RCU read
+/// side. Every frame is delivered, the socket's own ones included (on
+/// canloop the sender sees its frames come back, thesis 5.3.5).
 unsafe extern "C" fn can_rx(
     skb: *mut bindings::sk_buff,
     owner: *mut ffi::c_void,
@@ -256,8 +258,16 @@ impl glue::sock::Proto for CanProtoOps {
         let frame = CanFrame::from_bytes(bytes);
         let dlc = frame.dlc();
         let n = dlc.min(len);
-        // The data field sits at offset 8 of struct can_frame.
-        msg.copy_from_skb(&skb, 8, n)?;
+        if frame.can_id & rcan_core::arb::CAN_RTR_FLAG != 0 {
+            // A remote frame has no data field: whatever bytes its sender
+            // left in the can_frame (CAN_RAW passes them through, as on
+            // mainline), its DLC bytes read as zeros here
+            // (canproto-can.rst). The skb may be shared: not written.
+            msg.copy_to_user(&[0u8; MAX_DLC][..n])?;
+        } else {
+            // The data field sits at offset 8 of struct can_frame.
+            msg.copy_from_skb(&skb, 8, n)?;
+        }
         if n < dlc {
             msg.add_flags(bindings::MSG_TRUNC);
         }

@@ -7,7 +7,10 @@
 //!   on that protocol's module while its `create` runs.
 //! * Receives every ETH_P_CAN frame (packet_type handler, NET_RX softirq)
 //!   and dispatches it to the receivers whose filters match, through one
-//!   receive table shared by every protocol (`rcan_core::rxtable`).
+//!   receive table shared by every protocol (`rcan_core::rxtable`). This is
+//!   the only way in: drivers hand up bus frames and echoes alike through
+//!   the network core (`netif_rx` or NAPI), so receive callbacks always run
+//!   in NET_RX softirq, with no driver lock held, and may transmit.
 //! * Sends frames for the protocols (`rcan_send`, mainline `can_send`),
 //!   looping them back to local receivers when the device cannot echo.
 //!
@@ -425,8 +428,8 @@ unsafe extern "C" fn can_rcv(
 }
 
 /// Hands a received frame to every receiver that wants it (see
-/// `can_rcv`). BH disabled (NET_RX softirq, or a driver's transmit path for
-/// `rcan_rx_direct`). Returns false if the frame was malformed (dropped).
+/// `can_rcv`). NET_RX softirq. Returns false if the frame was malformed
+/// (dropped).
 fn dispatch(skb: Skb, dev: &NetDev) -> bool {
     let Some(frame) = valid_frame(&skb, dev) else {
         drop(skb); // counted as a drop
@@ -444,25 +447,6 @@ fn dispatch(skb: Skb, dev: &NetDev) -> bool {
         None => skb.consume(),
     }
     true
-}
-
-#[no_mangle]
-extern "C" fn rcan_rx_direct(skb: *mut bindings::sk_buff) -> ffi::c_int {
-    // SAFETY: the caller gives us its reference (rcan_api contract).
-    let Some(mut skb) = (unsafe { Skb::from_raw(skb) }) else {
-        return EINVAL.to_errno();
-    };
-    // SAFETY: the caller is the transmit path of skb->dev, which holds
-    // the device for the call.
-    let Some(dev) = (unsafe { skb.dev() }) else {
-        return ENODEV.to_errno();
-    };
-    skb.stamp_if_unset();
-    if dispatch(skb, dev) {
-        0
-    } else {
-        EINVAL.to_errno()
-    }
 }
 
 /// Calls a receiver with the skb borrowed. Softirq, RCU read side.
@@ -516,16 +500,14 @@ fn send(mut skb: Skb, dev: &NetDev, loopback: bool) -> Result {
     if !dev.is_up() {
         return Err(glue::neterr::ENETDOWN());
     }
-    let pkt_type = if loopback {
-        bindings::PACKET_LOOPBACK
-    } else {
-        bindings::PACKET_HOST
-    };
-    skb.set_can(dev, pkt_type as u8);
+    skb.set_can_tx(dev, loopback);
     // A device without IFF_ECHO cannot loop the frame back itself: local
-    // receivers get a copy that still names the sending socket.
+    // receivers get a copy that still names the sending socket, marked as
+    // mainline's can_send marks it (PACKET_BROADCAST), through netif_rx.
     let echo = if loopback && !dev.has_echo() {
-        Some(skb.clone_with_owner().ok_or(ENOMEM)?)
+        let mut e = skb.clone_with_owner().ok_or(ENOMEM)?;
+        e.set_can_rx(dev);
+        Some(e)
     } else {
         None
     };

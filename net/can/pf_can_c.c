@@ -34,7 +34,6 @@ void rcan_send(void);
 void rcan_rx_set_kernel(void);
 void rcan_rx_listen(void);
 void rcan_rx_filters(void);
-void rcan_rx_direct(void);
 
 EXPORT_SYMBOL_GPL(rcan_proto_register);
 EXPORT_SYMBOL_GPL(rcan_proto_unregister);
@@ -43,4 +42,3 @@ EXPORT_SYMBOL_GPL(rcan_send);
 EXPORT_SYMBOL_GPL(rcan_rx_set_kernel);
 EXPORT_SYMBOL_GPL(rcan_rx_listen);
 EXPORT_SYMBOL_GPL(rcan_rx_filters);
-EXPORT_SYMBOL_GPL(rcan_rx_direct);

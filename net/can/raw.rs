@@ -22,7 +22,9 @@
 //!   the order of mainline raw.c; RTNL keeps the device from vanishing
 //!   between the check and the registration, and serialises with the
 //!   netdevice notifier.
-//! * `raw_rx`, the receive callback, runs in NET_RX softirq under RCU. It
+//! * `raw_rx`, the receive callback, runs in NET_RX softirq under RCU, for
+//!   bus frames and echoes alike (every frame comes up through the network
+//!   core; a receive callback may transmit, this one only queues). It
 //!   reads only its arguments (the socket's receive options travel in the
 //!   registration's `cookie`), never the socket lock.
 //! * `MODULE.sockets`, every open socket (for the notifier), is protected by

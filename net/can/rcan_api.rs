@@ -70,16 +70,22 @@ pub(crate) struct RxSpec {
     pub(crate) nfilters: usize,
 }
 
-/// Receive callback. NET_RX softirq context, under `rcu_read_lock`; must
-/// not sleep. Called at most once per frame and receiver.
+/// Receive callback. NET_RX softirq context (pf_can's ETH_P_CAN packet
+/// handler: every frame, bus frames and echoes alike, comes up through
+/// the network core's receive path), under `rcu_read_lock`; must not
+/// sleep. It may transmit, on any device including the receiving one
+/// ([`rcan_send`], e.g. a gateway or a protocol's acknowledgement): no
+/// device lock is held. Called at most once per frame and receiver.
 ///
 /// `skb` is the received frame (`struct can_frame`, `skb->dev` the
-/// receiving device, `skb->sk` the sending socket for locally sent frames).
+/// receiving device, `skb->pkt_type` PACKET_BROADCAST, `skb->sk` the
+/// sending socket for an echo of a frame a local socket sent, NULL for
+/// frames from the bus and for frames the kernel sent without a socket).
 /// With `owned` false it is borrowed: clone it to keep it. With `owned`
 /// true the callee owns the reference and must consume or free it (it is
-/// then the last receiver, and the skb is not shared). `sk` and `cookie`
-/// `owner` and `cookie` are what the receiver registered: its
-/// `struct sock` ([`rcan_rx_set`]) or its data ([`rcan_rx_set_kernel`]).
+/// then the last receiver, and the skb is not shared). `owner` and
+/// `cookie` are what the receiver registered: its `struct sock`
+/// ([`rcan_rx_set`]) or its data ([`rcan_rx_set_kernel`]).
 pub(crate) type RxFn = unsafe extern "C" fn(
     skb: *mut bindings::sk_buff,
     owner: *mut ffi::c_void,
@@ -111,14 +117,6 @@ extern "C" {
         out: *mut crate::rcan_core::rxtable::Filter,
         cap: usize,
     ) -> isize;
-    /// Delivers a frame to the receivers directly, without the network
-    /// core's receive path (for echoing devices with no packet tap: the
-    /// backlog hop, the softirq and the protocol-handler walk are saved).
-    /// `skb->dev` is the receiving device, held by the caller; BH must be
-    /// disabled (a transmit path). Receive callbacks then run inside the
-    /// caller's transmit path, so they must not transmit synchronously on
-    /// that device (none does). Consumes `skb`.
-    pub(crate) fn rcan_rx_direct(skb: *mut bindings::sk_buff) -> ffi::c_int;
     /// Registers a protocol. Process context. EEXIST if the number is
     /// taken, EINVAL if out of range.
     pub(crate) fn rcan_proto_register(cp: *const CanProto) -> ffi::c_int;
@@ -208,7 +206,8 @@ pub(crate) fn send(
 /// A receiver inside the kernel (no socket), registered with
 /// [`rx_set_kernel`]. `rx` runs in NET_RX softirq under RCU for every
 /// matching frame, with the skb borrowed and its receiving device, both
-/// valid for the call; it must not sleep.
+/// valid for the call; it must not sleep, and may transmit (see
+/// [`RxFn`]).
 pub(crate) trait KernelRx: Sync + 'static {
     fn rx(&self, skb: &crate::glue::skb::Skb, dev: &crate::glue::netdev::NetDev);
 }
@@ -520,13 +519,3 @@ impl<T: crate::glue::sock::Proto> ProtoModule<T> {
 // SAFETY: the C structs are written only in `register` (module init) and
 // afterwards owned by the kernel's registries.
 unsafe impl<T: crate::glue::sock::Proto> Sync for ProtoModule<T> {}
-
-/// Safe wrapper of [`rcan_rx_direct`] for an echoing driver's transmit
-/// path: `skb` (with `skb->dev` set to the transmitting device, which the
-/// transmit path holds) is delivered to the receivers at once. BH is
-/// disabled in every transmit path.
-pub(crate) fn rx_direct(skb: crate::glue::skb::Skb) {
-    // SAFETY: rcan_rx_direct consumes the skb; skb->dev is the device
-    // whose transmit path we are in, held by the core for the call.
-    unsafe { rcan_rx_direct(skb.into_raw()) };
-}

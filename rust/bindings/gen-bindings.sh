@@ -24,7 +24,7 @@ tmp=$(mktemp)
 	--rust-target 1.68 --use-core --with-derive-default --ctypes-prefix ffi \
 	--no-layout-tests --no-debug '.*' --enable-function-attribute-detection \
 	--allowlist-function "$allow_fn" \
-	--allowlist-type '(net_device_flags|sock_type|netdev_priv_flags|sock|socket|sk_buff|net_device|proto|proto_ops|net_proto_family|packet_type|can_frame|can_skb_priv|notifier_block|netdev_notifier_info|msghdr|sockaddr|hrtimer|pci_dev|pci_driver|pci_device_id|callback_head|rtnl_link_stats64|ifreq)' \
+	--allowlist-type '(napi_struct|net_device_flags|sock_type|netdev_priv_flags|sock|socket|sk_buff|net_device|proto|proto_ops|net_proto_family|packet_type|can_frame|can_skb_priv|notifier_block|netdev_notifier_info|msghdr|sockaddr|hrtimer|pci_dev|pci_driver|pci_device_id|callback_head|rtnl_link_stats64|ifreq)' \
 	--allowlist-var '(AF|PF|SOCK|SOL|SO|MSG|IFF|ARPHRD|ETH_P|CAN|NETDEV|NET_RX|NET_XMIT|NETDEV_TX|PACKET|CHECKSUM|E[A-Z0-9]+|HRTIMER|CLOCK|IRQF|SIOC|NOTIFY|SOCK_RCU|RCAN|NET_NAME|CONFIG_PROVE|__GFP|___GFP)_?.*' \
 	-o "$tmp" -- $cflags -DMODULE '-DKBUILD_MODNAME="rcan"' \
 	'-DKBUILD_BASENAME="rcan"' -D__KBUILD_MODNAME=kmod_rcan)

@@ -7,6 +7,10 @@
 //! * [`Driver`] + [`Registration`]: a net_device whose ops are a Rust trait
 //!   and whose private area holds `Driver::Priv`. `Registration::drop`
 //!   unregisters (process context, takes RTNL) and frees the device.
+//! * NAPI, for a driver with `Driver::NAPI_WEIGHT` > 0: one NAPI instance
+//!   per device, added at registration, enabled from before `open` until
+//!   `stop`; [`Dev::napi_schedule`] from the interrupt, `Driver::poll` in
+//!   NET_RX softirq hands frames up through [`Napi::receive`].
 
 use super::bindings;
 use super::skb::Skb;
@@ -142,7 +146,10 @@ impl NetDev {
         unsafe { bindings::rcan_netif_stop_queue(self.as_ptr()) };
     }
 
-    /// Hands a received frame to the network stack (`netif_rx`). Any context.
+    /// Hands a received frame to the network stack (`netif_rx`): it is
+    /// queued on this CPU's backlog and reaches the protocol handlers
+    /// (pf_can's `can_rcv`, packet sockets, tc) in NET_RX softirq. Any
+    /// context.
     pub(crate) fn rx(&self, skb: Skb) {
         let _ = self;
         // SAFETY: netif_rx consumes the skb reference in every case.
@@ -263,6 +270,39 @@ pub(crate) trait Driver: Sized + 'static {
     fn irq(_dev: &Dev<Self>, _priv: &Self::Priv) -> bool {
         false
     }
+    /// NAPI weight (frames per poll); 0: the device has no NAPI instance
+    /// and `poll` is never called.
+    const NAPI_WEIGHT: u32 = 0;
+    /// NAPI poll: hands at most `budget` received frames up with
+    /// [`Napi::receive`] and returns how many; fewer than `budget` means
+    /// the driver's queue is empty (the glue then completes the poll, and
+    /// the next [`Dev::napi_schedule`] starts another). NET_RX softirq
+    /// context, interrupts enabled; never runs concurrently with itself
+    /// for one device, so frames handed up in queue order stay in order
+    /// whichever CPU polls.
+    fn poll(_dev: &Dev<Self>, _priv: &Self::Priv, _napi: &Napi, _budget: usize) -> usize {
+        0
+    }
+}
+
+/// Proof of running inside a device's NAPI poll (NET_RX softirq,
+/// interrupts enabled), handed to [`Driver::poll`]; only the glue makes
+/// one.
+pub(crate) struct Napi {
+    _private: (),
+    _not_send: PhantomData<*mut ()>,
+}
+
+impl Napi {
+    /// Hands a received frame to the protocol handlers at once
+    /// (`netif_receive_skb`: packet taps, tc ingress, pf_can's `can_rcv`),
+    /// in this NET_RX softirq. Consumes `skb`.
+    pub(crate) fn receive(&self, skb: Skb) {
+        // SAFETY: we are in a NAPI poll (only the glue makes a `Napi`, and
+        // only there): softirq context with interrupts enabled, which is
+        // what netif_receive_skb requires; it consumes the reference.
+        unsafe { bindings::rcan_netif_receive_skb(skb.into_raw()) };
+    }
 }
 
 /// A device of driver `T`, borrowed inside one of `T`'s callbacks.
@@ -319,6 +359,20 @@ impl<T: Driver> Dev<T> {
         super::to_result(ret)?;
         st.irq.store(irq, Ordering::Release);
         Ok(())
+    }
+
+    /// Schedules the device's NAPI poll (`napi_schedule`): `T::poll` runs
+    /// soon in NET_RX softirq; if it is running now, it runs once more.
+    /// Any context (hardirq, softirq, interrupts off). Does nothing for a
+    /// driver without NAPI (`T::NAPI_WEIGHT` 0) or while the device is
+    /// down (the instance is disabled then).
+    pub(crate) fn napi_schedule(&self) {
+        if T::NAPI_WEIGHT > 0 {
+            // SAFETY: the instance was added at registration (NAPI_WEIGHT
+            // > 0) and lives in the private area as long as the device;
+            // napi_schedule on a disabled instance does nothing.
+            unsafe { bindings::rcan_napi_schedule(self.state().napi.get()) };
+        }
     }
 
     /// Frees the line requested with [`Dev::request_irq`]; waits for a
@@ -380,6 +434,9 @@ pub(crate) fn capable_net_admin() -> bool {
 struct PrivBox<P> {
     /// Requested interrupt line, 0 = none.
     irq: AtomicU32,
+    /// The NAPI instance (added at registration if `Driver::NAPI_WEIGHT`
+    /// > 0; otherwise unused). Pinned: the private area never moves.
+    napi: kernel::types::Opaque<bindings::napi_struct>,
     inner: P,
 }
 
@@ -468,19 +525,60 @@ impl<T: Driver> Adapter<T> {
     unsafe extern "C" fn open(dev: *mut bindings::net_device) -> ffi::c_int {
         // SAFETY: the kernel passes a registered device of ours.
         let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
+        let napi = d.state().napi.get();
+        if T::NAPI_WEIGHT > 0 {
+            // SAFETY: added at registration; disabled (a new instance, or
+            // disabled by `stop`), RTNL held: open and stop alternate.
+            unsafe { bindings::rcan_napi_enable(napi) };
+        }
         match T::open(d, p) {
             Ok(()) => 0,
-            Err(e) => e.to_errno(),
+            Err(e) => {
+                if T::NAPI_WEIGHT > 0 {
+                    // SAFETY: enabled just above.
+                    unsafe { bindings::rcan_napi_disable(napi) };
+                }
+                e.to_errno()
+            }
         }
     }
 
     unsafe extern "C" fn stop(dev: *mut bindings::net_device) -> ffi::c_int {
         // SAFETY: as in open().
         let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
+        if T::NAPI_WEIGHT > 0 {
+            // SAFETY: enabled by a successful open (stop only follows
+            // one); waits for a running poll, after which none starts
+            // until the next open, so `T::stop` may empty the driver's
+            // receive queue.
+            unsafe { bindings::rcan_napi_disable(d.state().napi.get()) };
+        }
         match T::stop(d, p) {
             Ok(()) => 0,
             Err(e) => e.to_errno(),
         }
+    }
+
+    /// The NAPI poll of a device of `T` (NET_RX softirq).
+    unsafe extern "C" fn poll(napi: *mut bindings::napi_struct, budget: ffi::c_int) -> ffi::c_int {
+        // SAFETY: the instance was added by `register` for a device of `T`
+        // and lives in its private area; the core polls only enabled
+        // instances, i.e. between open and stop of the registered device.
+        let dev = unsafe { bindings::rcan_napi_dev(napi) };
+        // SAFETY: as above: a registered device of ours.
+        let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
+        let budget = usize::try_from(budget).unwrap_or(0);
+        let token = Napi {
+            _private: (),
+            _not_send: PhantomData,
+        };
+        let done = T::poll(d, p, &token, budget).min(budget);
+        if done < budget {
+            // SAFETY: our instance, inside its poll, which did less than
+            // its budget (so it may complete; a budget of 0 never does).
+            unsafe { bindings::rcan_napi_complete_done(napi, done as ffi::c_int) };
+        }
+        done as ffi::c_int
     }
 
     unsafe extern "C" fn start_xmit(
@@ -533,6 +631,9 @@ impl<T: Driver> Registration<T> {
             )
         };
         let dev = NonNull::new(dev).ok_or(code::ENOMEM)?;
+        // SAFETY: an all-zero napi_struct is what netif_napi_add expects
+        // (the private area of alloc_netdev is zeroed too).
+        let napi = kernel::types::Opaque::new(unsafe { core::mem::zeroed() });
         // SAFETY: the private area is sized and aligned (NETDEV_ALIGN) for
         // `PrivBox<T::Priv>`, and nothing reads it before registration.
         unsafe {
@@ -540,9 +641,26 @@ impl<T: Driver> Registration<T> {
                 .cast::<PrivBox<T::Priv>>()
                 .write(PrivBox {
                     irq: AtomicU32::new(0),
+                    napi,
                     inner: priv_,
                 })
         };
+        if T::NAPI_WEIGHT > 0 {
+            // SAFETY: the instance is in the private area, which does not
+            // move and lives until free_netdev, which deletes the instance
+            // (also on the error path below); `poll` is our trampoline for
+            // `T`.
+            unsafe {
+                bindings::rcan_napi_add(
+                    dev.as_ptr(),
+                    (*bindings::rcan_netdev_priv(dev.as_ptr()).cast::<PrivBox<T::Priv>>())
+                        .napi
+                        .get(),
+                    Some(Adapter::<T>::poll),
+                    T::NAPI_WEIGHT as ffi::c_int,
+                )
+            };
+        }
         // SAFETY: a fully set-up, unregistered device.
         let ret = unsafe { bindings::register_netdev(dev.as_ptr()) };
         if ret < 0 {

@@ -127,14 +127,48 @@ impl Skb {
         unsafe { Skb::from_raw(bindings::skb_clone(self.as_ptr(), super::GFP_ATOMIC)) }
     }
 
-    /// Marks the skb as a CAN frame leaving by / arriving on `dev`
-    /// (protocol ETH_P_CAN, headers reset, checksum unnecessary).
+    /// Marks the skb as a CAN frame leaving by `dev` (mainline `can_send`):
+    /// protocol ETH_P_CAN, headers reset, `CHECKSUM_UNNECESSARY` (built by
+    /// the CAN stack, not by a packet socket), and `PACKET_LOOPBACK` if the
+    /// sender asks for the echo ([`Skb::wants_echo`]), else `PACKET_HOST`.
     ///
     /// The caller holds a reference on `dev` for as long as the skb may use
     /// it (the transmit path holds it until dev_queue_xmit returns).
-    pub(crate) fn set_can(&mut self, dev: &super::netdev::NetDev, pkt_type: u8) {
+    pub(crate) fn set_can_tx(&mut self, dev: &super::netdev::NetDev, loopback: bool) {
         // SAFETY: valid skb we own; `dev` is a live device (NetDev invariant).
-        unsafe { bindings::rcan_skb_set_can(self.as_ptr(), dev.as_ptr(), pkt_type) };
+        unsafe { bindings::rcan_skb_set_can_tx(self.as_ptr(), dev.as_ptr(), loopback) };
+    }
+
+    /// Marks the skb as a CAN frame arriving on `dev`, as mainline marks
+    /// bus frames (`alloc_can_skb`) and echoes (`__can_get_echo_skb`,
+    /// `vcan_rx`): `PACKET_BROADCAST`, `CHECKSUM_UNNECESSARY`, protocol
+    /// ETH_P_CAN, headers reset. `skb->sk` is kept: an echo still names its
+    /// sending socket, which is how protocols tell their own frames.
+    ///
+    /// The caller is `dev`'s driver (or holds a reference on `dev`).
+    pub(crate) fn set_can_rx(&mut self, dev: &super::netdev::NetDev) {
+        // SAFETY: valid skb we own; `dev` is a live device (NetDev invariant).
+        unsafe { bindings::rcan_skb_set_can_rx(self.as_ptr(), dev.as_ptr()) };
+    }
+
+    /// For a driver's `start_xmit` (mainline `can_skb_headroom_valid`):
+    /// false if the skb has no room for `struct can_skb_priv` (drop it).
+    /// An skb written through a packet socket (`CHECKSUM_NONE`) gets the
+    /// CAN fields a CAN socket's skb has, including the echo request
+    /// (`PACKET_LOOPBACK`) on an IFF_ECHO device, so local CAN sockets see
+    /// it as on mainline. Transmit path of `dev`.
+    pub(crate) fn can_tx_prepare(&mut self, dev: &super::netdev::NetDev) -> bool {
+        // SAFETY: valid skb we own (the transmit path hands the driver its
+        // reference); the helper checks the headroom before writing it;
+        // `dev` is the transmitting device.
+        unsafe { bindings::rcan_can_skb_tx_prepare(self.as_ptr(), dev.as_ptr()) }
+    }
+
+    /// Whether the sender asked for the frame to be echoed to local
+    /// receivers (`PACKET_LOOPBACK`, set by `rcan_send` or
+    /// [`Skb::can_tx_prepare`]). For an IFF_ECHO driver's transmit path.
+    pub(crate) fn wants_echo(&self) -> bool {
+        self.pkt_type() == bindings::PACKET_LOOPBACK as u8
     }
 
     /// Appends `len` bytes copied from the user's buffers of `msg`
@@ -219,12 +253,6 @@ impl Skb {
     pub(crate) fn sk_ptr(&self) -> *mut bindings::sock {
         // SAFETY: valid skb; reading a pointer field.
         unsafe { (*self.as_ptr()).sk }
-    }
-
-    /// Sets `skb->pkt_type`.
-    pub(crate) fn set_pkt_type(&mut self, pkt_type: u8) {
-        // SAFETY: valid skb we own.
-        unsafe { bindings::rcan_skb_set_pkt_type(self.as_ptr(), pkt_type) };
     }
 
     /// The device in `skb->dev`.

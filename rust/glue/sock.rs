@@ -358,6 +358,14 @@ impl Msg {
         super::to_result(ret).map(|_| ())
     }
 
+    /// Copies `src` to the user's buffers; EFAULT on a bad pointer.
+    pub(crate) fn copy_to_user(&mut self, src: &[u8]) -> Result {
+        // SAFETY: valid msghdr; `src` is a readable kernel buffer.
+        let ret =
+            unsafe { bindings::rcan_memcpy_to_msg(self.0, src.as_ptr().cast(), src.len() as i32) };
+        super::to_result(ret).map(|_| ())
+    }
+
     /// Copies `len` bytes of `skb` from `offset` to the user's buffers.
     pub(crate) fn copy_from_skb(&mut self, skb: &Skb, offset: usize, len: usize) -> Result {
         // SAFETY: valid msghdr and skb; the kernel checks the skb bounds.

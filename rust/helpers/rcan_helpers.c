@@ -131,16 +131,59 @@ u8 rcan_skb_pkt_type(const struct sk_buff *skb)
 	return skb->pkt_type;
 }
 
-/* Marks @skb as a classic CAN frame on @dev (what every CAN driver sets). */
-void rcan_skb_set_can(struct sk_buff *skb, struct net_device *dev, u8 pkt_type)
+/* Marks @skb as a classic CAN frame leaving by @dev (mainline can_send):
+ * PACKET_LOOPBACK asks an IFF_ECHO driver for the echo, PACKET_HOST does
+ * not. CHECKSUM_UNNECESSARY tells drivers that the CAN stack built the skb
+ * (a packet socket's skb has CHECKSUM_NONE, see rcan_can_skb_tx_prepare).
+ */
+void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopback)
 {
 	skb->dev = dev;
 	skb->protocol = htons(ETH_P_CAN);
-	skb->pkt_type = pkt_type;
+	skb->pkt_type = loopback ? PACKET_LOOPBACK : PACKET_HOST;
 	skb->ip_summed = CHECKSUM_UNNECESSARY;
 	skb_reset_mac_header(skb);
 	skb_reset_network_header(skb);
 	skb_reset_transport_header(skb);
+}
+
+/* Marks @skb as a classic CAN frame arriving on @dev: a frame from the bus
+ * (mainline alloc_can_skb) or an echo (mainline __can_get_echo_skb,
+ * vcan_rx, can_send's clone). Every CAN frame is a broadcast; skb->sk is
+ * left as it is, so an echo still names its sending socket.
+ */
+void rcan_skb_set_can_rx(struct sk_buff *skb, struct net_device *dev)
+{
+	skb->dev = dev;
+	skb->protocol = htons(ETH_P_CAN);
+	skb->pkt_type = PACKET_BROADCAST;
+	skb->ip_summed = CHECKSUM_UNNECESSARY;
+	skb_reset_mac_header(skb);
+	skb_reset_network_header(skb);
+	skb_reset_transport_header(skb);
+}
+
+/* Mainline can_skb_headroom_valid (include/linux/can/skb.h) for a classic
+ * CAN frame about to be sent by @dev: false if there is no room for struct
+ * can_skb_priv. An skb written through a packet socket (CHECKSUM_NONE:
+ * af_packet sets none of the CAN fields) gets them here, including the
+ * echo request on an IFF_ECHO device, so local CAN sockets see it as
+ * mainline's do.
+ */
+bool rcan_can_skb_tx_prepare(struct sk_buff *skb, struct net_device *dev)
+{
+	if (skb_headroom(skb) < sizeof(struct can_skb_priv))
+		return false;
+	if (skb->ip_summed == CHECKSUM_NONE) {
+		can_skb_prv(skb)->ifindex = dev->ifindex;
+		can_skb_prv(skb)->skbcnt = 0;
+		skb->ip_summed = CHECKSUM_UNNECESSARY;
+		skb->pkt_type = (dev->flags & IFF_ECHO) ? PACKET_LOOPBACK : PACKET_HOST;
+		skb_reset_mac_header(skb);
+		skb_reset_network_header(skb);
+		skb_reset_transport_header(skb);
+	}
+	return true;
 }
 
 /* A clone of @skb that keeps its sending socket (mainline can_send's echo). */
@@ -156,11 +199,6 @@ struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp)
 bool rcan_skb_shared(const struct sk_buff *skb)
 {
 	return skb_shared(skb);
-}
-
-void rcan_skb_set_pkt_type(struct sk_buff *skb, u8 pkt_type)
-{
-	skb->pkt_type = pkt_type;
 }
 
 int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len)
@@ -183,6 +221,11 @@ int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len)
 {
 	return memcpy_from_msg(data, msg, len);
+}
+
+int rcan_memcpy_to_msg(struct msghdr *msg, const void *data, int len)
+{
+	return memcpy_to_msg(msg, (void *)data, len);
 }
 
 int rcan_sock_queue_rcv_skb(struct sock *sk, struct sk_buff *skb)
@@ -602,4 +645,41 @@ static DEFINE_PER_CPU(u64, rcan_rx_serial);
 u64 rcan_rx_serial_next(void)
 {
 	return this_cpu_inc_return(rcan_rx_serial);
+}
+
+/* NAPI (a driver's receive queue polled in NET_RX softirq). */
+void rcan_napi_add(struct net_device *dev, struct napi_struct *napi,
+		   int (*poll)(struct napi_struct *, int), int weight)
+{
+	netif_napi_add_weight(dev, napi, poll, weight);
+}
+
+void rcan_napi_enable(struct napi_struct *napi)
+{
+	napi_enable(napi);
+}
+
+void rcan_napi_disable(struct napi_struct *napi)
+{
+	napi_disable(napi);
+}
+
+void rcan_napi_schedule(struct napi_struct *napi)
+{
+	napi_schedule(napi);
+}
+
+void rcan_napi_complete_done(struct napi_struct *napi, int work_done)
+{
+	napi_complete_done(napi, work_done);
+}
+
+struct net_device *rcan_napi_dev(const struct napi_struct *napi)
+{
+	return napi->dev;
+}
+
+int rcan_netif_receive_skb(struct sk_buff *skb)
+{
+	return netif_receive_skb(skb);
 }

@@ -46,15 +46,17 @@ u8 rcan_skb_pkt_type(const struct sk_buff *skb);
 void rcan_skb_stamp_if_unset(struct sk_buff *skb);
 bool rcan_dev_nit_active(struct net_device *dev);
 void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev);
-void rcan_skb_set_can(struct sk_buff *skb, struct net_device *dev, u8 pkt_type);
+void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopback);
+void rcan_skb_set_can_rx(struct sk_buff *skb, struct net_device *dev);
+bool rcan_can_skb_tx_prepare(struct sk_buff *skb, struct net_device *dev);
 struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp);
 bool rcan_skb_shared(const struct sk_buff *skb);
-void rcan_skb_set_pkt_type(struct sk_buff *skb, u8 pkt_type);
 int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len);
 void rcan_skb_sock_params(struct sk_buff *skb, struct sock *sk);
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 			       struct msghdr *msg, int size);
 int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len);
+int rcan_memcpy_to_msg(struct msghdr *msg, const void *data, int len);
 int rcan_sock_queue_rcv_skb(struct sock *sk, struct sk_buff *skb);
 void rcan_sock_recv_cmsgs(struct msghdr *msg, struct sock *sk,
 			  struct sk_buff *skb);
@@ -167,3 +169,13 @@ u64 *rcan_percpu_u64_alloc(void);
 void rcan_percpu_u64_free(u64 *p);
 u64 rcan_percpu_u64_xchg(u64 *p, u64 v);
 u64 rcan_rx_serial_next(void);
+/* NAPI */
+struct napi_struct;
+void rcan_napi_add(struct net_device *dev, struct napi_struct *napi,
+		   int (*poll)(struct napi_struct *, int), int weight);
+void rcan_napi_enable(struct napi_struct *napi);
+void rcan_napi_disable(struct napi_struct *napi);
+void rcan_napi_schedule(struct napi_struct *napi);
+void rcan_napi_complete_done(struct napi_struct *napi, int work_done);
+struct net_device *rcan_napi_dev(const struct napi_struct *napi);
+int rcan_netif_receive_skb(struct sk_buff *skb);

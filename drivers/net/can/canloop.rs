@@ -5,13 +5,20 @@
 //! Registers `count` devices `can%d` (ARPHRD_CAN, IFF_NOARP, IFF_ECHO).
 //! Every frame handed to a device for transmission with a loopback request
 //! (`skb->pkt_type == PACKET_LOOPBACK`, set by `rcan_send` for thesis
-//! sockets and for CAN_RAW sockets with CAN_RAW_LOOPBACK on) is reflected
-//! into the receive path (`netif_rx`) as if it had come back from a bus,
-//! unless the `droprate` parameter makes the device drop it to simulate
-//! loss. Frames sent without a loopback request are counted as sent and
-//! freed: the device is an echoing device in mainline's sense (IFF_ECHO),
-//! like `vcan echo=1`. With `verbose`, each frame is logged with the device
-//! name.
+//! sockets and for CAN_RAW sockets with CAN_RAW_LOOPBACK on, and for
+//! frames written through a packet socket, as mainline's
+//! `can_skb_headroom_valid` does) is reflected into the receive path as if
+//! it had come back from a bus, unless the `droprate` parameter makes the
+//! device drop it to simulate loss. Frames sent without a loopback request
+//! are counted as sent and freed: the device is an echoing device in
+//! mainline's sense (IFF_ECHO), like `vcan echo=1`. With `verbose`, each
+//! frame is logged with the device name.
+//!
+//! The echo takes the path every received frame takes, as mainline
+//! `vcan_rx` does: marked `PACKET_BROADCAST` (the sending socket stays in
+//! `skb->sk`), handed to `netif_rx`, and delivered to pf_can, packet
+//! sockets and tc in NET_RX softirq, never from inside `start_xmit`. So a
+//! receiver may send on the device it receives from.
 //!
 //! Contexts: `start_xmit` runs with BH disabled under the device's TX lock
 //! (so the per-device counters need no lock of their own); `open`/`stop`
@@ -22,8 +29,6 @@ use kernel::prelude::*;
 
 #[path = "../../../rust/glue/mod.rs"]
 mod glue;
-#[path = "../../../net/can/rcan_api.rs"]
-mod rcan_api;
 #[path = "../../../net/can/rcan_core.rs"]
 mod rcan_core;
 
@@ -98,7 +103,7 @@ impl Driver for LoopDriver {
         Ok(())
     }
 
-    fn start_xmit(skb: Skb, dev: &Dev<Self>, _p: &()) -> Xmit {
+    fn start_xmit(mut skb: Skb, dev: &Dev<Self>, _p: &()) -> Xmit {
         let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
             // Not a classic CAN frame (e.g. a packet socket's garbage).
             dev.stats_tx_dropped();
@@ -106,6 +111,13 @@ impl Driver for LoopDriver {
             return Xmit::Ok;
         };
         let frame = CanFrame::from_bytes(bytes);
+        // A packet socket's frame gets its CAN fields (and its echo
+        // request) here, as on mainline.
+        if !skb.can_tx_prepare(dev) {
+            dev.stats_tx_dropped();
+            drop(skb);
+            return Xmit::Ok;
+        }
         if param(PARAM_VERBOSE) != 0 {
             pr_info!("{}: tx {}\n", dev.name(), FrameDump::new(&frame).as_str());
         }
@@ -121,24 +133,28 @@ impl Driver for LoopDriver {
         }
         let bytes = frame.dlc() as u32;
         dev.stats_tx(bytes);
-        if skb.pkt_type() != bindings::PACKET_LOOPBACK as u8 {
+        if !skb.wants_echo() {
             // Nobody asked for the echo: the frame "left on the bus".
             skb.consume();
             return Xmit::Ok;
         }
-        dev.stats_rx(bytes);
-        // Reflect: the same skb comes back as a received, locally
-        // originated frame (the sending socket stays in skb->sk so that
-        // protocols can tell their own frames).
-        let mut skb = skb;
-        skb.set_can(dev, bindings::PACKET_LOOPBACK as u8);
-        if dev.has_taps() {
-            // A packet socket wants to see the frame come in: the full
-            // receive path.
-            dev.rx(skb);
+        // Reflect: the skb comes back as a received, locally originated
+        // frame (mainline can_create_echo_skb + vcan_rx). A shared skb is
+        // not ours to re-mark: echo a clone that keeps the sender.
+        let mut skb = if skb.is_shared() {
+            let Some(c) = skb.clone_with_owner() else {
+                dev.stats_rx_dropped();
+                skb.consume();
+                return Xmit::Ok;
+            };
+            skb.consume();
+            c
         } else {
-            rcan_api::rx_direct(skb);
-        }
+            skb
+        };
+        dev.stats_rx(bytes);
+        skb.set_can_rx(dev);
+        dev.rx(skb);
         Xmit::Ok
     }
 }

@@ -18,17 +18,16 @@
 //! * [`ENGINE`] (a BH spinlock defined in `candsor_c.c`) protects all
 //!   protocol state: the reassembly table, the running transfers, the
 //!   stream table, the bound sockets and the queue of frames to send. It is
-//!   taken in process context (system calls), in the NET_RX softirq or a
-//!   CAN driver's transmit path ([`DsorRx::rx`], the receive callback), in
-//!   the `HRTIMER_SOFTIRQ` ([`Tick`]) and in `canip0`'s transmit path.
-//!   Nothing sleeps or sends frames under it; socket receive queues (their
-//!   own spinlock) are fed under it, so the order is ENGINE -> queue lock.
-//! * Frames are never sent from the receive callback: it may run inside
-//!   the sender's `dev_queue_xmit` (canloop's direct echo, see rcan_api.rs),
-//!   where sending on the same device would recurse. Every frame is queued
-//!   on `Engine::out` and sent by [`Tick`], a soft hrtimer that is kicked
-//!   to "now" whenever frames are queued and otherwise armed for the
-//!   earliest protocol deadline.
+//!   taken in process context (system calls), in the NET_RX softirq
+//!   ([`DsorRx::rx`], the receive callback), in the `HRTIMER_SOFTIRQ`
+//!   ([`Tick`]) and in `canip0`'s transmit path. Nothing sleeps or sends
+//!   frames under it; socket receive queues (their own spinlock) are fed
+//!   under it, so the order is ENGINE -> queue lock.
+//! * Frames are not sent from the receive callback (which runs in NET_RX
+//!   softirq and could send, see rcan_api.rs `RxFn`; this protocol keeps
+//!   one sender): every frame is queued on `Engine::out` and sent by
+//!   [`Tick`], a soft hrtimer that is kicked to "now" whenever frames are
+//!   queued and otherwise armed for the earliest protocol deadline.
 //! * Blocking senders sleep on [`WAITQ`] (defined in C) until their
 //!   transfer has finished; every finished transfer and every freed
 //!   channel wakes all waiters, which re-check under the lock.
@@ -778,8 +777,8 @@ fn send_frame(dev: &DevRef, f: &Frame) -> Result {
 struct DsorRx;
 
 impl KernelRx for DsorRx {
-    /// NET_RX softirq, or a CAN driver's transmit path (direct echo);
-    /// under RCU, BH disabled. Never sends: frames go to the queue.
+    /// NET_RX softirq, under RCU. Does not send (a receive callback may,
+    /// but this one leaves sending to the timer): frames go to the queue.
     fn rx(&self, skb: &Skb, dev: &NetDev) {
         let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
             return;

@@ -17,8 +17,9 @@
 //!
 //! Contexts: the receiver ([`TimeRx`]) runs in NET_RX softirq under RCU
 //! and only stores the frame's monotonic arrival time
-//! (`ticker::saw_foreign`, an atomic); the ticker's realtime timer
-//! callback owns the state machine.
+//! (`ticker::saw_foreign`, an atomic) or consumes the echo token of its
+//! own last frame (`ticker::take_own_echo`, an atomic); the ticker's
+//! realtime timer callback owns the state machine.
 
 use kernel::prelude::*;
 
@@ -30,7 +31,6 @@ mod rcan_api;
 mod rcan_core;
 mod ticker;
 
-use glue::bindings;
 use glue::netdev::NetDev;
 use glue::skb::Skb;
 use rcan_api::{KernelRx, KernelRxReg, RxFilter, RX_FILTER_CAN_ID};
@@ -51,10 +51,13 @@ struct TimeRx;
 
 impl KernelRx for TimeRx {
     /// Every standard data frame with the time identifier on `dev` counts
-    /// as another source, whatever its payload, except this service's own
-    /// frames: sent by this host's kernel (no sending socket, looped back)
-    /// with source 2. Frames from the bus, from user-space sockets and from
-    /// `rcan_time` on this host all count.
+    /// as another source, whatever its payload, except the echo of this
+    /// service's own frame: no sending socket, source 2, and the payload
+    /// of the frame it sent last, whose echo is still due (see
+    /// `ticker::take_own_echo`; an echo is marked like a bus frame, so
+    /// `pkt_type` cannot tell). Frames from the bus, from user-space
+    /// sockets and from `rcan_time` on this host all count. NET_RX
+    /// softirq.
     fn rx(&self, skb: &Skb, dev: &NetDev) {
         let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
             return;
@@ -64,10 +67,8 @@ impl KernelRx for TimeRx {
         if !is_time_id(&frame, p.vehicle) || dev.name().as_bytes() != p.dev.as_bytes() {
             return;
         }
-        let from_this_kernel =
-            skb.sk_ptr().is_null() && skb.pkt_type() == bindings::PACKET_LOOPBACK as u8;
         let ours = TimeFrame::decode(&frame, p.vehicle).is_some_and(|t| t.source == SOURCE_RTIME);
-        if from_this_kernel && ours {
+        if ours && skb.sk_ptr().is_null() && ticker::take_own_echo(&frame.data) {
             return;
         }
         ticker::saw_foreign(glue::hrtimer::ktime_get_mono_ns());

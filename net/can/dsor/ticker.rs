@@ -29,6 +29,10 @@
 //!   softirq, `fetch_max`), read by `TICK`'s callback. An atomic.
 //! * `STOPPING`: set by module exit; a callback that sees it neither sends
 //!   nor re-arms. The counters are atomics.
+//! * `OWN_ECHO`: the data bytes of the last frame this service sent, until
+//!   its echo comes back (0: none pending). Written by `TICK`'s callback
+//!   before each send, cleared by the receiver that recognises the echo
+//!   ([`take_own_echo`], NET_RX softirq). An atomic.
 //!
 //! Sending: the device is looked up by name at every send
 //! (`dev_get_by_name`), so the service survives the device going down and
@@ -75,6 +79,30 @@ static DEV: [AtomicU64; 2] = [
 const NEVER: i64 = i64::MIN;
 static LAST_FOREIGN: AtomicI64 = AtomicI64::new(NEVER);
 static STOPPING: AtomicBool = AtomicBool::new(false);
+/// See the module documentation. A time frame's data is never all zero
+/// (the source byte of `rcan_rtime`'s frames is 2), so 0 means none.
+static OWN_ECHO: AtomicU64 = AtomicU64::new(0);
+
+/// Whether `data`, the payload of a time frame with no sending socket
+/// received on the service's device, is the echo of the frame this
+/// service sent last; if so, that echo is consumed, so each frame sent
+/// excuses exactly one received frame. NET_RX softirq.
+///
+/// Echoes are marked like frames from the bus (PACKET_BROADCAST, as on
+/// mainline), so the service recognises its own by content: the frame it
+/// sent names its second and its source byte. A frame from another node
+/// that is identical (another `rcan_rtime` on the bus, same second) and
+/// arrives before our echo is taken for ours; our echo then counts as the
+/// foreign frame, so the foreign frame is still counted once. Only if our
+/// echo is lost (a frame never sent, canloop's `droprate`) can one
+/// identical foreign frame in that same second go uncounted.
+pub(crate) fn take_own_echo(data: &[u8; 8]) -> bool {
+    let v = u64::from_ne_bytes(*data);
+    v != 0
+        && OWN_ECHO
+            .compare_exchange(v, 0, Ordering::AcqRel, Ordering::Relaxed)
+            .is_ok()
+}
 
 static SENT: AtomicU64 = AtomicU64::new(0);
 static SKIPPED: AtomicU64 = AtomicU64::new(0);
@@ -289,7 +317,13 @@ fn send_frame(p: &Params, source: u8, second: i64) -> core::result::Result<(), D
     if !skb.write_headroom(&prv) || !skb.put_data(&frame.to_bytes()) {
         return Err(enomem);
     }
+    // Before sending: the echo may come back on another CPU before
+    // rcan_send returns.
+    let own = u64::from_ne_bytes(frame.data);
+    OWN_ECHO.store(own, Ordering::Release);
     rcan_api::send(skb, &dev, true).map_err(|e| {
+        // Not sent: no echo will come.
+        let _ = OWN_ECHO.compare_exchange(own, 0, Ordering::AcqRel, Ordering::Relaxed);
         if e.to_errno() == -(bindings::ENETDOWN as i32) {
             DevState::Down
         } else {

@@ -9,12 +9,25 @@
 //! interrupt handling) is the pure, host-tested `rcan_core::i82527`.
 //!
 //! Per device ([`I82527Priv`]): the chip, the echo skb of the frame in
-//! the transmit object, the programmed masks and the running flag behind
-//! an [`IrqSpinLock`]: the interrupt handler (hardirq on a real card,
-//! softirq on the simulated one), `start_xmit`, `open`/`stop`,
-//! `set_rx_mode`, the filter listener and the ioctls all touch the chip.
-//! The TX queue is stopped from `start_xmit` until the transmit object's
-//! completion: exactly one object transmits (thesis 5.3.10).
+//! the transmit object, the receive queue, the programmed masks and the
+//! running flag behind an [`IrqSpinLock`]: the interrupt handler (hardirq
+//! on a real card, softirq on the simulated one), `start_xmit`,
+//! `open`/`stop`, `set_rx_mode`, the filter listener, the NAPI poll and the
+//! ioctls all touch them. The TX queue is stopped from `start_xmit` until
+//! the transmit object's completion: exactly one object transmits (thesis
+//! 5.3.10).
+//!
+//! Receive path (mainline's `can_rx_offload` scheme): the interrupt
+//! handler only moves frames from the chip into the device's receive
+//! queue ([`RxQueue`], under the chip lock) and schedules the device's
+//! NAPI poll; the poll, in NET_RX softirq with interrupts on and no lock
+//! held, takes them out one at a time and hands each to the protocol
+//! handlers (`netif_receive_skb`: pf_can, packet sockets, tc). Echoes go
+//! through the same queue. Frames keep the order in which the chip gave
+//! them: the queue is FIFO, and a NAPI instance is polled by one CPU at a
+//! time, whichever CPU ran the "interrupt" (the simulated card's runs on
+//! varying CPUs, where `netif_rx`'s per-CPU backlogs could reorder them).
+//! No receiver ever runs under the chip lock or with interrupts off.
 //!
 //! Bus-off recovery: the chip sets INIT by itself; the interrupt handler
 //! (core) clears it at once, the chip then waits for 128 occurrences of
@@ -45,11 +58,59 @@ const TX_QUEUE_LEN: u32 = 1000;
 /// Headroom for mainline's `struct can_skb_priv` in received skbs.
 const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
+/// Frames the receive queue holds between two polls. The chip has 15
+/// message objects and one interrupt handles at most `MAX_IRQ_ROUNDS`
+/// causes; a full queue drops (counted in `rx_dropped`).
+const RXQ_LEN: usize = 128;
+
+/// NAPI weight: frames handed up per poll.
+const NAPI_WEIGHT: u32 = 64;
+
+/// The frames taken from the chip, waiting for the NAPI poll (FIFO).
+pub(crate) struct RxQueue {
+    slots: [Option<Skb>; RXQ_LEN],
+    head: usize,
+    len: usize,
+}
+
+impl RxQueue {
+    const fn new() -> Self {
+        RxQueue {
+            slots: [const { None }; RXQ_LEN],
+            head: 0,
+            len: 0,
+        }
+    }
+
+    /// Appends `skb`; gives it back if the queue is full.
+    fn push(&mut self, skb: Skb) -> core::result::Result<(), Skb> {
+        if self.len == RXQ_LEN {
+            return Err(skb);
+        }
+        self.slots[(self.head + self.len) % RXQ_LEN] = Some(skb);
+        self.len += 1;
+        Ok(())
+    }
+
+    /// Takes the oldest frame.
+    fn pop(&mut self) -> Option<Skb> {
+        if self.len == 0 {
+            return None;
+        }
+        let skb = self.slots[self.head].take();
+        self.head = (self.head + 1) % RXQ_LEN;
+        self.len -= 1;
+        skb
+    }
+}
+
 /// The chip and what goes with it, under the device's lock.
 pub(crate) struct ChipState<R: Regs> {
     pub(crate) chip: Chip<R>,
     /// The frame in the transmit object, kept for the echo.
     echo: Option<Skb>,
+    /// Frames for the NAPI poll.
+    rxq: RxQueue,
     running: bool,
 }
 
@@ -57,14 +118,8 @@ pub(crate) struct ChipState<R: Regs> {
 pub(crate) struct I82527Priv<R: Regs> {
     pub(crate) chip: IrqSpinLock<ChipState<R>>,
     /// Interrupt line; 0: the front-end calls the handler itself (the
-    /// simulated card).
+    /// simulated card, whose "interrupt" is a softirq on varying CPUs).
     irq: u32,
-    /// Hand received frames to pf_can at once (`rcan_rx_direct`) instead
-    /// of through `netif_rx`'s per-CPU backlog: for a front-end whose
-    /// "interrupt" runs in softirq context on varying CPUs (the simulated
-    /// card's hrtimer), where two backlogs could reorder frames. A real
-    /// interrupt line has one CPU (its affinity) and uses `netif_rx`.
-    direct_rx: bool,
 }
 
 /// One registered channel: its network device and the filter listener
@@ -91,7 +146,6 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
     regs: R,
     cfg: Config,
     irq: u32,
-    direct_rx: bool,
     xtal_hz: u32,
     what: core::fmt::Arguments<'_>,
 ) -> Result<Option<Channel<R>>> {
@@ -103,10 +157,10 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
         chip: IrqSpinLock::new(ChipState {
             chip,
             echo: None,
+            rxq: RxQueue::new(),
             running: false,
         })?,
         irq,
-        direct_rx,
     };
     let reg =
         crate::glue::netdev::Registration::<I82527<R>>::register(kernel::c_str!("can%d"), prv)?;
@@ -147,19 +201,18 @@ fn remask<R: Regs + Send + 'static>(dev: &NetDev, p: &I82527Priv<R>) {
     }
 }
 
-/// Hands a received skb to the stack: at once (`direct`, BH disabled, the
-/// device held by its registration) or through `netif_rx`.
-fn deliver(dev: &NetDev, skb: Skb, direct: bool) {
-    if direct {
-        rcan_api::rx_direct(skb);
-    } else {
-        dev.rx(skb);
+/// Queues `skb` for the NAPI poll; a full queue drops it. Chip lock held
+/// (interrupt handler).
+fn enqueue(dev: &NetDev, rxq: &mut RxQueue, skb: Skb) {
+    if let Err(skb) = rxq.push(skb) {
+        dev.stats_rx_dropped();
+        drop(skb);
     }
 }
 
-/// Hands a frame to the network stack. Any context (`direct`: BH
-/// disabled).
-fn rx_frame(dev: &NetDev, frame: &CanFrame, direct: bool) {
+/// Builds the skb of a frame from the bus (or an error frame) and queues
+/// it for the NAPI poll. Chip lock held (interrupt handler).
+fn rx_frame(dev: &NetDev, rxq: &mut RxQueue, frame: &CanFrame) {
     let Some(mut skb) = Skb::alloc(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, crate::glue::GFP_ATOMIC)
     else {
         dev.stats_rx_dropped();
@@ -172,11 +225,11 @@ fn rx_frame(dev: &NetDev, frame: &CanFrame, direct: bool) {
         dev.stats_rx_dropped();
         return;
     }
-    skb.set_can(dev, bindings::PACKET_HOST as u8);
+    skb.set_can_rx(dev);
     if frame.can_id & crate::rcan_core::arb::CAN_ERR_FLAG == 0 {
         dev.stats_rx(frame.dlc() as u32);
     }
-    deliver(dev, skb, direct);
+    enqueue(dev, rxq, skb);
 }
 
 /// `SIOCDEVPRIVATE`: the first device-private ioctl number.
@@ -191,6 +244,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     type Priv = I82527Priv<R>;
     const HAS_SET_RX_MODE: bool = true;
     const HAS_PRIVATE_IOCTL: bool = true;
+    const NAPI_WEIGHT: u32 = NAPI_WEIGHT;
 
     fn private_ioctl(_dev: &Dev<Self>, p: &Self::Priv, cmd: u32, data: &UserBuf) -> Result {
         match cmd {
@@ -246,25 +300,38 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
 
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         dev.stop_queue();
-        let echo = {
+        // The glue has disabled NAPI: no poll runs or starts until the
+        // next open, so what is left in the queue is freed here.
+        let (echo, rxq) = {
             let mut st = p.chip.lock();
             st.running = false;
             st.chip.stop();
-            st.echo.take()
+            (
+                st.echo.take(),
+                core::mem::replace(&mut st.rxq, RxQueue::new()),
+            )
         };
         drop(echo);
+        drop(rxq);
         dev.free_irq();
         dev.set_carrier(false);
         Ok(())
     }
 
-    fn start_xmit(skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
+    fn start_xmit(mut skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
         let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
             dev.stats_tx_dropped();
             drop(skb);
             return Xmit::Ok;
         };
         let frame = CanFrame::from_bytes(bytes);
+        // A packet socket's frame gets its CAN fields (and its echo
+        // request) here, as on mainline.
+        if !skb.can_tx_prepare(dev) {
+            dev.stats_tx_dropped();
+            drop(skb);
+            return Xmit::Ok;
+        }
         // One transmit object: no next frame until this one is done.
         dev.stop_queue();
         let mut st = p.chip.lock();
@@ -293,45 +360,72 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     }
 
     fn irq(dev: &Dev<Self>, p: &Self::Priv) -> bool {
-        let mut st = p.chip.lock();
-        let ChipState {
-            chip,
-            echo,
-            running,
-        } = &mut *st;
-        if !*running {
-            return false;
-        }
-        let direct = p.direct_rx;
-        chip.irq(MAX_IRQ_ROUNDS, |ev| {
-            match ev {
-                Event::Rx(f) => rx_frame(dev, &f, direct),
-                Event::TxDone => {
-                    if let Some(mut skb) = echo.take() {
-                        if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) {
-                            dev.stats_tx(CanFrame::from_bytes(b).dlc() as u32);
+        let (handled, queued) = {
+            let mut st = p.chip.lock();
+            let ChipState {
+                chip,
+                echo,
+                rxq,
+                running,
+            } = &mut *st;
+            if !*running {
+                return false;
+            }
+            let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| {
+                match ev {
+                    Event::Rx(f) => rx_frame(dev, rxq, &f),
+                    Event::TxDone => {
+                        if let Some(mut skb) = echo.take() {
+                            if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) {
+                                dev.stats_tx(CanFrame::from_bytes(b).dlc() as u32);
+                            }
+                            if skb.wants_echo() {
+                                skb.set_can_rx(dev);
+                                enqueue(dev, rxq, skb);
+                            } else {
+                                skb.consume();
+                            }
                         }
-                        if skb.pkt_type() == bindings::PACKET_LOOPBACK as u8 {
-                            skb.set_can(dev, bindings::PACKET_LOOPBACK as u8);
-                            deliver(dev, skb, direct);
-                        } else {
-                            skb.consume();
-                        }
+                        dev.wake_queue();
                     }
-                    dev.wake_queue();
+                    Event::TxAborted => {
+                        drop(echo.take());
+                        dev.stats_err(Stat::TxAborted);
+                        dev.wake_queue();
+                    }
+                    Event::Overrun { .. } => dev.stats_err(Stat::RxOverErrors),
+                    Event::State(_) | Event::Restarted => {}
                 }
-                Event::TxAborted => {
-                    drop(echo.take());
-                    dev.stats_err(Stat::TxAborted);
-                    dev.wake_queue();
+                if let Some(ef) = error_frame(&ev) {
+                    rx_frame(dev, rxq, &ef);
                 }
-                Event::Overrun { .. } => dev.stats_err(Stat::RxOverErrors),
-                Event::State(_) | Event::Restarted => {}
-            }
-            if let Some(ef) = error_frame(&ev) {
-                rx_frame(dev, &ef, direct);
-            }
-        })
+            });
+            (handled, rxq.len != 0)
+        };
+        // Outside the chip lock (the poll takes it).
+        if queued {
+            dev.napi_schedule();
+        }
+        handled
+    }
+
+    fn poll(
+        _dev: &Dev<Self>,
+        p: &Self::Priv,
+        napi: &crate::glue::netdev::Napi,
+        budget: usize,
+    ) -> usize {
+        let mut done = 0;
+        while done < budget {
+            // One frame per lock hold: the handlers run unlocked, with
+            // interrupts on, and may send on this device.
+            let Some(skb) = p.chip.lock().rxq.pop() else {
+                break;
+            };
+            napi.receive(skb);
+            done += 1;
+        }
+        done
     }
 }
 

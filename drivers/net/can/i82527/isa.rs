@@ -126,7 +126,6 @@ impl kernel::Module for IsaModule {
             regs,
             cfg,
             irq as u32,
-            false,
             XTAL_HZ,
             format_args!("ISA at {iomem:#x}"),
         )? {

@@ -14,11 +14,13 @@
 //! then calls the driver's interrupt handler of each card whose
 //! interrupt output is raised, and repeats until nothing moves, or re-arms
 //! itself after [`FRAMES_PER_RUN`] frames. Frames take no bus time; each
-//! frame's receivers are served before the next frame goes out. The
-//! callback may run on either CPU from one run to the next, so the driver
-//! hands received frames to pf_can directly (`rcan_rx_direct`) rather
-//! than through `netif_rx`, whose per-CPU backlogs would reorder them; a
-//! real card's interrupt has one CPU.
+//! frame is in its receivers' queues before the next frame goes out. The
+//! callback may run on either CPU from one run to the next; the driver
+//! keeps frame order all the same, because its interrupt handler only
+//! queues frames (under the chip lock, which is taken with interrupts
+//! off) and the device's NAPI poll hands them up in NET_RX softirq, one
+//! CPU at a time (see `i82527.rs`). The timer callback calls into the
+//! stack only through that poll: never with the bus or a chip lock held.
 //!
 //! Module parameter `cards` (default 2, at most [`MAX_CARDS`]).
 //!
@@ -60,10 +62,10 @@ const MAX_CARDS: usize = 8;
 /// The model's crystal (for the logged bit rate only).
 const XTAL_HZ: u32 = 16_000_000;
 /// Frames moved per timer run. The simulated bus has no bit time; a run
-/// that moved many frames would hand them all to `netif_rx` before the
-/// NET_RX softirq could take any, and overflow the backlog
-/// (`netdev_max_backlog`) that a real bus's pace never fills. After this
-/// many the timer re-arms and softirqs (NET_RX among them) run in between.
+/// that moved many frames would queue them all before the NAPI poll (NET_RX
+/// softirq) could take any, and overflow the driver's receive queue that a
+/// real bus's pace never fills. After this many the timer re-arms and
+/// softirqs (NET_RX among them) run in between.
 const FRAMES_PER_RUN: usize = 8;
 /// Delay of that re-arm, ns: about the time 8 frames take at 1 Mbit/s
 /// would be 0.5-1 ms; 20 us keeps the VM tests fast and still yields.
@@ -286,7 +288,6 @@ impl kernel::Module for SimModule {
                 regs,
                 Config::DEFAULT,
                 0,
-                true,
                 XTAL_HZ,
                 format_args!("simulated card {i}"),
             )?

@@ -20,9 +20,21 @@
 //!   frame sent or aborted (one TX buffer, thesis 5.3.6).
 //!
 //! Echo (IFF_ECHO): the sent skb is kept until transmission completes and
-//! then fed back into the receive path if its sender asked for loopback
-//! (`PACKET_LOOPBACK`), so local sockets see frames only once they are
-//! really on the bus.
+//! then fed back into the receive path (`netif_rx`) if its sender asked for
+//! loopback (`PACKET_LOOPBACK`; a frame written through a packet socket
+//! asks for it too, as on mainline), so local sockets see frames only once
+//! they are really on the bus. The echo is marked as mainline's
+//! `__can_get_echo_skb` marks it: `PACKET_BROADCAST`, the sending socket
+//! kept in `skb->sk`. Frames from the bus are `PACKET_BROADCAST` too.
+//!
+//! Hardware filter and packet sockets: the acceptance filter follows what
+//! CAN sockets want and opens fully while the device is promiscuous
+//! (`tcpdump` without `-p`). A non-promiscuous packet socket changes
+//! neither: the kernel tells a driver nothing when a packet socket binds
+//! (`dev_add_pack` has no notifier or device op), so such a socket sees
+//! what the CAN sockets' filters let in, like a non-promiscuous capture on
+//! an Ethernet card whose MAC filter passes only the host's traffic. See
+//! Documentation/networking/rcan/sja1000.rst.
 //!
 //! Bus-off recovery: the chip enters reset mode by itself; the interrupt
 //! handler restarts it at once (clearing the error counters), and the chip
@@ -258,7 +270,7 @@ fn rx_frame(dev: &NetDev, frame: &CanFrame) {
         dev.stats_rx_dropped();
         return;
     }
-    skb.set_can(dev, bindings::PACKET_HOST as u8);
+    skb.set_can_rx(dev);
     if frame.can_id & crate::rcan_core::arb::CAN_ERR_FLAG == 0 {
         dev.stats_rx(frame.dlc() as u32);
     }
@@ -377,13 +389,20 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         Ok(())
     }
 
-    fn start_xmit(skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
+    fn start_xmit(mut skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
         let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
             dev.stats_tx_dropped();
             drop(skb);
             return Xmit::Ok;
         };
         let frame = CanFrame::from_bytes(bytes);
+        // A packet socket's frame gets its CAN fields (and its echo
+        // request) here, as on mainline.
+        if !skb.can_tx_prepare(dev) {
+            dev.stats_tx_dropped();
+            drop(skb);
+            return Xmit::Ok;
+        }
         // One TX buffer: no next frame until this one is done.
         dev.stop_queue();
         let mut st = p.chip.lock();
@@ -431,8 +450,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
                         if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) {
                             dev.stats_tx(CanFrame::from_bytes(b).dlc() as u32);
                         }
-                        if skb.pkt_type() == bindings::PACKET_LOOPBACK as u8 {
-                            skb.set_can(dev, bindings::PACKET_LOOPBACK as u8);
+                        if skb.wants_echo() {
+                            skb.set_can_rx(dev);
                             dev.rx(skb);
                         } else {
                             skb.consume();

@@ -6,6 +6,7 @@ mod capture;
 mod dsor;
 mod errors;
 mod filter;
+mod gateway;
 mod i82527;
 mod lifecycle;
 mod loopdrv;
@@ -72,10 +73,12 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         raw_efault::TESTS,
         canutils::TESTS,
         capture::TESTS,
+        gateway::TESTS,
         mixed::TESTS,
         timesvc::TESTS,
         dsor::TESTS,
         sja1000::TESTS,
+        capture::SJA1000_TESTS,
         i82527::TESTS,
     ]
     .into_iter()
