@@ -56,11 +56,16 @@ tmp_src=
 signal=
 on_exit() {
 	local rc=$1 cmd=$2
+	# A second signal (make's exit hangs up the terminal) must not cut
+	# the cleanup short.
+	trap '' INT TERM HUP
 	[ -z "$tmp_src" ] || rm -rf "$tmp_src"
 	[ "$rc" = 0 ] && return
 	[ "$failed" = 0 ] || return
 	if [ -n "$signal" ]; then
-		echo "rcan: build-kernel.sh interrupted (SIG$signal)" >&"$err_fd"
+		# To the terminal: the make that reads our stdout is likely
+		# interrupted too.
+		echo "rcan: build-kernel.sh interrupted (SIG$signal)" >&2
 	else
 		echo "rcan: build-kernel.sh: '$cmd' failed (exit $rc)" >&"$err_fd"
 	fi

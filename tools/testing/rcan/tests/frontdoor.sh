@@ -181,14 +181,16 @@ touch "$work/killed/started"
 exec sleep 60
 EOF
 chmod +x "$bin/tar"
+exec 3>&2 2>/dev/null # no "Killed" job notice
 PATH="$bin:$PATH" setsid bash "$bk" --source >/dev/null 2>"$work/killed/err" &
 pgid=$!
 for _ in $(seq 100); do
 	[ -e "$work/killed/started" ] && break
 	sleep 0.1
 done
-kill -KILL -- "-$pgid" 2>/dev/null
-wait "$pgid" 2>/dev/null
+kill -KILL -- "-$pgid"
+wait "$pgid"
+exec 2>&3 3>&-
 [ -e "$work/killed/started" ] && [ ! -e "$ksrc" ]
 check "killed extraction: no source tree left" $? "$(cat "$work/killed/err")"
 out=$(timeout 30 bash "$bk" --source 2>"$work/killed/err")
