@@ -9,7 +9,20 @@
 # RCAN_KERNEL=debug selects the KASAN/lockdep/kmemleak kernel.
 
 T := tools/testing/rcan
-KDIR ?= $(shell bash $(T)/build-kernel.sh)
+
+# The kernel to build against: KDIR if given (make modules KDIR=...), else
+# the cached test kernel, built by build-kernel.sh when a recipe first needs
+# it (after `setup`), once per make run. $(shell ...) drops the exit status,
+# so the script prints its error message on stdout and a failure stops make
+# right here, with that message last, before any step runs without a kernel.
+ifeq ($(origin KDIR),undefined)
+KDIR = $(eval KDIR := $$(shell bash $(T)/build-kernel.sh --error-on-stdout))$(if \
+	$(filter-out 0,$(.SHELLSTATUS)),$(error $(or $(KDIR),rcan: $(T)/build-kernel.sh failed \
+	(exit status $(.SHELLSTATUS)))))$(KDIR)
+endif
+# What the recipes use: never empty.
+kdir = $(or $(strip $(KDIR)),$(error rcan: KDIR is empty: give the kernel build directory \
+	(make modules KDIR=...)))
 RCAN_CONFIG := CONFIG_RCAN=m CONFIG_RCAN_PF=m CONFIG_RCAN_PROTO_CAN=m CONFIG_RCAN_PROTO_RAW=m \
 	CONFIG_RCAN_LOOP=m CONFIG_RCAN_SJA1000=m CONFIG_RCAN_KVASER_PCI=m CONFIG_RCAN_ADVANTECH_PCI=m \
 	CONFIG_RCAN_SJA1000_ISA=m CONFIG_RCAN_PCAN_PCI=m CONFIG_RCAN_TSCAN1=m \
@@ -26,15 +39,15 @@ setup:
 	bash $(T)/setup.sh
 
 kernel: setup
-	@echo $(KDIR)
+	@echo $(kdir)
 
 # Regenerated on every build: the layout depends on the kernel (KDIR), and
 # the script leaves the file alone when nothing changed.
 bindings:
-	bash rust/bindings/gen-bindings.sh $(KDIR) $(BINDINGS)
+	bash rust/bindings/gen-bindings.sh $(kdir) $(BINDINGS)
 
 modules: bindings
-	$(MAKE) -C $(KDIR) M=$(CURDIR) LLVM=1 $(RCAN_CONFIG) modules
+	$(MAKE) -C $(kdir) M=$(CURDIR) LLVM=1 $(RCAN_CONFIG) modules
 
 userspace:
 	cargo build --release --workspace --bins
@@ -50,5 +63,5 @@ bench: setup modules userspace
 	bash $(T)/bench.sh $(BENCH_ARGS)
 
 clean:
-	$(MAKE) -C $(KDIR) M=$(CURDIR) clean || true
+	$(MAKE) -C $(kdir) M=$(CURDIR) clean || true
 	rm -f $(BINDINGS)

@@ -4,8 +4,15 @@
 # build directory), reusing the exact clang flags the kernel saved for its own
 # bindings, so layouts match the running kernel. Never committed.
 set -euo pipefail
+# An empty KDIR means the kernel build failed (or was not given): say so here
+# rather than fail later on an unrelated path.
+if [ $# != 2 ] || [ -z "$1" ] || [ -z "$2" ]; then
+	echo "gen-bindings: usage: gen-bindings.sh KDIR OUT, KDIR the kernel's (non-empty) build directory" >&2
+	exit 2
+fi
 kbuild=$1
 out=$2
+[ -d "$kbuild" ] || { echo "gen-bindings: kernel build directory $kbuild not found" >&2; exit 1; }
 here=$(cd "$(dirname "$0")" && pwd)
 saved="$kbuild/rust/bindings/.bindings_generated.rs.cmd"
 [ -f "$saved" ] || { echo "gen-bindings: $saved missing (kernel built without CONFIG_RUST?)" >&2; exit 1; }

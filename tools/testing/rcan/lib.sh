@@ -5,7 +5,9 @@ RCAN_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/../../.." && pwd)
 RCAN_CACHE=${RCAN_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/rcan}
 RCAN_KERNEL=${RCAN_KERNEL:-release}
 RCAN_BINDGEN_VERSION=0.73.0
-KERNEL_TARBALL=/usr/src/linux-source-6.12.tar.xz
+# Debian's linux-source-6.12; overridable for the front-door tests, which
+# extract a small tarball of their own (the default is part of the cache key).
+KERNEL_TARBALL=${KERNEL_TARBALL:-/usr/src/linux-source-6.12.tar.xz}
 
 export PATH="$HOME/.cargo/bin:$PATH"
 

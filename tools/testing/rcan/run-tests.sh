@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: GPL-2.0
-# The test command (make check, called by .ci/run): host tests, then the VM
-# suite on the release kernel, its CAN_RAW/can-utils subset against mainline
-# SocketCAN (can.ko, can-raw.ko, vcan.ko of the same kernel) in a VM boot of
-# its own, and the suite again on the debug kernel (KASAN, lockdep,
-# kmemleak), each VM run failing on any kernel report. Prints one closing
-# "N passed, M failed" line over all stages.
+# The test command (make check, called by .ci/run): host tests (cargo test,
+# then tests/frontdoor.sh: how the kernel build fails and shares its cache),
+# then the VM suite on the release kernel, its CAN_RAW/can-utils subset
+# against mainline SocketCAN (can.ko, can-raw.ko, vcan.ko of the same
+# kernel) in a VM boot of its own, and the suite again on the debug kernel
+# (KASAN, lockdep, kmemleak), each VM run failing on any kernel report.
+# Prints one closing "N passed, M failed" line over all stages.
 #
 # RCAN_SKIP_DEBUG=1 skips the debug-kernel stage (for quick local runs).
 set -uo pipefail
@@ -45,6 +46,13 @@ hp=$(grep -Eo 'test result: [a-z]+\. [0-9]+ passed' "$log_dir/host.log" | awk '{
 hf=$(grep -Eo '[0-9]+ failed;' "$log_dir/host.log" | awk '{s+=$1} END {print s+0}')
 echo "$hp passed, $hf failed" >> "$log_dir/host.log"
 tally host "$rc" "$log_dir/host.log"
+
+# The front door itself (seconds): a failed kernel build stops make with its
+# own message, runs sharing a cache wait for each other. Uses caches and a
+# small tarball of its own, never the real cache.
+echo "=== host: front door (build-kernel.sh, make modules)"
+bash "$RCAN_ROOT/tools/testing/rcan/tests/frontdoor.sh" 2>&1 | tee "$log_dir/frontdoor.log"
+tally frontdoor "${PIPESTATUS[0]}" "$log_dir/frontdoor.log"
 
 vm_stage() {
 	local variant=$1
