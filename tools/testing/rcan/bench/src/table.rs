@@ -832,15 +832,20 @@ pub fn summary(c: &Config, s: &Samples, header: &str) -> String {
     let _ = writeln!(
         o,
         "(e) {} frames of id {UNWANTED_ID:#x} per run in batches of {}, each batch closed by one sentinel frame read back; \
-         ns/frame = wall time of a batch / its {} frames (fastest tenth: undisturbed); kernel CPU from /proc/stat, all CPUs",
+         ns/frame = wall time of a batch / its {} frames (fastest tenth: undisturbed)",
         c.frames,
         c.batch,
         c.batch + 1
     );
     let _ = writeln!(
         o,
-        "(g) {} s per run, each sender thread sends {} frames to its own device and reads them back; ratios ours/mainline",
-        c.secs, c.batch
+        "(g) {} s per run, each sender thread (CPU 0: {}, CPU 1: {}) sends {} frames to its own device and reads them back; \
+         undisturbed: the {} ms window with the fastest tenth of frame counts while all threads ran",
+        c.secs,
+        c.iface,
+        c.iface2,
+        c.batch,
+        PAIR_WINDOW.as_millis()
     );
     let _ = writeln!(
         o,
