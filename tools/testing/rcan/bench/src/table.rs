@@ -20,12 +20,15 @@
 //!   through the receive path, fastest tenth of the batches and whole run,
 //!   the same with no socket bound (the baseline), and the difference.
 //!   Kernel CPU (system + irq + softirq of all CPUs, `/proc/stat`) per
-//!   frame beside it. Afterwards every one of the N sockets must be empty;
+//!   frame is printed beside it (not summarised: too coarse in USER_HZ
+//!   ticks for short runs). Afterwards every one of the N sockets must be
+//!   empty (a frame there is reported);
 //! - (f) 1,000 : 1 receivers: workload (b) of the raw part with 1 and with
 //!   1,000 exact receivers (each on its own id), cost per frame;
 //! - (g) two senders: one thread on CPU 0 sending to and receiving from
 //!   `can0`, and one on CPU 1 doing the same on `can1`, at the same time
-//!   for `--table-secs`: aggregate frames/s, against one thread alone.
+//!   for `--table-secs`: aggregate frames/s (whole run and undisturbed,
+//!   see [`pair`]), against one thread alone.
 //!
 //! Medians over the rounds, ratios ours/mainline and their range round by
 //! round, as in the raw part. Never fails on a missed target.
