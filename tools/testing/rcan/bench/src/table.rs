@@ -171,6 +171,11 @@ pub struct Config {
     pub iface: String,
     pub iface2: String,
     pub load: bool,
+    /// `can_id` of (e)'s frames; the kinds are built so that nobody wants
+    /// `UNWANTED_ID`, the default. Another id (`--table-unwanted-id`)
+    /// probes a particular hash bucket; the run reports any socket that
+    /// wants it.
+    pub unwanted_id: u32,
 }
 
 /// All samples: `(stack, round, figure, value)`, and the figures in the
@@ -266,13 +271,15 @@ pub struct UnwantedRun {
     pub counts: Counts,
 }
 
-/// Workload (e): `frames` frames of `UNWANTED_ID` from `tx`, in batches of
+/// Workload (e): `frames` frames of `id` (`UNWANTED_ID` unless
+/// `--table-unwanted-id`) from `tx`, in batches of
 /// `batch`, each batch followed by one `SENTINEL_ID` frame that is read
 /// back from `sentinel` (so the batch has been through the receive path
 /// when its time is taken).
 pub fn unwanted(
     tx: &RawSocket,
     sentinel: &RawSocket,
+    id: u32,
     frames: u64,
     batch: u64,
 ) -> io::Result<UnwantedRun> {
@@ -292,7 +299,7 @@ pub fn unwanted(
         let n = batch.min(frames - sent);
         let t = Instant::now();
         for _ in 0..n {
-            c.send_retries += send_retrying(tx, &Frame::with_words(UNWANTED_ID, seq, tag))?;
+            c.send_retries += send_retrying(tx, &Frame::with_words(id, seq, tag))?;
             seq = seq.wrapping_add(1);
         }
         let mark = Frame::with_words(SENTINEL_ID, seq, tag);
@@ -549,8 +556,9 @@ fn sockets_step(
         let tx = workload::sender(ifindex).map_err(|e| format!("sender socket: {e}"))?;
         let sentinel = workload::receiver(ifindex, SENTINEL_ID)
             .map_err(|e| format!("sentinel socket: {e}"))?;
-        unwanted(&tx, &sentinel, c.warmup, c.batch).map_err(|e| format!("warm-up: {e}"))?;
-        unwanted(&tx, &sentinel, c.frames, c.batch).map_err(|e| e.to_string())
+        unwanted(&tx, &sentinel, c.unwanted_id, c.warmup, c.batch)
+            .map_err(|e| format!("warm-up: {e}"))?;
+        unwanted(&tx, &sentinel, c.unwanted_id, c.frames, c.batch).map_err(|e| e.to_string())
     })();
     match res {
         Ok(r) => {
@@ -659,9 +667,10 @@ fn round(c: &Config, paths: &Paths, stack: Stack, r: usize, s: &mut Samples, bro
         let tx = workload::sender(ifindex).map_err(|e| format!("sender socket: {e}"))?;
         let sentinel = workload::receiver(ifindex, SENTINEL_ID)
             .map_err(|e| format!("sentinel socket: {e}"))?;
-        unwanted(&tx, &sentinel, c.warmup, c.batch).map_err(|e| format!("(e) warm-up: {e}"))?;
-        let b =
-            unwanted(&tx, &sentinel, c.frames, c.batch).map_err(|e| format!("(e) 0 rcv: {e}"))?;
+        unwanted(&tx, &sentinel, c.unwanted_id, c.warmup, c.batch)
+            .map_err(|e| format!("(e) warm-up: {e}"))?;
+        let b = unwanted(&tx, &sentinel, c.unwanted_id, c.frames, c.batch)
+            .map_err(|e| format!("(e) 0 rcv: {e}"))?;
         drop((tx, sentinel));
         println!(
             "{tag} (e) 0 rcv: {} frames: {:.0} ns/frame undisturbed, {:.0} whole run, kernel CPU {:.0} ns/frame; odd {}",
@@ -834,9 +843,10 @@ pub fn summary(c: &Config, s: &Samples, header: &str) -> String {
     );
     let _ = writeln!(
         o,
-        "(e) {} frames of id {UNWANTED_ID:#x} per run in batches of {}, each batch closed by one sentinel frame read back; \
+        "(e) {} frames of id {:#x} per run in batches of {}, each batch closed by one sentinel frame read back; \
          ns/frame = wall time of a batch / its {} frames (fastest tenth: undisturbed)",
         c.frames,
+        c.unwanted_id,
         c.batch,
         c.batch + 1
     );
