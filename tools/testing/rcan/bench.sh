@@ -5,13 +5,17 @@
 # can-raw.ko, vcan echo=1) and our stack (rcan_pf, rcan_can, rcan_raw,
 # rcan_loop), one after the other in alternating rounds, with the same
 # CAN_RAW programs -- throughput, fan-out cost, latency -- and prints the
-# figures, the ratios ours/mainline and a summary table; then (dsor part)
-# our DSOR message protocol (rcan_dsor over rcan_loop) against mainline
-# ISO-TP (can-isotp over vcan): goodput and CPU time per KiB. Never fails
-# on a missed target. See Documentation/networking/rcan/benchmarks.rst.
+# figures, the ratios ours/mainline and a summary table; then (table part)
+# the same two stacks with many sockets: bind + close of 1,000 and 10,000
+# sockets, the cost of a frame none of them wants, two senders on two
+# CPUs, memory per socket; then (dsor part) our DSOR message protocol
+# (rcan_dsor over rcan_loop) against mainline ISO-TP (can-isotp over
+# vcan): goodput and CPU time per KiB. Never fails on a missed target.
+# See Documentation/networking/rcan/benchmarks.rst.
 #
 #   bench.sh [rcan-bench options]     e.g. --stack mainline, --quick,
-#                                     --part dsor (make bench BENCH_ARGS=...)
+#                                     --part table, --part dsor
+#                                     (make bench BENCH_ARGS=...)
 #
 # Expects the modules and target/release/rcan-bench to be built (make bench
 # does that). The summary is saved as bench-summary.txt in the VM output

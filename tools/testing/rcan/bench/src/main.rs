@@ -89,6 +89,9 @@ usage: rcan-bench [options]
   --table-masks M       table part: distinct masks of kind masks (1-255, default 64)
   --table-frames N      table part: unwanted frames per run (default 6400)
   --table-secs S        table part: seconds per two-sender run (default 2)
+  --table-unwanted-id X table part: can_id (hex, flags included) of the frame
+                        nobody should want (default 555); another id may be
+                        wanted by some kinds, which the run then reports
   --table-only LIST     table part: workloads, comma-separated: sockets (bind,
                         close, unwanted frame, memory), fanout (1000 : 1
                         receivers), pair (two senders) (default all)
@@ -164,6 +167,7 @@ fn parse_args() -> Result<Config, String> {
             iface: "can0".into(),
             iface2: "can1".into(),
             load: true,
+            unwanted_id: table::UNWANTED_ID,
         },
         protos: vec![Proto::Isotp, Proto::IsotpNoGap, Proto::Dsor],
         msg_sizes: vec![1024, 4096],
@@ -265,6 +269,15 @@ fn parse_args() -> Result<Config, String> {
                 }
             }
             "--table-frames" => c.table.frames = parse_num(&a, args.next())?,
+            "--table-unwanted-id" => {
+                let v = args.next().ok_or("--table-unwanted-id wants a can_id")?;
+                let hex = v.trim_start_matches("0x").trim_start_matches("0X");
+                c.table.unwanted_id = u32::from_str_radix(hex, 16)
+                    .map_err(|_| format!("--table-unwanted-id: bad hex can_id '{v}'"))?;
+                if c.table.unwanted_id & 0x1fff_ffff == table::SENTINEL_ID {
+                    return Err("--table-unwanted-id: that is the sentinel's id".into());
+                }
+            }
             "--table-secs" => c.table.secs = parse_num(&a, args.next())?,
             "--table-only" => {
                 let v = args.next().ok_or("--table-only wants a list")?;

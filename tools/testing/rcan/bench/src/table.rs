@@ -20,12 +20,15 @@
 //!   through the receive path, fastest tenth of the batches and whole run,
 //!   the same with no socket bound (the baseline), and the difference.
 //!   Kernel CPU (system + irq + softirq of all CPUs, `/proc/stat`) per
-//!   frame beside it. Afterwards every one of the N sockets must be empty;
+//!   frame is printed beside it (not summarised: too coarse in USER_HZ
+//!   ticks for short runs). Afterwards every one of the N sockets must be
+//!   empty (a frame there is reported);
 //! - (f) 1,000 : 1 receivers: workload (b) of the raw part with 1 and with
 //!   1,000 exact receivers (each on its own id), cost per frame;
 //! - (g) two senders: one thread on CPU 0 sending to and receiving from
 //!   `can0`, and one on CPU 1 doing the same on `can1`, at the same time
-//!   for `--table-secs`: aggregate frames/s, against one thread alone.
+//!   for `--table-secs`: aggregate frames/s (whole run and undisturbed,
+//!   see [`pair`]), against one thread alone.
 //!
 //! Medians over the rounds, ratios ours/mainline and their range round by
 //! round, as in the raw part. Never fails on a missed target.
@@ -168,6 +171,11 @@ pub struct Config {
     pub iface: String,
     pub iface2: String,
     pub load: bool,
+    /// `can_id` of (e)'s frames; the kinds are built so that nobody wants
+    /// `UNWANTED_ID`, the default. Another id (`--table-unwanted-id`)
+    /// probes a particular hash bucket; the run reports any socket that
+    /// wants it.
+    pub unwanted_id: u32,
 }
 
 /// All samples: `(stack, round, figure, value)`, and the figures in the
@@ -263,13 +271,15 @@ pub struct UnwantedRun {
     pub counts: Counts,
 }
 
-/// Workload (e): `frames` frames of `UNWANTED_ID` from `tx`, in batches of
+/// Workload (e): `frames` frames of `id` (`UNWANTED_ID` unless
+/// `--table-unwanted-id`) from `tx`, in batches of
 /// `batch`, each batch followed by one `SENTINEL_ID` frame that is read
 /// back from `sentinel` (so the batch has been through the receive path
 /// when its time is taken).
 pub fn unwanted(
     tx: &RawSocket,
     sentinel: &RawSocket,
+    id: u32,
     frames: u64,
     batch: u64,
 ) -> io::Result<UnwantedRun> {
@@ -289,7 +299,7 @@ pub fn unwanted(
         let n = batch.min(frames - sent);
         let t = Instant::now();
         for _ in 0..n {
-            c.send_retries += send_retrying(tx, &Frame::with_words(UNWANTED_ID, seq, tag))?;
+            c.send_retries += send_retrying(tx, &Frame::with_words(id, seq, tag))?;
             seq = seq.wrapping_add(1);
         }
         let mark = Frame::with_words(SENTINEL_ID, seq, tag);
@@ -546,8 +556,9 @@ fn sockets_step(
         let tx = workload::sender(ifindex).map_err(|e| format!("sender socket: {e}"))?;
         let sentinel = workload::receiver(ifindex, SENTINEL_ID)
             .map_err(|e| format!("sentinel socket: {e}"))?;
-        unwanted(&tx, &sentinel, c.warmup, c.batch).map_err(|e| format!("warm-up: {e}"))?;
-        unwanted(&tx, &sentinel, c.frames, c.batch).map_err(|e| e.to_string())
+        unwanted(&tx, &sentinel, c.unwanted_id, c.warmup, c.batch)
+            .map_err(|e| format!("warm-up: {e}"))?;
+        unwanted(&tx, &sentinel, c.unwanted_id, c.frames, c.batch).map_err(|e| e.to_string())
     })();
     match res {
         Ok(r) => {
@@ -656,9 +667,10 @@ fn round(c: &Config, paths: &Paths, stack: Stack, r: usize, s: &mut Samples, bro
         let tx = workload::sender(ifindex).map_err(|e| format!("sender socket: {e}"))?;
         let sentinel = workload::receiver(ifindex, SENTINEL_ID)
             .map_err(|e| format!("sentinel socket: {e}"))?;
-        unwanted(&tx, &sentinel, c.warmup, c.batch).map_err(|e| format!("(e) warm-up: {e}"))?;
-        let b =
-            unwanted(&tx, &sentinel, c.frames, c.batch).map_err(|e| format!("(e) 0 rcv: {e}"))?;
+        unwanted(&tx, &sentinel, c.unwanted_id, c.warmup, c.batch)
+            .map_err(|e| format!("(e) warm-up: {e}"))?;
+        let b = unwanted(&tx, &sentinel, c.unwanted_id, c.frames, c.batch)
+            .map_err(|e| format!("(e) 0 rcv: {e}"))?;
         drop((tx, sentinel));
         println!(
             "{tag} (e) 0 rcv: {} frames: {:.0} ns/frame undisturbed, {:.0} whole run, kernel CPU {:.0} ns/frame; odd {}",
@@ -831,16 +843,22 @@ pub fn summary(c: &Config, s: &Samples, header: &str) -> String {
     );
     let _ = writeln!(
         o,
-        "(e) {} frames of id {UNWANTED_ID:#x} per run in batches of {}, each batch closed by one sentinel frame read back; \
-         ns/frame = wall time of a batch / its {} frames (fastest tenth: undisturbed); kernel CPU from /proc/stat, all CPUs",
+        "(e) {} frames of id {:#x} per run in batches of {}, each batch closed by one sentinel frame read back; \
+         ns/frame = wall time of a batch / its {} frames (fastest tenth: undisturbed)",
         c.frames,
+        c.unwanted_id,
         c.batch,
         c.batch + 1
     );
     let _ = writeln!(
         o,
-        "(g) {} s per run, each sender thread sends {} frames to its own device and reads them back; ratios ours/mainline",
-        c.secs, c.batch
+        "(g) {} s per run, each sender thread (CPU 0: {}, CPU 1: {}) sends {} frames to its own device and reads them back; \
+         undisturbed: the {} ms window with the fastest tenth of frame counts while all threads ran",
+        c.secs,
+        c.iface,
+        c.iface2,
+        c.batch,
+        PAIR_WINDOW.as_millis()
     );
     let _ = writeln!(
         o,
