@@ -356,6 +356,67 @@ fn doc_example_refused() {
     assert_eq!(rx.bytes_in_use(), 0);
 }
 
+#[test]
+fn doc_example_full_receiver() {
+    // dsor-wire.rst, "Full receiver": the last body is answered NO_MEMORY.
+    let msg = [0xa0, 0xa1, 0xa2, 0xa3, 0xa4, 0xa5, 0xa6, 0xa7, 0xa8];
+    let h = Header {
+        len: 9,
+        kind: MsgKind::Segm { id: 1 },
+    };
+    let tm = Timers::default();
+    let mut t = Transfer::new(0x05, 0x03, 5, 0x20, h, true, &tm);
+    let mut rx = Rx::new(0x03, Limits::default(), &tm);
+    let lines = [
+        Line(0x0400_C295, &[0x00, 0x09, 0x00, 0x00, 0x00, 0x01]),
+        Line(0x0401_41D5, &[0x00, 0x00]),
+        Line(
+            0x0400_C2A5,
+            &[0xa0, 0xa1, 0xa2, 0xa3, 0xa4, 0xa5, 0xa6, 0xa7],
+        ),
+        Line(0x0401_41C5, &[0x00, 0x01]),
+        Line(0x0400_C2B5, &[0xa8]),
+        Line(0x0401_41D5, &[0x00, 0x02, 0x02]),
+    ];
+    let mut f = t.start(&msg, 0);
+    let mut offered = 0;
+    for (i, pair) in lines.chunks(2).enumerate() {
+        frame_is(&f, &pair[0]);
+        let id = DsorId::from_can_id(f.id).unwrap();
+        let out = rx.on_frame_with(
+            &id,
+            f.payload(),
+            i as u64,
+            |i| want(i.header.len),
+            |d| {
+                offered += 1;
+                assert_eq!(&d.buf[..], &msg[..]);
+                Err(AckStatus::NoMemory)
+            },
+        );
+        let a = out.ack.unwrap();
+        frame_is(&a, &pair[1]);
+        match t.on_ack(
+            &DsorId::from_can_id(a.id).unwrap(),
+            a.payload(),
+            &msg,
+            i as u64,
+        ) {
+            TxStep::Send(n) => f = n,
+            TxStep::Failed(TxError::NoMemory) => {
+                assert_eq!(i, 2);
+                assert!(t.last_frame_sent());
+            }
+            s => panic!("{s:?}"),
+        }
+    }
+    assert_eq!(offered, 1);
+    // The retransmitted last body gets the same answer.
+    let id = DsorId::from_can_id(0x0400_C2B5).unwrap();
+    let out = rx.on_frame_with(&id, &[0xa8], 100, |i| want(i.header.len), |_| Ok(()));
+    frame_is(&out.ack.unwrap(), &lines[5]);
+}
+
 // ---------------------------------------------------------------------------
 // Simulation
 // ---------------------------------------------------------------------------
