@@ -112,10 +112,12 @@ enum Param {
 
 extern "C" {
     fn rcan_dsor_param(which: u32) -> u32;
-    /// Copies the `ifname` parameter (NUL-terminated) into `buf` (16 bytes).
-    fn rcan_dsor_ifname(buf: *mut u8);
-    /// Copies the `udp_saddr` parameter (NUL-terminated) into `buf` (16 bytes).
-    fn rcan_dsor_udp_saddr(buf: *mut u8);
+    /// Copies the `ifname` parameter (NUL-terminated, at most 15 bytes)
+    /// into `buf` (16 bytes); returns the parameter's full length.
+    fn rcan_dsor_ifname(buf: *mut u8) -> usize;
+    /// Copies the `udp_saddr` parameter (NUL-terminated, at most 15 bytes)
+    /// into `buf` (16 bytes); returns the parameter's full length.
+    fn rcan_dsor_udp_saddr(buf: *mut u8) -> usize;
     fn rcan_dsor_lock() -> *mut bindings::spinlock_t;
     fn rcan_dsor_waitq() -> *mut bindings::wait_queue_head;
 }
@@ -158,14 +160,37 @@ struct Config {
     canip: bool,
 }
 
+/// Fails the load with EINVAL and a `dmesg` line naming the parameter, its
+/// value and the allowed range (dsor.rst, "Loading").
+fn bad_param(name: &str, value: impl core::fmt::Display, range: &str) -> Error {
+    pr_err!("{}={}: out of range, allowed {}\n", name, value, range);
+    EINVAL
+}
+
+/// The `ifname` rules of the kernel's `dev_valid_name`: 1 to 15 bytes, no
+/// '/', ':' or white space, not "." or "..".
+fn valid_ifname(name: &[u8]) -> bool {
+    (1..IFNAMSIZ).contains(&name.len())
+        && name != b"."
+        && name != b".."
+        && !name
+            .iter()
+            .any(|&c| c == b'/' || c == b':' || c.is_ascii_whitespace())
+}
+
+/// Bytes of an interface name including the NUL (`IFNAMSIZ`).
+const IFNAMSIZ: usize = 16;
+
 fn load_config() -> Result<Config> {
     let mut ifname = Name([0; 16]);
     let mut saddr = Name([0; 16]);
     // SAFETY: both buffers have the 16 bytes the C side writes.
-    unsafe {
-        rcan_dsor_ifname(ifname.0.as_mut_ptr());
-        rcan_dsor_udp_saddr(saddr.0.as_mut_ptr());
-    }
+    let (ifname_len, saddr_len) = unsafe {
+        (
+            rcan_dsor_ifname(ifname.0.as_mut_ptr()),
+            rcan_dsor_udp_saddr(saddr.0.as_mut_ptr()),
+        )
+    };
     let node = param(Param::Node);
     let timers = Timers {
         ack_timeout_ms: param(Param::AckTimeoutMs),
@@ -174,27 +199,66 @@ fn load_config() -> Result<Config> {
     };
     let max_len = param(Param::MaxLen);
     let per_peer = param(Param::MaxPerPeer);
+    let max_bytes = param(Param::MaxBytes);
     let udp_prio = param(Param::UdpPrio);
-    let Some(udp_saddr) = rcan_core::dsor_udp::parse_ipv4_addr(saddr.bytes()) else {
-        pr_err!("udp_saddr: not an IPv4 address\n");
+    if node > u32::from(dsor_wire::MAX_NODE) {
+        return Err(bad_param("node", node, "0x00-0x7f"));
+    }
+    // The C side copies at most 15 bytes; the length is the whole string's.
+    if ifname_len >= IFNAMSIZ || !valid_ifname(ifname.bytes()) {
+        pr_err!(
+            "ifname: not an interface name ({} bytes), allowed 1-15 bytes without '/', ':' or white space\n",
+            ifname_len
+        );
+        return Err(EINVAL);
+    }
+    let Some(udp_saddr) =
+        rcan_core::dsor_udp::parse_ipv4_addr(saddr.bytes()).filter(|_| saddr_len < IFNAMSIZ)
+    else {
+        pr_err!("udp_saddr: not an IPv4 address, allowed a.b.c.d\n");
         return Err(EINVAL);
     };
+    if !(10..=60_000).contains(&timers.ack_timeout_ms) {
+        return Err(bad_param(
+            "ack_timeout_ms",
+            timers.ack_timeout_ms,
+            "10-60000",
+        ));
+    }
+    if timers.max_retx > 100 {
+        return Err(bad_param("max_retx", timers.max_retx, "0-100"));
+    }
     let window = u64::from(timers.ack_timeout_ms) * (u64::from(timers.max_retx) + 1);
-    if node > u32::from(dsor_wire::MAX_NODE)
-        || ifname.bytes().is_empty()
-        || !(10..=60_000).contains(&timers.ack_timeout_ms)
-        || timers.max_retx > 100
-        || u64::from(timers.reasm_timeout_ms) <= window
-        || timers.reasm_timeout_ms > 600_000
-        || max_len > dsor_wire::MAX_LEN as u32
-        || !(1..=(RX_SLOTS as u32)).contains(&per_peer)
-        || udp_prio > 0xff
-    {
+    if u64::from(timers.reasm_timeout_ms) <= window || timers.reasm_timeout_ms > 600_000 {
         pr_err!(
-            "bad parameters (node <= 0x7f, 10 <= ack_timeout_ms <= 60000, max_retx <= 100, reasm_timeout_ms > ack_timeout_ms * (max_retx + 1), max_len <= 65535, 1 <= max_per_peer <= {})\n",
+            "reasm_timeout_ms={}: out of range, allowed {}-600000 (more than ack_timeout_ms * (max_retx + 1))\n",
+            timers.reasm_timeout_ms,
+            window + 1
+        );
+        return Err(EINVAL);
+    }
+    if !(1..=dsor_wire::MAX_LEN as u32).contains(&max_len) {
+        return Err(bad_param("max_len", max_len, "1-65535"));
+    }
+    if !(1..=(RX_SLOTS as u32)).contains(&per_peer) {
+        pr_err!(
+            "max_per_peer={}: out of range, allowed 1-{}\n",
+            per_peer,
             RX_SLOTS
         );
         return Err(EINVAL);
+    }
+    if !(max_len..=MAX_BYTES_LIMIT).contains(&max_bytes) {
+        pr_err!(
+            "max_bytes={}: out of range, allowed max_len ({})-{}\n",
+            max_bytes,
+            max_len,
+            MAX_BYTES_LIMIT
+        );
+        return Err(EINVAL);
+    }
+    if udp_prio > 0xff {
+        return Err(bad_param("udp_prio", udp_prio, "0x00-0xff"));
     }
     Ok(Config {
         node: node as u8,
@@ -202,12 +266,15 @@ fn load_config() -> Result<Config> {
         timers,
         limits_max_len: max_len as u16,
         max_per_peer: per_peer as u8,
-        max_bytes: param(Param::MaxBytes) as usize,
+        max_bytes: max_bytes as usize,
         udp_saddr,
         udp_prio: udp_prio as u8,
         canip: param(Param::Canip) != 0,
     })
 }
+
+/// Largest `max_bytes`: 64 slots of the longest message.
+const MAX_BYTES_LIMIT: u32 = RX_SLOTS as u32 * dsor_wire::MAX_LEN as u32;
 
 // ---------------------------------------------------------------------------
 // Protocol state
@@ -259,13 +326,40 @@ struct Bind {
     addr: DsorAddr,
 }
 
-/// Counters, printed at unload and by the tests through dmesg.
+/// Counters, printed at unload (the tests read them from dmesg). Every
+/// incoming message that is not delivered is counted once, by cause.
 #[derive(Default)]
 struct Stats {
     tx_ok: u64,
     tx_failed: u64,
+    /// Messages queued on at least one socket, or handed to canip0.
     rx_delivered: u64,
-    rx_dropped: u64,
+    /// Headers refused: no socket (or canip0) wants the message (REFUSED).
+    rx_refused_unwanted: u64,
+    /// Headers refused: over `max_len` (TOO_LONG).
+    rx_refused_too_long: u64,
+    /// Headers refused: over `max_per_peer` or `max_bytes`, no slot, or no
+    /// memory for the buffer (NO_MEMORY).
+    rx_refused_no_memory: u64,
+    /// Complete messages refused with the last frame: the receive queue of
+    /// every socket that wanted it was full (NO_MEMORY).
+    rx_queue_full: u64,
+    /// Complete messages refused with the last frame: no socket (or no
+    /// canip0 up) wants it any more (REFUSED).
+    rx_unwanted_at_end: u64,
+    /// Partial messages stopped because the last socket that wanted them
+    /// was closed (their next body is refused, REFUSED).
+    rx_closed: u64,
+    /// Partial messages freed after `reasm_timeout_ms` without a frame.
+    rx_timed_out: u64,
+    /// Partial messages freed when `ifname` went down or the module was
+    /// unloaded.
+    rx_flushed: u64,
+    /// Extra copies (a message wanted by several sockets) that did not fit
+    /// a socket's receive queue; the message reached another socket.
+    rx_copies_dropped: u64,
+    /// Frames not sent because the send ring was full (recovered by
+    /// retransmission).
     out_overflow: u64,
     send_errors: u64,
 }
@@ -459,7 +553,7 @@ impl Engine {
         for i in 0..self.tx.len() {
             self.finish(i, errno);
         }
-        self.rx.clear();
+        self.stats.rx_flushed += self.rx.clear() as u64;
     }
 
     /// Handles one DSOR frame addressed to this node.
@@ -478,75 +572,54 @@ impl Engine {
             }
             return kick;
         }
-        let binds = &self.binds;
         let canip_up = udpip::is_up();
-        let out = self.rx.on_frame(id, data, now, |inc: &Incoming<'_>| {
-            accept(binds, canip_up, inc)
-        });
-        let mut kick = false;
-        if let Some(ack) = out.ack {
-            self.push_out(ack);
-            kick = true;
+        let Engine {
+            rx,
+            binds,
+            cfg,
+            stats,
+            ..
+        } = self;
+        let out = rx.on_frame_with(
+            id,
+            data,
+            now,
+            |inc: &Incoming<'_>| accept(binds, canip_up, inc),
+            |d| deliver(binds, cfg, stats, d),
+        );
+        match out.header_refused {
+            None => {}
+            Some(AckStatus::TooLong) => self.stats.rx_refused_too_long += 1,
+            Some(AckStatus::NoMemory) => self.stats.rx_refused_no_memory += 1,
+            Some(_) => self.stats.rx_refused_unwanted += 1,
         }
-        if let Some(d) = out.delivered {
-            self.deliver(d);
-        }
-        kick
-    }
-
-    /// Hands a complete message to its sockets or to canip0.
-    fn deliver(&mut self, d: Delivered<RxBuf>) {
-        let Delivered {
-            src,
-            prio,
-            header,
-            buf,
-        } = d;
-        let skb = buf.0;
-        let mut cb = [0u8; 12];
-        cb[0] = src;
-        cb[1] = prio;
-        match header.kind {
-            MsgKind::Udp { dport, daddr } => {
-                if udpip::deliver(skb, src, self.cfg.udp_saddr, daddr, dport) {
-                    self.stats.rx_delivered += 1;
-                } else {
-                    self.stats.rx_dropped += 1;
-                }
+        match out.ack {
+            Some(ack) => {
+                self.push_out(ack);
+                true
             }
-            MsgKind::Segm { id } => {
-                cb[2] = 0;
-                cb[4..8].copy_from_slice(&id.to_ne_bytes());
-                let ok = queue_to(&self.binds, skb, &cb, |a| a.segm_accepts(src, id));
-                self.count_delivery(ok);
-            }
-            MsgKind::Port { dport, sport } => {
-                cb[2] = 1;
-                cb[3] = sport;
-                let want = dsor_addr::make_port(self.cfg.node, dport);
-                let ok = queue_to(
-                    &self.binds,
-                    skb,
-                    &cb,
-                    |a| matches!(*a, DsorAddr::Port { port, .. } if port == want),
-                );
-                self.count_delivery(ok);
-            }
+            None => false,
         }
     }
 
-    fn count_delivery(&mut self, delivered: bool) {
-        if delivered {
-            self.stats.rx_delivered += 1;
-        } else {
-            self.stats.rx_dropped += 1;
-        }
+    /// A socket was closed (its bind is already gone): partial messages
+    /// that no remaining socket wants are stopped; the next frame of each
+    /// is refused, so their senders fail with ECONNREFUSED instead of
+    /// sending the rest for nothing.
+    fn refuse_orphans(&mut self) {
+        let canip_up = udpip::is_up();
+        let binds = &self.binds;
+        let n = self.rx.refuse_partial(
+            |inc: &Incoming<'_>| wanted(binds, canip_up, inc),
+            AckStatus::Refused,
+        );
+        self.stats.rx_closed += n as u64;
     }
 
     /// Runs due timers; returns whether frames were queued.
     fn on_timer(&mut self, now: u64) -> bool {
         let mut kick = false;
-        self.stats.rx_dropped += self.rx.on_timer(now) as u64;
+        self.stats.rx_timed_out += self.rx.on_timer(now) as u64;
         for i in 0..self.tx.len() {
             let step = match &mut self.tx[i] {
                 TxEntry::Running(r) if r.t.deadline().is_some_and(|d| d <= now) => {
@@ -572,16 +645,93 @@ impl Engine {
     }
 }
 
+/// Hands a complete message to its sockets or to canip0, before its last
+/// frame is acked (dsor-wire.rst, "Delivery rule"): `Ok` if at least one
+/// socket queued it (or canip0 took it), else the status the last frame is
+/// acked with: REFUSED if nobody wants it any more, NO_MEMORY if every
+/// socket that wants it has a full receive queue. Counts the outcome.
+/// Under ENGINE (softirq or a driver's transmit path).
+fn deliver(
+    binds: &[Bind],
+    cfg: &Config,
+    stats: &mut Stats,
+    d: Delivered<RxBuf>,
+) -> core::result::Result<(), AckStatus> {
+    let Delivered {
+        src,
+        prio,
+        header,
+        buf,
+    } = d;
+    let skb = buf.0;
+    let mut cb = [0u8; 12];
+    cb[0] = src;
+    cb[1] = prio;
+    let q = match header.kind {
+        MsgKind::Udp { dport, daddr } => {
+            udpip::deliver(skb, src, cfg.udp_saddr, daddr, dport).map(|()| Queued {
+                wanted: 1,
+                queued: 1,
+            })
+        }
+        MsgKind::Segm { id } => {
+            cb[2] = 0;
+            cb[4..8].copy_from_slice(&id.to_ne_bytes());
+            Ok(queue_to(binds, skb, &cb, |a| a.segm_accepts(src, id)))
+        }
+        MsgKind::Port { dport, sport } => {
+            cb[2] = 1;
+            cb[3] = sport;
+            let want = dsor_addr::make_port(cfg.node, dport);
+            Ok(queue_to(
+                binds,
+                skb,
+                &cb,
+                |a| matches!(*a, DsorAddr::Port { port, .. } if port == want),
+            ))
+        }
+    };
+    match q {
+        Ok(Queued {
+            queued: 0,
+            wanted: 0,
+        })
+        | Err(AckStatus::Refused) => {
+            stats.rx_unwanted_at_end += 1;
+            Err(AckStatus::Refused)
+        }
+        Ok(Queued { queued: 0, .. }) | Err(_) => {
+            stats.rx_queue_full += 1;
+            Err(AckStatus::NoMemory)
+        }
+        Ok(Queued { queued, wanted }) => {
+            stats.rx_delivered += 1;
+            stats.rx_copies_dropped += (wanted - queued) as u64;
+            Ok(())
+        }
+    }
+}
+
+/// How many sockets wanted a message and how many queued it.
+struct Queued {
+    wanted: usize,
+    queued: usize,
+}
+
 /// Queues `skb` on every bound socket whose address `want`s it (clones
-/// for all but the last); returns whether any socket took it. Sockets in
-/// `binds` are alive: release removes them under the ENGINE lock, which
-/// the caller holds.
-fn queue_to(binds: &[Bind], mut skb: Skb, cb: &[u8; 12], want: impl Fn(&DsorAddr) -> bool) -> bool {
+/// for all but the last). Sockets in `binds` are alive: release removes
+/// them under the ENGINE lock, which the caller holds.
+fn queue_to(
+    binds: &[Bind],
+    mut skb: Skb,
+    cb: &[u8; 12],
+    want: impl Fn(&DsorAddr) -> bool,
+) -> Queued {
     skb.cb_write(0, cb);
     skb.stamp_if_unset();
     let n = binds.iter().filter(|b| want(&b.addr)).count();
     let mut skb = Some(skb);
-    let mut ok = false;
+    let mut queued = 0;
     for (k, b) in binds.iter().filter(|b| want(&b.addr)).enumerate() {
         let one = if k + 1 == n {
             skb.take()
@@ -592,9 +742,22 @@ fn queue_to(binds: &[Bind], mut skb: Skb, cb: &[u8; 12], want: impl Fn(&DsorAddr
         // SAFETY: `b.sk` is a bound socket, alive while it is in `binds`
         // (see above).
         let sock = unsafe { Sock::<DsorProto>::from_raw(b.sk as *mut bindings::sock) };
-        ok |= sock.queue_rcv(one).is_ok();
+        if sock.queue_rcv(one).is_ok() {
+            queued += 1;
+        }
     }
-    ok
+    Queued { wanted: n, queued }
+}
+
+/// Whether some socket (or canip0) wants the message `inc` (under ENGINE).
+fn wanted(binds: &[Bind], canip_up: bool, inc: &Incoming<'_>) -> bool {
+    match inc.header.kind {
+        MsgKind::Segm { id } => binds.iter().any(|b| b.addr.segm_accepts(inc.src, id)),
+        MsgKind::Port { dport, .. } => binds.iter().any(
+            |b| matches!(b.addr, DsorAddr::Port { port, .. } if dsor_addr::port_sub(port) == dport),
+        ),
+        MsgKind::Udp { .. } => canip_up,
+    }
 }
 
 /// The acceptance decision for a new incoming message (under ENGINE).
@@ -603,20 +766,13 @@ fn accept(
     canip_up: bool,
     inc: &Incoming<'_>,
 ) -> core::result::Result<RxBuf, AckStatus> {
-    let wanted = match inc.header.kind {
-        MsgKind::Segm { id } => binds.iter().any(|b| b.addr.segm_accepts(inc.src, id)),
-        MsgKind::Port { dport, .. } => binds.iter().any(
-            |b| matches!(b.addr, DsorAddr::Port { port, .. } if dsor_addr::port_sub(port) == dport),
-        ),
-        MsgKind::Udp { .. } => {
-            // The rebuilt IPv4 + UDP headers must fit in 65535 bytes.
-            if usize::from(inc.header.len) > rcan_core::dsor_udp::MAX_PAYLOAD {
-                return Err(AckStatus::TooLong);
-            }
-            canip_up
-        }
-    };
-    if !wanted {
+    // The rebuilt IPv4 + UDP headers must fit in 65535 bytes.
+    if matches!(inc.header.kind, MsgKind::Udp { .. })
+        && usize::from(inc.header.len) > rcan_core::dsor_udp::MAX_PAYLOAD
+    {
+        return Err(AckStatus::TooLong);
+    }
+    if !wanted(binds, canip_up, inc) {
         return Err(AckStatus::Refused);
     }
     let len = u32::from(inc.header.len);
@@ -868,12 +1024,17 @@ fn remove_bind(sk: &S) {
     let mut g = ENGINE.lock();
     if let Some(e) = g.as_mut() {
         let mut i = 0;
+        let mut removed = false;
         while i < e.binds.len() {
             if e.binds[i].sk == me {
                 glue::kvec_swap_remove(&mut e.binds, i);
+                removed = true;
             } else {
                 i += 1;
             }
+        }
+        if removed {
+            e.refuse_orphans();
         }
     }
 }
@@ -1286,13 +1447,32 @@ fn teardown_engine() {
         e.fail_all(neterr::ENETDOWN().to_errno());
         let s = &e.stats;
         pr_info!(
-            "stopped: {} messages sent, {} failed, {} received, {} dropped, {} queue overflows, {} send errors\n",
+            "stopped: {} messages sent, {} failed, {} received, {} dropped, {} frames lost to a full send queue, {} send errors\n",
             s.tx_ok,
             s.tx_failed,
             s.rx_delivered,
-            s.rx_dropped,
+            s.rx_refused_unwanted
+                + s.rx_refused_too_long
+                + s.rx_refused_no_memory
+                + s.rx_queue_full
+                + s.rx_unwanted_at_end
+                + s.rx_closed
+                + s.rx_timed_out
+                + s.rx_flushed,
             s.out_overflow,
             s.send_errors
+        );
+        pr_info!(
+            "not delivered: header refused {} no receiver, {} too long, {} no memory; last frame refused {} receive queue full, {} no receiver; {} receiver closed mid-message; {} timed out; {} flushed at ifdown/unload; {} extra copies dropped (queue full)\n",
+            s.rx_refused_unwanted,
+            s.rx_refused_too_long,
+            s.rx_refused_no_memory,
+            s.rx_queue_full,
+            s.rx_unwanted_at_end,
+            s.rx_closed,
+            s.rx_timed_out,
+            s.rx_flushed,
+            s.rx_copies_dropped
         );
         drop(e);
     }

@@ -23,7 +23,7 @@ MODULE_PARM_DESC(node, "DSOR node id of this host, 0x00-0x7f (CONFIG_RCAN_DSOR_N
 
 static char *ifname = "can0";
 module_param(ifname, charp, 0444);
-MODULE_PARM_DESC(ifname, "CAN interface that carries DSOR (default can0)");
+MODULE_PARM_DESC(ifname, "CAN interface that carries DSOR, 1-15 bytes (default can0)");
 
 static unsigned int ack_timeout_ms = 100;
 module_param(ack_timeout_ms, uint, 0444);
@@ -39,7 +39,7 @@ MODULE_PARM_DESC(reasm_timeout_ms, "free a partial incoming message after this m
 
 static unsigned int max_len = 65535;
 module_param(max_len, uint, 0444);
-MODULE_PARM_DESC(max_len, "longest message sent or accepted, bytes (0-65535, default 65535)");
+MODULE_PARM_DESC(max_len, "longest message sent or accepted, bytes (1-65535, default 65535)");
 
 static unsigned int max_per_peer = 16;
 module_param(max_per_peer, uint, 0444);
@@ -47,7 +47,7 @@ MODULE_PARM_DESC(max_per_peer, "concurrent incoming messages per source node (1-
 
 static unsigned int max_bytes = 1048576;
 module_param(max_bytes, uint, 0444);
-MODULE_PARM_DESC(max_bytes, "reassembly memory for all incoming messages, bytes (default 1 MiB)");
+MODULE_PARM_DESC(max_bytes, "reassembly memory for all incoming messages, bytes (max_len-4194240, default 1 MiB)");
 
 static char *udp_saddr = "192.168.1.1";
 module_param(udp_saddr, charp, 0444);
@@ -79,23 +79,27 @@ unsigned int rcan_dsor_param(unsigned int which)
 	}
 }
 
-static void rcan_dsor_copy16(char *buf, const char *s)
+/* Copies at most IFNAMSIZ - 1 bytes; returns strlen(s) so that the Rust
+ * side refuses a longer parameter instead of using a truncated copy. */
+static size_t rcan_dsor_copy16(char *buf, const char *s)
 {
 	memset(buf, 0, IFNAMSIZ);
-	if (s)
-		strscpy(buf, s, IFNAMSIZ);
+	if (!s)
+		return 0;
+	strscpy(buf, s, IFNAMSIZ);
+	return strlen(s);
 }
 
-void rcan_dsor_ifname(char *buf);
-void rcan_dsor_ifname(char *buf)
+size_t rcan_dsor_ifname(char *buf);
+size_t rcan_dsor_ifname(char *buf)
 {
-	rcan_dsor_copy16(buf, ifname);
+	return rcan_dsor_copy16(buf, ifname);
 }
 
-void rcan_dsor_udp_saddr(char *buf);
-void rcan_dsor_udp_saddr(char *buf)
+size_t rcan_dsor_udp_saddr(char *buf);
+size_t rcan_dsor_udp_saddr(char *buf)
 {
-	rcan_dsor_copy16(buf, udp_saddr);
+	return rcan_dsor_copy16(buf, udp_saddr);
 }
 
 static DEFINE_SPINLOCK(rcan_dsor_engine_lock);

@@ -26,7 +26,7 @@ use super::glue::netdev::{Dev, Driver, NetDev, Registration, Setup, Xmit};
 use super::glue::skb::Skb;
 use super::rcan_core::dsor_addr::udp_node;
 use super::rcan_core::dsor_udp::{self, HDR_LEN};
-use super::rcan_core::dsor_wire::{Header, MsgKind};
+use super::rcan_core::dsor_wire::{AckStatus, Header, MsgKind};
 use kernel::c_str;
 
 /// The registered canip device, or NULL.
@@ -88,12 +88,22 @@ pub(crate) fn count_tx_error() {
 
 /// Rebuilds the IPv4/UDP headers in front of a received UDP/IP message
 /// (whose skb has the headroom) and hands it to the IP stack. Engine lock
-/// held (softirq or transmit path). Returns false if it was dropped.
-pub(crate) fn deliver(mut skb: Skb, _src: u8, saddr: u32, daddr: u32, dport: u16) -> bool {
-    let Some(d) = dev() else { return false };
+/// held (softirq or transmit path). If it cannot, the message is dropped
+/// and the error is the status its last frame is acked with: REFUSED when
+/// canip0 is gone or down, NO_MEMORY when the headers do not fit.
+pub(crate) fn deliver(
+    mut skb: Skb,
+    _src: u8,
+    saddr: u32,
+    daddr: u32,
+    dport: u16,
+) -> Result<(), AckStatus> {
+    let Some(d) = dev() else {
+        return Err(AckStatus::Refused);
+    };
     if !d.is_up() {
         d.stats_rx_dropped();
-        return false;
+        return Err(AckStatus::Refused);
     }
     let mut hdr = [0u8; HDR_LEN];
     let id = IP_ID.fetch_add(1, Ordering::Relaxed);
@@ -103,13 +113,13 @@ pub(crate) fn deliver(mut skb: Skb, _src: u8, saddr: u32, daddr: u32, dport: u16
         Some(h) => h.copy_from_slice(&hdr),
         None => {
             d.stats_rx_dropped();
-            return false;
+            return Err(AckStatus::NoMemory);
         }
     }
     skb.set_ipv4_rx(d);
     d.stats_rx(len);
     d.rx(skb);
-    true
+    Ok(())
 }
 
 impl Driver for CanipDriver {

@@ -4,7 +4,7 @@
 //! See Documentation/networking/rcan/dsor-peer.rst for the command line.
 
 use dsor_peer::node::{Config, Event, Node, SendError};
-use dsor_peer::wire::{fmt_ipv4, fnv1a64, parse_ipv4, pattern, Frame, Kind};
+use dsor_peer::wire::{fmt_ipv4, fnv1a64, parse_ipv4, pattern, Frame, Kind, Status};
 use socketcan::{CanFrame, CanSocket, Socket};
 use std::collections::{HashMap, VecDeque};
 use std::io::ErrorKind;
@@ -15,7 +15,8 @@ const USAGE: &str = "\
 usage: dsor-peer --if IFACE --node N [--ack-timeout-ms 100] [--retx 10] [--reasm-ms 2000]
                  [--drop PERCENT --seed S] [--linger-ms MS] [--max-len L] [--max-per-peer N]
                  [--max-bytes B] [--verbose] MODE
-  recv --count K [--timeout-s 30] [--refuse]
+  recv --count K [--timeout-s 30] [--refuse] [--app-queue N]
+       [--close-after-frames F | --close-after-ms MS]
   send --to NODE --prio P (--segm ID | --port DPORT:SPORT | --udp DPORT:A.B.C.D) --len L
        [--count 1] [--pattern SEED] [--window 1]
   echo --count K [--timeout-s 30]";
@@ -104,6 +105,9 @@ fn parse_args() -> Args {
                     "--len",
                     "--pattern",
                     "--window",
+                    "--app-queue",
+                    "--close-after-frames",
+                    "--close-after-ms",
                 ];
                 let Some(k) = KNOWN.iter().find(|k| **k == a) else {
                     usage(&format!("unknown option {a}"))
@@ -144,6 +148,13 @@ fn parse_args() -> Args {
         cfg.max_bytes_total = num(v, "--max-bytes") as usize;
     }
     cfg.refuse = flags.contains(&"--refuse");
+    cfg.app_queue = o.get("--app-queue").map(|v| num(v, "--app-queue") as usize);
+    cfg.close_after_frames = o
+        .get("--close-after-frames")
+        .map(|v| num(v, "--close-after-frames"));
+    cfg.close_after_ms = o
+        .get("--close-after-ms")
+        .map(|v| num(v, "--close-after-ms"));
     let drop_pct: f64 = match o.get("--drop") {
         Some(v) => v
             .parse()
@@ -246,6 +257,15 @@ impl Rng {
 fn show(f: &Frame) -> String {
     let d: String = f.bytes().iter().map(|b| format!("{b:02X}")).collect();
     format!("{:08X}#{d}", f.id)
+}
+
+fn status_reason(s: Status) -> &'static str {
+    match s {
+        Status::Ok => "ok",
+        Status::Refused => "refused",
+        Status::NoMemory => "nomem",
+        Status::TooLong => "toolong",
+    }
 }
 
 fn kind_str(k: &Kind) -> String {
@@ -369,6 +389,8 @@ fn main() {
     let mut queue: VecDeque<Pending> = VecDeque::new();
     let mut inflight: HashMap<u64, (u64, usize, u64)> = HashMap::new(); // handle -> (n, len, sha)
     let (mut received, mut sent_ok, mut sent_fail, mut started) = (0u64, 0u64, 0u64, 0u64);
+    // Messages the application refused (--app-queue, --close-after-*).
+    let mut not_delivered = 0u64;
     let deadline = match a.mode {
         Mode::Send { .. } => None,
         _ => Some(a.timeout_s.saturating_mul(1000)),
@@ -457,6 +479,18 @@ fn main() {
                     }
                     received += 1;
                 }
+                Event::NotDelivered { msg: d, status } => {
+                    println!(
+                        "RXFAIL reason={} src={:#04x} prio={:#04x} {} len={} chan={}",
+                        status_reason(status),
+                        d.src,
+                        d.prio,
+                        kind_str(&d.kind),
+                        d.payload.len(),
+                        d.chan
+                    );
+                    not_delivered += 1;
+                }
                 Event::Sent { handle, result, .. } => {
                     let (n, len, sha) = inflight.remove(&handle).expect("handle");
                     match result {
@@ -479,7 +513,7 @@ fn main() {
             continue; // events may have queued messages or frames
         }
         let finished = match a.mode {
-            Mode::Recv => received >= a.count,
+            Mode::Recv => received + not_delivered >= a.count,
             Mode::Send { .. } => sent_ok + sent_fail >= a.count,
             Mode::Echo => received >= a.count && sent_ok + sent_fail >= a.count,
         };

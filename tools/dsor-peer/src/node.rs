@@ -30,6 +30,18 @@ pub struct Config {
     pub max_bytes_total: usize,
     /// Answer every header REFUSED.
     pub refuse: bool,
+    /// The receiving application holds at most this many messages and
+    /// never reads them (a full receive queue): a complete message beyond
+    /// that is refused with its last frame, NO_MEMORY (dsor-wire.rst,
+    /// "Delivery rule").
+    pub app_queue: Option<usize>,
+    /// The receiving application goes away after this many new body
+    /// frames were received: partial messages are refused at their next
+    /// body, new headers and complete messages REFUSED.
+    pub close_after_frames: Option<u64>,
+    /// The receiving application goes away this many ms after the first
+    /// header it accepted (same effect as `close_after_frames`).
+    pub close_after_ms: Option<u64>,
 }
 
 impl Config {
@@ -44,6 +56,9 @@ impl Config {
             max_per_peer: 16,
             max_bytes_total: 16 * 65535,
             refuse: false,
+            app_queue: None,
+            close_after_frames: None,
+            close_after_ms: None,
         }
     }
 }
@@ -93,6 +108,15 @@ pub struct Delivery {
 pub enum Event {
     /// A complete message arrived (exactly once per message).
     Delivered(Delivery),
+    /// The application could not take a message: complete but refused
+    /// with its last frame, or a partial one refused because the
+    /// application went away (`payload` holds what had arrived).
+    NotDelivered {
+        /// The message as far as received.
+        msg: Delivery,
+        /// The status its sender was answered with.
+        status: Status,
+    },
     /// A message this node sent finished.
     Sent {
         /// The handle [`Node::send`] returned.
@@ -144,6 +168,9 @@ enum RxState {
         next: u16,
         expect_q: bool,
         deadline: u64,
+        /// The application went away: body `next` is answered with this
+        /// status (the buffer is already freed).
+        refuse: Option<Status>,
     },
     /// Delivered, or the header was refused (last index 0, non-zero status).
     Done {
@@ -154,6 +181,9 @@ enum RxState {
         hdr0: Option<(bool, Vec<u8>)>,
         /// The status the header was answered with.
         hdr_status: Status,
+        /// The status the last frame (index `last_index`) was answered
+        /// with; repeated for its retransmissions.
+        last_status: Status,
         deadline: u64,
     },
 }
@@ -169,6 +199,14 @@ pub struct Node {
     next_handle: u64,
     out: VecDeque<Frame>,
     events: VecDeque<Event>,
+    /// Messages the receiving application holds (see `app_queue`).
+    app_held: usize,
+    /// The receiving application went away.
+    app_closed: bool,
+    /// New body frames received (for `close_after_frames`).
+    body_frames: u64,
+    /// When the first header was accepted (for `close_after_ms`).
+    first_accept: Option<u64>,
 }
 
 impl Node {
@@ -183,6 +221,10 @@ impl Node {
             next_handle: 0,
             out: VecDeque::new(),
             events: VecDeque::new(),
+            app_held: 0,
+            app_closed: false,
+            body_frames: 0,
+            first_accept: None,
         }
     }
 
@@ -199,6 +241,53 @@ impl Node {
     /// Bytes of reassembly buffers in use.
     pub fn rx_bytes(&self) -> usize {
         self.rx_bytes
+    }
+
+    /// Whether the receiving application went away.
+    pub fn app_closed(&self) -> bool {
+        self.app_closed
+    }
+
+    /// The receiving application goes away: every partial message is
+    /// refused at its next body (REFUSED) and its buffer freed; new
+    /// headers and complete messages are refused too.
+    pub fn close_app(&mut self) {
+        if self.app_closed {
+            return;
+        }
+        self.app_closed = true;
+        for st in self.rx.values_mut() {
+            if let RxState::Receiving {
+                len, buf, refuse, ..
+            } = st
+            {
+                if refuse.is_none() {
+                    *refuse = Some(Status::Refused);
+                    self.rx_bytes -= usize::from(*len);
+                    *buf = Vec::new();
+                }
+            }
+        }
+    }
+
+    /// Hands a complete message to the application: OK if it took it,
+    /// else the status its last frame is answered with.
+    fn app_take(&mut self, d: Delivery) -> Status {
+        let status = if self.app_closed {
+            Status::Refused
+        } else if self.cfg.app_queue.is_some_and(|q| self.app_held >= q) {
+            Status::NoMemory
+        } else {
+            Status::Ok
+        };
+        if status == Status::Ok {
+            self.app_held += 1;
+            self.events.push_back(Event::Delivered(d));
+        } else {
+            self.events
+                .push_back(Event::NotDelivered { msg: d, status });
+        }
+        status
     }
 
     /// Next frame to transmit.
@@ -337,7 +426,11 @@ impl Node {
     }
 
     fn drop_rx(&mut self, key: (u8, u8)) {
-        if let Some(RxState::Receiving { len, .. }) = self.rx.remove(&key) {
+        // A refusing state's buffer was freed when it started refusing.
+        if let Some(RxState::Receiving {
+            len, refuse: None, ..
+        }) = self.rx.remove(&key)
+        {
             self.rx_bytes -= usize::from(len);
         }
     }
@@ -382,7 +475,7 @@ impl Node {
             .count();
         let status = if h.len > self.cfg.max_len {
             Status::TooLong
-        } else if self.cfg.refuse {
+        } else if self.cfg.refuse || self.app_closed {
             Status::Refused
         } else if h.len > 0
             && (receiving >= self.cfg.max_per_peer
@@ -392,9 +485,25 @@ impl Node {
         } else {
             Status::Ok
         };
-        self.ack(id.prio, id.src, id.chan, id.q, 0, status);
         let deadline = now + self.cfg.t_reasm;
+        if status == Status::Ok && h.len > 0 && self.first_accept.is_none() {
+            self.first_accept = Some(now);
+        }
         if status != Status::Ok || h.len == 0 {
+            // A zero-length message is complete with its header: the
+            // header's ack says whether the application took it.
+            let status = if status == Status::Ok {
+                self.app_take(Delivery {
+                    src: id.src,
+                    prio: id.prio,
+                    chan: id.chan,
+                    kind: h.kind,
+                    payload: Vec::new(),
+                })
+            } else {
+                status
+            };
+            self.ack(id.prio, id.src, id.chan, id.q, 0, status);
             // Remember the answer so that a retransmission of this header
             // gets the same one (a refused message is never delivered).
             self.rx.insert(
@@ -404,21 +513,13 @@ impl Node {
                     last_index: 0,
                     hdr0: Some((id.q, b.to_vec())),
                     hdr_status: status,
+                    last_status: status,
                     deadline,
                 },
             );
-            if status != Status::Ok {
-                return;
-            }
-            self.events.push_back(Event::Delivered(Delivery {
-                src: id.src,
-                prio: id.prio,
-                chan: id.chan,
-                kind: h.kind,
-                payload: Vec::new(),
-            }));
             return;
         }
+        self.ack(id.prio, id.src, id.chan, id.q, 0, status);
         self.rx_bytes += usize::from(h.len);
         self.rx.insert(
             key,
@@ -432,6 +533,7 @@ impl Node {
                 next: 1,
                 expect_q: !id.q,
                 deadline,
+                refuse: None,
             },
         );
     }
@@ -442,14 +544,18 @@ impl Node {
         let reack = match self.rx.get_mut(&key) {
             None => return,
             Some(RxState::Done {
-                last_q, last_index, ..
+                last_q,
+                last_index,
+                last_status,
+                ..
             }) => {
-                // Only a retransmitted last body is answered; after a
-                // header-only transfer no body belongs to it.
+                // Only a retransmitted last body is answered, with the
+                // answer it had; after a header-only transfer no body
+                // belongs to it.
                 if *last_q != id.q || *last_index == 0 {
                     return;
                 }
-                *last_index
+                (*last_index, *last_status)
             }
             Some(RxState::Receiving {
                 prio,
@@ -459,6 +565,7 @@ impl Node {
                 next,
                 expect_q,
                 deadline,
+                refuse,
                 ..
             }) => {
                 if id.q != *expect_q {
@@ -467,16 +574,15 @@ impl Node {
                     if *next == 1 {
                         return;
                     }
-                    *next - 1
+                    (*next - 1, Status::Ok)
                 } else {
                     if b.len() != usize::from(body_dlc(*len, *next)) {
                         return;
                     }
-                    buf.extend_from_slice(b);
                     let (prio, k, len, kind) = (*prio, *next, *len, *kind);
-                    if k == bodies(len) {
-                        let payload = std::mem::take(buf);
-                        self.rx_bytes -= usize::from(len);
+                    if let Some(status) = *refuse {
+                        // The application went away: refuse this body,
+                        // which ends the transfer.
                         self.rx.insert(
                             key,
                             RxState::Done {
@@ -484,32 +590,76 @@ impl Node {
                                 last_index: k,
                                 hdr0: None,
                                 hdr_status: Status::Ok,
+                                last_status: status,
                                 deadline: now + t_reasm,
                             },
                         );
-                        self.ack(id.prio, id.src, id.chan, id.q, k, Status::Ok);
-                        self.events.push_back(Event::Delivered(Delivery {
+                        self.ack(id.prio, id.src, id.chan, id.q, k, status);
+                        self.events.push_back(Event::NotDelivered {
+                            msg: Delivery {
+                                src: id.src,
+                                prio,
+                                chan: id.chan,
+                                kind,
+                                payload: Vec::new(),
+                            },
+                            status,
+                        });
+                        return;
+                    }
+                    buf.extend_from_slice(b);
+                    self.body_frames += 1;
+                    if k == bodies(len) {
+                        let payload = std::mem::take(buf);
+                        self.rx_bytes -= usize::from(len);
+                        // Hand the message over before the last ack: the
+                        // ack says whether the application took it.
+                        let status = self.app_take(Delivery {
                             src: id.src,
                             prio,
                             chan: id.chan,
                             kind,
                             payload,
-                        }));
+                        });
+                        self.rx.insert(
+                            key,
+                            RxState::Done {
+                                last_q: id.q,
+                                last_index: k,
+                                hdr0: None,
+                                hdr_status: Status::Ok,
+                                last_status: status,
+                                deadline: now + t_reasm,
+                            },
+                        );
+                        self.ack(id.prio, id.src, id.chan, id.q, k, status);
                     } else {
                         *next += 1;
                         *expect_q = !*expect_q;
                         *deadline = now + t_reasm;
                         self.ack(id.prio, id.src, id.chan, id.q, k, Status::Ok);
                     }
+                    if self
+                        .cfg
+                        .close_after_frames
+                        .is_some_and(|n| self.body_frames >= n)
+                    {
+                        self.close_app();
+                    }
                     return;
                 }
             }
         };
-        self.ack(id.prio, id.src, id.chan, id.q, reack, Status::Ok);
+        self.ack(id.prio, id.src, id.chan, id.q, reack.0, reack.1);
     }
 
     /// Runs the timers: retransmissions, send timeouts, reassembly expiry.
     pub fn poll(&mut self, now: u64) {
+        if let (Some(ms), Some(t0)) = (self.cfg.close_after_ms, self.first_accept) {
+            if now >= t0 + ms {
+                self.close_app();
+            }
+        }
         let mut due: Vec<(u8, u8)> = self
             .tx
             .iter()
@@ -546,6 +696,10 @@ impl Node {
         let rx = self.rx.values().map(|st| match st {
             RxState::Receiving { deadline, .. } | RxState::Done { deadline, .. } => *deadline,
         });
-        tx.chain(rx).min()
+        let close = match (self.cfg.close_after_ms, self.first_accept) {
+            (Some(ms), Some(t0)) if !self.app_closed => Some(t0 + ms),
+            _ => None,
+        };
+        tx.chain(rx).chain(close).min()
     }
 }

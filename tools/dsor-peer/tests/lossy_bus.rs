@@ -6,7 +6,7 @@
 //! exactly once; a failure before the last frame was sent never delivered.
 
 use dsor_peer::node::{Config, Event, Fail, Node};
-use dsor_peer::wire::{pattern, Frame, Id, Kind};
+use dsor_peer::wire::{pattern, Frame, Id, Kind, Status};
 use std::collections::{HashMap, VecDeque};
 
 struct Rng(u64);
@@ -47,10 +47,27 @@ fn message(j: u64, seed: u64) -> (Kind, Vec<u8>) {
 /// in flight per node. `loss` and `dup` are percentages per frame,
 /// `max_delay` the largest extra latency of a frame in ms.
 fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64) -> Stats {
+    run_app(seed, count, window, loss, dup, max_delay, &|c| c)
+}
+
+/// [`run`] with the receivers' application behaviour set by `app` (a
+/// full queue, an application that goes away): a success must still mean
+/// the application took the message, a refusal that it did not.
+fn run_app(
+    seed: u64,
+    count: u64,
+    window: usize,
+    loss: u64,
+    dup: u64,
+    max_delay: u64,
+    app: &dyn Fn(Config) -> Config,
+) -> Stats {
     let mut rng = Rng(seed | 1);
-    let cfg = |n| Config {
-        t_reasm: 3000,
-        ..Config::new(n)
+    let cfg = |n| {
+        app(Config {
+            t_reasm: 3000,
+            ..Config::new(n)
+        })
     };
     let mut nodes = [Node::new(cfg(3)), Node::new(cfg(0x40))];
     let addr = [3u8, 0x40];
@@ -60,6 +77,8 @@ fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64
     let mut finished = [0u64; 2];
     // Per receiver: message number -> deliveries.
     let mut delivered: [HashMap<u64, u32>; 2] = [HashMap::new(), HashMap::new()];
+    // Per receiver: message number -> status the application refused with.
+    let mut refused: [HashMap<u64, Status>; 2] = [HashMap::new(), HashMap::new()];
     let mut outcomes: [Vec<Outcome>; 2] = [Vec::new(), Vec::new()];
     let mut bus: VecDeque<(u64, usize, Frame)> = VecDeque::new();
     let mut last_arrival = 0u64;
@@ -118,6 +137,14 @@ fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64
                         );
                         *delivered[i].entry(j).or_default() += 1;
                     }
+                    Event::NotDelivered { msg, status } => {
+                        let Kind::Segm { id } = msg.kind else {
+                            panic!("kind {:?}", msg.kind)
+                        };
+                        assert!(status != Status::Ok);
+                        let old = refused[i].insert(u64::from(id), status);
+                        assert!(old.is_none(), "message {id} refused twice");
+                    }
                     Event::Sent {
                         handle,
                         result,
@@ -158,6 +185,9 @@ fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64
     }
     for i in 0..2 {
         let rx = &delivered[1 - i];
+        for j in refused[1 - i].keys() {
+            assert_eq!(rx.get(j), None, "message {j} refused and delivered");
+        }
         for (j, n) in rx {
             assert_eq!(
                 *n, 1,
@@ -176,6 +206,15 @@ fn run(seed: u64, count: u64, window: usize, loss: u64, dup: u64, max_delay: u64
                     )
                 }
                 Err(Fail::Timeout) => {} // outcome unknown to the sender (two generals)
+                Err(Fail::NoMemory) => {
+                    assert_eq!(rx.get(&j), None, "{j}: NO_MEMORY but delivered");
+                    assert_eq!(refused[1 - i].get(&j), Some(&Status::NoMemory));
+                }
+                Err(Fail::Refused) => {
+                    // Refused at the header (no event) or later.
+                    assert_eq!(rx.get(&j), None, "{j}: REFUSED but delivered");
+                    assert!(refused[1 - i].get(&j).is_none_or(|s| *s == Status::Refused));
+                }
                 Err(e) => panic!("unexpected failure {e:?}"),
             }
         }
@@ -239,4 +278,35 @@ fn frame_ids_are_ours() {
     let f = a.pop_frame().unwrap();
     let id = Id::decode(f.id);
     assert_eq!((id.src, id.dst, id.prio), (0x11, 0x22, 0xab));
+}
+
+#[test]
+fn full_application_queue_refuses_with_the_last_frame() {
+    // The receiving applications hold 5 messages and never read: the rest
+    // are refused with their last frame (NO_MEMORY), never reported as
+    // sent; with loss, a lost last ack may still turn a delivered one into
+    // a timeout (checked in run_app).
+    for (seed, loss) in [(1, 0), (2, 0), (3, 15), (4, 30)] {
+        let st = run_app(seed, 30, 3, loss, 10, 40, &|c| Config {
+            app_queue: Some(5),
+            ..c
+        });
+        assert!(st.ok <= 10, "seed {seed}: {st:?}");
+        if loss == 0 {
+            assert_eq!((st.ok, st.failed), (10, 50), "seed {seed}: {st:?}");
+        }
+    }
+}
+
+#[test]
+fn application_going_away_refuses_the_rest() {
+    // The receiving applications go away after 40 body frames: partial
+    // messages are refused at their next body, later ones at the header.
+    for (seed, loss) in [(1, 0), (5, 0), (6, 20)] {
+        let st = run_app(seed, 30, 2, loss, 10, 40, &|c| Config {
+            close_after_frames: Some(40),
+            ..c
+        });
+        assert!(st.failed > 0 && st.ok < 60, "seed {seed}: {st:?}");
+    }
 }

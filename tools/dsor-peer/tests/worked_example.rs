@@ -889,6 +889,63 @@ fn doc_lost_ack_example() {
     );
 }
 
+/// dsor-wire.rst, "Full receiver": the application holds one message (the
+/// zero-length one before), so the last body is answered NO_MEMORY.
+#[test]
+fn doc_full_receiver_example() {
+    let mut a = Node::new(Config::new(0x05));
+    let mut b = Node::new(Config {
+        app_queue: Some(1),
+        ..Config::new(0x03)
+    });
+    occupy(&mut a, 0x03, 5);
+    a.send(0, 0x03, 0x20, Kind::Segm { id: 1 }, vec![]).unwrap();
+    exchange(
+        &mut a,
+        &mut b,
+        5,
+        &[(0x0400_C285, &[0, 0, 0, 0, 0, 1]), (0x0401_41C5, &[0, 0])],
+        None,
+    );
+    events(&mut b);
+    events(&mut a);
+    a.send(0, 0x03, 0x20, Kind::Segm { id: 1 }, (0xa0..=0xa8).collect())
+        .unwrap();
+    exchange(
+        &mut a,
+        &mut b,
+        5,
+        &[
+            (0x0400_C295, &[0, 9, 0, 0, 0, 1]),
+            (0x0401_41D5, &[0, 0]),
+            (
+                0x0400_C2A5,
+                &[0xa0, 0xa1, 0xa2, 0xa3, 0xa4, 0xa5, 0xa6, 0xa7],
+            ),
+            (0x0401_41C5, &[0, 1]),
+            (0x0400_C2B5, &[0xa8]),
+            (0x0401_41D5, &[0, 2, 2]),
+        ],
+        None,
+    );
+    assert!(matches!(
+        &events(&mut b)[..],
+        [Event::NotDelivered { status: Status::NoMemory, msg }] if msg.payload.len() == 9
+    ));
+    assert!(events(&mut a).iter().any(|e| matches!(
+        e,
+        Event::Sent {
+            result: Err(Fail::NoMemory),
+            last_frame_sent: true,
+            ..
+        }
+    )));
+    // The retransmitted last body gets the same answer, nothing new.
+    b.on_frame(5000, &f(0x0400_C2B5, &[0xa8]));
+    assert_eq!(frames(&mut b), vec![f(0x0401_41D5, &[0, 2, 2])]);
+    assert!(events(&mut b).is_empty());
+}
+
 #[test]
 fn doc_refused_example() {
     let mut a = Node::new(Config::new(0x05));

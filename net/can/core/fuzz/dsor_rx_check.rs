@@ -10,7 +10,7 @@
 
 use rcan_core::dsor_rx::{Limits, Reassembler};
 use rcan_core::dsor_tx::Transfer;
-use rcan_core::dsor_wire::{Ack, DsorId, FrameType, Header, MsgKind, Timers};
+use rcan_core::dsor_wire::{Ack, AckStatus, DsorId, FrameType, Header, MsgKind, Timers};
 
 const LOCAL: u8 = 1;
 
@@ -60,14 +60,46 @@ pub fn check(input: &[u8]) {
         let Some(id) = DsorId::from_can_id(id29) else {
             continue;
         };
-        let out = rx.on_frame(&id, data, now, |inc| {
-            assert!(inc.header.len <= limits.max_len);
-            if inc.header.len % 5 == 4 {
-                Err(rcan_core::dsor_wire::AckStatus::Refused)
-            } else {
-                Ok(vec![0; inc.header.len as usize])
-            }
-        });
+        // The application refuses some complete messages (full queue,
+        // gone), decided by the message's length; now and then it goes
+        // away for the partial messages of one source (`dt` 254).
+        let mut offered = None;
+        let mut out = rx.on_frame_with(
+            &id,
+            data,
+            now,
+            |inc| {
+                assert!(inc.header.len <= limits.max_len);
+                if inc.header.len % 5 == 4 {
+                    Err(AckStatus::Refused)
+                } else {
+                    Ok(vec![0; inc.header.len as usize])
+                }
+            },
+            |d| {
+                offered = Some(d.header.len);
+                assert_eq!(d.buf.len(), d.header.len as usize);
+                match d.header.len % 7 {
+                    3 => Err(AckStatus::NoMemory),
+                    5 => Err(AckStatus::Refused),
+                    _ => Ok(()),
+                }
+            },
+        );
+        if let Some(len) = offered {
+            // The last frame is acked with the application's answer.
+            let a = Ack::decode(out.ack.unwrap().payload()).unwrap();
+            let want = match len % 7 {
+                3 => AckStatus::NoMemory,
+                5 => AckStatus::Refused,
+                _ => AckStatus::Ok,
+            };
+            assert_eq!(a.status, want);
+        }
+        if dt == 254 {
+            rx.refuse_partial(|inc| inc.src != id.src, AckStatus::Refused);
+        }
+        out.delivered = None;
         if id.dst != LOCAL || id.ftype == FrameType::Ack {
             assert!(out.ack.is_none() && out.delivered.is_none());
         }
@@ -78,9 +110,6 @@ pub fn check(input: &[u8]) {
                 (id.dst, id.src, id.chan, id.seq, FrameType::Ack)
             );
             assert!(Ack::decode(a.payload()).is_some());
-        }
-        if let Some(d) = out.delivered {
-            assert_eq!(d.buf.len(), d.header.len as usize);
         }
         assert!(rx.bytes_in_use() <= limits.max_bytes_total);
         assert!(rx.active() <= 4);

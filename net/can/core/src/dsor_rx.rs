@@ -7,7 +7,11 @@
 //! The table has `N` fixed slots, one per (source node, channel) with a
 //! state. Buffers are of the caller's type `B` (a kernel vector, a host
 //! `Vec<u8>`, ...), obtained from the `accept` callback only for a new
-//! header that passed all limits, and handed back on delivery.
+//! header that passed all limits, and handed to the `deliver` callback
+//! when the last frame arrives. The last frame is acknowledged only after
+//! `deliver` took the message: its ack carries OK if it did, else the
+//! status `deliver` refused with (dsor-wire.rst, "Delivery rule"), so a
+//! sender's success always means the application has the message.
 
 use super::dsor_wire::{
     body_count, body_dlc, Ack, AckStatus, DsorId, Frame, FrameType, Header, Timers, MAX_LEN,
@@ -69,15 +73,29 @@ pub struct Delivered<B> {
 pub struct RxOutput<B> {
     /// Ack to send (29-bit identifier, no `CAN_EFF_FLAG`).
     pub ack: Option<Frame>,
-    /// Message completed by this frame (at most once per message).
+    /// Message completed by this frame and taken by the application (at
+    /// most once per message). Only [`Reassembler::on_frame`] fills it;
+    /// with [`Reassembler::on_frame_with`] the `deliver` callback gets it.
     pub delivered: Option<Delivered<B>>,
+    /// A new header that this frame made the receiver refuse, with the
+    /// status of its ack (not set for a repeated answer to a duplicate).
+    pub header_refused: Option<AckStatus>,
 }
 
 impl<B> RxOutput<B> {
     const NONE: RxOutput<B> = RxOutput {
         ack: None,
         delivered: None,
+        header_refused: None,
     };
+
+    fn ack(ack: Option<Frame>) -> Self {
+        RxOutput {
+            ack,
+            delivered: None,
+            header_refused: None,
+        }
+    }
 }
 
 #[derive(Debug)]
@@ -91,6 +109,18 @@ enum St<B> {
         next: u16,
         buf: B,
     },
+    /// A partial message the application no longer wants
+    /// ([`Reassembler::refuse_partial`]): no buffer; body `next` gets
+    /// `status` and ends the transfer (Done); repetitions of frames acked
+    /// before are re-acked OK as in Receiving.
+    Refusing {
+        header: Header,
+        hq: bool,
+        next: u16,
+        status: AckStatus,
+    },
+    /// The last acked frame was `last_index` (Q `last_q`), answered with
+    /// `status`: OK, or the refusal of the header (index 0) or of a body.
     Done {
         header: Header,
         hq: bool,
@@ -138,6 +168,14 @@ fn ack_frame(id: &DsorId, index: u16, status: AckStatus) -> Option<Frame> {
     Some(Frame::ack(&id.ack_id(), &Ack { index, status }))
 }
 
+/// `status` as a refusal: OK means REFUSED.
+fn refusal(status: AckStatus) -> AckStatus {
+    match status {
+        AckStatus::Ok => AckStatus::Refused,
+        s => s,
+    }
+}
+
 impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
     /// An empty table for node `local`.
     pub const fn new(local: u8, limits: Limits, timers: &Timers) -> Self {
@@ -179,11 +217,9 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
     }
 
     /// One received frame (29-bit identifier already split; `data` is the
-    /// DLC bytes). Frames not addressed to the local node, acks, reserved
-    /// and malformed frames give nothing. `accept` is called only for a
-    /// new message header that passed the limits; it returns a buffer of
-    /// exactly `header.len` bytes (any other length counts as NO_MEMORY)
-    /// or the status to refuse with.
+    /// DLC bytes), for an application that always takes a completed
+    /// message: it is returned in [`RxOutput::delivered`]. See
+    /// [`Reassembler::on_frame_with`].
     pub fn on_frame<F: FnMut(&Incoming<'_>) -> Result<B, AckStatus>>(
         &mut self,
         id: &DsorId,
@@ -191,23 +227,106 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
         now_ms: u64,
         accept: F,
     ) -> RxOutput<B> {
+        let mut got = None;
+        let mut out = self.on_frame_with(id, data, now_ms, accept, |d| {
+            got = Some(d);
+            Ok(())
+        });
+        out.delivered = got;
+        out
+    }
+
+    /// One received frame (29-bit identifier already split; `data` is the
+    /// DLC bytes). Frames not addressed to the local node, acks, reserved
+    /// and malformed frames give nothing. `accept` is called only for a
+    /// new message header that passed the limits; it returns a buffer of
+    /// exactly `header.len` bytes (any other length counts as NO_MEMORY)
+    /// or the status to refuse with. `deliver` is called once per message,
+    /// with the last frame (the header if the length is 0, else the last
+    /// body), before that frame is acked: `Ok` acks it OK, `Err(status)`
+    /// acks it with `status` (`Err(AckStatus::Ok)` counts as REFUSED) and
+    /// the message is not delivered. Either answer is remembered and
+    /// repeated for retransmissions of that frame.
+    pub fn on_frame_with<F, D>(
+        &mut self,
+        id: &DsorId,
+        data: &[u8],
+        now_ms: u64,
+        accept: F,
+        deliver: D,
+    ) -> RxOutput<B>
+    where
+        F: FnMut(&Incoming<'_>) -> Result<B, AckStatus>,
+        D: FnOnce(Delivered<B>) -> Result<(), AckStatus>,
+    {
         if id.dst != self.local {
             return RxOutput::NONE;
         }
         match id.ftype {
-            FrameType::Header => self.on_header(id, data, now_ms, accept),
-            FrameType::Body => self.on_body(id, data, now_ms),
+            FrameType::Header => self.on_header(id, data, now_ms, accept, deliver),
+            FrameType::Body => self.on_body(id, data, now_ms, deliver),
             FrameType::Ack => RxOutput::NONE,
         }
     }
 
-    fn on_header<F: FnMut(&Incoming<'_>) -> Result<B, AckStatus>>(
+    /// Stops reassembling every partial message for which `keep` returns
+    /// false (for example: the last socket that wanted it was closed). Its
+    /// buffer is dropped now; the next body of the transfer is answered
+    /// with `status` instead of OK, which ends the transfer at the sender
+    /// (retransmissions of the header or body acked before are still
+    /// re-acked OK, so that the sender gets to that body).
+    /// `AckStatus::Ok` counts as REFUSED. Returns how many were stopped.
+    pub fn refuse_partial<K: FnMut(&Incoming<'_>) -> bool>(
+        &mut self,
+        mut keep: K,
+        status: AckStatus,
+    ) -> usize {
+        let status = refusal(status);
+        let mut n = 0;
+        for s in self.slots.iter_mut() {
+            let (header, hq, next) = match &s.st {
+                St::Receiving {
+                    header,
+                    hq,
+                    prio,
+                    next,
+                    ..
+                } => {
+                    let inc = Incoming {
+                        src: s.src,
+                        prio: *prio,
+                        header,
+                    };
+                    if keep(&inc) {
+                        continue;
+                    }
+                    (*header, *hq, *next)
+                }
+                _ => continue,
+            };
+            s.st = St::Refusing {
+                header,
+                hq,
+                next,
+                status,
+            };
+            n += 1;
+        }
+        n
+    }
+
+    fn on_header<F, D>(
         &mut self,
         id: &DsorId,
         data: &[u8],
         now_ms: u64,
         mut accept: F,
-    ) -> RxOutput<B> {
+        deliver: D,
+    ) -> RxOutput<B>
+    where
+        F: FnMut(&Incoming<'_>) -> Result<B, AckStatus>,
+        D: FnOnce(Delivered<B>) -> Result<(), AckStatus>,
+    {
         let Some(h) = Header::decode(data) else {
             return RxOutput::NONE;
         };
@@ -226,14 +345,15 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                     status,
                     ..
                 } if hq == id.seq && header == h => Some(status),
+                // Acked OK before; the refusal goes with body 1.
+                St::Refusing {
+                    header, hq, next, ..
+                } if next == 1 && hq == id.seq && header == h => Some(AckStatus::Ok),
                 _ => None,
             };
             if let Some(status) = dup {
                 slot.deadline = deadline;
-                return RxOutput {
-                    ack: ack_frame(id, 0, status),
-                    delivered: None,
-                };
+                return RxOutput::ack(ack_frame(id, 0, status));
             }
             // A new message on this stream: drop whatever was there.
             slot.st = St::Free;
@@ -248,7 +368,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
         let free = existing.or_else(|| self.slots.iter().position(|s| s.is_free()));
         let slot = free.or_else(|| self.oldest_done());
         let mut got = None;
-        let status = if h.len > self.limits.max_len {
+        let mut status = if h.len > self.limits.max_len {
             AckStatus::TooLong
         } else if peer >= self.limits.max_per_peer as usize
             || self.bytes_in_use() + h.len as usize > self.limits.max_bytes_total
@@ -270,67 +390,70 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                         AckStatus::NoMemory
                     }
                 }
-                Err(AckStatus::Ok) => AckStatus::Refused,
-                Err(s) => s,
+                Err(s) => refusal(s),
             }
         };
-        let ack = ack_frame(id, 0, status);
-        let slot = if got.is_some() { slot } else { free };
+        let header_refused = (status != AckStatus::Ok).then_some(status);
+        // A zero-length message is complete with its header: it is
+        // delivered before the header is acked, and the ack says whether
+        // the application took it.
+        let mut delivered = false;
+        if h.len == 0 {
+            if let Some(buf) = got.take() {
+                let d = Delivered {
+                    src: id.src,
+                    prio: id.prio,
+                    header: h,
+                    buf,
+                };
+                status = match deliver(d) {
+                    Ok(()) => AckStatus::Ok,
+                    Err(s) => refusal(s),
+                };
+                delivered = true;
+            }
+        }
+        let out = RxOutput {
+            ack: ack_frame(id, 0, status),
+            delivered: None,
+            header_refused,
+        };
+        let slot = if got.is_some() || delivered {
+            slot
+        } else {
+            free
+        };
         let Some(i) = slot else {
             // No slot to remember the refusal in.
-            return RxOutput {
-                ack,
-                delivered: None,
-            };
+            return out;
         };
         let slot = &mut self.slots[i];
         slot.src = id.src;
         slot.chan = id.chan;
         slot.deadline = deadline;
-        let done = St::Done {
-            header: h,
-            hq: id.seq,
-            last_q: id.seq,
-            last_index: 0,
-            status,
+        slot.st = match got {
+            Some(buf) => St::Receiving {
+                header: h,
+                hq: id.seq,
+                prio: id.prio,
+                next: 1,
+                buf,
+            },
+            None => St::Done {
+                header: h,
+                hq: id.seq,
+                last_q: id.seq,
+                last_index: 0,
+                status,
+            },
         };
-        match got {
-            Some(buf) if h.len == 0 => {
-                slot.st = done;
-                RxOutput {
-                    ack,
-                    delivered: Some(Delivered {
-                        src: id.src,
-                        prio: id.prio,
-                        header: h,
-                        buf,
-                    }),
-                }
-            }
-            Some(buf) => {
-                slot.st = St::Receiving {
-                    header: h,
-                    hq: id.seq,
-                    prio: id.prio,
-                    next: 1,
-                    buf,
-                };
-                RxOutput {
-                    ack,
-                    delivered: None,
-                }
-            }
-            None => {
-                slot.st = done;
-                RxOutput {
-                    ack,
-                    delivered: None,
-                }
-            }
-        }
+        out
     }
 
-    fn on_body(&mut self, id: &DsorId, data: &[u8], now_ms: u64) -> RxOutput<B> {
+    fn on_body<D>(&mut self, id: &DsorId, data: &[u8], now_ms: u64, deliver: D) -> RxOutput<B>
+    where
+        D: FnOnce(Delivered<B>) -> Result<(), AckStatus>,
+    {
         let Some(i) = self.find(id.src, id.chan) else {
             return RxOutput::NONE;
         };
@@ -342,6 +465,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                 header,
                 last_q,
                 last_index,
+                status,
                 ..
             } => {
                 if *last_index == 0
@@ -351,10 +475,40 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                     return RxOutput::NONE;
                 }
                 slot.deadline = deadline;
-                RxOutput {
-                    ack: ack_frame(id, *last_index, AckStatus::Ok),
-                    delivered: None,
+                // The last body again: the same answer as before.
+                RxOutput::ack(ack_frame(id, *last_index, *status))
+            }
+            St::Refusing {
+                header,
+                hq,
+                next,
+                status,
+            } => {
+                // Frames acked before get their old answer (OK), so that
+                // a sender that missed that ack moves on; the first new
+                // frame (body `next`) gets the refusal.
+                let expect_q = *hq ^ (*next & 1 == 1);
+                if id.seq != expect_q {
+                    if *next < 2 || data.len() != body_dlc(header.len, *next - 1) as usize {
+                        return RxOutput::NONE;
+                    }
+                    slot.deadline = deadline;
+                    return RxOutput::ack(ack_frame(id, *next - 1, AckStatus::Ok));
                 }
+                let k = *next;
+                if data.len() != body_dlc(header.len, k) as usize {
+                    return RxOutput::NONE;
+                }
+                let status = *status;
+                slot.st = St::Done {
+                    header: *header,
+                    hq: *hq,
+                    last_q: id.seq,
+                    last_index: k,
+                    status,
+                };
+                slot.deadline = deadline;
+                RxOutput::ack(ack_frame(id, k, status))
             }
             St::Receiving {
                 header,
@@ -371,10 +525,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                         return RxOutput::NONE;
                     }
                     slot.deadline = deadline;
-                    return RxOutput {
-                        ack: ack_frame(id, *next - 1, AckStatus::Ok),
-                        delivered: None,
-                    };
+                    return RxOutput::ack(ack_frame(id, *next - 1, AckStatus::Ok));
                 }
                 let dlc = body_dlc(header.len, *next) as usize;
                 if data.len() != dlc {
@@ -388,37 +539,39 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                     None => return RxOutput::NONE,
                 }
                 slot.deadline = deadline;
-                let ack = ack_frame(id, k, AckStatus::Ok);
                 if k < body_count(header.len) {
                     *next = k + 1;
-                    return RxOutput {
-                        ack,
-                        delivered: None,
-                    };
+                    return RxOutput::ack(ack_frame(id, k, AckStatus::Ok));
                 }
                 let h = *header;
-                let done = St::Done {
+                let hq = *hq;
+                let placeholder = St::Done {
                     header: h,
-                    hq: *hq,
+                    hq,
                     last_q: id.seq,
                     last_index: k,
                     status: AckStatus::Ok,
                 };
-                match core::mem::replace(&mut slot.st, done) {
-                    St::Receiving { prio, buf, .. } => RxOutput {
-                        ack,
-                        delivered: Some(Delivered {
-                            src: id.src,
-                            prio,
-                            header: h,
-                            buf,
-                        }),
-                    },
-                    _ => RxOutput {
-                        ack,
-                        delivered: None,
-                    },
+                let St::Receiving { prio, buf, .. } = core::mem::replace(&mut slot.st, placeholder)
+                else {
+                    // Cannot happen: matched above.
+                    return RxOutput::NONE;
+                };
+                // The last body: hand the message over first, then ack
+                // with the application's answer.
+                let status = match deliver(Delivered {
+                    src: id.src,
+                    prio,
+                    header: h,
+                    buf,
+                }) {
+                    Ok(()) => AckStatus::Ok,
+                    Err(s) => refusal(s),
+                };
+                if let St::Done { status: st, .. } = &mut slot.st {
+                    *st = status;
                 }
+                RxOutput::ack(ack_frame(id, k, status))
             }
         }
     }
@@ -447,11 +600,14 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             .min()
     }
 
-    /// Drop every state and buffer.
-    pub fn clear(&mut self) {
+    /// Drop every state and buffer; returns how many partial messages
+    /// were dropped.
+    pub fn clear(&mut self) -> usize {
+        let dropped = self.active();
         for s in self.slots.iter_mut() {
             s.st = St::Free;
         }
+        dropped
     }
 
     /// Bytes of reassembly buffers held (sum of the lengths of the partial
@@ -569,5 +725,147 @@ mod tests {
         assert_eq!(rx.on_timer(2009), 0);
         assert_eq!(rx.on_timer(2010), 1);
         assert_eq!(rx.bytes_in_use(), 0);
+    }
+
+    fn status_of(out: &RxOutput<[u8; 9]>) -> Option<(u16, AckStatus)> {
+        ack_of(out).map(|(_, a)| (a.index, a.status))
+    }
+
+    /// The delivery rule: the last frame is acked with the application's
+    /// answer, which is remembered for its retransmissions.
+    #[test]
+    fn last_frame_acked_with_the_applications_answer() {
+        let tm = Timers::default();
+        let mut rx = Rx::new(2, Limits::default(), &tm);
+        let h = Header {
+            len: 9,
+            kind: MsgKind::Segm { id: 1 },
+        };
+        let mut hb = [0; 8];
+        let dlc = h.encode(&mut hb) as usize;
+        let acc = |_: &Incoming<'_>| Ok([0u8; 9]);
+        let hdr = id(FrameType::Header, false, 2);
+        let b1 = id(FrameType::Body, true, 2);
+        let b2 = id(FrameType::Body, false, 2);
+        let full = |_: Delivered<[u8; 9]>| Err(AckStatus::NoMemory);
+        let o = rx.on_frame_with(&hdr, &hb[..dlc], 0, acc, full);
+        assert_eq!(status_of(&o), Some((0, AckStatus::Ok)));
+        let o = rx.on_frame_with(&b1, &[1; 8], 1, acc, full);
+        assert_eq!(status_of(&o), Some((1, AckStatus::Ok)));
+        let mut offered = 0;
+        let o = rx.on_frame_with(&b2, &[2], 2, acc, |d| {
+            offered += 1;
+            assert_eq!(d.buf, [1, 1, 1, 1, 1, 1, 1, 1, 2]);
+            Err(AckStatus::NoMemory)
+        });
+        assert_eq!(status_of(&o), Some((2, AckStatus::NoMemory)));
+        assert_eq!((offered, o.header_refused), (1, None));
+        // The retransmission gets the same answer; the application is not
+        // asked again.
+        let o = rx.on_frame_with(&b2, &[2], 3, acc, |_| -> Result<(), AckStatus> {
+            panic!("offered twice")
+        });
+        assert_eq!(status_of(&o), Some((2, AckStatus::NoMemory)));
+        assert_eq!((rx.active(), rx.bytes_in_use()), (0, 0));
+        // A zero-length message: the header is the last frame.
+        let mut rx = Reassembler::<Vec<u8>, 4>::new(2, Limits::default(), &tm);
+        let vacc = |i: &Incoming<'_>| Ok(vec![0u8; usize::from(i.header.len)]);
+        let z = Header {
+            len: 0,
+            kind: MsgKind::Segm { id: 2 },
+        };
+        let mut zb = [0; 8];
+        let zdlc = z.encode(&mut zb) as usize;
+        let zack = |o: &RxOutput<Vec<u8>>| {
+            let a = Ack::decode(o.ack.unwrap().payload()).unwrap();
+            (a.index, a.status)
+        };
+        let o = rx.on_frame_with(&hdr, &zb[..zdlc], 4, vacc, |_| Err(AckStatus::Ok));
+        assert_eq!(zack(&o), (0, AckStatus::Refused));
+        let o = rx.on_frame_with(&hdr, &zb[..zdlc], 5, vacc, |_| -> Result<(), AckStatus> {
+            panic!("offered twice")
+        });
+        assert_eq!(zack(&o), (0, AckStatus::Refused));
+        // The old entry point delivers and acks OK.
+        let hdr3 = DsorId { chan: 3, ..hdr };
+        let o = rx.on_frame(&hdr3, &zb[..zdlc], 6, vacc);
+        assert_eq!(zack(&o), (0, AckStatus::Ok));
+        assert!(o.delivered.is_some());
+    }
+
+    /// A partial message whose application went away: its buffer is freed
+    /// at once, repeated frames are re-acked OK, the next body is refused.
+    #[test]
+    fn refuse_partial_refuses_the_next_body() {
+        let tm = Timers::default();
+        let mut rx = Reassembler::<[u8; 17], 2>::new(2, Limits::default(), &tm);
+        let h = Header {
+            len: 17,
+            kind: MsgKind::Port { dport: 1, sport: 2 },
+        };
+        let mut hb = [0; 8];
+        let dlc = h.encode(&mut hb) as usize;
+        let acc = |_: &Incoming<'_>| Ok([0u8; 17]);
+        let never = |_: Delivered<[u8; 17]>| -> Result<(), AckStatus> { panic!("delivered") };
+        let st = |o: &RxOutput<[u8; 17]>| {
+            o.ack
+                .map(|f| Ack::decode(f.payload()).unwrap())
+                .map(|a| (a.index, a.status))
+        };
+        let hdr = id(FrameType::Header, false, 2);
+        assert_eq!(
+            st(&rx.on_frame_with(&hdr, &hb[..dlc], 0, acc, never)),
+            Some((0, AckStatus::Ok))
+        );
+        // Keep it: nothing changes.
+        assert_eq!(rx.refuse_partial(|_| true, AckStatus::Refused), 0);
+        assert_eq!(rx.bytes_in_use(), 17);
+        let mut seen = None;
+        let n = rx.refuse_partial(
+            |inc| {
+                seen = Some((inc.src, inc.prio, *inc.header));
+                false
+            },
+            AckStatus::Refused,
+        );
+        assert_eq!((n, seen), (1, Some((4, 7, h))));
+        assert_eq!((rx.active(), rx.bytes_in_use(), rx.states()), (0, 0, 1));
+        // The header again (its ack was lost): OK, as before.
+        assert_eq!(
+            st(&rx.on_frame_with(&hdr, &hb[..dlc], 1, acc, never)),
+            Some((0, AckStatus::Ok))
+        );
+        // Body 1 is refused; its retransmission gets the same answer.
+        let b1 = id(FrameType::Body, true, 2);
+        assert_eq!(
+            st(&rx.on_frame_with(&b1, &[1; 8], 2, acc, never)),
+            Some((1, AckStatus::Refused))
+        );
+        assert_eq!(
+            st(&rx.on_frame_with(&b1, &[1; 8], 3, acc, never)),
+            Some((1, AckStatus::Refused))
+        );
+        assert!(
+            st(&rx.on_frame_with(&id(FrameType::Body, false, 2), &[1; 8], 3, acc, never)).is_none()
+        );
+        // Refused after body 1 was stored: body 1 again is re-acked OK,
+        // body 2 refused with the given status.
+        let mut rx = Reassembler::<[u8; 17], 2>::new(2, Limits::default(), &tm);
+        rx.on_frame_with(&hdr, &hb[..dlc], 0, acc, never);
+        rx.on_frame_with(&b1, &[1; 8], 1, acc, never);
+        assert_eq!(rx.refuse_partial(|_| false, AckStatus::NoMemory), 1);
+        assert_eq!(
+            st(&rx.on_frame_with(&b1, &[1; 8], 2, acc, never)),
+            Some((1, AckStatus::Ok))
+        );
+        let b2 = id(FrameType::Body, false, 2);
+        assert!(st(&rx.on_frame_with(&b2, &[1; 7], 3, acc, never)).is_none());
+        assert_eq!(
+            st(&rx.on_frame_with(&b2, &[1; 8], 3, acc, never)),
+            Some((2, AckStatus::NoMemory))
+        );
+        // The state expires like any other.
+        assert_eq!(rx.on_timer(3 + 2000), 0);
+        assert_eq!(rx.states(), 0);
     }
 }

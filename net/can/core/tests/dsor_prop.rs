@@ -356,6 +356,67 @@ fn doc_example_refused() {
     assert_eq!(rx.bytes_in_use(), 0);
 }
 
+#[test]
+fn doc_example_full_receiver() {
+    // dsor-wire.rst, "Full receiver": the last body is answered NO_MEMORY.
+    let msg = [0xa0, 0xa1, 0xa2, 0xa3, 0xa4, 0xa5, 0xa6, 0xa7, 0xa8];
+    let h = Header {
+        len: 9,
+        kind: MsgKind::Segm { id: 1 },
+    };
+    let tm = Timers::default();
+    let mut t = Transfer::new(0x05, 0x03, 5, 0x20, h, true, &tm);
+    let mut rx = Rx::new(0x03, Limits::default(), &tm);
+    let lines = [
+        Line(0x0400_C295, &[0x00, 0x09, 0x00, 0x00, 0x00, 0x01]),
+        Line(0x0401_41D5, &[0x00, 0x00]),
+        Line(
+            0x0400_C2A5,
+            &[0xa0, 0xa1, 0xa2, 0xa3, 0xa4, 0xa5, 0xa6, 0xa7],
+        ),
+        Line(0x0401_41C5, &[0x00, 0x01]),
+        Line(0x0400_C2B5, &[0xa8]),
+        Line(0x0401_41D5, &[0x00, 0x02, 0x02]),
+    ];
+    let mut f = t.start(&msg, 0);
+    let mut offered = 0;
+    for (i, pair) in lines.chunks(2).enumerate() {
+        frame_is(&f, &pair[0]);
+        let id = DsorId::from_can_id(f.id).unwrap();
+        let out = rx.on_frame_with(
+            &id,
+            f.payload(),
+            i as u64,
+            |i| want(i.header.len),
+            |d| {
+                offered += 1;
+                assert_eq!(&d.buf[..], &msg[..]);
+                Err(AckStatus::NoMemory)
+            },
+        );
+        let a = out.ack.unwrap();
+        frame_is(&a, &pair[1]);
+        match t.on_ack(
+            &DsorId::from_can_id(a.id).unwrap(),
+            a.payload(),
+            &msg,
+            i as u64,
+        ) {
+            TxStep::Send(n) => f = n,
+            TxStep::Failed(TxError::NoMemory) => {
+                assert_eq!(i, 2);
+                assert!(t.last_frame_sent());
+            }
+            s => panic!("{s:?}"),
+        }
+    }
+    assert_eq!(offered, 1);
+    // The retransmitted last body gets the same answer.
+    let id = DsorId::from_can_id(0x0400_C2B5).unwrap();
+    let out = rx.on_frame_with(&id, &[0xa8], 100, |i| want(i.header.len), |_| Ok(()));
+    frame_is(&out.ack.unwrap(), &lines[5]);
+}
+
 // ---------------------------------------------------------------------------
 // Simulation
 // ---------------------------------------------------------------------------
@@ -473,6 +534,15 @@ struct SimCfg {
     garbage: u8,
     /// Faults of the receiver -> senders channel, if not `faults`.
     back_faults: Option<Faults>,
+    /// Messages whose tag % full_mod == 0 find the application's queue
+    /// full when they are complete: `deliver` refuses them (NO_MEMORY).
+    full_mod: u32,
+    /// Messages whose tag % close_mod == 0 lose their application while
+    /// they are being received: at random moments (`close_pct` percent of
+    /// the steps) `refuse_partial` stops every such partial message, and
+    /// the application refuses it from then on (REFUSED).
+    close_mod: u32,
+    close_pct: u8,
 }
 
 struct SimResult {
@@ -480,6 +550,10 @@ struct SimResult {
     outcome: Vec<Outcome>,
     delivered: Vec<u32>,
     refused: Vec<bool>,
+    /// The application refused the complete message (queue full).
+    full: Vec<bool>,
+    /// The application went away while the message was being received.
+    closed: Vec<bool>,
 }
 
 enum Act {
@@ -542,6 +616,9 @@ fn simulate(cfg: &SimCfg) -> SimResult {
     let mut outcome = vec![Outcome::Pending; msgs.len()];
     let mut delivered = vec![0u32; msgs.len()];
     let mut refused = vec![false; msgs.len()];
+    let mut full = vec![false; msgs.len()];
+    let mut closed = vec![false; msgs.len()];
+    let mut offered = vec![0u32; msgs.len()];
     let mut fwd = Fifo::default();
     let mut back = Fifo::default();
     let mut now = 0u64;
@@ -624,29 +701,63 @@ fn simulate(cfg: &SimCfg) -> SimResult {
                 let Some(id) = DsorId::from_can_id(f.id) else {
                     continue;
                 };
-                let out = rx.on_frame(&id, f.payload(), now, |inc| {
-                    let tag = tag_of(inc.header);
-                    let m = &msgs[tag];
-                    assert_eq!((inc.src, inc.header), (m.src, &m.header));
-                    if cfg.refuse_mod != 0 && (tag as u32).is_multiple_of(cfg.refuse_mod) {
-                        refused[tag] = true;
-                        return Err(AckStatus::Refused);
-                    }
-                    Ok(CountedBuf::new(inc.header.len as usize, &live))
-                });
-                assert!(live.get() <= limits.max_bytes_total);
-                assert_eq!(
-                    live.get(),
-                    rx.bytes_in_use() + out.delivered.as_ref().map_or(0, |d| d.buf.v.len())
+                let m_of = |tag: usize| -> &Msg { &msgs[tag] };
+                let out = rx.on_frame_with(
+                    &id,
+                    f.payload(),
+                    now,
+                    |inc| {
+                        let tag = tag_of(inc.header);
+                        let m = m_of(tag);
+                        assert_eq!((inc.src, inc.header), (m.src, &m.header));
+                        if cfg.refuse_mod != 0 && (tag as u32).is_multiple_of(cfg.refuse_mod) {
+                            refused[tag] = true;
+                            return Err(AckStatus::Refused);
+                        }
+                        if closed[tag] {
+                            return Err(AckStatus::Refused);
+                        }
+                        Ok(CountedBuf::new(inc.header.len as usize, &live))
+                    },
+                    |d| {
+                        let tag = tag_of(&d.header);
+                        let m = m_of(tag);
+                        assert_eq!((d.src, d.prio, d.header), (m.src, m.prio, m.header));
+                        assert_eq!(d.buf.v, m.data, "message {tag} not intact");
+                        // Once per message: a refused one is not offered
+                        // again (the refusal is remembered).
+                        offered[tag] += 1;
+                        assert_eq!(offered[tag], 1, "message {tag} offered twice");
+                        if closed[tag] {
+                            return Err(AckStatus::Refused);
+                        }
+                        if cfg.full_mod != 0 && (tag as u32).is_multiple_of(cfg.full_mod) {
+                            full[tag] = true;
+                            return Err(AckStatus::NoMemory);
+                        }
+                        delivered[tag] += 1;
+                        Ok(())
+                    },
                 );
-                if let Some(d) = out.delivered {
-                    let tag = tag_of(&d.header);
-                    let m = &msgs[tag];
-                    assert_eq!((d.src, d.prio, d.header), (m.src, m.prio, m.header));
-                    assert_eq!(d.buf.v, m.data, "message {tag} not intact");
-                    assert!(!refused[tag], "refused message {tag} delivered");
-                    delivered[tag] += 1;
-                    assert_eq!(delivered[tag], 1, "message {tag} delivered twice");
+                assert!(live.get() <= limits.max_bytes_total);
+                assert_eq!(live.get(), rx.bytes_in_use());
+                assert!(out.delivered.is_none());
+                // The application of some messages goes away.
+                if cfg.close_mod != 0 && rng.pct(cfg.close_pct) {
+                    let stopped = rx.refuse_partial(
+                        |inc| {
+                            let tag = tag_of(inc.header);
+                            if (tag as u32).is_multiple_of(cfg.close_mod) {
+                                closed[tag] = true;
+                                false
+                            } else {
+                                true
+                            }
+                        },
+                        AckStatus::Refused,
+                    );
+                    let _ = stopped;
+                    assert_eq!(live.get(), rx.bytes_in_use(), "refused buffers freed");
                 }
                 if let Some(a) = out.ack {
                     back.push(a, now, &mut rng, bfaults);
@@ -725,6 +836,8 @@ fn simulate(cfg: &SimCfg) -> SimResult {
         outcome,
         delivered,
         refused,
+        full,
+        closed,
     }
 }
 
@@ -738,17 +851,28 @@ fn check(r: &SimResult) {
             }
             Outcome::Failed(TxError::TimedOut, true) => {} // unknown outcome
             Outcome::Failed(TxError::Refused, _) => {
-                assert!(r.refused[i]);
+                assert!(r.refused[i] || r.closed[i], "message {i}: refused by whom?");
+                assert_eq!(r.delivered[i], 0);
+            }
+            Outcome::Failed(TxError::NoMemory, _) => {
+                assert!(r.full[i], "message {i}: NO_MEMORY without a full queue");
                 assert_eq!(r.delivered[i], 0);
             }
             Outcome::Failed(TxError::TooLong, _) => {
                 assert_eq!(r.delivered[i], 0);
             }
-            Outcome::Failed(e, _) => panic!("message {i}: unexpected {e:?}"),
         }
         assert!(r.delivered[i] <= 1);
+        if r.refused[i] || r.full[i] || r.closed[i] {
+            assert_eq!(r.delivered[i], 0, "message {i}: refused but delivered");
+        }
     }
     let _ = &r.msgs;
+}
+
+/// Whether a failed outcome came after the last frame was sent.
+fn o_last(o: &Outcome) -> bool {
+    matches!(o, Outcome::Failed(_, true))
 }
 
 fn lens() -> impl Strategy<Value = Vec<u16>> {
@@ -782,7 +906,8 @@ proptest! {
         senders.sort_by_key(|s| s.0);
         senders.dedup_by_key(|s| s.0);
         let cfg = SimCfg { seed, faults: Faults { loss, dup, max_delay }, senders,
-                           refuse_mod: refuse, max_len: 1000, garbage, back_faults: None };
+                           refuse_mod: refuse, max_len: 1000, garbage, back_faults: None,
+                           full_mod: 0, close_mod: 0, close_pct: 0 };
         let r = simulate(&cfg);
         check(&r);
         for (i, m) in r.msgs.iter().enumerate() {
@@ -801,11 +926,42 @@ proptest! {
         senders.sort_by_key(|s| s.0);
         senders.dedup_by_key(|s| s.0);
         let cfg = SimCfg { seed, faults: Faults { loss: 0, dup, max_delay }, senders,
-                           refuse_mod: 0, max_len: 65535, garbage: 5, back_faults: None };
+                           refuse_mod: 0, max_len: 65535, garbage: 5, back_faults: None,
+                           full_mod: 0, close_mod: 0, close_pct: 0 };
         let r = simulate(&cfg);
         check(&r);
         prop_assert!(r.outcome.iter().all(|o| *o == Outcome::Ok));
         prop_assert!(r.delivered.iter().all(|&d| d == 1));
+    }
+
+    /// The delivery rule (dsor-wire.rst): the application refuses some
+    /// complete messages (queue full) and goes away during others. Over
+    /// lossy channels a sender's success still means the application took
+    /// the message exactly once; NO_MEMORY and REFUSED mean it did not;
+    /// a refused message is never offered to the application twice.
+    #[test]
+    fn sim_delivery_rule(seed in any::<u64>(), loss in 0u8..35, dup in 0u8..30,
+                         max_delay in 0u64..50,
+                         senders in proptest::collection::vec((node(), 1usize..5, lens()), 1..4),
+                         full in 1u32..4, close in 1u32..4, close_pct in 0u8..8) {
+        let mut senders = senders;
+        senders.sort_by_key(|s| s.0);
+        senders.dedup_by_key(|s| s.0);
+        let cfg = SimCfg { seed, faults: Faults { loss, dup, max_delay }, senders,
+                           refuse_mod: 0, max_len: 65535, garbage: 3, back_faults: None,
+                           full_mod: full, close_mod: close, close_pct };
+        let r = simulate(&cfg);
+        check(&r);
+        for (i, o) in r.outcome.iter().enumerate() {
+            // Without loss every outcome is definite and matches what the
+            // application did.
+            if loss == 0 {
+                let want = if r.delivered[i] == 1 { Outcome::Ok }
+                    else if r.full[i] { Outcome::Failed(TxError::NoMemory, true) }
+                    else { prop_assert!(r.closed[i]); Outcome::Failed(TxError::Refused, o_last(o)) };
+                prop_assert_eq!(*o, want, "message {}", i);
+            }
+        }
     }
 }
 
@@ -828,6 +984,9 @@ fn sim_heavy_loss_failures_are_classified() {
             max_len: 65535,
             garbage: 0,
             back_faults: None,
+            full_mod: 0,
+            close_mod: 0,
+            close_pct: 0,
         };
         let r = simulate(&cfg);
         check(&r);
@@ -865,6 +1024,9 @@ fn sim_lost_acks_recover() {
                 dup: 10,
                 max_delay: 20,
             }),
+            full_mod: 0,
+            close_mod: 0,
+            close_pct: 0,
         };
         let r = simulate(&cfg);
         check(&r);
@@ -890,6 +1052,9 @@ fn sim_max_length() {
         max_len: 65535,
         garbage: 0,
         back_faults: None,
+        full_mod: 0,
+        close_mod: 0,
+        close_pct: 0,
     };
     let r = simulate(&cfg);
     check(&r);

@@ -42,6 +42,8 @@ pub const TESTS: &[Test] = test_table![
     dsor_peer_exchange,
     dsor_udp_over_can,
     dsor_sja1000_two_interfaces,
+    dsor_delivery_full_queue,
+    dsor_delivery_receiver_closes,
 ];
 
 /// Node of the peer program.
@@ -578,6 +580,51 @@ fn dsor_errors(ctx: &mut Ctx) -> TestResult {
             ctx.insmod(Module::Dsor, &[bad]).is_err(),
             "insmod rcan_dsor {bad} succeeded"
         );
+    }
+    dsor_bad_params(ctx)
+}
+
+/// Parameters a node cannot work with are refused with EINVAL and a
+/// dmesg line naming the parameter and its allowed range (issue 20,
+/// item 4: these three used to load).
+fn dsor_bad_params(ctx: &mut Ctx) -> TestResult {
+    let long_name = "c".repeat(300);
+    let ifname_300 = format!("ifname={long_name}");
+    for (bad, name, range) in [
+        (ifname_300.as_str(), "ifname", "1-15 bytes"),
+        ("ifname=can0:1", "ifname", "1-15 bytes"),
+        ("max_len=0", "max_len", "1-65535"),
+        ("max_bytes=0", "max_bytes", "max_len"),
+        ("max_bytes=1000", "max_bytes", "max_len"),
+    ] {
+        let mut log = ctx.kmsg()?;
+        let r = crate::sys::finit_module(&ctx.ko(Module::Dsor), &[bad]);
+        let shown = if bad.len() > 40 {
+            format!("ifname=<{} bytes>", long_name.len())
+        } else {
+            bad.to_string()
+        };
+        if r.is_ok() {
+            ctx.rmmod(Module::Dsor)?;
+            return Err(format!("insmod rcan_dsor {shown} succeeded"));
+        }
+        expect_errno(r, libc::EINVAL, &format!("insmod rcan_dsor {shown}"))?;
+        let lines = log.read_new()?;
+        ensure!(
+            lines
+                .iter()
+                .any(|l| l.contains("rcan_dsor") && l.contains(name) && l.contains(range)),
+            "insmod rcan_dsor {shown}: no dmesg line naming {name} and {range:?}: {lines:?}"
+        );
+    }
+    // The edges of the ranges still load.
+    for good in [
+        &["ifname=abcdefghijklmno"][..],
+        &["max_len=1", "max_bytes=1"][..],
+        &["max_len=1000", "max_bytes=1000"][..],
+    ] {
+        ctx.insmod(Module::Dsor, good)?;
+        ctx.rmmod(Module::Dsor)?;
     }
     Ok(())
 }
@@ -1359,5 +1406,427 @@ fn dsor_sja1000_two_interfaces(ctx: &mut Ctx) -> TestResult {
         );
     }
     peer_output(txp, "send on can1")?;
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------
+// The delivery rule (issue 20, item 1): a send succeeds only if the message
+// was queued on a receiving socket.
+
+/// A DSOR socket bound to segmented id `id` from any node, with the
+/// smallest receive buffer the kernel allows (SO_RCVBUF 0 gives
+/// SOCK_MIN_RCVBUF), that the test does not read until the end.
+fn small_queue_sock(id: u32) -> Result<DsorSocket, String> {
+    let s = sock()?;
+    rcan_uapi::raw::setsockopt(&s, libc::SOL_SOCKET, libc::SO_RCVBUF, &0i32.to_ne_bytes())
+        .or_fail("SO_RCVBUF 0")?;
+    s.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: DSOR_NODE_ANY,
+        id,
+    })
+    .or_fail("bind")?;
+    Ok(s)
+}
+
+/// Every message queued on `s`, without waiting.
+fn drain_now(s: &DsorSocket) -> Result<Vec<Vec<u8>>, String> {
+    let mut out = Vec::new();
+    let mut buf = vec![0u8; 70000];
+    loop {
+        match s.recv_from_flags(&mut buf, libc::MSG_DONTWAIT) {
+            Ok((n, _)) => out.push(buf[..n].to_vec()),
+            Err(e) if errno_of(&e) == libc::EAGAIN => return Ok(out),
+            Err(e) => return Err(format!("recv: {e}")),
+        }
+    }
+}
+
+/// Checks that exactly the messages `ok` (numbers j of `pattern(len, j,
+/// seed)`, in order) were queued: what succeeded is readable, nothing
+/// else is.
+fn only_successes_queued(
+    got: &[Vec<u8>],
+    ok: &[u64],
+    len: usize,
+    seed: u64,
+    what: &str,
+) -> TestResult {
+    let want: Vec<Vec<u8>> = ok.iter().map(|&j| pattern(len, j, seed)).collect();
+    let got_n: Vec<Option<u64>> = got
+        .iter()
+        .map(|m| (0..200u64).find(|&j| *m == pattern(len, j, seed)))
+        .collect();
+    ensure!(
+        got == want.as_slice(),
+        "{what}: sends that succeeded {ok:?}, messages readable {got_n:?}"
+    );
+    Ok(())
+}
+
+/// Runs dsor-peer and returns its stdout lines whatever its exit status
+/// (a sender exits 1 when a message failed); usage or socket errors
+/// (exit 2, 3) fail.
+fn peer_lines(c: Child, what: &str) -> Result<Vec<String>, String> {
+    let out = c.wait_with_output().or_fail("dsor-peer")?;
+    let code = out.status.code().unwrap_or(-1);
+    ensure!(
+        code == 0 || code == 1,
+        "dsor-peer {what}: {}: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr).trim()
+    );
+    Ok(String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(String::from)
+        .collect())
+}
+
+/// dsor-peer's `TX` lines: (message number, None for ok / Some(reason)).
+fn peer_tx(lines: &[String]) -> Vec<(u64, Option<String>)> {
+    lines
+        .iter()
+        .filter(|l| l.starts_with("TX "))
+        .filter_map(|l| {
+            let n = field(l, "n=")?.parse().ok()?;
+            let r = if l.starts_with("TX ok") {
+                None
+            } else {
+                Some(field(l, "reason=").unwrap_or("?").to_string())
+            };
+            Some((n, r))
+        })
+        .collect()
+}
+
+const PEER_ARGS: [&str; 4] = ["--ack-timeout-ms", "200", "--reasm-ms", "5000"];
+
+/// A receiver whose queue is full (SO_RCVBUF at its minimum, never read):
+/// every send either succeeded and its message is readable afterwards, or
+/// failed with ENOBUFS (the last frame was refused NO_MEMORY). Kernel to
+/// kernel, dsor-peer to kernel, and kernel to dsor-peer (whose application
+/// holds one message).
+fn dsor_delivery_full_queue(ctx: &mut Ctx) -> TestResult {
+    dsor_stack(ctx, &PEER_TIMERS)?;
+    let n = crate::ctx::sized("RCAN_DSOR_FULL_SENDS", 40, 8) as u64;
+    let len = crate::ctx::sized("RCAN_DSOR_FULL_LEN", 1000, 300) as usize;
+    // Every part runs and reports its figures; the failures are listed at
+    // the end.
+    let mut problems: Vec<String> = Vec::new();
+    // Kernel -> kernel.
+    let rx = small_queue_sock(0x5100)?;
+    let tx = sock()?;
+    let mut ok = Vec::new();
+    let mut other = Vec::new();
+    for j in 0..n {
+        let to = DsorAddr::Segm {
+            prio: 0x30,
+            node: 0,
+            id: 0x5100,
+        };
+        match tx.send_to(&pattern(len, j, 11), &to) {
+            Ok(_) => ok.push(j),
+            Err(e) if errno_of(&e) == libc::ENOBUFS => {}
+            Err(e) => other.push(format!("send {j}: {e}")),
+        }
+    }
+    let got = drain_now(&rx)?;
+    ctx.note(format!(
+        "full queue, kernel -> kernel: {} of {n} sends of {len} bytes succeeded, {} messages readable",
+        ok.len(),
+        got.len()
+    ));
+    problems.extend(other);
+    problems.extend(only_successes_queued(&got, &ok, len, 11, "kernel -> kernel").err());
+    if ok.is_empty() || ok.len() as u64 == n {
+        problems.push(format!(
+            "{} of {n} sends succeeded: the queue should take some and refuse others",
+            ok.len()
+        ));
+    }
+    let mut full = n - ok.len() as u64;
+    drop((rx, tx));
+    // dsor-peer -> kernel.
+    let rx = small_queue_sock(0x5200)?;
+    let mut args = PEER_ARGS.to_vec();
+    let count = n.to_string();
+    let len_s = len.to_string();
+    args.extend([
+        "send",
+        "--to",
+        "0",
+        "--prio",
+        "0x31",
+        "--segm",
+        "0x5200",
+        "--len",
+        &len_s,
+        "--count",
+        &count,
+        "--pattern",
+        "12",
+    ]);
+    let lines = peer_lines(peer(&args)?, "send")?;
+    let tx = peer_tx(&lines);
+    let ok: Vec<u64> = tx.iter().filter(|t| t.1.is_none()).map(|t| t.0).collect();
+    let got = drain_now(&rx)?;
+    ctx.note(format!(
+        "full queue, dsor-peer -> kernel: {} of {n} sends succeeded, {} messages readable",
+        ok.len(),
+        got.len()
+    ));
+    if tx.len() as u64 != n {
+        problems.push(format!("dsor-peer reported {} of {n}: {lines:?}", tx.len()));
+    }
+    if !tx
+        .iter()
+        .all(|t| t.1.as_deref().is_none_or(|r| r == "nomem"))
+    {
+        problems.push(format!("dsor-peer failures other than nomem: {lines:?}"));
+    }
+    problems.extend(only_successes_queued(&got, &ok, len, 12, "dsor-peer -> kernel").err());
+    full += n - ok.len() as u64;
+    // Kernel -> dsor-peer, whose application holds one message.
+    let mut args = PEER_ARGS.to_vec();
+    let timeout = crate::ctx::sized("RCAN_DSOR_FULL_PEER_S", 120, 600).to_string();
+    args.extend([
+        "recv",
+        "--app-queue",
+        "1",
+        "--count",
+        &count,
+        "--timeout-s",
+        &timeout,
+    ]);
+    let rxp = peer(&args)?;
+    thread::sleep(PEER_START);
+    let tx = sock()?;
+    let (mut ok, mut other) = (0u64, Vec::new());
+    for j in 0..n {
+        let to = DsorAddr::Segm {
+            prio: 0x32,
+            node: PEER,
+            id: 0x5300,
+        };
+        match tx.send_to(&pattern(len, j, 13), &to) {
+            Ok(_) => ok += 1,
+            Err(e) if errno_of(&e) == libc::ENOBUFS => {}
+            Err(e) => other.push(format!("send {j}: {e}")),
+        }
+    }
+    let lines = peer_output(rxp, "recv --app-queue 1")?;
+    let delivered = lines.iter().filter(|l| l.starts_with("RX ")).count() as u64;
+    let refused = lines
+        .iter()
+        .filter(|l| l.starts_with("RXFAIL reason=nomem"))
+        .count() as u64;
+    ctx.note(format!(
+        "full queue, kernel -> dsor-peer: {ok} of {n} sends succeeded, {delivered} delivered, {refused} refused"
+    ));
+    problems.extend(other);
+    if !(ok == 1 && delivered == 1 && refused == n - 1) {
+        problems.push(format!(
+            "kernel -> dsor-peer: {ok} sends succeeded, peer: {lines:?}"
+        ));
+    }
+    // The unload line counts the refused messages by their cause.
+    drop((rx, tx));
+    let mut log = ctx.kmsg()?;
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while let Err(e) = ctx.rmmod(Module::Dsor) {
+        ensure!(Instant::now() < deadline, "rmmod rcan_dsor: {e}");
+        thread::sleep(Duration::from_millis(100));
+    }
+    let lines = log.read_new()?;
+    let want = format!("last frame refused {full} receive queue full");
+    if !lines
+        .iter()
+        .any(|l| l.contains("rcan_dsor: not delivered:") && l.contains(&want))
+    {
+        let stats: Vec<&String> = lines.iter().filter(|l| l.contains("rcan_dsor")).collect();
+        problems.push(format!("unload statistics: want \"{want}\" in {stats:?}"));
+    }
+    ensure!(problems.is_empty(), "{}", problems.join("; "));
+    Ok(())
+}
+
+/// Reads frames from `raw` until `count` DSOR body frames from node `src`
+/// to node 0 have passed (or 30 s).
+fn wait_bodies(raw: &socketcan::CanSocket, src: u32, count: usize) -> TestResult {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let mut seen = 0;
+    while seen < count {
+        ensure!(
+            Instant::now() < deadline,
+            "only {seen} of {count} body frames in 30 s"
+        );
+        let f = canraw::recv(raw)?;
+        let c: &libc::can_frame = f.as_ref();
+        if c.can_id & libc::CAN_EFF_FLAG == 0 {
+            continue;
+        }
+        let id = c.can_id & libc::CAN_EFF_MASK;
+        if (id >> 14) & 0x7f == 0 && (id >> 7) & 0x7f == src && (id >> 5) & 3 == 1 {
+            seen += 1;
+        }
+    }
+    Ok(())
+}
+
+/// Sends one message in a thread; returns its handle.
+fn send_in_thread(
+    len: usize,
+    seed: u64,
+    to: DsorAddr,
+) -> thread::JoinHandle<Result<io::Result<usize>, String>> {
+    thread::spawn(move || {
+        let s = sock()?;
+        Ok(s.send_to(&pattern(len, 0, seed), &to))
+    })
+}
+
+/// The only receiver closes during a transfer: the send fails with
+/// ECONNREFUSED (the next body after the close is refused), never
+/// success. After 100 body frames of a 20000-byte message, and 1 to 5 ms
+/// into a 40000-byte message; kernel to kernel, dsor-peer to kernel and
+/// kernel to dsor-peer.
+fn dsor_delivery_receiver_closes(ctx: &mut Ctx) -> TestResult {
+    let idx = dsor_stack(ctx, &PEER_TIMERS)?;
+    let rounds = crate::ctx::sized("RCAN_DSOR_CLOSE_ROUNDS", 5, 2) as u64;
+    let len20 = crate::ctx::sized("RCAN_DSOR_CLOSE_LEN", 20000, 4000) as usize;
+    let after = crate::ctx::sized("RCAN_DSOR_CLOSE_FRAMES", 100, 40) as usize;
+    let seg = |id| DsorAddr::Segm {
+        prio: 0x40,
+        node: 0,
+        id,
+    };
+    let mut problems = Vec::new();
+    // Kernel -> kernel, close after `after` body frames.
+    let (mut ok, mut refused) = (0, 0);
+    for r in 0..rounds {
+        let id = 0x6000 + r as u32;
+        let raw = canraw::open(idx)?;
+        let rx = sock()?;
+        rx.bind(&seg(id)).or_fail("bind")?;
+        let h = send_in_thread(len20, r, seg(id));
+        wait_bodies(&raw, 0, after)?;
+        drop(rx);
+        match h.join().map_err(|_| "sender panicked")?? {
+            Ok(_) => {
+                ok += 1;
+                problems.push(format!(
+                    "round {r}: send succeeded after the receiver closed"
+                ))
+            }
+            Err(e) if errno_of(&e) == libc::ECONNREFUSED => refused += 1,
+            Err(e) => problems.push(format!("round {r}: {e}")),
+        }
+    }
+    ctx.note(format!(
+        "receiver closes after {after} frames of {len20} bytes, kernel -> kernel: {ok} of {rounds} sends succeeded, 0 delivered, {refused} ECONNREFUSED"
+    ));
+    // Kernel -> kernel, close 1 to 5 ms into a longer message.
+    let rounds40 = crate::ctx::sized("RCAN_DSOR_CLOSE40_ROUNDS", 9, 3) as u64;
+    let len40 = crate::ctx::sized("RCAN_DSOR_CLOSE40_LEN", 40000, 8000) as usize;
+    let (mut ok, mut early, mut refused) = (0, 0, 0);
+    for r in 0..rounds40 {
+        let id = 0x6100 + r as u32;
+        let rx = sock()?;
+        rx.bind(&seg(id)).or_fail("bind")?;
+        let h = send_in_thread(len40, r, seg(id));
+        thread::sleep(Duration::from_millis(1 + r % 5));
+        // Delivered before the close? Then success is right.
+        let mut b = [0u8; 1];
+        let queued = rx
+            .recv_from_flags(&mut b, libc::MSG_PEEK | libc::MSG_DONTWAIT)
+            .is_ok();
+        drop(rx);
+        match h.join().map_err(|_| "sender panicked")?? {
+            Ok(_) if queued => early += 1,
+            Ok(_) => {
+                ok += 1;
+                problems.push(format!(
+                    "40000-byte round {r}: send succeeded, nothing was queued when the receiver closed"
+                ))
+            }
+            Err(e) if errno_of(&e) == libc::ECONNREFUSED => refused += 1,
+            Err(e) => problems.push(format!("40000-byte round {r}: {e}")),
+        }
+    }
+    ctx.note(format!(
+        "receiver closes 1-5 ms into {len40} bytes, kernel -> kernel: {} of {rounds40} sends succeeded, {early} delivered before the close, {refused} ECONNREFUSED",
+        ok + early
+    ));
+    // dsor-peer -> kernel.
+    let len_s = len20.to_string();
+    let prounds = crate::ctx::sized("RCAN_DSOR_CLOSE_PEER_ROUNDS", 3, 1) as u64;
+    let (mut ok, mut refused) = (0, 0);
+    for r in 0..prounds {
+        let id = 0x6200 + r as u32;
+        let ids = format!("{id:#x}");
+        let raw = canraw::open(idx)?;
+        let rx = sock()?;
+        rx.bind(&DsorAddr::Segm {
+            prio: 0,
+            node: PEER,
+            id,
+        })
+        .or_fail("bind")?;
+        let mut args = PEER_ARGS.to_vec();
+        args.extend([
+            "send", "--to", "0", "--prio", "0x41", "--segm", &ids, "--len", &len_s,
+        ]);
+        let p = peer(&args)?;
+        wait_bodies(&raw, u32::from(PEER), after)?;
+        drop(rx);
+        let lines = peer_lines(p, "send")?;
+        match peer_tx(&lines).as_slice() {
+            [(_, Some(r))] if r == "refused" => refused += 1,
+            [(_, None)] => {
+                ok += 1;
+                problems.push(format!("dsor-peer round {r}: success after the close"))
+            }
+            _ => problems.push(format!("dsor-peer round {r}: {lines:?}")),
+        }
+    }
+    ctx.note(format!(
+        "receiver closes after {after} frames of {len20} bytes, dsor-peer -> kernel: {ok} of {prounds} sends succeeded, {refused} refused"
+    ));
+    // Kernel -> dsor-peer: its application goes away after `after` body
+    // frames, or 3 ms after the header.
+    let after_s = after.to_string();
+    for (opt, val, len) in [
+        ("--close-after-frames", after_s.as_str(), len20),
+        ("--close-after-ms", "3", len40),
+    ] {
+        let mut args = PEER_ARGS.to_vec();
+        args.extend(["recv", opt, val, "--count", "1", "--timeout-s", "300"]);
+        let rxp = peer(&args)?;
+        thread::sleep(PEER_START);
+        let r = sock()?.send_to(
+            &pattern(len, 0, 21),
+            &DsorAddr::Segm {
+                prio: 0x42,
+                node: PEER,
+                id: 0x6300,
+            },
+        );
+        let lines = peer_output(rxp, opt)?;
+        ctx.note(format!(
+            "dsor-peer {opt} {val} during {len} bytes: send {:?}",
+            r.as_ref().map_err(errno_of)
+        ));
+        match r {
+            Err(e) if errno_of(&e) == libc::ECONNREFUSED => {
+                if !lines.iter().any(|l| l.starts_with("RXFAIL reason=refused")) {
+                    problems.push(format!("dsor-peer {opt}: {lines:?}"));
+                }
+            }
+            r => problems.push(format!(
+                "kernel -> dsor-peer {opt} {val}: {r:?}, peer {lines:?}"
+            )),
+        }
+    }
+    ensure!(problems.is_empty(), "{}", problems.join("; "));
     Ok(())
 }
