@@ -234,7 +234,10 @@ fn canutils_tcpdump_cansend(ctx: &mut Ctx) -> TestResult {
     let want = std(0x123, &[0x11, 0x22]);
     for (k, extra) in [&[][..], &["-p"]].into_iter().enumerate() {
         let pcap = dir.path().join(format!("can0-{k}.pcap"));
-        let what = format!("tcpdump -i can0 {}-c 3", extra.join(" ") + " ");
+        let what = format!(
+            "tcpdump -i can0 {}",
+            [extra, &["-c", "3"]].concat().join(" ")
+        );
         let cap = start_tcpdump("can0", extra, 3, &pcap)?;
         for _ in 0..3 {
             tools::run_ok("cansend", &["can0", "123#1122"])?;
