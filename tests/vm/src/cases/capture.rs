@@ -151,20 +151,25 @@ fn check_records(recs: &[Vec<u8>], want: &[CanFrame], what: &str) -> TestResult 
 
 /// Runs `tcpdump ARGS -n -c COUNT -Z root -w FILE` in the background on
 /// interface `iface` until it has printed "listening on".
-///
-/// `-Z root`: Debian's tcpdump may drop to its own user before writing.
 fn start_tcpdump(iface: &str, extra: &[&str], count: usize, pcap: &Path) -> Result<Bg, String> {
+    let mut cap = spawn_tcpdump(iface, extra, count, pcap)?;
+    cap.wait_stderr("listening on")?;
+    Ok(cap)
+}
+
+/// Starts `tcpdump ARGS -n -c COUNT -Z root -w FILE` on `iface` in the
+/// background (`-Z root`: Debian's tcpdump may drop to its own user
+/// before writing).
+fn spawn_tcpdump(iface: &str, extra: &[&str], count: usize, pcap: &Path) -> Result<Bg, String> {
     let count = count.to_string();
     let pcap = pcap.to_string_lossy().into_owned();
     let mut args = vec!["-i", iface];
     args.extend(extra);
     args.extend(["-n", "-c", &count, "-Z", "root", "-w", &pcap]);
-    let mut cap = tools::spawn("tcpdump", &args, None)?;
-    cap.wait_stderr("listening on")?;
-    Ok(cap)
+    tools::spawn("tcpdump", &args, None)
 }
 
-/// Waits for a tcpdump started by [`start_tcpdump`] to end by itself once
+/// Waits for a tcpdump started by [`start_tcpdump`] or [`spawn_tcpdump`] to end by itself once
 /// it has its packets (killed and failed after [`TOOL_LIMIT`]); returns
 /// the records of its pcap file.
 fn finish_tcpdump(cap: Bg, pcap: &Path, what: &str) -> Result<Vec<Vec<u8>>, String> {
@@ -514,34 +519,73 @@ fn directions(i0: u32, i1: u32) -> [(u32, &'static str, u32, &'static str); 2] {
     [(i0, "can0", i1, "can1"), (i1, "can1", i0, "can0")]
 }
 
-/// Plain tcpdump on both QEMU SJA1000 cards (rcan_kvaser_pci), both
-/// directions: on the receiving card, where no CAN socket is open (so
-/// only tcpdump's promiscuous mode opens the acceptance filter), it
-/// captures the frames a CAN_RAW socket on the other card sends, in
-/// order; on the sending card it captures them too, as the echo the driver
-/// hands up on transmit completion (libpcap drops the outgoing copies, see
-/// [`canutils_tcpdump_pcap`]).
+/// The frames sent the other way in the SJA1000 capture tests: none of
+/// them is one of [`capture_frames`].
+fn capture_frames_back() -> [CanFrame; 3] {
+    [
+        std(0x321, &[0x11, 0x22, 0x33]),
+        ext(0x0765_4321, &[8, 7, 6, 5, 4, 3, 2, 1]),
+        canraw::rtr_ext(0x1FFF_FFFF, 0),
+    ]
+}
+
+/// Checks that `recs` are the frames of `a` and those of `b`, each in
+/// order, interleaved in any way (no frame is in both).
+fn check_two_streams(recs: &[Vec<u8>], a: &[CanFrame], b: &[CanFrame], what: &str) -> TestResult {
+    let (mut ia, mut ib) = (0, 0);
+    let ok = recs.iter().all(|r| {
+        if a.get(ia).is_some_and(|f| record_is(r, f)) {
+            ia += 1;
+            true
+        } else if b.get(ib).is_some_and(|f| record_is(r, f)) {
+            ib += 1;
+            true
+        } else {
+            false
+        }
+    });
+    ensure!(
+        ok && ia == a.len() && ib == b.len(),
+        "{what}: records {:?}, expected {:?} and {:?}, each in order",
+        recs.iter().map(|r| show_record(r)).collect::<Vec<_>>(),
+        a.iter().map(show).collect::<Vec<_>>(),
+        b.iter().map(show).collect::<Vec<_>>()
+    );
+    Ok(())
+}
+
+/// Plain tcpdump on both QEMU SJA1000 cards (rcan_kvaser_pci) while a
+/// CAN_RAW socket on can0 sends three frames, is closed, and one on can1
+/// sends three others: so each card receives with no CAN socket open on
+/// it, and only tcpdump's promiscuous mode opens its acceptance filter.
+/// Each tcpdump captures the frames the other card sent, in order, and
+/// those its own card sent, in order, as the echo the driver hands up on
+/// transmit completion (libpcap drops the outgoing copies, see
+/// [`canutils_tcpdump_pcap`]). The two tcpdumps start together (each
+/// start costs seconds on the debug kernel).
 fn sja1000_capture_tcpdump(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = kvaser2(ctx)?;
     let dir = TempDir::new("tcpdump-sja1000")?;
-    let frames = capture_frames();
-    for (tx_if, tx_name, _, rx_name) in directions(i0, i1) {
-        let rx_pcap = dir.path().join(format!("{rx_name}.pcap"));
-        let tx_pcap = dir.path().join(format!("{tx_name}.pcap"));
-        let rx_cap = start_tcpdump(rx_name, &[], frames.len(), &rx_pcap)?;
-        let tx_cap = start_tcpdump(tx_name, &[], frames.len(), &tx_pcap)?;
-        {
-            let tx = canraw::open(tx_if)?;
-            for f in &frames {
-                canraw::send(&tx, f)?;
-            }
+    let sent = [capture_frames(), capture_frames_back()];
+    let n = sent[0].len() + sent[1].len();
+    let pcaps = [dir.path().join("can0.pcap"), dir.path().join("can1.pcap")];
+    let mut caps = vec![
+        spawn_tcpdump("can0", &[], n, &pcaps[0])?,
+        spawn_tcpdump("can1", &[], n, &pcaps[1])?,
+    ];
+    for c in &mut caps {
+        c.wait_stderr("listening on")?;
+    }
+    for (ifindex, frames) in [i0, i1].into_iter().zip(&sent) {
+        let tx = canraw::open(ifindex)?;
+        for f in frames {
+            canraw::send(&tx, f)?;
         }
-        let rx_what = format!("tcpdump -i {rx_name} (receiving card, no CAN socket)");
-        let tx_what = format!("tcpdump -i {tx_name} (sending card)");
-        let rx_recs = finish_tcpdump(rx_cap, &rx_pcap, &rx_what)?;
-        let tx_recs = finish_tcpdump(tx_cap, &tx_pcap, &tx_what)?;
-        check_records(&rx_recs, &frames, &rx_what)?;
-        check_records(&tx_recs, &frames, &tx_what)?;
+    }
+    for (k, (cap, pcap)) in caps.into_iter().zip(&pcaps).enumerate() {
+        let what = format!("tcpdump -i can{k}");
+        let recs = finish_tcpdump(cap, pcap, &what)?;
+        check_two_streams(&recs, &sent[0], &sent[1], &what)?;
     }
     Ok(())
 }
@@ -654,6 +698,22 @@ mod tests {
         assert!(record_is(&r[0], &f[0]) && !record_is(&r[0], &f[1]));
         assert!(check_records(&r, &f, "x").is_ok());
         assert!(check_records(&r[..2], &f, "x").is_err());
+    }
+
+    #[test]
+    fn two_streams() {
+        let (a, b) = (capture_frames(), capture_frames_back());
+        let ra: Vec<Vec<u8>> = a.iter().map(rec).collect();
+        let rb: Vec<Vec<u8>> = b.iter().map(rec).collect();
+        let mix = |v: &[&Vec<u8>]| -> Vec<Vec<u8>> { v.iter().map(|r| r.to_vec()).collect() };
+        let ok = mix(&[&ra[0], &ra[1], &rb[0], &ra[2], &rb[1], &rb[2]]);
+        assert!(check_two_streams(&ok, &a, &b, "x").is_ok());
+        let swapped = mix(&[&ra[1], &ra[0], &ra[2], &rb[0], &rb[1], &rb[2]]);
+        assert!(check_two_streams(&swapped, &a, &b, "x").is_err());
+        let short = mix(&[&ra[0], &ra[1], &ra[2], &rb[0], &rb[1]]);
+        assert!(check_two_streams(&short, &a, &b, "x").is_err());
+        let twice = mix(&[&ra[0], &ra[0], &ra[1], &ra[2], &rb[0], &rb[1], &rb[2]]);
+        assert!(check_two_streams(&twice, &a, &b, "x").is_err());
     }
 
     #[test]
