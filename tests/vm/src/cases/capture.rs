@@ -595,7 +595,11 @@ fn sja1000_capture_tcpdump(ctx: &mut Ctx) -> TestResult {
 /// there receives the frames the other card sends; then, with no CAN
 /// socket on the receiving card, a packet socket in promiscuous mode
 /// (PACKET_MR_PROMISC, as libpcap asks for it) does. On the sending card a
-/// packet socket receives each frame once, as the driver's echo.
+/// packet socket receives each frame once, as the driver's echo. Last, a
+/// `struct can_frame` written through a packet socket on can0 goes on the
+/// bus (a CAN_RAW socket on can1 receives it) and is echoed to local
+/// sockets on can0, as mainline drivers with IFF_ECHO do (a CAN_RAW socket
+/// there receives it with MSG_DONTROUTE, no MSG_CONFIRM).
 fn sja1000_packet_socket(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = kvaser2(ctx)?;
     let frames = capture_frames();
@@ -631,7 +635,16 @@ fn sja1000_packet_socket(ctx: &mut Ctx) -> TestResult {
             tx_pkt.expect_quiet(&tx_who)?;
         }
     }
-    Ok(())
+    let (raw0, raw1) = (canraw::open(i0)?, canraw::open(i1)?);
+    let writer = PacketSocket::open(i0)?;
+    for f in &frames {
+        writer.send(f)?;
+    }
+    canraw::expect_seq(&raw1, &frames, "CAN_RAW socket on can1 (bus)")?;
+    for f in &frames {
+        canraw::expect_msg(&raw0, f, true, false, "CAN_RAW socket on can0 (echo)")?;
+    }
+    canraw::expect_quiet(&[("can0", &raw0), ("can1", &raw1)])
 }
 
 /// A packet socket that is not promiscuous on a QEMU SJA1000 card where no
