@@ -16,7 +16,7 @@ use std::path::Path;
 use std::thread;
 
 use rcan_uapi::raw;
-use socketcan::CanFrame;
+use socketcan::{CanFilter, CanFrame, SocketOptions};
 
 use super::sja1000::kvaser2;
 use super::{portable_table, raw1, test_table};
@@ -39,7 +39,7 @@ pub const TESTS: &[Test] = portable_table![
 pub const SJA1000_TESTS: &[Test] = test_table![
     sja1000_capture_tcpdump,
     sja1000_packet_socket,
-    sja1000_packet_socket_no_can_socket,
+    sja1000_packet_socket_nonpromisc,
 ];
 
 /// LINKTYPE_CAN_SOCKETCAN.
@@ -647,26 +647,47 @@ fn sja1000_packet_socket(ctx: &mut Ctx) -> TestResult {
     canraw::expect_quiet(&[("can0", &raw0), ("can1", &raw1)])
 }
 
-/// A packet socket that is not promiscuous on a QEMU SJA1000 card where no
-/// CAN socket is open receives the frames the other card sends (mainline's
-/// SJA1000 driver has no acceptance filter to close), both directions.
-/// Issue 11: "On an SJA1000 device with no CAN socket open, a
-/// non-promiscuous packet socket sees no bus traffic at all." Kept apart
-/// from [`sja1000_packet_socket`], whose cases do not depend on it.
-fn sja1000_packet_socket_no_can_socket(ctx: &mut Ctx) -> TestResult {
+/// A packet socket that is not promiscuous on a QEMU SJA1000 card sees
+/// what the card's acceptance filter lets in, which follows the CAN
+/// sockets' filters (sja1000.rst, "Packet sockets that are not
+/// promiscuous do not open the filter"; the Ethernet rule for `tcpdump -p`).
+/// With no CAN socket on can1 only the standard remote frame 0x7FF passes:
+/// of the frames can0 sends, the packet socket on can1 receives that one
+/// alone. With a CAN_RAW socket on can1 that filters 0x123 exactly, it
+/// receives 0x123 and not the extended frame sent before it.
+///
+/// This is where the stack differs from mainline, whose SJA1000 driver
+/// programs no acceptance filter (issue 11: "On an SJA1000 device with no
+/// CAN socket open, a non-promiscuous packet socket sees no bus traffic at
+/// all"); the kernel tells a driver nothing when a packet socket binds, see
+/// sja1000.rst for the reasons. Promiscuous capture sees everything
+/// ([`sja1000_packet_socket`], [`sja1000_capture_tcpdump`]).
+fn sja1000_packet_socket_nonpromisc(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = kvaser2(ctx)?;
+    let who = "non-promiscuous packet socket on can1";
+    let pkt = PacketSocket::open(i1)?;
+    let tx = canraw::open(i0)?;
     let frames = capture_frames();
-    for (tx_if, _, rx_if, rx_name) in directions(i0, i1) {
-        let who = format!("non-promiscuous packet socket on {rx_name}, no CAN socket there");
-        let rx_pkt = PacketSocket::open(rx_if)?;
-        let tx = canraw::open(tx_if)?;
-        for f in &frames {
-            canraw::send(&tx, f)?;
-        }
-        rx_pkt.expect_seq(&frames, &who)?;
-        rx_pkt.expect_quiet(&who)?;
+    for f in &frames {
+        canraw::send(&tx, f)?;
     }
-    Ok(())
+    let marker = rtr_std(0x7FF, 0);
+    pkt.expect(&marker, &format!("{who}, no CAN socket there"))?;
+    pkt.expect_quiet(who)?;
+
+    let rx = canraw::open(i1)?;
+    let exact = canraw::CAN_SFF_MASK | canraw::CAN_EFF_FLAG | CAN_RTR_FLAG;
+    rx.set_filters(&[CanFilter::new(0x123, exact)])
+        .or_fail("CAN_RAW_FILTER 0x123")?;
+    let (unwanted, wanted) = (frames[1], frames[0]);
+    canraw::send(&tx, &unwanted)?;
+    canraw::send(&tx, &wanted)?;
+    pkt.expect(
+        &wanted,
+        &format!("{who}, beside a CAN_RAW socket for 0x123"),
+    )?;
+    canraw::expect(&rx, &wanted, "CAN_RAW socket on can1")?;
+    pkt.expect_quiet(who)
 }
 
 #[cfg(test)]
