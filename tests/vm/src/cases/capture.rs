@@ -1,11 +1,15 @@
 // SPDX-License-Identifier: GPL-2.0
 //! Packet-socket visibility, as users capture: plain tcpdump (Debian's,
-//! unchanged) and `AF_PACKET` sockets bound to `ETH_P_CAN` see the CAN
-//! frames of an interface, both those it receives and those sent from this
-//! host (the outgoing copy and the device's echo, marked PACKET_BROADCAST
-//! as mainline marks it); a frame written through a packet socket is
-//! echoed to local CAN sockets. On canloop (portable: mainline vcan echo=1
-//! too) and on QEMU's SJA1000 cards (ours only), both directions.
+//! unchanged) and `AF_PACKET` sockets bound to `ETH_P_CAN` (or `ETH_P_ALL`)
+//! see the CAN frames of an interface, both those it receives and those
+//! sent from this host: the device's echo, marked PACKET_BROADCAST as
+//! mainline marks it, and, for an `ETH_P_ALL` socket, the outgoing copy
+//! too (libpcap drops that one on CAN devices). A frame written through a
+//! packet socket is echoed to local CAN sockets. On canloop (portable:
+//! mainline vcan echo=1 too) and on QEMU's SJA1000 cards (ours only), both
+//! directions; on those cards a packet socket that is not promiscuous sees
+//! what the acceptance filter lets in, which differs from mainline (see
+//! `sja1000_packet_socket_nonpromisc`).
 //!
 //! pcap files are LINKTYPE_CAN_SOCKETCAN, read back from the file and
 //! through `tcpdump -r`.
