@@ -335,6 +335,28 @@ impl Skb {
         unsafe { bindings::rcan_skb_set_dev(self.as_ptr(), dev.as_ptr()) };
     }
 
+    /// Frees as dropped from any context, including hardirq and code
+    /// holding an interrupt-disabling lock (`dev_kfree_skb_any`: there the
+    /// free, and the skb's destructor, is deferred to softirq).
+    pub(crate) fn drop_any(self) {
+        // SAFETY: we own the reference and give it up.
+        unsafe { bindings::rcan_dev_kfree_skb_any(self.into_raw()) };
+    }
+
+    /// For an IFF_ECHO driver's `start_xmit` (mainline
+    /// `can_create_echo_skb`): the skb to keep for the echo. A shared skb
+    /// (someone else holds a reference) is not the driver's to re-mark:
+    /// it is replaced by a clone that keeps the sending socket; `None` if
+    /// that clone cannot be allocated (the original is then freed).
+    pub(crate) fn into_echo(self) -> Option<Skb> {
+        if !self.is_shared() {
+            return Some(self);
+        }
+        let c = self.clone_with_owner();
+        self.consume();
+        c
+    }
+
     /// Frees as successfully consumed (not a drop in drop monitors).
     pub(crate) fn consume(self) {
         // SAFETY: we own the reference and give it up.

@@ -76,6 +76,15 @@ void rcan_kfree_skb(struct sk_buff *skb)
 	kfree_skb(skb);
 }
 
+/* Frees @skb as dropped from any context, interrupts off included: in
+ * hardirq or with interrupts disabled the free is deferred to the
+ * NET_TX softirq (dev_kfree_skb_any), so no destructor runs there.
+ */
+void rcan_dev_kfree_skb_any(struct sk_buff *skb)
+{
+	dev_kfree_skb_any(skb);
+}
+
 void rcan_consume_skb(struct sk_buff *skb)
 {
 	consume_skb(skb);

@@ -36,6 +36,7 @@ void rcan_assert_rtnl(void);
 struct sk_buff *rcan_alloc_skb(unsigned int size, gfp_t gfp);
 void rcan_kfree_skb(struct sk_buff *skb);
 void rcan_consume_skb(struct sk_buff *skb);
+void rcan_dev_kfree_skb_any(struct sk_buff *skb);
 struct sk_buff *rcan_sock_alloc_send_skb(struct sock *sk, unsigned long size,
 					 int noblock, int *errcode);
 void rcan_skb_reserve(struct sk_buff *skb, int len);

@@ -139,18 +139,10 @@ impl Driver for LoopDriver {
             return Xmit::Ok;
         }
         // Reflect: the skb comes back as a received, locally originated
-        // frame (mainline can_create_echo_skb + vcan_rx). A shared skb is
-        // not ours to re-mark: echo a clone that keeps the sender.
-        let mut skb = if skb.is_shared() {
-            let Some(c) = skb.clone_with_owner() else {
-                dev.stats_rx_dropped();
-                skb.consume();
-                return Xmit::Ok;
-            };
-            skb.consume();
-            c
-        } else {
-            skb
+        // frame (mainline can_create_echo_skb + vcan_rx).
+        let Some(mut skb) = skb.into_echo() else {
+            dev.stats_rx_dropped();
+            return Xmit::Ok;
         };
         dev.stats_rx(bytes);
         skb.set_can_rx(dev);

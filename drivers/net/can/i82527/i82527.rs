@@ -206,7 +206,8 @@ fn remask<R: Regs + Send + 'static>(dev: &NetDev, p: &I82527Priv<R>) {
 fn enqueue(dev: &NetDev, rxq: &mut RxQueue, skb: Skb) {
     if let Err(skb) = rxq.push(skb) {
         dev.stats_rx_dropped();
-        drop(skb);
+        // Interrupts are off: the free (an echo's destructor) is deferred.
+        skb.drop_any();
     }
 }
 
@@ -332,6 +333,19 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
             drop(skb);
             return Xmit::Ok;
         }
+        // The skb kept for the echo must be ours to re-mark (mainline
+        // can_put_echo_skb); a shared one is replaced by a clone.
+        let skb = if skb.wants_echo() {
+            match skb.into_echo() {
+                Some(s) => s,
+                None => {
+                    dev.stats_tx_dropped();
+                    return Xmit::Ok;
+                }
+            }
+        } else {
+            skb
+        };
         // One transmit object: no next frame until this one is done.
         dev.stop_queue();
         let mut st = p.chip.lock();
@@ -389,7 +403,10 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                         dev.wake_queue();
                     }
                     Event::TxAborted => {
-                        drop(echo.take());
+                        // Interrupts are off: the free is deferred.
+                        if let Some(s) = echo.take() {
+                            s.drop_any();
+                        }
                         dev.stats_err(Stat::TxAborted);
                         dev.wake_queue();
                     }

@@ -403,6 +403,19 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             drop(skb);
             return Xmit::Ok;
         }
+        // The skb kept for the echo must be ours to re-mark (mainline
+        // can_put_echo_skb); a shared one is replaced by a clone.
+        let skb = if skb.wants_echo() {
+            match skb.into_echo() {
+                Some(s) => s,
+                None => {
+                    dev.stats_tx_dropped();
+                    return Xmit::Ok;
+                }
+            }
+        } else {
+            skb
+        };
         // One TX buffer: no next frame until this one is done.
         dev.stop_queue();
         let mut st = p.chip.lock();
@@ -460,7 +473,10 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
                     dev.wake_queue();
                 }
                 Event::TxAborted => {
-                    drop(echo.take());
+                    // Interrupts are off: the free is deferred.
+                    if let Some(s) = echo.take() {
+                        s.drop_any();
+                    }
                     dev.stats_err(Stat::TxAborted);
                     dev.wake_queue();
                 }
@@ -477,7 +493,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         });
         if bus_off {
             // The frame in the TX buffer is lost with the reset.
-            if echo.take().is_some() {
+            if let Some(s) = echo.take() {
+                s.drop_any();
                 dev.stats_err(Stat::TxErrors);
             }
             let f = *filter;

@@ -20,6 +20,8 @@ mod raw_recv;
 mod raw_send;
 mod raw_sockopt;
 mod recv;
+mod remote;
+mod rxcontext;
 mod sja1000;
 mod socket;
 mod timesvc;
@@ -75,11 +77,14 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         capture::TESTS,
         gateway::TESTS,
         mixed::TESTS,
+        remote::TESTS,
+        remote::OURS,
         timesvc::TESTS,
         dsor::TESTS,
         sja1000::TESTS,
         capture::SJA1000_TESTS,
         i82527::TESTS,
+        rxcontext::TESTS,
     ]
     .into_iter()
     .flatten()
