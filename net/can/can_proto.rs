@@ -150,7 +150,7 @@ impl glue::sock::Proto for CanProtoOps {
     fn release(sk: &S) {
         let mut rtnl = Rtnl::lock();
         let me = sk.as_ptr() as usize;
-        glue::kvec_remove_all(MODULE.sockets.get(&mut rtnl), me);
+        MODULE.sockets.get(&mut rtnl).remove(me);
         let mut s = sk.lock();
         if s.bound.take().is_some() {
             let _ = set_receivers(sk, None);

@@ -186,7 +186,7 @@ fn rx_set(
             let filters = filters_of(filters, &mut err_mask)?;
             let s = Spec {
                 ifindex: spec.ifindex,
-                filters: &filters,
+                filters,
                 join: spec.join,
                 err_mask,
                 cookie,
@@ -201,7 +201,7 @@ fn rx_set(
                 owner,
                 is_sock,
             };
-            TABLE.set(owner as usize, Some((&s, t)))?
+            TABLE.set(owner as usize, Some((s, t)))?
         }
         None => TABLE.set(owner as usize, None)?,
     };

@@ -337,7 +337,7 @@ impl glue::sock::Proto for RawProto {
 
     fn release(sk: &S) {
         let mut rtnl = Rtnl::lock();
-        glue::kvec_remove_all(MODULE.sockets.get(&mut rtnl), sk.as_ptr() as usize);
+        MODULE.sockets.get(&mut rtnl).remove(sk.as_ptr() as usize);
         let mut s = sk.lock();
         if s.bound {
             unregister(sk);

@@ -398,6 +398,59 @@ pub(crate) type NotifierFn = unsafe extern "C" fn(
     info: *mut ffi::c_void,
 ) -> ffi::c_int;
 
+/// A set of socket addresses (`*mut sock` as `usize`): the open sockets of
+/// a protocol module, for its netdevice notifier. Insertion and removal are
+/// O(1) on average (hashed buckets), so closing one of n sockets does not
+/// scan the other n - 1. The owner names its lock (RTNL in
+/// [`ProtoModule`]).
+pub(crate) struct SockSet {
+    /// `SOCKSET_BUCKETS` vectors once the first socket arrives.
+    buckets: kernel::alloc::KVec<kernel::alloc::KVec<usize>>,
+}
+
+const SOCKSET_BUCKETS: usize = 512;
+
+impl SockSet {
+    pub(crate) const fn new() -> Self {
+        SockSet {
+            buckets: kernel::alloc::KVec::new(),
+        }
+    }
+
+    fn bucket(p: usize) -> usize {
+        // Socks are cache-line aligned: drop the low bits, then a
+        // multiplicative hash.
+        (((p >> 6) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            >> (64 - SOCKSET_BUCKETS.trailing_zeros())) as usize
+    }
+
+    /// Adds `p`. Process context (allocates). ENOMEM.
+    pub(crate) fn insert(&mut self, p: usize) -> kernel::error::Result {
+        use kernel::alloc::{flags::GFP_KERNEL, KVec};
+        if self.buckets.is_empty() {
+            let mut b = KVec::with_capacity(SOCKSET_BUCKETS, GFP_KERNEL)?;
+            for _ in 0..SOCKSET_BUCKETS {
+                b.push(KVec::new(), GFP_KERNEL)?;
+            }
+            self.buckets = b;
+        }
+        self.buckets[Self::bucket(p)].push(p, GFP_KERNEL)?;
+        Ok(())
+    }
+
+    /// Removes `p` if present.
+    pub(crate) fn remove(&mut self, p: usize) {
+        if let Some(b) = self.buckets.get_mut(Self::bucket(p)) {
+            crate::glue::kvec_remove_all(b, p);
+        }
+    }
+
+    /// Every member, in no particular order.
+    pub(crate) fn iter(&self) -> impl Iterator<Item = &usize> {
+        self.buckets.iter().flat_map(|b| b.iter())
+    }
+}
+
 /// Everything a CAN protocol module registers, in one static: its
 /// `struct proto` (sock allocator), its entry in pf_can's protocol table
 /// and its netdevice notifier. [`ProtoModule::register`] in module init,
@@ -408,7 +461,7 @@ pub(crate) struct ProtoModule<T: crate::glue::sock::Proto> {
     /// Every open socket (as `*mut sock` addresses), for the netdevice
     /// notifier. Protected by RTNL; a socket is listed from
     /// `create_socket` until its `release` removes it.
-    pub(crate) sockets: crate::glue::sync::RtnlLocked<kernel::alloc::KVec<usize>>,
+    pub(crate) sockets: crate::glue::sync::RtnlLocked<SockSet>,
     canproto: crate::glue::sync::CCell<CanProto>,
     notifier: crate::glue::sync::CCell<bindings::notifier_block>,
 }
@@ -429,7 +482,7 @@ impl<T: crate::glue::sock::Proto> ProtoModule<T> {
     ) -> Self {
         ProtoModule {
             proto: crate::glue::sock::ProtoReg::new(),
-            sockets: crate::glue::sync::RtnlLocked::new(kernel::alloc::KVec::new()),
+            sockets: crate::glue::sync::RtnlLocked::new(SockSet::new()),
             canproto: crate::glue::sync::CCell::new(CanProto {
                 protocol,
                 type_,
@@ -487,12 +540,7 @@ impl<T: crate::glue::sock::Proto> ProtoModule<T> {
         // SAFETY: create succeeded, so `sock->sk` is our new sock.
         let sk = unsafe { (*sock).sk } as usize;
         let mut rtnl = crate::glue::sync::Rtnl::lock();
-        if self
-            .sockets
-            .get(&mut rtnl)
-            .push(sk, kernel::alloc::flags::GFP_KERNEL)
-            .is_err()
-        {
+        if self.sockets.get(&mut rtnl).insert(sk).is_err() {
             // The socket layer calls release on failure, which copes with
             // a socket missing from the list.
             return kernel::error::code::ENOMEM.to_errno();
@@ -512,7 +560,7 @@ impl<T: crate::glue::sock::Proto> ProtoModule<T> {
         self.proto.unregister();
         // Statics are never dropped: free the (empty) list's buffer.
         let mut rtnl = crate::glue::sync::Rtnl::lock();
-        *self.sockets.get(&mut rtnl) = kernel::alloc::KVec::new();
+        *self.sockets.get(&mut rtnl) = SockSet::new();
     }
 }
 

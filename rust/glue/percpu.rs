@@ -2,54 +2,42 @@
 
 //! Per-CPU data.
 //!
-//! * [`PerCpuU64`]: one `u64` per CPU (`alloc_percpu`), read and written
-//!   only on the current CPU, atomically with respect to preemption and
-//!   interrupts (`this_cpu_xchg`).
+//! * [`CpuMarks`]: one `u64` per CPU in an ordinary allocation (cheaper to
+//!   make than per-CPU memory, which matters when one is made per socket).
 //! * [`rx_serial_next`]: a per-CPU counter of this module, one number per
 //!   frame the receive path dispatches on that CPU.
 
 use super::bindings;
-use core::ptr::NonNull;
-use kernel::error::{code, Result};
+use kernel::error::Result;
 
-/// One `u64` per possible CPU, zero when allocated.
-///
-/// # Invariants
-///
-/// `0` is a live `alloc_percpu(u64)` cookie, freed in `Drop`; it is never
-/// dereferenced as a plain pointer.
-pub(crate) struct PerCpuU64(NonNull<u64>);
+/// One `u64` per possible CPU (`nr_cpu_ids`), zero when allocated, each
+/// meant to be touched only by its own CPU (atomics, so a stale CPU number
+/// can only mislead the caller's logic, never corrupt memory).
+pub(crate) struct CpuMarks(kernel::alloc::KVec<core::sync::atomic::AtomicU64>);
 
-// SAFETY: the cookie names memory of every CPU; each access goes through
-// `this_cpu_*` on the current CPU, so any thread may hold and use it.
-unsafe impl Send for PerCpuU64 {}
-// SAFETY: as above; `xchg` is a single per-CPU atomic operation.
-unsafe impl Sync for PerCpuU64 {}
-
-impl PerCpuU64 {
-    /// Allocates the counters, all zero. Process context (may sleep).
+impl CpuMarks {
+    /// Allocates the marks, all zero. Process context (may sleep).
     pub(crate) fn new() -> Result<Self> {
-        // SAFETY: allocates or returns NULL.
-        let p = unsafe { bindings::rcan_percpu_u64_alloc() };
-        // INVARIANT: a fresh alloc_percpu cookie.
-        NonNull::new(p).map(PerCpuU64).ok_or(code::ENOMEM)
+        use kernel::alloc::{flags::GFP_KERNEL, KVec};
+        // SAFETY: reads a variable fixed at boot.
+        let n = unsafe { bindings::rcan_nr_cpu_ids() } as usize;
+        let mut v = KVec::with_capacity(n, GFP_KERNEL)?;
+        for _ in 0..n {
+            v.push(core::sync::atomic::AtomicU64::new(0), GFP_KERNEL)?;
+        }
+        Ok(CpuMarks(v))
     }
 
-    /// Stores `v` in this CPU's counter and returns its previous value.
-    /// Any context. The caller decides what a CPU change between two calls
-    /// means: within one NET_RX softirq run there is none.
+    /// Stores `v` in the current CPU's mark and returns its previous
+    /// value. Meant for BH-disabled context (no migration in between);
+    /// any context is memory-safe.
     pub(crate) fn xchg(&self, v: u64) -> u64 {
-        // SAFETY: a live cookie (invariant); this_cpu_xchg is safe in any
-        // context.
-        unsafe { bindings::rcan_percpu_u64_xchg(self.0.as_ptr(), v) }
-    }
-}
-
-impl Drop for PerCpuU64 {
-    fn drop(&mut self) {
-        // SAFETY: allocated by alloc_percpu (invariant), freed once; any
-        // context but NMI may free per-CPU memory.
-        unsafe { bindings::rcan_percpu_u64_free(self.0.as_ptr()) };
+        // SAFETY: raw_smp_processor_id may be called in any context.
+        let cpu = unsafe { bindings::rcan_raw_smp_processor_id() } as usize;
+        match self.0.get(cpu) {
+            Some(m) => m.swap(v, core::sync::atomic::Ordering::Relaxed),
+            None => 0,
+        }
     }
 }
 

@@ -629,31 +629,21 @@ unsigned long rcan_msecs_to_jiffies(unsigned int ms)
 	return msecs_to_jiffies(ms);
 }
 
-/*
- * Per-CPU u64s. The pointers are __percpu cookies; the prototypes drop the
- * annotation so that bindgen sees a plain pointer the glue never
- * dereferences.
- */
-u64 *rcan_percpu_u64_alloc(void)
-{
-	return (u64 __force *)alloc_percpu(u64);
-}
-
-void rcan_percpu_u64_free(u64 *p)
-{
-	free_percpu((u64 __percpu __force *)p);
-}
-
-u64 rcan_percpu_u64_xchg(u64 *p, u64 v)
-{
-	return this_cpu_xchg(*(u64 __percpu __force *)p, v);
-}
-
 static DEFINE_PER_CPU(u64, rcan_rx_serial);
 
 u64 rcan_rx_serial_next(void)
 {
 	return this_cpu_inc_return(rcan_rx_serial);
+}
+
+unsigned int rcan_nr_cpu_ids(void)
+{
+	return nr_cpu_ids;
+}
+
+unsigned int rcan_raw_smp_processor_id(void)
+{
+	return raw_smp_processor_id();
 }
 
 /* NAPI (a driver's receive queue polled in NET_RX softirq). */

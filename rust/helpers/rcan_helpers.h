@@ -165,11 +165,10 @@ void rcan_skb_set_ipv4_rx(struct sk_buff *skb, struct net_device *dev);
 unsigned long rcan_jiffies(void);
 unsigned long rcan_msecs_to_jiffies(unsigned int ms);
 
-/* per-CPU counters (the receive table's "seen" marks) */
-u64 *rcan_percpu_u64_alloc(void);
-void rcan_percpu_u64_free(u64 *p);
-u64 rcan_percpu_u64_xchg(u64 *p, u64 v);
+/* the receive table's per-CPU frame counter and CPU numbers */
 u64 rcan_rx_serial_next(void);
+unsigned int rcan_nr_cpu_ids(void);
+unsigned int rcan_raw_smp_processor_id(void);
 /* NAPI */
 struct napi_struct;
 void rcan_napi_add(struct net_device *dev, struct napi_struct *napi,

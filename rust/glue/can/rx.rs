@@ -8,11 +8,13 @@
 //! Layout (where each filter goes is pure logic, `rcan_core::rxtable`,
 //! host-tested against a naive model):
 //!
-//! * `buckets`: hashed filters, one [`Node`] each, in `1 << BUCKET_BITS`
-//!   RCU lists keyed by `(ifindex, mask, id & mask)`. `groups` (an
-//!   RCU-published snapshot) lists the distinct `(ifindex, mask)` pairs in
-//!   use, so a frame costs one probe per group of its interface and of
-//!   "all interfaces", not one test per socket.
+//! * `buckets`: `1 << BUCKET_BITS` RCU lists of [`KeyEntry`]s, one per
+//!   distinct key `(ifindex, mask, id & mask)` in use, each with the list
+//!   of hashed filter [`Node`]s (one per socket filter) that want it.
+//!   `groups` (an RCU-published snapshot) lists the distinct
+//!   `(ifindex, mask)` pairs in use, so a frame costs one probe per group
+//!   of its interface and of "all interfaces", and a probe walks distinct
+//!   keys, never the sockets of another id that shares the bucket.
 //! * `scanned`: per registration, at most one node holding its filters
 //!   that cannot be hashed (or all of them, joined), tested one by one.
 //! * `err`: per registration, at most one node with its error mask.
@@ -34,15 +36,16 @@
 //! * Writers ([`RxTable::set`], process context) are serialised by the
 //!   table's own mutex (`writer`, a `DEFINE_MUTEX` of the owning module's C
 //!   file, so it has a lockdep class of its own). They link and unlink
-//!   nodes with release stores; unlinked registrations (with their nodes)
-//!   and replaced group snapshots are freed by `call_rcu` callbacks
+//!   nodes with release stores; unlinked registrations (with their nodes),
+//!   key entries left without members and replaced group snapshots are
+//!   freed by `call_rcu` callbacks
 //!   (softirq), so no writer waits for a grace period.
 //! * A registration is reached from a node only while the node is
 //!   reachable or a grace period has not passed since it was unlinked; the
 //!   receiver outlives all of its registrations (freed with the last).
 
 use super::super::bindings;
-use super::super::percpu::{rx_serial_next, PerCpuU64};
+use super::super::percpu::{rx_serial_next, CpuMarks};
 use super::super::sync::{CMutex, RcuPtr, RcuReadGuard};
 use crate::rcan_core::arb::CAN_ERR_FLAG;
 use crate::rcan_core::rxtable::{self, frame_key, Filter, Place, BUCKET_BITS};
@@ -68,11 +71,12 @@ pub(crate) trait Receiver: Send + Sync + 'static {
 }
 
 /// What a registration asks for.
-pub(crate) struct Spec<'a> {
+pub(crate) struct Spec {
     /// Interface, 0 = all.
     pub(crate) ifindex: i32,
-    /// Filters for data and remote frames (none: no such frames).
-    pub(crate) filters: &'a [Filter],
+    /// Filters for data and remote frames (none: no such frames); kept by
+    /// the registration.
+    pub(crate) filters: KVec<Filter>,
     /// Deliver only frames that pass every filter.
     pub(crate) join: bool,
     /// Error classes wanted (0: no error frames).
@@ -100,13 +104,33 @@ enum Kind {
     ByIf,
 }
 
-/// A list entry. Lives inside its registration's `nodes` (allocated with
-/// its final capacity before linking, so never moved while linked).
-struct Node<R: Receiver> {
-    /// Next node (RCU: readers follow it with acquire loads).
-    next: AtomicPtr<Node<R>>,
+/// The link fields of an element of an RCU [`List`].
+struct Link<T> {
+    /// Next element (RCU: readers follow it with acquire loads).
+    next: AtomicPtr<T>,
     /// Writer side only (under `writer`): the link that points at us.
-    pprev: Cell<*const AtomicPtr<Node<R>>>,
+    pprev: Cell<*const AtomicPtr<T>>,
+}
+
+impl<T> Link<T> {
+    const fn new() -> Self {
+        Link {
+            next: AtomicPtr::new(ptr::null_mut()),
+            pprev: Cell::new(ptr::null()),
+        }
+    }
+}
+
+/// An element of an RCU [`List`].
+trait Linked: Sized {
+    fn link(&self) -> &Link<Self>;
+}
+
+/// A filter, scanned, error or interface entry of a registration. Lives
+/// inside its registration's `nodes` (allocated with its final capacity
+/// before linking, so never moved while linked).
+struct Node<R: Receiver> {
+    link: Link<Node<R>>,
     kind: Kind,
     ifindex: i32,
     /// Hashed: group mask; Err: error mask.
@@ -114,31 +138,80 @@ struct Node<R: Receiver> {
     /// Hashed: `id & mask`.
     value: u32,
     reg: *const Reg<R>,
+    /// Hashed, writer side only: the key entry whose `members` we are on.
+    key: Cell<*const KeyEntry<R>>,
 }
 
-/// An RCU list of nodes (the kernel's `hlist` discipline: readers only
-/// follow `next`; writers, serialised, keep `pprev`).
-struct List<R: Receiver> {
-    first: AtomicPtr<Node<R>>,
+impl<R: Receiver> Linked for Node<R> {
+    fn link(&self) -> &Link<Self> {
+        &self.link
+    }
 }
 
-impl<R: Receiver> List<R> {
+/// One distinct hash key `(ifindex, mask, value)` in a bucket, with the
+/// hashed nodes of every registration that wants it: a frame walks the
+/// distinct keys of its bucket, not every socket's filter, so receivers of
+/// a popular id do not slow down frames that merely share its bucket.
+/// Freed by `call_rcu` once its last member is unlinked.
+#[repr(C)]
+struct KeyEntry<R: Receiver> {
+    /// For call_rcu; first, so the callback finds the entry.
+    rcu: bindings::callback_head,
+    link: Link<KeyEntry<R>>,
+    ifindex: i32,
+    mask: u32,
+    value: u32,
+    members: List<Node<R>>,
+    /// Writer side only: number of members.
+    count: Cell<usize>,
+}
+
+impl<R: Receiver> Linked for KeyEntry<R> {
+    fn link(&self) -> &Link<Self> {
+        &self.link
+    }
+}
+
+/// An RCU list (the kernel's `hlist` discipline: readers only follow
+/// `next`; writers, serialised, keep `pprev`).
+struct List<T: Linked> {
+    first: AtomicPtr<T>,
+}
+
+impl<T: Linked> List<T> {
     const fn new() -> Self {
         List {
             first: AtomicPtr::new(ptr::null_mut()),
         }
     }
 
-    /// The nodes, for as long as the read-side section lasts.
-    fn iter<'g>(&'g self, _g: &'g RcuReadGuard) -> impl Iterator<Item = &'g Node<R>> + 'g {
+    /// The elements, for as long as the read-side section lasts.
+    fn iter<'g>(&'g self, _g: &'g RcuReadGuard) -> impl Iterator<Item = &'g T> + 'g {
         let mut p = self.first.load(Ordering::Acquire);
         core::iter::from_fn(move || {
             // SAFETY: `p` was read from a link reachable in this read-side
-            // section: nodes are published with release stores after they
-            // are initialised and freed only a grace period after being
-            // unlinked, which `_g` prevents from ending.
+            // section: elements are published with release stores after
+            // they are initialised and freed only a grace period after
+            // being unlinked, which `_g` prevents from ending.
             let n = unsafe { p.as_ref() }?;
-            p = n.next.load(Ordering::Acquire);
+            p = n.link().next.load(Ordering::Acquire);
+            Some(n)
+        })
+    }
+
+    /// The elements, for the writer.
+    ///
+    /// # Safety
+    ///
+    /// The caller holds the table's writer mutex for `'w` (nothing is
+    /// unlinked or freed meanwhile).
+    unsafe fn iter_locked<'w>(&'w self) -> impl Iterator<Item = &'w T> + 'w {
+        let mut p = self.first.load(Ordering::Acquire);
+        core::iter::from_fn(move || {
+            // SAFETY: linked elements, which only the writer (the caller,
+            // for 'w) unlinks or frees.
+            let n = unsafe { p.as_ref() }?;
+            p = n.link().next.load(Ordering::Acquire);
             Some(n)
         })
     }
@@ -150,18 +223,17 @@ impl<R: Receiver> List<R> {
     /// The caller holds the table's writer mutex; `n` is initialised, not
     /// linked, and stays at its address until a grace period after it is
     /// unlinked.
-    unsafe fn push(&self, n: &Node<R>) {
+    unsafe fn push(&self, n: &T) {
         let first = self.first.load(Ordering::Relaxed);
-        n.next.store(first, Ordering::Relaxed);
-        n.pprev.set(&self.first);
-        // SAFETY: `first` is NULL or a linked node; writers are serialised
-        // (caller), so its `pprev` is ours to change.
+        n.link().next.store(first, Ordering::Relaxed);
+        n.link().pprev.set(&self.first);
+        // SAFETY: `first` is NULL or a linked element; writers are
+        // serialised (caller), so its `pprev` is ours to change.
         if let Some(f) = unsafe { first.as_ref() } {
-            f.pprev.set(&n.next);
+            f.link().pprev.set(&n.link().next);
         }
-        // rcu_assign_pointer: the node's fields before the link.
-        self.first
-            .store(n as *const Node<R> as *mut Node<R>, Ordering::Release);
+        // rcu_assign_pointer: the element's fields before the link.
+        self.first.store(n as *const T as *mut T, Ordering::Release);
     }
 
     /// Unlinks `n` (`hlist_del_rcu`); readers on it may still follow its
@@ -170,14 +242,14 @@ impl<R: Receiver> List<R> {
     /// # Safety
     ///
     /// The caller holds the table's writer mutex and `n` is linked.
-    unsafe fn unlink(n: &Node<R>) {
-        let next = n.next.load(Ordering::Relaxed);
+    unsafe fn unlink(n: &T) {
+        let next = n.link().next.load(Ordering::Relaxed);
         // SAFETY: `pprev` points at the live link to `n` (list head or the
-        // previous node's `next`), maintained under the writer mutex.
-        unsafe { (*n.pprev.get()).store(next, Ordering::Release) };
-        // SAFETY: `next` is NULL or a linked node (writer mutex held).
+        // previous element's `next`), maintained under the writer mutex.
+        unsafe { (*n.link().pprev.get()).store(next, Ordering::Release) };
+        // SAFETY: `next` is NULL or a linked element (writer mutex held).
         if let Some(x) = unsafe { next.as_ref() } {
-            x.pprev.set(n.pprev.get());
+            x.link().pprev.set(n.link().pprev.get());
         }
     }
 }
@@ -185,7 +257,7 @@ impl<R: Receiver> List<R> {
 /// A receiver: the user's data and its per-CPU "seen" mark.
 struct Rcv<R: Receiver> {
     data: R,
-    seen: PerCpuU64,
+    seen: CpuMarks,
 }
 
 /// One registration of a receiver.
@@ -236,10 +308,10 @@ struct Writer<R: Receiver> {
 /// The receive table. See the module documentation.
 pub(crate) struct RxTable<R: Receiver> {
     writer: CMutex<Writer<R>>,
-    buckets: [List<R>; NBUCKETS],
-    scanned: List<R>,
-    err: List<R>,
-    by_if: [List<R>; IF_BUCKETS],
+    buckets: [List<KeyEntry<R>>; NBUCKETS],
+    scanned: List<Node<R>>,
+    err: List<Node<R>>,
+    by_if: [List<Node<R>>; IF_BUCKETS],
     groups: RcuPtr<Groups>,
 }
 
@@ -275,6 +347,14 @@ unsafe extern "C" fn free_reg<R: Receiver>(head: *mut bindings::callback_head) {
         // its last registration, so nothing else refers to it.
         drop(unsafe { KBox::from_raw(reg.rcv.as_ptr()) });
     }
+}
+
+/// `call_rcu` callback: frees a key entry without members. Softirq
+/// context.
+unsafe extern "C" fn free_key<R: Receiver>(head: *mut bindings::callback_head) {
+    // SAFETY: `head` is the first field of a `KeyEntry<R>` leaked from a
+    // KBox by `link_reg`, unlinked a grace period ago.
+    drop(unsafe { KBox::from_raw(head.cast::<KeyEntry<R>>()) });
 }
 
 /// `call_rcu` callback: frees a replaced group snapshot. Softirq context.
@@ -356,9 +436,13 @@ impl<R: Receiver> RxTable<R> {
                     continue;
                 }
                 let v = key & gm;
-                for n in self.buckets[rxtable::bucket(gi, gm, v)].iter(g) {
-                    if n.value == v && n.mask == gm && n.ifindex == gi {
-                        hit(n.reg);
+                for e in self.buckets[rxtable::bucket(gi, gm, v)].iter(g) {
+                    if e.value == v && e.mask == gm && e.ifindex == gi {
+                        for n in e.members.iter(g) {
+                            hit(n.reg);
+                        }
+                        // Keys are distinct within a bucket.
+                        break;
                     }
                 }
             }
@@ -386,7 +470,7 @@ impl<R: Receiver> RxTable<R> {
     pub(crate) fn filters(&self, ifindex: i32, out: &mut [Filter]) -> Option<usize> {
         let g = RcuReadGuard::new();
         let mut n = 0;
-        let mut scan = |bucket: &List<R>, want: i32| -> Option<()> {
+        let mut scan = |bucket: &List<Node<R>>, want: i32| -> Option<()> {
             for node in bucket.iter(&g) {
                 if node.ifindex != want {
                     continue;
@@ -413,7 +497,7 @@ impl<R: Receiver> RxTable<R> {
     /// nothing (no filters, no error mask) removes it too. On error (ENOMEM)
     /// the previous registration stays; removal never fails. Process
     /// context; sleeps.
-    pub(crate) fn set(&self, id: usize, new: Option<(&Spec<'_>, R)>) -> Result<Changed> {
+    pub(crate) fn set(&self, id: usize, new: Option<(Spec, R)>) -> Result<Changed> {
         let new = new.filter(|(s, _)| !s.filters.is_empty() || s.err_mask != 0);
         // Allocate before locking.
         let mut prepared = match new {
@@ -421,7 +505,7 @@ impl<R: Receiver> RxTable<R> {
                 let rcv = KBox::new(
                     Rcv {
                         data,
-                        seen: PerCpuU64::new()?,
+                        seen: CpuMarks::new()?,
                     },
                     GFP_KERNEL,
                 )?;
@@ -473,13 +557,9 @@ impl<R: Receiver> RxTable<R> {
             let last = w.regs[b].len() - 1;
             super::super::kvec_swap_remove(&mut w.regs[b], last);
         }
+        let fresh = self.new_keys(&w, &reg)?;
         self.grow_groups(&mut *w, &reg)?;
-        for n in reg.nodes.iter() {
-            // SAFETY: writer mutex held; the nodes are initialised, not
-            // linked, and stay put inside the boxed registration until
-            // free_reg.
-            unsafe { self.list_of(n).push(n) };
-        }
+        self.link_reg(&w, &reg, fresh);
         let reg = NonNull::from(KBox::leak(reg));
         changed.ifindex[0] = {
             // SAFETY: just leaked, owned by the map from now on.
@@ -512,13 +592,12 @@ impl<R: Receiver> RxTable<R> {
     }
 
     /// Builds an unlinked registration for `spec` (receiver still unset).
-    fn make_reg(spec: &Spec<'_>) -> Result<KBox<Reg<R>>> {
-        let join = rxtable::join_scanned(spec.filters, spec.join);
-        let mut filters = KVec::with_capacity(spec.filters.len(), GFP_KERNEL)?;
+    fn make_reg(spec: Spec) -> Result<KBox<Reg<R>>> {
+        let join = rxtable::join_scanned(&spec.filters, spec.join);
+        let filters = spec.filters;
         let mut scanned = KVec::new();
         let mut hashed = 0;
-        for f in spec.filters {
-            filters.push(*f, GFP_KERNEL)?;
+        for f in filters.iter() {
             match f.place() {
                 Place::Hashed { .. } if !join => hashed += 1,
                 _ => scanned.push(*f, GFP_KERNEL)?,
@@ -545,8 +624,8 @@ impl<R: Receiver> RxTable<R> {
         )?;
         let regp: *const Reg<R> = &*reg;
         let node = |kind, mask, value| Node {
-            next: AtomicPtr::new(ptr::null_mut()),
-            pprev: Cell::new(ptr::null()),
+            link: Link::new(),
+            key: Cell::new(ptr::null()),
             kind,
             ifindex: spec.ifindex,
             mask,
@@ -556,8 +635,8 @@ impl<R: Receiver> RxTable<R> {
         // Pushes stay within the capacity reserved above: the nodes never
         // move.
         if !join {
-            for f in spec.filters {
-                if let Place::Hashed { mask, value } = f.place() {
+            for i in 0..reg.filters.len() {
+                if let Place::Hashed { mask, value } = reg.filters[i].place() {
                     reg.nodes
                         .push(node(Kind::Hashed, mask, value), GFP_KERNEL)?;
                 }
@@ -576,13 +655,98 @@ impl<R: Receiver> RxTable<R> {
         Ok(reg)
     }
 
-    /// The list a node belongs on.
-    fn list_of(&self, n: &Node<R>) -> &List<R> {
+    /// The list a non-hashed node belongs on.
+    fn list_of(&self, n: &Node<R>) -> &List<Node<R>> {
         match n.kind {
-            Kind::Hashed => &self.buckets[rxtable::bucket(n.ifindex, n.mask, n.value)],
             Kind::Scanned => &self.scanned,
             Kind::Err => &self.err,
-            Kind::ByIf => &self.by_if[if_bucket(n.ifindex)],
+            _ => &self.by_if[if_bucket(n.ifindex)],
+        }
+    }
+
+    /// The key entry of `(ifindex, mask, value)`, if linked. Writer mutex
+    /// held (`w`).
+    fn find_key<'w>(
+        &'w self,
+        w: &'w Writer<R>,
+        ifindex: i32,
+        mask: u32,
+        value: u32,
+    ) -> Option<&'w KeyEntry<R>> {
+        let _ = w;
+        let bucket = &self.buckets[rxtable::bucket(ifindex, mask, value)];
+        // SAFETY: `w` is the writer mutex's data, borrowed for 'w: the
+        // mutex is held that long.
+        unsafe { bucket.iter_locked() }
+            .find(|e| e.ifindex == ifindex && e.mask == mask && e.value == value)
+    }
+
+    /// Allocates the key entries `reg`'s hashed nodes need and the table
+    /// lacks (one per distinct key), so that linking cannot fail. Writer
+    /// mutex held.
+    fn new_keys(&self, w: &Writer<R>, reg: &Reg<R>) -> Result<KVec<KBox<KeyEntry<R>>>> {
+        let mut fresh: KVec<KBox<KeyEntry<R>>> = KVec::new();
+        for n in reg.nodes.iter().filter(|n| n.kind == Kind::Hashed) {
+            let known = self.find_key(w, n.ifindex, n.mask, n.value).is_some()
+                || fresh
+                    .iter()
+                    .any(|e| e.ifindex == n.ifindex && e.mask == n.mask && e.value == n.value);
+            if !known {
+                let e = KBox::new(
+                    KeyEntry {
+                        // SAFETY: an all-zero callback_head is what
+                        // call_rcu expects.
+                        rcu: unsafe { core::mem::zeroed() },
+                        link: Link::new(),
+                        ifindex: n.ifindex,
+                        mask: n.mask,
+                        value: n.value,
+                        members: List::new(),
+                        count: Cell::new(0),
+                    },
+                    GFP_KERNEL,
+                )?;
+                fresh.push(e, GFP_KERNEL)?;
+            }
+        }
+        Ok(fresh)
+    }
+
+    /// Links every node of `reg`, taking key entries from `fresh` (made by
+    /// [`Self::new_keys`] for this registration) where the table has none.
+    /// Writer mutex held.
+    fn link_reg(&self, w: &Writer<R>, reg: &Reg<R>, mut fresh: KVec<KBox<KeyEntry<R>>>) {
+        for n in reg.nodes.iter() {
+            if n.kind != Kind::Hashed {
+                // SAFETY: writer mutex held; the nodes are initialised, not
+                // linked, and stay put inside the boxed registration until
+                // free_reg.
+                unsafe { self.list_of(n).push(n) };
+                continue;
+            }
+            let e: &KeyEntry<R> = match self.find_key(w, n.ifindex, n.mask, n.value) {
+                Some(e) => e,
+                None => {
+                    let i = fresh.iter().position(|e| {
+                        e.ifindex == n.ifindex && e.mask == n.mask && e.value == n.value
+                    });
+                    // new_keys made one for every missing key.
+                    let Some(e) = i.and_then(|i| super::super::kvec_swap_remove(&mut fresh, i))
+                    else {
+                        continue;
+                    };
+                    let e: &KeyEntry<R> = KBox::leak(e);
+                    // SAFETY: writer mutex held; a new, initialised entry,
+                    // freed only by free_key a grace period after it is
+                    // unlinked.
+                    unsafe { self.buckets[rxtable::bucket(e.ifindex, e.mask, e.value)].push(e) };
+                    e
+                }
+            };
+            n.key.set(e);
+            e.count.set(e.count.get() + 1);
+            // SAFETY: as for the other nodes.
+            unsafe { e.members.push(n) };
         }
     }
 
@@ -593,6 +757,22 @@ impl<R: Receiver> RxTable<R> {
             // SAFETY: writer mutex held (`w` is its data); `reg` is linked.
             unsafe { List::unlink(n) };
             if n.kind == Kind::Hashed {
+                // SAFETY: set when the node was linked; the entry lives
+                // while it has members (writer mutex held).
+                let e = unsafe { &*n.key.get() };
+                e.count.set(e.count.get() - 1);
+                if e.count.get() == 0 {
+                    // SAFETY: writer mutex held; the entry is linked.
+                    unsafe { List::unlink(e) };
+                    // SAFETY: unlinked: unreachable for new readers;
+                    // free_key frees it.
+                    unsafe {
+                        defer(
+                            e as *const KeyEntry<R> as *mut bindings::callback_head,
+                            free_key::<R>,
+                        )
+                    };
+                }
                 if let Some(g) = w
                     .groups
                     .iter_mut()
