@@ -376,9 +376,11 @@ struct Engine {
     out_len: usize,
     binds: KVec<Bind>,
     stats: Stats,
-    /// [`Tick`] is running and will take every frame queued before it
-    /// finds the queue empty (it checks and clears this in one critical
-    /// section), so queuing a frame needs no [`kick`].
+    /// A drainer ([`drain`], from [`Tick`] or from the receive callback)
+    /// is running and will take every frame queued before it finds the
+    /// queue empty (it checks and clears this in one critical section), so
+    /// queuing a frame needs no [`kick`]. At most one drainer runs at a
+    /// time, so frames leave in queue order.
     draining: bool,
 }
 
@@ -811,81 +813,103 @@ static TIMER: HrTimer<Tick> = HrTimer::new();
 impl HrTimerCallback for Tick {
     type State = ();
 
-    /// HRTIMER_SOFTIRQ. Takes frames from the queue in batches under
-    /// ENGINE and sends them without it (on one device reference for the
-    /// whole run); when the queue is empty, clears `draining` and re-arms
-    /// for the next deadline in the same critical section, so that a frame
-    /// queued concurrently (also under ENGINE) is never left unsent. After
-    /// [`FRAMES_PER_RUN`] frames it re-arms for "now" instead.
-    fn run(timer: &'static HrTimer<Self>, _state: &mut ()) {
-        let mut first = true;
-        let mut wake = false;
-        let mut dev: Option<DevRef> = None;
-        let mut sent = 0;
-        loop {
-            if wake {
-                WAITQ.wake_all();
-                wake = false;
+    /// HRTIMER_SOFTIRQ. Runs the protocol timers, then drains the queue
+    /// unless another drainer (a receive callback on another CPU) is at
+    /// it; that one re-arms the timer when it is done.
+    fn run(_timer: &'static HrTimer<Self>, _state: &mut ()) {
+        drain(true);
+    }
+}
+
+/// Sends the queued frames. Softirq context (HRTIMER_SOFTIRQ or NET_RX).
+///
+/// With `timers`, first runs the protocol timers. Becomes the drainer if
+/// nobody is (`draining`), else returns at once: the running drainer takes
+/// what was queued. Takes frames from the queue in batches under ENGINE
+/// and sends them without it (on one device reference for the whole run);
+/// when the queue is empty, clears `draining` and re-arms the timer for
+/// the next deadline in the same critical section, so that a frame queued
+/// concurrently (also under ENGINE) is never left unsent. After
+/// [`FRAMES_PER_RUN`] frames it re-arms for "now" instead.
+fn drain(timers: bool) {
+    let mut first = true;
+    let mut wake = false;
+    let mut dev: Option<DevRef> = None;
+    let mut sent = 0;
+    loop {
+        if wake {
+            WAITQ.wake_all();
+            wake = false;
+        }
+        let mut batch: [Option<Frame>; BATCH] = Default::default();
+        let mut n = 0;
+        let ifname;
+        {
+            let mut g = ENGINE.lock();
+            let Some(e) = g.as_mut() else { return };
+            if STOPPING.load(Ordering::Relaxed) {
+                return;
             }
-            let mut batch: [Option<Frame>; BATCH] = Default::default();
-            let mut n = 0;
-            let ifname;
-            {
-                let mut g = ENGINE.lock();
-                let Some(e) = g.as_mut() else { return };
-                if STOPPING.load(Ordering::Relaxed) {
-                    return;
-                }
-                if first {
-                    e.draining = true;
+            if first {
+                first = false;
+                if timers {
                     let before = e.stats.tx_ok + e.stats.tx_failed;
                     e.on_timer(now_ms());
                     wake = e.stats.tx_ok + e.stats.tx_failed != before;
-                    first = false;
                 }
-                if sent >= FRAMES_PER_RUN {
-                    e.draining = false;
-                    kick();
+                if e.draining {
+                    // The running drainer sends what on_timer queued and
+                    // re-arms the timer when it finds the queue empty.
                     drop(g);
                     if wake {
                         WAITQ.wake_all();
                     }
                     return;
                 }
-                while n < BATCH {
-                    match e.pop_out() {
-                        Some(f) => {
-                            batch[n] = Some(f);
-                            n += 1;
-                        }
-                        None => break,
-                    }
+                e.draining = true;
+            }
+            if sent >= FRAMES_PER_RUN {
+                e.draining = false;
+                kick();
+                drop(g);
+                if wake {
+                    WAITQ.wake_all();
                 }
-                ifname = e.cfg.ifname;
-                if n == 0 {
-                    e.draining = false;
-                    if let Some(d) = e.next_deadline() {
-                        timer.start((d as i64).saturating_mul(1_000_000));
+                return;
+            }
+            while n < BATCH {
+                match e.pop_out() {
+                    Some(f) => {
+                        batch[n] = Some(f);
+                        n += 1;
                     }
-                    drop(g);
-                    if wake {
-                        WAITQ.wake_all();
-                    }
-                    return;
+                    None => break,
                 }
             }
-            sent += n;
-            if dev.is_none() {
-                dev = DevRef::by_name(ifname.as_cstr());
-            }
-            let errors = match &dev {
-                Some(d) => send_batch(d, &batch[..n]),
-                None => n as u64,
-            };
-            if errors != 0 {
-                if let Some(e) = ENGINE.lock().as_mut() {
-                    e.stats.send_errors += errors;
+            ifname = e.cfg.ifname;
+            if n == 0 {
+                e.draining = false;
+                if let Some(d) = e.next_deadline() {
+                    TIMER.start((d as i64).saturating_mul(1_000_000));
                 }
+                drop(g);
+                if wake {
+                    WAITQ.wake_all();
+                }
+                return;
+            }
+        }
+        sent += n;
+        if dev.is_none() {
+            dev = DevRef::by_name(ifname.as_cstr());
+        }
+        let errors = match &dev {
+            Some(d) => send_batch(d, &batch[..n]),
+            None => n as u64,
+        };
+        if errors != 0 {
+            if let Some(e) = ENGINE.lock().as_mut() {
+                e.stats.send_errors += errors;
             }
         }
     }
@@ -933,8 +957,11 @@ fn send_frame(dev: &DevRef, f: &Frame) -> Result {
 struct DsorRx;
 
 impl KernelRx for DsorRx {
-    /// NET_RX softirq, under RCU. Does not send (a receive callback may,
-    /// but this one leaves sending to the timer): frames go to the queue.
+    /// NET_RX softirq, under RCU. The frame's answers (acks, the next
+    /// body) are queued under ENGINE and sent right here, after the lock
+    /// is dropped ([`drain`]), instead of a timer hop later: a receive
+    /// callback runs in NET_RX softirq with no device lock held, so it may
+    /// transmit.
     fn rx(&self, skb: &Skb, dev: &NetDev) {
         let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
             return;
@@ -957,12 +984,16 @@ impl KernelRx for DsorRx {
             return;
         }
         let finished_before = e.stats.tx_ok + e.stats.tx_failed;
-        if e.on_frame(&id, &cf.data[..len], now) {
-            e.kick();
-        }
-        if e.stats.tx_ok + e.stats.tx_failed != finished_before {
-            drop(g);
+        let queued = e.on_frame(&id, &cf.data[..len], now);
+        let finished = e.stats.tx_ok + e.stats.tx_failed != finished_before;
+        drop(g);
+        if finished {
             WAITQ.wake_all();
+        }
+        if queued {
+            // Becomes the drainer unless one runs (which then takes these
+            // frames too).
+            drain(false);
         }
     }
 }
