@@ -547,10 +547,9 @@ impl<T: Driver> Adapter<T> {
         // SAFETY: as in open().
         let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
         if T::NAPI_WEIGHT > 0 {
-            // SAFETY: enabled by a successful open (stop only follows
-            // one); waits for a running poll, after which none starts
-            // until the next open, so `T::stop` may empty the driver's
-            // receive queue.
+            // Waits for a running poll, after which none starts until the
+            // next open, so `T::stop` may empty the driver's receive queue.
+            // SAFETY: enabled by a successful open (stop only follows one).
             unsafe { bindings::rcan_napi_disable(d.state().napi.get()) };
         }
         match T::stop(d, p) {
@@ -646,10 +645,9 @@ impl<T: Driver> Registration<T> {
                 })
         };
         if T::NAPI_WEIGHT > 0 {
-            // SAFETY: the instance is in the private area, which does not
-            // move and lives until free_netdev, which deletes the instance
-            // (also on the error path below); `poll` is our trampoline for
-            // `T`.
+            // The instance lives in the private area (it does not move)
+            // until free_netdev deletes it (also on the error path below).
+            // SAFETY: see above; `poll` is our trampoline for `T`.
             unsafe {
                 bindings::rcan_napi_add(
                     dev.as_ptr(),

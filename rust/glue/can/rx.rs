@@ -189,10 +189,10 @@ impl<T: Linked> List<T> {
     fn iter<'g>(&'g self, _g: &'g RcuReadGuard) -> impl Iterator<Item = &'g T> + 'g {
         let mut p = self.first.load(Ordering::Acquire);
         core::iter::from_fn(move || {
-            // SAFETY: `p` was read from a link reachable in this read-side
-            // section: elements are published with release stores after
-            // they are initialised and freed only a grace period after
-            // being unlinked, which `_g` prevents from ending.
+            // `p` was read from a link reachable in this read-side section:
+            // elements are published (release) after they are initialised.
+            // SAFETY: freed only a grace period after being unlinked, which
+            // `_g` prevents from ending; see above for initialisation.
             let n = unsafe { p.as_ref() }?;
             p = n.link().next.load(Ordering::Acquire);
             Some(n)
