@@ -277,7 +277,46 @@ struct Reg<R: Receiver> {
     scanned: KVec<Filter>,
     /// The scanned node's filters must all pass.
     join: bool,
-    nodes: KVec<Node<R>>,
+    nodes: Nodes<R>,
+}
+
+/// Inline room for a registration's nodes: a socket with one filter has
+/// two (its key's member and its interface entry), with an error mask
+/// three; more go to `more`, so the common bind allocates no node vector.
+const INLINE_NODES: usize = 3;
+
+/// A registration's nodes. Filled before any is linked and never changed
+/// afterwards, so their addresses (inside the boxed registration, or in
+/// `more`'s buffer) stay put while linked.
+struct Nodes<R: Receiver> {
+    inline: [Option<Node<R>>; INLINE_NODES],
+    more: KVec<Node<R>>,
+}
+
+impl<R: Receiver> Nodes<R> {
+    fn new() -> Self {
+        Nodes {
+            inline: [const { None }; INLINE_NODES],
+            more: KVec::new(),
+        }
+    }
+
+    /// Adds a node. Only before the registration is linked.
+    fn push(&mut self, n: Node<R>) -> Result {
+        match self.inline.iter_mut().find(|s| s.is_none()) {
+            Some(slot) => *slot = Some(n),
+            None => self.more.push(n, GFP_KERNEL)?,
+        }
+        Ok(())
+    }
+
+    fn iter(&self) -> impl Iterator<Item = &Node<R>> {
+        self.inline.iter().flatten().chain(self.more.iter())
+    }
+
+    fn len(&self) -> usize {
+        self.iter().count()
+    }
 }
 
 impl<R: Receiver> Reg<R> {
@@ -499,18 +538,11 @@ impl<R: Receiver> RxTable<R> {
     /// context; sleeps.
     pub(crate) fn set(&self, id: usize, new: Option<(Spec, R)>) -> Result<Changed> {
         let new = new.filter(|(s, _)| !s.filters.is_empty() || s.err_mask != 0);
-        // Allocate before locking.
+        // The registration is allocated before locking; the receiver only
+        // under the lock, once we know it is new (a filter change reuses
+        // it).
         let mut prepared = match new {
-            Some((spec, data)) => {
-                let rcv = KBox::new(
-                    Rcv {
-                        data,
-                        seen: CpuMarks::new()?,
-                    },
-                    GFP_KERNEL,
-                )?;
-                Some((Self::make_reg(spec)?, rcv))
-            }
+            Some((spec, data)) => Some((Self::make_reg(spec)?, data)),
             None => None,
         };
         let mut w = self.writer.lock();
@@ -525,7 +557,7 @@ impl<R: Receiver> RxTable<R> {
             unsafe { r.as_ref() }.rcv().data.id() == id
         });
         let mut changed = Changed::default();
-        let Some((mut reg, spare)) = prepared.take() else {
+        let Some((mut reg, data)) = prepared.take() else {
             // Removal.
             let Some(i) = old_pos else {
                 return Ok(changed);
@@ -543,11 +575,25 @@ impl<R: Receiver> RxTable<R> {
             unsafe { defer(old.as_ptr().cast(), free_reg::<R>) };
             return Ok(changed);
         };
-        // The receiver: the existing one, or the one allocated above.
-        let rcv = match old_pos {
+        // The receiver: the existing one (`data` is dropped), or a new one.
+        let spare = match old_pos {
+            Some(_) => {
+                drop(data);
+                None
+            }
+            None => Some(KBox::new(
+                Rcv {
+                    data,
+                    seen: CpuMarks::new()?,
+                },
+                GFP_KERNEL,
+            )?),
+        };
+        let rcv = match (old_pos, &spare) {
             // SAFETY: a live registration of the map.
-            Some(i) => unsafe { w.regs[b][i].as_ref() }.rcv,
-            None => NonNull::from(&*spare),
+            (Some(i), _) => unsafe { w.regs[b][i].as_ref() }.rcv,
+            (None, Some(s)) => NonNull::from(&**s),
+            (None, None) => return Err(code::EINVAL),
         };
         reg.rcv = rcv;
         // Room in the map before anything is linked, so nothing can fail
@@ -578,13 +624,14 @@ impl<R: Receiver> RxTable<R> {
                 // SAFETY: unlinked and out of the map; the receiver lives
                 // on in the new registration (`last` stays false).
                 unsafe { defer(old.as_ptr().cast(), free_reg::<R>) };
-                drop(spare);
             }
             None => {
                 // The room was reserved above.
                 let _ = w.regs[b].push(reg, GFP_KERNEL);
                 // The receiver now belongs to its registrations.
-                let _ = KBox::into_raw(spare);
+                if let Some(s) = spare {
+                    let _ = KBox::into_raw(s);
+                }
             }
         }
         self.shrink_groups(&mut *w);
@@ -603,10 +650,15 @@ impl<R: Receiver> RxTable<R> {
                 _ => scanned.push(*f, GFP_KERNEL)?,
             }
         }
-        let count = hashed
+        let extra = (hashed
             + usize::from(!scanned.is_empty())
             + usize::from(spec.err_mask != 0)
-            + usize::from(!filters.is_empty());
+            + usize::from(!filters.is_empty()))
+        .saturating_sub(INLINE_NODES);
+        let mut nodes = Nodes::new();
+        if extra > 0 {
+            nodes.more = KVec::with_capacity(extra, GFP_KERNEL)?;
+        }
         let mut reg = KBox::new(
             Reg {
                 // SAFETY: an all-zero callback_head is what call_rcu expects.
@@ -618,7 +670,7 @@ impl<R: Receiver> RxTable<R> {
                 filters,
                 scanned,
                 join,
-                nodes: KVec::with_capacity(count, GFP_KERNEL)?,
+                nodes,
             },
             GFP_KERNEL,
         )?;
@@ -632,25 +684,23 @@ impl<R: Receiver> RxTable<R> {
             value,
             reg: regp,
         };
-        // Pushes stay within the capacity reserved above: the nodes never
-        // move.
+        // All nodes are added before any is linked (and within the
+        // capacity reserved above).
         if !join {
             for i in 0..reg.filters.len() {
                 if let Place::Hashed { mask, value } = reg.filters[i].place() {
-                    reg.nodes
-                        .push(node(Kind::Hashed, mask, value), GFP_KERNEL)?;
+                    reg.nodes.push(node(Kind::Hashed, mask, value))?;
                 }
             }
         }
         if !reg.scanned.is_empty() {
-            reg.nodes.push(node(Kind::Scanned, 0, 0), GFP_KERNEL)?;
+            reg.nodes.push(node(Kind::Scanned, 0, 0))?;
         }
         if spec.err_mask != 0 {
-            reg.nodes
-                .push(node(Kind::Err, spec.err_mask, 0), GFP_KERNEL)?;
+            reg.nodes.push(node(Kind::Err, spec.err_mask, 0))?;
         }
         if !reg.filters.is_empty() {
-            reg.nodes.push(node(Kind::ByIf, 0, 0), GFP_KERNEL)?;
+            reg.nodes.push(node(Kind::ByIf, 0, 0))?;
         }
         Ok(reg)
     }
