@@ -357,6 +357,37 @@ impl Skb {
         c
     }
 
+    /// The start of every CAN driver's `start_xmit`: the classic frame the
+    /// skb holds, with the skb prepared ([`Skb::can_tx_prepare`]) and, if
+    /// the sender wants an echo, made the driver's to keep and re-mark
+    /// ([`Skb::into_echo`]). `None`: not a classic frame, no room for the
+    /// CAN private area, or no memory for the echo's clone; the skb is
+    /// freed and counted in `dev`'s `tx_dropped`. Transmit path of `dev`.
+    pub(crate) fn can_xmit_start(
+        mut self,
+        dev: &super::netdev::NetDev,
+    ) -> Option<(Skb, crate::rcan_core::frame::CanFrame)> {
+        use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+        let frame = <&[u8; CAN_FRAME_LEN]>::try_from(self.data())
+            .ok()
+            .map(CanFrame::from_bytes);
+        let Some(frame) = frame.filter(|_| self.can_tx_prepare(dev)) else {
+            dev.stats_tx_dropped();
+            drop(self);
+            return None;
+        };
+        let skb = if self.wants_echo() {
+            let Some(e) = self.into_echo() else {
+                dev.stats_tx_dropped();
+                return None;
+            };
+            e
+        } else {
+            self
+        };
+        Some((skb, frame))
+    }
+
     /// Frees as successfully consumed (not a drop in drop monitors).
     pub(crate) fn consume(self) {
         // SAFETY: we own the reference and give it up.

@@ -37,7 +37,7 @@ use glue::netdev::{Dev, Driver, Registration, Setup, Xmit};
 use glue::skb::Skb;
 use kernel::c_str;
 use rcan_core::canloop::{DropRate, FrameDump};
-use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use rcan_core::frame::CAN_FRAME_LEN;
 
 module! {
     type: CanLoop,
@@ -103,21 +103,12 @@ impl Driver for LoopDriver {
         Ok(())
     }
 
-    fn start_xmit(mut skb: Skb, dev: &Dev<Self>, _p: &()) -> Xmit {
-        let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
-            // Not a classic CAN frame (e.g. a packet socket's garbage).
-            dev.stats_tx_dropped();
-            drop(skb);
+    fn start_xmit(skb: Skb, dev: &Dev<Self>, _p: &()) -> Xmit {
+        // Not a classic frame, or no room to prepare a packet socket's
+        // frame (mainline can_skb_headroom_valid): dropped and counted.
+        let Some((mut skb, frame)) = skb.can_xmit_start(dev) else {
             return Xmit::Ok;
         };
-        let frame = CanFrame::from_bytes(bytes);
-        // A packet socket's frame gets its CAN fields (and its echo
-        // request) here, as on mainline.
-        if !skb.can_tx_prepare(dev) {
-            dev.stats_tx_dropped();
-            drop(skb);
-            return Xmit::Ok;
-        }
         if param(PARAM_VERBOSE) != 0 {
             pr_info!("{}: tx {}\n", dev.name(), FrameDump::new(&frame).as_str());
         }
@@ -138,12 +129,9 @@ impl Driver for LoopDriver {
             skb.consume();
             return Xmit::Ok;
         }
-        // Reflect: the skb comes back as a received, locally originated
-        // frame (mainline can_create_echo_skb + vcan_rx).
-        let Some(mut skb) = skb.into_echo() else {
-            dev.stats_rx_dropped();
-            return Xmit::Ok;
-        };
+        // Reflect: the skb (ours to re-mark, can_xmit_start saw to it)
+        // comes back as a received, locally originated frame (mainline
+        // can_create_echo_skb + vcan_rx).
         dev.stats_rx(bytes);
         skb.set_can_rx(dev);
         dev.rx(skb);

@@ -389,32 +389,9 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         Ok(())
     }
 
-    fn start_xmit(mut skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
-        let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
-            dev.stats_tx_dropped();
-            drop(skb);
+    fn start_xmit(skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
+        let Some((skb, frame)) = skb.can_xmit_start(dev) else {
             return Xmit::Ok;
-        };
-        let frame = CanFrame::from_bytes(bytes);
-        // A packet socket's frame gets its CAN fields (and its echo
-        // request) here, as on mainline.
-        if !skb.can_tx_prepare(dev) {
-            dev.stats_tx_dropped();
-            drop(skb);
-            return Xmit::Ok;
-        }
-        // The skb kept for the echo must be ours to re-mark (mainline
-        // can_put_echo_skb); a shared one is replaced by a clone.
-        let skb = if skb.wants_echo() {
-            match skb.into_echo() {
-                Some(s) => s,
-                None => {
-                    dev.stats_tx_dropped();
-                    return Xmit::Ok;
-                }
-            }
-        } else {
-            skb
         };
         // One TX buffer: no next frame until this one is done.
         dev.stop_queue();
