@@ -168,6 +168,32 @@ fn ack_frame(id: &DsorId, index: u16, status: AckStatus) -> Option<Frame> {
     Some(Frame::ack(&id.ack_id(), &Ack { index, status }))
 }
 
+/// The Q bit body `next` of a message whose header had Q `hq` carries:
+/// Q alternates from the header on.
+fn expected_q(hq: bool, next: u16) -> bool {
+    hq ^ (next & 1 == 1)
+}
+
+/// A body whose Q is not the expected one, for a message of `len` bytes
+/// whose next body is `next`: a retransmission of body `next - 1` whose
+/// ack was lost (none if `next == 1`). It gets its old answer (OK) again,
+/// so that the sender moves on, and keeps the slot alive until `deadline`;
+/// anything else is ignored.
+fn previous_body_again<B>(
+    id: &DsorId,
+    data: &[u8],
+    len: u16,
+    next: u16,
+    deadline: u64,
+    slot_deadline: &mut u64,
+) -> RxOutput<B> {
+    if next < 2 || data.len() != body_dlc(len, next - 1) as usize {
+        return RxOutput::NONE;
+    }
+    *slot_deadline = deadline;
+    RxOutput::ack(ack_frame(id, next - 1, AckStatus::Ok))
+}
+
 /// `status` as a refusal: OK means REFUSED.
 fn refusal(status: AckStatus) -> AckStatus {
     match status {
@@ -487,13 +513,15 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                 // Frames acked before get their old answer (OK), so that
                 // a sender that missed that ack moves on; the first new
                 // frame (body `next`) gets the refusal.
-                let expect_q = *hq ^ (*next & 1 == 1);
-                if id.seq != expect_q {
-                    if *next < 2 || data.len() != body_dlc(header.len, *next - 1) as usize {
-                        return RxOutput::NONE;
-                    }
-                    slot.deadline = deadline;
-                    return RxOutput::ack(ack_frame(id, *next - 1, AckStatus::Ok));
+                if id.seq != expected_q(*hq, *next) {
+                    return previous_body_again(
+                        id,
+                        data,
+                        header.len,
+                        *next,
+                        deadline,
+                        &mut slot.deadline,
+                    );
                 }
                 let k = *next;
                 if data.len() != body_dlc(header.len, k) as usize {
@@ -517,15 +545,15 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                 buf,
                 ..
             } => {
-                let expect_q = *hq ^ (*next & 1 == 1);
-                if id.seq != expect_q {
-                    // The previous frame's Q: a retransmission of body
-                    // next-1 whose ack was lost (none if next == 1).
-                    if *next < 2 || data.len() != body_dlc(header.len, *next - 1) as usize {
-                        return RxOutput::NONE;
-                    }
-                    slot.deadline = deadline;
-                    return RxOutput::ack(ack_frame(id, *next - 1, AckStatus::Ok));
+                if id.seq != expected_q(*hq, *next) {
+                    return previous_body_again(
+                        id,
+                        data,
+                        header.len,
+                        *next,
+                        deadline,
+                        &mut slot.deadline,
+                    );
                 }
                 let dlc = body_dlc(header.len, *next) as usize;
                 if data.len() != dlc {
