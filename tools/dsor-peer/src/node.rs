@@ -538,6 +538,24 @@ impl Node {
         );
     }
 
+    /// Body `k` of the message `id` belongs to ended the transfer with
+    /// `status` (the last body, or a refused one): remember the answer
+    /// until `deadline`, for a sender that missed it, and send it.
+    fn last_body_answered(&mut self, id: Id, k: u16, status: Status, deadline: u64) {
+        self.rx.insert(
+            (id.src, id.chan),
+            RxState::Done {
+                last_q: id.q,
+                last_index: k,
+                hdr0: None,
+                hdr_status: Status::Ok,
+                last_status: status,
+                deadline,
+            },
+        );
+        self.ack(id.prio, id.src, id.chan, id.q, k, status);
+    }
+
     fn on_body(&mut self, now: u64, id: Id, b: &[u8]) {
         let key = (id.src, id.chan);
         let t_reasm = self.cfg.t_reasm;
@@ -583,18 +601,7 @@ impl Node {
                     if let Some(status) = *refuse {
                         // The application went away: refuse this body,
                         // which ends the transfer.
-                        self.rx.insert(
-                            key,
-                            RxState::Done {
-                                last_q: id.q,
-                                last_index: k,
-                                hdr0: None,
-                                hdr_status: Status::Ok,
-                                last_status: status,
-                                deadline: now + t_reasm,
-                            },
-                        );
-                        self.ack(id.prio, id.src, id.chan, id.q, k, status);
+                        self.last_body_answered(id, k, status, now + t_reasm);
                         self.events.push_back(Event::NotDelivered {
                             msg: Delivery {
                                 src: id.src,
@@ -621,18 +628,7 @@ impl Node {
                             kind,
                             payload,
                         });
-                        self.rx.insert(
-                            key,
-                            RxState::Done {
-                                last_q: id.q,
-                                last_index: k,
-                                hdr0: None,
-                                hdr_status: Status::Ok,
-                                last_status: status,
-                                deadline: now + t_reasm,
-                            },
-                        );
-                        self.ack(id.prio, id.src, id.chan, id.q, k, status);
+                        self.last_body_answered(id, k, status, now + t_reasm);
                     } else {
                         *next += 1;
                         *expect_q = !*expect_q;
