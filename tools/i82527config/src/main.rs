@@ -13,9 +13,10 @@
 //! eight for an extended one, then up to eight data bytes in hex.
 //! Publishing needs CAP_NET_ADMIN.
 
-use rcan_core::arb::CAN_EFF_FLAG;
+use clap::Parser;
+use i82527config::{Cli, Cmd};
 use rcan_core::frame::CanFrame;
-use rcan_core::i82527::{bitrate, AnswerReq, Setup, ANSWERS, ANSWER_LEN, SETUP_LEN};
+use rcan_core::i82527::{bitrate, AnswerReq, Setup, ANSWER_LEN, SETUP_LEN};
 use std::process::ExitCode;
 
 use rcan_uapi::{dev_ioctl, SIOCDEVPRIVATE};
@@ -25,38 +26,6 @@ const SIOCRCANI82527ANSWER: libc::c_ulong = SIOCDEVPRIVATE + 2;
 
 /// Crystal assumed when showing the bit rate.
 const XTAL_HZ: u32 = 16_000_000;
-
-/// Parses `ID#DATA` (cansend syntax, data frames only).
-fn parse_frame(s: &str) -> Result<CanFrame, String> {
-    let (id, data) = s.split_once('#').ok_or("frame must be ID#DATA")?;
-    let can_id = u32::from_str_radix(id, 16).map_err(|e| format!("identifier {id}: {e}"))?;
-    let can_id = match id.len() {
-        3 if can_id <= 0x7FF => can_id,
-        8 if can_id <= 0x1FFF_FFFF => can_id | CAN_EFF_FLAG,
-        _ => return Err(format!("identifier {id}: 3 or 8 hex digits")),
-    };
-    let data = data.replace('.', "");
-    if data.len() % 2 != 0 || data.len() > 16 {
-        return Err(format!("data {data}: up to 8 bytes in hex"));
-    }
-    let mut f = CanFrame {
-        can_id,
-        len: (data.len() / 2) as u8,
-        ..CanFrame::default()
-    };
-    for i in 0..data.len() / 2 {
-        f.data[i] = u8::from_str_radix(&data[2 * i..2 * i + 2], 16)
-            .map_err(|e| format!("data {data}: {e}"))?;
-    }
-    Ok(f)
-}
-
-fn parse_slot(s: &str) -> Result<u32, String> {
-    match s.parse::<u32>() {
-        Ok(v) if (v as usize) < ANSWERS => Ok(v),
-        _ => Err(format!("slot {s}: 0..{}", ANSWERS - 1)),
-    }
-}
 
 fn show(iface: &str) -> Result<(), String> {
     let mut b = [0u8; SETUP_LEN];
@@ -95,45 +64,21 @@ fn set_answer(iface: &str, slot: u32, frame: Option<CanFrame>) -> Result<(), Str
     dev_ioctl(iface, SIOCRCANI82527ANSWER, &mut b).map_err(|e| format!("{iface}: {e}"))
 }
 
-fn run(args: &[String]) -> Result<(), String> {
-    match args {
-        [iface] => show(iface),
-        [iface, cmd, slot, frame] if cmd == "answer" => {
-            set_answer(iface, parse_slot(slot)?, Some(parse_frame(frame)?))
-        }
-        [iface, cmd, slot] if cmd == "withdraw" => set_answer(iface, parse_slot(slot)?, None),
-        _ => Err("usage: i82527config IFACE [answer SLOT ID#DATA | withdraw SLOT]".into()),
+fn run(cli: &Cli) -> Result<(), String> {
+    let iface = cli.iface.as_str();
+    match &cli.cmd {
+        None => show(iface),
+        Some(Cmd::Answer { slot, frame }) => set_answer(iface, *slot, Some(*frame)),
+        Some(Cmd::Withdraw { slot }) => set_answer(iface, *slot, None),
     }
 }
 
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    match run(&args) {
+    match run(&Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("i82527config: {e}");
             ExitCode::FAILURE
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn frames_and_slots() {
-        let f = parse_frame("123#DEAD").unwrap();
-        assert_eq!(
-            (f.can_id, f.len, &f.data[..2]),
-            (0x123, 2, &[0xDE, 0xAD][..])
-        );
-        let f = parse_frame("1ABCDEF0#").unwrap();
-        assert_eq!((f.can_id, f.len), (0x1ABC_DEF0 | CAN_EFF_FLAG, 0));
-        assert!(parse_frame("800#").is_err());
-        assert!(parse_frame("123#112233445566778899").is_err());
-        assert!(parse_frame("123").is_err());
-        assert_eq!(parse_slot("11"), Ok(11));
-        assert!(parse_slot("12").is_err());
     }
 }

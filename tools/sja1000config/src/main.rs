@@ -13,7 +13,10 @@
 //! Setting needs CAP_NET_ADMIN and the interface down (`ip link set IFACE
 //! down`): the driver answers EPERM and EBUSY otherwise.
 
+use clap::error::ErrorKind;
+use clap::Parser;
 use rcan_core::sja1000::{bitrate, timing_for, Setup, SETUP_LEN};
+use sja1000config::{command, Cli, Setting};
 use std::io;
 use std::process::ExitCode;
 
@@ -26,14 +29,6 @@ fn get(iface: &str) -> io::Result<Setup> {
     let mut b = [0u8; SETUP_LEN];
     dev_ioctl(iface, SIOCRCANSJA1000GET, &mut b)?;
     Ok(Setup::from_bytes(&b))
-}
-
-fn parse_u8(s: &str) -> Result<u8, String> {
-    let v = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
-        Some(h) => u8::from_str_radix(h, 16),
-        None => s.parse(),
-    };
-    v.map_err(|_| format!("not a byte value: {s:?}"))
 }
 
 fn show(iface: &str, s: &Setup) {
@@ -55,23 +50,16 @@ fn show(iface: &str, s: &Setup) {
     );
 }
 
-fn run(args: &[String]) -> Result<(), String> {
-    let Some(iface) = args.first() else {
-        return Err(
-            "usage: sja1000config IFACE [bitrate N | btr0 X btr1 Y [ocr X] [cdr X]]".into(),
-        );
-    };
+fn run(cli: &Cli, settings: &[Setting]) -> Result<(), String> {
+    let iface = cli.iface.as_str();
     let mut s = get(iface).map_err(|e| format!("{iface}: {e}"))?;
-    if args.len() == 1 {
+    if settings.is_empty() {
         show(iface, &s);
         return Ok(());
     }
-    let mut it = args[1..].iter();
-    while let Some(k) = it.next() {
-        let v = it.next().ok_or_else(|| format!("{k} needs a value"))?;
-        match k.as_str() {
-            "bitrate" => {
-                let rate: u32 = v.parse().map_err(|_| format!("bad bit rate {v:?}"))?;
+    for setting in settings {
+        match *setting {
+            Setting::Bitrate(rate) => {
                 let (b0, b1) = timing_for(rate, s.xtal_hz).ok_or_else(|| {
                     format!(
                         "{rate} bit/s cannot be set exactly with a {} Hz crystal",
@@ -81,11 +69,10 @@ fn run(args: &[String]) -> Result<(), String> {
                 s.btr0 = b0;
                 s.btr1 = b1;
             }
-            "btr0" => s.btr0 = parse_u8(v)?,
-            "btr1" => s.btr1 = parse_u8(v)?,
-            "ocr" => s.ocr = parse_u8(v)?,
-            "cdr" => s.cdr = parse_u8(v)?,
-            other => return Err(format!("unknown setting {other:?}")),
+            Setting::Btr0(v) => s.btr0 = v,
+            Setting::Btr1(v) => s.btr1 = v,
+            Setting::Ocr(v) => s.ocr = v,
+            Setting::Cdr(v) => s.cdr = v,
         }
     }
     let mut b = s.to_bytes();
@@ -95,8 +82,11 @@ fn run(args: &[String]) -> Result<(), String> {
 }
 
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    match run(&args) {
+    let cli = Cli::parse();
+    let settings = cli
+        .parsed_settings()
+        .unwrap_or_else(|e| command().error(ErrorKind::InvalidValue, e).exit());
+    match run(&cli, &settings) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("sja1000config: {e}");
