@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: GPL-2.0
 //! canarb-demo: the thesis CAN socket API (section 5.2) on one page.
 //!
-//! Usage: `canarb-demo [IFACE]` (default `can0`; the interface must be up).
+//! Usage: `canarb-demo [IFACE]` (default `can0`; the interface must be up;
+//! `--help` for the rest).
 //!
 //! Opens a `socket(PF_CAN, SOCK_RAW, CANPROTO_CAN)`, binds it to IFACE with
 //! a filter that accepts every frame (mask `CAN_MASK_ANY`), sends three
@@ -10,16 +11,16 @@
 //! and the sender's own filter matches, so the socket sees its own frames.
 //! Exits 0 if all three came back in order and unchanged.
 
+use clap::Parser;
+use rcan_samples::CanarbDemo;
 use std::process::ExitCode;
 use std::time::Duration;
 
 use rcan_uapi::{arb_ext, arb_std, describe_arb, format_frame, ArbSocket, CAN_MASK_ANY};
 
 fn main() -> ExitCode {
-    let iface = std::env::args()
-        .nth(1)
-        .unwrap_or_else(|| "can0".to_string());
-    match run(&iface) {
+    let cli = CanarbDemo::parse();
+    match run(&cli.iface) {
         Ok(()) => ExitCode::SUCCESS,
         Err(why) => {
             eprintln!("canarb-demo: {why}");
