@@ -6,5 +6,6 @@
 //! [`wire`] is the frame codec, [`node`] the protocol (no I/O, virtual
 //! time), `main.rs` the CAN_RAW socket and the command line.
 
+pub mod cli;
 pub mod node;
 pub mod wire;
