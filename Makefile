@@ -31,7 +31,7 @@ RCAN_CONFIG := CONFIG_RCAN=m CONFIG_RCAN_PF=m CONFIG_RCAN_PROTO_CAN=m CONFIG_RCA
 	CONFIG_RCAN_PROTO_DSOR=m CONFIG_RCAN_DSOR_NODE_ID=0x00
 BINDINGS := rust/bindings/bindings_generated.rs
 
-.PHONY: all setup kernel modules bindings userspace demo check bench clean
+.PHONY: all setup kernel modules bindings userspace man demo check bench clean
 
 all: modules userspace
 
@@ -51,6 +51,11 @@ modules: bindings
 
 userspace:
 	cargo build --release --workspace --bins
+
+# Man pages and bash/zsh/fish completions of every tool, from the tools'
+# own clap definitions (tools/mangen), into target/man.
+man: userspace
+	target/release/rcan-mangen target/man
 
 demo: setup modules userspace
 	bash $(T)/demo.sh

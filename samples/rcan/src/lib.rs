@@ -19,3 +19,8 @@ pub struct CanarbDemo {
     #[arg(default_value = "can0")]
     pub iface: String,
 }
+
+/// The command definition of `canarb-demo`, for man pages and completions.
+pub fn canarb_demo_command() -> clap::Command {
+    <CanarbDemo as clap::CommandFactory>::command()
+}
