@@ -10,6 +10,7 @@
 #![warn(missing_docs)]
 
 pub mod arb;
+pub mod bittiming;
 pub mod canloop;
 pub mod dsor_addr;
 pub mod dsor_rx;
