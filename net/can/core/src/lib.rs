@@ -11,6 +11,7 @@
 
 pub mod arb;
 pub mod bittiming;
+pub mod candev;
 pub mod canloop;
 pub mod dsor_addr;
 pub mod dsor_rx;

@@ -630,30 +630,13 @@ impl HwFilter {
 }
 
 /// Mainline `<linux/can/error.h>` classes and details used by
-/// [`error_frame`].
+/// [`error_frame`]: the device layer's definitions
+/// ([`super::candev::err`]).
 pub mod err {
-    /// Lost arbitration (data[0]: bit number).
-    pub const LOSTARB: u32 = 0x0002;
-    /// Controller problems (data[1]).
-    pub const CRTL: u32 = 0x0004;
-    /// Bus-off.
-    pub const BUSOFF: u32 = 0x0040;
-    /// Controller restarted.
-    pub const RESTARTED: u32 = 0x0100;
-    /// data[6]/data[7] hold the TX/RX error counters.
-    pub const CNT: u32 = 0x0200;
-    /// data[1]: receive FIFO overflow.
-    pub const CRTL_RX_OVERFLOW: u8 = 0x01;
-    /// data[1]: RX warning level.
-    pub const CRTL_RX_WARNING: u8 = 0x04;
-    /// data[1]: TX warning level.
-    pub const CRTL_TX_WARNING: u8 = 0x08;
-    /// data[1]: RX error passive.
-    pub const CRTL_RX_PASSIVE: u8 = 0x10;
-    /// data[1]: TX error passive.
-    pub const CRTL_TX_PASSIVE: u8 = 0x20;
-    /// data[1]: back to error active.
-    pub const CRTL_ACTIVE: u8 = 0x40;
+    pub use super::super::candev::err::{
+        BUSOFF, CNT, CRTL, CRTL_ACTIVE, CRTL_RX_OVERFLOW, CRTL_RX_PASSIVE, CRTL_RX_WARNING,
+        CRTL_TX_PASSIVE, CRTL_TX_WARNING, LOSTARB, RESTARTED,
+    };
 }
 
 /// The mainline-format error frame (`CAN_ERR_FLAG`, DLC 8) that reports
