@@ -19,9 +19,12 @@
 //!
 //! Everything is integer arithmetic on `u32` with mainline's wrap-around
 //! where mainline's `unsigned int` arithmetic wraps, so that absurd input
-//! gives mainline's answer too, except that a division by zero (which
-//! mainline's code would trap on for some absurd constants) gives
-//! `EINVAL` instead.
+//! gives mainline's answer too, except where mainline's code would divide
+//! by zero (absurd limits or bit rates): there a candidate is skipped or
+//! the result is `EINVAL`. The functions are pure (no locks, no
+//! allocation, no sleeping) and may be called in any context; the netlink
+//! glue will call them in process context under RTNL, the tools in user
+//! space.
 
 use core::fmt;
 
