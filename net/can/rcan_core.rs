@@ -7,6 +7,10 @@
 
 #[path = "core/src/arb.rs"]
 pub(crate) mod arb;
+#[path = "core/src/bittiming.rs"]
+pub(crate) mod bittiming;
+#[path = "core/src/candev.rs"]
+pub(crate) mod candev;
 #[path = "core/src/canloop.rs"]
 pub(crate) mod canloop;
 #[path = "core/src/dsor_addr.rs"]

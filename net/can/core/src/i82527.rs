@@ -23,6 +23,7 @@
 //! register-level model in `i82527_model.rs`.
 
 use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK, MAX_DLC};
+use super::bittiming::{self, Bittiming};
 use super::frame::CanFrame;
 use super::sja1000::{Cube, Wanted};
 
@@ -334,24 +335,32 @@ impl Config {
 
 /// Bit rate of bit timing `bt0`/`bt1` with crystal `xtal_hz` and CPU
 /// interface register `cpu_if` (datasheet: system clock = XTAL / (DSC +
-/// 1); tq = (BRP + 1) / system clock; bit = (3 + TSEG1 + TSEG2) tq).
+/// 1); tq = (BRP + 1) / system clock; bit = (3 + TSEG1 + TSEG2) tq): the
+/// registers decoded by [`bittiming::from_btr`] (the 82527's layout is
+/// the SJA1000's) with the system clock as the bit-timing clock.
 pub fn bitrate(bt0: u8, bt1: u8, cpu_if: u8, xtal_hz: u32) -> u32 {
-    let sys = xtal_hz
-        / if cpu_if & self::cpu_if::DSC != 0 {
-            2
-        } else {
-            1
-        };
-    let brp = u32::from(bt0 & 0x3F) + 1;
-    let tseg1 = u32::from(bt1 & 0x0F);
-    let tseg2 = u32::from((bt1 >> 4) & 0x07);
-    sys / (brp * (3 + tseg1 + tseg2))
+    bittiming::from_btr(bt0, bt1, sys_clock(cpu_if, xtal_hz))
+        .0
+        .bitrate
+}
+
+/// The system clock, which the bit timing counts: the crystal, halved
+/// when the CPU interface register's DSC bit is set.
+pub fn sys_clock(cpu_if: u8, xtal_hz: u32) -> u32 {
+    if cpu_if & self::cpu_if::DSC != 0 {
+        xtal_hz / 2
+    } else {
+        xtal_hz
+    }
 }
 
 /// Bit timing for `bitrate` with system clock `sys_hz`: the exact setting
 /// with the most quanta per bit (8..=25) and a sample point nearest 87.5
-/// %, SJW 1, one sample. `None` if no setting gives the rate exactly.
+/// %, SJW 1, one sample, within [`bittiming::I82527_BITTIMING_CONST`]
+/// (programmed TSEG1 2..15, TSEG2 1..7), encoded by
+/// [`bittiming::to_btr`]. `None` if no setting gives the rate exactly.
 pub fn timing_for(bitrate: u32, sys_hz: u32) -> Option<(u8, u8)> {
+    let c = &bittiming::I82527_BITTIMING_CONST;
     if bitrate == 0 {
         return None;
     }
@@ -361,27 +370,34 @@ pub fn timing_for(bitrate: u32, sys_hz: u32) -> Option<(u8, u8)> {
             continue;
         }
         let brp = sys_hz / div;
-        if brp == 0 || brp > 64 {
+        if brp < c.brp_min || brp > c.brp_max {
             continue;
         }
-        let mut best: Option<(u32, u8)> = None;
-        // bit = 1 (sync) + (TSEG1 + 1) + (TSEG2 + 1); TSEG1 2..15,
-        // TSEG2 1..7.
-        for tseg2 in 1u32..=7 {
-            let Some(tseg1) = (tq - 3).checked_sub(tseg2) else {
+        let mut best: Option<(u32, Bittiming)> = None;
+        // bit = 1 (sync) + TSEG1 + TSEG2 quanta.
+        for tseg2 in c.tseg2_min..=c.tseg2_max {
+            let Some(tseg1) = (tq - 1).checked_sub(tseg2) else {
                 continue;
             };
-            if !(2..=15).contains(&tseg1) {
+            if !(c.tseg1_min..=c.tseg1_max).contains(&tseg1) {
                 continue;
             }
-            let sp = (2 + tseg1) * 1000 / tq;
+            let sp = (1 + tseg1) * 1000 / tq;
             let err = sp.abs_diff(875);
             if best.is_none_or(|(e, _)| err < e) {
-                best = Some((err, ((tseg2 << 4) | tseg1) as u8));
+                let bt = Bittiming {
+                    brp,
+                    sjw: 1,
+                    prop_seg: tseg1 / 2,
+                    phase_seg1: tseg1 - tseg1 / 2,
+                    phase_seg2: tseg2,
+                    ..Bittiming::default()
+                };
+                best = Some((err, bt));
             }
         }
-        if let Some((_, bt1)) = best {
-            return Some(((brp - 1) as u8, bt1));
+        if let Some((_, bt)) = best {
+            return Some(bittiming::to_btr(&bt, false));
         }
     }
     None

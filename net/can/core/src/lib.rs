@@ -10,6 +10,8 @@
 #![warn(missing_docs)]
 
 pub mod arb;
+pub mod bittiming;
+pub mod candev;
 pub mod canloop;
 pub mod dsor_addr;
 pub mod dsor_rx;

@@ -11,6 +11,7 @@
 //! statistics; the host tests supply a register-level model of the chip.
 
 use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK, MAX_DLC};
+use super::bittiming::{self, Bittiming};
 use super::frame::CanFrame;
 
 /// Register offsets (PeliCAN mode).
@@ -629,30 +630,13 @@ impl HwFilter {
 }
 
 /// Mainline `<linux/can/error.h>` classes and details used by
-/// [`error_frame`].
+/// [`error_frame`]: the device layer's definitions
+/// ([`super::candev::err`]).
 pub mod err {
-    /// Lost arbitration (data[0]: bit number).
-    pub const LOSTARB: u32 = 0x0002;
-    /// Controller problems (data[1]).
-    pub const CRTL: u32 = 0x0004;
-    /// Bus-off.
-    pub const BUSOFF: u32 = 0x0040;
-    /// Controller restarted.
-    pub const RESTARTED: u32 = 0x0100;
-    /// data[6]/data[7] hold the TX/RX error counters.
-    pub const CNT: u32 = 0x0200;
-    /// data[1]: receive FIFO overflow.
-    pub const CRTL_RX_OVERFLOW: u8 = 0x01;
-    /// data[1]: RX warning level.
-    pub const CRTL_RX_WARNING: u8 = 0x04;
-    /// data[1]: TX warning level.
-    pub const CRTL_TX_WARNING: u8 = 0x08;
-    /// data[1]: RX error passive.
-    pub const CRTL_RX_PASSIVE: u8 = 0x10;
-    /// data[1]: TX error passive.
-    pub const CRTL_TX_PASSIVE: u8 = 0x20;
-    /// data[1]: back to error active.
-    pub const CRTL_ACTIVE: u8 = 0x40;
+    pub use super::super::candev::err::{
+        BUSOFF, CNT, CRTL, CRTL_ACTIVE, CRTL_RX_OVERFLOW, CRTL_RX_PASSIVE, CRTL_RX_WARNING,
+        CRTL_TX_PASSIVE, CRTL_TX_WARNING, LOSTARB, RESTARTED,
+    };
 }
 
 /// The mainline-format error frame (`CAN_ERR_FLAG`, DLC 8) that reports
@@ -714,57 +698,67 @@ pub fn restarted_frame() -> CanFrame {
 
 /// Bit rate of bus timing `btr0`/`btr1` on a chip with crystal `xtal_hz`
 /// (datasheet 6.5.1: tq = 2 (BRP + 1) / fXTAL, bit = (1 + TSEG1+1 +
-/// TSEG2+1) tq).
+/// TSEG2+1) tq): the registers decoded by [`bittiming::from_btr`], the
+/// one decoder of the SJA1000 and 82527 timing registers, with the
+/// bit-timing clock at half the crystal (as mainline's front-ends set
+/// `clock.freq`).
 pub fn bitrate(btr0: u8, btr1: u8, xtal_hz: u32) -> u32 {
-    let brp = u32::from(btr0 & 0x3F) + 1;
-    let tseg1 = u32::from(btr1 & 0x0F) + 1;
-    let tseg2 = u32::from((btr1 >> 4) & 0x07) + 1;
-    xtal_hz / (2 * brp * (1 + tseg1 + tseg2))
+    bittiming::from_btr(btr0, btr1, xtal_hz / 2).0.bitrate
 }
 
 /// Bus timing for `bitrate` on a chip with crystal `xtal_hz`: the exact
 /// setting with the most time quanta per bit (8..25) and a sample point
-/// nearest 87.5 %, SJW 1, one sample. `None` if no setting gives the
-/// bit rate exactly.
+/// nearest 87.5 %, SJW 1, one sample, within
+/// [`bittiming::SJA1000_BITTIMING_CONST`], encoded by
+/// [`bittiming::to_btr`]. `None` if no setting gives the bit rate exactly.
+/// (`sja1000config`'s search; `ip link set ... type can bitrate` uses
+/// mainline's, [`bittiming::calc`], which also accepts the nearest rate.)
 pub fn timing_for(bitrate: u32, xtal_hz: u32) -> Option<(u8, u8)> {
+    let c = &bittiming::SJA1000_BITTIMING_CONST;
     if bitrate == 0 {
         return None;
     }
-    let mut best: Option<(u32, u32, u8, u8)> = None;
+    let mut best: Option<(u32, u32, Bittiming)> = None;
     for tq in (8u32..=25).rev() {
         let div = 2 * tq * bitrate;
         if !xtal_hz.is_multiple_of(div) {
             continue;
         }
         let brp = xtal_hz / div;
-        if brp == 0 || brp > 64 {
+        if brp < c.brp_min || brp > c.brp_max {
             continue;
         }
-        // Sample point after 1 + TSEG1 quanta; TSEG1 1..16, TSEG2 1..8.
-        for tseg2 in 1u32..=8 {
+        // Sample point after 1 + TSEG1 quanta.
+        for tseg2 in c.tseg2_min..=c.tseg2_max {
             let Some(tseg1) = (tq - 1).checked_sub(tseg2) else {
                 continue;
             };
-            if !(1..=16).contains(&tseg1) {
+            if !(c.tseg1_min..=c.tseg1_max).contains(&tseg1) {
                 continue;
             }
             let sp = (1 + tseg1) * 1000 / tq;
             let err = sp.abs_diff(875);
             let better = match best {
                 None => true,
-                Some((btq, berr, _, _)) => tq > btq || (tq == btq && err < berr),
+                Some((btq, berr, _)) => tq > btq || (tq == btq && err < berr),
             };
             if better {
-                let btr0 = (brp - 1) as u8;
-                let btr1 = (((tseg2 - 1) << 4) | (tseg1 - 1)) as u8;
-                best = Some((tq, err, btr0, btr1));
+                let bt = Bittiming {
+                    brp,
+                    sjw: 1,
+                    prop_seg: tseg1 / 2,
+                    phase_seg1: tseg1 - tseg1 / 2,
+                    phase_seg2: tseg2,
+                    ..Bittiming::default()
+                };
+                best = Some((tq, err, bt));
             }
         }
         if best.is_some() {
             break;
         }
     }
-    best.map(|(_, _, b0, b1)| (b0, b1))
+    best.map(|(_, _, bt)| bittiming::to_btr(&bt, false))
 }
 
 /// The controller setup exchanged with user space by the
