@@ -10,6 +10,9 @@
 #![warn(missing_docs)]
 
 pub mod arb;
+pub mod bcm;
+pub mod bcm_rx;
+pub mod bcm_tx;
 pub mod canloop;
 pub mod dsor_addr;
 pub mod dsor_rx;
