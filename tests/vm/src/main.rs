@@ -85,12 +85,19 @@ pub struct Test {
     /// the mainline API (CAN_RAW, can-utils, packet sockets) and sets up its
     /// interfaces with `Ctx::can_ifaces`.
     pub portable: bool,
+    /// Whether the test runs against mainline only: a portable test of a
+    /// protocol our stack does not have yet (CAN_BCM until rcan_bcm lands,
+    /// issue 13). Implies `portable`.
+    pub mainline_only: bool,
 }
 
 impl Test {
     /// Whether the test runs against `stack`.
     pub fn runs_on(&self, stack: Stack) -> bool {
-        stack == Stack::Ours || self.portable
+        match stack {
+            Stack::Ours => !self.mainline_only,
+            Stack::Mainline => self.portable || self.mainline_only,
+        }
     }
 }
 
