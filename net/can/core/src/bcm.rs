@@ -352,7 +352,8 @@ pub fn rtr_reply_frame(head: &MsgHead, mut frame: CanFrame) -> CanFrame {
 /// The checks of `TX_SEND`: exactly one frame, and nothing else, after the
 /// head (`EINVAL`), then a real interface (`ENODEV`). The frame itself is
 /// checked by the send path (`can_send`: a classic frame longer than 8
-/// bytes, or a CAN FD frame on a classic interface, is `EINVAL`). Returns
+/// bytes is `EINVAL`, a CAN FD frame on a classic interface `EMSGSIZE`,
+/// as the VM test `bcm_fd_on_classic_interface` shows). Returns
 /// `MHSIZ + cfsiz`.
 pub fn check_tx_send(req: &Request<'_>, ifindex: i32) -> Result<usize, i32> {
     let cfsiz = req.head.cfsiz();

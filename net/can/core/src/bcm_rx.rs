@@ -11,7 +11,10 @@
 //! entries with their own masks) and the last received frame per entry
 //! (`last`) live with the caller and are passed in. The caller serializes
 //! all calls on one operation (mainline: `bcm_rx_update_lock`); effects go
-//! to an [`RxOut`].
+//! to an [`RxOut`]. Nothing here sleeps or allocates; in the module
+//! `setup` and `read` run in process context (`sendmsg`),
+//! `frame_received` in NET_RX softirq (the receive callback) and the
+//! timer expiries in hrtimer softirq context.
 //!
 //! Change detection compares the 8 data bytes under the entry's mask
 //! (all 8 bytes, also those beyond the received length, as mainline's

@@ -9,6 +9,10 @@
 //! Effects go to a [`TxOut`]: "send frame i", "queue this message for user
 //! space", "arm the timer at t", "cancel the timer". The caller serializes
 //! all calls on one operation (the module holds the operation's lock).
+//! Nothing here sleeps or allocates, so any context may call it; in the
+//! module `setup` and `read` run in process context (`sendmsg`) and
+//! `timer_expired` in the hrtimer's softirq context (mainline arms its
+//! timers `HRTIMER_MODE_*_SOFT`).
 //!
 //! The schedule: while `count` > 0 and `ival1` != 0 each expiry sends one
 //! frame and decrements `count`; then every `ival2` (if != 0) sends one
