@@ -7,6 +7,12 @@
 
 #[path = "core/src/arb.rs"]
 pub(crate) mod arb;
+#[path = "core/src/bcm.rs"]
+pub(crate) mod bcm;
+#[path = "core/src/bcm_rx.rs"]
+pub(crate) mod bcm_rx;
+#[path = "core/src/bcm_tx.rs"]
+pub(crate) mod bcm_tx;
 #[path = "core/src/canloop.rs"]
 pub(crate) mod canloop;
 #[path = "core/src/dsor_addr.rs"]
