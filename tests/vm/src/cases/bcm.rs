@@ -39,6 +39,9 @@ pub static TESTS: &[crate::Test] = mainline_only_table![
     bcm_errno_of_bad_messages,
     bcm_python_can_send_periodic,
     bcm_fd_on_classic_interface,
+    bcm_tx_announce_and_reset_multi_idx,
+    bcm_rx_no_autotimer,
+    bcm_rx_any_interface,
 ];
 
 /// A failure with `what` unless `cond`.
@@ -70,6 +73,8 @@ const TX_ANNOUNCE: u32 = 0x8;
 const TX_CP_CAN_ID: u32 = 0x10;
 const RX_FILTER_ID: u32 = 0x20;
 const RX_CHECK_DLC: u32 = 0x40;
+const RX_NO_AUTOTIMER: u32 = 0x80;
+const TX_RESET_MULTI_IDX: u32 = 0x200;
 const RX_ANNOUNCE_RESUME: u32 = 0x100;
 const RX_RTR_FRAME: u32 = 0x400;
 const CAN_FD_FRAME: u32 = 0x800;
@@ -114,10 +119,12 @@ fn msg(h: Head, frames: &[[u8; 16]]) -> Vec<u8> {
     b
 }
 
-/// A received message: head and frames (id, data).
+/// A received message: head, frames (id, data) and the interface
+/// `recvfrom` reported.
 struct Msg {
     head: Head,
     frames: Vec<(u32, Vec<u8>)>,
+    ifindex: u32,
 }
 
 fn parse(b: &[u8]) -> Result<Msg, String> {
@@ -143,7 +150,11 @@ fn parse(b: &[u8]) -> Result<Msg, String> {
             )
         })
         .collect();
-    Ok(Msg { head, frames })
+    Ok(Msg {
+        head,
+        frames,
+        ifindex: 0,
+    })
 }
 
 /// A BCM socket connected to `ifindex`.
@@ -177,10 +188,15 @@ fn expect_errno(fd: impl AsFd, bytes: &[u8], want: i32, what: &str) -> TestResul
 fn recv(fd: impl AsFd, t: Duration) -> Result<Option<Msg>, String> {
     raw::set_timeout(&fd, libc::SO_RCVTIMEO, t).or_fail("SO_RCVTIMEO")?;
     let mut buf = [0u8; MHSIZ + 16 * 260];
-    match raw::read(&fd, &mut buf) {
-        Ok(n) => parse(&buf[..n]).map(Some),
+    let mut name = [0u8; crate::sys::SOCKADDR_CAN_LEN];
+    match raw::recvfrom(&fd, &mut buf, 0, Some(&mut name)) {
+        Ok((n, _)) => {
+            let mut m = parse(&buf[..n])?;
+            m.ifindex = canraw::addr_ifindex(&name)?;
+            Ok(Some(m))
+        }
         Err(e) if matches!(e.raw_os_error(), Some(libc::EAGAIN)) => Ok(None),
-        Err(e) => Err(format!("read: {e}")),
+        Err(e) => Err(format!("recvfrom: {e}")),
     }
 }
 
@@ -963,5 +979,104 @@ fn bcm_fd_on_classic_interface(ctx: &mut Ctx) -> TestResult {
     need(
         n == MHSIZ,
         format!("TX_DELETE with CAN_FD_FRAME returned {n}"),
+    )
+}
+
+/// TX_ANNOUNCE without timers sends one frame, once. TX_RESET_MULTI_IDX:
+/// an update of a running three-frame sequence made right after frame 0
+/// went out restarts it at frame 0 (without the flag it would go on with
+/// frame 1).
+fn bcm_tx_announce_and_reset_multi_idx(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let rx = canraw::open(i0)?;
+    write(
+        &bcm,
+        tx_head(TX_ANNOUNCE, 0, 0, 0, 0x620, 1),
+        &[frame_bytes(0x620, &[1])],
+    )?;
+    let got = collect(&rx, 0x620, Duration::from_millis(300))?;
+    need(
+        got.len() == 1,
+        format!("TX_ANNOUNCE sent {} frames, want 1", got.len()),
+    )?;
+
+    let old: Vec<[u8; 16]> = (0..3u8).map(|i| frame_bytes(0x621, &[i])).collect();
+    let new: Vec<[u8; 16]> = (0..3u8).map(|i| frame_bytes(0x621, &[0x10 + i])).collect();
+    write(
+        &bcm,
+        tx_head(SETTIMER | STARTTIMER, 0, 0, 150_000, 0x621, 3),
+        &old,
+    )?;
+    rx.set_read_timeout(Duration::from_secs(2))
+        .or_fail("SO_RCVTIMEO")?;
+    // Wait for frame 0 of a later round (the announce frame is frame 0 too).
+    let mut seen = 0;
+    loop {
+        let f = rx.read_frame().or_fail("waiting for frame 0")?;
+        if f.raw_id() == 0x621 {
+            seen += 1;
+            if seen > 1 && f.data() == [0] {
+                break;
+            }
+        }
+        need(seen < 10, "frame 0 did not come round")?;
+    }
+    write(&bcm, tx_head(TX_RESET_MULTI_IDX, 0, 0, 0, 0x621, 3), &new)?;
+    let got = collect(&rx, 0x621, Duration::from_millis(500))?;
+    let first_new = got.iter().find(|g| g.1[0] >= 0x10).map(|g| g.1[0]);
+    need(
+        first_new == Some(0x10),
+        format!("after TX_RESET_MULTI_IDX the first new frame was {first_new:x?}, want frame 0"),
+    )
+}
+
+/// RX_NO_AUTOTIMER: a frame cancels the STARTTIMER timeout and does not
+/// restart it, so no RX_TIMEOUT comes; the same setup without the flag
+/// (another identifier, same frames) gets its RX_TIMEOUT ival1 after the
+/// frame.
+fn bcm_rx_no_autotimer(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let tx = canraw::open(i0)?;
+    let mask = |id| frame_bytes(id, &[0xff]);
+    let flags = SETTIMER | STARTTIMER;
+    write(
+        &bcm,
+        rx_head(flags | RX_NO_AUTOTIMER, 1_000_000, 0, 0x630, 1),
+        &[mask(0x630)],
+    )?;
+    write(&bcm, rx_head(flags, 1_000_000, 0, 0x631, 1), &[mask(0x631)])?;
+    canraw::send(&tx, &sff(0x630, &[1]))?;
+    canraw::send(&tx, &sff(0x631, &[1]))?;
+    let mut got = Vec::new();
+    while let Some(m) = recv(&bcm, Duration::from_millis(2500))? {
+        got.push((m.head.opcode, m.head.can_id));
+    }
+    let want = vec![
+        (RX_CHANGED, 0x630),
+        (RX_CHANGED, 0x631),
+        (RX_TIMEOUT, 0x631),
+    ];
+    need(got == want, format!("messages {got:x?}, want {want:x?}"))
+}
+
+/// A socket connected to ifindex 0 receives from every interface, and
+/// recvfrom names the interface of each frame.
+fn bcm_rx_any_interface(ctx: &mut Ctx) -> TestResult {
+    let ifs = ctx.bcm_ifaces(2)?;
+    let bcm = open(0)?;
+    write(&bcm, rx_head(RX_FILTER_ID, 0, 0, 0x640, 0), &[])?;
+    for &i in &ifs {
+        canraw::send(&canraw::open(i)?, &sff(0x640, &[i as u8]))?;
+    }
+    let mut got = Vec::new();
+    while let Some(m) = recv(&bcm, Duration::from_millis(300))? {
+        got.push((m.head.opcode, m.ifindex));
+    }
+    let want: Vec<(u32, u32)> = ifs.iter().map(|&i| (RX_CHANGED, i)).collect();
+    need(
+        got == want,
+        format!("(opcode, ifindex) {got:?}, want {want:?}"),
     )
 }
