@@ -185,10 +185,13 @@ mod tests {
     #[test]
     fn portable_names() {
         // The prefixes say what a test needs: raw_/canutils_ run on both
-        // stacks, everything else (mixed_ included) on ours only.
+        // stacks, bcm_ on mainline only (until rcan_bcm lands, issue 13),
+        // everything else (mixed_ included) on ours only.
         for t in super::all() {
-            let portable = t.name.starts_with("raw_") || t.name.starts_with("canutils_");
+            let bcm = t.name.starts_with("bcm_");
+            let portable = t.name.starts_with("raw_") || t.name.starts_with("canutils_") || bcm;
             assert_eq!(t.portable, portable, "{}", t.name);
+            assert_eq!(t.mainline_only, bcm, "{}", t.name);
         }
     }
 
