@@ -803,6 +803,7 @@ fn bcm_errno_of_bad_messages(ctx: &mut Ctx) -> TestResult {
         libc::EINVAL,
         "TX_SEND nframes 1, two frames",
     )?;
+    expect_errno(&bcm, &msg(send, &[len9]), libc::EINVAL, "TX_SEND len 9")?;
     let rtr = rx_head(RX_RTR_FRAME, 0, 0, 0x600, 1);
     expect_errno(
         &bcm,
