@@ -56,7 +56,8 @@ pub trait RxOut {
     /// the operation's `head.nframes` filter frames itself (`frame` None).
     fn to_user(&mut self, head: &MsgHead, frame: Option<(&CanFrame, u8)>, rx_ifindex: i32);
     /// Transmit the reply of an [`RX_RTR_FRAME`] operation (filter frame 0)
-    /// on `ifindex`.
+    /// on `ifindex` (never 0: an operation on "any" interface does not
+    /// reply).
     fn send_reply(&mut self, reply: &CanFrame, ifindex: i32);
     /// Arm the timeout timer at `at` (ns).
     fn arm_timeout(&mut self, at: u64);
@@ -180,7 +181,9 @@ impl RxOp {
         }
         self.stop_timeout(out);
         if self.flags & RX_RTR_FRAME != 0 {
-            if let Some(reply) = filters.first() {
+            // Mainline sends the reply on the operation's interface; an
+            // operation on "any" interface (0) has none and stays silent.
+            if let (Some(reply), true) = (filters.first(), self.ifindex != 0) {
                 out.send_reply(reply, self.ifindex);
             }
             return;

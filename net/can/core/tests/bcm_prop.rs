@@ -457,6 +457,19 @@ fn rx_rtr_reply() {
     );
     assert_eq!(rec.replies, vec![reply]);
     assert!(rec.changed.is_empty());
+    // On "any" interface there is nowhere to reply.
+    let mut any = RxOp::new(&raw, 0);
+    any.setup(&raw, 0, &mut last, &mut rec);
+    any.frame_received(
+        &frame(0x42 | CAN_RTR_FLAG, 0, [0; 8]),
+        1,
+        0,
+        0,
+        &[reply],
+        &mut last,
+        &mut rec,
+    );
+    assert_eq!(rec.replies.len(), 1);
 }
 
 // ---- message format ---------------------------------------------------------

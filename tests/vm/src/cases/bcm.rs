@@ -618,7 +618,8 @@ fn bcm_rx_mux(ctx: &mut Ctx) -> TestResult {
 }
 
 /// RX_RTR_FRAME: a remote frame for the identifier is answered at once
-/// with the frame of the setup (as a data frame); no message to the user.
+/// with the frame of the setup (as a data frame); no message to the user;
+/// no reply from an operation on ifindex 0.
 fn bcm_rx_rtr_reply(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.bcm_ifaces(1)?[0];
     let bcm = open(i0)?;
@@ -641,7 +642,20 @@ fn bcm_rx_rtr_reply(ctx: &mut Ctx) -> TestResult {
     need(
         recv(&bcm, Duration::from_millis(100))?.is_none(),
         "a message to the user",
-    )
+    )?;
+    // The same setup on a socket of "any" interface never replies: mainline
+    // sends the reply on the operation's interface, and it has none.
+    let any = open(0)?;
+    let id = 0x551 | CAN_RTR_FLAG;
+    let reply = frame_bytes(id, &[0xbe, 0xef]);
+    write(
+        &any,
+        rx_head(RX_RTR_FRAME | TX_CP_CAN_ID, 0, 0, id, 1),
+        &[reply],
+    )?;
+    canraw::send(&tx, &canraw::rtr_std(0x551, 2))?;
+    let got = collect(&tx, 0x551, Duration::from_millis(300))?;
+    need(got.is_empty(), format!("ifindex 0 replied: {got:?}"))
 }
 
 /// RX_READ answers RX_STATUS with the filter; RX_DELETE removes it (no more
