@@ -7,6 +7,12 @@
 
 #[path = "core/src/arb.rs"]
 pub(crate) mod arb;
+#[path = "core/src/bcm.rs"]
+pub(crate) mod bcm;
+#[path = "core/src/bcm_rx.rs"]
+pub(crate) mod bcm_rx;
+#[path = "core/src/bcm_tx.rs"]
+pub(crate) mod bcm_tx;
 #[path = "core/src/bittiming.rs"]
 pub(crate) mod bittiming;
 #[path = "core/src/candev.rs"]

@@ -152,6 +152,9 @@ pub enum Mainline {
     Dev,
     /// Virtual CAN driver (`drivers/net/can/vcan.ko`).
     Vcan,
+    /// Broadcast manager (`net/can/can-bcm.ko`): not in [`Mainline::ALL`],
+    /// loaded only by [`Ctx::bcm_ifaces`].
+    Bcm,
 }
 
 impl Mainline {
@@ -165,6 +168,7 @@ impl Mainline {
             Mainline::Raw => "can_raw",
             Mainline::Dev => "can_dev",
             Mainline::Vcan => "vcan",
+            Mainline::Bcm => "can_bcm",
         }
     }
 
@@ -175,6 +179,7 @@ impl Mainline {
             Mainline::Raw => "net/can/can-raw.ko",
             Mainline::Dev => "drivers/net/can/dev/can-dev.ko",
             Mainline::Vcan => "drivers/net/can/vcan.ko",
+            Mainline::Bcm => "net/can/can-bcm.ko",
         }
     }
 }
@@ -325,6 +330,21 @@ impl Ctx {
         (0..n).map(|i| self.ifindex(&dev(i))).collect()
     }
 
+    /// [`Ctx::can_ifaces`] plus the CAN_BCM protocol. Mainline: can-bcm.ko.
+    /// Ours: an error until rcan_bcm exists (issue 13); the BCM tests are
+    /// registered mainline-only until then.
+    pub fn bcm_ifaces(&mut self, n: usize) -> Result<Vec<u32>, String> {
+        if self.stack == Stack::Ours {
+            return Err("rcan_bcm does not exist yet (issue 13)".into());
+        }
+        let ifaces = self.can_ifaces(n)?;
+        let ko = self
+            .mainline_ko(Mainline::Bcm)
+            .ok_or("no kernel build directory (RCAN_KBUILD or --kbuild)")?;
+        sys::finit_module(&ko, &[]).map_err(|e| format!("insmod {}: {e}", ko.display()))?;
+        Ok(ifaces)
+    }
+
     /// Unregisters the interfaces [`Ctx::can_ifaces`] made, under any
     /// sockets bound to them. Ours: rmmod rcan_loop. Mainline:
     /// `ip link del` each vcan.
@@ -361,7 +381,7 @@ impl Ctx {
                 }
             }
         }
-        for m in Mainline::ALL.into_iter().rev() {
+        for m in std::iter::once(Mainline::Bcm).chain(Mainline::ALL.into_iter().rev()) {
             if let Err(e) = rmmod_retrying(m.name()) {
                 errors.push(e);
             }

@@ -10,6 +10,9 @@
 #![warn(missing_docs)]
 
 pub mod arb;
+pub mod bcm;
+pub mod bcm_rx;
+pub mod bcm_tx;
 pub mod bittiming;
 pub mod candev;
 pub mod canloop;

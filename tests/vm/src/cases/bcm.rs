@@ -1,0 +1,1097 @@
+// SPDX-License-Identifier: GPL-2.0
+//! CAN_BCM (broadcast manager) as a user sees it: `socket(PF_CAN,
+//! SOCK_DGRAM, CAN_BCM)`, `connect()` to an interface, one `struct
+//! bcm_msg_head` (+ frames) per `write()`, replies and notifications from
+//! `read()`. Frames are watched with a CAN_RAW socket on the same vcan.
+//! Written against mainline's can-bcm.ko (mainline stage); they run on our
+//! stack once rcan_bcm exists (issue 13). Timing is measured and printed,
+//! and checked only with generous bounds: the VM runs under emulation.
+//! The message layout is encoded here independently of rcan-core.
+
+use std::os::fd::{AsFd, OwnedFd};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread;
+use std::time::{Duration, Instant};
+
+use rcan_uapi::raw;
+use socketcan::{EmbeddedFrame, Frame, Socket};
+
+use crate::canraw::{self, std as sff};
+use crate::check::{OrFail, TestResult};
+use crate::ctx::Ctx;
+use crate::tools;
+
+use super::mainline_only_table;
+
+pub static TESTS: &[crate::Test] = mainline_only_table![
+    bcm_tx_count_then_expired,
+    bcm_tx_ival2_and_delete,
+    bcm_tx_multi_frame_and_read,
+    bcm_tx_send_once,
+    bcm_rx_changed_under_mask,
+    bcm_rx_filter_id_and_check_dlc,
+    bcm_rx_timeout_and_resume,
+    bcm_rx_throttle,
+    bcm_rx_mux,
+    bcm_rx_rtr_reply,
+    bcm_rx_read_delete,
+    bcm_errno_of_bad_messages,
+    bcm_python_can_send_periodic,
+    bcm_fd_on_classic_interface,
+    bcm_tx_announce_and_reset_multi_idx,
+    bcm_rx_no_autotimer,
+    bcm_rx_any_interface,
+];
+
+/// A failure with `what` unless `cond`.
+fn need(cond: bool, what: impl Into<String>) -> TestResult {
+    if cond {
+        Ok(())
+    } else {
+        Err(what.into())
+    }
+}
+
+const CAN_BCM: i32 = 2;
+const TX_SETUP: u32 = 1;
+const TX_DELETE: u32 = 2;
+const TX_READ: u32 = 3;
+const TX_SEND: u32 = 4;
+const RX_SETUP: u32 = 5;
+const RX_DELETE: u32 = 6;
+const RX_READ: u32 = 7;
+const TX_STATUS: u32 = 8;
+const TX_EXPIRED: u32 = 9;
+const RX_STATUS: u32 = 10;
+const RX_TIMEOUT: u32 = 11;
+const RX_CHANGED: u32 = 12;
+const SETTIMER: u32 = 0x1;
+const STARTTIMER: u32 = 0x2;
+const TX_COUNTEVT: u32 = 0x4;
+const TX_ANNOUNCE: u32 = 0x8;
+const TX_CP_CAN_ID: u32 = 0x10;
+const RX_FILTER_ID: u32 = 0x20;
+const RX_CHECK_DLC: u32 = 0x40;
+const RX_NO_AUTOTIMER: u32 = 0x80;
+const TX_RESET_MULTI_IDX: u32 = 0x200;
+const RX_ANNOUNCE_RESUME: u32 = 0x100;
+const RX_RTR_FRAME: u32 = 0x400;
+const CAN_FD_FRAME: u32 = 0x800;
+const CAN_RTR_FLAG: u32 = 0x4000_0000;
+/// `sizeof(struct bcm_msg_head)` on x86_64.
+const MHSIZ: usize = 56;
+
+/// A `struct bcm_msg_head` (intervals in microseconds).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Head {
+    opcode: u32,
+    flags: u32,
+    count: u32,
+    ival1_us: i64,
+    ival2_us: i64,
+    can_id: u32,
+    nframes: u32,
+}
+
+/// One 16-byte `struct can_frame`.
+fn frame_bytes(id: u32, data: &[u8]) -> [u8; 16] {
+    let mut b = [0u8; 16];
+    b[..4].copy_from_slice(&id.to_ne_bytes());
+    b[4] = data.len() as u8;
+    b[8..8 + data.len()].copy_from_slice(data);
+    b
+}
+
+/// Head + frames as written to the socket (`nframes` as given in `h`).
+fn msg(h: Head, frames: &[[u8; 16]]) -> Vec<u8> {
+    let mut b = vec![0u8; MHSIZ];
+    let tv = |us: i64| [us / 1_000_000, us % 1_000_000];
+    b[0..4].copy_from_slice(&h.opcode.to_ne_bytes());
+    b[4..8].copy_from_slice(&h.flags.to_ne_bytes());
+    b[8..12].copy_from_slice(&h.count.to_ne_bytes());
+    for (i, v) in tv(h.ival1_us).into_iter().chain(tv(h.ival2_us)).enumerate() {
+        b[16 + 8 * i..24 + 8 * i].copy_from_slice(&v.to_ne_bytes());
+    }
+    b[48..52].copy_from_slice(&h.can_id.to_ne_bytes());
+    b[52..56].copy_from_slice(&h.nframes.to_ne_bytes());
+    frames.iter().for_each(|f| b.extend_from_slice(f));
+    b
+}
+
+/// A received message: head, frames (id, data) and the interface
+/// `recvfrom` reported.
+struct Msg {
+    head: Head,
+    frames: Vec<(u32, Vec<u8>)>,
+    ifindex: u32,
+}
+
+fn parse(b: &[u8]) -> Result<Msg, String> {
+    need(b.len() >= MHSIZ, format!("message of {} bytes", b.len()))?;
+    let u = |o: usize| u32::from_ne_bytes(b[o..o + 4].try_into().unwrap());
+    let l = |o: usize| i64::from_ne_bytes(b[o..o + 8].try_into().unwrap());
+    let head = Head {
+        opcode: u(0),
+        flags: u(4),
+        count: u(8),
+        ival1_us: l(16) * 1_000_000 + l(24),
+        ival2_us: l(32) * 1_000_000 + l(40),
+        can_id: u(48),
+        nframes: u(52),
+    };
+    let frames = b[MHSIZ..]
+        .chunks_exact(16)
+        .map(|f| {
+            let len = usize::from(f[4]).min(8);
+            (
+                u32::from_ne_bytes(f[..4].try_into().unwrap()),
+                f[8..8 + len].to_vec(),
+            )
+        })
+        .collect();
+    Ok(Msg {
+        head,
+        frames,
+        ifindex: 0,
+    })
+}
+
+/// A BCM socket connected to `ifindex`.
+fn open(ifindex: u32) -> Result<OwnedFd, String> {
+    let fd = raw::socket(libc::AF_CAN, libc::SOCK_DGRAM, CAN_BCM).or_fail("socket(CAN_BCM)")?;
+    raw::connect(&fd, &canraw::addr_bytes(libc::AF_CAN as u16, ifindex)).or_fail("connect")?;
+    Ok(fd)
+}
+
+fn write(fd: impl AsFd, h: Head, frames: &[[u8; 16]]) -> Result<usize, String> {
+    raw::write(fd, &msg(h, frames)).map_err(|e| format!("write opcode {}: {e}", h.opcode))
+}
+
+/// The errno of writing `bytes`, or a failure if the write succeeded.
+fn write_errno(fd: impl AsFd, bytes: &[u8], what: &str) -> Result<i32, String> {
+    match raw::write(fd, bytes) {
+        Ok(n) => Err(format!("{what}: write returned {n}, want an error")),
+        Err(e) => Ok(e.raw_os_error().unwrap_or(0)),
+    }
+}
+
+fn expect_errno(fd: impl AsFd, bytes: &[u8], want: i32, what: &str) -> TestResult {
+    let got = write_errno(fd, bytes, what)?;
+    need(
+        got == want,
+        format!("{what}: errno {got}, want {want} as mainline"),
+    )
+}
+
+/// The next message within `t`, or None.
+fn recv(fd: impl AsFd, t: Duration) -> Result<Option<Msg>, String> {
+    raw::set_timeout(&fd, libc::SO_RCVTIMEO, t).or_fail("SO_RCVTIMEO")?;
+    let mut buf = [0u8; MHSIZ + 16 * 260];
+    let mut name = [0u8; crate::sys::SOCKADDR_CAN_LEN];
+    match raw::recvfrom(&fd, &mut buf, 0, Some(&mut name)) {
+        Ok((n, _)) => {
+            let mut m = parse(&buf[..n])?;
+            m.ifindex = canraw::addr_ifindex(&name)?;
+            Ok(Some(m))
+        }
+        Err(e) if matches!(e.raw_os_error(), Some(libc::EAGAIN)) => Ok(None),
+        Err(e) => Err(format!("recvfrom: {e}")),
+    }
+}
+
+fn recv_some(fd: impl AsFd, t: Duration, what: &str) -> Result<Msg, String> {
+    recv(fd, t)?.ok_or_else(|| format!("no {what} within {t:?}"))
+}
+
+/// Frames with `id` seen on `s` until `t` passes; with their arrival times.
+fn collect(
+    s: &socketcan::CanSocket,
+    id: u32,
+    t: Duration,
+) -> Result<Vec<(Instant, Vec<u8>)>, String> {
+    let end = Instant::now() + t;
+    let mut got = Vec::new();
+    while let Some(left) = end.checked_duration_since(Instant::now()) {
+        s.set_read_timeout(left.max(Duration::from_millis(1)))
+            .or_fail("SO_RCVTIMEO")?;
+        match s.read_frame() {
+            Ok(f) if f.raw_id() == id => got.push((Instant::now(), f.data().to_vec())),
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    Ok(got)
+}
+
+fn gaps_ms(v: &[(Instant, Vec<u8>)]) -> String {
+    let g: Vec<String> = v
+        .windows(2)
+        .map(|w| format!("{:.0}", (w[1].0 - w[0].0).as_secs_f64() * 1e3))
+        .collect();
+    format!("[{}] ms", g.join(" "))
+}
+
+fn tx_head(flags: u32, count: u32, ival1_us: i64, ival2_us: i64, can_id: u32, n: u32) -> Head {
+    Head {
+        opcode: TX_SETUP,
+        flags,
+        count,
+        ival1_us,
+        ival2_us,
+        can_id,
+        nframes: n,
+    }
+}
+
+/// TX_SETUP count=5 at 20 ms with TX_COUNTEVT: exactly 5 frames, then
+/// silence, and one TX_EXPIRED with count 0. With count=1, the frame sent
+/// at STARTTIMER uses the count up and no TX_EXPIRED comes (mainline).
+fn bcm_tx_count_then_expired(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let rx = canraw::open(i0)?;
+    let f = frame_bytes(0x101, &[1, 2, 3]);
+    let h = tx_head(SETTIMER | STARTTIMER | TX_COUNTEVT, 5, 20_000, 0, 0x101, 1);
+    need(write(&bcm, h, &[f])? == MHSIZ + 16, "TX_SETUP returns 72")?;
+    let got = collect(&rx, 0x101, Duration::from_millis(600))?;
+    println!(
+        "# count=5 ival1=20ms: {} frames, gaps {}",
+        got.len(),
+        gaps_ms(&got)
+    );
+    need(got.len() == 5, format!("{} frames, want 5", got.len()))?;
+    need(got.iter().all(|g| g.1 == [1, 2, 3]), "frame data")?;
+    let m = recv_some(&bcm, Duration::from_secs(2), "TX_EXPIRED")?;
+    need(
+        m.head.opcode == TX_EXPIRED
+            && m.head.count == 0
+            && m.head.can_id == 0x101
+            && m.frames.is_empty(),
+        format!("got {:?}", m.head),
+    )?;
+    need(
+        recv(&bcm, Duration::from_millis(100))?.is_none(),
+        "a second message",
+    )?;
+
+    let h = tx_head(SETTIMER | STARTTIMER | TX_COUNTEVT, 1, 20_000, 0, 0x102, 1);
+    write(&bcm, h, &[frame_bytes(0x102, &[9])])?;
+    let got = collect(&rx, 0x102, Duration::from_millis(200))?;
+    need(
+        got.len() == 1,
+        format!("count=1: {} frames, want 1", got.len()),
+    )?;
+    need(
+        recv(&bcm, Duration::from_millis(200))?.is_none(),
+        "count=1: TX_EXPIRED although the count went in the STARTTIMER frame",
+    )
+}
+
+/// count=2 at 10 ms then every 50 ms: the cyclic part keeps going; a data
+/// update is sent from the next cycle; TX_DELETE stops it; a second
+/// TX_DELETE is EINVAL.
+fn bcm_tx_ival2_and_delete(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let rx = canraw::open(i0)?;
+    let h = tx_head(SETTIMER | STARTTIMER, 2, 10_000, 50_000, 0x200, 1);
+    write(&bcm, h, &[frame_bytes(0x200, &[1])])?;
+    let got = collect(&rx, 0x200, Duration::from_millis(600))?;
+    println!(
+        "# count=2 ival1=10ms ival2=50ms over 600 ms: {} frames, gaps {}",
+        got.len(),
+        gaps_ms(&got)
+    );
+    need(
+        (5..=15).contains(&got.len()),
+        format!("{} frames in 600 ms, want about 13", got.len()),
+    )?;
+    // Update the data only (no flags): the timer keeps running.
+    write(
+        &bcm,
+        tx_head(0, 0, 0, 0, 0x200, 1),
+        &[frame_bytes(0x200, &[2])],
+    )?;
+    let got = collect(&rx, 0x200, Duration::from_millis(300))?;
+    need(
+        got.len() >= 2,
+        format!("{} frames after the update", got.len()),
+    )?;
+    need(
+        got.iter().skip(1).all(|g| g.1 == [2]),
+        "updated data not sent",
+    )?;
+    let del = Head {
+        opcode: TX_DELETE,
+        can_id: 0x200,
+        ..Head::default()
+    };
+    need(write(&bcm, del, &[])? == MHSIZ, "TX_DELETE returns 56")?;
+    let _ = collect(&rx, 0x200, Duration::from_millis(20))?;
+    let after = collect(&rx, 0x200, Duration::from_millis(300))?;
+    need(
+        after.is_empty(),
+        format!("{} frames after TX_DELETE", after.len()),
+    )?;
+    expect_errno(&bcm, &msg(del, &[]), libc::EINVAL, "second TX_DELETE")
+}
+
+/// Three frames cycle in order; TX_READ answers TX_STATUS with the
+/// operation's state (STARTTIMER left TX_ANNOUNCE set) and frames;
+/// TX_CP_CAN_ID puts the head's identifier into the frames.
+fn bcm_tx_multi_frame_and_read(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let rx = canraw::open(i0)?;
+    let frames: Vec<[u8; 16]> = (0..3u8).map(|i| frame_bytes(0x7ff, &[i])).collect();
+    let h = tx_head(SETTIMER | STARTTIMER | TX_CP_CAN_ID, 0, 0, 30_000, 0x300, 3);
+    write(&bcm, h, &frames)?;
+    let got = collect(&rx, 0x300, Duration::from_millis(400))?;
+    need(got.len() >= 4, format!("{} frames", got.len()))?;
+    for (k, g) in got.iter().enumerate() {
+        need(
+            g.1 == [k as u8 % 3],
+            format!("frame {k}: {:?}, want the cycle 0,1,2", g.1),
+        )?;
+    }
+    write(
+        &bcm,
+        Head {
+            opcode: TX_READ,
+            can_id: 0x300,
+            ..Head::default()
+        },
+        &[],
+    )?;
+    let m = recv_some(&bcm, Duration::from_secs(2), "TX_STATUS")?;
+    need(
+        m.head.opcode == TX_STATUS
+            && m.head.nframes == 3
+            && m.head.flags == SETTIMER | STARTTIMER | TX_CP_CAN_ID | TX_ANNOUNCE
+            && m.head.ival2_us == 30_000,
+        format!("TX_STATUS head {:?}", m.head),
+    )?;
+    need(
+        m.frames == (0..3u8).map(|i| (0x300, vec![i])).collect::<Vec<_>>(),
+        format!("TX_STATUS frames {:?}", m.frames),
+    )?;
+    let unknown = Head {
+        opcode: TX_READ,
+        can_id: 0x301,
+        ..Head::default()
+    };
+    expect_errno(
+        &bcm,
+        &msg(unknown, &[]),
+        libc::EINVAL,
+        "TX_READ of no operation",
+    )
+}
+
+/// TX_SEND: one frame, once; returns 72.
+fn bcm_tx_send_once(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let rx = canraw::open(i0)?;
+    let h = Head {
+        opcode: TX_SEND,
+        can_id: 0x400,
+        nframes: 1,
+        ..Head::default()
+    };
+    need(
+        write(&bcm, h, &[frame_bytes(0x401, &[5, 6])])? == MHSIZ + 16,
+        "TX_SEND returns 72",
+    )?;
+    let got = collect(&rx, 0x401, Duration::from_millis(300))?;
+    need(
+        got.len() == 1 && got[0].1 == [5, 6],
+        format!("TX_SEND gave {:?}", got),
+    )
+}
+
+fn rx_head(flags: u32, ival1_us: i64, ival2_us: i64, can_id: u32, n: u32) -> Head {
+    Head {
+        opcode: RX_SETUP,
+        flags,
+        ival1_us,
+        ival2_us,
+        can_id,
+        nframes: n,
+        ..Head::default()
+    }
+}
+
+/// RX_SETUP with a mask on byte 0 (and half of byte 1): RX_CHANGED for the
+/// first frame and for each change under the mask only, with the frame.
+fn bcm_rx_changed_under_mask(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let tx = canraw::open(i0)?;
+    let mask = frame_bytes(0x500, &[0xff, 0x0f, 0, 0, 0, 0, 0, 0]);
+    need(
+        write(&bcm, rx_head(0, 0, 0, 0x500, 1), &[mask])? == MHSIZ + 16,
+        "RX_SETUP returns 72",
+    )?;
+    let sent: [&[u8]; 6] = [&[1, 1], &[1, 0x11], &[1, 1, 7], &[2, 1], &[2, 2], &[2, 2]];
+    for d in sent {
+        canraw::send(&tx, &sff(0x500, d))?;
+        canraw::send(&tx, &sff(0x501, d))?;
+    }
+    let mut got = Vec::new();
+    while let Some(m) = recv(&bcm, Duration::from_millis(300))? {
+        need(
+            m.head.opcode == RX_CHANGED && m.head.nframes == 1,
+            format!("{:?}", m.head),
+        )?;
+        got.push(m.frames[0].1.clone());
+    }
+    let want: Vec<Vec<u8>> = vec![vec![1, 1], vec![2, 1], vec![2, 2]];
+    need(
+        got == want,
+        format!("RX_CHANGED data {got:?}, want {want:?}"),
+    )
+}
+
+/// RX_FILTER_ID: every frame of the identifier is reported (and the
+/// setup returns 56 whatever frames follow). RX_CHECK_DLC: a length
+/// change alone is reported.
+fn bcm_rx_filter_id_and_check_dlc(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let tx = canraw::open(i0)?;
+    let n = write(
+        &bcm,
+        rx_head(RX_FILTER_ID, 0, 0, 0x510, 1),
+        &[frame_bytes(0x510, &[0xff])],
+    )?;
+    need(
+        n == MHSIZ,
+        format!("RX_SETUP RX_FILTER_ID returned {n}, mainline 56"),
+    )?;
+    let dlc = frame_bytes(0x511, &[0xff, 0, 0, 0, 0, 0, 0, 0]);
+    write(&bcm, rx_head(RX_CHECK_DLC, 0, 0, 0x511, 1), &[dlc])?;
+    for _ in 0..3 {
+        canraw::send(&tx, &sff(0x510, &[1]))?;
+    }
+    for d in [&[1u8][..], &[1], &[1, 0], &[1, 0]] {
+        canraw::send(&tx, &sff(0x511, d))?;
+    }
+    let mut ids = Vec::new();
+    while let Some(m) = recv(&bcm, Duration::from_millis(300))? {
+        ids.push((m.head.can_id, m.frames[0].1.len()));
+    }
+    let want = vec![(0x510, 1), (0x510, 1), (0x510, 1), (0x511, 1), (0x511, 2)];
+    need(
+        ids == want,
+        format!("RX_CHANGED (id, len) {ids:?}, want {want:?}"),
+    )
+}
+
+/// RX_TIMEOUT after ival1 (1 s) without frames (STARTTIMER), once;
+/// frames 50 ms apart keep it away; RX_ANNOUNCE_RESUME reports the same
+/// content again after a timeout. (ival1 is long so that a stalled VM
+/// cannot fake a timeout between two frames.)
+fn bcm_rx_timeout_and_resume(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let tx = canraw::open(i0)?;
+    let mask = frame_bytes(0x520, &[0xff]);
+    let t0 = Instant::now();
+    let h = rx_head(
+        SETTIMER | STARTTIMER | RX_ANNOUNCE_RESUME,
+        1_000_000,
+        0,
+        0x520,
+        1,
+    );
+    write(&bcm, h, &[mask])?;
+    let m = recv_some(&bcm, Duration::from_secs(5), "RX_TIMEOUT")?;
+    println!(
+        "# RX_TIMEOUT after {:.0} ms (ival1 1000 ms)",
+        t0.elapsed().as_secs_f64() * 1e3
+    );
+    need(
+        m.head.opcode == RX_TIMEOUT && m.frames.is_empty() && m.head.ival1_us == 1_000_000,
+        format!("{:?}", m.head),
+    )?;
+    need(
+        t0.elapsed() >= Duration::from_millis(990),
+        "RX_TIMEOUT before ival1",
+    )?;
+    need(
+        recv(&bcm, Duration::from_millis(1500))?.is_none(),
+        "RX_TIMEOUT repeated without a frame",
+    )?;
+    // Frames every 50 ms for 600 ms: one RX_CHANGED, no timeout.
+    for _ in 0..12 {
+        canraw::send(&tx, &sff(0x520, &[7]))?;
+        thread::sleep(Duration::from_millis(50));
+    }
+    let mut ops = Vec::new();
+    while let Some(m) = recv(&bcm, Duration::from_millis(10))? {
+        ops.push(m.head.opcode);
+    }
+    need(
+        ops == [RX_CHANGED],
+        format!("while frames came: {ops:?}, want one RX_CHANGED"),
+    )?;
+    // Silence: timeout; then the same content is announced again.
+    let m = recv_some(&bcm, Duration::from_secs(5), "RX_TIMEOUT after silence")?;
+    need(m.head.opcode == RX_TIMEOUT, format!("{:?}", m.head))?;
+    canraw::send(&tx, &sff(0x520, &[7]))?;
+    let m = recv_some(&bcm, Duration::from_secs(2), "RX_CHANGED on resume")?;
+    need(
+        m.head.opcode == RX_CHANGED && m.frames[0].1 == [7],
+        format!("{:?}", m.head),
+    )
+}
+
+/// Throttling (ival2 = 200 ms): 20 changes 10 ms apart give a few
+/// RX_CHANGED, at most about one per 200 ms, the last carrying the last
+/// data.
+fn bcm_rx_throttle(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let tx = canraw::open(i0)?;
+    write(
+        &bcm,
+        rx_head(SETTIMER, 0, 200_000, 0x530, 1),
+        &[frame_bytes(0x530, &[0xff])],
+    )?;
+    let t0 = Instant::now();
+    for i in 0..20u8 {
+        canraw::send(&tx, &sff(0x530, &[i]))?;
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let span = t0.elapsed();
+    let mut got = Vec::new();
+    while let Some(m) = recv(&bcm, Duration::from_millis(600))? {
+        got.push((Instant::now(), m.frames[0].1.clone()));
+    }
+    println!(
+        "# 20 changes in {:.0} ms, ival2 200 ms: {} RX_CHANGED {:?}",
+        span.as_secs_f64() * 1e3,
+        got.len(),
+        got.iter().map(|g| g.1[0]).collect::<Vec<_>>()
+    );
+    let most = span.as_millis() as usize / 200 + 3;
+    need(
+        (2..=most).contains(&got.len()),
+        format!("{} notifications, want 2..={most}", got.len()),
+    )?;
+    need(got[0].1 == [0], "first change not reported at once")?;
+    need(
+        got.last().map(|g| g.1.clone()) == Some(vec![19]),
+        "last change lost",
+    )
+}
+
+/// Mux: frame 0's data is the mux mask (byte 0), frames 1.. the entries;
+/// each entry tracks its own content.
+fn bcm_rx_mux(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let tx = canraw::open(i0)?;
+    let f = [
+        frame_bytes(0x540, &[0xff, 0, 0, 0, 0, 0, 0, 0]),
+        frame_bytes(0x540, &[0x01, 0xff, 0, 0, 0, 0, 0, 0]),
+        frame_bytes(0x540, &[0x02, 0xff, 0, 0, 0, 0, 0, 0]),
+    ];
+    need(
+        write(&bcm, rx_head(0, 0, 0, 0x540, 3), &f)? == MHSIZ + 48,
+        "RX_SETUP mux returns 104",
+    )?;
+    for d in [[1u8, 5], [2, 5], [1, 5], [3, 5], [2, 6], [1, 6]] {
+        canraw::send(&tx, &sff(0x540, &d))?;
+    }
+    let mut got = Vec::new();
+    while let Some(m) = recv(&bcm, Duration::from_millis(300))? {
+        got.push(m.frames[0].1.clone());
+    }
+    let want: Vec<Vec<u8>> = vec![vec![1, 5], vec![2, 5], vec![2, 6], vec![1, 6]];
+    need(
+        got == want,
+        format!("mux RX_CHANGED {got:?}, want {want:?}"),
+    )
+}
+
+/// RX_RTR_FRAME: a remote frame for the identifier is answered at once
+/// with the frame of the setup (as a data frame); no message to the user;
+/// no reply from an operation on ifindex 0.
+fn bcm_rx_rtr_reply(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let tx = canraw::open(i0)?;
+    let id = 0x550 | CAN_RTR_FLAG;
+    let reply = frame_bytes(id, &[0xde, 0xad]);
+    write(
+        &bcm,
+        rx_head(RX_RTR_FRAME | TX_CP_CAN_ID, 0, 0, id, 1),
+        &[reply],
+    )?;
+    canraw::send(&tx, &canraw::rtr_std(0x550, 2))?;
+    let got = collect(&tx, 0x550, Duration::from_millis(300))?;
+    // The CAN_RAW socket sees the reply (data frame); its own RTR frame is
+    // not looped back to itself.
+    need(
+        got.len() == 1 && got[0].1 == [0xde, 0xad],
+        format!("replies {:?}, want one data frame de ad", got),
+    )?;
+    need(
+        recv(&bcm, Duration::from_millis(100))?.is_none(),
+        "a message to the user",
+    )?;
+    // The same setup on a socket of "any" interface never replies: mainline
+    // sends the reply on the operation's interface, and it has none.
+    let any = open(0)?;
+    let id = 0x551 | CAN_RTR_FLAG;
+    let reply = frame_bytes(id, &[0xbe, 0xef]);
+    write(
+        &any,
+        rx_head(RX_RTR_FRAME | TX_CP_CAN_ID, 0, 0, id, 1),
+        &[reply],
+    )?;
+    canraw::send(&tx, &canraw::rtr_std(0x551, 2))?;
+    let got = collect(&tx, 0x551, Duration::from_millis(300))?;
+    need(got.is_empty(), format!("ifindex 0 replied: {got:?}"))
+}
+
+/// RX_READ answers RX_STATUS with the filter; RX_DELETE removes it (no more
+/// RX_CHANGED); a second RX_DELETE or RX_READ is EINVAL.
+fn bcm_rx_read_delete(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let tx = canraw::open(i0)?;
+    let mask = frame_bytes(0x560, &[0xf0]);
+    // count 7: mainline does not keep an RX_SETUP's count (reports 0).
+    let h = Head {
+        count: 7,
+        ..rx_head(SETTIMER, 1_500_000, 0, 0x560, 1)
+    };
+    write(&bcm, h, &[mask])?;
+    write(
+        &bcm,
+        Head {
+            opcode: RX_READ,
+            can_id: 0x560,
+            ..Head::default()
+        },
+        &[],
+    )?;
+    let m = recv_some(&bcm, Duration::from_secs(2), "RX_STATUS")?;
+    need(
+        m.head.opcode == RX_STATUS
+            && m.head.nframes == 1
+            && m.head.ival1_us == 1_500_000
+            && m.head.count == 0
+            && m.frames == [(0x560, vec![0xf0])],
+        format!("RX_STATUS {:?} {:?}", m.head, m.frames),
+    )?;
+    let del = Head {
+        opcode: RX_DELETE,
+        can_id: 0x560,
+        ..Head::default()
+    };
+    need(write(&bcm, del, &[])? == MHSIZ, "RX_DELETE returns 56")?;
+    canraw::send(&tx, &sff(0x560, &[0x10]))?;
+    need(
+        recv(&bcm, Duration::from_millis(200))?.is_none(),
+        "RX_CHANGED after RX_DELETE",
+    )?;
+    expect_errno(&bcm, &msg(del, &[]), libc::EINVAL, "second RX_DELETE")?;
+    let rd = Head {
+        opcode: RX_READ,
+        can_id: 0x560,
+        ..Head::default()
+    };
+    expect_errno(&bcm, &msg(rd, &[]), libc::EINVAL, "RX_READ of no operation")
+}
+
+/// The errno of each bad message, as mainline.
+fn bcm_errno_of_bad_messages(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let f = frame_bytes(0x600, &[1]);
+    let ok = tx_head(SETTIMER, 0, 0, 100_000, 0x600, 1);
+
+    let unconnected = raw::socket(libc::AF_CAN, libc::SOCK_DGRAM, CAN_BCM).or_fail("socket")?;
+    expect_errno(
+        &unconnected,
+        &msg(ok, &[f]),
+        libc::ENOTCONN,
+        "write before connect",
+    )?;
+    let e = raw::connect(&unconnected, &canraw::addr_bytes(libc::AF_CAN as u16, 9999))
+        .err()
+        .and_then(|e| e.raw_os_error());
+    need(
+        e == Some(libc::ENODEV),
+        format!("connect to ifindex 9999: {e:?}, want ENODEV"),
+    )?;
+
+    let bcm = open(i0)?;
+    let e = raw::connect(&bcm, &canraw::addr_bytes(libc::AF_CAN as u16, i0))
+        .err()
+        .and_then(|e| e.raw_os_error());
+    need(
+        e == Some(libc::EISCONN),
+        format!("second connect: {e:?}, want EISCONN"),
+    )?;
+    let m = msg(ok, &[f]);
+    expect_errno(&bcm, &m[..MHSIZ - 1], libc::EINVAL, "short head")?;
+    expect_errno(&bcm, &m[..MHSIZ + 8], libc::EINVAL, "half a frame")?;
+    for op in [0, TX_STATUS, RX_CHANGED, 42] {
+        expect_errno(
+            &bcm,
+            &msg(Head { opcode: op, ..ok }, &[f]),
+            libc::EINVAL,
+            &format!("opcode {op}"),
+        )?;
+    }
+    expect_errno(
+        &bcm,
+        &msg(Head { nframes: 0, ..ok }, &[]),
+        libc::EINVAL,
+        "TX_SETUP nframes 0",
+    )?;
+    let many = vec![f; 257];
+    expect_errno(
+        &bcm,
+        &msg(Head { nframes: 257, ..ok }, &many),
+        libc::EINVAL,
+        "TX_SETUP nframes 257",
+    )?;
+    expect_errno(
+        &bcm,
+        &msg(Head { nframes: 2, ..ok }, &[f]),
+        libc::EFAULT,
+        "TX_SETUP nframes 2, one frame",
+    )?;
+    let mut len9 = f;
+    len9[4] = 9;
+    expect_errno(
+        &bcm,
+        &msg(ok, &[len9]),
+        libc::EINVAL,
+        "TX_SETUP frame len 9",
+    )?;
+    expect_errno(
+        &bcm,
+        &msg(Head { ival1_us: -1, ..ok }, &[f]),
+        libc::EINVAL,
+        "negative ival1",
+    )?;
+    let too_long = Head {
+        ival2_us: (400 * 86_400 + 1) * 1_000_000,
+        ..ok
+    };
+    expect_errno(
+        &bcm,
+        &msg(too_long, &[f]),
+        libc::EINVAL,
+        "ival2 over 400 days",
+    )?;
+    // Accepted with two frames, an update with three is E2BIG.
+    write(&bcm, Head { nframes: 2, ..ok }, &[f, f])?;
+    expect_errno(
+        &bcm,
+        &msg(Head { nframes: 3, ..ok }, &[f, f, f]),
+        libc::E2BIG,
+        "TX_SETUP update growing",
+    )?;
+    let send = Head {
+        opcode: TX_SEND,
+        nframes: 1,
+        ..ok
+    };
+    expect_errno(
+        &bcm,
+        &msg(Head { nframes: 2, ..send }, &[f, f]),
+        libc::EINVAL,
+        "TX_SEND two frames",
+    )?;
+    expect_errno(
+        &bcm,
+        &msg(send, &[f, f]),
+        libc::EINVAL,
+        "TX_SEND nframes 1, two frames",
+    )?;
+    expect_errno(&bcm, &msg(send, &[len9]), libc::EINVAL, "TX_SEND len 9")?;
+    let rtr = rx_head(RX_RTR_FRAME, 0, 0, 0x600, 1);
+    expect_errno(
+        &bcm,
+        &msg(rtr, &[f]),
+        libc::EINVAL,
+        "RX_RTR_FRAME without CAN_RTR_FLAG",
+    )?;
+    expect_errno(
+        &bcm,
+        &msg(rx_head(0, 0, 0, 0x601, 258), &[]),
+        libc::EINVAL,
+        "RX_SETUP nframes 258",
+    )?;
+
+    // Connected to "any" interface: transmit opcodes need a device.
+    let any = open(0)?;
+    expect_errno(&any, &msg(ok, &[f]), libc::ENODEV, "TX_SETUP on ifindex 0")?;
+    expect_errno(&any, &msg(send, &[f]), libc::ENODEV, "TX_SEND on ifindex 0")?;
+    need(
+        write(&any, rx_head(0, 0, 0, 0x602, 1), &[f])? == MHSIZ + 16,
+        "RX_SETUP on ifindex 0",
+    )
+}
+
+/// python-can's cyclic API, as a user writes it: `send_periodic` at 20 ms,
+/// `modify_data`, `stop()`, then `send_periodic(..., duration=0.3)`; a
+/// CAN_RAW socket records every frame: both data seen in order, nothing
+/// of the first task after `stop()`, the second task ends by itself.
+fn bcm_python_can_send_periodic(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let rx = canraw::open(i0)?;
+    let script = r#"
+import can, time
+bus = can.Bus(interface="socketcan", channel="can0")
+msg = can.Message(arbitration_id=0x321, data=[1, 2, 3], is_extended_id=False)
+task = bus.send_periodic(msg, 0.02)
+time.sleep(0.5)
+msg.data = bytearray([4, 5, 6])
+task.modify_data(msg)
+time.sleep(0.5)
+task.stop()
+time.sleep(0.5)
+bus.send_periodic(can.Message(arbitration_id=0x322, data=[7], is_extended_id=False), 0.02, duration=0.3)
+time.sleep(0.8)
+bus.shutdown()
+print("done", flush=True)
+"#;
+    let stop = Arc::new(AtomicBool::new(false));
+    let rec = {
+        let stop = stop.clone();
+        thread::spawn(move || {
+            let mut got = Vec::new();
+            let _ = rx.set_read_timeout(Duration::from_millis(50));
+            while !stop.load(Ordering::Relaxed) {
+                if let Ok(f) = rx.read_frame() {
+                    got.push((Instant::now(), f.raw_id(), f.data().to_vec()));
+                }
+            }
+            got
+        })
+    };
+    let start = Instant::now();
+    let out = tools::spawn("/usr/bin/python3", &["-c", script], None)?.finish(tools::TOOL_LIMIT);
+    thread::sleep(Duration::from_millis(300));
+    stop.store(true, Ordering::Relaxed);
+    let got = rec.join().map_err(|_| "recorder panicked")?;
+    let out = out?;
+    need(
+        out.status.success() && out.stdout.contains("done"),
+        format!("python3: {}: {}", out.status, out.stderr.trim()),
+    )?;
+    let a: Vec<_> = got.iter().filter(|g| g.1 == 0x321).collect();
+    let b: Vec<_> = got.iter().filter(|g| g.1 == 0x322).collect();
+    let first = a.iter().filter(|g| g.2 == [1, 2, 3]).count();
+    let second = a.iter().filter(|g| g.2 == [4, 5, 6]).count();
+    println!(
+        "# python-can send_periodic 20 ms: {first} frames before modify_data, {second} after, \
+         {} with duration=0.3 s; python ran {:.1} s",
+        b.len(),
+        start.elapsed().as_secs_f64()
+    );
+    need(
+        first >= 5 && second >= 5,
+        format!("{first} old, {second} new frames, want >= 5 each"),
+    )?;
+    need(
+        first + second <= 80,
+        format!("{} frames in about 1 s at 20 ms", first + second),
+    )?;
+    let switched = a.iter().position(|g| g.2 == [4, 5, 6]).unwrap_or(0);
+    need(
+        a[switched..].iter().all(|g| g.2 == [4, 5, 6]),
+        "old data after modify_data",
+    )?;
+    need(
+        (3..=25).contains(&b.len()),
+        format!("duration=0.3 s gave {} frames", b.len()),
+    )?;
+    // stop() stopped: 0.5 s of silence before the second task.
+    let gap = b[0].0.saturating_duration_since(a[a.len() - 1].0);
+    need(
+        gap >= Duration::from_millis(300),
+        format!("only {gap:?} between the last frame before stop() and the next task"),
+    )?;
+    // duration ended the second task before bus.shutdown() 0.8 s later.
+    let span = b[b.len() - 1].0 - b[0].0;
+    need(
+        span <= Duration::from_millis(600),
+        format!("the duration=0.3 s task sent for {span:?}"),
+    )
+}
+
+/// CAN_FD_FRAME (72-byte frames) on a classic interface (MTU 16): TX_SETUP
+/// is accepted (returns 56 + 72) but nothing is sent; TX_SEND is refused
+/// by the send path (EMSGSIZE: larger than the MTU); TX_DELETE must name
+/// the operation with the flag.
+fn bcm_fd_on_classic_interface(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let rx = canraw::open(i0)?;
+    let mut fd = vec![0u8; 72];
+    fd[..4].copy_from_slice(&0x610u32.to_ne_bytes());
+    fd[4] = 12;
+    let h = Head {
+        flags: SETTIMER | STARTTIMER | CAN_FD_FRAME,
+        ..tx_head(0, 0, 0, 20_000, 0x610, 1)
+    };
+    let mut m = msg(h, &[]);
+    m.extend_from_slice(&fd);
+    let n = raw::write(&bcm, &m).or_fail("TX_SETUP CAN_FD_FRAME")?;
+    need(
+        n == MHSIZ + 72,
+        format!("TX_SETUP CAN_FD_FRAME returned {n}"),
+    )?;
+    let got = collect(&rx, 0x610, Duration::from_millis(200))?;
+    need(
+        got.is_empty(),
+        format!("{} frames sent on a classic interface", got.len()),
+    )?;
+    let mut send = msg(
+        Head {
+            opcode: TX_SEND,
+            nframes: 1,
+            ..h
+        },
+        &[],
+    );
+    send.extend_from_slice(&fd);
+    let e = write_errno(&bcm, &send, "TX_SEND CAN_FD_FRAME")?;
+    println!("# TX_SEND of a CAN FD frame on MTU 16: errno {e}");
+    need(
+        e == libc::EMSGSIZE,
+        format!("TX_SEND CAN_FD_FRAME: errno {e}, want EMSGSIZE"),
+    )?;
+    let del = Head {
+        opcode: TX_DELETE,
+        can_id: 0x610,
+        ..Head::default()
+    };
+    expect_errno(
+        &bcm,
+        &msg(del, &[]),
+        libc::EINVAL,
+        "TX_DELETE without CAN_FD_FRAME",
+    )?;
+    let n = write(
+        &bcm,
+        Head {
+            flags: CAN_FD_FRAME,
+            ..del
+        },
+        &[],
+    )?;
+    need(
+        n == MHSIZ,
+        format!("TX_DELETE with CAN_FD_FRAME returned {n}"),
+    )
+}
+
+/// TX_ANNOUNCE without timers sends one frame, once. TX_RESET_MULTI_IDX:
+/// an update of a running three-frame sequence made right after frame 0
+/// went out restarts it at frame 0 (without the flag it would go on with
+/// frame 1).
+fn bcm_tx_announce_and_reset_multi_idx(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let rx = canraw::open(i0)?;
+    write(
+        &bcm,
+        tx_head(TX_ANNOUNCE, 0, 0, 0, 0x620, 1),
+        &[frame_bytes(0x620, &[1])],
+    )?;
+    let got = collect(&rx, 0x620, Duration::from_millis(300))?;
+    need(
+        got.len() == 1,
+        format!("TX_ANNOUNCE sent {} frames, want 1", got.len()),
+    )?;
+
+    let old: Vec<[u8; 16]> = (0..3u8).map(|i| frame_bytes(0x621, &[i])).collect();
+    let new: Vec<[u8; 16]> = (0..3u8).map(|i| frame_bytes(0x621, &[0x10 + i])).collect();
+    write(
+        &bcm,
+        tx_head(SETTIMER | STARTTIMER, 0, 0, 150_000, 0x621, 3),
+        &old,
+    )?;
+    rx.set_read_timeout(Duration::from_secs(2))
+        .or_fail("SO_RCVTIMEO")?;
+    // Wait for frame 0 of a later round (the announce frame is frame 0 too).
+    let mut seen = 0;
+    loop {
+        let f = rx.read_frame().or_fail("waiting for frame 0")?;
+        if f.raw_id() == 0x621 {
+            seen += 1;
+            if seen > 1 && f.data() == [0] {
+                break;
+            }
+        }
+        need(seen < 10, "frame 0 did not come round")?;
+    }
+    write(&bcm, tx_head(TX_RESET_MULTI_IDX, 0, 0, 0, 0x621, 3), &new)?;
+    let got = collect(&rx, 0x621, Duration::from_millis(500))?;
+    let first_new = got.iter().find(|g| g.1[0] >= 0x10).map(|g| g.1[0]);
+    need(
+        first_new == Some(0x10),
+        format!("after TX_RESET_MULTI_IDX the first new frame was {first_new:x?}, want frame 0"),
+    )
+}
+
+/// RX_NO_AUTOTIMER: a frame cancels the STARTTIMER timeout and does not
+/// restart it, so no RX_TIMEOUT comes; the same setup without the flag
+/// (another identifier, same frames) gets its RX_TIMEOUT ival1 after the
+/// frame.
+fn bcm_rx_no_autotimer(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    let tx = canraw::open(i0)?;
+    let mask = |id| frame_bytes(id, &[0xff]);
+    let flags = SETTIMER | STARTTIMER;
+    write(
+        &bcm,
+        rx_head(flags | RX_NO_AUTOTIMER, 1_000_000, 0, 0x630, 1),
+        &[mask(0x630)],
+    )?;
+    write(&bcm, rx_head(flags, 1_000_000, 0, 0x631, 1), &[mask(0x631)])?;
+    canraw::send(&tx, &sff(0x630, &[1]))?;
+    canraw::send(&tx, &sff(0x631, &[1]))?;
+    let mut got = Vec::new();
+    while let Some(m) = recv(&bcm, Duration::from_millis(2500))? {
+        got.push((m.head.opcode, m.head.can_id));
+    }
+    let want = vec![
+        (RX_CHANGED, 0x630),
+        (RX_CHANGED, 0x631),
+        (RX_TIMEOUT, 0x631),
+    ];
+    need(got == want, format!("messages {got:x?}, want {want:x?}"))
+}
+
+/// A socket connected to ifindex 0 receives from every interface, and
+/// recvfrom names the interface of each frame.
+fn bcm_rx_any_interface(ctx: &mut Ctx) -> TestResult {
+    let ifs = ctx.bcm_ifaces(2)?;
+    let bcm = open(0)?;
+    write(&bcm, rx_head(RX_FILTER_ID, 0, 0, 0x640, 0), &[])?;
+    for &i in &ifs {
+        canraw::send(&canraw::open(i)?, &sff(0x640, &[i as u8]))?;
+    }
+    let mut got = Vec::new();
+    while let Some(m) = recv(&bcm, Duration::from_millis(300))? {
+        got.push((m.head.opcode, m.ifindex));
+    }
+    let want: Vec<(u32, u32)> = ifs.iter().map(|&i| (RX_CHANGED, i)).collect();
+    need(
+        got == want,
+        format!("(opcode, ifindex) {got:?}, want {want:?}"),
+    )
+}
