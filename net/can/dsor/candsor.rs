@@ -36,7 +36,6 @@
 
 use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use kernel::alloc::{flags::GFP_KERNEL, KBox, KVec};
-use kernel::ffi;
 use kernel::prelude::*;
 
 #[path = "../../../rust/glue/mod.rs"]
@@ -55,7 +54,10 @@ use glue::skb::Skb;
 use glue::sock::{Msg, Sock, SockRef};
 use glue::sync::{BhSpinLock, CWaitQueue, Rtnl, Waited};
 use kernel::c_str;
-use rcan_api::{KernelRx, KernelRxReg, ProtoModule, RxFilter, RX_FILTER_CAN_ID};
+use rcan_api::{
+    CanProtocol, KernelRx, KernelRxReg, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter,
+    Sockets, RX_FILTER_CAN_ID, SOCK_DGRAM,
+};
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG};
 use rcan_core::dsor_addr::{self, DsorAddr, DSOR_EPHEMERAL_MIN};
 use rcan_core::dsor_rx::{Delivered, Incoming, Limits, Reassembler};
@@ -1014,12 +1016,32 @@ struct DsorSock {
 
 struct DsorProto;
 
-static MODULE: ProtoModule<DsorProto> = ProtoModule::new(
-    CANPROTO_DSOR,
-    bindings::sock_type_SOCK_DGRAM as i32,
-    dsor_create,
-    dsor_notifier,
-);
+static MODULE: ProtoModule<DsorProto> = ProtoModule::new();
+
+impl CanProtocol for DsorProto {
+    const PROTOCOL: i32 = CANPROTO_DSOR;
+    const SOCK_TYPE: i32 = SOCK_DGRAM;
+
+    fn module() -> &'static ProtoModule<Self> {
+        &MODULE
+    }
+
+    /// The DSOR interface went down or away: every running transfer fails
+    /// with ENETDOWN, partial messages are dropped. Process context, RTNL
+    /// held. (DSOR sockets take frames through the engine's in-kernel
+    /// receiver, not per socket: the default `rx` is never called.)
+    fn netdev_event(_event: NetdevEvent, dev: &NetDev, _sockets: &Sockets<'_, Self>) {
+        {
+            let mut g = ENGINE.lock();
+            if let Some(e) = g.as_mut() {
+                if dev.name().as_bytes() == e.cfg.ifname.bytes() {
+                    e.fail_all(neterr::ENETDOWN().to_errno());
+                }
+            }
+        }
+        WAITQ.wake_all();
+    }
+}
 
 type S = Sock<DsorProto>;
 
@@ -1412,50 +1434,13 @@ fn start_udp(dst: u8, header: Header, payload: KVec<u8>) -> bool {
     }
 }
 
-/// `CanProto.create`: a new DSOR socket. Process context.
-unsafe extern "C" fn dsor_create(
-    net: *mut bindings::net,
-    sock: *mut bindings::socket,
-    protocol: ffi::c_int,
-    kern: ffi::c_int,
-) -> ffi::c_int {
-    // SAFETY: called by pf_can's create with the socket layer's arguments.
-    unsafe { MODULE.create_socket(net, sock, protocol, kern) }
-}
-
-/// Netdevice notifier: the DSOR interface went down or away: every
-/// running transfer fails with ENETDOWN, partial messages are dropped.
-/// Process context, RTNL held.
-unsafe extern "C" fn dsor_notifier(
-    _nb: *mut bindings::notifier_block,
-    event: ffi::c_ulong,
-    info: *mut ffi::c_void,
-) -> ffi::c_int {
-    if event != bindings::netdev_cmd_NETDEV_DOWN as ffi::c_ulong
-        && event != bindings::netdev_cmd_NETDEV_UNREGISTER as ffi::c_ulong
-    {
-        return bindings::NOTIFY_DONE as ffi::c_int;
-    }
-    // SAFETY: netdevice notifiers receive a netdev_notifier_info.
-    let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
-    {
-        let mut g = ENGINE.lock();
-        if let Some(e) = g.as_mut() {
-            if dev.name().as_bytes() == e.cfg.ifname.bytes() {
-                e.fail_all(neterr::ENETDOWN().to_errno());
-            }
-        }
-    }
-    WAITQ.wake_all();
-    bindings::NOTIFY_DONE as ffi::c_int
-}
-
 // ---------------------------------------------------------------------------
 // Module
 
 /// Registrations that pf_can and the network core hold; dropped in
-/// this order (receiver first, then canip0).
+/// this order (the protocol, then the receiver, then canip0).
 struct Regs {
+    _proto: ProtoRegistration<DsorProto>,
     _rx: KernelRxReg<DsorRx>,
     _canip: Option<udpip::Canip>,
 }
@@ -1559,8 +1544,9 @@ fn register_all(node: u8, canip: bool) -> Result<Regs> {
     } else {
         None
     };
-    MODULE.register(c_str!("CANPROTO_DSOR"))?;
+    let proto = MODULE.register(c_str!("CANPROTO_DSOR"))?;
     Ok(Regs {
+        _proto: proto,
         _rx: rx,
         _canip: canip,
     })
@@ -1596,10 +1582,10 @@ impl kernel::Module for DsorModule {
 
 impl Drop for DsorModule {
     fn drop(&mut self) {
-        // Sockets hold the module, so none is left when this runs.
-        MODULE.unregister();
-        // No receive callback runs after the receiver guard is dropped,
-        // and canip0's transmit path is gone with its registration.
+        // Sockets hold the module, so none is left when this runs. The
+        // protocol goes first (Regs' field order); no receive callback
+        // runs after the receiver guard is dropped, and canip0's transmit
+        // path is gone with its registration.
         self.regs = None;
         teardown_engine();
     }
