@@ -21,12 +21,10 @@
 //! * `MODULE.sockets` (every open socket, for the netdevice notifier) is protected
 //!   by RTNL.
 
-use kernel::prelude::*;
+#![forbid(unsafe_code)]
 
-#[path = "../../rust/glue/mod.rs"]
-mod glue;
-mod rcan_api;
-mod rcan_core;
+use crate::{glue, rcan_api, rcan_core};
+use kernel::prelude::*;
 
 use glue::bindings;
 use glue::netdev::{DevRef, NetDev};
@@ -41,14 +39,6 @@ use rcan_api::{
 use rcan_core::arb::{Arb, MAX_DLC};
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use rcan_core::sockaddr::{self, SockaddrArb, AF_UNSPEC, SOCKADDR_CANARB_LEN};
-
-module! {
-    type: CanProtoModule,
-    name: "rcan_can",
-    author: "rcan developers",
-    description: "CANPROTO_CAN: thesis CAN 2.0A/B socket protocol",
-    license: "GPL",
-}
 
 /// A CANPROTO_CAN socket's state, protected by its socket lock.
 #[derive(Default)]
@@ -321,7 +311,7 @@ fn send_one(sk: &S, dev: &DevRef, frame: &CanFrame, nonblock: bool) -> Result {
 }
 
 /// The module: its registrations, undone when it is dropped (unload).
-struct CanProtoModule {
+pub(crate) struct CanProtoModule {
     _reg: ProtoRegistration<CanProtoOps>,
 }
 

@@ -36,14 +36,10 @@
 //! handler registrations and every raw pointer are in the glue
 //! (`glue::can::family`), which calls the [`Family`] implementation here.
 
-use kernel::prelude::*;
+#![forbid(unsafe_code)]
 
-#[path = "../../rust/glue/can/family.rs"]
-mod family;
-#[path = "../../rust/glue/mod.rs"]
-mod glue;
-mod rcan_api;
-mod rcan_core;
+use crate::{family, glue, rcan_api, rcan_core};
+use kernel::prelude::*;
 
 use family::{Family, RxRequest, Target};
 use glue::can::rx::{RxTable, Spec};
@@ -54,14 +50,6 @@ use rcan_api::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use rcan_core::filter::ArbFilter;
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use rcan_core::rxtable::{self, CanFilterKind, Filter};
-
-module! {
-    type: PfCan,
-    name: "rcan_pf",
-    author: "rcan developers",
-    description: "PF_CAN protocol family (thesis pf_can)",
-    license: "GPL",
-}
 
 /// The receive table (RCU readers in softirq, `rcan_rx_mutex` for
 /// writers).
@@ -190,7 +178,7 @@ fn valid_frame(skb: &Skb, dev: &NetDev) -> Option<CanFrame> {
 }
 
 /// The module: PF_CAN and the packet handler while loaded.
-struct PfCan {
+pub(crate) struct PfCan {
     reg: Option<family::FamilyReg>,
 }
 

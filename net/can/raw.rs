@@ -30,13 +30,11 @@
 //! * `MODULE.sockets`, every open socket (for the notifier), is protected by
 //!   RTNL.
 
+#![forbid(unsafe_code)]
+
+use crate::{glue, rcan_api, rcan_core};
 use core::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use kernel::prelude::*;
-
-#[path = "../../rust/glue/mod.rs"]
-mod glue;
-mod rcan_api;
-mod rcan_core;
 
 use glue::bindings;
 use glue::netdev::{DevRef, NetDev};
@@ -50,14 +48,6 @@ use rcan_api::{
 };
 use rcan_core::frame::CAN_FRAME_LEN;
 use rcan_core::rxtable::CAN_ERR_MASK;
-
-module! {
-    type: RawModule,
-    name: "rcan_raw",
-    author: "rcan developers",
-    description: "CAN_RAW: SocketCAN-compatible raw CAN protocol",
-    license: "GPL",
-}
 
 /// `SOL_CAN_RAW` (`SOL_CAN_BASE + CAN_RAW`).
 const SOL_CAN_RAW: i32 = 101;
@@ -583,7 +573,7 @@ impl glue::sock::Proto for RawProto {
 }
 
 /// The module: its registrations, undone when it is dropped (unload).
-struct RawModule {
+pub(crate) struct RawModule {
     _reg: ProtoRegistration<RawProto>,
 }
 

@@ -7,6 +7,7 @@
 //! `rust/glue/can/abi.rs`; nothing here is `unsafe`.
 //!
 //! Not every includer uses every item.
+#![forbid(unsafe_code)]
 #![allow(unused_imports)]
 
 pub(crate) use crate::glue::can::proto::*;
