@@ -322,9 +322,10 @@ enum TxEntry {
 }
 
 /// A bound socket.
-#[derive(Clone, Copy)]
 struct Bind {
-    sk: usize,
+    /// The bound socket: the reference keeps it valid for the receive
+    /// path until `remove_bind` (from its release) drops the Bind.
+    sk: SockRef<DsorProto>,
     addr: DsorAddr,
 }
 
@@ -723,8 +724,9 @@ struct Queued {
 }
 
 /// Queues `skb` on every bound socket whose address `want`s it (clones
-/// for all but the last). Sockets in `binds` are alive: release removes
-/// them under the ENGINE lock, which the caller holds.
+/// for all but the last). Each Bind holds a reference on its socket, so
+/// they are valid here; release removes them under the ENGINE lock, which
+/// the caller holds.
 fn queue_to(
     binds: &[Bind],
     mut skb: Skb,
@@ -743,10 +745,7 @@ fn queue_to(
             skb.as_ref().and_then(|s| s.clone_atomic())
         };
         let Some(one) = one else { continue };
-        // SAFETY: `b.sk` is a bound socket, alive while it is in `binds`
-        // (see above).
-        let sock = unsafe { Sock::<DsorProto>::from_raw(b.sk as *mut bindings::sock) };
-        if sock.queue_rcv(one).is_ok() {
+        if b.sk.sock().queue_rcv(one).is_ok() {
             queued += 1;
         }
     }
@@ -1064,7 +1063,7 @@ fn add_bind(sk: &S, addr: DsorAddr) -> Result {
     e.binds
         .push(
             Bind {
-                sk: sk.as_ptr() as usize,
+                sk: sk.to_ref(),
                 addr,
             },
             kernel::alloc::flags::GFP_ATOMIC,
@@ -1079,7 +1078,7 @@ fn remove_bind(sk: &S) {
         let mut i = 0;
         let mut removed = false;
         while i < e.binds.len() {
-            if e.binds[i].sk == me {
+            if e.binds[i].sk.sock().as_ptr() as usize == me {
                 glue::kvec_swap_remove(&mut e.binds, i);
                 removed = true;
             } else {
