@@ -24,10 +24,11 @@
 //!   frames under it; socket receive queues (their own spinlock) are fed
 //!   under it, so the order is ENGINE -> queue lock.
 //! * Frames are not sent from the receive callback (which runs in NET_RX
-//!   softirq and could send, see rcan_api.rs `RxFn`; this protocol keeps
-//!   one sender): every frame is queued on `Engine::out` and sent by
-//!   [`Tick`], a soft hrtimer that is kicked to "now" whenever frames are
-//!   queued and otherwise armed for the earliest protocol deadline.
+//!   softirq and could send, see `KernelRx` in rust/glue/can/proto.rs;
+//!   this protocol keeps one sender): every frame is queued on
+//!   `Engine::out` and sent by [`Tick`], a soft hrtimer that is kicked to
+//!   "now" whenever frames are queued and otherwise armed for the earliest
+//!   protocol deadline.
 //! * Blocking senders sleep on [`WAITQ`] (defined in C) until their
 //!   transfer has finished; every finished transfer and every freed
 //!   channel wakes all waiters, which re-check under the lock.
@@ -378,6 +379,9 @@ struct Engine {
     out_head: usize,
     out_len: usize,
     binds: KVec<Bind>,
+    /// canip0 while it is registered (a counted reference, set by
+    /// `udpip::Canip::register`, taken back before it unregisters).
+    canip: Option<DevRef>,
     stats: Stats,
     /// A drainer ([`drain`], from [`Tick`] or from the receive callback)
     /// is running and will take every frame queued before it finds the
@@ -471,7 +475,7 @@ impl Engine {
             }
             Owner::Canip => {
                 if result != 0 {
-                    udpip::count_tx_error();
+                    udpip::count_tx_error(self.canip.as_deref());
                 }
             }
         }
@@ -577,12 +581,13 @@ impl Engine {
             }
             return kick;
         }
-        let canip_up = udpip::is_up();
+        let canip_up = udpip::is_up(self.canip.as_deref());
         let Engine {
             rx,
             binds,
             cfg,
             stats,
+            canip,
             ..
         } = self;
         let out = rx.on_frame_with(
@@ -590,7 +595,7 @@ impl Engine {
             data,
             now,
             |inc: &Incoming<'_>| accept(binds, canip_up, inc),
-            |d| deliver(binds, cfg, stats, d),
+            |d| deliver(binds, canip.as_deref(), cfg, stats, d),
         );
         match out.header_refused {
             None => {}
@@ -612,7 +617,7 @@ impl Engine {
     /// is refused, so their senders fail with ECONNREFUSED instead of
     /// sending the rest for nothing.
     fn refuse_orphans(&mut self) {
-        let canip_up = udpip::is_up();
+        let canip_up = udpip::is_up(self.canip.as_deref());
         let binds = &self.binds;
         let n = self.rx.refuse_partial(
             |inc: &Incoming<'_>| wanted(binds, canip_up, inc),
@@ -658,6 +663,7 @@ impl Engine {
 /// Under ENGINE (softirq or a driver's transmit path).
 fn deliver(
     binds: &[Bind],
+    canip: Option<&NetDev>,
     cfg: &Config,
     stats: &mut Stats,
     d: Delivered<RxBuf>,
@@ -674,7 +680,7 @@ fn deliver(
     cb[1] = prio;
     let q = match header.kind {
         MsgKind::Udp { dport, daddr } => {
-            udpip::deliver(skb, src, cfg.udp_saddr, daddr, dport).map(|()| Queued {
+            udpip::deliver(canip, skb, src, cfg.udp_saddr, daddr, dport).map(|()| Queued {
                 wanted: 1,
                 queued: 1,
             })
@@ -1523,6 +1529,7 @@ fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
             out_head: 0,
             out_len: 0,
             binds: KVec::new(),
+            canip: None,
             stats: Stats::default(),
             draining: false,
         },
