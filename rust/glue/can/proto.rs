@@ -139,17 +139,20 @@ pub(crate) trait CanProtocol: Proto {
 /// Only [`ProtoModule`] inserts, and only live socks of its protocol;
 /// each is removed by the protocol's `release` (under RTNL) before the
 /// sock can be freed.
-pub(crate) struct SockSet {
+pub(crate) struct SockSet<T: CanProtocol> {
     /// `SOCKSET_BUCKETS` vectors once the first socket arrives.
     buckets: kernel::alloc::KVec<kernel::alloc::KVec<usize>>,
+    /// Socks of `T` only: a set cannot be swapped with another protocol's.
+    _t: PhantomData<fn() -> T>,
 }
 
 const SOCKSET_BUCKETS: usize = 512;
 
-impl SockSet {
+impl<T: CanProtocol> SockSet<T> {
     pub(crate) const fn new() -> Self {
         SockSet {
             buckets: kernel::alloc::KVec::new(),
+            _t: PhantomData,
         }
     }
 
@@ -186,7 +189,7 @@ impl SockSet {
 /// The open sockets of protocol `T`, as its netdevice notifier sees them
 /// (RTNL held for `'a`).
 pub(crate) struct Sockets<'a, T: CanProtocol> {
-    set: &'a SockSet,
+    set: &'a SockSet<T>,
     _t: PhantomData<T>,
 }
 
@@ -216,7 +219,7 @@ pub(crate) struct ProtoModule<T: CanProtocol> {
     /// Every open socket, for the netdevice notifier. Protected by RTNL;
     /// a socket is listed from its creation until its `release` removes it
     /// ([`SockSet::remove`]).
-    pub(crate) sockets: RtnlLocked<SockSet>,
+    pub(crate) sockets: RtnlLocked<SockSet<T>>,
     canproto: CCell<CanProto>,
     notifier: CCell<bindings::notifier_block>,
 }
