@@ -14,40 +14,31 @@
 //! * System calls (process context) take RTNL, then the socket lock (the
 //!   order mainline raw.c uses), then pf_can's writers' mutex inside
 //!   `rcan_rx_set`.
-//! * `can_rx` runs in NET_RX softirq under RCU, for bus frames and echoes
+//! * `CanProtoOps::rx` runs in NET_RX softirq under RCU, for bus frames and echoes
 //!   alike; it only clones (or takes over) the skb and queues it on the
 //!   socket (receive-queue spinlock). (A receive callback may transmit;
 //!   this one has no reason to.)
 //! * `MODULE.sockets` (every open socket, for the netdevice notifier) is protected
 //!   by RTNL.
 
-use kernel::ffi;
-use kernel::prelude::*;
+#![forbid(unsafe_code)]
 
-#[path = "../../rust/glue/mod.rs"]
-mod glue;
-mod rcan_api;
-mod rcan_core;
+use crate::{glue, rcan_api, rcan_core};
+use kernel::prelude::*;
 
 use glue::bindings;
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
-use glue::skb::Skb;
 use glue::sock::{Msg, Sock};
 use glue::sync::{Rtnl, RtnlProof};
 use kernel::c_str;
-use rcan_api::{ProtoModule, RxFilter, CANPROTO_CAN, RX_FILTER_ARB};
+use rcan_api::{
+    CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets,
+    CANPROTO_CAN, RX_FILTER_ARB, SOCK_RAW,
+};
 use rcan_core::arb::{Arb, MAX_DLC};
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use rcan_core::sockaddr::{self, SockaddrArb, AF_UNSPEC, SOCKADDR_CANARB_LEN};
-
-module! {
-    type: CanProtoModule,
-    name: "rcan_can",
-    author: "rcan developers",
-    description: "CANPROTO_CAN: thesis CAN 2.0A/B socket protocol",
-    license: "GPL",
-}
 
 /// A CANPROTO_CAN socket's state, protected by its socket lock.
 #[derive(Default)]
@@ -61,12 +52,7 @@ struct CanSock {
 struct CanProtoOps;
 
 /// This module's registrations (proto, CAN protocol, notifier).
-static MODULE: ProtoModule<CanProtoOps> = ProtoModule::new(
-    CANPROTO_CAN,
-    bindings::sock_type_SOCK_RAW as i32,
-    can_create,
-    can_notifier,
-);
+static MODULE: ProtoModule<CanProtoOps> = ProtoModule::new();
 
 type S = Sock<CanProtoOps>;
 
@@ -74,38 +60,45 @@ type S = Sock<CanProtoOps>;
 /// accept our skbs too.
 const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
-/// Receive callback (see `rcan_api::RxFn`): NET_RX softirq, RCU read
-/// side. Every frame is delivered, the socket's own ones included (on
-/// canloop the sender sees its frames come back, thesis 5.3.5).
-unsafe extern "C" fn can_rx(
-    skb: *mut bindings::sk_buff,
-    owner: *mut ffi::c_void,
-    _cookie: u32,
-    owned: bool,
-) {
-    let sk: *mut bindings::sock = owner.cast();
-    // SAFETY: pf_can passes a valid skb, borrowed or owned as `owned` says,
-    // and a sock of ours that its receiver record keeps alive for the call.
-    let (skb, sk) = unsafe {
-        let Some(s) = Skb::from_raw(skb) else { return };
-        (s, S::from_raw(sk))
-    };
-    let mut skb = if owned {
-        skb
-    } else {
-        // Only borrowed: clone it and give the reference back.
-        let clone = skb.clone_atomic();
-        core::mem::forget(skb);
-        match clone {
-            Some(c) => c,
-            None => return,
+impl CanProtocol for CanProtoOps {
+    const PROTOCOL: i32 = CANPROTO_CAN;
+    const SOCK_TYPE: i32 = SOCK_RAW;
+
+    fn module() -> &'static ProtoModule<Self> {
+        &MODULE
+    }
+
+    /// NET_RX softirq, RCU read side. Every frame is delivered, the
+    /// socket's own ones included (on canloop the sender sees its frames
+    /// come back, thesis 5.3.5).
+    fn rx(sk: &S, skb: RxSkb<'_>, _cookie: u32) {
+        let Some(mut skb) = skb.into_owned() else {
+            return;
+        };
+        // The receiving interface may be gone by the time recvmsg runs.
+        let ifindex = skb.ifindex();
+        skb.set_cb_u32(0, ifindex as u32);
+        // A full receive queue drops the frame (counted by the socket layer).
+        let _ = sk.queue_rcv(skb);
+    }
+
+    /// A CAN device is going away. Process context, RTNL held. Sockets
+    /// bound to it lose their filter and get ENODEV once.
+    fn netdev_event(event: NetdevEvent, dev: &NetDev, sockets: &Sockets<'_, Self>) {
+        if event != NetdevEvent::Unregister || !dev.is_can() {
+            return;
         }
-    };
-    // The receiving interface may be gone by the time recvmsg runs.
-    let ifindex = skb.ifindex();
-    skb.set_cb_u32(0, ifindex as u32);
-    // A full receive queue drops the frame (counted by the socket layer).
-    let _ = sk.queue_rcv(skb);
+        let ifindex = dev.ifindex();
+        sockets.for_each(|sk| {
+            let mut s = sk.lock();
+            if matches!(s.bound, Some(b) if b.ifindex as i32 == ifindex) {
+                s.bound = None;
+                let _ = set_receivers(sk, None);
+                drop(s);
+                sk.report_error(-ENODEV.to_errno());
+            }
+        });
+    }
 }
 
 fn set_receivers(sk: &S, filter: Option<&SockaddrArb>) -> Result {
@@ -116,10 +109,10 @@ fn set_receivers(sk: &S, filter: Option<&SockaddrArb>) -> Result {
                 id: a.arb,
                 mask: a.mask,
             };
-            rcan_api::rx_set(can_rx, sk, 0, a.ifindex as i32, &[f], false, 0)
+            rcan_api::rx_set(sk, 0, a.ifindex as i32, &[f], false, 0)
         }
         None => {
-            rcan_api::rx_remove(can_rx, sk);
+            rcan_api::rx_remove(sk);
             Ok(())
         }
     }
@@ -317,61 +310,15 @@ fn send_one(sk: &S, dev: &DevRef, frame: &CanFrame, nonblock: bool) -> Result {
     rcan_api::send(skb, dev, true)
 }
 
-/// `CanProto.create`: a new CANPROTO_CAN socket. Process context.
-unsafe extern "C" fn can_create(
-    net: *mut bindings::net,
-    sock: *mut bindings::socket,
-    protocol: ffi::c_int,
-    kern: ffi::c_int,
-) -> ffi::c_int {
-    // SAFETY: called by pf_can's create with the socket layer's arguments.
-    unsafe { MODULE.create_socket(net, sock, protocol, kern) }
+/// The module: its registrations, undone when it is dropped (unload).
+pub(crate) struct CanProtoModule {
+    _reg: ProtoRegistration<CanProtoOps>,
 }
-
-/// Netdevice notifier: a CAN device is going away. Process context, RTNL
-/// held. Sockets bound to it lose their filter and get ENODEV once.
-unsafe extern "C" fn can_notifier(
-    _nb: *mut bindings::notifier_block,
-    event: ffi::c_ulong,
-    info: *mut ffi::c_void,
-) -> ffi::c_int {
-    if event != bindings::netdev_cmd_NETDEV_UNREGISTER as ffi::c_ulong {
-        return bindings::NOTIFY_DONE as ffi::c_int;
-    }
-    // SAFETY: netdevice notifiers receive a netdev_notifier_info.
-    let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
-    if !dev.is_can() {
-        return bindings::NOTIFY_DONE as ffi::c_int;
-    }
-    let ifindex = dev.ifindex();
-    let mut held = Rtnl::assert_held();
-    for &p in MODULE.sockets.get(&mut held).iter() {
-        // SAFETY: sockets are listed from create until release, which
-        // removes them under RTNL (held here), so `p` is alive.
-        let sk = unsafe { S::from_raw(p as *mut bindings::sock) };
-        let mut s = sk.lock();
-        if matches!(s.bound, Some(b) if b.ifindex as i32 == ifindex) {
-            s.bound = None;
-            let _ = set_receivers(&sk, None);
-            drop(s);
-            sk.report_error(-ENODEV.to_errno());
-        }
-    }
-    bindings::NOTIFY_DONE as ffi::c_int
-}
-
-struct CanProtoModule;
 
 impl kernel::Module for CanProtoModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        MODULE.register(c_str!("CANPROTO_CAN"))?;
+        let reg = MODULE.register(c_str!("CANPROTO_CAN"))?;
         pr_info!("CANPROTO_CAN ({}) registered\n", CANPROTO_CAN);
-        Ok(CanProtoModule)
-    }
-}
-
-impl Drop for CanProtoModule {
-    fn drop(&mut self) {
-        MODULE.unregister();
+        Ok(CanProtoModule { _reg: reg })
     }
 }

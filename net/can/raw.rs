@@ -22,7 +22,7 @@
 //!   the order of mainline raw.c; RTNL keeps the device from vanishing
 //!   between the check and the registration, and serialises with the
 //!   netdevice notifier.
-//! * `raw_rx`, the receive callback, runs in NET_RX softirq under RCU, for
+//! * `RawProto::rx`, the receive callback, runs in NET_RX softirq under RCU, for
 //!   bus frames and echoes alike (every frame comes up through the network
 //!   core; a receive callback may transmit, this one only queues). It
 //!   reads only its arguments (the socket's receive options travel in the
@@ -30,33 +30,24 @@
 //! * `MODULE.sockets`, every open socket (for the notifier), is protected by
 //!   RTNL.
 
-use core::sync::atomic::{AtomicBool, AtomicI32, Ordering};
-use kernel::ffi;
-use kernel::prelude::*;
+#![forbid(unsafe_code)]
 
-#[path = "../../rust/glue/mod.rs"]
-mod glue;
-mod rcan_api;
-mod rcan_core;
+use crate::{glue, rcan_api, rcan_core};
+use core::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+use kernel::prelude::*;
 
 use glue::bindings;
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
-use glue::skb::Skb;
 use glue::sock::{Msg, OptIn, OptOut, Sock};
 use glue::sync::Rtnl;
 use kernel::c_str;
-use rcan_api::{ProtoModule, RxFilter, CAN_RAW, RX_FILTER_CAN_ID};
+use rcan_api::{
+    CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets, CAN_RAW,
+    RX_FILTER_CAN_ID, SOCK_RAW,
+};
 use rcan_core::frame::CAN_FRAME_LEN;
 use rcan_core::rxtable::CAN_ERR_MASK;
-
-module! {
-    type: RawModule,
-    name: "rcan_raw",
-    author: "rcan developers",
-    description: "CAN_RAW: SocketCAN-compatible raw CAN protocol",
-    license: "GPL",
-}
 
 /// `SOL_CAN_RAW` (`SOL_CAN_BASE + CAN_RAW`).
 const SOL_CAN_RAW: i32 = 101;
@@ -156,66 +147,76 @@ impl RawSock {
 struct RawProto;
 
 /// This module's registrations (proto, CAN protocol, notifier).
-static MODULE: ProtoModule<RawProto> = ProtoModule::new(
-    CAN_RAW,
-    bindings::sock_type_SOCK_RAW as i32,
-    raw_create,
-    raw_notifier,
-);
+static MODULE: ProtoModule<RawProto> = ProtoModule::new();
 
 type S = Sock<RawProto>;
 
-/// Receive callback (see `rcan_api::RxFn`): NET_RX softirq, RCU read side.
-/// Mainline `raw_rcv`: own frames only with CAN_RAW_RECV_OWN_MSGS,
-/// MSG_DONTROUTE for frames sent from this host, MSG_CONFIRM for frames
-/// sent by this socket.
-unsafe extern "C" fn raw_rx(
-    skb: *mut bindings::sk_buff,
-    owner: *mut ffi::c_void,
-    cookie: u32,
-    owned: bool,
-) {
-    let sk: *mut bindings::sock = owner.cast();
-    // SAFETY: pf_can passes a valid skb, borrowed or owned as `owned` says,
-    // and a sock of ours that its receiver record keeps alive for the call.
-    let (skb, sock) = unsafe {
-        let Some(s) = Skb::from_raw(skb) else { return };
-        (s, S::from_raw(sk))
-    };
-    let origin = skb.sk_ptr();
-    let own = origin == sk;
-    if own && cookie & COOKIE_RECV_OWN == 0 {
-        if owned {
-            skb.consume();
-        } else {
-            core::mem::forget(skb);
+impl CanProtocol for RawProto {
+    const PROTOCOL: i32 = CAN_RAW;
+    const SOCK_TYPE: i32 = SOCK_RAW;
+
+    fn module() -> &'static ProtoModule<Self> {
+        &MODULE
+    }
+
+    /// NET_RX softirq, RCU read side. Mainline `raw_rcv`: own frames only
+    /// with CAN_RAW_RECV_OWN_MSGS, MSG_DONTROUTE for frames sent from this
+    /// host, MSG_CONFIRM for frames sent by this socket.
+    fn rx(sk: &S, skb: RxSkb<'_>, cookie: u32) {
+        let origin = skb.skb().sk_ptr();
+        let own = origin == sk.as_ptr();
+        if own && cookie & COOKIE_RECV_OWN == 0 {
+            skb.done();
+            return;
         }
-        return;
-    }
-    let mut flags = 0u32;
-    if !origin.is_null() {
-        flags |= bindings::MSG_DONTROUTE;
-    }
-    if own {
-        flags |= bindings::MSG_CONFIRM;
-    }
-    let mut skb = if owned {
-        skb
-    } else {
-        let clone = skb.clone_atomic();
-        core::mem::forget(skb);
-        match clone {
-            Some(c) => c,
-            None => return,
+        let mut flags = 0u32;
+        if !origin.is_null() {
+            flags |= bindings::MSG_DONTROUTE;
         }
-    };
-    let mut name = [0u8; RAW_MIN_NAMELEN];
-    name[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
-    name[4..].copy_from_slice(&skb.ifindex().to_ne_bytes());
-    skb.cb_write(CB_NAME, &name);
-    skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
-    // A full receive queue drops the frame (counted by the socket layer).
-    let _ = sock.queue_rcv(skb);
+        if own {
+            flags |= bindings::MSG_CONFIRM;
+        }
+        let Some(mut skb) = skb.into_owned() else {
+            return;
+        };
+        let mut name = [0u8; RAW_MIN_NAMELEN];
+        name[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
+        name[4..].copy_from_slice(&skb.ifindex().to_ne_bytes());
+        skb.cb_write(CB_NAME, &name);
+        skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
+        // A full receive queue drops the frame (counted by the socket layer).
+        let _ = sk.queue_rcv(skb);
+    }
+
+    /// Mainline `raw_notify`. Process context, RTNL held. Sockets bound to
+    /// a CAN device that goes away lose their filters and get ENODEV;
+    /// those bound to one that goes down get ENETDOWN.
+    fn netdev_event(event: NetdevEvent, dev: &NetDev, sockets: &Sockets<'_, Self>) {
+        if !dev.is_can() {
+            return;
+        }
+        let ifindex = dev.ifindex();
+        sockets.for_each(|sk| {
+            let mut s = sk.lock();
+            if !s.bound || s.ifindex != ifindex {
+                return;
+            }
+            let errno = if event == NetdevEvent::Unregister {
+                unregister(sk);
+                s.bound = false;
+                s.ifindex = 0;
+                sk.shared().ifindex.store(0, Ordering::Relaxed);
+                // Mainline forgets the filters too: a new bind receives
+                // nothing until CAN_RAW_FILTER is set again.
+                s.filters = Some(KVec::new());
+                bindings::ENODEV
+            } else {
+                bindings::ENETDOWN
+            };
+            drop(s);
+            sk.report_error(errno as i32);
+        });
+    }
 }
 
 /// (Re)registers the socket's receiver from its current state, or removes
@@ -223,7 +224,7 @@ unsafe extern "C" fn raw_rx(
 /// the socket lock (passes the locked state in `s`).
 fn register(sk: &S, s: &RawSock) -> Result {
     if !s.bound {
-        rcan_api::rx_remove(raw_rx, sk);
+        rcan_api::rx_remove(sk);
         return Ok(());
     }
     let fs = s.filters();
@@ -239,7 +240,6 @@ fn register(sk: &S, s: &RawSock) -> Result {
         )?;
     }
     rcan_api::rx_set(
-        raw_rx,
         sk,
         s.cookie(),
         s.ifindex,
@@ -250,7 +250,7 @@ fn register(sk: &S, s: &RawSock) -> Result {
 }
 
 fn unregister(sk: &S) {
-    rcan_api::rx_remove(raw_rx, sk);
+    rcan_api::rx_remove(sk);
 }
 
 /// Parses the `can_family`/`can_ifindex` part of a `struct sockaddr_can`.
@@ -572,75 +572,15 @@ impl glue::sock::Proto for RawProto {
     }
 }
 
-/// `CanProto.create`: a new CAN_RAW socket. Process context.
-unsafe extern "C" fn raw_create(
-    net: *mut bindings::net,
-    sock: *mut bindings::socket,
-    protocol: ffi::c_int,
-    kern: ffi::c_int,
-) -> ffi::c_int {
-    // SAFETY: called by pf_can's create with the socket layer's arguments.
-    unsafe { MODULE.create_socket(net, sock, protocol, kern) }
+/// The module: its registrations, undone when it is dropped (unload).
+pub(crate) struct RawModule {
+    _reg: ProtoRegistration<RawProto>,
 }
-
-/// Netdevice notifier (mainline `raw_notify`). Process context, RTNL held.
-/// Sockets bound to a device that goes away lose their filters and get
-/// ENODEV; those bound to a device that goes down get ENETDOWN.
-unsafe extern "C" fn raw_notifier(
-    _nb: *mut bindings::notifier_block,
-    event: ffi::c_ulong,
-    info: *mut ffi::c_void,
-) -> ffi::c_int {
-    let unregister_ev = event == bindings::netdev_cmd_NETDEV_UNREGISTER as ffi::c_ulong;
-    let down_ev = event == bindings::netdev_cmd_NETDEV_DOWN as ffi::c_ulong;
-    if !unregister_ev && !down_ev {
-        return bindings::NOTIFY_DONE as ffi::c_int;
-    }
-    // SAFETY: netdevice notifiers receive a netdev_notifier_info.
-    let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
-    if !dev.is_can() {
-        return bindings::NOTIFY_DONE as ffi::c_int;
-    }
-    let ifindex = dev.ifindex();
-    let mut held = Rtnl::assert_held();
-    for &p in MODULE.sockets.get(&mut held).iter() {
-        // SAFETY: sockets are listed from create until release, which
-        // removes them under RTNL (held here), so `p` is alive.
-        let sk = unsafe { S::from_raw(p as *mut bindings::sock) };
-        let mut s = sk.lock();
-        if !s.bound || s.ifindex != ifindex {
-            continue;
-        }
-        let errno = if unregister_ev {
-            unregister(&sk);
-            s.bound = false;
-            s.ifindex = 0;
-            sk.shared().ifindex.store(0, Ordering::Relaxed);
-            // Mainline forgets the filters too: a new bind receives
-            // nothing until CAN_RAW_FILTER is set again.
-            s.filters = Some(KVec::new());
-            bindings::ENODEV
-        } else {
-            bindings::ENETDOWN
-        };
-        drop(s);
-        sk.report_error(errno as i32);
-    }
-    bindings::NOTIFY_DONE as ffi::c_int
-}
-
-struct RawModule;
 
 impl kernel::Module for RawModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        MODULE.register(c_str!("CAN_RAW"))?;
+        let reg = MODULE.register(c_str!("CAN_RAW"))?;
         pr_info!("CAN_RAW ({}) registered\n", CAN_RAW);
-        Ok(RawModule)
-    }
-}
-
-impl Drop for RawModule {
-    fn drop(&mut self) {
-        MODULE.unregister();
+        Ok(RawModule { _reg: reg })
     }
 }

@@ -24,10 +24,11 @@
 //!   frames under it; socket receive queues (their own spinlock) are fed
 //!   under it, so the order is ENGINE -> queue lock.
 //! * Frames are not sent from the receive callback (which runs in NET_RX
-//!   softirq and could send, see rcan_api.rs `RxFn`; this protocol keeps
-//!   one sender): every frame is queued on `Engine::out` and sent by
-//!   [`Tick`], a soft hrtimer that is kicked to "now" whenever frames are
-//!   queued and otherwise armed for the earliest protocol deadline.
+//!   softirq and could send, see `KernelRx` in rust/glue/can/proto.rs;
+//!   this protocol keeps one sender): every frame is queued on
+//!   `Engine::out` and sent by [`Tick`], a soft hrtimer that is kicked to
+//!   "now" whenever frames are queued and otherwise armed for the earliest
+//!   protocol deadline.
 //! * Blocking senders sleep on [`WAITQ`] (defined in C) until their
 //!   transfer has finished; every finished transfer and every freed
 //!   channel wakes all waiters, which re-check under the lock.
@@ -36,7 +37,6 @@
 
 use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use kernel::alloc::{flags::GFP_KERNEL, KBox, KVec};
-use kernel::ffi;
 use kernel::prelude::*;
 
 #[path = "../../../rust/glue/mod.rs"]
@@ -55,7 +55,10 @@ use glue::skb::Skb;
 use glue::sock::{Msg, Sock, SockRef};
 use glue::sync::{BhSpinLock, CWaitQueue, Rtnl, Waited};
 use kernel::c_str;
-use rcan_api::{KernelRx, KernelRxReg, ProtoModule, RxFilter, RX_FILTER_CAN_ID};
+use rcan_api::{
+    CanProtocol, KernelRx, KernelRxReg, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter,
+    Sockets, RX_FILTER_CAN_ID, SOCK_DGRAM,
+};
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG};
 use rcan_core::dsor_addr::{self, DsorAddr, DSOR_EPHEMERAL_MIN};
 use rcan_core::dsor_rx::{Delivered, Incoming, Limits, Reassembler};
@@ -320,9 +323,10 @@ enum TxEntry {
 }
 
 /// A bound socket.
-#[derive(Clone, Copy)]
 struct Bind {
-    sk: usize,
+    /// The bound socket: the reference keeps it valid for the receive
+    /// path until `remove_bind` (from its release) drops the Bind.
+    sk: SockRef<DsorProto>,
     addr: DsorAddr,
 }
 
@@ -375,6 +379,9 @@ struct Engine {
     out_head: usize,
     out_len: usize,
     binds: KVec<Bind>,
+    /// canip0 while it is registered (a counted reference, set by
+    /// `udpip::Canip::register`, taken back before it unregisters).
+    canip: Option<DevRef>,
     stats: Stats,
     /// A drainer ([`drain`], from [`Tick`] or from the receive callback)
     /// is running and will take every frame queued before it finds the
@@ -468,7 +475,7 @@ impl Engine {
             }
             Owner::Canip => {
                 if result != 0 {
-                    udpip::count_tx_error();
+                    udpip::count_tx_error(self.canip.as_deref());
                 }
             }
         }
@@ -574,12 +581,13 @@ impl Engine {
             }
             return kick;
         }
-        let canip_up = udpip::is_up();
+        let canip_up = udpip::is_up(self.canip.as_deref());
         let Engine {
             rx,
             binds,
             cfg,
             stats,
+            canip,
             ..
         } = self;
         let out = rx.on_frame_with(
@@ -587,7 +595,7 @@ impl Engine {
             data,
             now,
             |inc: &Incoming<'_>| accept(binds, canip_up, inc),
-            |d| deliver(binds, cfg, stats, d),
+            |d| deliver(binds, canip.as_deref(), cfg, stats, d),
         );
         match out.header_refused {
             None => {}
@@ -609,7 +617,7 @@ impl Engine {
     /// is refused, so their senders fail with ECONNREFUSED instead of
     /// sending the rest for nothing.
     fn refuse_orphans(&mut self) {
-        let canip_up = udpip::is_up();
+        let canip_up = udpip::is_up(self.canip.as_deref());
         let binds = &self.binds;
         let n = self.rx.refuse_partial(
             |inc: &Incoming<'_>| wanted(binds, canip_up, inc),
@@ -655,6 +663,7 @@ impl Engine {
 /// Under ENGINE (softirq or a driver's transmit path).
 fn deliver(
     binds: &[Bind],
+    canip: Option<&NetDev>,
     cfg: &Config,
     stats: &mut Stats,
     d: Delivered<RxBuf>,
@@ -671,7 +680,7 @@ fn deliver(
     cb[1] = prio;
     let q = match header.kind {
         MsgKind::Udp { dport, daddr } => {
-            udpip::deliver(skb, src, cfg.udp_saddr, daddr, dport).map(|()| Queued {
+            udpip::deliver(canip, skb, src, cfg.udp_saddr, daddr, dport).map(|()| Queued {
                 wanted: 1,
                 queued: 1,
             })
@@ -721,8 +730,9 @@ struct Queued {
 }
 
 /// Queues `skb` on every bound socket whose address `want`s it (clones
-/// for all but the last). Sockets in `binds` are alive: release removes
-/// them under the ENGINE lock, which the caller holds.
+/// for all but the last). Each Bind holds a reference on its socket, so
+/// they are valid here; release removes them under the ENGINE lock, which
+/// the caller holds.
 fn queue_to(
     binds: &[Bind],
     mut skb: Skb,
@@ -741,10 +751,7 @@ fn queue_to(
             skb.as_ref().and_then(|s| s.clone_atomic())
         };
         let Some(one) = one else { continue };
-        // SAFETY: `b.sk` is a bound socket, alive while it is in `binds`
-        // (see above).
-        let sock = unsafe { Sock::<DsorProto>::from_raw(b.sk as *mut bindings::sock) };
-        if sock.queue_rcv(one).is_ok() {
+        if b.sk.sock().queue_rcv(one).is_ok() {
             queued += 1;
         }
     }
@@ -1014,12 +1021,32 @@ struct DsorSock {
 
 struct DsorProto;
 
-static MODULE: ProtoModule<DsorProto> = ProtoModule::new(
-    CANPROTO_DSOR,
-    bindings::sock_type_SOCK_DGRAM as i32,
-    dsor_create,
-    dsor_notifier,
-);
+static MODULE: ProtoModule<DsorProto> = ProtoModule::new();
+
+impl CanProtocol for DsorProto {
+    const PROTOCOL: i32 = CANPROTO_DSOR;
+    const SOCK_TYPE: i32 = SOCK_DGRAM;
+
+    fn module() -> &'static ProtoModule<Self> {
+        &MODULE
+    }
+
+    /// The DSOR interface went down or away: every running transfer fails
+    /// with ENETDOWN, partial messages are dropped. Process context, RTNL
+    /// held. (DSOR sockets take frames through the engine's in-kernel
+    /// receiver, not per socket: the default `rx` is never called.)
+    fn netdev_event(_event: NetdevEvent, dev: &NetDev, _sockets: &Sockets<'_, Self>) {
+        {
+            let mut g = ENGINE.lock();
+            if let Some(e) = g.as_mut() {
+                if dev.name().as_bytes() == e.cfg.ifname.bytes() {
+                    e.fail_all(neterr::ENETDOWN().to_errno());
+                }
+            }
+        }
+        WAITQ.wake_all();
+    }
+}
 
 type S = Sock<DsorProto>;
 
@@ -1042,7 +1069,7 @@ fn add_bind(sk: &S, addr: DsorAddr) -> Result {
     e.binds
         .push(
             Bind {
-                sk: sk.as_ptr() as usize,
+                sk: sk.to_ref(),
                 addr,
             },
             kernel::alloc::flags::GFP_ATOMIC,
@@ -1057,7 +1084,7 @@ fn remove_bind(sk: &S) {
         let mut i = 0;
         let mut removed = false;
         while i < e.binds.len() {
-            if e.binds[i].sk == me {
+            if e.binds[i].sk.sock().as_ptr() as usize == me {
                 glue::kvec_swap_remove(&mut e.binds, i);
                 removed = true;
             } else {
@@ -1412,50 +1439,13 @@ fn start_udp(dst: u8, header: Header, payload: KVec<u8>) -> bool {
     }
 }
 
-/// `CanProto.create`: a new DSOR socket. Process context.
-unsafe extern "C" fn dsor_create(
-    net: *mut bindings::net,
-    sock: *mut bindings::socket,
-    protocol: ffi::c_int,
-    kern: ffi::c_int,
-) -> ffi::c_int {
-    // SAFETY: called by pf_can's create with the socket layer's arguments.
-    unsafe { MODULE.create_socket(net, sock, protocol, kern) }
-}
-
-/// Netdevice notifier: the DSOR interface went down or away: every
-/// running transfer fails with ENETDOWN, partial messages are dropped.
-/// Process context, RTNL held.
-unsafe extern "C" fn dsor_notifier(
-    _nb: *mut bindings::notifier_block,
-    event: ffi::c_ulong,
-    info: *mut ffi::c_void,
-) -> ffi::c_int {
-    if event != bindings::netdev_cmd_NETDEV_DOWN as ffi::c_ulong
-        && event != bindings::netdev_cmd_NETDEV_UNREGISTER as ffi::c_ulong
-    {
-        return bindings::NOTIFY_DONE as ffi::c_int;
-    }
-    // SAFETY: netdevice notifiers receive a netdev_notifier_info.
-    let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
-    {
-        let mut g = ENGINE.lock();
-        if let Some(e) = g.as_mut() {
-            if dev.name().as_bytes() == e.cfg.ifname.bytes() {
-                e.fail_all(neterr::ENETDOWN().to_errno());
-            }
-        }
-    }
-    WAITQ.wake_all();
-    bindings::NOTIFY_DONE as ffi::c_int
-}
-
 // ---------------------------------------------------------------------------
 // Module
 
 /// Registrations that pf_can and the network core hold; dropped in
-/// this order (receiver first, then canip0).
+/// this order (the protocol, then the receiver, then canip0).
 struct Regs {
+    _proto: ProtoRegistration<DsorProto>,
     _rx: KernelRxReg<DsorRx>,
     _canip: Option<udpip::Canip>,
 }
@@ -1539,6 +1529,7 @@ fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
             out_head: 0,
             out_len: 0,
             binds: KVec::new(),
+            canip: None,
             stats: Stats::default(),
             draining: false,
         },
@@ -1559,8 +1550,9 @@ fn register_all(node: u8, canip: bool) -> Result<Regs> {
     } else {
         None
     };
-    MODULE.register(c_str!("CANPROTO_DSOR"))?;
+    let proto = MODULE.register(c_str!("CANPROTO_DSOR"))?;
     Ok(Regs {
+        _proto: proto,
         _rx: rx,
         _canip: canip,
     })
@@ -1596,10 +1588,10 @@ impl kernel::Module for DsorModule {
 
 impl Drop for DsorModule {
     fn drop(&mut self) {
-        // Sockets hold the module, so none is left when this runs.
-        MODULE.unregister();
-        // No receive callback runs after the receiver guard is dropped,
-        // and canip0's transmit path is gone with its registration.
+        // Sockets hold the module, so none is left when this runs. The
+        // protocol goes first (Regs' field order); no receive callback
+        // runs after the receiver guard is dropped, and canip0's transmit
+        // path is gone with its registration.
         self.regs = None;
         teardown_engine();
     }

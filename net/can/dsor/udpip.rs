@@ -13,24 +13,23 @@
 //! Contexts: `start_xmit` runs with BH disabled (qdisc or direct
 //! transmit) and only starts a transfer under the engine lock;
 //! [`deliver`] runs under the engine lock in the receive path.
-//! [`DEV`] is the registered device: set after registration, cleared
-//! before unregistration, read under the engine lock or in the device's
-//! own callbacks.
+//! The engine keeps a counted reference on the registered device
+//! (`Engine::canip`, under the engine lock): set after registration,
+//! taken back before unregistration; the functions here get it from
+//! their caller, who holds the engine lock.
 
-use core::sync::atomic::{AtomicPtr, AtomicU16, Ordering};
+use core::sync::atomic::{AtomicU16, Ordering};
 use kernel::alloc::KVec;
 use kernel::prelude::*;
 
 use super::glue::bindings;
-use super::glue::netdev::{Dev, Driver, NetDev, Registration, Setup, Xmit};
+use super::glue::netdev::{Dev, DevRef, Driver, NetDev, Registration, Setup, Xmit};
 use super::glue::skb::Skb;
 use super::rcan_core::dsor_addr::udp_node;
 use super::rcan_core::dsor_udp::{self, HDR_LEN};
 use super::rcan_core::dsor_wire::{AckStatus, Header, MsgKind};
 use kernel::c_str;
 
-/// The registered canip device, or NULL.
-static DEV: AtomicPtr<bindings::net_device> = AtomicPtr::new(core::ptr::null_mut());
 /// IPv4 identification of rebuilt headers.
 static IP_ID: AtomicU16 = AtomicU16::new(1);
 
@@ -45,7 +44,13 @@ impl Canip {
     /// Registers `canip%d`. Process context.
     pub(crate) fn register() -> Result<Canip> {
         let reg = Registration::<CanipDriver>::register(c_str!("canip%d"), ())?;
-        DEV.store(reg.dev().as_ptr(), Ordering::Release);
+        // The index names our device until we unregister it (dropping
+        // `reg` on an error return does).
+        let dev = DevRef::by_index(reg.dev().ifindex()).ok_or(ENODEV)?;
+        match super::ENGINE.lock().as_mut() {
+            Some(e) => e.canip = Some(dev),
+            None => return Err(ENODEV),
+        }
         pr_info!("{}: UDP/IP over DSOR\n", reg.dev().name());
         Ok(Canip { reg: Some(reg) })
     }
@@ -53,35 +58,24 @@ impl Canip {
 
 impl Drop for Canip {
     fn drop(&mut self) {
-        // The receive callback is gone before this runs (see DsorModule),
-        // and it read DEV only under the engine lock.
-        {
-            let _g = super::ENGINE.lock();
-            DEV.store(core::ptr::null_mut(), Ordering::Release);
-        }
+        // Nothing reaches canip0 through the engine after this: every user
+        // holds the engine lock. The reference is dropped outside it, and
+        // before unregistering (which waits for every reference).
+        let dev = super::ENGINE.lock().as_mut().and_then(|e| e.canip.take());
+        drop(dev);
         self.reg = None;
     }
 }
 
-fn dev() -> Option<&'static NetDev> {
-    let p = DEV.load(Ordering::Acquire);
-    if p.is_null() {
-        return None;
-    }
-    // SAFETY: DEV is a registered device until Canip's drop clears it
-    // under the engine lock, before unregistering; callers hold that lock
-    // or run in the device's own callbacks.
-    Some(unsafe { NetDev::from_raw(p) })
-}
-
-/// Whether canip0 exists and is up (engine lock held).
-pub(crate) fn is_up() -> bool {
-    dev().is_some_and(|d| d.is_up())
+/// Whether canip0 exists and is up (engine lock held, `canip` from the
+/// engine).
+pub(crate) fn is_up(canip: Option<&NetDev>) -> bool {
+    canip.is_some_and(|d| d.is_up())
 }
 
 /// Counts a UDP/IP message that could not be delivered to its peer.
-pub(crate) fn count_tx_error() {
-    if let Some(d) = dev() {
+pub(crate) fn count_tx_error(canip: Option<&NetDev>) {
+    if let Some(d) = canip {
         d.stats_tx_dropped();
     }
 }
@@ -92,13 +86,14 @@ pub(crate) fn count_tx_error() {
 /// and the error is the status its last frame is acked with: REFUSED when
 /// canip0 is gone or down, NO_MEMORY when the headers do not fit.
 pub(crate) fn deliver(
+    canip: Option<&NetDev>,
     mut skb: Skb,
     _src: u8,
     saddr: u32,
     daddr: u32,
     dport: u16,
 ) -> Result<(), AckStatus> {
-    let Some(d) = dev() else {
+    let Some(d) = canip else {
         return Err(AckStatus::Refused);
     };
     if !d.is_up() {

@@ -2,6 +2,15 @@
 
 //! The CAN framework the protocols and drivers build on.
 //!
+//! * [`proto`]: the typed protocol framework (protocol registration,
+//!   receive subscriptions, in-kernel receivers, filter listeners,
+//!   sending) that protocols and drivers use.
+//! * [`abi`]: the C ABI between the modules underneath it.
 //! * [`rx`]: the incremental receive table of `rcan_pf`.
+//!
+//! `family.rs` (the PF_CAN family and the C entry points `rcan_pf`
+//! exports) is compiled into `rcan_pf` only, by `pf_can_main.rs`.
 
+pub(crate) mod abi;
+pub(crate) mod proto;
 pub(crate) mod rx;

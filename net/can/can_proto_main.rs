@@ -1,0 +1,26 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! Crate root of `rcan_can`: the CANPROTO_CAN protocol in [`can_proto`] (`can_proto.rs`, which
+//! is `#![forbid(unsafe_code)]`), the glue it builds on (`rust/glue/`, the
+//! only place with `unsafe` code) and the shared pure logic
+//! (`rcan_core`). Nothing else lives here: the module declaration must be
+//! at the crate root (`module!` defines the crate's log prefix).
+
+use kernel::prelude::*;
+
+#[path = "../../rust/glue/mod.rs"]
+mod glue;
+mod rcan_api;
+mod rcan_core;
+
+mod can_proto;
+
+use can_proto::CanProtoModule;
+
+module! {
+    type: CanProtoModule,
+    name: "rcan_can",
+    author: "rcan developers",
+    description: "CANPROTO_CAN: thesis CAN 2.0A/B socket protocol",
+    license: "GPL",
+}

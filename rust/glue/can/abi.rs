@@ -1,0 +1,157 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The C ABI between `rcan_pf` and the modules above and below it: the
+//! `#[repr(C)]` structs, function-pointer types and `extern "C"`
+//! declarations of the functions `rcan_pf` exports (defined in
+//! `family.rs`, which only `pf_can_main.rs` compiles, exported by
+//! `pf_can_c.c`).
+//!
+//! Nothing outside `rust/glue/can/` uses this file: protocols and drivers
+//! see the typed API of [`super::proto`] instead. All modules are built
+//! from one tree, so the ABI may change freely; it is C only because the
+//! modules are separate crates linked by the kernel's module loader.
+#![allow(dead_code, improper_ctypes)]
+
+use crate::glue::bindings;
+use kernel::ffi;
+
+/// Size of the protocol table (`CANPROTO_MAX` in `<linux/can/rcan.h>`).
+pub(crate) const CANPROTO_MAX: usize = 24;
+
+/// A CAN protocol (thesis `struct can_proto`, 5.3.1). Lives in a static of
+/// the protocol's module (inside its [`super::proto::ProtoModule`]);
+/// `owner` is that module.
+#[repr(C)]
+pub(crate) struct CanProto {
+    pub(crate) protocol: ffi::c_int,
+    /// SOCK_RAW, SOCK_DGRAM, ...: socket() with another type gets EPROTOTYPE.
+    pub(crate) type_: ffi::c_int,
+    pub(crate) owner: *mut bindings::module,
+    /// Initialises a new socket. Process context; may sleep. Called with a
+    /// reference held on `owner`.
+    pub(crate) create: CreateFn,
+}
+
+/// `net_proto_family.create` / [`CanProto::create`].
+pub(crate) type CreateFn = unsafe extern "C" fn(
+    net: *mut bindings::net,
+    sock: *mut bindings::socket,
+    protocol: ffi::c_int,
+    kern: ffi::c_int,
+) -> ffi::c_int;
+
+// SAFETY: a CanProto is immutable once registered; `owner` is only passed
+// to try_module_get/module_put, which are safe from any thread.
+unsafe impl Send for CanProto {}
+// SAFETY: as above.
+unsafe impl Sync for CanProto {}
+
+/// [`RxFilter::kind`]: thesis filter, `id`/`mask` are an arbitration field
+/// pattern and mask (mask bit 1 = don't care, thesis 5.2.4).
+pub(crate) const RX_FILTER_ARB: u32 = 0;
+/// [`RxFilter::kind`]: mainline `struct can_filter` (`can_id`, `can_mask`,
+/// `CAN_INV_FILTER`; a mask with `CAN_ERR_FLAG` selects error frames).
+pub(crate) const RX_FILTER_CAN_ID: u32 = 1;
+
+/// One acceptance filter of a receiver.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub(crate) struct RxFilter {
+    pub(crate) kind: u32,
+    pub(crate) id: u32,
+    pub(crate) mask: u32,
+}
+
+/// What a receiver wants: frames on `ifindex` (0 = every CAN interface)
+/// passing any of `filters` (all of them with `join`), and error frames
+/// whose class bits meet `err_mask`.
+#[repr(C)]
+pub(crate) struct RxSpec {
+    pub(crate) ifindex: i32,
+    pub(crate) join: bool,
+    pub(crate) err_mask: u32,
+    pub(crate) filters: *const RxFilter,
+    pub(crate) nfilters: usize,
+}
+
+/// Receive callback. NET_RX softirq context (pf_can's ETH_P_CAN packet
+/// handler), under `rcu_read_lock`; must not sleep. Called at most once
+/// per frame and receiver.
+///
+/// `skb` is the received frame. With `owned` false it is borrowed for the
+/// call; with `owned` true the callee owns the reference (it is then the
+/// last receiver, and the skb is not shared). `owner` and `cookie` are
+/// what the receiver registered: its `struct sock` ([`rcan_rx_set`]) or
+/// its data ([`rcan_rx_set_kernel`]). The typed side of this is
+/// [`super::proto::RxSkb`]: the flag never leaves the glue.
+pub(crate) type RxFn = unsafe extern "C" fn(
+    skb: *mut bindings::sk_buff,
+    owner: *mut ffi::c_void,
+    cookie: u32,
+    owned: bool,
+);
+
+/// Called after every change of the filters wanted on the listener's
+/// interface (process context, under pf_can's `rcan_pf_mutex`: may not
+/// sleep for long; must not call back into the registry functions).
+pub(crate) type ListenFn = unsafe extern "C" fn(data: *mut ffi::c_void);
+
+extern "C" {
+    /// Adds (`add`) or removes the listener (`func`, `data`), called after
+    /// every change of the filters that apply to interface `ifindex`
+    /// (registrations on it or on every interface). Removal returns only
+    /// after any running call has finished. Process context. ENOMEM.
+    pub(crate) fn rcan_rx_listen(
+        func: ListenFn,
+        data: *mut ffi::c_void,
+        ifindex: i32,
+        add: bool,
+    ) -> ffi::c_int;
+    /// Copies into `out` (room for `cap`) every filter that applies to
+    /// frames received on `ifindex`; returns how many, or -1 if there are
+    /// more than `cap` (then a driver must not filter). Any context.
+    pub(crate) fn rcan_rx_filters(
+        ifindex: i32,
+        out: *mut crate::rcan_core::rxtable::Filter,
+        cap: usize,
+    ) -> isize;
+    /// Registers a protocol. Process context. EEXIST if the number is
+    /// taken, EINVAL if out of range.
+    pub(crate) fn rcan_proto_register(cp: *const CanProto) -> ffi::c_int;
+    /// Unregisters a protocol; returns after a grace period, so no socket
+    /// creation can still be looking at it. Process context.
+    pub(crate) fn rcan_proto_unregister(cp: *const CanProto);
+    /// Sets (replaces) the receiver of (`func`, `sk`): `spec` NULL, or a
+    /// spec with neither filters nor error mask, removes it. The receiver
+    /// holds a reference on `sk` (`sock_hold`), dropped after an RCU grace
+    /// period once the receiver is removed, so `func` may run for a removed
+    /// receiver until then, and the sock stays valid while it does.
+    /// Process context; may sleep. On error (ENOMEM, EINVAL for a bad
+    /// filter) the previous receiver stays; removal never fails.
+    pub(crate) fn rcan_rx_set(
+        func: RxFn,
+        sk: *mut bindings::sock,
+        cookie: u32,
+        spec: *const RxSpec,
+    ) -> ffi::c_int;
+    /// Like [`rcan_rx_set`], for a receiver inside the kernel that has no
+    /// socket: `data` is passed to `func` as its `owner`. No reference is
+    /// taken; instead every call returns only after every running callback
+    /// with a registration it replaced or removed has finished, so the
+    /// caller may free `data` (or unload) then. Process context.
+    pub(crate) fn rcan_rx_set_kernel(
+        func: RxFn,
+        data: *mut ffi::c_void,
+        cookie: u32,
+        spec: *const RxSpec,
+    ) -> ffi::c_int;
+    /// Sends one CAN frame (mainline `can_send`): `skb` holds a
+    /// `struct can_frame`, `skb->dev` is the device (the caller holds a
+    /// reference until this returns), `skb->sk` the sending socket. With
+    /// `loopback` the frame is also delivered to local receivers (by the
+    /// driver if the device has IFF_ECHO, else by a clone made here).
+    /// Always consumes `skb`. Returns 0, or EINVAL (not a classic frame),
+    /// EMSGSIZE, EPERM (not a CAN device), ENETDOWN, ENOBUFS (queue full),
+    /// ENOMEM. Process or softirq context.
+    pub(crate) fn rcan_send(skb: *mut bindings::sk_buff, loopback: bool) -> ffi::c_int;
+}

@@ -1,0 +1,558 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The C side of `rcan_pf`: the PF_CAN protocol family, the ETH_P_CAN
+//! packet handler, and the entry points `rcan_pf` exports to the protocol
+//! and driver modules ([`crate::glue::can::abi`]). Compiled into `rcan_pf` only
+//! (`pf_can_main.rs` includes it as `mod family` next to `mod glue`): the
+//! `#[no_mangle]` definitions must exist once.
+//!
+//! Everything here is pointer work: turning the C arguments into the
+//! types of the rest of the glue (skbs, devices, filter slices, counted
+//! sock references), keeping the protocol table and the listener list,
+//! and registering the family and the packet handler. The decisions
+//! (what a frame is, who receives it, what a send checks) are pf_can's,
+//! through [`Family`], implemented by `crate::PfCan`.
+//!
+//! Shared state and its discipline:
+//!
+//! * `PROTOS`, the protocol table: read under RCU (`pf_can_create`,
+//!   process context); written under `WRITERS` (`rcan_pf_mutex`, process
+//!   context) by `rcan_proto_register`/`_unregister`.
+//! * `WRITERS` also protects the listeners (drivers that follow the receive
+//!   table, [`notify_listeners`]); they are called under it, so removal
+//!   (which takes it) waits for a running call.
+//! * The receive table is pf_can's (`rcan_rx_mutex`, [`rx_mutex`]);
+//!   `WRITERS` is never held together with it.
+
+use crate::glue::bindings;
+use crate::glue::can::abi::{CanProto, ListenFn, RxFilter, RxFn, RxSpec, CANPROTO_MAX};
+use crate::glue::can::rx::Receiver;
+use crate::glue::netdev::NetDev;
+use crate::glue::skb::Skb;
+use crate::glue::sync::{synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard};
+use core::ptr::NonNull;
+use kernel::error::{code, Error, Result};
+use kernel::ffi;
+use kernel::prelude::*;
+
+/// The implementation behind the entry points: `rcan_pf`'s module type.
+type Impl = crate::pf_can::PfCan;
+
+/// What `rcan_pf` decides; the entry points below call it.
+pub(crate) trait Family: 'static {
+    /// Sets (`new`: a request and its receiver, replacing the previous
+    /// registration of receiver `id`) or removes (`None`) a registration
+    /// in the receive table, then tells the listeners
+    /// ([`notify_listeners`]). Process context; may sleep. ENOMEM, EINVAL
+    /// (bad filter); on error the previous registration stays.
+    fn rx_set(id: usize, new: Option<(RxRequest<'_>, Target)>) -> Result;
+    /// Copies the filters that apply to frames received on `ifindex` into
+    /// `out`; `None` if there are more than fit. Any context.
+    fn rx_filters(ifindex: i32, out: &mut [crate::rcan_core::rxtable::Filter]) -> Option<usize>;
+    /// `rcan_send` (see [`crate::glue::can::abi::rcan_send`]). Process or softirq
+    /// context.
+    fn send(skb: Skb, dev: &NetDev, loopback: bool) -> Result;
+    /// The ETH_P_CAN packet handler: a frame received on `dev`. NET_RX
+    /// softirq, inside the core's RCU read-side section. Returns false if
+    /// the frame was dropped as malformed.
+    fn rcv(skb: Skb, dev: &NetDev) -> bool;
+}
+
+/// A registration request as a receiver made it.
+pub(crate) struct RxRequest<'a> {
+    /// Interface, 0 = every CAN interface.
+    pub(crate) ifindex: i32,
+    /// Deliver only frames that pass every filter.
+    pub(crate) join: bool,
+    /// Error classes wanted (0: none), unchecked.
+    pub(crate) err_mask: u32,
+    /// The receiver's filters, for the duration of the call.
+    pub(crate) filters: &'a [RxFilter],
+    /// Handed back to the receiver with every frame.
+    pub(crate) cookie: u32,
+}
+
+/// A receiver in the receive table: a protocol's socket (with a counted
+/// reference on it) or an in-kernel receiver's data, and its callback.
+///
+/// # Invariants
+///
+/// `func` and `owner` come from one `rcan_rx_set` / `rcan_rx_set_kernel`
+/// call. With `sock`, the Target holds one reference on the sock `owner`
+/// (and, through it, on the protocol module holding `func`). Without,
+/// `owner` and `func` stay valid until the receiver's removal returns,
+/// which waits for a grace period after the table unlinked it
+/// ([`rcan_rx_set_kernel`]).
+pub(crate) struct Target {
+    func: RxFn,
+    owner: NonNull<ffi::c_void>,
+    sock: bool,
+}
+
+// SAFETY: `owner` is a counted sock reference or a kernel receiver's
+// `Sync` data; both are usable from any CPU.
+unsafe impl Send for Target {}
+// SAFETY: as above; shared access only calls the receiver.
+unsafe impl Sync for Target {}
+
+impl Receiver for Target {
+    /// One registration per owner (a socket belongs to one protocol; a
+    /// kernel receiver's data to one module).
+    fn id(&self) -> usize {
+        self.owner.as_ptr() as usize
+    }
+}
+
+impl Target {
+    /// Calls the receiver with `skb` borrowed. NET_RX softirq, inside the
+    /// read-side section in which the Target was found in the table.
+    pub(crate) fn deliver(&self, _rcu: &RcuReadGuard, skb: &Skb, cookie: u32) {
+        // SAFETY: a live receiver (type invariant; a kernel receiver is not
+        // released before a grace period that `_rcu` holds off); a valid
+        // skb, borrowed (owned = false).
+        unsafe { (self.func)(skb.as_ptr(), self.owner.as_ptr(), cookie, false) };
+    }
+
+    /// Calls the receiver handing it `skb` (our reference) when nobody
+    /// else holds one; else borrowed, then consumed. Context as
+    /// [`Target::deliver`].
+    pub(crate) fn deliver_last(&self, rcu: &RcuReadGuard, skb: Skb, cookie: u32) {
+        if skb.is_shared() {
+            self.deliver(rcu, &skb, cookie);
+            skb.consume();
+            return;
+        }
+        // SAFETY: as in deliver; the callee takes our (only) reference
+        // (owned = true).
+        unsafe { (self.func)(skb.into_raw(), self.owner.as_ptr(), cookie, true) };
+    }
+}
+
+impl Drop for Target {
+    /// Runs in a `call_rcu` callback (softirq) or in the writer's process
+    /// context; the final `sock_put` may free the sock.
+    fn drop(&mut self) {
+        if self.sock {
+            // SAFETY: the reference this Target holds (type invariant).
+            unsafe { bindings::rcan_sock_put(self.owner.as_ptr().cast()) };
+        }
+    }
+}
+
+/// The receive table's writers' mutex (`rcan_rx_mutex`, a `DEFINE_MUTEX`
+/// of `pf_can_c.c` with a lockdep class of its own). Process context.
+pub(crate) fn rx_mutex() -> *mut bindings::mutex {
+    extern "C" {
+        fn rcan_rx_mutex_ptr() -> *mut bindings::mutex;
+    }
+    // SAFETY: returns the address of a statically defined mutex.
+    unsafe { rcan_rx_mutex_ptr() }
+}
+
+fn pf_mutex() -> *mut bindings::mutex {
+    extern "C" {
+        fn rcan_pf_mutex_ptr() -> *mut bindings::mutex;
+    }
+    // SAFETY: returns the address of a statically defined mutex.
+    unsafe { rcan_pf_mutex_ptr() }
+}
+
+/// A driver that wants to know when the receive table changes for its
+/// interface (to recompute its hardware filter, DESIGN decision 7).
+#[derive(Clone, Copy)]
+struct Listener {
+    func: ListenFn,
+    data: *mut ffi::c_void,
+    ifindex: i32,
+}
+
+/// What `WRITERS` protects besides `PROTOS`.
+struct Registry {
+    listeners: KVec<Listener>,
+}
+
+// SAFETY: the raw pointers are opaque tokens handed back to their owners'
+// callbacks; the owners guarantee their validity (abi contracts).
+unsafe impl Send for Registry {}
+
+/// Serialises the writers of `PROTOS` and protects the listeners. Process
+/// context.
+static WRITERS: CMutex<Registry> = CMutex::new(
+    pf_mutex,
+    Registry {
+        listeners: KVec::new(),
+    },
+);
+
+/// The protocol table (RCU readers, `WRITERS` for writers).
+static PROTOS: [RcuPtr<CanProto>; CANPROTO_MAX] = [const { RcuPtr::null() }; CANPROTO_MAX];
+
+/// Tells the drivers of the interfaces in `ifindexes` (0: all of them)
+/// that their wanted filters changed. Process context; takes `WRITERS` (so
+/// a listener being removed is not called after its removal returns).
+pub(crate) fn notify_listeners(ifindexes: &[Option<i32>]) {
+    if ifindexes.iter().all(|i| i.is_none()) {
+        return;
+    }
+    let reg = WRITERS.lock();
+    for l in reg.listeners.iter() {
+        if ifindexes
+            .iter()
+            .flatten()
+            .any(|&i| i == 0 || i == l.ifindex)
+        {
+            // SAFETY: a registered listener's data stays valid until
+            // rcan_rx_listen removes it, which needs `WRITERS` (held here).
+            unsafe { (l.func)(l.data) };
+        }
+    }
+}
+
+/// Converts a C spec into a request. NULL or empty filter arrays are no
+/// filters.
+///
+/// # Safety
+///
+/// `spec.filters` points to `spec.nfilters` readable filters that stay
+/// valid for `'a`.
+unsafe fn request<'a>(spec: &'a RxSpec, cookie: u32) -> RxRequest<'a> {
+    let filters = if spec.nfilters == 0 || spec.filters.is_null() {
+        &[][..]
+    } else {
+        // SAFETY: this function's contract.
+        unsafe { core::slice::from_raw_parts(spec.filters, spec.nfilters) }
+    };
+    RxRequest {
+        ifindex: spec.ifindex,
+        join: spec.join,
+        err_mask: spec.err_mask,
+        filters,
+        cookie,
+    }
+}
+
+/// See [`crate::glue::can::abi::rcan_rx_set`].
+#[no_mangle]
+extern "C" fn rcan_rx_set(
+    func: RxFn,
+    sk: *mut bindings::sock,
+    cookie: u32,
+    spec: *const RxSpec,
+) -> ffi::c_int {
+    let Some(owner) = NonNull::new(sk.cast::<ffi::c_void>()) else {
+        return code::EINVAL.to_errno();
+    };
+    let id = owner.as_ptr() as usize;
+    // SAFETY: NULL or a valid spec, with its filters, for the duration of
+    // the call (abi contract).
+    let new = unsafe { spec.as_ref() }.map(|spec| {
+        // SAFETY: the caller's `sk` is a live sock; the Target keeps this
+        // reference until it is dropped.
+        unsafe { bindings::rcan_sock_hold(sk) };
+        // INVARIANT: one reference held, just taken.
+        let t = Target {
+            func,
+            owner,
+            sock: true,
+        };
+        // SAFETY: the spec's filters are valid for the call (above).
+        (unsafe { request(spec, cookie) }, t)
+    });
+    match Impl::rx_set(id, new) {
+        Ok(()) => 0,
+        Err(e) => e.to_errno(),
+    }
+}
+
+/// See [`crate::glue::can::abi::rcan_rx_set_kernel`].
+#[no_mangle]
+extern "C" fn rcan_rx_set_kernel(
+    func: RxFn,
+    data: *mut ffi::c_void,
+    cookie: u32,
+    spec: *const RxSpec,
+) -> ffi::c_int {
+    let Some(owner) = NonNull::new(data) else {
+        return code::EINVAL.to_errno();
+    };
+    let id = owner.as_ptr() as usize;
+    // SAFETY: as in rcan_rx_set.
+    let new = unsafe { spec.as_ref() }.map(|spec| {
+        // INVARIANT: the caller keeps `data` and `func` valid until a
+        // removal returns; every call waits a grace period below.
+        let t = Target {
+            func,
+            owner,
+            sock: false,
+        };
+        // SAFETY: as in rcan_rx_set.
+        (unsafe { request(spec, cookie) }, t)
+    });
+    let ret = Impl::rx_set(id, new);
+    // A registration this call replaced or removed is unlinked now; the
+    // caller may free `data` (or unload) once we return: wait out every
+    // callback that may still use it.
+    synchronize_rcu();
+    match ret {
+        Ok(()) => 0,
+        Err(e) => e.to_errno(),
+    }
+}
+
+/// See [`crate::glue::can::abi::rcan_rx_listen`].
+#[no_mangle]
+extern "C" fn rcan_rx_listen(
+    func: ListenFn,
+    data: *mut ffi::c_void,
+    ifindex: i32,
+    add: bool,
+) -> ffi::c_int {
+    let mut reg = WRITERS.lock();
+    if let Some(i) = reg
+        .listeners
+        .iter()
+        .position(|l| l.func as usize == func as usize && l.data == data)
+    {
+        crate::glue::kvec_swap_remove(&mut reg.listeners, i);
+    }
+    if add {
+        if let Err(e) = reg.listeners.push(
+            Listener {
+                func,
+                data,
+                ifindex,
+            },
+            GFP_KERNEL,
+        ) {
+            return Error::from(e).to_errno();
+        }
+    }
+    0
+}
+
+/// See [`crate::glue::can::abi::rcan_rx_filters`].
+#[no_mangle]
+extern "C" fn rcan_rx_filters(
+    ifindex: i32,
+    out: *mut crate::rcan_core::rxtable::Filter,
+    cap: usize,
+) -> isize {
+    let out = if cap == 0 || out.is_null() {
+        &mut [][..]
+    } else {
+        // SAFETY: the caller passes room for `cap` filters (abi contract);
+        // `Filter` is plain `Copy` data, so overwriting is fine.
+        unsafe { core::slice::from_raw_parts_mut(out, cap) }
+    };
+    match Impl::rx_filters(ifindex, out) {
+        Some(n) => n as isize,
+        None => -1,
+    }
+}
+
+/// See [`crate::glue::can::abi::rcan_proto_register`].
+#[no_mangle]
+extern "C" fn rcan_proto_register(cp: *const CanProto) -> ffi::c_int {
+    // SAFETY: callers pass a static CanProto of their module.
+    let proto = unsafe { (*cp).protocol };
+    if proto < 0 || proto as usize >= CANPROTO_MAX {
+        return code::EINVAL.to_errno();
+    }
+    let _w = WRITERS.lock();
+    let slot = &PROTOS[proto as usize];
+    if !slot.get_locked().is_null() {
+        pr_err!("protocol {} already registered\n", proto);
+        return code::EEXIST.to_errno();
+    }
+    slot.replace(cp as *mut CanProto);
+    0
+}
+
+/// See [`crate::glue::can::abi::rcan_proto_unregister`].
+#[no_mangle]
+extern "C" fn rcan_proto_unregister(cp: *const CanProto) {
+    // SAFETY: as in register.
+    let proto = unsafe { (*cp).protocol };
+    if proto < 0 || proto as usize >= CANPROTO_MAX {
+        return;
+    }
+    {
+        let _w = WRITERS.lock();
+        let slot = &PROTOS[proto as usize];
+        if slot.get_locked() == cp as *mut CanProto {
+            slot.replace(core::ptr::null_mut());
+        }
+    }
+    // No socket creation may still hold the old pointer after this.
+    synchronize_rcu();
+}
+
+/// `net_proto_family.create`: socket(PF_CAN, type, protocol). Process
+/// context.
+///
+/// # Safety
+///
+/// Called by the socket layer with its arguments.
+unsafe extern "C" fn pf_can_create(
+    net: *mut bindings::net,
+    sock: *mut bindings::socket,
+    protocol: ffi::c_int,
+    kern: ffi::c_int,
+) -> ffi::c_int {
+    // SAFETY: `net` is the caller's namespace, valid for the call.
+    if !unsafe { bindings::rcan_net_is_init(net) } {
+        return -(bindings::EAFNOSUPPORT as ffi::c_int);
+    }
+    if protocol < 0 || protocol as usize >= CANPROTO_MAX {
+        return -(bindings::EPROTONOSUPPORT as ffi::c_int);
+    }
+    // SAFETY: `sock` is the new socket the socket layer is creating.
+    let sock_type = unsafe { (*sock).type_ } as i32;
+    let (create, owner) = {
+        let g = RcuReadGuard::new();
+        let Some(cp) = PROTOS[protocol as usize].read(&g) else {
+            return -(bindings::EPROTONOSUPPORT as ffi::c_int);
+        };
+        if cp.type_ != sock_type {
+            return -(bindings::EPROTOTYPE as ffi::c_int);
+        }
+        // Pin the protocol's module before leaving the read-side section:
+        // its `create` may sleep and the module may be on its way out.
+        // SAFETY: `owner` is the registering module; try_module_get fails
+        // once its unloading has begun.
+        if !unsafe { bindings::rcan_try_module_get(cp.owner) } {
+            return -(bindings::EPROTONOSUPPORT as ffi::c_int);
+        }
+        (cp.create, cp.owner)
+    };
+    // SAFETY: the module holding `create` is pinned until module_put; the
+    // CanProto static lives as long as the module.
+    let ret = unsafe { create(net, sock, protocol, kern) };
+    // SAFETY: paired with the try_module_get above. The new socket holds
+    // its own module reference through its proto_ops owner.
+    unsafe { bindings::rcan_module_put(owner) };
+    ret
+}
+
+/// ETH_P_CAN packet handler: every CAN frame received on any device.
+/// NET_RX softirq context, inside the core's RCU read-side section.
+///
+/// # Safety
+///
+/// Called by the network core's receive path with one skb reference and
+/// the receiving device.
+unsafe extern "C" fn can_rcv(
+    skb: *mut bindings::sk_buff,
+    dev: *mut bindings::net_device,
+    _pt: *mut bindings::packet_type,
+    _orig_dev: *mut bindings::net_device,
+) -> ffi::c_int {
+    // SAFETY: the core hands us one skb reference and the receiving
+    // device, alive for the call.
+    let (skb, dev) = unsafe {
+        match Skb::from_raw(skb) {
+            Some(s) => (s, NetDev::from_raw(dev)),
+            None => return bindings::NET_RX_DROP as ffi::c_int,
+        }
+    };
+    if Impl::rcv(skb, dev) {
+        bindings::NET_RX_SUCCESS as ffi::c_int
+    } else {
+        bindings::NET_RX_DROP as ffi::c_int
+    }
+}
+
+/// See [`crate::glue::can::abi::rcan_send`].
+#[no_mangle]
+extern "C" fn rcan_send(skb: *mut bindings::sk_buff, loopback: bool) -> ffi::c_int {
+    // SAFETY: the caller gives us its reference (abi contract).
+    let Some(skb) = (unsafe { Skb::from_raw(skb) }) else {
+        return code::EINVAL.to_errno();
+    };
+    // SAFETY: the caller holds a reference on skb->dev until we return.
+    let Some(dev) = (unsafe { skb.dev() }) else {
+        return code::ENODEV.to_errno();
+    };
+    match Impl::send(skb, dev, loopback) {
+        Ok(()) => 0,
+        Err(e) => e.to_errno(),
+    }
+}
+
+/// `dev_queue_xmit` of a prepared CAN skb on `dev` (sets `skb->dev`):
+/// consumes `skb`; congestion (`NET_XMIT_CN`) counts as sent, a drop is
+/// ENOBUFS. Process or softirq context.
+pub(crate) fn queue_xmit(mut skb: Skb, dev: &NetDev) -> Result {
+    skb.set_dev(dev);
+    // SAFETY: dev_queue_xmit consumes the skb in every case; skb->dev is
+    // `dev`, borrowed (so alive) for the call.
+    let ret = unsafe { bindings::rcan_dev_queue_xmit(skb.into_raw()) };
+    match ret {
+        r if r < 0 => Err(Error::from_errno(r)),
+        0 => Ok(()),
+        r if r as u32 == bindings::NET_XMIT_CN => Ok(()),
+        _ => Err(crate::glue::neterr::ENOBUFS()),
+    }
+}
+
+static FAMILY: CCell<bindings::net_proto_family> = CCell::new(bindings::net_proto_family {
+    family: bindings::PF_CAN as i32,
+    create: Some(pf_can_create),
+    owner: core::ptr::null_mut(),
+});
+
+static PACKET: CCell<bindings::packet_type> = CCell::new(bindings::packet_type {
+    type_: (bindings::ETH_P_CAN as u16).to_be(),
+    func: Some(can_rcv),
+    // SAFETY: all-zero is valid for the remaining fields (no device filter,
+    // empty list head filled in by dev_add_pack).
+    ..unsafe { core::mem::zeroed() }
+});
+
+/// PF_CAN and the ETH_P_CAN handler registered; dropping it unregisters
+/// both (waiting for running handlers). Process context.
+pub(crate) struct FamilyReg(());
+
+/// Registers PF_CAN with the socket layer (EEXIST if another family, e.g.
+/// mainline's can.ko, has it) and the ETH_P_CAN packet handler. Module
+/// init only (process context); at most once at a time: EBUSY.
+pub(crate) fn register() -> Result<FamilyReg> {
+    // SAFETY: module init is single-threaded with respect to FAMILY:
+    // nothing uses it before sock_register, and a second call while
+    // registered is refused here.
+    unsafe {
+        if !(*FAMILY.get()).owner.is_null() {
+            return Err(code::EBUSY);
+        }
+        (*FAMILY.get()).owner = crate::glue::this_module();
+    }
+    // SAFETY: FAMILY is a static, fully initialised family.
+    let ret = unsafe { bindings::sock_register(FAMILY.get()) };
+    if let Err(e) = crate::glue::to_result(ret) {
+        // SAFETY: not registered: nothing else sees FAMILY.
+        unsafe { (*FAMILY.get()).owner = core::ptr::null_mut() };
+        return Err(e);
+    }
+    // SAFETY: PACKET is a static packet_type, removed in FamilyReg's Drop.
+    unsafe { bindings::dev_add_pack(PACKET.get()) };
+    Ok(FamilyReg(()))
+}
+
+impl Drop for FamilyReg {
+    fn drop(&mut self) {
+        // SAFETY: registered in `register`; dev_remove_pack waits for
+        // running handlers (synchronize_net), sock_unregister for running
+        // creates.
+        unsafe {
+            bindings::dev_remove_pack(PACKET.get());
+            bindings::sock_unregister(bindings::PF_CAN as i32);
+            (*FAMILY.get()).owner = core::ptr::null_mut();
+        }
+    }
+}
+
+/// Module exit: frees the (empty) listener list; statics are never
+/// dropped. Process context.
+pub(crate) fn shutdown() {
+    WRITERS.lock().listeners = KVec::new();
+}

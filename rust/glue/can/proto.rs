@@ -1,0 +1,659 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The typed CAN protocol framework: what a protocol module (`raw`,
+//! `can_proto`, DSOR) or a driver that follows the receive table sees of
+//! `rcan_pf`. No raw pointer, `extern "C"` or `bindings::` item crosses
+//! this API; the C ABI underneath is [`super::abi`].
+//!
+//! A socket protocol:
+//!
+//! * implements [`sock::Proto`](crate::glue::sock::Proto) (the socket
+//!   calls) and [`CanProtocol`] (its number and type, its receive
+//!   callback, its reaction to devices going down or away);
+//! * keeps a `static` [`ProtoModule`] (sock allocator, entry in pf_can's
+//!   protocol table, netdevice notifier, list of open sockets) and
+//!   registers it in module init; the returned [`ProtoRegistration`]
+//!   unregisters everything when dropped (module exit);
+//! * subscribes a socket to frames with [`rx_set`] and unsubscribes it with
+//!   [`rx_remove`] (at the latest in `release`).
+//!
+//! The C entry points are generic trampolines here, one source for every
+//! protocol: [`create_trampoline`] (`socket()`), [`notifier_trampoline`]
+//! (netdevice events), [`rx_trampoline`] (received frames), which turns
+//! pf_can's "owned" flag into the type of [`RxSkb`].
+//!
+//! An in-kernel receiver without a socket (DSOR's engine, the time
+//! services) implements [`KernelRx`] and holds a [`KernelRxReg`]; a driver
+//! whose hardware filter follows the sockets implements [`FilterListener`]
+//! and holds a [`Listening`].
+
+use super::abi::{self, CanProto, RxSpec};
+// Re-exported for the protocols; not every module uses every one.
+#[allow(unused_imports)]
+pub(crate) use super::abi::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
+use crate::glue::bindings;
+use crate::glue::netdev::{self as gnetdev, DevRef, NetDev};
+use crate::glue::skb::Skb;
+use crate::glue::sock::{Proto, ProtoReg, Sock};
+use crate::glue::sync::{CCell, Rtnl, RtnlLocked};
+use core::marker::PhantomData;
+use core::mem::ManuallyDrop;
+use kernel::error::{code, Result};
+use kernel::ffi;
+
+/// Mainline-compatible raw protocol (SOCK_RAW), `CAN_RAW` in `<linux/can.h>`.
+pub(crate) const CAN_RAW: i32 = 1;
+/// The thesis' CAN 2.0 data link protocol (SOCK_RAW).
+pub(crate) const CANPROTO_CAN: i32 = 16;
+/// Socket types a protocol can be registered for.
+pub(crate) const SOCK_RAW: i32 = bindings::sock_type_SOCK_RAW as i32;
+pub(crate) const SOCK_DGRAM: i32 = bindings::sock_type_SOCK_DGRAM as i32;
+
+/// A received frame as a receive callback gets it.
+///
+/// pf_can calls each matching receiver once per frame; all but the last
+/// get the skb borrowed, the last one gets pf_can's reference when nobody
+/// else holds one, so the common single-receiver case queues the skb
+/// without cloning it.
+pub(crate) enum RxSkb<'a> {
+    /// Borrowed for the call; clone it to keep it.
+    Shared(&'a Skb),
+    /// This receiver's own, unshared reference.
+    Owned(Skb),
+}
+
+impl RxSkb<'_> {
+    /// The frame, to look at.
+    pub(crate) fn skb(&self) -> &Skb {
+        match self {
+            RxSkb::Shared(s) => s,
+            RxSkb::Owned(s) => s,
+        }
+    }
+
+    /// An skb this receiver owns, to queue: the one handed over, or a
+    /// clone (GFP_ATOMIC; `None` if that fails). Any context.
+    pub(crate) fn into_owned(self) -> Option<Skb> {
+        match self {
+            RxSkb::Shared(s) => s.clone_atomic(),
+            RxSkb::Owned(s) => Some(s),
+        }
+    }
+
+    /// The receiver has used the frame without keeping it: an owned
+    /// reference is freed as consumed (not counted as a drop).
+    pub(crate) fn done(self) {
+        if let RxSkb::Owned(s) = self {
+            s.consume();
+        }
+    }
+}
+
+/// A netdevice event a protocol reacts to.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum NetdevEvent {
+    /// The device went down (`NETDEV_DOWN`).
+    Down,
+    /// The device is going away (`NETDEV_UNREGISTER`).
+    Unregister,
+}
+
+/// A CAN socket protocol (thesis `struct can_proto`, 5.3.1), on top of the
+/// socket calls of [`Proto`].
+pub(crate) trait CanProtocol: Proto {
+    /// Protocol number (`socket(PF_CAN, type, PROTOCOL)`), below
+    /// [`CANPROTO_MAX`].
+    const PROTOCOL: i32;
+    /// Socket type ([`SOCK_RAW`], [`SOCK_DGRAM`]); `socket()` with another
+    /// type gets EPROTOTYPE.
+    const SOCK_TYPE: i32;
+
+    /// The protocol's registrations (a static of its module).
+    fn module() -> &'static ProtoModule<Self>;
+
+    /// A frame for socket `sk`, which subscribed with [`rx_set`] (with
+    /// `cookie`). NET_RX softirq context, inside pf_can's RCU read-side
+    /// section; must not sleep and must not take the socket lock. `sk` is
+    /// alive for the call (the subscription holds a reference on it), even
+    /// if the socket is being closed. May transmit ([`send`]). The default
+    /// ignores the frame.
+    fn rx(_sk: &Sock<Self>, skb: RxSkb<'_>, _cookie: u32) {
+        skb.done();
+    }
+
+    /// A network device (any type: check [`NetDev::is_can`]) went down or
+    /// is going away. Process context, RTNL held; may take socket locks
+    /// (RTNL comes first in the lock order) and call [`rx_set`] /
+    /// [`rx_remove`]. `sockets` are the protocol's open sockets. The
+    /// default does nothing.
+    fn netdev_event(_event: NetdevEvent, _dev: &NetDev, _sockets: &Sockets<'_, Self>) {}
+}
+
+/// A set of socket addresses (`*mut sock` as `usize`): the open sockets of
+/// a protocol module, for its netdevice notifier. Insertion and removal are
+/// O(1) on average (hashed buckets), so closing one of n sockets does not
+/// scan the other n - 1. Protected by RTNL (in [`ProtoModule::sockets`]).
+///
+/// # Invariants
+///
+/// Only [`ProtoModule`] inserts, and only live socks of its protocol;
+/// each is removed by the protocol's `release` (under RTNL) before the
+/// sock can be freed.
+pub(crate) struct SockSet<T: CanProtocol> {
+    /// `SOCKSET_BUCKETS` vectors once the first socket arrives.
+    buckets: kernel::alloc::KVec<kernel::alloc::KVec<usize>>,
+    /// Socks of `T` only: a set cannot be swapped with another protocol's.
+    _t: PhantomData<fn() -> T>,
+}
+
+const SOCKSET_BUCKETS: usize = 512;
+
+impl<T: CanProtocol> SockSet<T> {
+    pub(crate) const fn new() -> Self {
+        SockSet {
+            buckets: kernel::alloc::KVec::new(),
+            _t: PhantomData,
+        }
+    }
+
+    fn bucket(p: usize) -> usize {
+        // Socks are cache-line aligned: drop the low bits, then a
+        // multiplicative hash.
+        (((p >> 6) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            >> (64 - SOCKSET_BUCKETS.trailing_zeros())) as usize
+    }
+
+    /// Adds `p`. Process context (allocates). ENOMEM.
+    fn insert(&mut self, p: usize) -> Result {
+        use kernel::alloc::{flags::GFP_KERNEL, KVec};
+        if self.buckets.is_empty() {
+            let mut b = KVec::with_capacity(SOCKSET_BUCKETS, GFP_KERNEL)?;
+            for _ in 0..SOCKSET_BUCKETS {
+                b.push(KVec::new(), GFP_KERNEL)?;
+            }
+            self.buckets = b;
+        }
+        self.buckets[Self::bucket(p)].push(p, GFP_KERNEL)?;
+        Ok(())
+    }
+
+    /// Removes socket `p` (its `struct sock` address) if present. The
+    /// protocol's `release` calls this under RTNL.
+    pub(crate) fn remove(&mut self, p: usize) {
+        if let Some(b) = self.buckets.get_mut(Self::bucket(p)) {
+            crate::glue::kvec_remove_all(b, p);
+        }
+    }
+}
+
+/// The open sockets of protocol `T`, as its netdevice notifier sees them
+/// (RTNL held for `'a`).
+pub(crate) struct Sockets<'a, T: CanProtocol> {
+    set: &'a SockSet<T>,
+    _t: PhantomData<T>,
+}
+
+impl<T: CanProtocol> Sockets<'_, T> {
+    /// Calls `f` for every open socket, in no particular order. The
+    /// sockets stay alive during the call: `release` needs RTNL to leave
+    /// the set.
+    pub(crate) fn for_each(&self, mut f: impl FnMut(&Sock<T>)) {
+        for &p in self.set.buckets.iter().flat_map(|b| b.iter()) {
+            // SAFETY: the set holds only live socks of `T` until their
+            // release removes them under RTNL, which our caller holds for
+            // 'a (SockSet invariant); the borrow handed to `f` cannot
+            // outlive this call.
+            let sk = unsafe { Sock::<T>::from_raw(p as *mut bindings::sock) };
+            f(&sk);
+        }
+    }
+}
+
+/// Everything a CAN protocol module registers, in one static: its
+/// `struct proto` (sock allocator), its entry in pf_can's protocol table
+/// and its netdevice notifier, plus the list of its open sockets.
+/// [`ProtoModule::register`] in module init; the registration's drop in
+/// module exit.
+pub(crate) struct ProtoModule<T: CanProtocol> {
+    proto: ProtoReg<T>,
+    /// Every open socket, for the netdevice notifier. Protected by RTNL;
+    /// a socket is listed from its creation until its `release` removes it
+    /// ([`SockSet::remove`]).
+    pub(crate) sockets: RtnlLocked<SockSet<T>>,
+    canproto: CCell<CanProto>,
+    notifier: CCell<bindings::notifier_block>,
+}
+
+// SAFETY: the C structs are written only in `register` (module init,
+// before the kernel can see them) and afterwards owned by the kernel's
+// registries; `sockets` is RTNL-protected (RtnlLocked).
+unsafe impl<T: CanProtocol> Sync for ProtoModule<T> {}
+
+impl<T: CanProtocol> ProtoModule<T> {
+    /// The registrations of protocol `T`, not yet registered.
+    pub(crate) const fn new() -> Self {
+        ProtoModule {
+            proto: ProtoReg::new(),
+            sockets: RtnlLocked::new(SockSet::new()),
+            canproto: CCell::new(CanProto {
+                protocol: T::PROTOCOL,
+                type_: T::SOCK_TYPE,
+                owner: core::ptr::null_mut(),
+                create: create_trampoline::<T>,
+            }),
+            notifier: CCell::new(bindings::notifier_block {
+                notifier_call: Some(notifier_trampoline::<T>),
+                next: core::ptr::null_mut(),
+                priority: 0,
+            }),
+        }
+    }
+
+    /// Registers the proto, the notifier and the protocol, in that order;
+    /// undoes what was done on failure. Module init (process context).
+    /// EBUSY if already registered.
+    pub(crate) fn register(
+        &'static self,
+        name: &'static kernel::str::CStr,
+    ) -> Result<ProtoRegistration<T>> {
+        // SAFETY: reading our own static; only `register` writes `owner`,
+        // and registration is serialised by module init.
+        if !unsafe { (*self.canproto.get()).owner }.is_null() {
+            return Err(code::EBUSY);
+        }
+        self.proto.register(name, bindings::PF_CAN as i32)?;
+        // SAFETY: module init: nothing else sees the CanProto yet.
+        unsafe { (*self.canproto.get()).owner = crate::glue::this_module() };
+        // SAFETY: a static notifier, unregistered in `unregister`.
+        let ret = unsafe { bindings::register_netdevice_notifier(self.notifier.get()) };
+        if let Err(e) = crate::glue::to_result(ret) {
+            self.proto.unregister();
+            // SAFETY: as above.
+            unsafe { (*self.canproto.get()).owner = core::ptr::null_mut() };
+            return Err(e);
+        }
+        // SAFETY: a static CanProto, unregistered in `unregister`.
+        let ret = unsafe { abi::rcan_proto_register(self.canproto.get()) };
+        if let Err(e) = crate::glue::to_result(ret) {
+            // SAFETY: registered just above.
+            unsafe { bindings::unregister_netdevice_notifier(self.notifier.get()) };
+            self.proto.unregister();
+            // SAFETY: as above.
+            unsafe { (*self.canproto.get()).owner = core::ptr::null_mut() };
+            return Err(e);
+        }
+        Ok(ProtoRegistration(self))
+    }
+
+    /// `CanProto.create`: allocates the sock and lists it in `sockets`.
+    /// Process context.
+    ///
+    /// # Safety
+    ///
+    /// The arguments are those of pf_can's `create` call (socket layer).
+    unsafe fn create_socket(
+        &self,
+        net: *mut bindings::net,
+        sock: *mut bindings::socket,
+        protocol: ffi::c_int,
+        kern: ffi::c_int,
+    ) -> ffi::c_int {
+        // SAFETY: the socket layer's arguments (this function's contract).
+        if let Err(e) = unsafe { self.proto.create(net, sock, protocol, kern) } {
+            return e.to_errno();
+        }
+        // SAFETY: create succeeded, so `sock->sk` is our new sock.
+        let sk = unsafe { (*sock).sk } as usize;
+        let mut rtnl = Rtnl::lock();
+        // INVARIANT: a live sock of `T`, removed by its release.
+        if self.sockets.get(&mut rtnl).insert(sk).is_err() {
+            // The socket layer calls release on failure, which copes with
+            // a socket missing from the list.
+            return code::ENOMEM.to_errno();
+        }
+        0
+    }
+}
+
+/// A registered [`ProtoModule`]; dropping it (module exit) unregisters the
+/// protocol, the notifier and the proto. Every socket holds a reference on
+/// the module, so no socket is left by then. Process context; sleeps (a
+/// grace period).
+pub(crate) struct ProtoRegistration<T: CanProtocol>(&'static ProtoModule<T>);
+
+impl<T: CanProtocol> Drop for ProtoRegistration<T> {
+    fn drop(&mut self) {
+        let m = self.0;
+        // SAFETY: registered by `register`; rcan_proto_unregister returns
+        // after a grace period, so no socket creation still sees it.
+        unsafe {
+            abi::rcan_proto_unregister(m.canproto.get());
+            bindings::unregister_netdevice_notifier(m.notifier.get());
+        }
+        m.proto.unregister();
+        // Statics are never dropped: free the (empty) list's buffer.
+        let mut rtnl = Rtnl::lock();
+        *m.sockets.get(&mut rtnl) = SockSet::new();
+        // SAFETY: nothing uses the CanProto any more; allows a new register.
+        unsafe { (*m.canproto.get()).owner = core::ptr::null_mut() };
+    }
+}
+
+/// `CanProto.create` of protocol `T`: `socket(PF_CAN, T::SOCK_TYPE,
+/// T::PROTOCOL)`. Process context.
+///
+/// # Safety
+///
+/// Called only by pf_can's `net_proto_family.create` with the socket
+/// layer's arguments, while it holds a reference on `T`'s module.
+unsafe extern "C" fn create_trampoline<T: CanProtocol>(
+    net: *mut bindings::net,
+    sock: *mut bindings::socket,
+    protocol: ffi::c_int,
+    kern: ffi::c_int,
+) -> ffi::c_int {
+    // SAFETY: the socket layer's arguments (this function's contract).
+    unsafe { T::module().create_socket(net, sock, protocol, kern) }
+}
+
+/// The netdevice notifier of protocol `T`. Process context, RTNL held
+/// (the notifier chain's contract).
+///
+/// # Safety
+///
+/// Called only by the netdevice notifier chain, `info` a
+/// `netdev_notifier_info`.
+unsafe extern "C" fn notifier_trampoline<T: CanProtocol>(
+    _nb: *mut bindings::notifier_block,
+    event: ffi::c_ulong,
+    info: *mut ffi::c_void,
+) -> ffi::c_int {
+    let event = if event == bindings::netdev_cmd_NETDEV_DOWN as ffi::c_ulong {
+        NetdevEvent::Down
+    } else if event == bindings::netdev_cmd_NETDEV_UNREGISTER as ffi::c_ulong {
+        NetdevEvent::Unregister
+    } else {
+        return bindings::NOTIFY_DONE as ffi::c_int;
+    };
+    // SAFETY: netdevice notifiers receive a netdev_notifier_info naming a
+    // device that stays registered for the call.
+    let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
+    let mut held = Rtnl::assert_held();
+    let sockets = Sockets::<T> {
+        set: T::module().sockets.get(&mut held),
+        _t: PhantomData,
+    };
+    T::netdev_event(event, dev, &sockets);
+    bindings::NOTIFY_DONE as ffi::c_int
+}
+
+/// The receive callback (`abi::RxFn`) of protocol `T`'s sockets.
+///
+/// # Safety
+///
+/// Called only by pf_can's dispatcher as `abi::RxFn` says, for a
+/// subscription made by [`rx_set`]`::<T>`: `owner` is a sock of `T` on
+/// which the subscription holds a reference.
+unsafe extern "C" fn rx_trampoline<T: CanProtocol>(
+    skb: *mut bindings::sk_buff,
+    owner: *mut ffi::c_void,
+    cookie: u32,
+    owned: bool,
+) {
+    // SAFETY: a live sock of `T` for the call (this function's contract).
+    let sk = unsafe { Sock::<T>::from_raw(owner.cast()) };
+    // SAFETY: a valid skb; ours if `owned`, else borrowed for the call
+    // (RxFn contract). A borrowed one is kept from being freed by
+    // ManuallyDrop and only lent out by reference.
+    let Some(skb) = (unsafe { Skb::from_raw(skb) }) else {
+        return;
+    };
+    if owned {
+        T::rx(&sk, RxSkb::Owned(skb), cookie);
+    } else {
+        let skb = ManuallyDrop::new(skb);
+        T::rx(&sk, RxSkb::Shared(&skb), cookie);
+    }
+}
+
+/// Subscribes socket `sk` of protocol `T` (replacing its previous
+/// subscription) to frames on `ifindex` (0: every CAN interface) passing
+/// `filters` (any of them, all of them with `join`) and to error frames
+/// meeting `err_mask`; `T::rx` gets them with `cookie`. With neither
+/// filters nor error mask this removes the subscription. The
+/// subscription holds a reference on the sock until it is removed and a
+/// grace period has passed. Process context; may sleep. ENOMEM, EINVAL
+/// (bad filter); on error the previous subscription stays.
+pub(crate) fn rx_set<T: CanProtocol>(
+    sk: &Sock<T>,
+    cookie: u32,
+    ifindex: i32,
+    filters: &[RxFilter],
+    join: bool,
+    err_mask: u32,
+) -> Result {
+    let spec = RxSpec {
+        ifindex,
+        join,
+        err_mask,
+        filters: filters.as_ptr(),
+        nfilters: filters.len(),
+    };
+    // SAFETY: `spec` and the filters it points to live for the call; `sk`
+    // is a live sock of `T` (Sock invariant), on which pf_can takes its own
+    // reference for as long as it keeps the subscription, and
+    // rx_trampoline::<T> expects exactly such an owner.
+    let ret = unsafe { abi::rcan_rx_set(rx_trampoline::<T>, sk.as_ptr(), cookie, &spec) };
+    crate::glue::to_result(ret).map(|_| ())
+}
+
+/// Removes socket `sk`'s subscription, if any. Never fails. `T::rx` may
+/// still run for it until a grace period has passed. Process context; may
+/// sleep.
+pub(crate) fn rx_remove<T: CanProtocol>(sk: &Sock<T>) {
+    // SAFETY: removal of a subscription; `sk` is a live sock (Sock
+    // invariant).
+    unsafe { abi::rcan_rx_set(rx_trampoline::<T>, sk.as_ptr(), 0, core::ptr::null()) };
+}
+
+/// Sends the CAN frame in `skb` on `dev` (mainline `can_send`; sets
+/// `skb->dev`; `dev`'s reference covers the call); with `loopback` local
+/// receivers get it too. Consumes `skb`. EINVAL, EMSGSIZE, EPERM,
+/// ENETDOWN, ENOBUFS, ENOMEM. Process or softirq context.
+pub(crate) fn send(mut skb: Skb, dev: &DevRef, loopback: bool) -> Result {
+    skb.set_dev(dev);
+    // SAFETY: rcan_send consumes the skb in every case; skb->dev is `dev`,
+    // whose reference the caller holds until after the call returns.
+    crate::glue::to_result(unsafe { abi::rcan_send(skb.into_raw(), loopback) }).map(|_| ())
+}
+
+/// A receiver inside the kernel (no socket), registered with
+/// [`rx_set_kernel`]. `rx` runs in NET_RX softirq under RCU for every
+/// matching frame, with the skb borrowed and its receiving device, both
+/// valid for the call; it must not sleep, and may transmit ([`send`]).
+pub(crate) trait KernelRx: Sync + 'static {
+    fn rx(&self, skb: &Skb, dev: &NetDev);
+}
+
+/// The `abi::RxFn` of a [`KernelRx`].
+///
+/// # Safety
+///
+/// Called by pf_can's dispatcher as `abi::RxFn` says, with the `owner`
+/// that [`rx_set_kernel`] registered: a `&'static T`.
+unsafe extern "C" fn kernel_rx<T: KernelRx>(
+    skb: *mut bindings::sk_buff,
+    owner: *mut ffi::c_void,
+    _cookie: u32,
+    owned: bool,
+) {
+    // SAFETY: a valid skb, our reference if `owned`, else borrowed for the
+    // call (RxFn contract); ManuallyDrop keeps a borrowed one unfreed.
+    let Some(skb) = (unsafe { Skb::from_raw(skb) }) else {
+        return;
+    };
+    let skb = ManuallyDrop::new(skb);
+    // CAST: `owner` is the `&'static T` that rx_set_kernel registered.
+    let rx = owner as *const T;
+    // SAFETY: that static outlives the registration, and removing the
+    // registration waits for running callbacks (rcan_rx_set_kernel).
+    let rx = unsafe { &*rx };
+    // SAFETY: the receive path holds the receiving device for the call.
+    if let Some(dev) = unsafe { skb.dev() } {
+        rx.rx(&skb, dev);
+    }
+    if owned {
+        ManuallyDrop::into_inner(skb).consume();
+    }
+}
+
+/// A registered [`KernelRx`]; dropping it removes the receiver and waits
+/// for running callbacks (process context; sleeps).
+pub(crate) struct KernelRxReg<T: KernelRx>(&'static T);
+
+impl<T: KernelRx> Drop for KernelRxReg<T> {
+    fn drop(&mut self) {
+        // SAFETY: removal (NULL spec) of the receiver registered with this
+        // func and data; never fails.
+        unsafe {
+            abi::rcan_rx_set_kernel(
+                kernel_rx::<T>,
+                self.0 as *const T as *mut ffi::c_void,
+                0,
+                core::ptr::null(),
+            )
+        };
+    }
+}
+
+/// Registers `rx` for frames on `ifindex` (0: every CAN interface)
+/// passing any of `filters` (at least one). The registration lasts until
+/// the returned guard is dropped. Process context; may sleep.
+pub(crate) fn rx_set_kernel<T: KernelRx>(
+    rx: &'static T,
+    ifindex: i32,
+    filters: &[RxFilter],
+) -> Result<KernelRxReg<T>> {
+    if filters.is_empty() {
+        return Err(code::EINVAL);
+    }
+    let spec = RxSpec {
+        ifindex,
+        join: false,
+        err_mask: 0,
+        filters: filters.as_ptr(),
+        nfilters: filters.len(),
+    };
+    // `rx` is 'static: a static of the calling module, which keeps the
+    // guard in its module object, so the registration is removed at module
+    // exit at the latest.
+    let data = rx as *const T as *mut ffi::c_void;
+    // SAFETY: `spec` and its filters live for the call; `data` is 'static.
+    let ret = unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, &spec) };
+    crate::glue::to_result(ret).map(|_| KernelRxReg(rx))
+}
+
+/// A driver whose hardware filter follows the sockets (DESIGN decision 7).
+pub(crate) trait FilterListener: gnetdev::Driver {
+    /// The filters wanted on this device's interface changed. Process
+    /// context, may not sleep for long (pf_can's writers' mutex is held).
+    fn filters_changed(dev: &gnetdev::Dev<Self>, priv_: &Self::Priv);
+}
+
+/// # Safety
+///
+/// Called by pf_can as `abi::ListenFn` says, with the cookie that
+/// [`Listening::new`] registered.
+unsafe extern "C" fn listen_trampoline<T: FilterListener>(data: *mut ffi::c_void) {
+    // SAFETY: `data` is the device of a live Registration<T>: the
+    // Listening guard that registered it removes it (waiting for a running
+    // call) before that registration can be dropped.
+    let (dev, p) = unsafe { gnetdev::from_cookie::<T>(data.cast()) };
+    T::filters_changed(dev, p);
+}
+
+/// Calls `T::filters_changed` for one device whenever the receive table
+/// changes; stops when dropped. Must be dropped before the device's
+/// Registration (declare it after the registration in a struct, or drop it
+/// explicitly).
+pub(crate) struct Listening<T: FilterListener> {
+    dev: *mut bindings::net_device,
+    ifindex: i32,
+    _t: PhantomData<T>,
+}
+
+// SAFETY: only used to unregister the listener, from any thread.
+unsafe impl<T: FilterListener> Send for Listening<T> {}
+// SAFETY: no shared access.
+unsafe impl<T: FilterListener> Sync for Listening<T> {}
+
+impl<T: FilterListener> Listening<T> {
+    /// Starts listening for `reg`'s device. Process context.
+    pub(crate) fn new(reg: &gnetdev::Registration<T>) -> Result<Self> {
+        let dev = reg.dev().as_ptr();
+        let ifindex = reg.dev().ifindex();
+        // SAFETY: the trampoline's cookie is the registered device; the
+        // registration outlives this guard (documented contract), whose
+        // Drop removes the listener.
+        crate::glue::to_result(unsafe {
+            abi::rcan_rx_listen(listen_trampoline::<T>, dev.cast(), ifindex, true)
+        })?;
+        Ok(Listening {
+            dev,
+            ifindex,
+            _t: PhantomData,
+        })
+    }
+}
+
+impl<T: FilterListener> Drop for Listening<T> {
+    fn drop(&mut self) {
+        // SAFETY: removal of the listener added in new(); returns after a
+        // running call finished.
+        unsafe {
+            abi::rcan_rx_listen(listen_trampoline::<T>, self.dev.cast(), self.ifindex, false)
+        };
+    }
+}
+
+/// The filters that apply to frames received on `ifindex`, in `out`;
+/// `None` if there are more than fit. Any context.
+pub(crate) fn rx_filters(
+    ifindex: i32,
+    out: &mut [crate::rcan_core::rxtable::Filter],
+) -> Option<usize> {
+    // SAFETY: `out` has room for `out.len()` filters.
+    let n = unsafe { abi::rcan_rx_filters(ifindex, out.as_mut_ptr(), out.len()) };
+    usize::try_from(n).ok()
+}
+
+/// Most filters [`wanted`] takes into account; with more, a driver's
+/// hardware filter stays open (sound, just not tight). Stack use in atomic
+/// context bounds it.
+pub(crate) const MAX_WANTED: usize = 24;
+
+/// What the sockets bound to `dev` (or to every interface) want, as
+/// [`Wanted`](crate::rcan_core::sja1000::Wanted) sets handed to `derive`,
+/// which computes a driver's hardware filter from them. `None` when the
+/// hardware filter must be open: `dev` is promiscuous, or more than
+/// [`MAX_WANTED`] filters apply. Any context.
+pub(crate) fn wanted<T>(
+    dev: &NetDev,
+    derive: impl FnOnce(&[crate::rcan_core::sja1000::Wanted]) -> T,
+) -> Option<T> {
+    use crate::rcan_core::{rxtable::Filter, sja1000::Wanted};
+    if dev.is_promisc() {
+        return None;
+    }
+    let mut fs = [Filter::Id {
+        id: 0,
+        mask: 0,
+        inv: false,
+    }; MAX_WANTED];
+    let n = rx_filters(dev.ifindex(), &mut fs)?;
+    let mut w = [Wanted::ALL; MAX_WANTED];
+    for (o, f) in w.iter_mut().zip(&fs[..n]) {
+        *o = Wanted::of(f);
+    }
+    Some(derive(&w[..n]))
+}
