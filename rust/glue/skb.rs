@@ -269,9 +269,10 @@ impl Skb {
     #[inline]
     fn dev_ptr(&self) -> *mut bindings::net_device {
         // SAFETY: valid skb by the type invariant. `dev` shares a union
-        // with `dev_scratch`, which only UDP uses, on its own skbs, while
-        // they sit in its receive queue: on the skbs we see, the union
-        // holds `dev`.
+        // with `dev_scratch` (UDP's, on its own receive queue) and with
+        // `rbnode` (skbs inside an rbtree: TCP, defragmentation, netem):
+        // neither holds on an skb handed to us, so the union holds `dev`;
+        // these are the bytes C's `skb->dev` reads.
         unsafe {
             (*self.as_ptr())
                 .__bindgen_anon_1
