@@ -20,6 +20,20 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use kernel::error::{code, Result};
 use kernel::prelude::*;
 
+/// `netdev_priv(dev)`: the driver's private area, the flexible array at
+/// the end of the C struct (`dev->priv`). Computed here rather than by a C
+/// helper: drivers reach their state through it on every frame.
+///
+/// # Safety
+///
+/// `dev` points to a valid `net_device`.
+#[inline]
+unsafe fn netdev_priv(dev: *const bindings::net_device) -> *mut ffi::c_void {
+    // SAFETY: `dev` is valid (contract); only the address of the field is
+    // taken, nothing is read.
+    unsafe { core::ptr::addr_of!((*dev).priv_).cast_mut().cast() }
+}
+
 /// A `struct net_device` borrowed for the duration of a callback.
 #[repr(transparent)]
 pub(crate) struct NetDev(kernel::types::Opaque<bindings::net_device>);
@@ -330,7 +344,7 @@ impl<T: Driver> Dev<T> {
     fn state(&self) -> &PrivBox<T::Priv> {
         // SAFETY: a device of `T` holds an initialised PrivBox (invariant
         // of Registration).
-        unsafe { &*bindings::rcan_netdev_priv(self.as_ptr()).cast::<PrivBox<T::Priv>>() }
+        unsafe { &*netdev_priv(self.as_ptr()).cast::<PrivBox<T::Priv>>() }
     }
 
     /// Requests interrupt line `irq` (shared) for this device; `T::irq`
@@ -467,7 +481,7 @@ impl<T: Driver> Adapter<T> {
     unsafe fn priv_of<'a>(dev: *mut bindings::net_device) -> &'a T::Priv {
         // SAFETY: the private area holds an initialised `PrivBox<T::Priv>`
         // from registration until free (see Registration).
-        unsafe { &(*bindings::rcan_netdev_priv(dev).cast::<PrivBox<T::Priv>>()).inner }
+        unsafe { &(*netdev_priv(dev).cast::<PrivBox<T::Priv>>()).inner }
     }
 
     unsafe extern "C" fn siocdevprivate(
@@ -636,7 +650,7 @@ impl<T: Driver> Registration<T> {
         // SAFETY: the private area is sized and aligned (NETDEV_ALIGN) for
         // `PrivBox<T::Priv>`, and nothing reads it before registration.
         unsafe {
-            bindings::rcan_netdev_priv(dev.as_ptr())
+            netdev_priv(dev.as_ptr())
                 .cast::<PrivBox<T::Priv>>()
                 .write(PrivBox {
                     irq: AtomicU32::new(0),
@@ -651,7 +665,7 @@ impl<T: Driver> Registration<T> {
             unsafe {
                 bindings::rcan_napi_add(
                     dev.as_ptr(),
-                    (*bindings::rcan_netdev_priv(dev.as_ptr()).cast::<PrivBox<T::Priv>>())
+                    (*netdev_priv(dev.as_ptr()).cast::<PrivBox<T::Priv>>())
                         .napi
                         .get(),
                     Some(Adapter::<T>::poll),
@@ -664,9 +678,7 @@ impl<T: Driver> Registration<T> {
         if ret < 0 {
             // SAFETY: never registered: drop the private data, free it.
             unsafe {
-                core::ptr::drop_in_place(
-                    bindings::rcan_netdev_priv(dev.as_ptr()).cast::<PrivBox<T::Priv>>(),
-                );
+                core::ptr::drop_in_place(netdev_priv(dev.as_ptr()).cast::<PrivBox<T::Priv>>());
                 bindings::free_netdev(dev.as_ptr());
             }
             return Err(Error::from_errno(ret));
@@ -701,9 +713,7 @@ impl<T: Driver> Drop for Registration<T> {
         // SAFETY: unregistered, no handler or op can run any more: drop
         // the private data and free the device.
         unsafe {
-            core::ptr::drop_in_place(
-                bindings::rcan_netdev_priv(self.dev.as_ptr()).cast::<PrivBox<T::Priv>>(),
-            );
+            core::ptr::drop_in_place(netdev_priv(self.dev.as_ptr()).cast::<PrivBox<T::Priv>>());
             bindings::free_netdev(self.dev.as_ptr());
         }
     }

@@ -5,8 +5,8 @@
 //! * [`CpuMarks`]: one `u64` per CPU, inline for up to 8 CPUs, else in an
 //!   ordinary allocation (cheaper to make than per-CPU memory, which
 //!   matters when one is made per socket).
-//! * [`rx_serial_next`]: a per-CPU counter of this module, one number per
-//!   frame the receive path dispatches on that CPU.
+//! * [`rx_stamp`]: a per-CPU counter of this module, one number per
+//!   frame the receive path dispatches on that CPU, with the CPU's id.
 
 use super::bindings;
 use kernel::error::Result;
@@ -43,28 +43,52 @@ impl CpuMarks {
         Ok(CpuMarks::Heap(v))
     }
 
-    /// Stores `v` in the current CPU's mark and returns its previous
-    /// value. Meant for BH-disabled context (no migration in between);
-    /// any context is memory-safe.
-    pub(crate) fn xchg(&self, v: u64) -> u64 {
-        // SAFETY: raw_smp_processor_id may be called in any context.
-        let cpu = unsafe { bindings::rcan_raw_smp_processor_id() } as usize;
+    /// Marks `stamp`'s CPU with its frame number: true if that mark did
+    /// not hold the number yet (the first time this frame meets these
+    /// marks), false if it did. Meant for the BH-disabled context that took
+    /// `stamp` (no migration, and nothing else on this CPU touches its
+    /// mark in between, so a load and a store suffice: no locked
+    /// read-modify-write); any context is memory-safe.
+    #[inline]
+    pub(crate) fn mark(&self, stamp: &RxStamp) -> bool {
+        use core::sync::atomic::Ordering::Relaxed;
         let marks: &[core::sync::atomic::AtomicU64] = match self {
             CpuMarks::Inline(a) => a,
             CpuMarks::Heap(v) => v,
         };
-        match marks.get(cpu) {
-            Some(m) => m.swap(v, core::sync::atomic::Ordering::Relaxed),
-            None => 0,
+        match marks.get(stamp.cpu) {
+            Some(m) if m.load(Relaxed) != stamp.serial => {
+                m.store(stamp.serial, Relaxed);
+                true
+            }
+            Some(_) => false,
+            // Cannot happen (cpu < nr_cpu_ids); deliver rather than lose.
+            None => true,
         }
     }
 }
 
-/// The next number of this CPU's frame counter (starts at 1, so a fresh
-/// [`PerCpuU64`] never equals it). Call with BH disabled (NET_RX softirq)
-/// so that the number and the marks compared with it are of one CPU.
-pub(crate) fn rx_serial_next() -> u64 {
-    // SAFETY: this_cpu_inc_return on this module's own per-CPU variable;
-    // any context.
-    unsafe { bindings::rcan_rx_serial_next() }
+/// One frame's number on the CPU that dispatches it, with that CPU's id.
+pub(crate) struct RxStamp {
+    /// The CPU's frame counter after this frame (starts at 1, so fresh
+    /// [`CpuMarks`] never hold it).
+    serial: u64,
+    /// The CPU the number was taken on.
+    cpu: usize,
+}
+
+/// The next number of this CPU's frame counter, and the CPU, in one call.
+/// Call with BH disabled (NET_RX softirq), so that the frame keeps the CPU
+/// while its receivers are marked.
+#[inline]
+pub(crate) fn rx_stamp() -> RxStamp {
+    let mut cpu: u32 = 0;
+    // SAFETY: this_cpu_inc_return on this module's own per-CPU variable
+    // and raw_smp_processor_id, both valid in any context; `cpu` is a
+    // valid place for the id.
+    let serial = unsafe { bindings::rcan_rx_serial_next(&mut cpu) };
+    RxStamp {
+        serial,
+        cpu: cpu as usize,
+    }
 }

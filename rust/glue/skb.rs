@@ -50,12 +50,14 @@ impl Skb {
     }
 
     /// Bytes in the skb.
+    #[inline]
     pub(crate) fn len(&self) -> u32 {
         // SAFETY: valid skb by the type invariant.
         unsafe { (*self.as_ptr()).len }
     }
 
     /// The linear data (the whole skb for the linear skbs CAN uses).
+    #[inline]
     pub(crate) fn data(&self) -> &[u8] {
         // SAFETY: `data` points to `len - data_len` readable bytes (the
         // linear part), valid as long as we hold the reference; `&self`
@@ -242,10 +244,18 @@ impl Skb {
         }
     }
 
-    /// Whether someone else holds a reference too (`skb_shared`).
+    /// Whether someone else holds a reference too (`skb_shared`). Read
+    /// here rather than through a C helper: it is on every frame's path.
+    #[inline]
     pub(crate) fn is_shared(&self) -> bool {
-        // SAFETY: valid skb.
-        unsafe { bindings::rcan_skb_shared(self.as_ptr()) }
+        // SAFETY: valid skb by the type invariant; `users` is a refcount_t,
+        // read as refcount_read does (one volatile load of the counter,
+        // READ_ONCE), through a raw place so no reference to a field that
+        // other CPUs change is made.
+        let users = unsafe {
+            core::ptr::read_volatile(core::ptr::addr_of!((*self.as_ptr()).users.refs.counter))
+        };
+        users != 1
     }
 
     /// The socket that sent the skb (`skb->sk`), for identity comparisons
@@ -253,6 +263,23 @@ impl Skb {
     pub(crate) fn sk_ptr(&self) -> *mut bindings::sock {
         // SAFETY: valid skb; reading a pointer field.
         unsafe { (*self.as_ptr()).sk }
+    }
+
+    /// `skb->dev` (NULL if none), read in place: every frame asks.
+    #[inline]
+    fn dev_ptr(&self) -> *mut bindings::net_device {
+        // SAFETY: valid skb by the type invariant. `dev` shares a union
+        // with `dev_scratch` (UDP's, on its own receive queue) and with
+        // `rbnode` (skbs inside an rbtree: TCP, defragmentation, netem):
+        // neither holds on an skb handed to us, so the union holds `dev`;
+        // these are the bytes C's `skb->dev` reads.
+        unsafe {
+            (*self.as_ptr())
+                .__bindgen_anon_1
+                .__bindgen_anon_1
+                .__bindgen_anon_1
+                .dev
+        }
     }
 
     /// The device in `skb->dev`.
@@ -265,7 +292,7 @@ impl Skb {
     pub(crate) unsafe fn dev<'a>(&self) -> Option<&'a super::netdev::NetDev> {
         // SAFETY: valid skb; the device's lifetime per the contract.
         unsafe {
-            let dev = bindings::rcan_skb_dev(self.as_ptr());
+            let dev = self.dev_ptr();
             if dev.is_null() {
                 None
             } else {
@@ -399,7 +426,7 @@ impl Skb {
         // SAFETY: valid skb; `dev` is NULL or a device kept alive by the
         // path that handed us the skb (receive path or transmit path).
         unsafe {
-            let dev = bindings::rcan_skb_dev(self.as_ptr());
+            let dev = self.dev_ptr();
             if dev.is_null() {
                 0
             } else {
@@ -408,10 +435,21 @@ impl Skb {
         }
     }
 
-    /// `skb->pkt_type` (PACKET_HOST, PACKET_LOOPBACK, ...).
+    /// `skb->pkt_type` (PACKET_HOST, PACKET_LOOPBACK, ...). Read here
+    /// rather than through a C helper: drivers ask on every frame.
+    #[inline]
     pub(crate) fn pkt_type(&self) -> u8 {
-        // SAFETY: valid skb.
-        unsafe { bindings::rcan_skb_pkt_type(self.as_ptr()) }
+        // SAFETY: valid skb by the type invariant, and we hold a reference,
+        // so nobody else writes its header fields meanwhile. The bitfield
+        // lives in the skb's header group, a union whose anonymous-struct
+        // view bindgen generated from the running kernel's layout.
+        unsafe {
+            (*self.as_ptr())
+                .__bindgen_anon_4
+                .__bindgen_anon_1
+                .as_ref()
+                .pkt_type()
+        }
     }
 
     /// The first bytes of the 48-byte control buffer, owned by whoever queues

@@ -219,9 +219,10 @@ impl<T: Proto> Sock<T> {
     /// full unless `nonblock` (then EAGAIN); honours SO_SNDTIMEO.
     pub(crate) fn alloc_send_skb(&self, size: u32, nonblock: bool) -> Result<Skb> {
         let mut err: ffi::c_int = 0;
-        // SAFETY: live sock.
+        // SAFETY: live sock; `err` is a valid place for the error. This is
+        // the body of the inline sock_alloc_send_skb (no paged part).
         let skb = unsafe {
-            bindings::rcan_sock_alloc_send_skb(self.sk, size as _, nonblock as i32, &mut err)
+            bindings::sock_alloc_send_pskb(self.sk, size as _, 0, nonblock as i32, &mut err, 0)
         };
         // SAFETY: an owned skb or NULL with `err` set.
         unsafe { Skb::from_raw(skb) }.ok_or_else(|| Error::from_errno(err))

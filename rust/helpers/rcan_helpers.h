@@ -37,13 +37,9 @@ struct sk_buff *rcan_alloc_skb(unsigned int size, gfp_t gfp);
 void rcan_kfree_skb(struct sk_buff *skb);
 void rcan_consume_skb(struct sk_buff *skb);
 void rcan_dev_kfree_skb_any(struct sk_buff *skb);
-struct sk_buff *rcan_sock_alloc_send_skb(struct sock *sk, unsigned long size,
-					 int noblock, int *errcode);
 void rcan_skb_reserve(struct sk_buff *skb, int len);
 unsigned int rcan_skb_headroom(const struct sk_buff *skb);
 void rcan_skb_reset_headers(struct sk_buff *skb);
-struct net_device *rcan_skb_dev(const struct sk_buff *skb);
-u8 rcan_skb_pkt_type(const struct sk_buff *skb);
 void rcan_skb_stamp_if_unset(struct sk_buff *skb);
 bool rcan_dev_nit_active(struct net_device *dev);
 void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev);
@@ -51,7 +47,6 @@ void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopb
 void rcan_skb_set_can_rx(struct sk_buff *skb, struct net_device *dev);
 bool rcan_can_skb_tx_prepare(struct sk_buff *skb, struct net_device *dev);
 struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp);
-bool rcan_skb_shared(const struct sk_buff *skb);
 int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len);
 void rcan_skb_sock_params(struct sk_buff *skb, struct sock *sk);
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
@@ -73,7 +68,6 @@ struct net *rcan_sock_net(const struct sock *sk);
 bool rcan_net_is_init(const struct net *net);
 
 /* net_device */
-void *rcan_netdev_priv(const struct net_device *dev);
 void rcan_netif_start_queue(struct net_device *dev);
 void rcan_netif_stop_queue(struct net_device *dev);
 void rcan_dev_hold(struct net_device *dev);
@@ -166,9 +160,8 @@ unsigned long rcan_jiffies(void);
 unsigned long rcan_msecs_to_jiffies(unsigned int ms);
 
 /* the receive table's per-CPU frame counter and CPU numbers */
-u64 rcan_rx_serial_next(void);
+u64 rcan_rx_serial_next(unsigned int *cpu);
 unsigned int rcan_nr_cpu_ids(void);
-unsigned int rcan_raw_smp_processor_id(void);
 /* NAPI */
 struct napi_struct;
 void rcan_napi_add(struct net_device *dev, struct napi_struct *napi,

@@ -45,7 +45,7 @@
 //!   receiver outlives all of its registrations (freed with the last).
 
 use super::super::bindings;
-use super::super::percpu::{rx_serial_next, CpuMarks};
+use super::super::percpu::{rx_stamp, CpuMarks};
 use super::super::sync::{CMutex, RcuPtr, RcuReadGuard};
 use crate::rcan_core::arb::CAN_ERR_FLAG;
 use crate::rcan_core::rxtable::{self, frame_key, Filter, Place, BUCKET_BITS};
@@ -448,14 +448,14 @@ impl<R: Receiver> RxTable<R> {
         can_id: u32,
         mut f: impl FnMut(&'g R, u32),
     ) {
-        let serial = rx_serial_next();
+        let stamp = rx_stamp();
         let mut hit = |reg: *const Reg<R>| {
             // SAFETY: a node reachable in this read-side section names a
             // registration freed only a grace period after the node was
             // unlinked.
             let reg: &'g Reg<R> = unsafe { &*reg };
             let rcv = reg.rcv();
-            if rcv.seen.xchg(serial) != serial {
+            if rcv.seen.mark(&stamp) {
                 f(&rcv.data, reg.cookie);
             }
         };
