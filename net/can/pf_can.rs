@@ -42,7 +42,7 @@ mod rcan_api;
 mod rcan_core;
 
 use glue::bindings;
-use glue::can::rx::{Receiver, RxTable, Spec};
+use glue::can::rx::{Filters, Receiver, RxTable, Spec};
 use glue::netdev::NetDev;
 use glue::skb::Skb;
 use glue::sync::{rcu_barrier, synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard};
@@ -146,16 +146,16 @@ static PROTOS: [RcuPtr<CanProto>; CANPROTO_MAX] = [const { RcuPtr::null() }; CAN
 static TABLE: RxTable<Target> = RxTable::new(rx_mutex);
 
 /// Converts the C filters of a spec.
-fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<KVec<Filter>> {
-    let mut v = KVec::with_capacity(filters.len(), GFP_KERNEL)?;
+fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<Filters> {
+    let mut v = Filters::with_capacity(filters.len())?;
     for f in filters {
         match f.kind {
             RX_FILTER_ARB => {
                 let af = ArbFilter::new(f.id, f.mask).map_err(|e| glue::errno(e.errno()))?;
-                v.push(Filter::Arb(af), GFP_KERNEL)?;
+                v.push(Filter::Arb(af))?;
             }
             RX_FILTER_CAN_ID => match Filter::from_can_filter(f.id, f.mask) {
-                CanFilterKind::Frames(x) => v.push(x, GFP_KERNEL)?,
+                CanFilterKind::Frames(x) => v.push(x)?,
                 CanFilterKind::Errors(m) => *err_mask |= m,
             },
             _ => return Err(EINVAL),

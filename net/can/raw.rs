@@ -119,8 +119,8 @@ struct RawSock {
     bound: bool,
     /// Interface given to bind (0 = all CAN interfaces).
     ifindex: i32,
-    /// Filters set with CAN_RAW_FILTER; `None` = the default filter.
-    filters: Option<KVec<RxFilter>>,
+    /// Filters set with CAN_RAW_FILTER.
+    filters: RawFilters,
     err_mask: u32,
     /// Option values as the user set them (mainline keeps the int).
     loopback: i32,
@@ -131,6 +131,17 @@ struct RawSock {
     /// or received: every rcan device is a classic CAN device (MTU 16).
     fd_frames: i32,
     xl_frames: i32,
+}
+
+/// A socket's CAN_RAW_FILTER list. One filter (the common case, as in
+/// mainline's `dfilter`) is kept inline: setting it allocates nothing and
+/// close frees nothing.
+enum RawFilters {
+    /// Never set: the default filter (everything).
+    Default,
+    One(RxFilter),
+    /// None or several.
+    Many(KVec<RxFilter>),
 }
 
 /// What sendmsg needs, readable without the socket lock (mainline reads
@@ -146,8 +157,9 @@ struct RawShared {
 impl RawSock {
     fn filters(&self) -> &[RxFilter] {
         match &self.filters {
-            Some(v) => v,
-            None => &DEFAULT_FILTER,
+            RawFilters::Default => &DEFAULT_FILTER,
+            RawFilters::One(f) => core::slice::from_ref(f),
+            RawFilters::Many(v) => v,
         }
     }
 
@@ -271,7 +283,7 @@ fn read_int(opt: &OptIn) -> Result<i32> {
 
 /// A change of what a socket receives.
 enum Change {
-    Filters(KVec<RxFilter>),
+    Filters(RawFilters),
     ErrMask(u32),
     RecvOwn(i32),
     Join(i32),
@@ -286,7 +298,7 @@ fn update(sk: &S, change: Change) -> Result {
     let (err_mask, recv_own, join) = (s.err_mask, s.recv_own_msgs, s.join_filters);
     let mut old_filters = None;
     match change {
-        Change::Filters(v) => old_filters = Some(s.filters.replace(v)),
+        Change::Filters(v) => old_filters = Some(core::mem::replace(&mut s.filters, v)),
         Change::ErrMask(m) => s.err_mask = m,
         Change::RecvOwn(v) => s.recv_own_msgs = v,
         Change::Join(v) => s.join_filters = v,
@@ -320,7 +332,7 @@ impl glue::sock::Proto for RawProto {
         RawSock {
             bound: false,
             ifindex: 0,
-            filters: None,
+            filters: RawFilters::Default,
             err_mask: 0,
             loopback: 1,
             recv_own_msgs: 0,
@@ -339,7 +351,7 @@ impl glue::sock::Proto for RawProto {
         }
         s.bound = false;
         s.ifindex = 0;
-        s.filters = None;
+        s.filters = RawFilters::Default;
         sk.shared().ifindex.store(0, Ordering::Relaxed);
     }
 
@@ -476,16 +488,21 @@ impl glue::sock::Proto for RawProto {
                     &mut big
                 };
                 opt.read(raw)?;
-                let mut v = KVec::with_capacity(len / CAN_FILTER_LEN, GFP_KERNEL)?;
-                for c in raw.chunks_exact(CAN_FILTER_LEN) {
-                    v.push(
-                        can_filter(
-                            u32::from_ne_bytes([c[0], c[1], c[2], c[3]]),
-                            u32::from_ne_bytes([c[4], c[5], c[6], c[7]]),
-                        ),
-                        GFP_KERNEL,
-                    )?;
-                }
+                let parse = |c: &[u8]| {
+                    can_filter(
+                        u32::from_ne_bytes([c[0], c[1], c[2], c[3]]),
+                        u32::from_ne_bytes([c[4], c[5], c[6], c[7]]),
+                    )
+                };
+                let v = if len == CAN_FILTER_LEN {
+                    RawFilters::One(parse(raw))
+                } else {
+                    let mut v = KVec::with_capacity(len / CAN_FILTER_LEN, GFP_KERNEL)?;
+                    for c in raw.chunks_exact(CAN_FILTER_LEN) {
+                        v.push(parse(c), GFP_KERNEL)?;
+                    }
+                    RawFilters::Many(v)
+                };
                 update(sk, Change::Filters(v))
             }
             CAN_RAW_ERR_FILTER => {
@@ -622,7 +639,7 @@ unsafe extern "C" fn raw_notifier(
             sk.shared().ifindex.store(0, Ordering::Relaxed);
             // Mainline forgets the filters too: a new bind receives
             // nothing until CAN_RAW_FILTER is set again.
-            s.filters = Some(KVec::new());
+            s.filters = RawFilters::Many(KVec::new());
             bindings::ENODEV
         } else {
             bindings::ENETDOWN

@@ -75,13 +75,63 @@ pub(crate) trait Receiver: Send + Sync + 'static {
     fn id(&self) -> usize;
 }
 
+/// A registration's frame filters: one kept inline, more in a vector, so
+/// the common registration (a socket with one filter) allocates nothing
+/// for them. Derefs to the slice of filters.
+pub(crate) struct Filters {
+    /// The only filter, if there is one and `more` was never allocated.
+    one: Option<Filter>,
+    /// Every filter, once there are two (or room for two was reserved).
+    more: KVec<Filter>,
+}
+
+impl Filters {
+    /// No filters, with room for `n` without reallocating. Process
+    /// context (may allocate and sleep).
+    pub(crate) fn with_capacity(n: usize) -> Result<Self> {
+        Ok(Filters {
+            one: None,
+            more: if n > 1 {
+                KVec::with_capacity(n, GFP_KERNEL)?
+            } else {
+                KVec::new()
+            },
+        })
+    }
+
+    /// Appends `f`. Process context (may allocate and sleep).
+    pub(crate) fn push(&mut self, f: Filter) -> Result {
+        if self.one.is_none() && self.more.capacity() == 0 {
+            self.one = Some(f);
+            return Ok(());
+        }
+        if let Some(o) = self.one {
+            self.more.push(o, GFP_KERNEL)?;
+            self.one = None;
+        }
+        self.more.push(f, GFP_KERNEL)?;
+        Ok(())
+    }
+}
+
+impl core::ops::Deref for Filters {
+    type Target = [Filter];
+
+    fn deref(&self) -> &[Filter] {
+        match &self.one {
+            Some(f) => core::slice::from_ref(f),
+            None => &self.more,
+        }
+    }
+}
+
 /// What a registration asks for.
 pub(crate) struct Spec {
     /// Interface, 0 = all.
     pub(crate) ifindex: i32,
     /// Filters for data and remote frames (none: no such frames); kept by
     /// the registration.
-    pub(crate) filters: KVec<Filter>,
+    pub(crate) filters: Filters,
     /// Deliver only frames that pass every filter.
     pub(crate) join: bool,
     /// Error classes wanted (0: no error frames).
@@ -289,7 +339,7 @@ struct Reg<R: Receiver> {
     cookie: u32,
     ifindex: i32,
     /// Every frame filter, for [`RxTable::filters`].
-    filters: KVec<Filter>,
+    filters: Filters,
     /// The scanned node's filters.
     scanned: KVec<Filter>,
     /// The scanned node's filters must all pass.
