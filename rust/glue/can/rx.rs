@@ -348,9 +348,11 @@ struct Reg<R: Receiver> {
 }
 
 /// Inline room for a registration's nodes: a socket with one filter has
-/// two (its key's member and its interface entry), with an error mask
-/// three; more go to `more`, so the common bind allocates no node vector.
-const INLINE_NODES: usize = 3;
+/// two (its key's member and its interface entry); more (an error mask,
+/// more filters) go to `more`, so the common bind allocates no node
+/// vector. Two, not three: with three a registration no longer fits
+/// kmalloc-256 and takes 512 bytes.
+const INLINE_NODES: usize = 2;
 
 /// A registration's nodes. Filled before any is linked and never changed
 /// afterwards, so their addresses (inside the boxed registration, or in
