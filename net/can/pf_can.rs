@@ -42,7 +42,7 @@ use crate::{family, glue, rcan_api, rcan_core};
 use kernel::prelude::*;
 
 use family::{Family, RxRequest, Target};
-use glue::can::rx::{RxTable, Spec};
+use glue::can::rx::{Filters, RxTable, Spec};
 use glue::netdev::NetDev;
 use glue::skb::Skb;
 use glue::sync::{rcu_barrier, RcuReadGuard};
@@ -56,16 +56,16 @@ use rcan_core::rxtable::{self, CanFilterKind, Filter};
 static TABLE: RxTable<Target> = RxTable::new(family::rx_mutex);
 
 /// Converts the C filters of a spec.
-fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<KVec<Filter>> {
-    let mut v = KVec::with_capacity(filters.len(), GFP_KERNEL)?;
+fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<Filters> {
+    let mut v = Filters::with_capacity(filters.len())?;
     for f in filters {
         match f.kind {
             RX_FILTER_ARB => {
                 let af = ArbFilter::new(f.id, f.mask).map_err(|e| glue::errno(e.errno()))?;
-                v.push(Filter::Arb(af), GFP_KERNEL)?;
+                v.push(Filter::Arb(af))?;
             }
             RX_FILTER_CAN_ID => match Filter::from_can_filter(f.id, f.mask) {
-                CanFilterKind::Frames(x) => v.push(x, GFP_KERNEL)?,
+                CanFilterKind::Frames(x) => v.push(x)?,
                 CanFilterKind::Errors(m) => *err_mask |= m,
             },
             _ => return Err(EINVAL),

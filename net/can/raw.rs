@@ -64,6 +64,8 @@ const SCM_CAN_RAW_ERRQUEUE: i32 = 1;
 const CAN_RAW_FILTER_MAX: usize = 512;
 /// `sizeof(struct can_filter)`.
 const CAN_FILTER_LEN: usize = 8;
+/// CAN_RAW_FILTER reads up to this many filters without a heap buffer.
+const SMALL_FILTERS: usize = 8;
 /// Bytes of `struct sockaddr_can` that CAN_RAW requires and returns
 /// (`can_family`, padding, `can_ifindex`).
 const RAW_MIN_NAMELEN: usize = 8;
@@ -85,17 +87,22 @@ const CB_FLAGS: usize = RAW_MIN_NAMELEN;
 /// Headroom for mainline's `struct can_skb_priv`.
 const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
-/// `struct can_filter`, as the user set it.
-#[derive(Clone, Copy, PartialEq, Eq)]
-struct CanFilter {
-    can_id: u32,
-    can_mask: u32,
+/// A `struct can_filter` as the user set it, kept in the form pf_can
+/// takes (`id` = `can_id`, `mask` = `can_mask`), so that bind and every
+/// filter change hand the socket's filters over without copying them.
+fn can_filter(can_id: u32, can_mask: u32) -> RxFilter {
+    RxFilter {
+        kind: RX_FILTER_CAN_ID,
+        id: can_id,
+        mask: can_mask,
+    }
 }
 
 /// The filter of a new socket: everything (`can_mask` 0).
-static DEFAULT_FILTER: [CanFilter; 1] = [CanFilter {
-    can_id: 0,
-    can_mask: 0,
+static DEFAULT_FILTER: [RxFilter; 1] = [RxFilter {
+    kind: RX_FILTER_CAN_ID,
+    id: 0,
+    mask: 0,
 }];
 
 /// A CAN_RAW socket's state, protected by its socket lock.
@@ -103,8 +110,8 @@ struct RawSock {
     bound: bool,
     /// Interface given to bind (0 = all CAN interfaces).
     ifindex: i32,
-    /// Filters set with CAN_RAW_FILTER; `None` = the default filter.
-    filters: Option<KVec<CanFilter>>,
+    /// Filters set with CAN_RAW_FILTER.
+    filters: RawFilters,
     err_mask: u32,
     /// Option values as the user set them (mainline keeps the int).
     loopback: i32,
@@ -115,6 +122,17 @@ struct RawSock {
     /// or received: every rcan device is a classic CAN device (MTU 16).
     fd_frames: i32,
     xl_frames: i32,
+}
+
+/// A socket's CAN_RAW_FILTER list. One filter (the common case, as in
+/// mainline's `dfilter`) is kept inline: setting it allocates nothing and
+/// close frees nothing.
+enum RawFilters {
+    /// Never set: the default filter (everything).
+    Default,
+    One(RxFilter),
+    /// None or several.
+    Many(KVec<RxFilter>),
 }
 
 /// What sendmsg needs, readable without the socket lock (mainline reads
@@ -128,10 +146,11 @@ struct RawShared {
 }
 
 impl RawSock {
-    fn filters(&self) -> &[CanFilter] {
+    fn filters(&self) -> &[RxFilter] {
         match &self.filters {
-            Some(v) => v,
-            None => &DEFAULT_FILTER,
+            RawFilters::Default => &DEFAULT_FILTER,
+            RawFilters::One(f) => core::slice::from_ref(f),
+            RawFilters::Many(v) => v,
         }
     }
 
@@ -208,7 +227,7 @@ impl CanProtocol for RawProto {
                 sk.shared().ifindex.store(0, Ordering::Relaxed);
                 // Mainline forgets the filters too: a new bind receives
                 // nothing until CAN_RAW_FILTER is set again.
-                s.filters = Some(KVec::new());
+                s.filters = RawFilters::Many(KVec::new());
                 bindings::ENODEV
             } else {
                 bindings::ENETDOWN
@@ -227,23 +246,11 @@ fn register(sk: &S, s: &RawSock) -> Result {
         rcan_api::rx_remove(sk);
         return Ok(());
     }
-    let fs = s.filters();
-    let mut v = KVec::with_capacity(fs.len(), GFP_KERNEL)?;
-    for f in fs {
-        v.push(
-            RxFilter {
-                kind: RX_FILTER_CAN_ID,
-                id: f.can_id,
-                mask: f.can_mask,
-            },
-            GFP_KERNEL,
-        )?;
-    }
     rcan_api::rx_set(
         sk,
         s.cookie(),
         s.ifindex,
-        &v,
+        s.filters(),
         s.join_filters != 0,
         s.err_mask,
     )
@@ -276,7 +283,7 @@ fn read_int(opt: &OptIn) -> Result<i32> {
 
 /// A change of what a socket receives.
 enum Change {
-    Filters(KVec<CanFilter>),
+    Filters(RawFilters),
     ErrMask(u32),
     RecvOwn(i32),
     Join(i32),
@@ -291,7 +298,7 @@ fn update(sk: &S, change: Change) -> Result {
     let (err_mask, recv_own, join) = (s.err_mask, s.recv_own_msgs, s.join_filters);
     let mut old_filters = None;
     match change {
-        Change::Filters(v) => old_filters = Some(s.filters.replace(v)),
+        Change::Filters(v) => old_filters = Some(core::mem::replace(&mut s.filters, v)),
         Change::ErrMask(m) => s.err_mask = m,
         Change::RecvOwn(v) => s.recv_own_msgs = v,
         Change::Join(v) => s.join_filters = v,
@@ -325,7 +332,7 @@ impl glue::sock::Proto for RawProto {
         RawSock {
             bound: false,
             ifindex: 0,
-            filters: None,
+            filters: RawFilters::Default,
             err_mask: 0,
             loopback: 1,
             recv_own_msgs: 0,
@@ -344,7 +351,7 @@ impl glue::sock::Proto for RawProto {
         }
         s.bound = false;
         s.ifindex = 0;
-        s.filters = None;
+        s.filters = RawFilters::Default;
         sk.shared().ifindex.store(0, Ordering::Relaxed);
     }
 
@@ -470,18 +477,32 @@ impl glue::sock::Proto for RawProto {
                 if len % CAN_FILTER_LEN != 0 || len > CAN_RAW_FILTER_MAX * CAN_FILTER_LEN {
                     return Err(EINVAL);
                 }
-                let mut raw = KVec::from_elem(0u8, len, GFP_KERNEL)?;
-                opt.read(&mut raw)?;
-                let mut v = KVec::with_capacity(len / CAN_FILTER_LEN, GFP_KERNEL)?;
-                for c in raw.chunks_exact(CAN_FILTER_LEN) {
-                    v.push(
-                        CanFilter {
-                            can_id: u32::from_ne_bytes([c[0], c[1], c[2], c[3]]),
-                            can_mask: u32::from_ne_bytes([c[4], c[5], c[6], c[7]]),
-                        },
-                        GFP_KERNEL,
-                    )?;
-                }
+                // A few filters are read through a buffer on the stack,
+                // more through one on the heap.
+                let mut small = [0u8; SMALL_FILTERS * CAN_FILTER_LEN];
+                let mut big;
+                let raw: &mut [u8] = if len <= small.len() {
+                    &mut small[..len]
+                } else {
+                    big = KVec::from_elem(0u8, len, GFP_KERNEL)?;
+                    &mut big
+                };
+                opt.read(raw)?;
+                let parse = |c: &[u8]| {
+                    can_filter(
+                        u32::from_ne_bytes([c[0], c[1], c[2], c[3]]),
+                        u32::from_ne_bytes([c[4], c[5], c[6], c[7]]),
+                    )
+                };
+                let v = if len == CAN_FILTER_LEN {
+                    RawFilters::One(parse(raw))
+                } else {
+                    let mut v = KVec::with_capacity(len / CAN_FILTER_LEN, GFP_KERNEL)?;
+                    for c in raw.chunks_exact(CAN_FILTER_LEN) {
+                        v.push(parse(c), GFP_KERNEL)?;
+                    }
+                    RawFilters::Many(v)
+                };
                 update(sk, Change::Filters(v))
             }
             CAN_RAW_ERR_FILTER => {
@@ -550,8 +571,8 @@ impl glue::sock::Proto for RawProto {
                 }
                 let mut buf = KVec::with_capacity(fsize as usize, GFP_KERNEL)?;
                 for f in fs {
-                    buf.extend_from_slice(&f.can_id.to_ne_bytes(), GFP_KERNEL)?;
-                    buf.extend_from_slice(&f.can_mask.to_ne_bytes(), GFP_KERNEL)?;
+                    buf.extend_from_slice(&f.id.to_ne_bytes(), GFP_KERNEL)?;
+                    buf.extend_from_slice(&f.mask.to_ne_bytes(), GFP_KERNEL)?;
                 }
                 drop(s);
                 opt.write(&buf)?;

@@ -20,6 +20,9 @@
 //! * `err`: per registration, at most one node with its error mask.
 //! * `by_if`: per registration with frame filters, one node hashed by
 //!   interface, for drivers computing their hardware filter.
+//! * `rcvs` (writer side only): the receivers, hashed by id and chained
+//!   through the receivers themselves, so a new receiver is added without
+//!   an allocation and a socket's registration is found without a scan.
 //!
 //! Each registration belongs to a *receiver* ([`Receiver::id`]); a
 //! receiver has at most one live registration, and replacing it links the
@@ -58,8 +61,10 @@ use kernel::error::{code, Result};
 const NBUCKETS: usize = 1 << BUCKET_BITS;
 /// Interface lists for [`RxTable::filters`] (a power of two).
 const IF_BUCKETS: usize = 64;
-/// Receiver map buckets of the writer side (a power of two).
-const ID_BUCKETS: usize = 1024;
+/// Receiver map buckets of the writer side (a power of two): a few
+/// receivers per chain at 10,000 sockets, so finding a socket's receiver
+/// touches one or two of them.
+const ID_BUCKETS: usize = 4096;
 
 /// What the table's user keeps per receiver: typically the callback and
 /// its owner. Dropped when the receiver's last registration is freed: in
@@ -70,13 +75,63 @@ pub(crate) trait Receiver: Send + Sync + 'static {
     fn id(&self) -> usize;
 }
 
+/// A registration's frame filters: one kept inline, more in a vector, so
+/// the common registration (a socket with one filter) allocates nothing
+/// for them. Derefs to the slice of filters.
+pub(crate) struct Filters {
+    /// The only filter, if there is one and `more` was never allocated.
+    one: Option<Filter>,
+    /// Every filter, once there are two (or room for two was reserved).
+    more: KVec<Filter>,
+}
+
+impl Filters {
+    /// No filters, with room for `n` without reallocating. Process
+    /// context (may allocate and sleep).
+    pub(crate) fn with_capacity(n: usize) -> Result<Self> {
+        Ok(Filters {
+            one: None,
+            more: if n > 1 {
+                KVec::with_capacity(n, GFP_KERNEL)?
+            } else {
+                KVec::new()
+            },
+        })
+    }
+
+    /// Appends `f`. Process context (may allocate and sleep).
+    pub(crate) fn push(&mut self, f: Filter) -> Result {
+        if self.one.is_none() && self.more.capacity() == 0 {
+            self.one = Some(f);
+            return Ok(());
+        }
+        if let Some(o) = self.one {
+            self.more.push(o, GFP_KERNEL)?;
+            self.one = None;
+        }
+        self.more.push(f, GFP_KERNEL)?;
+        Ok(())
+    }
+}
+
+impl core::ops::Deref for Filters {
+    type Target = [Filter];
+
+    fn deref(&self) -> &[Filter] {
+        match &self.one {
+            Some(f) => core::slice::from_ref(f),
+            None => &self.more,
+        }
+    }
+}
+
 /// What a registration asks for.
 pub(crate) struct Spec {
     /// Interface, 0 = all.
     pub(crate) ifindex: i32,
     /// Filters for data and remote frames (none: no such frames); kept by
     /// the registration.
-    pub(crate) filters: KVec<Filter>,
+    pub(crate) filters: Filters,
     /// Deliver only frames that pass every filter.
     pub(crate) join: bool,
     /// Error classes wanted (0: no error frames).
@@ -254,10 +309,22 @@ impl<T: Linked> List<T> {
     }
 }
 
-/// A receiver: the user's data and its per-CPU "seen" mark.
+/// A receiver: the user's data and its per-CPU "seen" mark, and, for the
+/// writer only, its place in the receiver map and its live registration.
 struct Rcv<R: Receiver> {
     data: R,
     seen: CpuMarks,
+    /// Writer side only: the chain of the receiver map (`RxTable::rcvs`)
+    /// the receiver is on while it has a live registration.
+    chain: Link<Rcv<R>>,
+    /// Writer side only: the live registration.
+    reg: Cell<*const Reg<R>>,
+}
+
+impl<R: Receiver> Linked for Rcv<R> {
+    fn link(&self) -> &Link<Self> {
+        &self.chain
+    }
 }
 
 /// One registration of a receiver.
@@ -272,7 +339,7 @@ struct Reg<R: Receiver> {
     cookie: u32,
     ifindex: i32,
     /// Every frame filter, for [`RxTable::filters`].
-    filters: KVec<Filter>,
+    filters: Filters,
     /// The scanned node's filters.
     scanned: KVec<Filter>,
     /// The scanned node's filters must all pass.
@@ -281,9 +348,11 @@ struct Reg<R: Receiver> {
 }
 
 /// Inline room for a registration's nodes: a socket with one filter has
-/// two (its key's member and its interface entry), with an error mask
-/// three; more go to `more`, so the common bind allocates no node vector.
-const INLINE_NODES: usize = 3;
+/// two (its key's member and its interface entry); more (an error mask,
+/// more filters) go to `more`, so the common bind allocates no node
+/// vector. Two, not three: with three a registration no longer fits
+/// kmalloc-256 and takes 512 bytes.
+const INLINE_NODES: usize = 2;
 
 /// A registration's nodes. Filled before any is linked and never changed
 /// afterwards, so their addresses (inside the boxed registration, or in
@@ -335,10 +404,7 @@ struct Groups {
 }
 
 /// The writer side, under `writer`.
-struct Writer<R: Receiver> {
-    /// Receiver id -> its live registration (`ID_BUCKETS` vectors once
-    /// the first registration arrives).
-    regs: KVec<KVec<NonNull<Reg<R>>>>,
+struct Writer {
     /// Hashed groups with their number of nodes; mirrors `groups` but for
     /// groups whose count fell to 0 and are still published.
     groups: KVec<(i32, u32, usize)>,
@@ -346,7 +412,13 @@ struct Writer<R: Receiver> {
 
 /// The receive table. See the module documentation.
 pub(crate) struct RxTable<R: Receiver> {
-    writer: CMutex<Writer<R>>,
+    writer: CMutex<Writer>,
+    /// The receiver map, writer side only (under `writer`): receivers
+    /// hashed by id, chained through [`Rcv::chain`]; a receiver is on it
+    /// from its first registration until its last is retired. Intrusive,
+    /// so adding a receiver allocates nothing and removing one searches
+    /// nothing but its chain.
+    rcvs: [List<Rcv<R>>; ID_BUCKETS],
     buckets: [List<KeyEntry<R>>; NBUCKETS],
     scanned: List<Node<R>>,
     err: List<Node<R>>,
@@ -354,12 +426,10 @@ pub(crate) struct RxTable<R: Receiver> {
     groups: RcuPtr<Groups>,
 }
 
-// SAFETY: the raw pointers in `Writer` name registrations the table owns
-// (freed by the writer or its RCU callbacks); `R: Send`.
-unsafe impl<R: Receiver> Send for Writer<R> {}
 // SAFETY: shared access to nodes, registrations and receivers is read-only
 // (but for the atomic links and the per-CPU marks); `R: Sync`. Writer-only
-// cells (`pprev`, `last`) are touched under the writer mutex only.
+// cells (`pprev`, `last`, `reg`) and the receiver map are touched under the
+// writer mutex only.
 unsafe impl<R: Receiver> Sync for RxTable<R> {}
 // SAFETY: plain data once published; freed by an RCU callback.
 unsafe impl Send for Groups {}
@@ -425,10 +495,10 @@ impl<R: Receiver> RxTable<R> {
             writer: CMutex::new(
                 lock,
                 Writer {
-                    regs: KVec::new(),
                     groups: KVec::new(),
                 },
             ),
+            rcvs: [const { List::new() }; ID_BUCKETS],
             buckets: [const { List::new() }; NBUCKETS],
             scanned: List::new(),
             err: List::new(),
@@ -541,42 +611,39 @@ impl<R: Receiver> RxTable<R> {
         // The registration is allocated before locking; the receiver only
         // under the lock, once we know it is new (a filter change reuses
         // it).
-        let mut prepared = match new {
+        let prepared = match new {
             Some((spec, data)) => Some((Self::make_reg(spec)?, data)),
             None => None,
         };
         let mut w = self.writer.lock();
-        if w.regs.is_empty() {
-            for _ in 0..ID_BUCKETS {
-                w.regs.push(KVec::new(), GFP_KERNEL)?;
-            }
-        }
-        let b = id_bucket(id);
-        let old_pos = w.regs[b].iter().position(|r| {
-            // SAFETY: live registrations of the map (writer mutex held).
-            unsafe { r.as_ref() }.rcv().data.id() == id
-        });
+        let chain = &self.rcvs[id_bucket(id)];
+        // SAFETY: writer mutex held (`w`) for as long as `old` is used: the
+        // map's receivers are unlinked and freed only under it.
+        let old: Option<&Rcv<R>> = unsafe { chain.iter_locked() }.find(|r| r.data.id() == id);
         let mut changed = Changed::default();
-        let Some((mut reg, data)) = prepared.take() else {
+        let Some((mut reg, data)) = prepared else {
             // Removal.
-            let Some(i) = old_pos else {
+            let Some(rcv) = old else {
                 return Ok(changed);
             };
-            let old = super::super::kvec_swap_remove(&mut w.regs[b], i).ok_or(code::EINVAL)?;
-            // SAFETY: a live registration of the map.
-            let o = unsafe { old.as_ref() };
+            // SAFETY: a receiver on the map has a live registration.
+            let o = unsafe { &*rcv.reg.get() };
             changed.ifindex[0] = (!o.filters.is_empty()).then_some(o.ifindex);
             changed.removed = true;
-            self.unlink_reg(&mut *w, o);
-            self.shrink_groups(&mut *w);
+            // SAFETY: writer mutex held; `rcv` is on the map.
+            unsafe { List::unlink(rcv) };
+            self.unlink_reg(&mut w, o);
+            self.shrink_groups(&mut w);
             o.last.set(true);
-            // SAFETY: unlinked above and out of the map: unreachable for
-            // new readers; free_reg frees it.
-            unsafe { defer(old.as_ptr().cast(), free_reg::<R>) };
+            // SAFETY: unlinked above and the receiver is off the map:
+            // unreachable for new readers and writers; free_reg frees it
+            // and the receiver.
+            unsafe { defer((o as *const Reg<R>).cast_mut().cast(), free_reg::<R>) };
             return Ok(changed);
         };
-        // The receiver: the existing one (`data` is dropped), or a new one.
-        let spare = match old_pos {
+        // The receiver: the existing one (`data` is dropped), or a new one,
+        // put on the map only once nothing can fail any more.
+        let spare = match old {
             Some(_) => {
                 drop(data);
                 None
@@ -585,56 +652,48 @@ impl<R: Receiver> RxTable<R> {
                 Rcv {
                     data,
                     seen: CpuMarks::new()?,
+                    chain: Link::new(),
+                    reg: Cell::new(ptr::null()),
                 },
                 GFP_KERNEL,
             )?),
         };
-        let rcv = match (old_pos, &spare) {
-            // SAFETY: a live registration of the map.
-            (Some(i), _) => unsafe { w.regs[b][i].as_ref() }.rcv,
-            (None, Some(s)) => NonNull::from(&**s),
+        let rcv: &Rcv<R> = match (old, &spare) {
+            (Some(r), _) => r,
+            (None, Some(s)) => s,
             (None, None) => return Err(code::EINVAL),
         };
-        reg.rcv = rcv;
-        // Room in the map before anything is linked, so nothing can fail
-        // half way.
-        if old_pos.is_none() {
-            w.regs[b].push(NonNull::dangling(), GFP_KERNEL)?;
-            let last = w.regs[b].len() - 1;
-            super::super::kvec_swap_remove(&mut w.regs[b], last);
-        }
+        reg.rcv = NonNull::from(rcv);
         let fresh = self.new_keys(&w, &reg)?;
-        self.grow_groups(&mut *w, &reg)?;
+        self.grow_groups(&mut w, &reg)?;
         self.link_reg(&w, &reg, fresh);
-        let reg = NonNull::from(KBox::leak(reg));
-        changed.ifindex[0] = {
-            // SAFETY: just leaked, owned by the map from now on.
-            let r = unsafe { reg.as_ref() };
-            (!r.filters.is_empty()).then_some(r.ifindex)
-        };
-        match old_pos {
-            Some(i) => {
-                let old = core::mem::replace(&mut w.regs[b][i], reg);
-                // SAFETY: the replaced registration, still linked.
-                let o = unsafe { old.as_ref() };
+        let reg: &Reg<R> = KBox::leak(reg);
+        changed.ifindex[0] = (!reg.filters.is_empty()).then_some(reg.ifindex);
+        let prev = rcv.reg.replace(reg as *const Reg<R>);
+        match spare {
+            Some(s) => {
+                // The receiver now belongs to its registrations.
+                let s: &Rcv<R> = KBox::leak(s);
+                // SAFETY: writer mutex held; a new receiver, not on the map,
+                // at a stable address until free_reg frees it after its
+                // last registration (which takes it off the map first).
+                unsafe { chain.push(s) };
+            }
+            None => {
+                // SAFETY: the receiver was on the map: `prev` is its live
+                // registration, still linked.
+                let o = unsafe { &*prev };
                 if !o.filters.is_empty() && Some(o.ifindex) != changed.ifindex[0] {
                     changed.ifindex[1] = Some(o.ifindex);
                 }
-                self.unlink_reg(&mut *w, o);
-                // SAFETY: unlinked and out of the map; the receiver lives
-                // on in the new registration (`last` stays false).
-                unsafe { defer(old.as_ptr().cast(), free_reg::<R>) };
-            }
-            None => {
-                // The room was reserved above.
-                let _ = w.regs[b].push(reg, GFP_KERNEL);
-                // The receiver now belongs to its registrations.
-                if let Some(s) = spare {
-                    let _ = KBox::into_raw(s);
-                }
+                self.unlink_reg(&mut w, o);
+                // SAFETY: unlinked and no longer the receiver's live
+                // registration; the receiver lives on in the new one
+                // (`last` stays false); free_reg frees it.
+                unsafe { defer(prev.cast_mut().cast(), free_reg::<R>) };
             }
         }
-        self.shrink_groups(&mut *w);
+        self.shrink_groups(&mut w);
         Ok(changed)
     }
 
@@ -718,7 +777,7 @@ impl<R: Receiver> RxTable<R> {
     /// held (`w`).
     fn find_key<'w>(
         &'w self,
-        w: &'w Writer<R>,
+        w: &'w Writer,
         ifindex: i32,
         mask: u32,
         value: u32,
@@ -734,7 +793,7 @@ impl<R: Receiver> RxTable<R> {
     /// Allocates the key entries `reg`'s hashed nodes need and the table
     /// lacks (one per distinct key), so that linking cannot fail. Writer
     /// mutex held.
-    fn new_keys(&self, w: &Writer<R>, reg: &Reg<R>) -> Result<KVec<KBox<KeyEntry<R>>>> {
+    fn new_keys(&self, w: &Writer, reg: &Reg<R>) -> Result<KVec<KBox<KeyEntry<R>>>> {
         let mut fresh: KVec<KBox<KeyEntry<R>>> = KVec::new();
         for n in reg.nodes.iter().filter(|n| n.kind == Kind::Hashed) {
             let known = self.find_key(w, n.ifindex, n.mask, n.value).is_some()
@@ -765,7 +824,7 @@ impl<R: Receiver> RxTable<R> {
     /// Links every node of `reg`, taking key entries from `fresh` (made by
     /// [`Self::new_keys`] for this registration) where the table has none.
     /// Writer mutex held.
-    fn link_reg(&self, w: &Writer<R>, reg: &Reg<R>, mut fresh: KVec<KBox<KeyEntry<R>>>) {
+    fn link_reg(&self, w: &Writer, reg: &Reg<R>, mut fresh: KVec<KBox<KeyEntry<R>>>) {
         for n in reg.nodes.iter() {
             if n.kind != Kind::Hashed {
                 // SAFETY: writer mutex held; the nodes are initialised, not
@@ -802,7 +861,7 @@ impl<R: Receiver> RxTable<R> {
 
     /// Unlinks every node of `reg` and drops its group counts. Writer
     /// mutex held (`w` is its data).
-    fn unlink_reg(&self, w: &mut Writer<R>, reg: &Reg<R>) {
+    fn unlink_reg(&self, w: &mut Writer, reg: &Reg<R>) {
         for n in reg.nodes.iter() {
             // SAFETY: writer mutex held (`w` is its data); `reg` is linked.
             unsafe { List::unlink(n) };
@@ -837,11 +896,10 @@ impl<R: Receiver> RxTable<R> {
     /// Counts `reg`'s hashed nodes in their groups, publishing a new group
     /// snapshot first if a group is new. ENOMEM leaves the counts as they
     /// were. Writer mutex held.
-    fn grow_groups(&self, w: &mut Writer<R>, reg: &Reg<R>) -> Result {
+    fn grow_groups(&self, w: &mut Writer, reg: &Reg<R>) -> Result {
         let hashed = || reg.nodes.iter().filter(|n| n.kind == Kind::Hashed);
-        let missing = |w: &Writer<R>, n: &Node<R>| {
-            !w.groups.iter().any(|g| g.0 == n.ifindex && g.1 == n.mask)
-        };
+        let missing =
+            |w: &Writer, n: &Node<R>| !w.groups.iter().any(|g| g.0 == n.ifindex && g.1 == n.mask);
         if hashed().any(|n| missing(w, n)) {
             let mut grown = KVec::with_capacity(w.groups.len() + reg.nodes.len(), GFP_KERNEL)?;
             for g in w.groups.iter() {
@@ -870,7 +928,7 @@ impl<R: Receiver> RxTable<R> {
     /// Drops groups without nodes from the published snapshot; on ENOMEM
     /// they stay (a probe of an empty group costs time, not correctness).
     /// Writer mutex held.
-    fn shrink_groups(&self, w: &mut Writer<R>) {
+    fn shrink_groups(&self, w: &mut Writer) {
         if !w.groups.iter().any(|g| g.2 == 0) {
             return;
         }
@@ -916,10 +974,13 @@ impl<R: Receiver> RxTable<R> {
     pub(crate) fn shutdown(&self) {
         let old = {
             let mut w = self.writer.lock();
-            if w.regs.iter().any(|b| !b.is_empty()) {
+            if self
+                .rcvs
+                .iter()
+                .any(|c| !c.first.load(Ordering::Relaxed).is_null())
+            {
                 kernel::pr_warn!("receive table not empty at exit: registrations leaked\n");
             }
-            w.regs = KVec::new();
             w.groups = KVec::new();
             self.groups.replace(ptr::null_mut())
         };
