@@ -14,7 +14,8 @@
 //! trait), [`netdev`] (network devices from a Rust trait), [`hrtimer`]
 //! (high-resolution timers in statics), [`pci`] (PCI drivers and BARs),
 //! [`isa`] (claimed memory/port windows, interrupt autoprobe), [`percpu`]
-//! (per-CPU counters), [`can`] (the CAN framework: the receive table).
+//! (per-CPU counters), [`params`] (module parameters of the C shims),
+//! [`can`] (the CAN framework: the receive table).
 #![allow(dead_code)]
 
 #[allow(
@@ -43,6 +44,7 @@ pub(crate) mod hrtimer;
 pub(crate) mod iomap;
 pub(crate) mod isa;
 pub(crate) mod netdev;
+pub(crate) mod params;
 pub(crate) mod pci;
 pub(crate) mod percpu;
 pub(crate) mod skb;

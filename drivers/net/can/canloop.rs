@@ -34,6 +34,7 @@ mod rcan_core;
 
 use glue::bindings;
 use glue::netdev::{Dev, Driver, Registration, Setup, Xmit};
+use glue::params::Param;
 use glue::skb::Skb;
 use kernel::c_str;
 use rcan_core::canloop::{DropRate, FrameDump};
@@ -50,19 +51,13 @@ module! {
 /// Most devices one module instance registers.
 const MAX_COUNT: u32 = 16;
 
+// Parameter numbers shared with canloop_c.c (its rcan_module_param).
 const PARAM_COUNT: i32 = 0;
 const PARAM_VERBOSE: i32 = 1;
 const PARAM_DROPRATE: i32 = 2;
-
-extern "C" {
-    fn rcan_loop_get(which: i32) -> u32;
-}
-
-fn param(which: i32) -> u32 {
-    // SAFETY: the C side reads a module parameter with READ_ONCE; any
-    // `which` is valid.
-    unsafe { rcan_loop_get(which) }
-}
+const COUNT: Param<u32> = Param::new(PARAM_COUNT as u32);
+const VERBOSE: Param<bool> = Param::new(PARAM_VERBOSE as u32);
+const DROPRATE: Param<u32> = Param::new(PARAM_DROPRATE as u32);
 
 /// Validates a parameter value for the C parameter setter: refusing a bad
 /// value at insmod time makes the load fail with EINVAL.
@@ -109,11 +104,11 @@ impl Driver for LoopDriver {
         let Some((mut skb, frame)) = skb.can_xmit_start(dev) else {
             return Xmit::Ok;
         };
-        if param(PARAM_VERBOSE) != 0 {
+        if VERBOSE.get() {
             pr_info!("{}: tx {}\n", dev.name(), FrameDump::new(&frame).as_str());
         }
         // The parameter setter only stores valid rates.
-        let drop_it = match DropRate::new(param(PARAM_DROPRATE)) {
+        let drop_it = match DropRate::new(DROPRATE.get()) {
             Some(rate) if rate.percent() > 0 => rate.should_drop(glue::random_u32()),
             _ => false,
         };
@@ -145,14 +140,14 @@ struct CanLoop {
 
 impl kernel::Module for CanLoop {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        let count = param(PARAM_COUNT);
+        let count = COUNT.get();
         let mut devs = KVec::new();
         for _ in 0..count {
             let reg = Registration::<LoopDriver>::register(c_str!("can%d"), ())?;
             pr_info!(
                 "{}: CAN loopback device, droprate {}%\n",
                 reg.dev().name(),
-                param(PARAM_DROPRATE)
+                DROPRATE.get()
             );
             devs.push(reg, GFP_KERNEL)?;
         }

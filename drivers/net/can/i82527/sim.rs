@@ -45,6 +45,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use glue::bindings;
 use glue::hrtimer::{ClockId, HrTimer, HrTimerCallback, HrTimerMode};
 use glue::netdev::Driver;
+use glue::params::Param;
 use i82527::{add_channel, Channel, I82527};
 use rcan_core::i82527::{bits, reg, Config, Regs};
 use rcan_core::i82527_model::I82527Model;
@@ -73,9 +74,10 @@ const REARM_NS: i64 = 20_000;
 /// Rounds of a run without moving frames (interrupt handling only)
 /// before re-arming.
 const MAX_ROUNDS: usize = 64;
+/// Module parameter `cards` (number 0 in sim_c.c).
+const CARDS: Param<u32> = Param::new(0);
 
 extern "C" {
-    fn rcan_i82527_sim_cards() -> u32;
     fn rcan_i82527_sim_lock() -> kernel::ffi::c_ulong;
     fn rcan_i82527_sim_unlock(flags: kernel::ffi::c_ulong);
 }
@@ -259,8 +261,7 @@ struct SimModule {
 
 impl kernel::Module for SimModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        // SAFETY: reads the module parameter (READ_ONCE).
-        let n = unsafe { rcan_i82527_sim_cards() } as usize;
+        let n = CARDS.get() as usize;
         if n == 0 || n > MAX_CARDS {
             pr_err!("rcan_i82527_sim: cards must be 1..={}\n", MAX_CARDS);
             return Err(EINVAL);

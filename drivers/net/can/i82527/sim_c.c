@@ -11,6 +11,7 @@
 #include <linux/spinlock.h>
 
 #include "../../../../rust/helpers/rcan_helpers.c"
+#include "../../../../rust/helpers/rcan_params.h"
 
 static unsigned int cards = 2;
 module_param(cards, uint, 0444);
@@ -18,10 +19,10 @@ MODULE_PARM_DESC(cards, "Number of simulated 82527 cards on the bus (1..8, defau
 
 static DEFINE_SPINLOCK(rcan_i82527_sim_bus);
 
-u32 rcan_i82527_sim_cards(void);
-u32 rcan_i82527_sim_cards(void)
+/* Parameter numbers shared with sim.rs: 0 cards. */
+u64 rcan_module_param(unsigned int which, unsigned int idx)
 {
-	return READ_ONCE(cards);
+	return which == 0 ? READ_ONCE(cards) : 0;
 }
 
 unsigned long rcan_i82527_sim_lock(void);

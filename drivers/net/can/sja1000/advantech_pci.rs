@@ -41,19 +41,8 @@ const ADVANTECH_OCR: u8 = 0xDA;
 /// Clock divider: comparator bypass, clock out off.
 const ADVANTECH_CDR: u8 = CDR_CBP | rcan_core::sja1000::CDR_CLK_OFF;
 
-extern "C" {
-    fn rcan_advantech_btr(which: i32) -> u8;
-}
-
 fn config() -> Config {
-    // SAFETY: reads the module parameters (READ_ONCE); any index is valid.
-    let (btr0, btr1) = unsafe { (rcan_advantech_btr(0), rcan_advantech_btr(1)) };
-    Config {
-        btr0,
-        btr1,
-        ocr: ADVANTECH_OCR,
-        cdr: ADVANTECH_CDR,
-    }
+    sja1000::module_config(ADVANTECH_OCR, ADVANTECH_CDR)
 }
 
 /// Crystal of the SJA1000s on the card.

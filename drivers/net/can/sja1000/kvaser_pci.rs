@@ -49,21 +49,10 @@ const KVASER_OCR: u8 = 0xDA;
 /// Clock divider: comparator bypass, clock out at full rate.
 const KVASER_CDR: u8 = CDR_CBP | 0x07;
 
-extern "C" {
-    fn rcan_kvaser_btr(which: i32) -> u8;
-}
-
 /// Bit timing from the module parameters (`btr0`, `btr1`; defaults from
 /// the thesis' Kconfig: 0x01/0x14, 500 kbit/s).
 fn config() -> Config {
-    // SAFETY: reads the module parameters (READ_ONCE); any index is valid.
-    let (btr0, btr1) = unsafe { (rcan_kvaser_btr(0), rcan_kvaser_btr(1)) };
-    Config {
-        btr0,
-        btr1,
-        ocr: KVASER_OCR,
-        cdr: KVASER_CDR,
-    }
+    sja1000::module_config(KVASER_OCR, KVASER_CDR)
 }
 
 /// Crystal of the SJA1000s on the card.

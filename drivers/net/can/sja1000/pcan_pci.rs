@@ -68,19 +68,8 @@ fn channels_of(subsystem: u16) -> usize {
     }
 }
 
-extern "C" {
-    fn rcan_pcan_pci_btr(which: i32) -> u8;
-}
-
 fn config() -> Config {
-    // SAFETY: reads the module parameters (READ_ONCE); any index is valid.
-    let (btr0, btr1) = unsafe { (rcan_pcan_pci_btr(0), rcan_pcan_pci_btr(1)) };
-    Config {
-        btr0,
-        btr1,
-        ocr: PCAN_OCR,
-        cdr: PCAN_CDR,
-    }
+    sja1000::module_config(PCAN_OCR, PCAN_CDR)
 }
 
 /// One channel's register access: its SJA1000 (32-bit spacing) and the

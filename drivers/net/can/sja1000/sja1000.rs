@@ -45,6 +45,7 @@
 
 use crate::glue::bindings;
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
+use crate::glue::params::Param;
 use crate::glue::skb::Skb;
 use crate::glue::sync::IrqSpinLock;
 use crate::rcan_api::{self, FilterListener};
@@ -101,6 +102,25 @@ impl crate::rcan_core::sja1000_boards::Io for crate::glue::pci::IoMem {
     }
     fn outw(&mut self, off: usize, val: u16) {
         self.write16(off, val);
+    }
+}
+
+/// Module parameter `btr0` of every SJA1000 front-end (number 0 in each
+/// front-end's C shim; default from the thesis' Kconfig: 0x01).
+const BTR0: Param<u8> = Param::new(0);
+/// Module parameter `btr1` (number 1; default 0x14: 500 kbit/s with a
+/// 16 MHz crystal).
+const BTR1: Param<u8> = Param::new(1);
+
+/// The chip configuration of a front-end: its board's output control and
+/// clock divider, the bit timing from the module parameters `btr0` and
+/// `btr1`. Process context (probe).
+pub(crate) fn module_config(ocr: u8, cdr: u8) -> Config {
+    Config {
+        btr0: BTR0.get(),
+        btr1: BTR1.get(),
+        ocr,
+        cdr,
     }
 }
 

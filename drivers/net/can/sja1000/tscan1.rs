@@ -51,19 +51,8 @@ const TSCAN1_CDR: u8 = CDR_CBP | 0x08;
 /// Crystal of the board's SJA1000.
 const XTAL_HZ: u32 = 16_000_000;
 
-extern "C" {
-    fn rcan_tscan1_btr(which: i32) -> u8;
-}
-
 fn config() -> Config {
-    // SAFETY: reads the module parameters (READ_ONCE); any index is valid.
-    let (btr0, btr1) = unsafe { (rcan_tscan1_btr(0), rcan_tscan1_btr(1)) };
-    Config {
-        btr0,
-        btr1,
-        ocr: TSCAN1_OCR,
-        cdr: TSCAN1_CDR,
-    }
+    sja1000::module_config(TSCAN1_OCR, TSCAN1_CDR)
 }
 
 /// The claimed PLD window seen as the port space the board logic
