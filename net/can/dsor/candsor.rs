@@ -15,7 +15,7 @@
 //!
 //! Contexts and locks:
 //!
-//! * [`ENGINE`] (a BH spinlock defined in `candsor_c.c`) protects all
+//! * [`ENGINE`] (a BH spinlock, lockdep class `rcan_dsor::ENGINE`) protects all
 //!   protocol state: the reassembly table, the running transfers, the
 //!   stream table, the bound sockets and the queue of frames to send. It is
 //!   taken in process context (system calls), in the NET_RX softirq
@@ -28,7 +28,7 @@
 //!   one sender): every frame is queued on `Engine::out` and sent by
 //!   [`Tick`], a soft hrtimer that is kicked to "now" whenever frames are
 //!   queued and otherwise armed for the earliest protocol deadline.
-//! * Blocking senders sleep on [`WAITQ`] (defined in C) until their
+//! * Blocking senders sleep on [`WAITQ`] until their
 //!   transfer has finished; every finished transfer and every freed
 //!   channel wakes all waiters, which re-check under the lock.
 //! * [`MODULE`]`.sockets` (every open socket, for the notifier) is under
@@ -54,7 +54,8 @@ use glue::neterr;
 use glue::params::{Param, ParamStr};
 use glue::skb::Skb;
 use glue::sock::{Msg, Sock, SockRef};
-use glue::sync::{BhSpinLock, CWaitQueue, Rtnl, Waited};
+use glue::lock::{BhSpinLock, WaitQueue, Waited};
+use glue::sync::Rtnl;
 use kernel::c_str;
 use rcan_api::{KernelRx, KernelRxReg, ProtoModule, RxFilter, RX_FILTER_CAN_ID};
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG};
@@ -111,11 +112,6 @@ const PARAM_CANIP: Param<bool> = Param::new(8);
 const PARAM_IFNAME: ParamStr = ParamStr::new(9);
 /// `udp_saddr`: copied NUL-terminated, at most 15 bytes.
 const PARAM_UDP_SADDR: ParamStr = ParamStr::new(10);
-
-extern "C" {
-    fn rcan_dsor_lock() -> *mut bindings::spinlock_t;
-    fn rcan_dsor_waitq() -> *mut bindings::wait_queue_head;
-}
 
 /// An interface name or address string of the C side: 16 bytes, NUL-padded.
 #[derive(Clone, Copy)]
@@ -370,18 +366,11 @@ struct Engine {
 }
 
 /// All protocol state; `None` outside the module's lifetime.
-static ENGINE: BhSpinLock<Option<KBox<Engine>>> = BhSpinLock::new(engine_lock, None);
-fn engine_lock() -> *mut bindings::spinlock_t {
-    // SAFETY: returns the address of a static spinlock in candsor_c.c.
-    unsafe { rcan_dsor_lock() }
-}
+static ENGINE: BhSpinLock<Option<KBox<Engine>>> =
+    BhSpinLock::new(None, c_str!("rcan_dsor::ENGINE"));
 
 /// Blocking senders wait here.
-static WAITQ: CWaitQueue = CWaitQueue::new(waitq);
-fn waitq() -> *mut bindings::wait_queue_head {
-    // SAFETY: returns the address of a static wait queue in candsor_c.c.
-    unsafe { rcan_dsor_waitq() }
-}
+static WAITQ: WaitQueue = WaitQueue::new(c_str!("rcan_dsor::WAITQ"));
 
 /// Set by module exit: the timer neither sends nor re-arms.
 static STOPPING: AtomicBool = AtomicBool::new(false);

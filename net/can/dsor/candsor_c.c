@@ -1,15 +1,13 @@
 // SPDX-License-Identifier: GPL-2.0
 /*
- * C side of rcan_dsor: module parameters, the engine's spinlock and the
- * senders' wait queue (statically defined, which Rust cannot do on 6.12),
- * and the module's private copy of the helpers. candsor.rs validates the
- * parameters at load and refuses bad ones with EINVAL.
+ * C side of rcan_dsor: module parameters (read through
+ * rust/glue/params.rs) and the module's private copy of the helpers.
+ * candsor.rs validates the parameters at load and refuses bad ones with
+ * EINVAL.
  */
 #include <linux/moduleparam.h>
 #include <linux/netdevice.h>
-#include <linux/spinlock.h>
 #include <linux/string.h>
-#include <linux/wait.h>
 
 #include "../../../rust/helpers/rcan_helpers.c"
 #include "../../../rust/helpers/rcan_params.h"
@@ -100,19 +98,4 @@ size_t rcan_module_param_str(unsigned int which, char *buf, size_t len)
 	if (len)
 		strscpy(buf, s, len);
 	return strlen(s);
-}
-
-static DEFINE_SPINLOCK(rcan_dsor_engine_lock);
-static DECLARE_WAIT_QUEUE_HEAD(rcan_dsor_wq);
-
-spinlock_t *rcan_dsor_lock(void);
-spinlock_t *rcan_dsor_lock(void)
-{
-	return &rcan_dsor_engine_lock;
-}
-
-struct wait_queue_head *rcan_dsor_waitq(void);
-struct wait_queue_head *rcan_dsor_waitq(void)
-{
-	return &rcan_dsor_wq;
 }

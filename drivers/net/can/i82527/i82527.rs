@@ -37,7 +37,7 @@
 use crate::glue::bindings;
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::skb::Skb;
-use crate::glue::sync::IrqSpinLock;
+use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::i82527::{
@@ -130,12 +130,13 @@ pub(crate) struct Channel<R: Regs + Send + 'static> {
 }
 
 impl<R: Regs + Send + 'static> Channel<R> {
-    /// The device, as a cookie for [`crate::glue::netdev::from_cookie`]
-    /// (the simulated card's interrupt delivery; the ISA front-end has a
-    /// real line).
+    /// Runs the device's interrupt handler, for a front-end without an
+    /// interrupt line (the simulated card's timer; the ISA front-end has a
+    /// real line). Whether the chip had a cause. Any context that may take
+    /// the chip lock (not under it).
     #[allow(dead_code)]
-    pub(crate) fn dev_ptr(&self) -> *mut bindings::net_device {
-        self.reg.dev().as_ptr()
+    pub(crate) fn irq(&self) -> bool {
+        <I82527<R> as Driver>::irq(self.reg.dev(), self.reg.priv_data())
     }
 }
 
@@ -154,12 +155,15 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
         return Ok(None);
     }
     let prv = I82527Priv {
-        chip: IrqSpinLock::new(ChipState {
-            chip,
-            echo: None,
-            rxq: RxQueue::new(),
-            running: false,
-        })?,
+        chip: new_irq_spinlock!(
+            ChipState {
+                chip,
+                echo: None,
+                rxq: RxQueue::new(),
+                running: false,
+            },
+            "I82527Priv::chip"
+        )?,
         irq,
     };
     let reg =

@@ -47,7 +47,7 @@ use crate::glue::bindings;
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::params::Param;
 use crate::glue::skb::Skb;
-use crate::glue::sync::IrqSpinLock;
+use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::sja1000::{
@@ -166,14 +166,17 @@ impl<R: Regs + Send + 'static> Sja1000Priv<R> {
     /// context.
     pub(crate) fn new(chip: Chip<R>, irq: u32, xtal_hz: u32) -> Result<Self> {
         Ok(Sja1000Priv {
-            chip: IrqSpinLock::new(ChipState {
-                chip,
-                echo: None,
-                filter: HwFilter::OPEN,
-                filter_pending: false,
-                running: false,
-                restarts: 0,
-            })?,
+            chip: new_irq_spinlock!(
+                ChipState {
+                    chip,
+                    echo: None,
+                    filter: HwFilter::OPEN,
+                    filter_pending: false,
+                    running: false,
+                    restarts: 0,
+                },
+                "Sja1000Priv::chip"
+            )?,
             irq,
             xtal_hz,
         })
