@@ -85,6 +85,12 @@ void rcan_dev_kfree_skb_any(struct sk_buff *skb)
 	dev_kfree_skb_any(skb);
 }
 
+/* The same, freed as consumed (not a drop). */
+void rcan_dev_consume_skb_any(struct sk_buff *skb)
+{
+	dev_consume_skb_any(skb);
+}
+
 void rcan_consume_skb(struct sk_buff *skb)
 {
 	consume_skb(skb);

@@ -37,6 +37,7 @@ struct sk_buff *rcan_alloc_skb(unsigned int size, gfp_t gfp);
 void rcan_kfree_skb(struct sk_buff *skb);
 void rcan_consume_skb(struct sk_buff *skb);
 void rcan_dev_kfree_skb_any(struct sk_buff *skb);
+void rcan_dev_consume_skb_any(struct sk_buff *skb);
 struct sk_buff *rcan_sock_alloc_send_skb(struct sock *sk, unsigned long size,
 					 int noblock, int *errcode);
 void rcan_skb_reserve(struct sk_buff *skb, int len);

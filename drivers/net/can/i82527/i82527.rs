@@ -370,16 +370,8 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                 match ev {
                     Event::Rx(f) => rx_frame(dev, rxq, &f),
                     Event::TxDone => {
-                        if let Some(mut skb) = echo.take() {
-                            if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) {
-                                dev.stats_tx(CanFrame::from_bytes(b).dlc() as u32);
-                            }
-                            if skb.wants_echo() {
-                                skb.set_can_rx(dev);
-                                enqueue(dev, rxq, skb);
-                            } else {
-                                skb.consume();
-                            }
+                        if let Some(skb) = echo.take().and_then(|s| s.can_echo_done(dev)) {
+                            enqueue(dev, rxq, skb);
                         }
                         dev.wake_queue();
                     }

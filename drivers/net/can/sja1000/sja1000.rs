@@ -459,16 +459,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             match ev {
                 Event::Rx(f) => rx_frame(dev, &f),
                 Event::TxDone => {
-                    if let Some(mut skb) = echo.take() {
-                        if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) {
-                            dev.stats_tx(CanFrame::from_bytes(b).dlc() as u32);
-                        }
-                        if skb.wants_echo() {
-                            skb.set_can_rx(dev);
-                            dev.rx(skb);
-                        } else {
-                            skb.consume();
-                        }
+                    if let Some(skb) = echo.take().and_then(|s| s.can_echo_done(dev)) {
+                        dev.rx(skb);
                     }
                     dev.wake_queue();
                 }
