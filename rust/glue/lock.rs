@@ -454,7 +454,8 @@ impl WaitQueue {
         let arg = &c as *const WaitCond<'_> as *mut ffi::c_void;
         // SAFETY: an initialised static wait queue; `arg` is a `WaitCond`
         // that outlives the call, as `wait_cond` requires.
-        let ret = unsafe { bindings::rcan_wait_event_timeout(wq, Some(wait_cond), arg, timeo as _) };
+        let ret =
+            unsafe { bindings::rcan_wait_event_timeout(wq, Some(wait_cond), arg, timeo as _) };
         if ret > 0 {
             Waited::Ready
         } else if ret == 0 {

@@ -24,13 +24,11 @@
 //! (so the per-device counters need no lock of their own); `open`/`stop`
 //! run in process context under RTNL. The parameters are read with
 //! READ_ONCE and may change at any time through sysfs.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../../../net/can/rcan_core.rs"]
-mod rcan_core;
+use crate::{glue, rcan_core};
 
 use glue::bindings;
 use glue::netdev::{Dev, Driver, Registration, Setup, Xmit};
@@ -39,14 +37,6 @@ use glue::skb::Skb;
 use kernel::c_str;
 use rcan_core::canloop::{DropRate, FrameDump};
 use rcan_core::frame::CAN_FRAME_LEN;
-
-module! {
-    type: CanLoop,
-    name: "rcan_loop",
-    author: "rcan developers",
-    description: "CAN loopback device (thesis canloop)",
-    license: "GPL",
-}
 
 /// Most devices one module instance registers.
 const MAX_COUNT: u32 = 16;
@@ -59,10 +49,10 @@ const COUNT: Param<u32> = Param::new(PARAM_COUNT as u32);
 const VERBOSE: Param<bool> = Param::new(PARAM_VERBOSE as u32);
 const DROPRATE: Param<u32> = Param::new(PARAM_DROPRATE as u32);
 
-/// Validates a parameter value for the C parameter setter: refusing a bad
-/// value at insmod time makes the load fail with EINVAL.
-#[no_mangle]
-extern "C" fn rcan_loop_param_ok(which: i32, val: u32) -> bool {
+/// Validates a parameter value for the C parameter setter
+/// (`rcan_loop_param_ok` in canloop_mod.rs): refusing a bad value at insmod
+/// time makes the load fail with EINVAL. Process context.
+pub(crate) fn param_ok(which: i32, val: u32) -> bool {
     match which {
         PARAM_COUNT => (1..=MAX_COUNT).contains(&val),
         PARAM_VERBOSE => val <= 1,
@@ -134,7 +124,7 @@ impl Driver for LoopDriver {
     }
 }
 
-struct CanLoop {
+pub(crate) struct CanLoop {
     _devs: KVec<Registration<LoopDriver>>,
 }
 

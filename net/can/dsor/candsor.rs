@@ -49,12 +49,12 @@ mod udpip;
 
 use glue::bindings;
 use glue::hrtimer::{ktime_get_mono_ns, ClockId, HrTimer, HrTimerCallback, HrTimerMode};
+use glue::lock::{BhSpinLock, WaitQueue, Waited};
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::params::{Param, ParamStr};
 use glue::skb::Skb;
 use glue::sock::{Msg, Sock, SockRef};
-use glue::lock::{BhSpinLock, WaitQueue, Waited};
 use glue::sync::Rtnl;
 use kernel::c_str;
 use rcan_api::{KernelRx, KernelRxReg, ProtoModule, RxFilter, RX_FILTER_CAN_ID};

@@ -33,11 +33,12 @@
 //! (core) clears it at once, the chip then waits for 128 occurrences of
 //! 11 recessive bits and rejoins the bus; sockets see `CAN_ERR_BUSOFF`
 //! and then `CAN_ERR_RESTARTED`.
+#![forbid(unsafe_code)]
 
 use crate::glue::bindings;
+use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::skb::Skb;
-use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::i82527::{

@@ -14,31 +14,17 @@
 //!
 //! Register access runs in every context the driver uses (process,
 //! softirq, hardirq), serialised by the driver's chip lock.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "i82527.rs"]
-mod i82527;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
+use crate::{glue, i82527, rcan_core};
 
 use glue::isa::{IoWindow, Space};
 use glue::params::Param;
 use i82527::{add_channel, Channel};
 use kernel::c_str;
 use rcan_core::i82527::{Config, Regs};
-
-module! {
-    type: IsaModule,
-    name: "rcan_i82527_isa",
-    author: "rcan developers",
-    description: "Intel 82527 front-end for memory-mapped ISA cards",
-    license: "GPL",
-}
 
 /// Crystal of the cards the thesis used (16 MHz).
 const XTAL_HZ: u32 = 16_000_000;
@@ -72,7 +58,7 @@ impl Regs for IsaRegs {
     }
 }
 
-struct IsaModule {
+pub(crate) struct IsaModule {
     _channel: Channel<IsaRegs>,
 }
 

@@ -34,17 +34,11 @@
 //! kicks), and the timer is cancelled once more before the bus is taken
 //! out of `BUS` and freed. No `unsafe` here: the cards are reached only
 //! through the statics, so nothing can outlive what it points to.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "i82527.rs"]
-mod i82527;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
+use crate::{glue, i82527, rcan_core};
 
 use core::sync::atomic::{AtomicBool, Ordering};
 use glue::hrtimer::{ClockId, HrTimer, HrTimerCallback, HrTimerMode};
@@ -54,14 +48,6 @@ use i82527::{add_channel, Channel};
 use kernel::c_str;
 use rcan_core::i82527::{bits, reg, Config, Regs};
 use rcan_core::i82527_model::I82527Model;
-
-module! {
-    type: SimModule,
-    name: "rcan_i82527_sim",
-    author: "rcan developers",
-    description: "Simulated Intel 82527 cards on a simulated CAN bus",
-    license: "GPL",
-}
 
 /// Most simulated cards.
 const MAX_CARDS: usize = 8;
@@ -203,7 +189,7 @@ impl HrTimerCallback for SimBus {
 }
 
 /// The module: its state is in the statics above, torn down in Drop.
-struct SimModule;
+pub(crate) struct SimModule;
 
 impl kernel::Module for SimModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {

@@ -12,30 +12,16 @@
 //! Contexts: probe/remove in process context (PCI core); register access
 //! from every context the driver uses, serialised by the driver's chip
 //! lock.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
-#[path = "sja1000.rs"]
-mod sja1000;
+use crate::{glue, rcan_core, sja1000};
 
 use glue::pci::{self, IoMem};
 use kernel::c_str;
 use rcan_core::sja1000::{Config, CDR_CBP};
 use sja1000::{add_channel, Channel, IoRegs};
-
-module! {
-    type: KvaserPciModule,
-    name: "rcan_kvaser_pci",
-    author: "rcan developers",
-    description: "SJA1000 front-end for Kvaser PCIcan cards",
-    license: "GPL",
-}
 
 const MAX_CHANNELS: usize = 4;
 /// Bytes of I/O space per channel.
@@ -129,7 +115,7 @@ static IDS: [glue::bindings::pci_device_id; 2] = [pci::id(0x10e8, 0x8406), pci::
 
 static DRIVER: pci::Registration<KvaserPci> = pci::Registration::new();
 
-struct KvaserPciModule;
+pub(crate) struct KvaserPciModule;
 
 impl kernel::Module for KvaserPciModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {

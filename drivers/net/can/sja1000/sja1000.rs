@@ -42,12 +42,13 @@
 //! part in bus traffic again. Each restart is counted and reported to
 //! sockets as a `CAN_ERR_RESTARTED` error frame after the
 //! `CAN_ERR_BUSOFF` one.
+#![forbid(unsafe_code)]
 
 use crate::glue::bindings;
+use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::params::Param;
 use crate::glue::skb::Skb;
-use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::sja1000::{

@@ -14,17 +14,11 @@
 //!
 //! Contexts: everything here runs in module init/exit (process context);
 //! register access from the driver is serialised by its chip lock.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
-#[path = "sja1000.rs"]
-mod sja1000;
+use crate::{glue, rcan_core, sja1000};
 
 use glue::isa::{self, IoWindow, Space};
 use glue::params::{Param, ParamArray};
@@ -32,14 +26,6 @@ use kernel::c_str;
 use rcan_core::sja1000::{cmd, reg, Chip, Config, Regs, CDR_CBP};
 use rcan_core::sja1000_boards::{autoprobe_ack, autoprobe_arm, autoprobe_fire, SpacedRegs};
 use sja1000::{add_probed, Channel};
-
-module! {
-    type: IsaModule,
-    name: "rcan_sja1000_isa",
-    author: "rcan developers",
-    description: "SJA1000 front-end for memory-mapped ISA cards",
-    license: "GPL",
-}
 
 /// Bytes of memory per SJA1000 (registers 0..31, byte spacing).
 const WINDOW_BYTES: usize = 32;
@@ -139,7 +125,7 @@ fn add_board(addr: usize, line: i32) -> Result<Channel<IsaRegs>> {
     )
 }
 
-struct IsaModule {
+pub(crate) struct IsaModule {
     _boards: KVec<Channel<IsaRegs>>,
 }
 

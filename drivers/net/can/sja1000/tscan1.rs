@@ -15,17 +15,11 @@
 //!
 //! Contexts: module init/exit (process context); register access from
 //! the driver is serialised by its chip lock.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
-#[path = "sja1000.rs"]
-mod sja1000;
+use crate::{glue, rcan_core, sja1000};
 
 use glue::isa::{IoWindow, Space};
 use kernel::c_str;
@@ -35,14 +29,6 @@ use rcan_core::sja1000_boards::{
     TSCAN1_MAX_BOARDS, TSCAN1_PLD, TSCAN1_PLD_SIZE, TSCAN1_SJA1000_ADDRESSES, TSCAN1_SJA1000_SIZE,
 };
 use sja1000::{add_channel, Channel};
-
-module! {
-    type: Tscan1Module,
-    name: "rcan_tscan1",
-    author: "rcan developers",
-    description: "SJA1000 front-end for TS-CAN1 PC/104 boards",
-    license: "GPL",
-}
 
 /// Output control: both TX pins push-pull.
 const TSCAN1_OCR: u8 = 0xDA;
@@ -137,7 +123,7 @@ fn probe_board(n: usize) -> Result<Option<Board>> {
     Ok(None)
 }
 
-struct Tscan1Module {
+pub(crate) struct Tscan1Module {
     _boards: KVec<Board>,
 }
 
