@@ -3,6 +3,7 @@
 //! The pure, host-tested logic of `net/can/core` (crate `rcan-core`),
 //! compiled into a kernel module. Each file is allocation-free `no_std` Rust
 //! with no `unsafe`; `cargo test -p rcan-core` tests the same files.
+#![forbid(unsafe_code)]
 #![allow(dead_code, unreachable_pub, missing_docs)]
 
 #[path = "core/src/arb.rs"]

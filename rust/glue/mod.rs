@@ -10,11 +10,13 @@
 //! above it is safe Rust; each `unsafe` block here says who guarantees it.
 //!
 //! One file per kernel concept: [`sync`] (RCU, RTNL, C-defined mutexes),
+//! [`lock`] (spinlocks and wait queues, each with its own lockdep class),
 //! [`skb`] (owned socket buffers), [`sock`] (socket protocols from a Rust
 //! trait), [`netdev`] (network devices from a Rust trait), [`hrtimer`]
 //! (high-resolution timers in statics), [`pci`] (PCI drivers and BARs),
 //! [`isa`] (claimed memory/port windows, interrupt autoprobe), [`percpu`]
-//! (per-CPU counters), [`can`] (the CAN framework: the receive table).
+//! (per-CPU counters), [`params`] (module parameters of the C shims),
+//! [`can`] (the CAN framework: the receive table).
 #![allow(dead_code)]
 
 #[allow(
@@ -42,7 +44,9 @@ pub(crate) mod can;
 pub(crate) mod hrtimer;
 pub(crate) mod iomap;
 pub(crate) mod isa;
+pub(crate) mod lock;
 pub(crate) mod netdev;
+pub(crate) mod params;
 pub(crate) mod pci;
 pub(crate) mod percpu;
 pub(crate) mod skb;

@@ -415,10 +415,42 @@ impl Skb {
         Some((skb, frame))
     }
 
+    /// The end of an IFF_ECHO driver's transmission (mainline
+    /// `can_get_echo_skb`), for the skb [`Skb::can_xmit_start`] returned,
+    /// once the chip reports the frame sent: counts the frame in `dev`'s
+    /// `tx_packets`/`tx_bytes` and, if its sender asked for the echo,
+    /// returns it marked as a frame received on `dev` (`PACKET_BROADCAST`,
+    /// the sending socket kept), for the driver to hand up its way
+    /// ([`super::netdev::NetDev::rx`] or its NAPI queue); otherwise frees it
+    /// as consumed and returns `None`. Any context, interrupts off
+    /// included (the driver's interrupt handler under its chip lock): the
+    /// free is deferred there ([`Skb::consume_any`]).
+    pub(crate) fn can_echo_done(mut self, dev: &super::netdev::NetDev) -> Option<Skb> {
+        use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+        if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(self.data()) {
+            dev.stats_tx(CanFrame::from_bytes(b).dlc() as u32);
+        }
+        if self.wants_echo() {
+            self.set_can_rx(dev);
+            Some(self)
+        } else {
+            self.consume_any();
+            None
+        }
+    }
+
     /// Frees as successfully consumed (not a drop in drop monitors).
     pub(crate) fn consume(self) {
         // SAFETY: we own the reference and give it up.
         unsafe { bindings::rcan_consume_skb(self.into_raw()) };
+    }
+
+    /// [`Skb::consume`] from any context, like [`Skb::drop_any`]: in
+    /// hardirq or with interrupts off the free (and the destructor) is
+    /// deferred to softirq (`dev_consume_skb_any`).
+    pub(crate) fn consume_any(self) {
+        // SAFETY: we own the reference and give it up.
+        unsafe { bindings::rcan_dev_consume_skb_any(self.into_raw()) };
     }
 
     /// ifindex of the device the skb arrived on / leaves by (0 if none).

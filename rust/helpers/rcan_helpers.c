@@ -85,6 +85,12 @@ void rcan_dev_kfree_skb_any(struct sk_buff *skb)
 	dev_kfree_skb_any(skb);
 }
 
+/* The same, freed as consumed (not a drop). */
+void rcan_dev_consume_skb_any(struct sk_buff *skb)
+{
+	dev_consume_skb_any(skb);
+}
+
 void rcan_consume_skb(struct sk_buff *skb)
 {
 	consume_skb(skb);
@@ -404,14 +410,35 @@ int rcan_copy_to_user(void __user *dst, const void *src, unsigned long n)
 	return copy_to_user(dst, src, n) ? -EFAULT : 0;
 }
 
+/* spin_lock_init with the caller's class (rust_helper___spin_lock_init). */
+void rcan_spin_lock_init_key(spinlock_t *lock, const char *name,
+			     struct lock_class_key *key)
+{
+#ifdef CONFIG_DEBUG_SPINLOCK
+# if defined(CONFIG_PREEMPT_RT)
+	__spin_lock_init(lock, name, key, false);
+# else
+	__raw_spin_lock_init(spinlock_check(lock), name, key, LD_WAIT_CONFIG);
+# endif
+#else
+	spin_lock_init(lock);
+#endif
+}
+
 /* A spinlock in its own allocation, for Rust values that move. */
-spinlock_t *rcan_spinlock_alloc(void)
+spinlock_t *rcan_spinlock_alloc(const char *name, struct lock_class_key *key)
 {
 	spinlock_t *l = kmalloc(sizeof(*l), GFP_KERNEL);
 
 	if (l)
-		spin_lock_init(l);
+		rcan_spin_lock_init_key(l, name, key);
 	return l;
+}
+
+void rcan_init_waitqueue_head_key(struct wait_queue_head *wq, const char *name,
+				  struct lock_class_key *key)
+{
+	__init_waitqueue_head(wq, name, key);
 }
 
 void rcan_spinlock_free(spinlock_t *lock)

@@ -37,6 +37,7 @@ struct sk_buff *rcan_alloc_skb(unsigned int size, gfp_t gfp);
 void rcan_kfree_skb(struct sk_buff *skb);
 void rcan_consume_skb(struct sk_buff *skb);
 void rcan_dev_kfree_skb_any(struct sk_buff *skb);
+void rcan_dev_consume_skb_any(struct sk_buff *skb);
 void rcan_skb_reserve(struct sk_buff *skb, int len);
 unsigned int rcan_skb_headroom(const struct sk_buff *skb);
 void rcan_skb_reset_headers(struct sk_buff *skb);
@@ -92,8 +93,19 @@ int rcan_copy_to_user(void __user *dst, const void *src, unsigned long n);
 int rcan_copy_from_user(void *dst, const void __user *src, unsigned long n);
 bool rcan_capable_net_admin(void);
 
-/* spinlocks for Rust values that move */
-spinlock_t *rcan_spinlock_alloc(void);
+/*
+ * Spinlocks and wait queues with the lockdep class of their definition
+ * site (a static struct lock_class_key per site, as spin_lock_init's
+ * macro makes one): for Rust values that move, a spinlock in its own
+ * allocation; for Rust statics, initialisation in place.
+ */
+struct lock_class_key;
+spinlock_t *rcan_spinlock_alloc(const char *name, struct lock_class_key *key);
+void rcan_spin_lock_init_key(spinlock_t *lock, const char *name,
+			     struct lock_class_key *key);
+struct wait_queue_head;
+void rcan_init_waitqueue_head_key(struct wait_queue_head *wq, const char *name,
+				  struct lock_class_key *key);
 void rcan_spinlock_free(spinlock_t *lock);
 unsigned long rcan_spin_lock_irqsave(spinlock_t *lock);
 void rcan_spin_unlock_irqrestore(spinlock_t *lock, unsigned long flags);
@@ -141,11 +153,11 @@ u32 rcan_get_random_u32(void);
 
 #endif /* _RCAN_HELPERS_H */
 
-/* bottom-half spinlocks defined in C (DEFINE_SPINLOCK) */
+/* bottom-half spinlocks (statics of the glue's BhSpinLock) */
 void rcan_spin_lock_bh(spinlock_t *lock);
 void rcan_spin_unlock_bh(spinlock_t *lock);
 
-/* wait queues defined in C (DECLARE_WAIT_QUEUE_HEAD) */
+/* wait queues (statics of the glue's WaitQueue) */
 struct wait_queue_head;
 long rcan_wait_event_timeout(struct wait_queue_head *wq,
 			     bool (*cond)(void *arg), void *arg, long timeo);

@@ -24,50 +24,35 @@
 //! (so the per-device counters need no lock of their own); `open`/`stop`
 //! run in process context under RTNL. The parameters are read with
 //! READ_ONCE and may change at any time through sysfs.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../../../net/can/rcan_core.rs"]
-mod rcan_core;
+use crate::{glue, rcan_core};
 
 use glue::bindings;
 use glue::netdev::{Dev, Driver, Registration, Setup, Xmit};
+use glue::params::Param;
 use glue::skb::Skb;
 use kernel::c_str;
 use rcan_core::canloop::{DropRate, FrameDump};
 use rcan_core::frame::CAN_FRAME_LEN;
 
-module! {
-    type: CanLoop,
-    name: "rcan_loop",
-    author: "rcan developers",
-    description: "CAN loopback device (thesis canloop)",
-    license: "GPL",
-}
-
 /// Most devices one module instance registers.
 const MAX_COUNT: u32 = 16;
 
+// Parameter numbers shared with canloop_c.c (its rcan_module_param).
 const PARAM_COUNT: i32 = 0;
 const PARAM_VERBOSE: i32 = 1;
 const PARAM_DROPRATE: i32 = 2;
+const COUNT: Param<u32> = Param::new(PARAM_COUNT as u32);
+const VERBOSE: Param<bool> = Param::new(PARAM_VERBOSE as u32);
+const DROPRATE: Param<u32> = Param::new(PARAM_DROPRATE as u32);
 
-extern "C" {
-    fn rcan_loop_get(which: i32) -> u32;
-}
-
-fn param(which: i32) -> u32 {
-    // SAFETY: the C side reads a module parameter with READ_ONCE; any
-    // `which` is valid.
-    unsafe { rcan_loop_get(which) }
-}
-
-/// Validates a parameter value for the C parameter setter: refusing a bad
-/// value at insmod time makes the load fail with EINVAL.
-#[no_mangle]
-extern "C" fn rcan_loop_param_ok(which: i32, val: u32) -> bool {
+/// Validates a parameter value for the C parameter setter
+/// (`rcan_loop_param_ok` in canloop_mod.rs): refusing a bad value at insmod
+/// time makes the load fail with EINVAL. Process context.
+pub(crate) fn param_ok(which: i32, val: u32) -> bool {
     match which {
         PARAM_COUNT => (1..=MAX_COUNT).contains(&val),
         PARAM_VERBOSE => val <= 1,
@@ -109,11 +94,11 @@ impl Driver for LoopDriver {
         let Some((mut skb, frame)) = skb.can_xmit_start(dev) else {
             return Xmit::Ok;
         };
-        if param(PARAM_VERBOSE) != 0 {
+        if VERBOSE.get() {
             pr_info!("{}: tx {}\n", dev.name(), FrameDump::new(&frame).as_str());
         }
         // The parameter setter only stores valid rates.
-        let drop_it = match DropRate::new(param(PARAM_DROPRATE)) {
+        let drop_it = match DropRate::new(DROPRATE.get()) {
             Some(rate) if rate.percent() > 0 => rate.should_drop(glue::random_u32()),
             _ => false,
         };
@@ -139,20 +124,20 @@ impl Driver for LoopDriver {
     }
 }
 
-struct CanLoop {
+pub(crate) struct CanLoop {
     _devs: KVec<Registration<LoopDriver>>,
 }
 
 impl kernel::Module for CanLoop {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        let count = param(PARAM_COUNT);
+        let count = COUNT.get();
         let mut devs = KVec::new();
         for _ in 0..count {
             let reg = Registration::<LoopDriver>::register(c_str!("can%d"), ())?;
             pr_info!(
                 "{}: CAN loopback device, droprate {}%\n",
                 reg.dev().name(),
-                param(PARAM_DROPRATE)
+                DROPRATE.get()
             );
             devs.push(reg, GFP_KERNEL)?;
         }

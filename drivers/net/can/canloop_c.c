@@ -8,6 +8,7 @@
 #include <linux/moduleparam.h>
 
 #include "../../../rust/helpers/rcan_helpers.c"
+#include "../../../rust/helpers/rcan_params.h"
 
 bool rcan_loop_param_ok(int which, unsigned int val);
 
@@ -66,15 +67,13 @@ MODULE_PARM_DESC(verbose, "log every frame with the device name (0/1)");
 module_param_cb(droprate, &rcan_loop_droprate_ops, &rcan_loop_droprate, 0644);
 MODULE_PARM_DESC(droprate, "percentage of frames dropped to simulate loss (0-100)");
 
-unsigned int rcan_loop_get(int which);
-unsigned int rcan_loop_get(int which)
+/* Parameter numbers shared with canloop.rs. */
+u64 rcan_module_param(unsigned int which, unsigned int idx)
 {
 	switch (which) {
-	case 0:
-		return READ_ONCE(rcan_loop_count);
-	case 1:
-		return READ_ONCE(rcan_loop_verbose);
-	default:
-		return READ_ONCE(rcan_loop_droprate);
+	case 0: return READ_ONCE(rcan_loop_count);
+	case 1: return READ_ONCE(rcan_loop_verbose);
+	case 2: return READ_ONCE(rcan_loop_droprate);
+	default: return 0;
 	}
 }

@@ -15,7 +15,7 @@
 //!
 //! Contexts and locks:
 //!
-//! * [`ENGINE`] (a BH spinlock defined in `candsor_c.c`) protects all
+//! * [`ENGINE`] (a BH spinlock, lockdep class `rcan_dsor::ENGINE`) protects all
 //!   protocol state: the reassembly table, the running transfers, the
 //!   stream table, the bound sockets and the queue of frames to send. It is
 //!   taken in process context (system calls), in the NET_RX softirq
@@ -29,7 +29,7 @@
 //!   `Engine::out` and sent by [`Tick`], a soft hrtimer that is kicked to
 //!   "now" whenever frames are queued and otherwise armed for the earliest
 //!   protocol deadline.
-//! * Blocking senders sleep on [`WAITQ`] (defined in C) until their
+//! * Blocking senders sleep on [`WAITQ`] until their
 //!   transfer has finished; every finished transfer and every freed
 //!   channel wakes all waiters, which re-check under the lock.
 //! * [`MODULE`]`.sockets` (every open socket, for the notifier) is under
@@ -49,11 +49,13 @@ mod udpip;
 
 use glue::bindings;
 use glue::hrtimer::{ktime_get_mono_ns, ClockId, HrTimer, HrTimerCallback, HrTimerMode};
+use glue::lock::{BhSpinLock, WaitQueue, Waited};
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
+use glue::params::{Param, ParamStr};
 use glue::skb::Skb;
 use glue::sock::{Msg, Sock, SockRef};
-use glue::sync::{BhSpinLock, CWaitQueue, Rtnl, Waited};
+use glue::sync::Rtnl;
 use kernel::c_str;
 use rcan_api::{
     CanProtocol, KernelRx, KernelRxReg, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter,
@@ -98,37 +100,21 @@ const RX_HEADROOM: u32 = rcan_core::dsor_udp::HDR_LEN as u32 + 2;
 // ---------------------------------------------------------------------------
 // Parameters (C side: candsor_c.c)
 
-/// Parameter numbers shared with candsor_c.c.
-#[repr(u32)]
-#[derive(Clone, Copy)]
-enum Param {
-    Node = 0,
-    AckTimeoutMs = 1,
-    MaxRetx = 2,
-    ReasmTimeoutMs = 3,
-    MaxLen = 4,
-    MaxPerPeer = 5,
-    MaxBytes = 6,
-    UdpPrio = 7,
-    Canip = 8,
-}
-
-extern "C" {
-    fn rcan_dsor_param(which: u32) -> u32;
-    /// Copies the `ifname` parameter (NUL-terminated, at most 15 bytes)
-    /// into `buf` (16 bytes); returns the parameter's full length.
-    fn rcan_dsor_ifname(buf: *mut u8) -> usize;
-    /// Copies the `udp_saddr` parameter (NUL-terminated, at most 15 bytes)
-    /// into `buf` (16 bytes); returns the parameter's full length.
-    fn rcan_dsor_udp_saddr(buf: *mut u8) -> usize;
-    fn rcan_dsor_lock() -> *mut bindings::spinlock_t;
-    fn rcan_dsor_waitq() -> *mut bindings::wait_queue_head;
-}
-
-fn param(p: Param) -> u32 {
-    // SAFETY: reads a module parameter (fixed after load).
-    unsafe { rcan_dsor_param(p as u32) }
-}
+// Parameter numbers shared with candsor_c.c (its rcan_module_param and
+// rcan_module_param_str).
+const PARAM_NODE: Param<u32> = Param::new(0);
+const PARAM_ACK_TIMEOUT_MS: Param<u32> = Param::new(1);
+const PARAM_MAX_RETX: Param<u32> = Param::new(2);
+const PARAM_REASM_TIMEOUT_MS: Param<u32> = Param::new(3);
+const PARAM_MAX_LEN: Param<u32> = Param::new(4);
+const PARAM_MAX_PER_PEER: Param<u32> = Param::new(5);
+const PARAM_MAX_BYTES: Param<u32> = Param::new(6);
+const PARAM_UDP_PRIO: Param<u32> = Param::new(7);
+const PARAM_CANIP: Param<bool> = Param::new(8);
+/// `ifname`: copied NUL-terminated, at most 15 bytes.
+const PARAM_IFNAME: ParamStr = ParamStr::new(9);
+/// `udp_saddr`: copied NUL-terminated, at most 15 bytes.
+const PARAM_UDP_SADDR: ParamStr = ParamStr::new(10);
 
 /// An interface name or address string of the C side: 16 bytes, NUL-padded.
 #[derive(Clone, Copy)]
@@ -187,23 +173,18 @@ const IFNAMSIZ: usize = 16;
 fn load_config() -> Result<Config> {
     let mut ifname = Name([0; 16]);
     let mut saddr = Name([0; 16]);
-    // SAFETY: both buffers have the 16 bytes the C side writes.
-    let (ifname_len, saddr_len) = unsafe {
-        (
-            rcan_dsor_ifname(ifname.0.as_mut_ptr()),
-            rcan_dsor_udp_saddr(saddr.0.as_mut_ptr()),
-        )
-    };
-    let node = param(Param::Node);
+    let ifname_len = PARAM_IFNAME.read(&mut ifname.0);
+    let saddr_len = PARAM_UDP_SADDR.read(&mut saddr.0);
+    let node = PARAM_NODE.get();
     let timers = Timers {
-        ack_timeout_ms: param(Param::AckTimeoutMs),
-        max_retx: param(Param::MaxRetx),
-        reasm_timeout_ms: param(Param::ReasmTimeoutMs),
+        ack_timeout_ms: PARAM_ACK_TIMEOUT_MS.get(),
+        max_retx: PARAM_MAX_RETX.get(),
+        reasm_timeout_ms: PARAM_REASM_TIMEOUT_MS.get(),
     };
-    let max_len = param(Param::MaxLen);
-    let per_peer = param(Param::MaxPerPeer);
-    let max_bytes = param(Param::MaxBytes);
-    let udp_prio = param(Param::UdpPrio);
+    let max_len = PARAM_MAX_LEN.get();
+    let per_peer = PARAM_MAX_PER_PEER.get();
+    let max_bytes = PARAM_MAX_BYTES.get();
+    let udp_prio = PARAM_UDP_PRIO.get();
     if node > u32::from(dsor_wire::MAX_NODE) {
         return Err(bad_param("node", node, "0x00-0x7f"));
     }
@@ -272,7 +253,7 @@ fn load_config() -> Result<Config> {
         max_bytes: max_bytes as usize,
         udp_saddr,
         udp_prio: udp_prio as u8,
-        canip: param(Param::Canip) != 0,
+        canip: PARAM_CANIP.get(),
     })
 }
 
@@ -392,18 +373,11 @@ struct Engine {
 }
 
 /// All protocol state; `None` outside the module's lifetime.
-static ENGINE: BhSpinLock<Option<KBox<Engine>>> = BhSpinLock::new(engine_lock, None);
-fn engine_lock() -> *mut bindings::spinlock_t {
-    // SAFETY: returns the address of a static spinlock in candsor_c.c.
-    unsafe { rcan_dsor_lock() }
-}
+static ENGINE: BhSpinLock<Option<KBox<Engine>>> =
+    BhSpinLock::new(None, c_str!("rcan_dsor::ENGINE"));
 
 /// Blocking senders wait here.
-static WAITQ: CWaitQueue = CWaitQueue::new(waitq);
-fn waitq() -> *mut bindings::wait_queue_head {
-    // SAFETY: returns the address of a static wait queue in candsor_c.c.
-    unsafe { rcan_dsor_waitq() }
-}
+static WAITQ: WaitQueue = WaitQueue::new(c_str!("rcan_dsor::WAITQ"));
 
 /// Set by module exit: the timer neither sends nor re-arms.
 static STOPPING: AtomicBool = AtomicBool::new(false);
@@ -1379,7 +1353,7 @@ fn restart_hold(timeo: i64) -> Result {
 /// When the restart rule ([`restart_hold`]) stops holding zero-length
 /// messages (monotonic ms). Any context.
 fn restart_over_ms() -> u64 {
-    LOADED_MS.load(Ordering::Relaxed) + u64::from(param(Param::ReasmTimeoutMs))
+    LOADED_MS.load(Ordering::Relaxed) + u64::from(PARAM_REASM_TIMEOUT_MS.get())
 }
 
 /// Whether a transfer to `dst` could start now (wait condition).

@@ -1,17 +1,16 @@
 // SPDX-License-Identifier: GPL-2.0
 /*
- * C side of rcan_dsor: module parameters, the engine's spinlock and the
- * senders' wait queue (statically defined, which Rust cannot do on 6.12),
- * and the module's private copy of the helpers. candsor.rs validates the
- * parameters at load and refuses bad ones with EINVAL.
+ * C side of rcan_dsor: module parameters (read through
+ * rust/glue/params.rs) and the module's private copy of the helpers.
+ * candsor.rs validates the parameters at load and refuses bad ones with
+ * EINVAL.
  */
 #include <linux/moduleparam.h>
 #include <linux/netdevice.h>
-#include <linux/spinlock.h>
 #include <linux/string.h>
-#include <linux/wait.h>
 
 #include "../../../rust/helpers/rcan_helpers.c"
+#include "../../../rust/helpers/rcan_params.h"
 
 #ifndef RCAN_DSOR_NODE_ID
 #define RCAN_DSOR_NODE_ID 0x00
@@ -61,58 +60,42 @@ static bool canip = true;
 module_param(canip, bool, 0444);
 MODULE_PARM_DESC(canip, "create the canip0 UDP/IP device (default yes)");
 
-/* Parameter numbers shared with candsor.rs (enum Param). */
-unsigned int rcan_dsor_param(unsigned int which);
-unsigned int rcan_dsor_param(unsigned int which)
+/* Parameter numbers shared with candsor.rs (the PARAM_* consts). */
+u64 rcan_module_param(unsigned int which, unsigned int idx)
 {
 	switch (which) {
-	case 0: return node;
-	case 1: return ack_timeout_ms;
-	case 2: return max_retx;
-	case 3: return reasm_timeout_ms;
-	case 4: return max_len;
-	case 5: return max_per_peer;
-	case 6: return max_bytes;
-	case 7: return udp_prio;
-	case 8: return canip;
+	case 0: return READ_ONCE(node);
+	case 1: return READ_ONCE(ack_timeout_ms);
+	case 2: return READ_ONCE(max_retx);
+	case 3: return READ_ONCE(reasm_timeout_ms);
+	case 4: return READ_ONCE(max_len);
+	case 5: return READ_ONCE(max_per_peer);
+	case 6: return READ_ONCE(max_bytes);
+	case 7: return READ_ONCE(udp_prio);
+	case 8: return READ_ONCE(canip);
 	default: return 0;
 	}
 }
 
-/* Copies at most IFNAMSIZ - 1 bytes; returns strlen(s) so that the Rust
- * side refuses a longer parameter instead of using a truncated copy. */
-static size_t rcan_dsor_copy16(char *buf, const char *s)
+/*
+ * String parameters: 9 ifname, 10 udp_saddr. Copies at most len - 1
+ * bytes; returns strlen(s) so that the Rust side refuses a longer
+ * parameter instead of using a truncated copy.
+ */
+size_t rcan_module_param_str(unsigned int which, char *buf, size_t len)
 {
-	memset(buf, 0, IFNAMSIZ);
+	const char *s;
+
+	switch (which) {
+	case 9: s = READ_ONCE(ifname); break;
+	case 10: s = READ_ONCE(udp_saddr); break;
+	default: s = NULL; break;
+	}
+	if (len)
+		memset(buf, 0, len);
 	if (!s)
 		return 0;
-	strscpy(buf, s, IFNAMSIZ);
+	if (len)
+		strscpy(buf, s, len);
 	return strlen(s);
-}
-
-size_t rcan_dsor_ifname(char *buf);
-size_t rcan_dsor_ifname(char *buf)
-{
-	return rcan_dsor_copy16(buf, ifname);
-}
-
-size_t rcan_dsor_udp_saddr(char *buf);
-size_t rcan_dsor_udp_saddr(char *buf)
-{
-	return rcan_dsor_copy16(buf, udp_saddr);
-}
-
-static DEFINE_SPINLOCK(rcan_dsor_engine_lock);
-static DECLARE_WAIT_QUEUE_HEAD(rcan_dsor_wq);
-
-spinlock_t *rcan_dsor_lock(void);
-spinlock_t *rcan_dsor_lock(void)
-{
-	return &rcan_dsor_engine_lock;
-}
-
-struct wait_queue_head *rcan_dsor_waitq(void);
-struct wait_queue_head *rcan_dsor_waitq(void)
-{
-	return &rcan_dsor_wq;
 }

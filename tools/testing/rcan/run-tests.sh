@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: GPL-2.0
 # The test command (make check, called by .ci/run): host tests (cargo test,
-# then tests/frontdoor.sh: how the kernel build fails and shares its cache),
+# then tests/frontdoor.sh: how the kernel build fails and shares its cache,
+# then tests/unsafe.sh: the ceiling on unsafe outside rust/glue/),
 # then the VM suite on the release kernel, its CAN_RAW/can-utils subset
 # against mainline SocketCAN (can.ko, can-raw.ko, vcan.ko of the same
 # kernel) in a VM boot of its own, and the suite again on the debug kernel
@@ -53,6 +54,12 @@ tally host "$rc" "$log_dir/host.log"
 echo "=== host: front door (build-kernel.sh, make modules)"
 bash "$RCAN_ROOT/tools/testing/rcan/tests/frontdoor.sh" 2>&1 | tee "$log_dir/frontdoor.log"
 tally frontdoor "${PIPESTATUS[0]}" "$log_dir/frontdoor.log"
+
+# The unsafe ratchet: `unsafe` in kernel-module Rust outside rust/glue/
+# must not exceed the ceiling recorded in tools/testing/rcan/unsafe-ceiling.
+echo "=== host: unsafe outside rust/glue (ratchet)"
+bash "$RCAN_ROOT/tools/testing/rcan/tests/unsafe.sh" 2>&1 | tee "$log_dir/unsafe.log"
+tally unsafe "${PIPESTATUS[0]}" "$log_dir/unsafe.log"
 
 vm_stage() {
 	local variant=$1

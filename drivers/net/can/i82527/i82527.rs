@@ -33,11 +33,12 @@
 //! (core) clears it at once, the chip then waits for 128 occurrences of
 //! 11 recessive bits and rejoins the bus; sockets see `CAN_ERR_BUSOFF`
 //! and then `CAN_ERR_RESTARTED`.
+#![forbid(unsafe_code)]
 
 use crate::glue::bindings;
+use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::skb::Skb;
-use crate::glue::sync::IrqSpinLock;
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::i82527::{
@@ -130,12 +131,13 @@ pub(crate) struct Channel<R: Regs + Send + 'static> {
 }
 
 impl<R: Regs + Send + 'static> Channel<R> {
-    /// The device, as a cookie for [`crate::glue::netdev::from_cookie`]
-    /// (the simulated card's interrupt delivery; the ISA front-end has a
-    /// real line).
+    /// Runs the device's interrupt handler, for a front-end without an
+    /// interrupt line (the simulated card's timer; the ISA front-end has a
+    /// real line). Whether the chip had a cause. Any context that may take
+    /// the chip lock (not under it).
     #[allow(dead_code)]
-    pub(crate) fn dev_ptr(&self) -> *mut bindings::net_device {
-        self.reg.dev().as_ptr()
+    pub(crate) fn irq(&self) -> bool {
+        <I82527<R> as Driver>::irq(self.reg.dev(), self.reg.priv_data())
     }
 }
 
@@ -154,12 +156,15 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
         return Ok(None);
     }
     let prv = I82527Priv {
-        chip: IrqSpinLock::new(ChipState {
-            chip,
-            echo: None,
-            rxq: RxQueue::new(),
-            running: false,
-        })?,
+        chip: new_irq_spinlock!(
+            ChipState {
+                chip,
+                echo: None,
+                rxq: RxQueue::new(),
+                running: false,
+            },
+            "I82527Priv::chip"
+        )?,
         irq,
     };
     let reg =
@@ -366,16 +371,8 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                 match ev {
                     Event::Rx(f) => rx_frame(dev, rxq, &f),
                     Event::TxDone => {
-                        if let Some(mut skb) = echo.take() {
-                            if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) {
-                                dev.stats_tx(CanFrame::from_bytes(b).dlc() as u32);
-                            }
-                            if skb.wants_echo() {
-                                skb.set_can_rx(dev);
-                                enqueue(dev, rxq, skb);
-                            } else {
-                                skb.consume();
-                            }
+                        if let Some(skb) = echo.take().and_then(|s| s.can_echo_done(dev)) {
+                            enqueue(dev, rxq, skb);
                         }
                         dev.wake_queue();
                     }

@@ -14,114 +14,74 @@
 //!
 //! Register access runs in every context the driver uses (process,
 //! softirq, hardirq), serialised by the driver's chip lock.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "i82527.rs"]
-mod i82527;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
+use crate::{glue, i82527, rcan_core};
 
+use glue::isa::{IoWindow, Space};
+use glue::params::Param;
 use i82527::{add_channel, Channel};
+use kernel::c_str;
 use rcan_core::i82527::{Config, Regs};
-
-module! {
-    type: IsaModule,
-    name: "rcan_i82527_isa",
-    author: "rcan developers",
-    description: "Intel 82527 front-end for memory-mapped ISA cards",
-    license: "GPL",
-}
 
 /// Crystal of the cards the thesis used (16 MHz).
 const XTAL_HZ: u32 = 16_000_000;
 
-extern "C" {
-    fn rcan_i82527_isa_param(which: i32) -> u64;
-    fn rcan_i82527_isa_map(phys: u64, err: *mut i32) -> *mut kernel::ffi::c_void;
-    fn rcan_i82527_isa_unmap(phys: u64, p: *mut kernel::ffi::c_void);
-    fn rcan_i82527_isa_readb(p: *mut kernel::ffi::c_void, reg: u8) -> u8;
-    fn rcan_i82527_isa_writeb(p: *mut kernel::ffi::c_void, reg: u8, val: u8);
-}
+/// Bytes of the 82527's register window.
+const WINDOW_BYTES: usize = 0x100;
 
-fn param(which: i32) -> u64 {
-    // SAFETY: reads a module parameter (READ_ONCE); any index is valid.
-    unsafe { rcan_i82527_isa_param(which) }
-}
+// Parameter numbers shared with isa_c.c.
+/// `iomem=`: physical address of the window (required).
+const IOMEM: Param<usize> = Param::new(0);
+/// `irq=`: the card's interrupt line (required).
+const IRQ: Param<i32> = Param::new(1);
+const BT0: Param<u8> = Param::new(2);
+const BT1: Param<u8> = Param::new(3);
+const CPU_IF: Param<u8> = Param::new(4);
+const CLKOUT: Param<u8> = Param::new(5);
+const BUS_CFG: Param<u8> = Param::new(6);
 
-/// The requested and mapped register window.
-///
-/// # Invariants
-///
-/// `p` maps 256 bytes at `phys`, requested by `rcan_i82527_isa_map`,
-/// released in Drop.
-struct Window {
-    phys: u64,
-    p: *mut kernel::ffi::c_void,
-}
-
-// SAFETY: the mapping may be used and released from any thread.
-unsafe impl Send for Window {}
-
-impl Window {
-    fn map(phys: u64) -> Result<Window> {
-        let mut err = 0i32;
-        // SAFETY: `err` is writable; the helper requests and maps or fails.
-        let p = unsafe { rcan_i82527_isa_map(phys, &mut err) };
-        if p.is_null() {
-            return Err(Error::from_errno(err));
-        }
-        // INVARIANT: mapped above.
-        Ok(Window { phys, p })
-    }
-}
-
-impl Drop for Window {
-    fn drop(&mut self) {
-        // SAFETY: mapped and requested by rcan_i82527_isa_map (invariant).
-        unsafe { rcan_i82527_isa_unmap(self.phys, self.p) };
-    }
-}
-
-/// Register access through the window (readb/writeb; the default
-/// readn/writen are the thesis' memcpy_fromio/memcpy_toio byte by byte,
-/// which the 82527's byte-wide bus needs anyway).
-struct IsaRegs(Window);
+/// Register access through the claimed and mapped window (readb/writeb;
+/// the default readn/writen are the thesis' memcpy_fromio/memcpy_toio
+/// byte by byte, which the 82527's byte-wide bus needs anyway). Every
+/// register number (< 256) lies inside the window.
+struct IsaRegs(IoWindow);
 
 impl Regs for IsaRegs {
     fn read(&mut self, reg: u8) -> u8 {
-        // SAFETY: `reg` < 256 lies in the mapped window (Window invariant).
-        unsafe { rcan_i82527_isa_readb(self.0.p, reg) }
+        self.0.read8(reg.into())
     }
     fn write(&mut self, reg: u8, val: u8) {
-        // SAFETY: as in read.
-        unsafe { rcan_i82527_isa_writeb(self.0.p, reg, val) }
+        self.0.write8(reg.into(), val)
     }
 }
 
-struct IsaModule {
+pub(crate) struct IsaModule {
     _channel: Channel<IsaRegs>,
 }
 
 impl kernel::Module for IsaModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        let (iomem, irq) = (param(0), param(1));
+        let (iomem, irq) = (IOMEM.get(), IRQ.get());
         if iomem == 0 || irq <= 0 || irq > 0xFFFF {
             pr_err!("rcan_i82527_isa: iomem= and irq= are required\n");
             return Err(ENODEV);
         }
         let cfg = Config {
-            bt0: param(2) as u8,
-            bt1: param(3) as u8,
-            cpu_if: param(4) as u8,
-            clkout: param(5) as u8,
-            bus_cfg: param(6) as u8,
+            bt0: BT0.get(),
+            bt1: BT1.get(),
+            cpu_if: CPU_IF.get(),
+            clkout: CLKOUT.get(),
+            bus_cfg: BUS_CFG.get(),
         };
-        let regs = IsaRegs(Window::map(iomem)?);
+        let regs = IsaRegs(IoWindow::request(
+            Space::Mem,
+            iomem,
+            WINDOW_BYTES,
+            c_str!("rcan_i82527_isa"),
+        )?);
         match add_channel(
             regs,
             cfg,

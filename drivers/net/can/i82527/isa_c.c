@@ -1,20 +1,15 @@
 // SPDX-License-Identifier: GPL-2.0
 /*
  * C side of rcan_i82527_isa (thesis 5.3.11): the iomem/irq and bit timing
- * module parameters (6.12's Rust module! macro has none), the memory
- * region request and mapping, byte access (readb/writeb are inline
- * functions bindgen cannot call), and the module's private copy of the
- * helpers.
+ * module parameters (6.12's Rust module! macro has none; read through
+ * rust/glue/params.rs) and the module's private copy of the helpers. The
+ * window is claimed and mapped by the glue's IoWindow (rust/glue/isa.rs).
  */
 #include <linux/kernel.h>
 #include <linux/moduleparam.h>
-#include <linux/ioport.h>
-#include <linux/io.h>
 
 #include "../../../../rust/helpers/rcan_helpers.c"
-
-/* The 82527's 256-byte register window. */
-#define RCAN_I82527_WINDOW 0x100
+#include "../../../../rust/helpers/rcan_params.h"
 
 static unsigned long iomem;
 module_param(iomem, ulong, 0444);
@@ -38,54 +33,17 @@ static unsigned char bus_cfg = 0x40;
 module_param(bus_cfg, byte, 0444);
 MODULE_PARM_DESC(bus_cfg, "82527 bus configuration register (default 0x40: comparator bypass)");
 
-u64 rcan_i82527_isa_param(int which);
-u64 rcan_i82527_isa_param(int which)
+/* Parameter numbers shared with isa.rs. */
+u64 rcan_module_param(unsigned int which, unsigned int idx)
 {
 	switch (which) {
 	case 0: return READ_ONCE(iomem);
-	case 1: return READ_ONCE(irq);
+	case 1: return (u64)(s64)READ_ONCE(irq);
 	case 2: return READ_ONCE(bt0);
 	case 3: return READ_ONCE(bt1);
 	case 4: return READ_ONCE(cpu_if);
 	case 5: return READ_ONCE(clkout);
-	default: return READ_ONCE(bus_cfg);
+	case 6: return READ_ONCE(bus_cfg);
+	default: return 0;
 	}
-}
-
-/* Requests and maps the window at `phys`; NULL with *err set on failure. */
-void __iomem *rcan_i82527_isa_map(u64 phys, int *err);
-void __iomem *rcan_i82527_isa_map(u64 phys, int *err)
-{
-	void __iomem *p;
-
-	if (!request_mem_region(phys, RCAN_I82527_WINDOW, "rcan_i82527_isa")) {
-		*err = -EBUSY;
-		return NULL;
-	}
-	p = ioremap(phys, RCAN_I82527_WINDOW);
-	if (!p) {
-		release_mem_region(phys, RCAN_I82527_WINDOW);
-		*err = -ENOMEM;
-		return NULL;
-	}
-	return p;
-}
-
-void rcan_i82527_isa_unmap(u64 phys, void __iomem *p);
-void rcan_i82527_isa_unmap(u64 phys, void __iomem *p)
-{
-	iounmap(p);
-	release_mem_region(phys, RCAN_I82527_WINDOW);
-}
-
-u8 rcan_i82527_isa_readb(void __iomem *p, u8 reg);
-u8 rcan_i82527_isa_readb(void __iomem *p, u8 reg)
-{
-	return readb(p + reg);
-}
-
-void rcan_i82527_isa_writeb(void __iomem *p, u8 reg, u8 val);
-void rcan_i82527_isa_writeb(void __iomem *p, u8 reg, u8 val)
-{
-	writeb(val, p + reg);
 }

@@ -6,8 +6,9 @@
 //! (`rcan_core::i82527_model`, the one the host tests use), and the
 //! unchanged driver (`i82527.rs`) runs beneath pf_can and the protocols.
 //!
-//! The bus: every card's model lives in one array under one spinlock.
-//! Writing a transmission request (TxRqst set) to a message object kicks
+//! The bus: every card's model lives in one array under one spinlock
+//! ([`BUS`], a static of the glue's `StaticIrqSpinLock` with a lockdep
+//! class of its own), the registered cards in [`CHANNELS`]. Writing a transmission request (TxRqst set) to a message object kicks
 //! an hrtimer (soft mode); its callback, in softirq context, is the bus
 //! and the interrupt wires: it takes one frame from a card whose object
 //! wants to send (cards in turn), offers it to every other card's model,
@@ -21,41 +22,32 @@
 //! off) and the device's NAPI poll hands them up in NET_RX softirq, one
 //! CPU at a time (see `i82527.rs`). The timer callback calls into the
 //! stack only through that poll: never with the bus or a chip lock held.
+//! It calls the interrupt handlers under `CHANNELS` (so module exit
+//! cannot unregister a card meanwhile); lock order CHANNELS -> chip lock
+//! -> BUS.
 //!
 //! Module parameter `cards` (default 2, at most [`MAX_CARDS`]).
 //!
 //! Teardown: `DYING` stops the callback from touching anything, the
-//! timer is cancelled, the devices are unregistered (their `stop` writes
-//! to the models, which no longer kicks), and the timer is cancelled once
-//! more before the bus is freed.
+//! timer is cancelled, the devices are taken out of `CHANNELS` and
+//! unregistered (their `stop` writes to the models, which no longer
+//! kicks), and the timer is cancelled once more before the bus is taken
+//! out of `BUS` and freed. No `unsafe` here: the cards are reached only
+//! through the statics, so nothing can outlive what it points to.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "i82527.rs"]
-mod i82527;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
+use crate::{glue, i82527, rcan_core};
 
-use core::cell::UnsafeCell;
 use core::sync::atomic::{AtomicBool, Ordering};
-use glue::bindings;
 use glue::hrtimer::{ClockId, HrTimer, HrTimerCallback, HrTimerMode};
-use glue::netdev::Driver;
-use i82527::{add_channel, Channel, I82527};
+use glue::lock::StaticIrqSpinLock;
+use glue::params::Param;
+use i82527::{add_channel, Channel};
+use kernel::c_str;
 use rcan_core::i82527::{bits, reg, Config, Regs};
 use rcan_core::i82527_model::I82527Model;
-
-module! {
-    type: SimModule,
-    name: "rcan_i82527_sim",
-    author: "rcan developers",
-    description: "Simulated Intel 82527 cards on a simulated CAN bus",
-    license: "GPL",
-}
 
 /// Most simulated cards.
 const MAX_CARDS: usize = 8;
@@ -73,12 +65,8 @@ const REARM_NS: i64 = 20_000;
 /// Rounds of a run without moving frames (interrupt handling only)
 /// before re-arming.
 const MAX_ROUNDS: usize = 64;
-
-extern "C" {
-    fn rcan_i82527_sim_cards() -> u32;
-    fn rcan_i82527_sim_lock() -> kernel::ffi::c_ulong;
-    fn rcan_i82527_sim_unlock(flags: kernel::ffi::c_ulong);
-}
+/// Module parameter `cards` (number 0 in sim_c.c).
+const CARDS: Param<u32> = Param::new(0);
 
 /// The simulated bus: every card's chip.
 struct Bus {
@@ -88,56 +76,17 @@ struct Bus {
     next: usize,
 }
 
-/// The bus under the C-side bus spinlock (`sim_c.c`), shared by every
-/// card's register access and the timer.
-struct BusLock(UnsafeCell<Bus>);
+/// The bus, shared by every card's register access and the timer; `None`
+/// outside the module's lifetime. Taken inside a card's chip lock (the
+/// driver reads registers under it), never the other way round.
+static BUS: StaticIrqSpinLock<Option<KBox<Bus>>> =
+    StaticIrqSpinLock::new(None, c_str!("rcan_i82527_sim::BUS"));
 
-// SAFETY: the bus is only reached through `lock`, which holds the bus
-// spinlock (one bus per module, one lock).
-unsafe impl Sync for BusLock {}
-
-impl BusLock {
-    /// Takes the bus lock, local interrupts off. Any context.
-    fn lock(&self) -> BusGuard<'_> {
-        // SAFETY: a static, initialised spinlock (DEFINE_SPINLOCK).
-        let flags = unsafe { rcan_i82527_sim_lock() };
-        BusGuard {
-            bus: self,
-            flags,
-            _not_send: core::marker::PhantomData,
-        }
-    }
-}
-
-/// The held bus lock.
-struct BusGuard<'a> {
-    bus: &'a BusLock,
-    flags: kernel::ffi::c_ulong,
-    _not_send: core::marker::PhantomData<*mut ()>,
-}
-
-impl core::ops::Deref for BusGuard<'_> {
-    type Target = Bus;
-    fn deref(&self) -> &Bus {
-        // SAFETY: the bus lock is held while the guard lives.
-        unsafe { &*self.bus.0.get() }
-    }
-}
-
-impl core::ops::DerefMut for BusGuard<'_> {
-    fn deref_mut(&mut self) -> &mut Bus {
-        // SAFETY: the bus lock is held while the guard lives, exclusively.
-        unsafe { &mut *self.bus.0.get() }
-    }
-}
-
-impl Drop for BusGuard<'_> {
-    fn drop(&mut self) {
-        // SAFETY: taken in BusLock::lock with these flags, on this CPU
-        // (the guard is not Send).
-        unsafe { rcan_i82527_sim_unlock(self.flags) };
-    }
-}
+/// The registered cards, in bus order, for the timer's interrupt
+/// delivery; empty outside the module's lifetime. Lock order: CHANNELS ->
+/// a card's chip lock -> BUS.
+static CHANNELS: StaticIrqSpinLock<KVec<Channel<SimRegs>>> =
+    StaticIrqSpinLock::new(KVec::new(), c_str!("rcan_i82527_sim::CHANNELS"));
 
 /// Set while the module goes away: no kicks, no callback work.
 static DYING: AtomicBool = AtomicBool::new(false);
@@ -151,31 +100,24 @@ fn kick() {
     }
 }
 
-/// Register access of card `idx`: the model behind the bus lock.
+/// Register access of card `idx`: its model on the bus.
 struct SimRegs {
-    bus: *const BusLock,
     idx: usize,
-}
-
-// SAFETY: `bus` points to the module's bus, which outlives every device
-// (freed after they are unregistered); access goes through its lock.
-unsafe impl Send for SimRegs {}
-
-impl SimRegs {
-    fn bus(&self) -> &BusLock {
-        // SAFETY: the bus outlives the devices and their register access
-        // (see the Send impl).
-        unsafe { &*self.bus }
-    }
 }
 
 impl Regs for SimRegs {
     fn read(&mut self, r: u8) -> u8 {
-        self.bus().lock().models[self.idx].read(r)
+        match BUS.lock().as_mut() {
+            Some(b) => b.models[self.idx].read(r),
+            // No bus: as an absent chip.
+            None => 0xFF,
+        }
     }
 
     fn write(&mut self, r: u8, val: u8) {
-        self.bus().lock().models[self.idx].write(r, val);
+        if let Some(b) = BUS.lock().as_mut() {
+            b.models[self.idx].write(r, val);
+        }
         // A transmission request: the bus has work.
         let is_ctrl1 = r >= 0x10 && r & 0x0F == reg::CTRL1;
         if is_ctrl1 && (val >> bits::TXRQST) & 0b11 == bits::SET {
@@ -184,28 +126,15 @@ impl Regs for SimRegs {
     }
 }
 
-/// What the timer callback works on.
-struct SimState {
-    bus: *const BusLock,
-    devs: [*mut bindings::net_device; MAX_CARDS],
-}
-
-// SAFETY: the pointers are the module's bus and registered devices, valid
-// until the module's teardown, which stops the callback (DYING, cancel)
-// before freeing them.
-unsafe impl Send for SimState {}
-
 struct SimBus;
 
 impl HrTimerCallback for SimBus {
-    type State = SimState;
+    type State = ();
 
-    fn run(timer: &'static HrTimer<Self>, st: &mut SimState) {
+    fn run(timer: &'static HrTimer<Self>, _st: &mut ()) {
         if DYING.load(Ordering::SeqCst) {
             return;
         }
-        // SAFETY: not DYING, so the bus is alive (SimState's Send impl).
-        let bus: &BusLock = unsafe { &*st.bus };
         let mut frames = 0;
         for _ in 0..MAX_ROUNDS {
             if frames == FRAMES_PER_RUN {
@@ -213,7 +142,10 @@ impl HrTimerCallback for SimBus {
             }
             let mut lines = [false; MAX_CARDS];
             let (n, moved) = {
-                let mut b = bus.lock();
+                let mut g = BUS.lock();
+                let Some(b) = g.as_mut() else {
+                    return;
+                };
                 let n = b.n;
                 let mut moved = false;
                 for k in 0..n {
@@ -235,12 +167,16 @@ impl HrTimerCallback for SimBus {
                 }
                 (n, moved)
             };
+            // The bus lock is released: the handlers take their chip lock
+            // and then the bus lock for each register access.
             let mut handled = false;
-            for i in (0..n).filter(|&i| lines[i]) {
-                // SAFETY: a registered device of this driver, alive while
-                // not DYING (above).
-                let (d, p) = unsafe { glue::netdev::from_cookie::<I82527<SimRegs>>(st.devs[i]) };
-                handled |= <I82527<SimRegs> as Driver>::irq(d, p);
+            {
+                let chans = CHANNELS.lock();
+                for (i, c) in chans.iter().enumerate().take(n) {
+                    if lines[i] {
+                        handled |= c.irq();
+                    }
+                }
             }
             frames += usize::from(moved);
             if !moved && !handled {
@@ -252,40 +188,32 @@ impl HrTimerCallback for SimBus {
     }
 }
 
-struct SimModule {
-    channels: KVec<Channel<SimRegs>>,
-    bus: Option<KBox<BusLock>>,
-}
+/// The module: its state is in the statics above, torn down in Drop.
+pub(crate) struct SimModule;
 
 impl kernel::Module for SimModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        // SAFETY: reads the module parameter (READ_ONCE).
-        let n = unsafe { rcan_i82527_sim_cards() } as usize;
+        let n = CARDS.get() as usize;
         if n == 0 || n > MAX_CARDS {
             pr_err!("rcan_i82527_sim: cards must be 1..={}\n", MAX_CARDS);
             return Err(EINVAL);
         }
         let bus = KBox::new(
-            BusLock(UnsafeCell::new(Bus {
+            Bus {
                 models: core::array::from_fn(|_| I82527Model::new()),
                 n,
                 next: 0,
-            })),
+            },
             GFP_KERNEL,
         )?;
-        let bus_ptr: *const BusLock = &*bus;
-        let mut m = SimModule {
-            channels: KVec::new(),
-            bus: Some(bus),
-        };
-        let mut devs = [core::ptr::null_mut(); MAX_CARDS];
-        for (i, d) in devs.iter_mut().enumerate().take(n) {
-            let regs = SimRegs {
-                bus: bus_ptr,
-                idx: i,
-            };
+        // From here on a failure tears down through Drop (after `chans`,
+        // declared later, has unregistered what it holds).
+        let m = SimModule;
+        *BUS.lock() = Some(bus);
+        let mut chans = KVec::with_capacity(n, GFP_KERNEL)?;
+        for i in 0..n {
             let Some(c) = add_channel(
-                regs,
+                SimRegs { idx: i },
                 Config::DEFAULT,
                 0,
                 XTAL_HZ,
@@ -295,14 +223,12 @@ impl kernel::Module for SimModule {
                 pr_err!("rcan_i82527_sim: model {} does not probe\n", i);
                 return Err(ENODEV);
             };
-            *d = c.dev_ptr();
-            m.channels.push(c, GFP_KERNEL)?;
+            chans.push(c, GFP_KERNEL)?;
         }
-        TIMER.init(
-            ClockId::Monotonic,
-            HrTimerMode::RelativeSoft,
-            SimState { bus: bus_ptr, devs },
-        )?;
+        // The old (empty) vector is dropped with the guard held: it owns
+        // no memory.
+        *CHANNELS.lock() = chans;
+        TIMER.init(ClockId::Monotonic, HrTimerMode::RelativeSoft, ())?;
         DYING.store(false, Ordering::SeqCst);
         Ok(m)
     }
@@ -312,20 +238,21 @@ impl Drop for SimModule {
     fn drop(&mut self) {
         DYING.store(true, Ordering::SeqCst);
         TIMER.cancel();
-        // Unregisters the devices (stop, then free).
-        drop(core::mem::replace(&mut self.channels, KVec::new()));
+        // Unregisters the devices (stop, then free), outside the lock.
+        let chans = core::mem::replace(&mut *CHANNELS.lock(), KVec::new());
+        drop(chans);
         TIMER.cancel();
-        if let Some(bus) = self.bus.take() {
-            let b = bus.lock();
-            for (i, m) in b.models.iter().enumerate().take(b.n) {
-                pr_info!(
-                    "rcan_i82527_sim: card {}: {} frames sent, {} answered, {} not taken\n",
-                    i,
-                    m.sent,
-                    m.answered,
-                    m.not_taken
-                );
-            }
+        let Some(bus) = BUS.lock().take() else {
+            return;
+        };
+        for (i, m) in bus.models.iter().enumerate().take(bus.n) {
+            pr_info!(
+                "rcan_i82527_sim: card {}: {} frames sent, {} answered, {} not taken\n",
+                i,
+                m.sent,
+                m.answered,
+                m.not_taken
+            );
         }
     }
 }

@@ -1,40 +1,21 @@
 // SPDX-License-Identifier: GPL-2.0
 /*
  * C side of rcan_i82527_sim: the `cards` module parameter (6.12's Rust
- * module! macro has none), the simulated bus's spinlock (a lock class of
- * its own: the bus lock nests inside the driver's per-device chip lock,
- * whose class all rcan_spinlock_alloc locks share), and the module's
- * private copy of the helpers.
+ * module! macro has none; read through rust/glue/params.rs) and the
+ * module's private copy of the helpers.
  */
 #include <linux/kernel.h>
 #include <linux/moduleparam.h>
-#include <linux/spinlock.h>
 
 #include "../../../../rust/helpers/rcan_helpers.c"
+#include "../../../../rust/helpers/rcan_params.h"
 
 static unsigned int cards = 2;
 module_param(cards, uint, 0444);
 MODULE_PARM_DESC(cards, "Number of simulated 82527 cards on the bus (1..8, default 2)");
 
-static DEFINE_SPINLOCK(rcan_i82527_sim_bus);
-
-u32 rcan_i82527_sim_cards(void);
-u32 rcan_i82527_sim_cards(void)
+/* Parameter numbers shared with sim.rs: 0 cards. */
+u64 rcan_module_param(unsigned int which, unsigned int idx)
 {
-	return READ_ONCE(cards);
-}
-
-unsigned long rcan_i82527_sim_lock(void);
-unsigned long rcan_i82527_sim_lock(void)
-{
-	unsigned long flags;
-
-	spin_lock_irqsave(&rcan_i82527_sim_bus, flags);
-	return flags;
-}
-
-void rcan_i82527_sim_unlock(unsigned long flags);
-void rcan_i82527_sim_unlock(unsigned long flags)
-{
-	spin_unlock_irqrestore(&rcan_i82527_sim_bus, flags);
+	return which == 0 ? READ_ONCE(cards) : 0;
 }

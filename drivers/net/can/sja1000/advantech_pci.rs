@@ -10,30 +10,16 @@
 //!
 //! Contexts: probe/remove in process context (PCI core); register access
 //! from every context the driver uses, serialised by the chip lock.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
-#[path = "sja1000.rs"]
-mod sja1000;
+use crate::{glue, rcan_core, sja1000};
 
 use glue::pci;
 use kernel::c_str;
 use rcan_core::sja1000::{Config, CDR_CBP};
 use sja1000::{add_channel, Channel, IoRegs};
-
-module! {
-    type: AdvantechPciModule,
-    name: "rcan_advantech_pci",
-    author: "rcan developers",
-    description: "SJA1000 front-end for Advantech PCM-3680I / MIOe-3680 PCI cards",
-    license: "GPL",
-}
 
 const CHANNELS: usize = 2;
 /// Output control: TX0 push-pull, normal mode (what these boards use).
@@ -41,19 +27,8 @@ const ADVANTECH_OCR: u8 = 0xDA;
 /// Clock divider: comparator bypass, clock out off.
 const ADVANTECH_CDR: u8 = CDR_CBP | rcan_core::sja1000::CDR_CLK_OFF;
 
-extern "C" {
-    fn rcan_advantech_btr(which: i32) -> u8;
-}
-
 fn config() -> Config {
-    // SAFETY: reads the module parameters (READ_ONCE); any index is valid.
-    let (btr0, btr1) = unsafe { (rcan_advantech_btr(0), rcan_advantech_btr(1)) };
-    Config {
-        btr0,
-        btr1,
-        ocr: ADVANTECH_OCR,
-        cdr: ADVANTECH_CDR,
-    }
+    sja1000::module_config(ADVANTECH_OCR, ADVANTECH_CDR)
 }
 
 /// Crystal of the SJA1000s on the card.
@@ -116,7 +91,7 @@ static IDS: [glue::bindings::pci_device_id; 3] = [
 
 static DRIVER: pci::Registration<AdvantechPci> = pci::Registration::new();
 
-struct AdvantechPciModule;
+pub(crate) struct AdvantechPciModule;
 
 impl kernel::Module for AdvantechPciModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {

@@ -9,6 +9,7 @@
 #include <linux/moduleparam.h>
 
 #include "../../../../rust/helpers/rcan_helpers.c"
+#include "../../../../rust/helpers/rcan_params.h"
 
 static unsigned char btr0 = 0x01;
 static unsigned char btr1 = 0x14;
@@ -17,8 +18,12 @@ MODULE_PARM_DESC(btr0, "SJA1000 bus timing register 0 (default 0x01)");
 module_param(btr1, byte, 0444);
 MODULE_PARM_DESC(btr1, "SJA1000 bus timing register 1 (default 0x14: 500 kbit/s)");
 
-u8 rcan_advantech_btr(int which);
-u8 rcan_advantech_btr(int which)
+/* Parameter numbers: the SJA1000 core's BTR0/BTR1 (sja1000.rs). */
+u64 rcan_module_param(unsigned int which, unsigned int idx)
 {
-	return which ? READ_ONCE(btr1) : READ_ONCE(btr0);
+	switch (which) {
+	case 0: return READ_ONCE(btr0);
+	case 1: return READ_ONCE(btr1);
+	default: return 0;
+	}
 }

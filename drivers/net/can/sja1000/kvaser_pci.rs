@@ -12,30 +12,16 @@
 //! Contexts: probe/remove in process context (PCI core); register access
 //! from every context the driver uses, serialised by the driver's chip
 //! lock.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
-#[path = "sja1000.rs"]
-mod sja1000;
+use crate::{glue, rcan_core, sja1000};
 
 use glue::pci::{self, IoMem};
 use kernel::c_str;
 use rcan_core::sja1000::{Config, CDR_CBP};
 use sja1000::{add_channel, Channel, IoRegs};
-
-module! {
-    type: KvaserPciModule,
-    name: "rcan_kvaser_pci",
-    author: "rcan developers",
-    description: "SJA1000 front-end for Kvaser PCIcan cards",
-    license: "GPL",
-}
 
 const MAX_CHANNELS: usize = 4;
 /// Bytes of I/O space per channel.
@@ -49,21 +35,10 @@ const KVASER_OCR: u8 = 0xDA;
 /// Clock divider: comparator bypass, clock out at full rate.
 const KVASER_CDR: u8 = CDR_CBP | 0x07;
 
-extern "C" {
-    fn rcan_kvaser_btr(which: i32) -> u8;
-}
-
 /// Bit timing from the module parameters (`btr0`, `btr1`; defaults from
 /// the thesis' Kconfig: 0x01/0x14, 500 kbit/s).
 fn config() -> Config {
-    // SAFETY: reads the module parameters (READ_ONCE); any index is valid.
-    let (btr0, btr1) = unsafe { (rcan_kvaser_btr(0), rcan_kvaser_btr(1)) };
-    Config {
-        btr0,
-        btr1,
-        ocr: KVASER_OCR,
-        cdr: KVASER_CDR,
-    }
+    sja1000::module_config(KVASER_OCR, KVASER_CDR)
 }
 
 /// Crystal of the SJA1000s on the card.
@@ -140,7 +115,7 @@ static IDS: [glue::bindings::pci_device_id; 2] = [pci::id(0x10e8, 0x8406), pci::
 
 static DRIVER: pci::Registration<KvaserPci> = pci::Registration::new();
 
-struct KvaserPciModule;
+pub(crate) struct KvaserPciModule;
 
 impl kernel::Module for KvaserPciModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {

@@ -18,17 +18,11 @@
 //! per channel by the driver's chip lock. The PITA's ICR is shared by the
 //! channels, but each channel only reads it and writes its own bit back
 //! (write-1-to-clear), so channels need no common lock.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
-#[path = "sja1000.rs"]
-mod sja1000;
+use crate::{glue, rcan_core, sja1000};
 
 use glue::pci::{self, IoMem};
 use kernel::c_str;
@@ -37,14 +31,6 @@ use rcan_core::sja1000_boards::{
     pita_ack, pita_init, pita_irq, SpacedRegs, PCAN_CHAN_SIZE, PCAN_MAX_CHANNELS,
 };
 use sja1000::{add_channel, Channel};
-
-module! {
-    type: PcanPciModule,
-    name: "rcan_pcan_pci",
-    author: "rcan developers",
-    description: "SJA1000 front-end for PEAK PCAN-PCI cards",
-    license: "GPL",
-}
 
 /// Bytes of PITA registers mapped from BAR 0.
 const PITA_BYTES: usize = 0x20;
@@ -68,19 +54,8 @@ fn channels_of(subsystem: u16) -> usize {
     }
 }
 
-extern "C" {
-    fn rcan_pcan_pci_btr(which: i32) -> u8;
-}
-
 fn config() -> Config {
-    // SAFETY: reads the module parameters (READ_ONCE); any index is valid.
-    let (btr0, btr1) = unsafe { (rcan_pcan_pci_btr(0), rcan_pcan_pci_btr(1)) };
-    Config {
-        btr0,
-        btr1,
-        ocr: PCAN_OCR,
-        cdr: PCAN_CDR,
-    }
+    sja1000::module_config(PCAN_OCR, PCAN_CDR)
 }
 
 /// One channel's register access: its SJA1000 (32-bit spacing) and the
@@ -182,7 +157,7 @@ static IDS: [glue::bindings::pci_device_id; 2] = [pci::id(0x001c, 0x0001), pci::
 
 static DRIVER: pci::Registration<PcanPci> = pci::Registration::new();
 
-struct PcanPciModule;
+pub(crate) struct PcanPciModule;
 
 impl kernel::Module for PcanPciModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {

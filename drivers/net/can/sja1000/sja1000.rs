@@ -42,11 +42,13 @@
 //! part in bus traffic again. Each restart is counted and reported to
 //! sockets as a `CAN_ERR_RESTARTED` error frame after the
 //! `CAN_ERR_BUSOFF` one.
+#![forbid(unsafe_code)]
 
 use crate::glue::bindings;
+use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
+use crate::glue::params::Param;
 use crate::glue::skb::Skb;
-use crate::glue::sync::IrqSpinLock;
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::sja1000::{
@@ -104,6 +106,25 @@ impl crate::rcan_core::sja1000_boards::Io for crate::glue::pci::IoMem {
     }
 }
 
+/// Module parameter `btr0` of every SJA1000 front-end (number 0 in each
+/// front-end's C shim; default from the thesis' Kconfig: 0x01).
+const BTR0: Param<u8> = Param::new(0);
+/// Module parameter `btr1` (number 1; default 0x14: 500 kbit/s with a
+/// 16 MHz crystal).
+const BTR1: Param<u8> = Param::new(1);
+
+/// The chip configuration of a front-end: its board's output control and
+/// clock divider, the bit timing from the module parameters `btr0` and
+/// `btr1`. Process context (probe).
+pub(crate) fn module_config(ocr: u8, cdr: u8) -> Config {
+    Config {
+        btr0: BTR0.get(),
+        btr1: BTR1.get(),
+        ocr,
+        cdr,
+    }
+}
+
 /// Interrupt causes handled per interrupt before returning (mainline
 /// `SJA1000_MAX_IRQ`): bounds the time spent in hardirq on a babbling bus.
 const MAX_IRQ_ROUNDS: usize = 20;
@@ -146,14 +167,17 @@ impl<R: Regs + Send + 'static> Sja1000Priv<R> {
     /// context.
     pub(crate) fn new(chip: Chip<R>, irq: u32, xtal_hz: u32) -> Result<Self> {
         Ok(Sja1000Priv {
-            chip: IrqSpinLock::new(ChipState {
-                chip,
-                echo: None,
-                filter: HwFilter::OPEN,
-                filter_pending: false,
-                running: false,
-                restarts: 0,
-            })?,
+            chip: new_irq_spinlock!(
+                ChipState {
+                    chip,
+                    echo: None,
+                    filter: HwFilter::OPEN,
+                    filter_pending: false,
+                    running: false,
+                    restarts: 0,
+                },
+                "Sja1000Priv::chip"
+            )?,
             irq,
             xtal_hz,
         })
@@ -436,16 +460,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             match ev {
                 Event::Rx(f) => rx_frame(dev, &f),
                 Event::TxDone => {
-                    if let Some(mut skb) = echo.take() {
-                        if let Ok(b) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) {
-                            dev.stats_tx(CanFrame::from_bytes(b).dlc() as u32);
-                        }
-                        if skb.wants_echo() {
-                            skb.set_can_rx(dev);
-                            dev.rx(skb);
-                        } else {
-                            skb.consume();
-                        }
+                    if let Some(skb) = echo.take().and_then(|s| s.can_echo_done(dev)) {
+                        dev.rx(skb);
                     }
                     dev.wake_queue();
                 }

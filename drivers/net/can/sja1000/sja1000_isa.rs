@@ -14,31 +14,18 @@
 //!
 //! Contexts: everything here runs in module init/exit (process context);
 //! register access from the driver is serialised by its chip lock.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
-#[path = "sja1000.rs"]
-mod sja1000;
+use crate::{glue, rcan_core, sja1000};
 
 use glue::isa::{self, IoWindow, Space};
+use glue::params::{Param, ParamArray};
 use kernel::c_str;
 use rcan_core::sja1000::{cmd, reg, Chip, Config, Regs, CDR_CBP};
 use rcan_core::sja1000_boards::{autoprobe_ack, autoprobe_arm, autoprobe_fire, SpacedRegs};
 use sja1000::{add_probed, Channel};
-
-module! {
-    type: IsaModule,
-    name: "rcan_sja1000_isa",
-    author: "rcan developers",
-    description: "SJA1000 front-end for memory-mapped ISA cards",
-    license: "GPL",
-}
 
 /// Bytes of memory per SJA1000 (registers 0..31, byte spacing).
 const WINDOW_BYTES: usize = 32;
@@ -52,23 +39,19 @@ const XTAL_HZ: u32 = 16_000_000;
 /// the bus is busy).
 const AUTOPROBE_TRIES: usize = 3;
 
-extern "C" {
-    fn rcan_isa_boards() -> u32;
-    fn rcan_isa_board(i: u32, addr: *mut core::ffi::c_ulong, line: *mut i32);
-    fn rcan_isa_btr(which: i32) -> u8;
-}
+// Parameter numbers shared with sja1000_isa_c.c (0 and 1 are the core's
+// BTR0/BTR1).
+/// Cards given with `iomem=` (at most 8).
+const BOARDS: Param<u32> = Param::new(2);
+/// `iomem=`: each card's address.
+const IOMEM: ParamArray<usize> = ParamArray::new(3);
+/// `irq=`: each card's line; 0 or missing: autoprobe.
+const IRQ: ParamArray<i32> = ParamArray::new(4);
 
 type IsaRegs = SpacedRegs<IoWindow>;
 
 fn config() -> Config {
-    // SAFETY: reads the module parameters (READ_ONCE); any index is valid.
-    let (btr0, btr1) = unsafe { (rcan_isa_btr(0), rcan_isa_btr(1)) };
-    Config {
-        btr0,
-        btr1,
-        ocr: ISA_OCR,
-        cdr: ISA_CDR,
-    }
+    sja1000::module_config(ISA_OCR, ISA_CDR)
 }
 
 /// Finds the interrupt line of the probed chip: the thesis' sleep-to-wake
@@ -142,27 +125,22 @@ fn add_board(addr: usize, line: i32) -> Result<Channel<IsaRegs>> {
     )
 }
 
-struct IsaModule {
+pub(crate) struct IsaModule {
     _boards: KVec<Channel<IsaRegs>>,
 }
 
 impl kernel::Module for IsaModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        // SAFETY: reads the module parameters.
-        let n = unsafe { rcan_isa_boards() };
+        let n = BOARDS.get();
         if n == 0 {
             pr_err!("no card given (iomem=ADDR[,ADDR...])\n");
             return Err(EINVAL);
         }
         let mut boards = KVec::new();
         for i in 0..n {
-            let mut addr: core::ffi::c_ulong = 0;
-            let mut line = 0i32;
-            // SAFETY: valid out pointers; any index is valid.
-            unsafe { rcan_isa_board(i, &mut addr, &mut line) };
             // Any failure unwinds the boards added so far (dropped with
             // `boards`): all cards given must be there.
-            boards.push(add_board(addr as usize, line)?, GFP_KERNEL)?;
+            boards.push(add_board(IOMEM.get(i), IRQ.get(i))?, GFP_KERNEL)?;
         }
         Ok(IsaModule { _boards: boards })
     }

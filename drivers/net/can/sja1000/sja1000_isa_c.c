@@ -7,6 +7,7 @@
 #include <linux/moduleparam.h>
 
 #include "../../../../rust/helpers/rcan_helpers.c"
+#include "../../../../rust/helpers/rcan_params.h"
 
 #define RCAN_ISA_MAX_BOARDS 8
 
@@ -27,23 +28,24 @@ MODULE_PARM_DESC(btr0, "SJA1000 bus timing register 0 (default 0x01)");
 module_param(btr1, byte, 0444);
 MODULE_PARM_DESC(btr1, "SJA1000 bus timing register 1 (default 0x14: 500 kbit/s)");
 
-/* Number of boards given with iomem=. */
-unsigned int rcan_isa_boards(void);
-unsigned int rcan_isa_boards(void)
+/*
+ * Parameter numbers (sja1000_isa.rs): 0/1 the SJA1000 core's BTR0/BTR1,
+ * 2 the number of boards given with iomem=, 3 board idx's address, 4 its
+ * configured interrupt line (0: autoprobe).
+ */
+u64 rcan_module_param(unsigned int which, unsigned int idx)
 {
-	return min_t(unsigned int, READ_ONCE(n_iomem), RCAN_ISA_MAX_BOARDS);
-}
+	unsigned int n = min_t(unsigned int, READ_ONCE(n_iomem), RCAN_ISA_MAX_BOARDS);
 
-/* Board i's address and configured interrupt line (0: autoprobe). */
-void rcan_isa_board(unsigned int i, unsigned long *addr, int *line);
-void rcan_isa_board(unsigned int i, unsigned long *addr, int *line)
-{
-	*addr = i < RCAN_ISA_MAX_BOARDS ? READ_ONCE(iomem[i]) : 0;
-	*line = i < READ_ONCE(n_irq) && i < RCAN_ISA_MAX_BOARDS ? READ_ONCE(irq[i]) : 0;
-}
-
-u8 rcan_isa_btr(int which);
-u8 rcan_isa_btr(int which)
-{
-	return which ? READ_ONCE(btr1) : READ_ONCE(btr0);
+	switch (which) {
+	case 0: return READ_ONCE(btr0);
+	case 1: return READ_ONCE(btr1);
+	case 2: return n;
+	case 3: return idx < n ? READ_ONCE(iomem[idx]) : 0;
+	case 4:
+		if (idx >= RCAN_ISA_MAX_BOARDS || idx >= READ_ONCE(n_irq))
+			return 0;
+		return (u64)(s64)READ_ONCE(irq[idx]);
+	default: return 0;
+	}
 }

@@ -15,17 +15,11 @@
 //!
 //! Contexts: module init/exit (process context); register access from
 //! the driver is serialised by its chip lock.
+#![forbid(unsafe_code)]
 
 use kernel::prelude::*;
 
-#[path = "../../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../../../../net/can/rcan_api.rs"]
-mod rcan_api;
-#[path = "../../../../net/can/rcan_core.rs"]
-mod rcan_core;
-#[path = "sja1000.rs"]
-mod sja1000;
+use crate::{glue, rcan_core, sja1000};
 
 use glue::isa::{IoWindow, Space};
 use kernel::c_str;
@@ -36,14 +30,6 @@ use rcan_core::sja1000_boards::{
 };
 use sja1000::{add_channel, Channel};
 
-module! {
-    type: Tscan1Module,
-    name: "rcan_tscan1",
-    author: "rcan developers",
-    description: "SJA1000 front-end for TS-CAN1 PC/104 boards",
-    license: "GPL",
-}
-
 /// Output control: both TX pins push-pull.
 const TSCAN1_OCR: u8 = 0xDA;
 /// Clock divider: comparator bypass, clock out off.
@@ -51,19 +37,8 @@ const TSCAN1_CDR: u8 = CDR_CBP | 0x08;
 /// Crystal of the board's SJA1000.
 const XTAL_HZ: u32 = 16_000_000;
 
-extern "C" {
-    fn rcan_tscan1_btr(which: i32) -> u8;
-}
-
 fn config() -> Config {
-    // SAFETY: reads the module parameters (READ_ONCE); any index is valid.
-    let (btr0, btr1) = unsafe { (rcan_tscan1_btr(0), rcan_tscan1_btr(1)) };
-    Config {
-        btr0,
-        btr1,
-        ocr: TSCAN1_OCR,
-        cdr: TSCAN1_CDR,
-    }
+    sja1000::module_config(TSCAN1_OCR, TSCAN1_CDR)
 }
 
 /// The claimed PLD window seen as the port space the board logic
@@ -148,7 +123,7 @@ fn probe_board(n: usize) -> Result<Option<Board>> {
     Ok(None)
 }
 
-struct Tscan1Module {
+pub(crate) struct Tscan1Module {
     _boards: KVec<Board>,
 }
 

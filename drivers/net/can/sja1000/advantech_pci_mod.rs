@@ -1,0 +1,31 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! Module root of `rcan_advantech_pci`: the `module!` declaration and what the module
+//! compiles in. The driver itself is [`advantech_pci`] (`advantech_pci.rs`), under
+//! `#![forbid(unsafe_code)]`; this file only wires the module together
+//! (`module!` expands to unsafe code and `#[no_mangle]` entry points,
+//! which a scope that forbids unsafe code rejects), beside the glue
+//! (`mod glue`), the only place with `unsafe`.
+
+use kernel::prelude::*;
+
+#[path = "advantech_pci.rs"]
+mod advantech_pci;
+#[path = "../../../../rust/glue/mod.rs"]
+mod glue;
+#[path = "../../../../net/can/rcan_api.rs"]
+mod rcan_api;
+#[path = "../../../../net/can/rcan_core.rs"]
+mod rcan_core;
+#[path = "sja1000.rs"]
+mod sja1000;
+
+use advantech_pci::AdvantechPciModule;
+
+module! {
+    type: AdvantechPciModule,
+    name: "rcan_advantech_pci",
+    author: "rcan developers",
+    description: "SJA1000 front-end for Advantech PCM-3680I / MIOe-3680 PCI cards",
+    license: "GPL",
+}

@@ -1,0 +1,31 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! Module root of `rcan_kvaser_pci`: the `module!` declaration and what the module
+//! compiles in. The driver itself is [`kvaser_pci`] (`kvaser_pci.rs`), under
+//! `#![forbid(unsafe_code)]`; this file only wires the module together
+//! (`module!` expands to unsafe code and `#[no_mangle]` entry points,
+//! which a scope that forbids unsafe code rejects), beside the glue
+//! (`mod glue`), the only place with `unsafe`.
+
+use kernel::prelude::*;
+
+#[path = "../../../../rust/glue/mod.rs"]
+mod glue;
+#[path = "kvaser_pci.rs"]
+mod kvaser_pci;
+#[path = "../../../../net/can/rcan_api.rs"]
+mod rcan_api;
+#[path = "../../../../net/can/rcan_core.rs"]
+mod rcan_core;
+#[path = "sja1000.rs"]
+mod sja1000;
+
+use kvaser_pci::KvaserPciModule;
+
+module! {
+    type: KvaserPciModule,
+    name: "rcan_kvaser_pci",
+    author: "rcan developers",
+    description: "SJA1000 front-end for Kvaser PCIcan cards",
+    license: "GPL",
+}

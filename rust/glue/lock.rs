@@ -1,0 +1,477 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! Spinlocks and wait queues, each with the lockdep class of its
+//! definition site.
+//!
+//! * [`LockClassKey`]: a lockdep class. Lockdep checks lock order per
+//!   class; the kernel's `spin_lock_init` macro makes one static key per
+//!   call site, and so do the constructors here (as upstream
+//!   `new_spinlock!` does with `static_lock_class!`), so lockdep tells
+//!   the bus lock of the simulated 82527 from a chip lock of the SJA1000
+//!   driver and reports an inversion between them.
+//! * [`IrqSpinLock`] (made with [`new_irq_spinlock!`]): data shared with
+//!   a hardirq handler, in a value that may move (per-device driver data).
+//! * [`StaticIrqSpinLock`]: the same for a `static` (the simulated bus).
+//! * [`BhSpinLock`]: data in a `static` shared between process context
+//!   and softirqs (`spin_lock_bh`).
+//! * [`WaitQueue`]: a `wait_queue_head` in a `static`.
+//!
+//! The statics are initialised in place on first use ([`Once`]): 6.12's
+//! Rust cannot run `spin_lock_init` at compile time. Their methods take
+//! `&'static self`, so an initialised lock or wait queue never moves (an
+//! empty wait queue's list points to itself). Make the first use in
+//! process context (module init): a first use from an interrupt on the
+//! CPU that is in the middle of initialising would spin forever.
+
+use super::bindings;
+use core::cell::UnsafeCell;
+use core::marker::PhantomData;
+use core::ops::{Deref, DerefMut};
+use core::sync::atomic::{AtomicU8, Ordering};
+use kernel::ffi;
+use kernel::str::CStr;
+use kernel::types::Opaque;
+
+/// A lockdep class (`struct lock_class_key`). Lockdep needs it in static
+/// storage for as long as locks of the class exist: put it in a `static`
+/// (as [`new_irq_spinlock!`] does) or in a static lock. A key elsewhere
+/// makes lockdep warn and leave the lock unchecked; it cannot corrupt
+/// memory.
+#[repr(transparent)]
+pub(crate) struct LockClassKey(Opaque<bindings::lock_class_key>);
+
+// SAFETY: lockdep synchronises all access to a key itself; Rust never
+// reads or writes it.
+unsafe impl Sync for LockClassKey {}
+
+impl LockClassKey {
+    /// A key for a `static` (lockdep wants static keys zero-filled or
+    /// uninitialised; it only uses their address).
+    pub(crate) const fn new() -> Self {
+        LockClassKey(Opaque::uninit())
+    }
+
+    fn as_ptr(&self) -> *mut bindings::lock_class_key {
+        self.0.get()
+    }
+}
+
+const UNINIT: u8 = 0;
+const INITIALISING: u8 = 1;
+const READY: u8 = 2;
+
+/// One-time initialisation of a static, in any context.
+struct Once(AtomicU8);
+
+impl Once {
+    const fn new() -> Self {
+        Once(AtomicU8::new(UNINIT))
+    }
+
+    /// Runs `init` the first time it is called; every caller returns only
+    /// once `init` has completed. `init` must not sleep. Any context (see
+    /// the module doc about a first use from an interrupt).
+    #[inline]
+    fn call(&self, init: impl FnOnce()) {
+        if self.0.load(Ordering::Acquire) == READY {
+            return;
+        }
+        self.slow(init);
+    }
+
+    #[cold]
+    fn slow(&self, init: impl FnOnce()) {
+        match self
+            .0
+            .compare_exchange(UNINIT, INITIALISING, Ordering::Acquire, Ordering::Acquire)
+        {
+            Ok(_) => {
+                init();
+                self.0.store(READY, Ordering::Release);
+            }
+            Err(_) => {
+                while self.0.load(Ordering::Acquire) != READY {
+                    core::hint::spin_loop();
+                }
+            }
+        }
+    }
+}
+
+/// A `spinlock_t` in a static, initialised on first use with its own
+/// class.
+///
+/// # Invariants
+///
+/// Once `once` has run, `lock` is initialised (`rcan_spin_lock_init_key`
+/// with `key` and `name`).
+struct StaticRawLock {
+    lock: Opaque<bindings::spinlock_t>,
+    key: LockClassKey,
+    name: &'static CStr,
+    once: Once,
+}
+
+impl StaticRawLock {
+    const fn new(name: &'static CStr) -> Self {
+        StaticRawLock {
+            lock: Opaque::uninit(),
+            key: LockClassKey::new(),
+            name,
+            once: Once::new(),
+        }
+    }
+
+    /// The initialised lock. Any context.
+    fn get(&'static self) -> *mut bindings::spinlock_t {
+        self.once.call(|| {
+            // SAFETY: first and only initialisation (Once), before anyone
+            // can take the lock (every path to it goes through here); the
+            // lock is 'static, so it never moves; `key` and `name` are
+            // 'static.
+            unsafe {
+                bindings::rcan_spin_lock_init_key(
+                    self.lock.get(),
+                    self.name.as_char_ptr(),
+                    self.key.as_ptr(),
+                )
+            }
+        });
+        // INVARIANT: initialised above.
+        self.lock.get()
+    }
+}
+
+// ---------------------------------------------------------------------------
+// IrqSpinLock: in a value that moves
+
+/// Data protected by a spinlock taken with interrupts disabled
+/// (`spin_lock_irqsave`): for state shared with a hardirq handler. Usable
+/// in every context; never sleep while holding it. Made with
+/// [`new_irq_spinlock!`], which gives each definition site its own lockdep
+/// class.
+///
+/// The `spinlock_t` lives in its own small allocation, so the value can
+/// be moved freely before it is shared.
+///
+/// # Invariants
+///
+/// `lock` is an initialised spinlock allocated by `rcan_spinlock_alloc`,
+/// freed in Drop.
+pub(crate) struct IrqSpinLock<T> {
+    lock: core::ptr::NonNull<bindings::spinlock_t>,
+    data: UnsafeCell<T>,
+}
+
+// SAFETY: `data` is only reached through a guard holding the lock.
+unsafe impl<T: Send> Sync for IrqSpinLock<T> {}
+// SAFETY: the lock allocation may be freed from any thread.
+unsafe impl<T: Send> Send for IrqSpinLock<T> {}
+
+/// `IrqSpinLock::new(data, name)` with a lockdep class of this call site
+/// (shared by every lock made here, e.g. every device's chip lock).
+/// Process context (allocates with GFP_KERNEL); `Result`.
+// Not every module that compiles the glue has a driver.
+#[allow(unused_macros)]
+macro_rules! new_irq_spinlock {
+    ($data:expr, $name:literal $(,)?) => {{
+        static CLASS: $crate::glue::lock::LockClassKey = $crate::glue::lock::LockClassKey::new();
+        $crate::glue::lock::IrqSpinLock::new($data, ::kernel::c_str!($name), &CLASS)
+    }};
+}
+#[allow(unused_imports)]
+pub(crate) use new_irq_spinlock;
+
+impl<T> IrqSpinLock<T> {
+    /// A new unlocked lock of class `key`, named `name` in lockdep
+    /// reports. Process context (allocates with GFP_KERNEL). Use
+    /// [`new_irq_spinlock!`], which makes the key.
+    pub(crate) fn new(
+        data: T,
+        name: &'static CStr,
+        key: &'static LockClassKey,
+    ) -> kernel::error::Result<Self> {
+        // SAFETY: allocates and initialises a spinlock, or returns NULL;
+        // `name` and `key` are 'static, as lockdep keeps them.
+        let lock = unsafe { bindings::rcan_spinlock_alloc(name.as_char_ptr(), key.as_ptr()) };
+        let lock = core::ptr::NonNull::new(lock).ok_or(kernel::error::code::ENOMEM)?;
+        // INVARIANT: just allocated and initialised.
+        Ok(IrqSpinLock {
+            lock,
+            data: UnsafeCell::new(data),
+        })
+    }
+
+    /// Takes the lock, disabling local interrupts. Any context.
+    pub(crate) fn lock(&self) -> IrqSpinGuard<'_, T> {
+        // SAFETY: an initialised spinlock (invariant).
+        let flags = unsafe { bindings::rcan_spin_lock_irqsave(self.lock.as_ptr()) };
+        IrqSpinGuard {
+            lock: self.lock,
+            data: &self.data,
+            flags,
+            _not_send: PhantomData,
+        }
+    }
+}
+
+impl<T> Drop for IrqSpinLock<T> {
+    fn drop(&mut self) {
+        // SAFETY: nobody can hold the lock (we have `&mut self`); allocated
+        // by rcan_spinlock_alloc (invariant).
+        unsafe { bindings::rcan_spinlock_free(self.lock.as_ptr()) };
+    }
+}
+
+/// A held [`IrqSpinLock`] or [`StaticIrqSpinLock`]: `&mut` access to the
+/// data.
+///
+/// # Invariants
+///
+/// `lock` is held, taken with `spin_lock_irqsave` on this CPU with
+/// `flags`; it protects `data`.
+pub(crate) struct IrqSpinGuard<'a, T> {
+    lock: core::ptr::NonNull<bindings::spinlock_t>,
+    data: &'a UnsafeCell<T>,
+    flags: ffi::c_ulong,
+    _not_send: PhantomData<*mut ()>,
+}
+
+impl<T> Deref for IrqSpinGuard<'_, T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        // SAFETY: the lock is held while the guard lives (invariant).
+        unsafe { &*self.data.get() }
+    }
+}
+
+impl<T> DerefMut for IrqSpinGuard<'_, T> {
+    fn deref_mut(&mut self) -> &mut T {
+        // SAFETY: the lock is held while the guard lives, exclusively.
+        unsafe { &mut *self.data.get() }
+    }
+}
+
+impl<T> Drop for IrqSpinGuard<'_, T> {
+    fn drop(&mut self) {
+        // SAFETY: locked with these flags on this CPU (invariant; the
+        // guard is not Send).
+        unsafe { bindings::rcan_spin_unlock_irqrestore(self.lock.as_ptr(), self.flags) };
+    }
+}
+
+// ---------------------------------------------------------------------------
+// StaticIrqSpinLock: in a static
+
+/// Data in a `static`, protected by a spinlock taken with interrupts
+/// disabled (`spin_lock_irqsave`), of its own lockdep class. Any context;
+/// never sleep while holding it.
+pub(crate) struct StaticIrqSpinLock<T> {
+    raw: StaticRawLock,
+    data: UnsafeCell<T>,
+}
+
+// SAFETY: `data` is only reached through a guard holding the lock.
+unsafe impl<T: Send> Sync for StaticIrqSpinLock<T> {}
+
+impl<T> StaticIrqSpinLock<T> {
+    /// For a `static`; `name` appears in lockdep reports.
+    pub(crate) const fn new(data: T, name: &'static CStr) -> Self {
+        StaticIrqSpinLock {
+            raw: StaticRawLock::new(name),
+            data: UnsafeCell::new(data),
+        }
+    }
+
+    /// Takes the lock, disabling local interrupts. Any context.
+    pub(crate) fn lock(&'static self) -> IrqSpinGuard<'static, T> {
+        let lock = self.raw.get();
+        // SAFETY: initialised by `get`, static.
+        let flags = unsafe { bindings::rcan_spin_lock_irqsave(lock) };
+        // INVARIANT: taken above with `flags`.
+        IrqSpinGuard {
+            // SAFETY: the address of a static is not NULL.
+            lock: unsafe { core::ptr::NonNull::new_unchecked(lock) },
+            data: &self.data,
+            flags,
+            _not_send: PhantomData,
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// BhSpinLock: in a static, shared with softirqs
+
+/// Data in a `static`, protected by a spinlock taken with bottom halves
+/// disabled (`spin_lock_bh`), of its own lockdep class: for state shared
+/// between process context and softirqs (receive path, soft hrtimers),
+/// never with a hardirq handler. Usable in process and softirq context,
+/// and in a transmit path (BH already disabled); never sleep while
+/// holding it.
+pub(crate) struct BhSpinLock<T> {
+    raw: StaticRawLock,
+    data: UnsafeCell<T>,
+}
+
+// SAFETY: `data` is only reached through a guard holding the lock.
+unsafe impl<T: Send> Sync for BhSpinLock<T> {}
+
+impl<T> BhSpinLock<T> {
+    /// For a `static`; `name` appears in lockdep reports.
+    pub(crate) const fn new(data: T, name: &'static CStr) -> Self {
+        BhSpinLock {
+            raw: StaticRawLock::new(name),
+            data: UnsafeCell::new(data),
+        }
+    }
+
+    /// Takes the lock with bottom halves disabled.
+    pub(crate) fn lock(&'static self) -> BhSpinGuard<T> {
+        let lock = self.raw.get();
+        // SAFETY: initialised by `get`, static.
+        unsafe { bindings::rcan_spin_lock_bh(lock) };
+        BhSpinGuard {
+            l: self,
+            lock,
+            _not_send: PhantomData,
+        }
+    }
+}
+
+/// A held [`BhSpinLock`].
+///
+/// # Invariants
+///
+/// `lock` (`l`'s) is held, taken with `spin_lock_bh` on this CPU.
+pub(crate) struct BhSpinGuard<T: 'static> {
+    l: &'static BhSpinLock<T>,
+    lock: *mut bindings::spinlock_t,
+    _not_send: PhantomData<*mut ()>,
+}
+
+impl<T> Deref for BhSpinGuard<T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        // SAFETY: the lock is held while the guard lives.
+        unsafe { &*self.l.data.get() }
+    }
+}
+
+impl<T> DerefMut for BhSpinGuard<T> {
+    fn deref_mut(&mut self) -> &mut T {
+        // SAFETY: the lock is held while the guard lives, exclusively.
+        unsafe { &mut *self.l.data.get() }
+    }
+}
+
+impl<T> Drop for BhSpinGuard<T> {
+    fn drop(&mut self) {
+        // SAFETY: locked in BhSpinLock::lock on this CPU (invariant; not
+        // Send).
+        unsafe { bindings::rcan_spin_unlock_bh(self.lock) };
+    }
+}
+
+// ---------------------------------------------------------------------------
+// WaitQueue
+
+/// How [`WaitQueue::wait`] ended.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Waited {
+    /// The condition became true.
+    Ready,
+    /// The timeout passed first.
+    TimedOut,
+    /// A signal arrived first.
+    Interrupted,
+}
+
+/// A wait queue (`wait_queue_head`) in a `static`, of its own lockdep
+/// class, initialised on first use.
+///
+/// # Invariants
+///
+/// Once `once` has run, `wq` is initialised with `key` and `name`.
+pub(crate) struct WaitQueue {
+    wq: Opaque<bindings::wait_queue_head>,
+    key: LockClassKey,
+    name: &'static CStr,
+    once: Once,
+}
+
+// SAFETY: the wait queue has its own lock; Rust only passes its address.
+unsafe impl Sync for WaitQueue {}
+
+struct WaitCond<'a> {
+    f: &'a dyn Fn() -> bool,
+}
+
+/// # Safety
+///
+/// `arg` is the `WaitCond` that [`WaitQueue::wait`] passes, alive for the
+/// whole wait.
+unsafe extern "C" fn wait_cond(arg: *mut ffi::c_void) -> bool {
+    // SAFETY: the function's contract.
+    let c = unsafe { &*arg.cast::<WaitCond<'_>>() };
+    (c.f)()
+}
+
+impl WaitQueue {
+    /// For a `static`; `name` appears in lockdep reports.
+    pub(crate) const fn new(name: &'static CStr) -> Self {
+        WaitQueue {
+            wq: Opaque::uninit(),
+            key: LockClassKey::new(),
+            name,
+            once: Once::new(),
+        }
+    }
+
+    fn get(&'static self) -> *mut bindings::wait_queue_head {
+        self.once.call(|| {
+            // SAFETY: first and only initialisation (Once), before any
+            // waiter or waker reaches it (they all go through here); the
+            // queue is 'static, so its self-pointing list never moves.
+            unsafe {
+                bindings::rcan_init_waitqueue_head_key(
+                    self.wq.get(),
+                    self.name.as_char_ptr(),
+                    self.key.as_ptr(),
+                )
+            }
+        });
+        // INVARIANT: initialised above.
+        self.wq.get()
+    }
+
+    /// Sleeps (interruptibly) until `cond` is true, for at most `timeo`
+    /// jiffies (`MAX_SCHEDULE_TIMEOUT`: forever). `cond` is evaluated in
+    /// process context, possibly several times; it may take spinlocks but
+    /// must not sleep. Process context.
+    pub(crate) fn wait(&'static self, timeo: i64, cond: &dyn Fn() -> bool) -> Waited {
+        let wq = self.get();
+        let c = WaitCond { f: cond };
+        let arg = &c as *const WaitCond<'_> as *mut ffi::c_void;
+        // SAFETY: an initialised static wait queue; `arg` is a `WaitCond`
+        // that outlives the call, as `wait_cond` requires.
+        let ret =
+            unsafe { bindings::rcan_wait_event_timeout(wq, Some(wait_cond), arg, timeo as _) };
+        if ret > 0 {
+            Waited::Ready
+        } else if ret == 0 {
+            if cond() {
+                Waited::Ready
+            } else {
+                Waited::TimedOut
+            }
+        } else {
+            Waited::Interrupted
+        }
+    }
+
+    /// Wakes every waiter (they re-check their conditions). Any context.
+    pub(crate) fn wake_all(&'static self) {
+        // SAFETY: an initialised static wait queue.
+        unsafe { bindings::rcan_wake_up_all(self.get()) };
+    }
+}
