@@ -35,16 +35,14 @@
 //! * [`MODULE`]`.sockets` (every open socket, for the notifier) is under
 //!   RTNL, as in the other protocol modules.
 
+#![forbid(unsafe_code)]
+
 use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use kernel::alloc::{flags::GFP_KERNEL, KBox, KVec};
 use kernel::prelude::*;
 
-#[path = "../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../rcan_api.rs"]
-mod rcan_api;
-#[path = "../rcan_core.rs"]
-mod rcan_core;
+use crate::{glue, rcan_api, rcan_core};
+#[path = "udpip.rs"]
 mod udpip;
 
 use glue::bindings;
@@ -67,14 +65,6 @@ use rcan_core::dsor_rx::{Delivered, Incoming, Limits, Reassembler};
 use rcan_core::dsor_tx::{Transfer, TxError, TxStep, TxStreams};
 use rcan_core::dsor_wire::{self, AckStatus, DsorId, Frame, FrameType, Header, MsgKind, Timers};
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
-
-module! {
-    type: DsorModule,
-    name: "rcan_dsor",
-    author: "rcan developers",
-    description: "CANPROTO_DSOR: the DSOR higher-layer CAN protocol and UDP/IP over CAN (thesis candsor)",
-    license: "GPL",
-}
 
 /// `CANPROTO_DSOR` in `<linux/can/rcan.h>`.
 const CANPROTO_DSOR: i32 = 17;
@@ -1424,7 +1414,7 @@ struct Regs {
     _canip: Option<udpip::Canip>,
 }
 
-struct DsorModule {
+pub(crate) struct DsorModule {
     regs: Option<Regs>,
 }
 

@@ -21,15 +21,12 @@
 //! own last frame (`ticker::take_own_echo`, an atomic); the ticker's
 //! realtime timer callback owns the state machine.
 
+#![forbid(unsafe_code)]
+
 use kernel::prelude::*;
 
-#[path = "../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../rcan_api.rs"]
-mod rcan_api;
-#[path = "../rcan_core.rs"]
-mod rcan_core;
-mod ticker;
+use crate::ticker;
+use crate::{glue, rcan_api, rcan_core};
 
 use glue::netdev::NetDev;
 use glue::skb::Skb;
@@ -37,14 +34,6 @@ use rcan_api::{KernelRx, KernelRxReg, RxFilter, RX_FILTER_CAN_ID};
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK};
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use rcan_core::timesvc::{is_time_id, TimeFrame, SOURCE_RTIME};
-
-module! {
-    type: RtimeModule,
-    name: "rcan_rtime",
-    author: "rcan developers",
-    description: "Redundant DSOR time service: sends the time CAN frame while the usual source is silent (thesis dsor/rtime)",
-    license: "GPL",
-}
 
 /// The receiver of time frames from every interface.
 struct TimeRx;
@@ -77,7 +66,7 @@ impl KernelRx for TimeRx {
 
 static RX: TimeRx = TimeRx;
 
-struct RtimeModule {
+pub(crate) struct RtimeModule {
     /// Dropped after `drop()` has stopped the ticker.
     _rx: KernelRxReg<TimeRx>,
 }

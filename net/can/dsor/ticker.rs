@@ -40,6 +40,7 @@
 //! the device is missing or down is skipped and counted, with one log line
 //! per change of that state.
 
+#![forbid(unsafe_code)]
 // Shared by two modules, each of which uses only part of it.
 #![allow(dead_code)]
 
@@ -138,11 +139,10 @@ impl IfName {
     }
 }
 
-/// Validates and stores integer parameter `which` (C parameter callback,
-/// process context). A false return makes the load, or the sysfs write,
+/// Validates and stores integer parameter `which` (C parameter callback
+/// through `ticker_abi.rs`, process context). A false return makes the load, or the sysfs write,
 /// fail with EINVAL.
-#[no_mangle]
-extern "C" fn rcan_timesvc_param_set(which: u32, val: u32) -> bool {
+pub(crate) fn param_set(which: u32, val: u32) -> bool {
     match which {
         PARAM_VEHICLE if timesvc::vehicle_valid(val) => VEHICLE.store(val, Ordering::Relaxed),
         PARAM_TIMEOUT_MS if timesvc::timeout_valid(val) => TIMEOUT_MS.store(val, Ordering::Relaxed),
@@ -152,8 +152,7 @@ extern "C" fn rcan_timesvc_param_set(which: u32, val: u32) -> bool {
 }
 
 /// Reads integer parameter `which` (C parameter callback).
-#[no_mangle]
-extern "C" fn rcan_timesvc_param_get(which: u32) -> u32 {
+pub(crate) fn param_get(which: u32) -> u32 {
     match which {
         PARAM_VEHICLE => VEHICLE.load(Ordering::Relaxed),
         _ => TIMEOUT_MS.load(Ordering::Relaxed),
@@ -162,8 +161,7 @@ extern "C" fn rcan_timesvc_param_get(which: u32) -> u32 {
 
 /// Validates and stores the `dev` parameter (C parameter callback, while
 /// loading).
-#[no_mangle]
-extern "C" fn rcan_timesvc_dev_set(name: IfName) -> bool {
+pub(crate) fn dev_set(name: IfName) -> bool {
     if name.name[IFNAME_MAX] != 0 || !timesvc::ifname_valid(name.as_bytes()) {
         return false;
     }
@@ -177,8 +175,7 @@ extern "C" fn rcan_timesvc_dev_set(name: IfName) -> bool {
 }
 
 /// Reads the `dev` parameter (C parameter callback).
-#[no_mangle]
-extern "C" fn rcan_timesvc_dev_get() -> IfName {
+pub(crate) fn dev_get() -> IfName {
     let mut name = [0u8; IFNAME_MAX + 1];
     name[..8].copy_from_slice(&DEV[0].load(Ordering::Relaxed).to_le_bytes());
     name[8..].copy_from_slice(&DEV[1].load(Ordering::Relaxed).to_le_bytes());
@@ -196,7 +193,7 @@ pub(crate) struct Params {
 pub(crate) fn params() -> Params {
     Params {
         vehicle: VEHICLE.load(Ordering::Relaxed),
-        dev: rcan_timesvc_dev_get(),
+        dev: dev_get(),
     }
 }
 

@@ -12,25 +12,13 @@
 //! Parameters (C side, `time_c.c`): `vehicle` (default 0xc0, only bits 4-7
 //! may be set), `dev` (default "can0"); both fixed at load.
 
+#![forbid(unsafe_code)]
+
 use kernel::prelude::*;
 
-#[path = "../../../rust/glue/mod.rs"]
-mod glue;
-#[path = "../rcan_api.rs"]
-mod rcan_api;
-#[path = "../rcan_core.rs"]
-mod rcan_core;
-mod ticker;
+use crate::ticker;
 
-module! {
-    type: TimeModule,
-    name: "rcan_time",
-    author: "rcan developers",
-    description: "DSOR time service: the time CAN frame at every second (thesis dsor/time)",
-    license: "GPL",
-}
-
-struct TimeModule;
+pub(crate) struct TimeModule;
 
 impl kernel::Module for TimeModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {

@@ -3,7 +3,7 @@
 //! The C ABI between `rcan_pf` and the modules above and below it: the
 //! `#[repr(C)]` structs, function-pointer types and `extern "C"`
 //! declarations of the functions `rcan_pf` exports (defined in
-//! `family.rs`, which only `pf_can_main.rs` compiles, exported by
+//! `family.rs`, which only `pf_can_mod.rs` compiles, exported by
 //! `pf_can_c.c`).
 //!
 //! Nothing outside `rust/glue/can/` uses this file: protocols and drivers

@@ -3,7 +3,7 @@
 //! The C side of `rcan_pf`: the PF_CAN protocol family, the ETH_P_CAN
 //! packet handler, and the entry points `rcan_pf` exports to the protocol
 //! and driver modules ([`crate::glue::can::abi`]). Compiled into `rcan_pf` only
-//! (`pf_can_main.rs` includes it as `mod family` next to `mod glue`): the
+//! (`pf_can_mod.rs` includes it as `mod family` next to `mod glue`): the
 //! `#[no_mangle]` definitions must exist once.
 //!
 //! Everything here is pointer work: turning the C arguments into the

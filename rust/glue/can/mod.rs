@@ -9,7 +9,7 @@
 //! * [`rx`]: the incremental receive table of `rcan_pf`.
 //!
 //! `family.rs` (the PF_CAN family and the C entry points `rcan_pf`
-//! exports) is compiled into `rcan_pf` only, by `pf_can_main.rs`.
+//! exports) is compiled into `rcan_pf` only, by `pf_can_mod.rs`.
 
 pub(crate) mod abi;
 pub(crate) mod proto;

@@ -1,0 +1,28 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! Crate root of `rcan_dsor`: the DSOR protocol and UDP/IP over CAN in
+//! [`candsor`] (`candsor.rs`, which is `#![forbid(unsafe_code)]`), the
+//! glue it builds on (`rust/glue/`, the only place with `unsafe` code) and the shared pure logic (`rcan_core`).
+//! Nothing else lives here: `module!` expands to unsafe code and must be
+//! at the crate root (it defines the crate's log prefix).
+
+use kernel::prelude::*;
+
+#[path = "../../../rust/glue/mod.rs"]
+mod glue;
+#[path = "../rcan_api.rs"]
+mod rcan_api;
+#[path = "../rcan_core.rs"]
+mod rcan_core;
+
+mod candsor;
+
+use candsor::DsorModule;
+
+module! {
+    type: DsorModule,
+    name: "rcan_dsor",
+    author: "rcan developers",
+    description: "CANPROTO_DSOR: the DSOR higher-layer CAN protocol and UDP/IP over CAN (thesis candsor)",
+    license: "GPL",
+}
