@@ -320,6 +320,18 @@ impl Worker<'_> {
                     .position(|p| p.protocol == proto)
                     .unwrap_or(pi);
                 self.store(s, fd, pi);
+                // Half the new sockets get a well-formed bind at once, so
+                // that frames and messages flow and the receive paths run.
+                if valid && self.rng.chance(1, 2) {
+                    let a = self.valid_addr(p);
+                    self.begin(format!(
+                        "bind({} fd {fd}, well-formed [{}])",
+                        p.name,
+                        hex(&a)
+                    ));
+                    let r = sys::bind(fd, &a);
+                    self.end(Call::Bind, &r);
+                }
             }
             Err(e) if valid && ![libc::ENOBUFS, libc::ENOMEM, libc::EMFILE].contains(&e) => {
                 self.violation(format!(
@@ -330,6 +342,31 @@ impl Worker<'_> {
             }
             Err(_) => {}
         }
+    }
+
+    /// A well-formed address of one of `p`'s layouts: `AF_CAN`, a CAN
+    /// device that exists, wildcards where the layout has them.
+    fn valid_addr(&mut self, p: &Proto) -> Vec<u8> {
+        let l = &p.addrs[self.rng.below(p.addrs.len())];
+        let mut b = vec![0u8; l.len];
+        for &(off, size, kind) in l.fields {
+            let r = &mut self.rng;
+            let v: u32 = match kind {
+                Field::Family => AF_CAN as u32,
+                Field::Ifindex => self.sh.can_ifindex[r.below(NDEV)].load(Ordering::Relaxed),
+                Field::Arb => (r.next_u32() & 0x7ff) << 21,
+                Field::Mask => 0xffff_ffff,
+                Field::Node => *r.pick(&[0, 0xff]),
+                Field::Port => r.next_u32() & 0xff, // a port of node 0, ours
+                Field::MsgId => {
+                    let small = r.below(8) as u32;
+                    *r.pick(&[0xffff_ffff, small])
+                }
+                Field::Any => r.next_u32() & 0xff,
+            };
+            b[off..off + size].copy_from_slice(&v.to_ne_bytes()[..size]);
+        }
+        b
     }
 
     fn addr(&mut self, p: &Proto) -> Vec<u8> {

@@ -403,6 +403,8 @@ impl Call {
             ENOTTY,
             EINVAL,
             ENOENT,
+            // SIOCSPGRP/FIOSETOWN with a pid that does not exist.
+            ESRCH,
             EAGAIN,
             EOPNOTSUPP,
             EPERM,
@@ -465,6 +467,7 @@ pub fn errno_name(e: c_int) -> String {
     let n = match e {
         0 => "OK",
         EPERM => "EPERM",
+        ESRCH => "ESRCH",
         ENOENT => "ENOENT",
         EINTR => "EINTR",
         ENXIO => "ENXIO",
