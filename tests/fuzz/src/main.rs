@@ -29,10 +29,12 @@
 //! program itself.
 //!
 //! **Determinism.** Each thread draws from its own PRNG stream derived from
-//! the seed and its number ([`rng::Rng::for_thread`]): a seed gives the
-//! same call sequence per thread on every run; the interleaving of the
-//! threads is up to the scheduler. `--threads 1 --no-modchurn` replays a
-//! sequence exactly.
+//! the seed and its number ([`rng::Rng::for_thread`]). `--threads 1
+//! --no-modchurn` replays a seed's calls and arguments exactly (outcomes
+//! that depend on timing may differ); with several threads the shared
+//! slot table makes the per-thread sequences diverge once threads race
+//! (a thread that finds a slot empty opens a socket instead), so a
+//! failure's seed/thread/iteration locate it rather than replay it.
 //!
 //! **Checks.** A call fails the run when it returns an errno outside the
 //! documented set for that call ([`table::Call::allowed`]; also any
