@@ -4,6 +4,8 @@
 #
 #   make demo     build everything, boot the VM, run the thesis-API sample
 #   make check    host tests + VM test suite (what CI runs)
+#   make fuzz     the syscall fuzzer on the debug kernel (SECONDS=N per seed,
+#                 SEED=S, THREADS=K; default 600 s, a time-derived seed)
 #   make modules  just the kernel modules (KDIR=... for your own kernel)
 #
 # RCAN_KERNEL=debug selects the KASAN/lockdep/kmemleak kernel.
@@ -31,7 +33,7 @@ RCAN_CONFIG := CONFIG_RCAN=m CONFIG_RCAN_PF=m CONFIG_RCAN_PROTO_CAN=m CONFIG_RCA
 	CONFIG_RCAN_PROTO_DSOR=m CONFIG_RCAN_DSOR_NODE_ID=0x00
 BINDINGS := rust/bindings/bindings_generated.rs
 
-.PHONY: all setup kernel modules bindings userspace man demo check bench clean
+.PHONY: all setup kernel modules bindings userspace man demo check fuzz bench clean
 
 all: modules userspace
 
@@ -62,6 +64,18 @@ demo: setup modules userspace
 
 check: setup modules userspace
 	bash $(T)/run-tests.sh
+
+# A longer run of the syscall fuzzer (tests/fuzz) than make check's, on the
+# debug kernel (KASAN, lockdep, kmemleak), in one VM boot; builds the debug
+# modules. Prints the seed; replay with SEED=.
+SECONDS ?= 600
+THREADS ?= 4
+fuzz: setup userspace
+	RCAN_KERNEL=debug $(MAKE) --no-print-directory modules
+	@seed=$${SEED:-$$(date +%s)}; echo "rcan-fuzz: seed $$seed, $(SECONDS) s, $(THREADS) threads"; \
+	. $(T)/lib.sh && RCAN_KERNEL=debug bash $(T)/vm-run.sh --timeout $$(( $(SECONDS) + 900 )) \
+		--qemu-extra "$$RCAN_QEMU_CAN" -- target/release/rcan-fuzz --seed $$seed \
+		--seconds $(SECONDS) --threads $(THREADS) --iterations 100000000
 
 # Benchmarks, not tests: ours vs mainline SocketCAN in one VM boot.
 bench: setup modules userspace

@@ -6,10 +6,15 @@
 # then the VM suite on the release kernel, its CAN_RAW/can-utils subset
 # against mainline SocketCAN (can.ko, can-raw.ko, vcan.ko of the same
 # kernel) in a VM boot of its own, and the suite again on the debug kernel
-# (KASAN, lockdep, kmemleak), each VM run failing on any kernel report.
-# Prints one closing "N passed, M failed" line over all stages.
+# (KASAN, lockdep, kmemleak), each VM run failing on any kernel report,
+# then a bounded run of the syscall fuzzer (tests/fuzz, rcan-fuzz) on the
+# debug kernel in one more boot: a fixed seed and a time-derived one,
+# printed, so that each CI run also tries a new sequence (counted as one
+# test). Prints one closing "N passed, M failed" line over all stages.
 #
-# RCAN_SKIP_DEBUG=1 skips the debug-kernel stage (for quick local runs).
+# RCAN_SKIP_DEBUG=1 skips the debug-kernel stages (for quick local runs).
+# RCAN_FUZZ_SECONDS (default 45) is the fuzzer's time per seed; a longer
+# run is `make fuzz SECONDS=N`.
 set -uo pipefail
 . "$(dirname "$0")/lib.sh"
 cd "$RCAN_ROOT"
@@ -93,10 +98,25 @@ mainline_stage() {
 	tally vm-mainline "${PIPESTATUS[0]}" "$log_dir/vm-mainline.log"
 }
 
+# The syscall fuzzer on the debug kernel, in a boot of its own, with the
+# debug modules vm_stage debug built. Seed 1 always; the second seed is the
+# time, printed so that a failure can be replayed
+# (Documentation/networking/rcan/robustness.rst).
+fuzz_stage() {
+	local tseed
+	tseed=${RCAN_FUZZ_SEED:-$(date +%s)}
+	echo "=== syscall fuzzer on the debug kernel: seeds 1 and $tseed (time-derived), ${RCAN_FUZZ_SECONDS:-45} s each"
+	RCAN_KERNEL=debug bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 900 --qemu-extra "$RCAN_QEMU_CAN" -- \
+		target/release/rcan-fuzz --seed 1 --seed "$tseed" --seconds "${RCAN_FUZZ_SECONDS:-45}" \
+		--iterations 1000000 2>&1 | tee "$log_dir/fuzz-debug.log"
+	tally fuzz-debug "${PIPESTATUS[0]}" "$log_dir/fuzz-debug.log"
+}
+
 vm_stage release
 mainline_stage
 if [ "${RCAN_SKIP_DEBUG:-0}" != 1 ]; then
 	vm_stage debug
+	fuzz_stage
 	# Leave release modules in the tree, as `make modules` would.
 	RCAN_KERNEL=release make --no-print-directory modules > /dev/null 2>&1 || true
 fi
