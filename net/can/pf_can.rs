@@ -53,7 +53,7 @@ use rcan_core::rxtable::{self, CanFilterKind, Filter};
 
 /// The receive table (RCU readers in softirq, `rcan_rx_mutex` for
 /// writers).
-static TABLE: RxTable<Target> = RxTable::new(family::rx_mutex);
+static TABLE: RxTable<Target> = RxTable::new(family::RX_MUTEX);
 
 /// Converts the C filters of a spec.
 fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<Filters> {

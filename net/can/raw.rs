@@ -435,7 +435,7 @@ impl glue::sock::Proto for RawProto {
         if !ok {
             return Err(EINVAL);
         }
-        skb.set_sock_params(sk.as_ptr());
+        skb.set_sock_params(sk);
         rcan_api::send(skb, &dev, loopback)?;
         Ok(len)
     }

@@ -201,10 +201,10 @@ impl Skb {
 
     /// Copies the socket's priority and mark into the skb, as every
     /// protocol's sendmsg does for the qdisc layer.
-    pub(crate) fn set_sock_params(&mut self, sk: *mut bindings::sock) {
-        // SAFETY: valid skb we own; `sk` is the live sending sock (callers
-        // pass their own).
-        unsafe { bindings::rcan_skb_sock_params(self.as_ptr(), sk) };
+    pub(crate) fn set_sock_params<T: super::sock::Proto>(&mut self, sk: &super::sock::Sock<T>) {
+        // SAFETY: valid skb we own; `sk` is a live sock: a `Sock` is only
+        // made for a sock the caller holds (a system call's own socket).
+        unsafe { bindings::rcan_skb_sock_params(self.as_ptr(), sk.as_ptr()) };
     }
 
     /// Writes `src` into the control buffer at `off` (clamped to its 48

@@ -84,9 +84,16 @@ impl<T> RcuPtr<T> {
     }
 
     /// `rcu_assign_pointer`: publishes `new` and returns the previous
-    /// pointer. The caller holds the writers' lock and must not free the
-    /// returned object before a grace period has elapsed.
-    pub(crate) fn replace(&self, new: *mut T) -> *mut T {
+    /// pointer.
+    ///
+    /// # Safety
+    ///
+    /// The caller holds the writers' lock; `new` is NULL or points to a
+    /// fully initialised `T` that stays valid until it is replaced and a
+    /// grace period has elapsed after that (readers get `&T` from
+    /// [`RcuPtr::read`]); the caller owns the returned object and must not
+    /// free it before a grace period has elapsed.
+    pub(crate) unsafe fn replace(&self, new: *mut T) -> *mut T {
         self.ptr.swap(new, Ordering::AcqRel)
     }
 
@@ -157,9 +164,31 @@ impl<T> RtnlLocked<T> {
     }
 }
 
-/// Data protected by a `struct mutex` defined in C with `DEFINE_MUTEX`.
+/// A `struct mutex` defined in C with `DEFINE_MUTEX` (its own lockdep
+/// class, named after its definition), known by the C function that
+/// returns its address. Only [`StaticMutex::new`], an `unsafe fn`, makes
+/// one, so a safe caller cannot hand [`CMutex`] a bad address.
+#[derive(Clone, Copy)]
+pub(crate) struct StaticMutex(fn() -> *mut bindings::mutex);
+
+impl StaticMutex {
+    /// # Safety
+    ///
+    /// `addr` returns, on every call, the address of the same statically
+    /// defined and initialised `struct mutex`, which nothing else uses as
+    /// anything but a mutex.
+    pub(crate) const unsafe fn new(addr: fn() -> *mut bindings::mutex) -> Self {
+        StaticMutex(addr)
+    }
+
+    fn ptr(self) -> *mut bindings::mutex {
+        (self.0)()
+    }
+}
+
+/// Data protected by a C [`StaticMutex`].
 pub(crate) struct CMutex<T> {
-    lock: fn() -> *mut bindings::mutex,
+    lock: StaticMutex,
     data: UnsafeCell<T>,
 }
 
@@ -167,8 +196,8 @@ pub(crate) struct CMutex<T> {
 unsafe impl<T: Send> Sync for CMutex<T> {}
 
 impl<T> CMutex<T> {
-    /// `lock` returns the address of the C mutex.
-    pub(crate) const fn new(lock: fn() -> *mut bindings::mutex, data: T) -> Self {
+    /// `data` guarded by the C mutex `lock`.
+    pub(crate) const fn new(lock: StaticMutex, data: T) -> Self {
         CMutex {
             lock,
             data: UnsafeCell::new(data),
@@ -177,8 +206,9 @@ impl<T> CMutex<T> {
 
     /// Locks the mutex. Process context; sleeps.
     pub(crate) fn lock(&self) -> CMutexGuard<'_, T> {
-        // SAFETY: the pointer is a statically defined, initialised mutex.
-        unsafe { bindings::rcan_mutex_lock((self.lock)()) };
+        // SAFETY: a statically defined, initialised mutex (StaticMutex's
+        // contract).
+        unsafe { bindings::rcan_mutex_lock(self.lock.ptr()) };
         CMutexGuard {
             m: self,
             _not_send: PhantomData,
@@ -210,7 +240,7 @@ impl<T> DerefMut for CMutexGuard<'_, T> {
 impl<T> Drop for CMutexGuard<'_, T> {
     fn drop(&mut self) {
         // SAFETY: we locked it in CMutex::lock().
-        unsafe { bindings::rcan_mutex_unlock((self.m.lock)()) };
+        unsafe { bindings::rcan_mutex_unlock(self.m.lock.ptr()) };
     }
 }
 

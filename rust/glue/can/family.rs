@@ -21,7 +21,7 @@
 //! * `WRITERS` also protects the listeners (drivers that follow the receive
 //!   table, [`notify_listeners`]); they are called under it, so removal
 //!   (which takes it) waits for a running call.
-//! * The receive table is pf_can's (`rcan_rx_mutex`, [`rx_mutex`]);
+//! * The receive table is pf_can's (`rcan_rx_mutex`, [`RX_MUTEX`]);
 //!   `WRITERS` is never held together with it.
 
 use crate::glue::bindings;
@@ -29,7 +29,7 @@ use crate::glue::can::abi::{CanProto, ListenFn, RxFilter, RxFn, RxSpec, CANPROTO
 use crate::glue::can::rx::Receiver;
 use crate::glue::netdev::NetDev;
 use crate::glue::skb::Skb;
-use crate::glue::sync::{synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard};
+use crate::glue::sync::{synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard, StaticMutex};
 use core::ptr::NonNull;
 use kernel::error::{code, Error, Result};
 use kernel::ffi;
@@ -141,21 +141,31 @@ impl Drop for Target {
 
 /// The receive table's writers' mutex (`rcan_rx_mutex`, a `DEFINE_MUTEX`
 /// of `pf_can_c.c` with a lockdep class of its own). Process context.
-pub(crate) fn rx_mutex() -> *mut bindings::mutex {
+pub(crate) const RX_MUTEX: StaticMutex = {
     extern "C" {
         fn rcan_rx_mutex_ptr() -> *mut bindings::mutex;
     }
-    // SAFETY: returns the address of a statically defined mutex.
-    unsafe { rcan_rx_mutex_ptr() }
-}
+    fn addr() -> *mut bindings::mutex {
+        // SAFETY: pf_can_c.c returns the address of its DEFINE_MUTEX.
+        unsafe { rcan_rx_mutex_ptr() }
+    }
+    // SAFETY: `addr` always returns the same static, initialised mutex,
+    // used only as the receive table's lock.
+    unsafe { StaticMutex::new(addr) }
+};
 
-fn pf_mutex() -> *mut bindings::mutex {
+const PF_MUTEX: StaticMutex = {
     extern "C" {
         fn rcan_pf_mutex_ptr() -> *mut bindings::mutex;
     }
-    // SAFETY: returns the address of a statically defined mutex.
-    unsafe { rcan_pf_mutex_ptr() }
-}
+    fn addr() -> *mut bindings::mutex {
+        // SAFETY: pf_can_c.c returns the address of its DEFINE_MUTEX.
+        unsafe { rcan_pf_mutex_ptr() }
+    }
+    // SAFETY: `addr` always returns the same static, initialised mutex,
+    // used only as `WRITERS`' lock.
+    unsafe { StaticMutex::new(addr) }
+};
 
 /// A driver that wants to know when the receive table changes for its
 /// interface (to recompute its hardware filter, DESIGN decision 7).
@@ -178,7 +188,7 @@ unsafe impl Send for Registry {}
 /// Serialises the writers of `PROTOS` and protects the listeners. Process
 /// context.
 static WRITERS: CMutex<Registry> = CMutex::new(
-    pf_mutex,
+    PF_MUTEX,
     Registry {
         listeners: KVec::new(),
     },
@@ -364,7 +374,10 @@ extern "C" fn rcan_proto_register(cp: *const CanProto) -> ffi::c_int {
         pr_err!("protocol {} already registered\n", proto);
         return code::EEXIST.to_errno();
     }
-    slot.replace(cp as *mut CanProto);
+    // SAFETY: writers' lock held; `cp` is the module's static CanProto,
+    // valid until rcan_proto_unregister takes it out and waits for a
+    // grace period; the previous value is NULL (checked above).
+    unsafe { slot.replace(cp as *mut CanProto) };
     0
 }
 
@@ -380,7 +393,10 @@ extern "C" fn rcan_proto_unregister(cp: *const CanProto) {
         let _w = WRITERS.lock();
         let slot = &PROTOS[proto as usize];
         if slot.get_locked() == cp as *mut CanProto {
-            slot.replace(core::ptr::null_mut());
+            // SAFETY: writers' lock held; NULL is always valid; the old
+            // value is the caller's static, used by readers until the
+            // synchronize_rcu below.
+            unsafe { slot.replace(core::ptr::null_mut()) };
         }
     }
     // No socket creation may still hold the old pointer after this.

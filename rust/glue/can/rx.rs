@@ -49,7 +49,7 @@
 
 use super::super::bindings;
 use super::super::percpu::{rx_stamp, CpuMarks};
-use super::super::sync::{CMutex, RcuPtr, RcuReadGuard};
+use super::super::sync::{CMutex, RcuPtr, RcuReadGuard, StaticMutex};
 use crate::rcan_core::arb::CAN_ERR_FLAG;
 use crate::rcan_core::rxtable::{self, frame_key, Filter, Place, BUCKET_BITS};
 use core::cell::Cell;
@@ -489,8 +489,8 @@ unsafe fn defer(
 
 impl<R: Receiver> RxTable<R> {
     /// An empty table whose writers are serialised by the C mutex `lock`
-    /// returns (the table's own: it must guard nothing else).
-    pub(crate) const fn new(lock: fn() -> *mut bindings::mutex) -> Self {
+    /// (the table's own: it must guard nothing else).
+    pub(crate) const fn new(lock: StaticMutex) -> Self {
         RxTable {
             writer: CMutex::new(
                 lock,
@@ -959,7 +959,9 @@ impl<R: Receiver> RxTable<R> {
             },
             GFP_KERNEL,
         )?;
-        let old = self.groups.replace(KBox::into_raw(snap));
+        // SAFETY: writer mutex held (`w`); a fully built snapshot, freed
+        // only through `defer` after it is replaced; `old` is ours.
+        let old = unsafe { self.groups.replace(KBox::into_raw(snap)) };
         if !old.is_null() {
             // SAFETY: replaced above, so unreachable for new readers;
             // free_groups frees it.
@@ -982,7 +984,9 @@ impl<R: Receiver> RxTable<R> {
                 kernel::pr_warn!("receive table not empty at exit: registrations leaked\n");
             }
             w.groups = KVec::new();
-            self.groups.replace(ptr::null_mut())
+            // SAFETY: writer mutex held (`w`); NULL is always valid; the
+            // old snapshot is ours and goes through `defer` below.
+            unsafe { self.groups.replace(ptr::null_mut()) }
         };
         if !old.is_null() {
             // SAFETY: unpublished above; free_groups frees it.
