@@ -318,7 +318,25 @@ fn dsor_concurrent_senders(ctx: &mut Ctx) -> TestResult {
     }
     let mut seen: HashMap<u32, usize> = HashMap::new();
     for _ in 0..senders * per {
-        let (got, from) = recv_msg(&rx)?;
+        let (got, from) = match recv_msg(&rx) {
+            Ok(m) => m,
+            Err(e) => {
+                // A missing message: say which senders failed and how.
+                let failed: Vec<String> = handles
+                    .into_iter()
+                    .filter(|h| h.is_finished())
+                    .filter_map(|h| match h.join() {
+                        Ok(Ok(())) => None,
+                        Ok(Err(e)) => Some(e),
+                        Err(_) => Some("sender panicked".into()),
+                    })
+                    .collect();
+                return Err(format!(
+                    "{e} after {} messages; failed senders: {failed:?}",
+                    seen.len()
+                ));
+            }
+        };
         let Some(DsorAddr::Segm { id, .. }) = from else {
             return Err(format!("source {from:?}"));
         };
