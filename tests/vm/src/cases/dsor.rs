@@ -284,7 +284,13 @@ fn dsor_port_both_ways(ctx: &mut Ctx) -> TestResult {
 }
 
 /// Several sockets send at once (different channels); every message
-/// arrives exactly once and intact.
+/// arrives exactly once and intact. Node 0 talks to itself over canloop,
+/// so the frames of a stream come back through canloop's echo, which must
+/// keep their order (canloop.rst): when canloop's echo still went through
+/// `netif_rx` this failed with "body k holds body k-2" on a loaded host,
+/// and every time with QEMU pinned to one host core
+/// (`taskset -c 0 bash tools/testing/rcan/vm-run.sh ...`), which makes
+/// late acks, retransmissions and a late CPU backlog likely.
 fn dsor_concurrent_senders(ctx: &mut Ctx) -> TestResult {
     dsor_stack(ctx, &[])?;
     let rx = sock()?;
