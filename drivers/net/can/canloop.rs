@@ -14,16 +14,30 @@
 //! mainline's sense (IFF_ECHO), like `vcan echo=1`. With `verbose`, each
 //! frame is logged with the device name.
 //!
-//! The echo takes the path every received frame takes, as mainline
-//! `vcan_rx` does: marked `PACKET_BROADCAST` (the sending socket stays in
-//! `skb->sk`), handed to `netif_rx`, and delivered to pf_can, packet
-//! sockets and tc in NET_RX softirq, never from inside `start_xmit`. So a
-//! receiver may send on the device it receives from.
+//! The echo takes the path every received frame takes: marked
+//! `PACKET_BROADCAST` (the sending socket stays in `skb->sk`), queued on
+//! the device's receive FIFO and handed up by the device's NAPI poll to
+//! pf_can, packet sockets and tc in NET_RX softirq, never from inside
+//! `start_xmit`. So a receiver may send on the device it receives from.
+//!
+//! Like a CAN bus, the device never reorders frames: they come back in the
+//! order they were transmitted, whichever CPUs transmit them. Mainline
+//! `vcan_rx` hands the echo to `netif_rx`, which queues it on the backlog
+//! of the transmitting CPU; two frames sent one after the other from two
+//! CPUs can then come back in the opposite order (each CPU's backlog is
+//! processed on its own, and under load ksoftirqd may run one much later).
+//! A stop-and-wait protocol with a 1-bit sequence number (DSOR) takes such
+//! a late copy for a new frame and delivers corrupted messages
+//! (dsor-wire.rst, "Guarantees"). The single FIFO, drained by the one NAPI
+//! poll that never runs concurrently with itself, keeps the order.
 //!
 //! Contexts: `start_xmit` runs with BH disabled under the device's TX lock
-//! (so the per-device counters need no lock of their own); `open`/`stop`
-//! run in process context under RTNL. The parameters are read with
-//! READ_ONCE and may change at any time through sysfs.
+//! (so the per-device counters need no lock of their own); the receive
+//! FIFO ([`Fifo`]) is protected by its own spinlock, taken by `start_xmit`,
+//! the NAPI poll (NET_RX softirq) and `stop` (process context, under RTNL,
+//! after the poll was disabled); `open`/`stop` run in process context
+//! under RTNL. The parameters are read with READ_ONCE and may change at
+//! any time through sysfs.
 #![forbid(unsafe_code)]
 
 use kernel::prelude::*;
@@ -31,7 +45,8 @@ use kernel::prelude::*;
 use crate::{glue, rcan_core};
 
 use glue::bindings;
-use glue::netdev::{Dev, Driver, Registration, Setup, Xmit};
+use glue::lock::{new_irq_spinlock, IrqSpinLock};
+use glue::netdev::{Dev, Driver, Napi, Registration, Setup, Xmit};
 use glue::params::Param;
 use glue::skb::Skb;
 use kernel::c_str;
@@ -62,8 +77,60 @@ pub(crate) fn param_ok(which: i32, val: u32) -> bool {
 
 struct LoopDriver;
 
+/// Echoed frames not yet handed up, oldest first. A device whose FIFO is
+/// full drops the echo (counted as `rx_dropped`), like a CAN controller
+/// whose receive FIFO overflows.
+const FIFO_LEN: usize = 512;
+
+/// The receive FIFO of one device: a ring of `FIFO_LEN` entries,
+/// `ring[(head + i) % FIFO_LEN]` for i < len. Under its [`IrqSpinLock`]
+/// (the device's private data).
+struct Fifo {
+    ring: KVec<Option<Skb>>,
+    head: usize,
+    len: usize,
+}
+
+impl Fifo {
+    /// An empty FIFO. Process context.
+    fn new() -> Result<Self> {
+        let mut ring = KVec::with_capacity(FIFO_LEN, GFP_KERNEL)?;
+        for _ in 0..FIFO_LEN {
+            ring.push(None, GFP_KERNEL)?;
+        }
+        Ok(Fifo {
+            ring,
+            head: 0,
+            len: 0,
+        })
+    }
+
+    /// Appends `skb`; gives it back if the FIFO is full.
+    fn push(&mut self, skb: Skb) -> core::result::Result<(), Skb> {
+        if self.len == FIFO_LEN {
+            return Err(skb);
+        }
+        self.ring[(self.head + self.len) % FIFO_LEN] = Some(skb);
+        self.len += 1;
+        Ok(())
+    }
+
+    /// Takes the oldest frame.
+    fn pop(&mut self) -> Option<Skb> {
+        if self.len == 0 {
+            return None;
+        }
+        let skb = self.ring[self.head].take();
+        self.head = (self.head + 1) % FIFO_LEN;
+        self.len -= 1;
+        skb
+    }
+}
+
 impl Driver for LoopDriver {
-    type Priv = ();
+    type Priv = IrqSpinLock<Fifo>;
+
+    const NAPI_WEIGHT: u32 = 64;
 
     fn setup() -> Setup {
         Setup {
@@ -78,17 +145,39 @@ impl Driver for LoopDriver {
         }
     }
 
-    fn open(dev: &Dev<Self>, _p: &()) -> Result {
+    fn open(dev: &Dev<Self>, _p: &Self::Priv) -> Result {
         dev.start_queue();
         Ok(())
     }
 
-    fn stop(dev: &Dev<Self>, _p: &()) -> Result {
+    /// Process context, RTNL; the NAPI poll is disabled already (the
+    /// glue waits for a running one), so the frames still queued are
+    /// dropped here.
+    fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         dev.stop_queue();
+        let mut fifo = p.lock();
+        while let Some(skb) = fifo.pop() {
+            dev.stats_rx_dropped();
+            drop(skb);
+        }
         Ok(())
     }
 
-    fn start_xmit(skb: Skb, dev: &Dev<Self>, _p: &()) -> Xmit {
+    /// NET_RX softirq; never concurrent with itself, so frames go up in
+    /// FIFO order.
+    fn poll(_dev: &Dev<Self>, p: &Self::Priv, napi: &Napi, budget: usize) -> usize {
+        let mut done = 0;
+        while done < budget {
+            // Not held while the frame is handed up: a receiver may send
+            // on this device, which takes the lock in start_xmit.
+            let Some(skb) = p.lock().pop() else { break };
+            napi.receive(skb);
+            done += 1;
+        }
+        done
+    }
+
+    fn start_xmit(skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
         // Not a classic frame, or no room to prepare a packet socket's
         // frame (mainline can_skb_headroom_valid): dropped and counted.
         let Some((mut skb, frame)) = skb.can_xmit_start(dev) else {
@@ -117,9 +206,16 @@ impl Driver for LoopDriver {
         // Reflect: the skb (ours to re-mark, can_xmit_start saw to it)
         // comes back as a received, locally originated frame (mainline
         // can_create_echo_skb + vcan_rx).
-        dev.stats_rx(bytes);
         skb.set_can_rx(dev);
-        dev.rx(skb);
+        let queued = p.lock().push(skb);
+        match queued {
+            Ok(()) => dev.stats_rx(bytes),
+            Err(skb) => {
+                dev.stats_rx_dropped();
+                drop(skb);
+            }
+        }
+        dev.napi_schedule();
         Xmit::Ok
     }
 }
@@ -133,7 +229,10 @@ impl kernel::Module for CanLoop {
         let count = COUNT.get();
         let mut devs = KVec::new();
         for _ in 0..count {
-            let reg = Registration::<LoopDriver>::register(c_str!("can%d"), ())?;
+            let reg = Registration::<LoopDriver>::register(
+                c_str!("can%d"),
+                new_irq_spinlock!(Fifo::new()?, "canloop::Fifo")?,
+            )?;
             pr_info!(
                 "{}: CAN loopback device, droprate {}%\n",
                 reg.dev().name(),

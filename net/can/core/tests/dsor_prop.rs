@@ -259,6 +259,65 @@ fn doc_example_udp() {
     assert_eq!(d.buf, msg);
 }
 
+/// dsor-wire.rst, "Guarantees": the protocol needs frames kept in order.
+/// A retransmitted copy of body 1 overtaken by body 2 (as canloop's echo
+/// through `netif_rx` on two CPUs' backlogs allowed) has the Q and DLC of
+/// body 3: the receiver stores it as body 3 and delivers a corrupted
+/// message, the sender takes its ack for body 3's and reports success,
+/// and the real body 3 is re-acked as a repetition. This is what
+/// `dsor_concurrent_senders` saw in the VM ("body k holds body k-2"); no
+/// receiver rule can tell the copy apart, so the fix is in the device
+/// (canloop keeps frame order), and this test pins the reason.
+#[test]
+fn reordered_retransmission_is_taken_for_a_later_body() {
+    let msg: Vec<u8> = (1..=24).collect();
+    let h = Header {
+        len: 24,
+        kind: MsgKind::Segm { id: 7 },
+    };
+    let tm = Timers::default();
+    let mut t = Transfer::new(0, 0, 0, 0x10, h, false, &tm);
+    let mut rx = Rx::new(0, Limits::default(), &tm);
+    let acc = |i: &Incoming<'_>| want(i.header.len);
+    let id = |f: &Frame| DsorId::from_can_id(f.id).unwrap();
+    let hdr = t.start(&msg, 0);
+    let a0 = rx.on_frame(&id(&hdr), hdr.payload(), 0, acc).ack.unwrap();
+    let TxStep::Send(b1) = t.on_ack(&id(&a0), a0.payload(), &msg, 1) else {
+        panic!()
+    };
+    // Body 1 arrives and is acked, but the ack comes late: T_ack passes
+    // and the sender retransmits body 1; that copy is held back.
+    let a1 = rx.on_frame(&id(&b1), b1.payload(), 1, acc).ack.unwrap();
+    let TxStep::Send(late) = t.on_timer(&msg, 101) else {
+        panic!()
+    };
+    assert_eq!(late, b1);
+    let TxStep::Send(b2) = t.on_ack(&id(&a1), a1.payload(), &msg, 102) else {
+        panic!()
+    };
+    let a2 = rx.on_frame(&id(&b2), b2.payload(), 102, acc).ack.unwrap();
+    // In order, the copy would have come before body 2 and been re-acked
+    // as a repetition; here it arrives after body 2, with the Q and DLC
+    // of body 3.
+    let out = rx.on_frame(&id(&late), late.payload(), 103, acc);
+    let got = out.delivered.expect("taken for body 3").buf;
+    assert_eq!(&got[..16], &msg[..16]);
+    assert_eq!(&got[16..], &msg[..8], "body 3 holds body 1");
+    let a3_false = out.ack.unwrap();
+    let TxStep::Send(b3) = t.on_ack(&id(&a2), a2.payload(), &msg, 104) else {
+        panic!()
+    };
+    assert_eq!(
+        t.on_ack(&id(&a3_false), a3_false.payload(), &msg, 105),
+        TxStep::Done,
+        "the sender reports success"
+    );
+    // The real body 3 is a repetition to the receiver: re-acked, dropped.
+    let out = rx.on_frame(&id(&b3), b3.payload(), 105, acc);
+    assert!(out.delivered.is_none());
+    assert_eq!(out.ack, Some(a3_false));
+}
+
 #[test]
 fn doc_example_lost_ack() {
     let msg = [0xa0, 0xa1, 0xa2, 0xa3, 0xa4, 0xa5, 0xa6, 0xa7, 0xa8];
