@@ -125,10 +125,10 @@ impl StaticRawLock {
     /// The initialised lock. Any context.
     fn get(&'static self) -> *mut bindings::spinlock_t {
         self.once.call(|| {
-            // SAFETY: first and only initialisation (Once), before anyone
-            // can take the lock (every path to it goes through here); the
-            // lock is 'static, so it never moves; `key` and `name` are
-            // 'static.
+            // Every path to the lock goes through here, so nobody takes it
+            // before; the lock, `key` and `name` are 'static (never move).
+            // SAFETY: first and only initialisation (Once), of a lock that
+            // nobody can have taken yet and that never moves.
             unsafe {
                 bindings::rcan_spin_lock_init_key(
                     self.lock.get(),

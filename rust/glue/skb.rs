@@ -248,10 +248,10 @@ impl Skb {
     /// here rather than through a C helper: it is on every frame's path.
     #[inline]
     pub(crate) fn is_shared(&self) -> bool {
-        // SAFETY: valid skb by the type invariant; `users` is a refcount_t,
-        // read as refcount_read does (one volatile load of the counter,
-        // READ_ONCE), through a raw place so no reference to a field that
-        // other CPUs change is made.
+        // `users` is a refcount_t, read as refcount_read does (one volatile
+        // load of the counter, READ_ONCE).
+        // SAFETY: valid skb by the type invariant; read through a raw place,
+        // so no reference to a field that other CPUs change is made.
         let users = unsafe {
             core::ptr::read_volatile(core::ptr::addr_of!((*self.as_ptr()).users.refs.counter))
         };
@@ -268,11 +268,11 @@ impl Skb {
     /// `skb->dev` (NULL if none), read in place: every frame asks.
     #[inline]
     fn dev_ptr(&self) -> *mut bindings::net_device {
-        // SAFETY: valid skb by the type invariant. `dev` shares a union
-        // with `dev_scratch` (UDP's, on its own receive queue) and with
-        // `rbnode` (skbs inside an rbtree: TCP, defragmentation, netem):
-        // neither holds on an skb handed to us, so the union holds `dev`;
-        // these are the bytes C's `skb->dev` reads.
+        // `dev` shares a union with `dev_scratch` (UDP's, on its own
+        // receive queue) and `rbnode` (skbs in an rbtree: TCP, defrag,
+        // netem); neither holds on an skb handed to us.
+        // SAFETY: valid skb by the type invariant; the union holds `dev`
+        // (above), the bytes C's `skb->dev` reads.
         unsafe {
             (*self.as_ptr())
                 .__bindgen_anon_1
@@ -471,10 +471,10 @@ impl Skb {
     /// rather than through a C helper: drivers ask on every frame.
     #[inline]
     pub(crate) fn pkt_type(&self) -> u8 {
+        // The bitfield lives in the skb's header group, a union whose
+        // anonymous-struct view bindgen generated from the kernel's layout.
         // SAFETY: valid skb by the type invariant, and we hold a reference,
-        // so nobody else writes its header fields meanwhile. The bitfield
-        // lives in the skb's header group, a union whose anonymous-struct
-        // view bindgen generated from the running kernel's layout.
+        // so nobody else writes its header fields meanwhile.
         unsafe {
             (*self.as_ptr())
                 .__bindgen_anon_4

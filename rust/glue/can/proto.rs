@@ -199,10 +199,10 @@ impl<T: CanProtocol> Sockets<'_, T> {
     /// the set.
     pub(crate) fn for_each(&self, mut f: impl FnMut(&Sock<T>)) {
         for &p in self.set.buckets.iter().flat_map(|b| b.iter()) {
+            // The borrow handed to `f` cannot outlive this call.
             // SAFETY: the set holds only live socks of `T` until their
             // release removes them under RTNL, which our caller holds for
-            // 'a (SockSet invariant); the borrow handed to `f` cannot
-            // outlive this call.
+            // 'a (SockSet invariant).
             let sk = unsafe { Sock::<T>::from_raw(p as *mut bindings::sock) };
             f(&sk);
         }
@@ -439,10 +439,10 @@ pub(crate) fn rx_set<T: CanProtocol>(
         filters: filters.as_ptr(),
         nfilters: filters.len(),
     };
+    // pf_can takes its own reference on `sk` for as long as it keeps the
+    // subscription, and rx_trampoline::<T> expects exactly such an owner.
     // SAFETY: `spec` and the filters it points to live for the call; `sk`
-    // is a live sock of `T` (Sock invariant), on which pf_can takes its own
-    // reference for as long as it keeps the subscription, and
-    // rx_trampoline::<T> expects exactly such an owner.
+    // is a live sock of `T` (Sock invariant).
     let ret = unsafe { abi::rcan_rx_set(rx_trampoline::<T>, sk.as_ptr(), cookie, &spec) };
     crate::glue::to_result(ret).map(|_| ())
 }
