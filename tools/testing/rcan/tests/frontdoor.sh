@@ -20,20 +20,7 @@ trap 'rm -rf "$work"' EXIT
 bk="$RCAN_ROOT/tools/testing/rcan/build-kernel.sh"
 real_tar=$(command -v tar)
 
-passed=0
-failed=0
-# check NAME STATUS [DETAIL]: counts one test, passed if STATUS is 0; a
-# failure shows the first lines of DETAIL.
-check() {
-	if [ "$2" = 0 ]; then
-		echo "ok - $1"
-		passed=$((passed + 1))
-	else
-		echo "not ok - $1"
-		[ -z "${3:-}" ] || printf '%s\n' "$3" | head -n 12 | sed 's/^/#   /'
-		failed=$((failed + 1))
-	fi
-}
+. "$(dirname "$0")/check.sh"
 
 # The fake kernel source: a Makefile with the targets build-kernel.sh runs
 # (bzImage fails with $FAKE_KERNEL_ERROR when set; it waits up to 10 s for
@@ -224,5 +211,5 @@ check "two builds at once: both succeed and print the build directory" $? \
 check "two builds at once: the kernel was built once, the other run said it waits" $? \
 	"built: $(tr '\n' ' ' 2>/dev/null <"$kbuild/built") $(cat "$work"/two-builds/err.*)"
 
-echo "$passed passed, $failed failed"
+check_summary
 [ "$failed" = 0 ]

@@ -12,18 +12,9 @@ here=$(cd "$(dirname "$0")/.." && pwd)
 root=$(cd "$here/../../.." && pwd)
 count="$here/unsafe-count.sh"
 
-passed=0
-failed=0
-check() {
-	if [ "$2" = 0 ]; then
-		echo "ok - $1"
-		passed=$((passed + 1))
-	else
-		echo "not ok - $1"
-		[ -n "${3:-}" ] && printf '%s\n' "$3" | sed 's/^/# /'
-		failed=$((failed + 1))
-	fi
-}
+# Every file's count on failure, however many.
+CHECK_DETAIL_LINES=100000
+. "$(dirname "$0")/check.sh"
 
 # The counter on a known tree: a block, an impl and an fn count (3 lines);
 # comments, a forbid attribute, glue and words that merely contain
@@ -59,5 +50,5 @@ else
 		"$out"
 fi
 
-echo "$passed passed, $failed failed"
+check_summary
 [ "$failed" = 0 ]
