@@ -78,6 +78,7 @@ pub fn errno_name(e: i32) -> String {
         libc::EISCONN => "EISCONN",
         libc::ENOTCONN => "ENOTCONN",
         libc::ETIMEDOUT => "ETIMEDOUT",
+        libc::ECONNREFUSED => "ECONNREFUSED",
         _ => return format!("errno {e}"),
     };
     name.to_string()

@@ -6,14 +6,16 @@
 //! interface calls the runner makes between every two tests
 //! (`finit_module`, `delete_module`, `SIOCSIFFLAGS`), which on the debug
 //! kernel under TCG cost a fraction of an `insmod`/`rmmod`/`ip` process
-//! each; CPU pinning and a one-descriptor `poll`. Every `unsafe` block of
+//! each; CPU pinning and a one-descriptor `poll`; `recv`, `shutdown` and
+//! `close` on a descriptor number several threads share (the teardown
+//! races). Every `unsafe` block of
 //! the test suite is here.
 
 use std::ffi::CString;
 use std::fs::File;
 use std::io;
 use std::mem::{size_of, zeroed};
-use std::os::fd::{AsFd, AsRawFd, FromRawFd, OwnedFd};
+use std::os::fd::{AsFd, AsRawFd, FromRawFd, OwnedFd, RawFd};
 use std::path::Path;
 use std::ptr;
 
@@ -362,6 +364,35 @@ pub fn set_link_up(dev: &str, up: bool) -> io::Result<()> {
     // SAFETY: as for SIOCGIFFLAGS; the kernel only reads `ifr`.
     cvt(unsafe { libc::ioctl(sock.as_raw_fd(), libc::SIOCSIFFLAGS, &ifr) })?;
     Ok(())
+}
+
+/// `recv(fd, buf, flags)` on a descriptor *number* that other threads
+/// share and one of them may close meanwhile (the teardown tests: a thread
+/// blocked in `recv` while another closes the socket). A number that was
+/// closed gives `EBADF`; the caller must not open descriptors while such
+/// calls may still start, or the number may name another file by then.
+pub fn recv_fd(fd: RawFd, buf: &mut [u8], flags: c_int) -> io::Result<usize> {
+    // SAFETY: `buf` is writable for `buf.len()` bytes for the call; a
+    // stale or closed descriptor number can only make the call fail.
+    let n = unsafe { libc::recv(fd, buf.as_mut_ptr().cast(), buf.len(), flags) };
+    usize::try_from(n).map_err(|_| io::Error::last_os_error())
+}
+
+/// `shutdown(fd, how)` on a shared descriptor number (see [`recv_fd`]).
+pub fn shutdown_fd(fd: RawFd, how: c_int) -> io::Result<()> {
+    // SAFETY: no memory is passed; a bad number only fails.
+    cvt(unsafe { libc::shutdown(fd, how) }).map(drop)
+}
+
+/// `close(fd)` of a descriptor number taken out of its owner with
+/// `into_raw_fd`, while other threads may be inside calls on it (see
+/// [`recv_fd`]). Closing it again, or a number still owned elsewhere,
+/// would close whatever file has that number then: callers close each
+/// number they took once.
+pub fn close_fd(fd: RawFd) -> io::Result<()> {
+    // SAFETY: no memory is passed; the caller owns the number (it came
+    // from `into_raw_fd`) and closes it once.
+    cvt(unsafe { libc::close(fd) }).map(drop)
 }
 
 /// Pins the calling thread to CPU 0 (`sched_setaffinity`).

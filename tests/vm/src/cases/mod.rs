@@ -25,6 +25,7 @@ mod remote;
 mod rxcontext;
 mod sja1000;
 mod socket;
+mod teardown;
 mod timesvc;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -77,6 +78,8 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         errors::TESTS,
         loopdrv::TESTS,
         lifecycle::TESTS,
+        teardown::TESTS,
+        teardown::OURS,
         raw_sockopt::TESTS,
         raw_filter::TESTS,
         raw_loopback::TESTS,

@@ -1,0 +1,879 @@
+// SPDX-License-Identifier: GPL-2.0
+//! Teardown races (issue 15, item 3): one thread tears down a socket, an
+//! interface or a module while other threads are inside calls on it, the
+//! way a multi-threaded program does. Each test is a loop a user could
+//! write, on CAN_RAW (`raw_teardown_*`, also run against mainline
+//! SocketCAN), CANPROTO_CAN and CANPROTO_DSOR (`teardown_*`, ours only).
+//!
+//! What they check: no call hangs (every blocking call has a timeout, and
+//! the runner's watchdog ends a hung test), every errno is in the set the
+//! protocol documents for the situation, a message queued for a closed
+//! socket never reaches the socket that gets its descriptor number next,
+//! a module in use refuses to unload and unloads after the last close, and
+//! the stack works again afterwards. The VM runner fails the run on any
+//! kernel report (KASAN, lockdep, WARNING), which is the point of running
+//! these on the debug kernel; the runner's unload after each test fails it
+//! if a socket or a receive registration was leaked (the modules would
+//! stay pinned).
+
+use std::collections::BTreeMap;
+use std::io;
+use std::os::fd::{AsFd, AsRawFd, IntoRawFd, OwnedFd};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use rcan_uapi::dsor::DsorAddr;
+use rcan_uapi::{
+    arb_std, raw, SockaddrCanArb, CANPROTO_CAN, CANPROTO_DSOR, CAN_MASK_EXACT, PF_CAN,
+};
+use socketcan::{Socket, SocketOptions};
+
+use super::{portable_table, raw1, test_table};
+use crate::canraw::{self, addr_bytes, std as sff, CAN_RAW, CAN_SFF_MASK};
+use crate::check::{ensure, errno_name, errno_of, OnDrop, OrFail, TestResult, QUIET};
+use crate::ctx::{dev, sized, Ctx, Mainline, Module, Stack};
+use crate::sys;
+use crate::Test;
+
+/// CAN_RAW: run on both stacks.
+pub const TESTS: &[Test] = portable_table![
+    raw_teardown_close_during_recv,
+    raw_teardown_ifdown_during_send,
+    raw_teardown_iface_delete_bound,
+    raw_teardown_rmmod_busy,
+];
+
+/// CANPROTO_CAN and CANPROTO_DSOR, and all three protocols at once.
+pub const OURS: &[Test] = test_table![
+    teardown_close_during_recv,
+    teardown_ifdown_during_send,
+    teardown_rmmod_loop_traffic,
+    teardown_rmmod_proto_busy,
+];
+
+/// Receive timeout of a socket whose readers are meant to be blocked when
+/// it is closed: they return EAGAIN after it.
+const BLOCKED_RX: Duration = Duration::from_millis(400);
+/// Receive timeout of the traffic threads' sockets.
+const TRAFFIC_RX: Duration = Duration::from_millis(100);
+/// Send timeout of every socket here: a blocking send that cannot go on
+/// gives up after it (DSOR: ETIMEDOUT; others: EAGAIN).
+const TX_TIMEOUT: Duration = Duration::from_secs(1);
+/// How long any one call may take before it counts as hung: far above
+/// every timeout set, for a debug kernel under software emulation.
+const HANG: Duration = Duration::from_secs(30);
+
+/// The three protocols, as a test drives them: a receiver for one tag (CAN
+/// identifier or DSOR message id), and numbered messages with that tag.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Proto {
+    Raw,
+    Arb,
+    Dsor,
+}
+
+impl Proto {
+    const OURS: [Proto; 3] = [Proto::Raw, Proto::Arb, Proto::Dsor];
+
+    fn name(self) -> &'static str {
+        match self {
+            Proto::Raw => "CAN_RAW",
+            Proto::Arb => "CANPROTO_CAN",
+            Proto::Dsor => "CANPROTO_DSOR",
+        }
+    }
+
+    /// An unbound socket with receive timeout `rx` and [`TX_TIMEOUT`].
+    fn socket(self, rx: Duration) -> Result<OwnedFd, String> {
+        let (ty, proto) = match self {
+            Proto::Raw => (libc::SOCK_RAW, CAN_RAW),
+            Proto::Arb => (libc::SOCK_RAW, CANPROTO_CAN),
+            Proto::Dsor => (libc::SOCK_DGRAM, CANPROTO_DSOR),
+        };
+        let fd = raw::socket(PF_CAN, ty, proto).or_fail(format_args!("{} socket", self.name()))?;
+        raw::set_timeout(&fd, libc::SO_RCVTIMEO, rx).or_fail("SO_RCVTIMEO")?;
+        raw::set_timeout(&fd, libc::SO_SNDTIMEO, TX_TIMEOUT).or_fail("SO_SNDTIMEO")?;
+        Ok(fd)
+    }
+
+    /// A socket that receives exactly the messages tagged `tag` on
+    /// `ifindex` (DSOR: on the interface rcan_dsor runs on).
+    fn receiver(self, ifindex: u32, tag: u16, rx: Duration) -> Result<OwnedFd, String> {
+        let fd = self.socket(rx)?;
+        let what = format!("{} bind (tag {tag:#x}, ifindex {ifindex})", self.name());
+        match self {
+            Proto::Raw => {
+                let filter = canraw::filter_bytes(&[(u32::from(tag), CAN_SFF_MASK | 0xC000_0000)]);
+                raw::setsockopt(&fd, canraw::SOL_CAN_RAW, canraw::CAN_RAW_FILTER, &filter)
+                    .or_fail("CAN_RAW_FILTER")?;
+                raw::bind(&fd, &addr_bytes(libc::AF_CAN as u16, ifindex)).or_fail(what)?
+            }
+            Proto::Arb => {
+                let a =
+                    SockaddrCanArb::new(arb_std(u32::from(tag), false), CAN_MASK_EXACT, ifindex);
+                raw::bind(&fd, &a.to_bytes()).or_fail(what)?
+            }
+            Proto::Dsor => raw::bind(&fd, &dsor_addr(tag).to_bytes()).or_fail(what)?,
+        }
+        Ok(fd)
+    }
+
+    /// Sends message `i` tagged `tag` on `ifindex` through `fd` (any socket
+    /// of this protocol, bound or not).
+    fn send(self, fd: impl AsFd, ifindex: u32, tag: u16, i: u32) -> io::Result<usize> {
+        match self {
+            Proto::Raw => {
+                let f = canraw::wire(&sff(tag, &i.to_le_bytes()));
+                let a = addr_bytes(libc::AF_CAN as u16, ifindex);
+                raw::sendto(fd, &f, 0, Some(&a))
+            }
+            Proto::Arb => {
+                let a = SockaddrCanArb::new(arb_std(u32::from(tag), false), 0, ifindex);
+                raw::sendto(fd, &i.to_le_bytes(), 0, Some(&a.to_bytes()))
+            }
+            Proto::Dsor => raw::sendto(fd, &dsor_payload(i), 0, Some(&dsor_addr(tag).to_bytes())),
+        }
+    }
+
+    /// The number of a received message tagged `tag`, or None if `b` is
+    /// not one.
+    fn decode(self, b: &[u8], tag: u16) -> Option<u32> {
+        let num = |x: &[u8]| u32::from_le_bytes(x.try_into().unwrap());
+        match self {
+            Proto::Raw => {
+                let id = u32::from_ne_bytes(b.get(..4)?.try_into().unwrap());
+                (b.len() == canraw::CAN_MTU && id == u32::from(tag) && b[4] == 4)
+                    .then(|| num(&b[8..12]))
+            }
+            Proto::Arb => (b.len() == 4).then(|| num(b)),
+            Proto::Dsor => {
+                let i = num(b.get(..4)?);
+                (b == dsor_payload(i).as_slice()).then_some(i)
+            }
+        }
+    }
+
+    /// Receive buffer size: more than any message of the protocol here.
+    fn buf_len(self) -> usize {
+        match self {
+            Proto::Raw => 72,
+            Proto::Arb => 8,
+            Proto::Dsor => 64,
+        }
+    }
+
+    /// Errnos a send may give while its interface goes down or away
+    /// (can-raw.rst, canproto-can.rst, dsor.rst "Delivery reports"), and
+    /// a full queue (ENOBUFS, or EAGAIN once SO_SNDTIMEO expired).
+    fn send_errnos(self) -> &'static [i32] {
+        match self {
+            Proto::Raw => &[
+                libc::ENETDOWN,
+                libc::ENODEV,
+                libc::ENXIO,
+                libc::ENOBUFS,
+                libc::EAGAIN,
+            ],
+            Proto::Arb => &[libc::ENETDOWN, libc::ENODEV, libc::ENOBUFS, libc::EAGAIN],
+            Proto::Dsor => &[
+                libc::ENETDOWN,
+                libc::ENODEV,
+                libc::ETIMEDOUT,
+                libc::ECONNREFUSED,
+                libc::ENOBUFS,
+                libc::EAGAIN,
+            ],
+        }
+    }
+
+    /// Errnos a receive may give meanwhile: its timeout, and the
+    /// interface's going down (ENETDOWN) or away (ENODEV), reported once.
+    fn recv_errnos(self) -> &'static [i32] {
+        &[libc::EAGAIN, libc::ENETDOWN, libc::ENODEV]
+    }
+}
+
+/// DSOR address of tag `tag`: segmented, node 0 (this node: canloop
+/// reflects the frames back to it), message id `tag`.
+fn dsor_addr(tag: u16) -> DsorAddr {
+    DsorAddr::Segm {
+        prio: 0,
+        node: 0,
+        id: u32::from(tag),
+    }
+}
+
+/// A 20-byte DSOR message (header and two body frames) numbered `i`: the
+/// number, then 16 bytes derived from it.
+fn dsor_payload(i: u32) -> Vec<u8> {
+    let mut b = i.to_le_bytes().to_vec();
+    b.extend((4..20u8).map(|j| (i as u8).wrapping_mul(31) ^ j));
+    b
+}
+
+/// Results of calls per errno (0: success).
+type Tally = BTreeMap<i32, u64>;
+
+fn count(t: &mut Tally, r: &io::Result<usize>) {
+    *t.entry(r.as_ref().err().map_or(0, errno_of)).or_default() += 1;
+}
+
+fn tally_text(t: &Tally) -> String {
+    t.iter()
+        .map(|(&e, n)| match e {
+            0 => format!("ok {n}"),
+            e => format!("{} {n}", errno_name(e)),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Fails unless every errno in `t` is in `allowed`.
+fn only(t: &Tally, allowed: &[i32], what: &str) -> TestResult {
+    match t.keys().find(|&&e| e != 0 && !allowed.contains(&e)) {
+        Some(&e) => Err(format!(
+            "{what}: {} is not in the documented set [{}] ({})",
+            errno_name(e),
+            allowed
+                .iter()
+                .map(|&e| errno_name(e))
+                .collect::<Vec<_>>()
+                .join(", "),
+            tally_text(t)
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Waits up to 2 s for message `want` tagged `tag` on `fd`, skipping
+/// earlier messages of the same tag (traffic still in flight).
+fn expect_msg(p: Proto, fd: impl AsFd, tag: u16, want: u32, what: &str) -> TestResult {
+    let start = Instant::now();
+    let mut buf = vec![0u8; p.buf_len()];
+    loop {
+        let n = raw::read(&fd, &mut buf).map_err(|e| {
+            format!(
+                "{what}: {} message {want}: {}",
+                p.name(),
+                crate::check::errno_text(&e)
+            )
+        });
+        match n {
+            Ok(n) if p.decode(&buf[..n], tag) == Some(want) => return Ok(()),
+            Ok(_) if start.elapsed() < Duration::from_secs(2) => {}
+            Ok(n) => {
+                return Err(format!(
+                    "{what}: {} got {:02X?}, expected message {want}",
+                    p.name(),
+                    &buf[..n]
+                ))
+            }
+            Err(e) if start.elapsed() < Duration::from_secs(2) && e.contains("EAGAIN") => {}
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+/// Checks that nothing is queued on `fd` (after [`QUIET`]).
+fn expect_nothing(p: Proto, fd: impl AsFd, what: &str) -> TestResult {
+    thread::sleep(QUIET);
+    let mut buf = vec![0u8; p.buf_len()];
+    match raw::recvfrom(&fd, &mut buf, libc::MSG_DONTWAIT, None) {
+        Ok((n, _)) => Err(format!(
+            "{what}: {} unexpected message {:02X?}",
+            p.name(),
+            &buf[..n]
+        )),
+        Err(e) if errno_of(&e) == libc::EAGAIN => Ok(()),
+        Err(e) => Err(format!(
+            "{what}: {}: {}",
+            p.name(),
+            crate::check::errno_text(&e)
+        )),
+    }
+}
+
+/// Loads our stack with one loopback interface (up), CAN_RAW and
+/// rcan_dsor on can0; returns can0's ifindex.
+fn all_protocols(ctx: &mut Ctx) -> Result<u32, String> {
+    ctx.load_stack(&[])?;
+    ensure!(ctx.is_loaded(Module::Raw), "rcan_raw not built");
+    ctx.insmod(Module::Dsor, &["ifname=can0"])?;
+    ctx.ifindex("can0")
+}
+
+/// Close during receive, `rounds` times: three threads block in `recv` on
+/// one socket while the main thread shuts it down and closes it, then
+/// sends a message the socket would have wanted. The readers return within
+/// their timeout (EAGAIN), with EBADF (the descriptor was gone before they
+/// got into the kernel) or with that last message (an in-flight call keeps
+/// the socket alive until it returns, as on any Linux socket), at most one
+/// of them. Then: messages queued on a socket that is closed are not
+/// delivered to the socket opened next, even when it gets the same
+/// descriptor number and the same binding.
+fn close_during_recv(ctx: &Ctx, p: Proto, ifindex: u32, rounds: u32) -> TestResult {
+    let tx = p.socket(BLOCKED_RX)?;
+    let mut outcomes = Tally::new();
+    let mut shutdowns = Tally::new();
+    let mut reused = 0;
+    for round in 0..rounds {
+        let tag = 0x100 + round as u16;
+        let late = 1000 + round;
+        let what = format!("{} round {round}", p.name());
+        let fd = p.receiver(ifindex, tag, BLOCKED_RX)?.into_raw_fd();
+        let (sd, cl, sent, readers) = thread::scope(|sc| {
+            let readers: Vec<_> = (0..3)
+                .map(|_| {
+                    sc.spawn(move || {
+                        let mut b = vec![0u8; p.buf_len()];
+                        let t = Instant::now();
+                        let r = sys::recv_fd(fd, &mut b, 0).map(|n| b[..n].to_vec());
+                        (r, t.elapsed())
+                    })
+                })
+                .collect();
+            thread::sleep(Duration::from_millis(50));
+            let sd = sys::shutdown_fd(fd, libc::SHUT_RDWR);
+            let cl = sys::close_fd(fd);
+            // No descriptor may be opened until the readers are back: one
+            // that had not entered recv yet would find the number reused.
+            let sent = p.send(&tx, ifindex, tag, late);
+            let readers: Vec<_> = readers.into_iter().map(|h| h.join()).collect();
+            (sd, cl, sent, readers)
+        });
+        cl.or_fail(format_args!("{what}: close with readers blocked"))?;
+        let shut = sd.is_ok();
+        count(&mut shutdowns, &sd.map(|()| 0));
+        only(
+            &shutdowns,
+            &[libc::EOPNOTSUPP, libc::ENOTCONN],
+            &format!("{what}: shutdown"),
+        )?;
+        match sent {
+            Ok(_) => {}
+            // DSOR: the receiving socket may be gone by the time the
+            // message arrives (dsor.rst: refused, not delivered).
+            Err(e) if p == Proto::Dsor && errno_of(&e) == libc::ECONNREFUSED => {}
+            Err(e) => {
+                return Err(format!(
+                    "{what}: send after close: {}",
+                    crate::check::errno_text(&e)
+                ))
+            }
+        }
+        let mut got_late = 0;
+        for (i, r) in readers.into_iter().enumerate() {
+            let (r, took) = r.map_err(|_| format!("{what}: reader {i} panicked"))?;
+            ensure!(
+                took < HANG,
+                "{what}: reader {i} returned only after {took:?}"
+            );
+            match r {
+                Ok(b) if b.is_empty() && shut => *outcomes.entry(-1).or_default() += 1,
+                Ok(b) => {
+                    ensure!(
+                        p.decode(&b, tag) == Some(late),
+                        "{what}: reader {i} got {b:02X?}, expected nothing or message {late}"
+                    );
+                    got_late += 1;
+                    *outcomes.entry(0).or_default() += 1;
+                }
+                Err(e) => {
+                    let e = errno_of(&e);
+                    ensure!(
+                        e == libc::EAGAIN || e == libc::EBADF,
+                        "{what}: reader {i}: {} (expected EAGAIN, EBADF or the message)",
+                        errno_name(e)
+                    );
+                    *outcomes.entry(e).or_default() += 1;
+                }
+            }
+        }
+        ensure!(
+            got_late <= 1,
+            "{what}: message {late} received {got_late} times"
+        );
+
+        // Messages queued on a closed socket stay with it.
+        let rx = p.receiver(ifindex, tag, BLOCKED_RX)?;
+        let old = rx.as_raw_fd();
+        for i in [2000, 2001] {
+            p.send(&tx, ifindex, tag, i)
+                .or_fail(format_args!("{what}: send {i}"))?;
+        }
+        let ev = sys::poll_one(&rx, libc::POLLIN, 2000).or_fail("poll")?;
+        ensure!(
+            ev & libc::POLLIN != 0,
+            "{what}: messages 2000, 2001 not queued after 2 s"
+        );
+        drop(rx);
+        let fresh = p.receiver(ifindex, tag, Duration::from_secs(2))?;
+        if fresh.as_raw_fd() == old {
+            reused += 1;
+        }
+        p.send(&tx, ifindex, tag, 3000)
+            .or_fail(format_args!("{what}: send 3000"))?;
+        let mut b = vec![0u8; p.buf_len()];
+        let n =
+            raw::read(&fresh, &mut b).or_fail(format_args!("{what}: read on the next socket"))?;
+        ensure!(
+            p.decode(&b[..n], tag) == Some(3000),
+            "{what}: the socket opened after the close got {:02X?} first, expected message 3000 \
+             (2000 and 2001 were queued on the closed one)",
+            &b[..n]
+        );
+        expect_nothing(p, &fresh, &what)?;
+    }
+    let name = |e: i32| match e {
+        0 => "the late message".to_string(),
+        -1 => "end of file".to_string(),
+        e => errno_name(e),
+    };
+    ctx.note(format!(
+        "{}: shutdown under blocked readers: {}; readers returned: {}; the next socket reused the number {reused} of {rounds} times",
+        p.name(),
+        tally_text(&shutdowns),
+        outcomes
+            .iter()
+            .map(|(&e, n)| format!("{} {n}", name(e)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    Ok(())
+}
+
+/// Close during receive on CAN_RAW ([`close_during_recv`]).
+fn raw_teardown_close_during_recv(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    close_during_recv(ctx, Proto::Raw, idx, sized("RCAN_TEARDOWN_ROUNDS", 3, 2))
+}
+
+/// Close during receive on CANPROTO_CAN and CANPROTO_DSOR
+/// ([`close_during_recv`]).
+fn teardown_close_during_recv(ctx: &mut Ctx) -> TestResult {
+    let idx = all_protocols(ctx)?;
+    for p in [Proto::Arb, Proto::Dsor] {
+        close_during_recv(ctx, p, idx, sized("RCAN_TEARDOWN_ROUNDS", 3, 2))?;
+    }
+    Ok(())
+}
+
+/// Traffic of protocol `p` tagged `tag` on `ifindex`: one thread sends as
+/// fast as it can, one receives, until `stop`; returns their tallies.
+fn traffic<'s>(
+    sc: &'s thread::Scope<'s, '_>,
+    p: Proto,
+    ifindex: u32,
+    tag: u16,
+    stop: &'s AtomicBool,
+) -> Result<
+    (
+        thread::ScopedJoinHandle<'s, Tally>,
+        thread::ScopedJoinHandle<'s, Tally>,
+    ),
+    String,
+> {
+    let rx = p.receiver(ifindex, tag, TRAFFIC_RX)?;
+    let tx = p.socket(TRAFFIC_RX)?;
+    let sender = sc.spawn(move || {
+        let mut t = Tally::new();
+        let mut i = 0u32;
+        while !stop.load(Ordering::SeqCst) {
+            count(&mut t, &p.send(&tx, ifindex, tag, i));
+            i = i.wrapping_add(1);
+        }
+        t
+    });
+    let receiver = sc.spawn(move || {
+        let mut t = Tally::new();
+        let mut b = vec![0u8; p.buf_len()];
+        while !stop.load(Ordering::SeqCst) {
+            count(&mut t, &raw::read(&rx, &mut b));
+        }
+        t
+    });
+    Ok((sender, receiver))
+}
+
+/// `ip link set DEV down` while protocol `p` sends on it: sends fail with
+/// ENETDOWN while it is down (never anything undocumented, never a hang),
+/// the receiver sees at most its timeout and the reports of the link
+/// state, and after `ip link set DEV up` a message goes through again.
+fn ifdown_during_send(ctx: &Ctx, p: Proto, ifindex: u32) -> TestResult {
+    let tag = 0x300;
+    let stop = AtomicBool::new(false);
+    let (sent, received) = thread::scope(|sc| -> Result<(Tally, Tally), String> {
+        let _stop = OnDrop(|| stop.store(true, Ordering::SeqCst));
+        let (tx, rx) = traffic(sc, p, ifindex, tag, &stop)?;
+        thread::sleep(Duration::from_millis(200));
+        let down = ctx.link_down(&dev(0));
+        thread::sleep(Duration::from_millis(300));
+        let up = ctx.link_up(&dev(0));
+        thread::sleep(Duration::from_millis(200));
+        stop.store(true, Ordering::SeqCst);
+        let sent = tx.join().map_err(|_| "sender panicked")?;
+        let received = rx.join().map_err(|_| "receiver panicked")?;
+        down?;
+        up?;
+        Ok((sent, received))
+    })?;
+    ctx.note(format!(
+        "{}: send [{}], recv [{}]",
+        p.name(),
+        tally_text(&sent),
+        tally_text(&received)
+    ));
+    let what = format!("{} during ip link set down/up", p.name());
+    only(&sent, p.send_errnos(), &format!("{what}: send"))?;
+    only(&received, p.recv_errnos(), &format!("{what}: recv"))?;
+    ensure!(
+        sent.contains_key(&libc::ENETDOWN),
+        "{what}: no send failed with ENETDOWN while the link was down ({})",
+        tally_text(&sent)
+    );
+    ensure!(sent.contains_key(&0), "{what}: no send succeeded");
+    let rx = p.receiver(ifindex, tag, Duration::from_secs(2))?;
+    let tx = p.socket(TRAFFIC_RX)?;
+    p.send(&tx, ifindex, tag, 7777)
+        .or_fail(format_args!("{what}: send after the link came back"))?;
+    expect_msg(
+        p,
+        &rx,
+        tag,
+        7777,
+        &format!("{what}: after the link came back"),
+    )
+}
+
+/// ip link down/up during CAN_RAW sends ([`ifdown_during_send`]).
+fn raw_teardown_ifdown_during_send(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    ifdown_during_send(ctx, Proto::Raw, idx)
+}
+
+/// ip link down/up during CANPROTO_CAN and DSOR sends
+/// ([`ifdown_during_send`]).
+fn teardown_ifdown_during_send(ctx: &mut Ctx) -> TestResult {
+    let idx = all_protocols(ctx)?;
+    for p in [Proto::Arb, Proto::Dsor] {
+        ifdown_during_send(ctx, p, idx)?;
+    }
+    Ok(())
+}
+
+/// Deleting an interface under bound CAN_RAW sockets while one thread is
+/// blocked in `read` and another writes as fast as it can: the blocked
+/// read returns ENODEV (it had no frame: its filter matches none of the
+/// traffic), or ENETDOWN when the interface's going down woke it first,
+/// ENODEV following; the writer sees only documented errnos and, once the
+/// interface is gone, ENXIO (its socket was unbound); an idle bound
+/// socket reads ENODEV once, then the frames it had queued. Ours: rmmod rcan_loop; mainline: ip link del.
+fn raw_teardown_iface_delete_bound(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let blocked = canraw::open(idx)?;
+    blocked
+        .set_filters(&[(0x7FF, CAN_SFF_MASK)])
+        .or_fail("CAN_RAW_FILTER")?;
+    blocked
+        .set_read_timeout(Duration::from_secs(20))
+        .or_fail("SO_RCVTIMEO")?;
+    let idle = canraw::open(idx)?;
+    let tx = canraw::open(idx)?;
+    raw::set_timeout(&tx, libc::SO_SNDTIMEO, TX_TIMEOUT).or_fail("SO_SNDTIMEO")?;
+    let stop = AtomicBool::new(false);
+    let (read, sent) = thread::scope(|sc| -> Result<_, String> {
+        let _stop = OnDrop(|| stop.store(true, Ordering::SeqCst));
+        let reader = sc.spawn(|| {
+            let t = Instant::now();
+            (blocked.read_frame(), t.elapsed())
+        });
+        let sender = sc.spawn(|| {
+            let mut t = Tally::new();
+            let mut i = 0u32;
+            while !stop.load(Ordering::SeqCst) {
+                let f = canraw::wire(&sff(0x123, &i.to_le_bytes()));
+                count(&mut t, &raw::write(&tx, &f));
+                i = i.wrapping_add(1);
+            }
+            t
+        });
+        let queued = sys::poll_one(&idle, libc::POLLIN, 2000);
+        thread::sleep(Duration::from_millis(300));
+        let rm = ctx.remove_can_ifaces();
+        let read = reader.join().map_err(|_| "reader panicked")?;
+        thread::sleep(Duration::from_millis(100));
+        stop.store(true, Ordering::SeqCst);
+        let sent = sender.join().map_err(|_| "sender panicked")?;
+        rm?;
+        let queued = queued.or_fail("poll")?;
+        ensure!(
+            queued & libc::POLLIN != 0,
+            "the idle socket had no frame queued before the delete"
+        );
+        Ok((read, sent))
+    })?;
+    ctx.note(format!("write during the delete: [{}]", tally_text(&sent)));
+    // The interface goes down before it goes away: the reader may wake
+    // with ENETDOWN, and ENODEV then follows (mainline reports both, each
+    // once; a report not yet read is overwritten by the next).
+    let (r, took) = read;
+    let first = match r {
+        Ok(f) => {
+            return Err(format!(
+                "blocked read got {}, expected ENETDOWN or ENODEV",
+                canraw::show(&f)
+            ))
+        }
+        Err(e) => errno_of(&e),
+    };
+    ensure!(
+        first == libc::ENETDOWN || first == libc::ENODEV,
+        "blocked read returned {} after {took:?}, expected ENETDOWN or ENODEV",
+        errno_name(first)
+    );
+    let mut b = [0u8; 16];
+    if first == libc::ENETDOWN {
+        crate::check::expect_errno(
+            raw::recvfrom(&blocked, &mut b, libc::MSG_DONTWAIT, None),
+            libc::ENODEV,
+            "read after the blocked read returned ENETDOWN",
+        )?;
+    }
+    crate::check::expect_errno(
+        raw::recvfrom(&blocked, &mut b, libc::MSG_DONTWAIT, None),
+        libc::EAGAIN,
+        "read after ENODEV (reported once)",
+    )?;
+    ensure!(took < HANG, "blocked read returned only after {took:?}");
+    only(
+        &sent,
+        Proto::Raw.send_errnos(),
+        "write while the interface was deleted",
+    )?;
+    ensure!(
+        sent.contains_key(&0),
+        "no write succeeded before the delete"
+    );
+    crate::check::expect_errno(
+        raw::write(&tx, &canraw::wire(&sff(0x123, &[1]))),
+        libc::ENXIO,
+        "write after the delete (the socket lost its interface)",
+    )?;
+    crate::check::expect_errno(
+        raw::recvfrom(&idle, &mut b, libc::MSG_DONTWAIT, None),
+        libc::ENODEV,
+        "first read of an idle socket bound to the deleted interface",
+    )?;
+    // The frames it had queued before are still read after the report
+    // (mainline: the error comes first, the queue stays), then EAGAIN.
+    let mut drained = 0;
+    loop {
+        match raw::recvfrom(&idle, &mut b, libc::MSG_DONTWAIT, None) {
+            Ok(_) => drained += 1,
+            Err(e) if errno_of(&e) == libc::EAGAIN => break,
+            Err(e) => {
+                return Err(format!(
+                    "read of the idle socket's queue after ENODEV: {}",
+                    crate::check::errno_text(&e)
+                ))
+            }
+        }
+    }
+    ctx.note(format!(
+        "{drained} frames queued before the delete read after it"
+    ));
+    ensure!(
+        drained > 0,
+        "the frames queued on the idle socket before the delete were lost"
+    );
+    Ok(())
+}
+
+/// `delete_module(name)` (rmmod) is refused while the module is in use:
+/// EAGAIN (EWOULDBLOCK: references held, or modules that depend on it)
+/// or EBUSY (the module is in transition), as the kernel gives.
+fn expect_busy(name: &str, what: &str) -> TestResult {
+    match sys::delete_module(name) {
+        Ok(()) => Err(format!("rmmod {name} succeeded with {what}")),
+        Err(e) if [libc::EAGAIN, libc::EBUSY].contains(&errno_of(&e)) => {
+            ensure!(module_listed(name), "{name} gone after a refused rmmod");
+            Ok(())
+        }
+        Err(e) => Err(format!(
+            "rmmod {name} with {what}: {}, expected EAGAIN or EBUSY",
+            crate::check::errno_text(&e)
+        )),
+    }
+}
+
+/// rmmod `name` once its sockets are closed: retried for up to `limit`,
+/// since a socket is freed after an RCU grace period (DSOR: after its
+/// transfers ended).
+fn rmmod_after_close(ctx: &Ctx, name: &str, limit: Duration) -> TestResult {
+    let start = Instant::now();
+    loop {
+        match sys::delete_module(name) {
+            Ok(()) => break,
+            Err(e) if start.elapsed() > limit => {
+                return Err(format!(
+                    "rmmod {name} after the last close: {} after {limit:?}",
+                    crate::check::errno_text(&e)
+                ))
+            }
+            Err(_) => thread::sleep(Duration::from_millis(20)),
+        }
+    }
+    if start.elapsed() > Duration::from_millis(100) {
+        ctx.note(format!(
+            "rmmod {name} after the last close took {:?}",
+            start.elapsed()
+        ));
+    }
+    Ok(())
+}
+
+fn module_listed(name: &str) -> bool {
+    std::fs::read_to_string("/proc/modules")
+        .is_ok_and(|s| s.lines().any(|l| l.split(' ').next() == Some(name)))
+}
+
+/// rmmod of protocol `p`'s module `name` (and of the family, `core`)
+/// while one of its sockets is open and a thread is blocked in `read` on
+/// it: refused, and the socket goes on working (the blocked read gets the
+/// next message); after the last close the module unloads.
+fn rmmod_busy(ctx: &Ctx, p: Proto, ifindex: u32, name: &str, core: &str) -> TestResult {
+    let tag = 0x400;
+    let rx = p.receiver(ifindex, tag, Duration::from_secs(5))?;
+    let tx = p.socket(TRAFFIC_RX)?;
+    thread::scope(|sc| -> TestResult {
+        let reader =
+            sc.spawn(|| expect_msg(p, &rx, tag, 1, "blocked reader across a refused rmmod"));
+        thread::sleep(Duration::from_millis(100));
+        let busy = expect_busy(
+            name,
+            &format!("a {} socket open and a reader blocked", p.name()),
+        )
+        .and_then(|()| expect_busy(core, &format!("{name} loaded")));
+        let sent = p.send(&tx, ifindex, tag, 1);
+        let read = reader.join().map_err(|_| "reader panicked")?;
+        busy?;
+        sent.or_fail(format_args!("{} send after the refused rmmod", p.name()))?;
+        read
+    })?;
+    drop((rx, tx));
+    rmmod_after_close(ctx, name, Duration::from_secs(10))
+}
+
+/// rmmod of the CAN_RAW module (ours rcan_raw, mainline can_raw) and the
+/// family's (rcan_pf, can) with a CAN_RAW socket open ([`rmmod_busy`]).
+fn raw_teardown_rmmod_busy(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let (name, core) = match ctx.stack() {
+        Stack::Ours => (Module::Raw.name(), Module::Pf.name()),
+        Stack::Mainline => (Mainline::Raw.name(), Mainline::Can.name()),
+    };
+    rmmod_busy(ctx, Proto::Raw, idx, name, core)
+}
+
+/// rmmod of rcan_can and rcan_dsor with one of their sockets open
+/// ([`rmmod_busy`]).
+fn teardown_rmmod_proto_busy(ctx: &mut Ctx) -> TestResult {
+    let idx = all_protocols(ctx)?;
+    rmmod_busy(
+        ctx,
+        Proto::Dsor,
+        idx,
+        Module::Dsor.name(),
+        Module::Pf.name(),
+    )?;
+    rmmod_busy(ctx, Proto::Arb, idx, Module::Can.name(), Module::Pf.name())
+}
+
+/// rmmod rcan_loop while all three protocols send and receive on can0 at
+/// full speed, twice: the driver goes, every call returns (documented
+/// errnos only: the interface went down, then away), and once it is
+/// loaded again each protocol works on the new can0 with new sockets.
+fn teardown_rmmod_loop_traffic(ctx: &mut Ctx) -> TestResult {
+    all_protocols(ctx)?;
+    for round in 0..2 {
+        let idx = ctx.ifindex("can0")?;
+        let stop = AtomicBool::new(false);
+        let tallies = thread::scope(|sc| -> Result<Vec<(Proto, Tally, Tally)>, String> {
+            let _stop = OnDrop(|| stop.store(true, Ordering::SeqCst));
+            let mut threads = Vec::new();
+            for (k, p) in Proto::OURS.into_iter().enumerate() {
+                threads.push((p, traffic(sc, p, idx, 0x500 + k as u16, &stop)?));
+            }
+            thread::sleep(Duration::from_millis(400));
+            let rm = ctx.rmmod(Module::Loop);
+            thread::sleep(Duration::from_millis(300));
+            stop.store(true, Ordering::SeqCst);
+            let mut out = Vec::new();
+            for (p, (tx, rx)) in threads {
+                let sent = tx.join().map_err(|_| "sender panicked")?;
+                let received = rx.join().map_err(|_| "receiver panicked")?;
+                out.push((p, sent, received));
+            }
+            rm.map_err(|e| format!("round {round}: rmmod rcan_loop under traffic: {e}"))?;
+            Ok(out)
+        })?;
+        for (p, sent, received) in &tallies {
+            let what = format!("round {round}: {} under rmmod rcan_loop", p.name());
+            ctx.note(format!(
+                "{what}: send [{}], recv [{}]",
+                tally_text(sent),
+                tally_text(received)
+            ));
+            only(sent, p.send_errnos(), &format!("{what}: send"))?;
+            only(received, p.recv_errnos(), &format!("{what}: recv"))?;
+            ensure!(
+                sent.contains_key(&0) && received.contains_key(&0),
+                "{what}: no traffic before the rmmod (send [{}], recv [{}])",
+                tally_text(sent),
+                tally_text(received)
+            );
+        }
+        ctx.insmod(Module::Loop, &[])?;
+        ctx.links_up()?;
+        let idx = ctx.ifindex("can0")?;
+        for p in Proto::OURS {
+            let rx = p.receiver(idx, 0x600, Duration::from_secs(2))?;
+            let tx = p.socket(TRAFFIC_RX)?;
+            let what = format!("round {round}: {} after reloading rcan_loop", p.name());
+            p.send(&tx, idx, 0x600, 42).or_fail(&what)?;
+            expect_msg(p, &rx, 0x600, 42, &what)?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_decode() {
+        let f = canraw::wire(&sff(0x123, &7u32.to_le_bytes()));
+        assert_eq!(Proto::Raw.decode(&f, 0x123), Some(7));
+        assert_eq!(Proto::Raw.decode(&f, 0x124), None);
+        assert_eq!(Proto::Arb.decode(&9u32.to_le_bytes(), 0), Some(9));
+        let d = dsor_payload(0x0102_0304);
+        assert_eq!(d.len(), 20);
+        assert_eq!(Proto::Dsor.decode(&d, 0), Some(0x0102_0304));
+        assert_eq!(Proto::Dsor.decode(&d[..19], 0), None);
+        assert_ne!(dsor_payload(1), dsor_payload(2));
+    }
+
+    #[test]
+    fn errno_sets() {
+        let mut t = Tally::new();
+        count(&mut t, &Ok(1));
+        count(&mut t, &Err(io::Error::from_raw_os_error(libc::ENETDOWN)));
+        assert!(only(&t, Proto::Arb.send_errnos(), "x").is_ok());
+        count(&mut t, &Err(io::Error::from_raw_os_error(libc::EPERM)));
+        let e = only(&t, Proto::Arb.send_errnos(), "x").unwrap_err();
+        assert!(e.contains("EPERM"), "{e}");
+        assert_eq!(tally_text(&t), "ok 1, EPERM 1, ENETDOWN 1");
+    }
+}
