@@ -53,6 +53,7 @@
 //! `1 passed, 0 failed` (the whole run counts as one test in make check)
 //! or `0 passed, 1 failed`; exit status 1 on failure.
 
+mod leak;
 mod rng;
 mod sys;
 mod table;
@@ -174,7 +175,25 @@ struct Shared {
     failure: Mutex<Option<String>>,
     progress: Vec<Progress>,
     start: Instant,
+    /// Info-leak checks made ([`leak`]), per [`LeakCheck`].
+    leak_checks: [AtomicU64; LEAK_CHECKS],
 }
+
+/// The kinds of info-leak check, for the summary.
+#[derive(Clone, Copy)]
+enum LeakCheck {
+    /// Receive data: nothing past the returned length.
+    Data = 0,
+    /// An address, layout unknown (the socket changed under the call).
+    Addr,
+    /// An address with its protocol's padding checked.
+    AddrLayout,
+    /// A getsockopt value.
+    Opt,
+    /// A control message buffer.
+    Cmsg,
+}
+const LEAK_CHECKS: usize = 5;
 
 impl Shared {
     fn now_ms(&self) -> u64 {
@@ -259,6 +278,63 @@ impl Worker<'_> {
             self.id,
             p.iteration.load(Ordering::Relaxed)
         ));
+    }
+
+    /// What socket `fd` is now: its inode and, for a CAN socket, its
+    /// [`leak::Kind`] (SO_TYPE; a SOCK_RAW socket that has
+    /// CAN_RAW_LOOPBACK is CAN_RAW, else CANPROTO_CAN). Not counted as
+    /// calls.
+    fn ident(fd: c_int) -> Option<(u64, Option<leak::Kind>)> {
+        let ino = sys::ino(fd).ok()?;
+        let int = |level, name| {
+            let mut b = [0u8; 4];
+            sys::getsockopt(fd, level, name, &mut b)
+                .ok()
+                .map(|_| c_int::from_ne_bytes(b))
+        };
+        let kind = match (
+            int(libc::SOL_SOCKET, libc::SO_DOMAIN),
+            int(libc::SOL_SOCKET, libc::SO_TYPE),
+        ) {
+            (Some(PF_CAN), Some(libc::SOCK_DGRAM)) => Some(leak::Kind::Dsor),
+            (Some(PF_CAN), Some(libc::SOCK_RAW)) => Some(match int(table::SOL_CAN_RAW, 3) {
+                Some(_) => leak::Kind::Raw,
+                None => leak::Kind::Arb,
+            }),
+            _ => None,
+        };
+        Some((ino, kind))
+    }
+
+    /// The layout to check an address from `fd` against: its kind if `fd`
+    /// names the socket it named before the call (inode `before`).
+    fn layout_after(&self, fd: c_int, before: Option<u64>) -> Option<leak::Kind> {
+        match (before, Self::ident(fd)) {
+            (Some(b), Some((a, kind))) if a == b => kind,
+            _ => None,
+        }
+    }
+
+    /// Records an info-leak check; a failed one fails the run.
+    fn leak(&self, check: LeakCheck, r: Result<(), String>) {
+        self.sh.leak_checks[check as usize].fetch_add(1, Ordering::Relaxed);
+        if let Err(e) = r {
+            self.violation(format!("info leak: {e}"));
+        }
+    }
+
+    /// Checks an address the kernel reported ([`leak::check_addr`]).
+    fn leak_addr(&self, fd: c_int, before: Option<u64>, buf: &[u8], reported: usize, what: &str) {
+        if reported == 0 && buf.iter().all(|&b| b == leak::POISON) {
+            return;
+        }
+        let kind = self.layout_after(fd, before);
+        let check = if kind.is_some() {
+            LeakCheck::AddrLayout
+        } else {
+            LeakCheck::Addr
+        };
+        self.leak(check, leak::check_addr(kind, buf, reported, what));
     }
 
     /// A slot and the descriptor in it (-1: empty).
@@ -563,8 +639,13 @@ impl Worker<'_> {
         if let Ok(l) = res {
             if l > n {
                 self.violation(format!("optlen {n} came back as {l}"));
+                return;
             }
         }
+        self.leak(
+            LeakCheck::Opt,
+            leak::check_opt(&buf, res, level, "getsockopt value"),
+        );
     }
 
     fn send_len(&mut self, p: &Proto) -> usize {
@@ -755,6 +836,7 @@ impl Worker<'_> {
                     p.name,
                     name.len()
                 ));
+                let before = sys::ino(fd).ok();
                 let res = sys::recvfrom(fd, &mut buf, flags, with_name.then_some(&mut name[..]));
                 let call = if with_name {
                     Call::Recvfrom
@@ -764,9 +846,14 @@ impl Worker<'_> {
                 if !self.end(call, &res) {
                     return;
                 }
-                if let Ok((_, al)) = res {
+                if let Ok((k, al)) = res {
                     if with_name && al > MAX_ADDR {
                         self.violation(format!("address length {al}"));
+                        return;
+                    }
+                    self.leak(LeakCheck::Data, leak::check_data(&buf, k, "received data"));
+                    if with_name {
+                        self.leak_addr(fd, before, &name, al, "recvfrom address");
                     }
                 }
                 res.map(|(k, _)| k)
@@ -780,6 +867,7 @@ impl Worker<'_> {
                     p.name,
                     name.len()
                 ));
+                let before = sys::ino(fd).ok();
                 let res = sys::recvmsg(fd, &mut buf, &mut name, &mut c, clen, flags);
                 if !self.end(Call::Recvmsg, &res) {
                     return;
@@ -797,6 +885,16 @@ impl Worker<'_> {
                             "returned {} > buffer {n} without MSG_TRUNC in msg_flags",
                             m.n
                         ));
+                    } else {
+                        self.leak(
+                            LeakCheck::Data,
+                            leak::check_data(&buf, m.n, "received data"),
+                        );
+                        self.leak_addr(fd, before, &name, m.namelen, "recvmsg msg_name");
+                        self.leak(
+                            LeakCheck::Cmsg,
+                            leak::check_cmsgs(&c.0[..], m.controllen, "recvmsg control"),
+                        );
                     }
                 }
                 res.map(|m| m.n)
@@ -915,6 +1013,7 @@ impl Worker<'_> {
                     if peer { "getpeername" } else { "getsockname" },
                     p.name
                 ));
+                let before = sys::ino(fd).ok();
                 let r = sys::getname(fd, &mut buf, peer);
                 let call = if peer {
                     Call::Getpeername
@@ -925,6 +1024,9 @@ impl Worker<'_> {
                     if let Ok(l) = r {
                         if l > MAX_ADDR {
                             self.violation(format!("address length {l}"));
+                        } else {
+                            let what = if peer { "getpeername" } else { "getsockname" };
+                            self.leak_addr(fd, before, &buf, l, what);
                         }
                     }
                 }
@@ -1094,7 +1196,11 @@ fn churn(sh: &Shared, root: &Path, modchurn: bool, ctl: c_int) {
 static CHURN_HIST: Mutex<Hist> = Mutex::new(BTreeMap::new());
 
 /// Runs one seed; returns (calls, histogram, failure).
-fn run_seed(a: &Args, seed: u64, ctl: c_int) -> (u64, Hist, Option<String>, Duration) {
+fn run_seed(
+    a: &Args,
+    seed: u64,
+    ctl: c_int,
+) -> (u64, Hist, Option<String>, Duration, [u64; LEAK_CHECKS]) {
     let sh = Arc::new(Shared {
         seed,
         slots: std::array::from_fn(|_| AtomicI32::new(-1)),
@@ -1107,6 +1213,7 @@ fn run_seed(a: &Args, seed: u64, ctl: c_int) -> (u64, Hist, Option<String>, Dura
         failure: Mutex::new(None),
         progress: (0..a.threads).map(|_| Progress::default()).collect(),
         start: Instant::now(),
+        leak_checks: Default::default(),
     });
     CHURN_HIST.lock().unwrap().clear();
     let per_thread = a.iterations.div_ceil(a.threads as u64);
@@ -1183,7 +1290,8 @@ fn run_seed(a: &Args, seed: u64, ctl: c_int) -> (u64, Hist, Option<String>, Dura
         }
     }
     let f = sh.failure.lock().unwrap().clone();
-    (sh.calls.load(Ordering::Relaxed), hist, f, elapsed)
+    let leaks = sh.leak_checks.each_ref().map(|x| x.load(Ordering::Relaxed));
+    (sh.calls.load(Ordering::Relaxed), hist, f, elapsed, leaks)
 }
 
 /// Prints the kernel stacks of this process' threads (root only).
@@ -1254,13 +1362,22 @@ fn main() {
             a.seconds,
             if a.modchurn { "on" } else { "off" }
         );
-        let (calls, hist, failure, took) = run_seed(&a, seed, ctl);
+        let (calls, hist, failure, took, leaks) = run_seed(&a, seed, ctl);
         total += calls;
         print_hist(&hist);
         println!(
             "# seed {seed}: {calls} calls in {:.1} s ({:.0}/s)",
             took.as_secs_f64(),
             calls as f64 / took.as_secs_f64().max(0.001)
+        );
+        println!(
+            "# seed {seed}: info-leak checks: received data {}, addresses {} ({} against \
+             their protocol's layout), getsockopt values {}, control buffers {}",
+            leaks[LeakCheck::Data as usize],
+            leaks[LeakCheck::Addr as usize] + leaks[LeakCheck::AddrLayout as usize],
+            leaks[LeakCheck::AddrLayout as usize],
+            leaks[LeakCheck::Opt as usize],
+            leaks[LeakCheck::Cmsg as usize]
         );
         match failure {
             None => println!("ok - fuzz seed {seed}"),
@@ -1354,6 +1471,7 @@ mod tests {
             failure: Mutex::new(None),
             progress: vec![Progress::default()],
             start: Instant::now(),
+            leak_checks: Default::default(),
         }
     }
 

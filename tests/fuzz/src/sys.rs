@@ -319,6 +319,16 @@ pub fn getname(fd: c_int, buf: &mut [u8], peer: bool) -> Res<usize> {
     Ok(len as usize)
 }
 
+/// The inode number of the file `fd` refers to (`fstat(2)`): tells
+/// whether a descriptor number still names the same socket after a call.
+pub fn ino(fd: c_int) -> Res<u64> {
+    // SAFETY: all-zero is a valid `stat`; fstat writes one into `st`.
+    let mut st: libc::stat = unsafe { zeroed() };
+    // SAFETY: `st` is a live, writable `stat`.
+    cvt(unsafe { libc::fstat(fd, &mut st) } as isize)?;
+    Ok(st.st_ino)
+}
+
 /// `insmod KO PARAMS`: `finit_module(2)`.
 pub fn finit_module(ko: &Path, params: &str) -> Res<()> {
     let file = File::open(ko).map_err(|e| e.raw_os_error().unwrap_or(libc::EIO))?;
