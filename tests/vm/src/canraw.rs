@@ -127,6 +127,23 @@ pub fn wire(f: &CanFrame) -> [u8; CAN_MTU] {
     b
 }
 
+/// The 16 bytes of a standard data frame `id` with `len` data bytes
+/// (`0x10 + i`) and `tail` in the data bytes past `len`: what a writer
+/// may leave there (CAN_RAW passes them through).
+pub fn sff_with_tail(id: u16, len: u8, tail: u8) -> [u8; CAN_MTU] {
+    let mut b = [0u8; CAN_MTU];
+    b[..4].copy_from_slice(&u32::from(id & 0x7FF).to_ne_bytes());
+    b[4] = len;
+    for (i, d) in b[8..].iter_mut().enumerate() {
+        *d = if i < usize::from(len) {
+            0x10 + i as u8
+        } else {
+            tail
+        };
+    }
+    b
+}
+
 /// Whether two frames have the same `can_id`, `len`, `len8_dlc` and all
 /// eight data bytes (the padding bytes the crate does not expose aside).
 pub fn same(a: &CanFrame, b: &CanFrame) -> bool {

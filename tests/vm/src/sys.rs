@@ -14,7 +14,7 @@
 use std::ffi::CString;
 use std::fs::File;
 use std::io;
-use std::mem::{size_of, zeroed};
+use std::mem::{size_of, size_of_val, zeroed};
 use std::os::fd::{AsFd, AsRawFd, FromRawFd, OwnedFd, RawFd};
 use std::path::Path;
 use std::ptr;
@@ -126,6 +126,54 @@ pub fn recvmsg(fd: impl AsFd, buflen: usize, flags: c_int) -> io::Result<Receive
         }
     }
     Ok(r)
+}
+
+/// What [`recvmsg_into`] returned: return value, `msg_namelen`,
+/// `msg_controllen`, `msg_flags`.
+#[derive(Clone, Copy, Debug)]
+pub struct RecvLens {
+    pub len: usize,
+    pub namelen: usize,
+    pub controllen: usize,
+    pub flags: c_int,
+}
+
+/// `recvmsg` into the caller's buffers as they are (the caller poisons
+/// them): `data`, `name` (its whole length as `msg_namelen`) and
+/// `control` (its whole length as `msg_controllen`, 8-byte aligned by
+/// the caller's use of a `u64` array).
+pub fn recvmsg_into(
+    fd: impl AsFd,
+    data: &mut [u8],
+    name: &mut [u8],
+    control: &mut [u64],
+    flags: c_int,
+) -> io::Result<RecvLens> {
+    let mut iov = libc::iovec {
+        iov_base: data.as_mut_ptr().cast(),
+        iov_len: data.len(),
+    };
+    // SAFETY: msghdr is plain old data; all-zero is a valid value.
+    let mut msg: libc::msghdr = unsafe { zeroed() };
+    msg.msg_name = name.as_mut_ptr().cast();
+    msg.msg_namelen = name.len() as socklen_t;
+    msg.msg_iov = &mut iov;
+    msg.msg_iovlen = 1;
+    msg.msg_control = control.as_mut_ptr().cast();
+    msg.msg_controllen = size_of_val(control) as _;
+    // SAFETY: every pointer in msg (address, iovec and its buffer, control
+    // buffer) is writable for the length given next to it and outlives the
+    // call.
+    let n = unsafe { libc::recvmsg(fd.as_fd().as_raw_fd(), &mut msg, flags) };
+    if n < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(RecvLens {
+        len: n as usize,
+        namelen: msg.msg_namelen as usize,
+        controllen: msg.msg_controllen as usize,
+        flags: msg.msg_flags,
+    })
 }
 
 /// `ioctl(fd, SIOCGSTAMP)`: the receive time of the last frame read.

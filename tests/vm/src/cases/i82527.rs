@@ -35,7 +35,7 @@ pub const TESTS: &[crate::Test] = test_table![
 
 /// Loads rcan_pf, rcan_can, rcan_raw and rcan_i82527_sim (two cards:
 /// can0, can1), both up; returns their ifindexes.
-fn sim2(ctx: &mut Ctx) -> Result<(u32, u32), String> {
+pub(super) fn sim2(ctx: &mut Ctx) -> Result<(u32, u32), String> {
     ctx.insmod(Module::Pf, &[])?;
     ctx.insmod(Module::Can, &[])?;
     ctx.insmod(Module::Raw, &[])?;

@@ -9,6 +9,7 @@ mod errors;
 mod filter;
 mod gateway;
 mod i82527;
+mod leak;
 mod lifecycle;
 mod loopdrv;
 mod mixed;
@@ -87,6 +88,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         raw_bind::TESTS,
         raw_send::TESTS,
         raw_efault::TESTS,
+        leak::TESTS,
         canutils::TESTS,
         capture::TESTS,
         gateway::TESTS,
@@ -98,6 +100,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         sja1000::TESTS,
         capture::SJA1000_TESTS,
         i82527::TESTS,
+        leak::OURS,
         rxcontext::TESTS,
         // Until rcan_bcm lands (issue 13): mainline stage only.
         bcm::TESTS,

@@ -19,7 +19,7 @@
 use std::collections::BTreeMap;
 use std::io;
 use std::os::fd::{AsFd, AsRawFd, IntoRawFd, OwnedFd};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::thread;
 use std::time::{Duration, Instant};
 
@@ -31,8 +31,8 @@ use socketcan::{Socket, SocketOptions};
 
 use super::{portable_table, raw1, test_table};
 use crate::canraw::{self, addr_bytes, std as sff, CAN_RAW, CAN_SFF_MASK};
-use crate::check::{ensure, errno_name, errno_of, OnDrop, OrFail, TestResult, QUIET};
-use crate::ctx::{dev, sized, Ctx, Mainline, Module, Stack};
+use crate::check::{ensure, errno_name, errno_of, wait_for, OnDrop, OrFail, TestResult, QUIET};
+use crate::ctx::{debug_kernel, dev, sized, Ctx, Mainline, Module, Stack};
 use crate::sys;
 use crate::Test;
 
@@ -322,18 +322,27 @@ fn close_during_recv(ctx: &Ctx, p: Proto, ifindex: u32, rounds: u32) -> TestResu
         let late = 1000 + round;
         let what = format!("{} round {round}", p.name());
         let fd = p.receiver(ifindex, tag, BLOCKED_RX)?.into_raw_fd();
+        let ready = AtomicUsize::new(0);
         let (sd, cl, sent, readers) = thread::scope(|sc| {
             let readers: Vec<_> = (0..3)
                 .map(|_| {
+                    let ready = &ready;
                     sc.spawn(move || {
                         let mut b = vec![0u8; p.buf_len()];
                         let t = Instant::now();
+                        ready.fetch_add(1, Ordering::SeqCst);
                         let r = sys::recv_fd(fd, &mut b, 0).map(|n| b[..n].to_vec());
                         (r, t.elapsed())
                     })
                 })
                 .collect();
-            thread::sleep(Duration::from_millis(50));
+            // Let them get into the kernel: all three about to call recv,
+            // then a pause (longer on the slow debug kernel). One that is
+            // late finds the descriptor closed (EBADF), which is counted.
+            while ready.load(Ordering::SeqCst) < 3 {
+                thread::yield_now();
+            }
+            thread::sleep(Duration::from_millis(if debug_kernel() { 200 } else { 50 }));
             let sd = sys::shutdown_fd(fd, libc::SHUT_RDWR);
             let cl = sys::close_fd(fd);
             // No descriptor may be opened until the readers are back: one
@@ -446,7 +455,7 @@ fn close_during_recv(ctx: &Ctx, p: Proto, ifindex: u32, rounds: u32) -> TestResu
 /// Close during receive on CAN_RAW ([`close_during_recv`]).
 fn raw_teardown_close_during_recv(ctx: &mut Ctx) -> TestResult {
     let idx = raw1(ctx)?;
-    close_during_recv(ctx, Proto::Raw, idx, sized("RCAN_TEARDOWN_ROUNDS", 3, 2))
+    close_during_recv(ctx, Proto::Raw, idx, sized("RCAN_TEARDOWN_ROUNDS", 3, 1))
 }
 
 /// Close during receive on CANPROTO_CAN and CANPROTO_DSOR
@@ -454,19 +463,21 @@ fn raw_teardown_close_during_recv(ctx: &mut Ctx) -> TestResult {
 fn teardown_close_during_recv(ctx: &mut Ctx) -> TestResult {
     let idx = all_protocols(ctx)?;
     for p in [Proto::Arb, Proto::Dsor] {
-        close_during_recv(ctx, p, idx, sized("RCAN_TEARDOWN_ROUNDS", 3, 2))?;
+        close_during_recv(ctx, p, idx, sized("RCAN_TEARDOWN_ROUNDS", 3, 1))?;
     }
     Ok(())
 }
 
 /// Traffic of protocol `p` tagged `tag` on `ifindex`: one thread sends as
-/// fast as it can, one receives, until `stop`; returns their tallies.
+/// fast as it can, one receives (counting into `got`), until `stop`;
+/// returns their tallies.
 fn traffic<'s>(
     sc: &'s thread::Scope<'s, '_>,
     p: Proto,
     ifindex: u32,
     tag: u16,
     stop: &'s AtomicBool,
+    got: &'s AtomicU64,
 ) -> Result<
     (
         thread::ScopedJoinHandle<'s, Tally>,
@@ -489,11 +500,29 @@ fn traffic<'s>(
         let mut t = Tally::new();
         let mut b = vec![0u8; p.buf_len()];
         while !stop.load(Ordering::SeqCst) {
-            count(&mut t, &raw::read(&rx, &mut b));
+            let r = raw::read(&rx, &mut b);
+            if r.is_ok() {
+                got.fetch_add(1, Ordering::SeqCst);
+            }
+            count(&mut t, &r);
         }
         t
     });
     Ok((sender, receiver))
+}
+
+/// Waits (up to 60 s: DSOR on the debug kernel under emulation is slow
+/// to start) until every receiver in `got` has had a message, then 100 ms
+/// more: the teardown must hit traffic that is flowing.
+fn flowing(got: &[&AtomicU64], what: &str) -> TestResult {
+    wait_for(Duration::from_secs(60), &format!("{what}: traffic"), || {
+        Ok(got
+            .iter()
+            .all(|g| g.load(Ordering::SeqCst) > 0)
+            .then_some(()))
+    })?;
+    thread::sleep(Duration::from_millis(100));
+    Ok(())
 }
 
 /// `ip link set DEV down` while protocol `p` sends on it: sends fail with
@@ -503,10 +532,11 @@ fn traffic<'s>(
 fn ifdown_during_send(ctx: &Ctx, p: Proto, ifindex: u32) -> TestResult {
     let tag = 0x300;
     let stop = AtomicBool::new(false);
+    let got = AtomicU64::new(0);
     let (sent, received) = thread::scope(|sc| -> Result<(Tally, Tally), String> {
         let _stop = OnDrop(|| stop.store(true, Ordering::SeqCst));
-        let (tx, rx) = traffic(sc, p, ifindex, tag, &stop)?;
-        thread::sleep(Duration::from_millis(200));
+        let (tx, rx) = traffic(sc, p, ifindex, tag, &stop, &got)?;
+        flowing(&[&got], p.name())?;
         let down = ctx.link_down(&dev(0));
         thread::sleep(Duration::from_millis(300));
         let up = ctx.link_up(&dev(0));
@@ -799,13 +829,14 @@ fn teardown_rmmod_loop_traffic(ctx: &mut Ctx) -> TestResult {
     for round in 0..2 {
         let idx = ctx.ifindex("can0")?;
         let stop = AtomicBool::new(false);
+        let got: [AtomicU64; 3] = Default::default();
         let tallies = thread::scope(|sc| -> Result<Vec<(Proto, Tally, Tally)>, String> {
             let _stop = OnDrop(|| stop.store(true, Ordering::SeqCst));
             let mut threads = Vec::new();
             for (k, p) in Proto::OURS.into_iter().enumerate() {
-                threads.push((p, traffic(sc, p, idx, 0x500 + k as u16, &stop)?));
+                threads.push((p, traffic(sc, p, idx, 0x500 + k as u16, &stop, &got[k])?));
             }
-            thread::sleep(Duration::from_millis(400));
+            flowing(&got.each_ref(), "all three protocols")?;
             let rm = ctx.rmmod(Module::Loop);
             thread::sleep(Duration::from_millis(300));
             stop.store(true, Ordering::SeqCst);

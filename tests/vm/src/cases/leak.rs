@@ -1,0 +1,270 @@
+// SPDX-License-Identifier: GPL-2.0
+//! Info leaks (issue 15, item 2) where the fuzzer cannot see them: every
+//! buffer is filled with [`FILL`] (0xAA) before the call, and every byte
+//! the kernel reports written must be the defined value, padding zero;
+//! nothing past the reported length may change. `raw_leak_*` also runs
+//! against mainline SocketCAN (what mainline writes is the reference);
+//! `leak_*` checks frames our kernel code builds itself, from hardware
+//! registers (SJA1000, 82527) or from scratch (the time service), whose
+//! padding no sender wrote: an uninitialised skb shows there.
+
+use std::os::fd::AsFd;
+use std::time::Duration;
+
+use rcan_uapi::raw;
+use socketcan::{Socket, SocketOptions};
+
+use super::{portable_table, raw1, test_table};
+use crate::canraw::{self, addr_ifindex, sff_with_tail, CAN_MTU, MIN_NAMELEN, SOL_CAN_RAW};
+use crate::check::{ensure, OrFail, TestResult};
+use crate::ctx::{Ctx, Module};
+use crate::sys::{self, FILL};
+use crate::Test;
+
+pub const TESTS: &[Test] = portable_table![raw_leak_poisoned_buffers];
+
+pub const OURS: &[Test] = test_table![leak_sja1000_frames, leak_i82527_frames, leak_time_frame];
+
+/// `SO_RCVMARK`: an `SO_MARK` control message (4 bytes) with every frame.
+const SO_RCVMARK: libc::c_int = 75;
+/// `sizeof(struct cmsghdr)` on x86_64.
+const CMSG_HDR: usize = 16;
+
+/// The control messages in `buf[..controllen]` as (level, type, payload
+/// length), after checking the chain: each `cmsg_len` at least a header
+/// and inside `controllen`, the alignment bytes after each zero or
+/// [`FILL`] (never written, or zeroed), nothing past `controllen` written.
+fn cmsg_chain(buf: &[u8], controllen: usize) -> Result<Vec<(i32, i32, usize)>, String> {
+    ensure!(
+        controllen <= buf.len(),
+        "msg_controllen {controllen} > {}",
+        buf.len()
+    );
+    ensure!(
+        buf[controllen..].iter().all(|&b| b == FILL),
+        "control buffer written past msg_controllen {controllen}"
+    );
+    let mut out = Vec::new();
+    let mut off = 0;
+    while off < controllen {
+        ensure!(
+            controllen - off >= CMSG_HDR,
+            "a cut control message header at {off}"
+        );
+        let len = u64::from_ne_bytes(buf[off..off + 8].try_into().unwrap()) as usize;
+        let level = i32::from_ne_bytes(buf[off + 8..off + 12].try_into().unwrap());
+        let ty = i32::from_ne_bytes(buf[off + 12..off + 16].try_into().unwrap());
+        ensure!(
+            (CMSG_HDR..=controllen - off).contains(&len),
+            "control message at {off}: cmsg_len {len} (level {level}, type {ty})"
+        );
+        let next = (off + len).next_multiple_of(8).min(controllen);
+        if let Some(i) = (off + len..next).find(|&i| buf[i] != 0 && buf[i] != FILL) {
+            return Err(format!(
+                "alignment byte {i} after control message ({level}, {ty}) is {:#04x}: \
+                 uninitialised kernel memory",
+                buf[i]
+            ));
+        }
+        out.push((level, ty, len - CMSG_HDR));
+        off = next;
+    }
+    Ok(out)
+}
+
+/// One frame through CAN_RAW into poisoned buffers, with SO_TIMESTAMP and
+/// SO_RCVMARK on: the 16 frame bytes as sent and nothing after them, an
+/// 8-byte address (family, zero padding, ifindex) and nothing after it in
+/// a 128-byte buffer, a well-formed control chain whose alignment bytes
+/// are clean, with a 16-byte timestamp and a 4-byte mark; then every
+/// SOL_CAN_RAW option and getsockname into 64 and 128 poisoned bytes:
+/// only the reported length changed.
+fn raw_leak_poisoned_buffers(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let tx = canraw::open(idx)?;
+    let rx = canraw::open(idx)?;
+    rx.set_socket_option_int(libc::SOL_SOCKET, libc::SO_TIMESTAMP, 1)
+        .or_fail("SO_TIMESTAMP")?;
+    rx.set_socket_option_int(libc::SOL_SOCKET, SO_RCVMARK, 1)
+        .or_fail("SO_RCVMARK")?;
+    let f = canraw::std(0x321, &[1, 2, 3]);
+    canraw::send(&tx, &f)?;
+    let mut data = [FILL; 72];
+    let mut name = [FILL; 128];
+    let mut control = [u64::from_ne_bytes([FILL; 8]); 32];
+    let r = sys::recvmsg_into(&rx, &mut data, &mut name, &mut control, 0).or_fail("recvmsg")?;
+    ensure!(
+        r.len == CAN_MTU && data[..CAN_MTU] == canraw::wire(&f),
+        "recvmsg returned {} bytes: {}",
+        r.len,
+        canraw::show_wire(&data[..r.len.min(CAN_MTU)])
+    );
+    ensure!(
+        data[CAN_MTU..].iter().all(|&b| b == FILL),
+        "data buffer written past the {CAN_MTU} bytes returned"
+    );
+    ensure!(
+        r.namelen == MIN_NAMELEN,
+        "msg_namelen {} for a 128-byte buffer, expected {MIN_NAMELEN}",
+        r.namelen
+    );
+    ensure!(
+        addr_ifindex(&name)? == idx,
+        "address ifindex {:02X?}",
+        &name[..8]
+    );
+    ensure!(
+        name[MIN_NAMELEN..].iter().all(|&b| b == FILL),
+        "address buffer written past msg_namelen: {:02X?}",
+        &name[..32]
+    );
+    ensure!(
+        r.flags & (libc::MSG_TRUNC | libc::MSG_CTRUNC) == 0,
+        "msg_flags {:#x}: truncated with room to spare",
+        r.flags
+    );
+    let bytes: Vec<u8> = control.iter().flat_map(|w| w.to_ne_bytes()).collect();
+    let chain = cmsg_chain(&bytes, r.controllen)?;
+    let has = |ty: i32, len: usize| chain.contains(&(libc::SOL_SOCKET, ty, len));
+    ensure!(
+        has(libc::SO_TIMESTAMP, 16) && has(libc::SO_MARK, 4),
+        "control messages {chain:?}: expected SCM_TIMESTAMP (16 bytes) and SO_MARK (4 bytes)"
+    );
+    for (opt, want) in [
+        (canraw::CAN_RAW_FILTER, 8),
+        (canraw::CAN_RAW_ERR_FILTER, 4),
+        (canraw::CAN_RAW_LOOPBACK, 4),
+        (canraw::CAN_RAW_RECV_OWN_MSGS, 4),
+        (canraw::CAN_RAW_FD_FRAMES, 4),
+        (canraw::CAN_RAW_JOIN_FILTERS, 4),
+    ] {
+        let what = canraw::opt_name(opt);
+        let mut v = [FILL; 64];
+        let (res, len) = sys::getsockopt_len(&rx, SOL_CAN_RAW, opt, &mut v, 64);
+        res.or_fail(format_args!("getsockopt {what}"))?;
+        ensure!(
+            len == want,
+            "getsockopt {what} into 64 bytes: optlen {len}, expected {want}"
+        );
+        ensure!(
+            v[want as usize..].iter().all(|&b| b == FILL),
+            "getsockopt {what}: written past optlen {len}: {:02X?}",
+            &v[..16]
+        );
+    }
+    let mut a = [FILL; 128];
+    let n = raw::getsockname(&rx, &mut a).or_fail("getsockname")? as usize;
+    ensure!(n == MIN_NAMELEN, "getsockname length {n}");
+    ensure!(addr_ifindex(&a)? == idx, "getsockname ifindex");
+    ensure!(
+        a[n..].iter().all(|&b| b == FILL),
+        "getsockname wrote past its {n} bytes"
+    );
+    Ok(())
+}
+
+/// Reads one frame from `rx` into a poisoned buffer and checks what a
+/// frame built by the kernel must look like: 16 bytes, `__pad`, `__res0`
+/// and `len8_dlc` zero, data bytes past `len` zero (not the sender's
+/// bytes, not stale memory), nothing past the 16 bytes. Returns them.
+fn kernel_built(rx: impl AsFd, what: &str) -> Result<[u8; CAN_MTU], String> {
+    let r = sys::recvmsg(rx, 72, 0).or_fail(format_args!("{what}: recvmsg"))?;
+    ensure!(r.len == CAN_MTU, "{what}: {} bytes", r.len);
+    let w: [u8; CAN_MTU] = r.data[..CAN_MTU].try_into().unwrap();
+    let len = usize::from(w[4]).min(8);
+    ensure!(
+        w[5..8] == [0, 0, 0] && w[8 + len..].iter().all(|&b| b == 0),
+        "{what}: {} [{:02X?}]: padding or data past len not zero",
+        canraw::show_wire(&w),
+        w
+    );
+    ensure!(
+        r.data[CAN_MTU..].iter().all(|&b| b == FILL),
+        "{what}: written past the 16 bytes"
+    );
+    Ok(w)
+}
+
+/// Frames of every length sent on card 0 with 0x5C in the data bytes
+/// past `len` (CAN_RAW passes a writer's bytes through, so they reach the
+/// driver), received on card 1 from the controller's registers: the
+/// driver's receive path must hand up zeros there.
+fn driver_frames(ctx: &Ctx, i0: u32, i1: u32, card: &str) -> TestResult {
+    let tx = canraw::open(i0)?;
+    let rx = canraw::open(i1)?;
+    rx.set_read_timeout(Duration::from_secs(5))
+        .or_fail("SO_RCVTIMEO")?;
+    for len in 0..=8u8 {
+        let sent = sff_with_tail(0x240 + u16::from(len), len, 0x5C);
+        raw::write(&tx, &sent).or_fail(format_args!("{card}: write len {len}"))?;
+        let w = kernel_built(
+            &rx,
+            &format!("{card}: frame of len {len} from the other card"),
+        )?;
+        ensure!(
+            w[..5] == sent[..5] && w[8..8 + usize::from(len)] == sent[8..8 + usize::from(len)],
+            "{card}: sent {}, received {}",
+            canraw::show_wire(&sent),
+            canraw::show_wire(&w)
+        );
+    }
+    ctx.note(format!("{card}: 9 frames checked"));
+    Ok(())
+}
+
+/// [`driver_frames`] through two emulated Kvaser PCIcan cards (SJA1000).
+fn leak_sja1000_frames(ctx: &mut Ctx) -> TestResult {
+    let (i0, i1) = super::sja1000::kvaser2(ctx)?;
+    driver_frames(ctx, i0, i1, "rcan_kvaser_pci")
+}
+
+/// [`driver_frames`] through two simulated 82527 cards.
+fn leak_i82527_frames(ctx: &mut Ctx) -> TestResult {
+    let (i0, i1) = super::i82527::sim2(ctx)?;
+    driver_frames(ctx, i0, i1, "rcan_i82527_sim")
+}
+
+/// The time frame rcan_time builds every second, read by a CAN_RAW socket
+/// on can0 ([`kernel_built`]).
+fn leak_time_frame(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let rx = canraw::open(idx)?;
+    rx.set_read_timeout(Duration::from_secs(5))
+        .or_fail("SO_RCVTIMEO")?;
+    ctx.insmod(Module::Time, &[])?;
+    let w = kernel_built(&rx, "rcan_time frame")?;
+    ctx.note(format!("time frame {}", canraw::show_wire(&w)));
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cmsg(level: i32, ty: i32, data: &[u8]) -> Vec<u8> {
+        let mut b = ((CMSG_HDR + data.len()) as u64).to_ne_bytes().to_vec();
+        b.extend_from_slice(&level.to_ne_bytes());
+        b.extend_from_slice(&ty.to_ne_bytes());
+        b.extend_from_slice(data);
+        b
+    }
+
+    #[test]
+    fn control_chain() {
+        let mut buf = vec![FILL; 256];
+        let a = cmsg(1, 36, &[7, 0, 0, 0]);
+        let b = cmsg(1, 29, &[1; 16]);
+        buf[..20].copy_from_slice(&a);
+        buf[24..56].copy_from_slice(&b);
+        assert_eq!(cmsg_chain(&buf, 56).unwrap(), [(1, 36, 4), (1, 29, 16)]);
+        buf[22] = 0x11;
+        assert!(cmsg_chain(&buf, 56)
+            .unwrap_err()
+            .contains("alignment byte 22"));
+        buf[22] = 0;
+        assert!(cmsg_chain(&buf, 56).is_ok());
+        assert!(cmsg_chain(&buf, 40).is_err());
+        buf[60] = 0;
+        assert!(cmsg_chain(&buf, 56).is_err());
+    }
+}
