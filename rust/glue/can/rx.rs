@@ -46,6 +46,9 @@
 //! * A registration is reached from a node only while the node is
 //!   reachable or a grace period has not passed since it was unlinked; the
 //!   receiver outlives all of its registrations (freed with the last).
+//!   A receiver's first registration is allocated inside it (see
+//!   [`Rcv`]), so a socket's bind allocates one object and its close
+//!   frees one.
 
 use super::super::bindings;
 use super::super::percpu::{rx_stamp, CpuMarks};
@@ -56,7 +59,7 @@ use core::cell::Cell;
 use core::ptr::{self, NonNull};
 use core::sync::atomic::{AtomicPtr, Ordering};
 use kernel::alloc::{flags::GFP_KERNEL, KBox, KVec};
-use kernel::error::{code, Result};
+use kernel::error::Result;
 
 const NBUCKETS: usize = 1 << BUCKET_BITS;
 /// Interface lists for [`RxTable::filters`] (a power of two).
@@ -309,9 +312,21 @@ impl<T: Linked> List<T> {
     }
 }
 
-/// A receiver: the user's data and its per-CPU "seen" mark, and, for the
-/// writer only, its place in the receiver map and its live registration.
+/// A receiver: the user's data and its per-CPU "seen" mark, its first
+/// registration, and, for the writer only, its place in the receiver map
+/// and its live registration.
+///
+/// The first registration (a socket's bind) lives inside the receiver, so
+/// a new receiver costs one allocation, not two, and its removal one
+/// `call_rcu` and one free. Later registrations (filter changes) are boxed
+/// on their own; the inline one, once replaced, is never reused and is
+/// freed with the receiver, after the last registration's grace period
+/// (which ends after the inline one's, unlinked earlier).
+#[repr(C)]
 struct Rcv<R: Receiver> {
+    /// For call_rcu when the inline registration is retired as the last
+    /// one; first, so the callback finds the receiver.
+    rcu: bindings::callback_head,
     data: R,
     seen: CpuMarks,
     /// Writer side only: the chain of the receiver map (`RxTable::rcvs`)
@@ -319,6 +334,17 @@ struct Rcv<R: Receiver> {
     chain: Link<Rcv<R>>,
     /// Writer side only: the live registration.
     reg: Cell<*const Reg<R>>,
+    /// The first registration, set before the receiver is published and
+    /// never changed afterwards (only read, through the table's lists and
+    /// `reg`).
+    first: Option<Reg<R>>,
+}
+
+impl<R: Receiver> Rcv<R> {
+    /// Whether `reg` is this receiver's inline first registration.
+    fn is_first(&self, reg: &Reg<R>) -> bool {
+        self.first.as_ref().is_some_and(|f| ptr::eq(f, reg))
+    }
 }
 
 impl<R: Receiver> Linked for Rcv<R> {
@@ -333,8 +359,9 @@ struct Reg<R: Receiver> {
     /// For call_rcu; first, so the callback finds the registration.
     rcu: bindings::callback_head,
     rcv: NonNull<Rcv<R>>,
-    /// Set when retired as its receiver's last registration: the RCU
-    /// callback then frees the receiver too.
+    /// Set when a boxed registration is retired as its receiver's last
+    /// one: the RCU callback then frees the receiver too. (The inline first
+    /// registration is never freed on its own; see [`Rcv`].)
     last: Cell<bool>,
     cookie: u32,
     ifindex: i32,
@@ -383,6 +410,10 @@ impl<R: Receiver> Nodes<R> {
         self.inline.iter().flatten().chain(self.more.iter())
     }
 
+    fn iter_mut(&mut self) -> impl Iterator<Item = &mut Node<R>> {
+        self.inline.iter_mut().flatten().chain(self.more.iter_mut())
+    }
+
     fn len(&self) -> usize {
         self.iter().count()
     }
@@ -393,6 +424,17 @@ impl<R: Receiver> Reg<R> {
         // SAFETY: the receiver is freed only with (after) its last
         // registration.
         unsafe { self.rcv.as_ref() }
+    }
+
+    /// Points the registration at its receiver and its nodes at the
+    /// registration, once it is at its final address (boxed, or inside its
+    /// receiver). Before it is linked.
+    fn place(&mut self, rcv: NonNull<Rcv<R>>) {
+        self.rcv = rcv;
+        let me: *const Reg<R> = self;
+        for n in self.nodes.iter_mut() {
+            n.reg = me;
+        }
     }
 }
 
@@ -456,6 +498,16 @@ unsafe extern "C" fn free_reg<R: Receiver>(head: *mut bindings::callback_head) {
         // its last registration, so nothing else refers to it.
         drop(unsafe { KBox::from_raw(reg.rcv.as_ptr()) });
     }
+}
+
+/// `call_rcu` callback: frees a receiver whose inline first registration
+/// was its last (with that registration). Softirq context.
+unsafe extern "C" fn free_rcv<R: Receiver>(head: *mut bindings::callback_head) {
+    // SAFETY: `head` is the first field of an `Rcv<R>` leaked from a KBox
+    // by `set`; its live registration (the inline one) was unlinked and
+    // the receiver taken off the map a grace period ago, so nothing refers
+    // to it any more.
+    drop(unsafe { KBox::from_raw(head.cast::<Rcv<R>>()) });
 }
 
 /// `call_rcu` callback: frees a key entry without members. Softirq
@@ -606,11 +658,16 @@ impl<R: Receiver> RxTable<R> {
     /// nothing (no filters, no error mask) removes it too. On error (ENOMEM)
     /// the previous registration stays; removal never fails. Process
     /// context; sleeps.
+    ///
+    /// Allocations: a new receiver is one (the receiver with its first
+    /// registration inside), plus a key entry per key the table lacks and
+    /// a group snapshot when a group is new; a filter change one (the
+    /// boxed registration) plus the same; a removal none.
     pub(crate) fn set(&self, id: usize, new: Option<(Spec, R)>) -> Result<Changed> {
         let new = new.filter(|(s, _)| !s.filters.is_empty() || s.err_mask != 0);
-        // The registration is allocated before locking; the receiver only
-        // under the lock, once we know it is new (a filter change reuses
-        // it).
+        // The registration is built before locking (unplaced); where it
+        // goes (inside a new receiver, or boxed for an existing one) is
+        // decided under the lock.
         let prepared = match new {
             Some((spec, data)) => Some((Self::make_reg(spec)?, data)),
             None => None,
@@ -621,7 +678,7 @@ impl<R: Receiver> RxTable<R> {
         // map's receivers are unlinked and freed only under it.
         let old: Option<&Rcv<R>> = unsafe { chain.iter_locked() }.find(|r| r.data.id() == id);
         let mut changed = Changed::default();
-        let Some((mut reg, data)) = prepared else {
+        let Some((reg, data)) = prepared else {
             // Removal.
             let Some(rcv) = old else {
                 return Ok(changed);
@@ -634,52 +691,34 @@ impl<R: Receiver> RxTable<R> {
             unsafe { List::unlink(rcv) };
             self.unlink_reg(&mut w, o);
             self.shrink_groups(&mut w);
-            o.last.set(true);
-            // SAFETY: unlinked above and the receiver is off the map:
-            // unreachable for new readers and writers; free_reg frees it
-            // and the receiver.
-            unsafe { defer((o as *const Reg<R>).cast_mut().cast(), free_reg::<R>) };
+            if rcv.is_first(o) {
+                // SAFETY: the receiver's only registration ever (inline) is
+                // unlinked and the receiver is off the map: unreachable
+                // for new readers and writers; free_rcv frees both.
+                unsafe { defer((rcv as *const Rcv<R>).cast_mut().cast(), free_rcv::<R>) };
+            } else {
+                o.last.set(true);
+                // SAFETY: unlinked above and the receiver is off the map:
+                // unreachable for new readers and writers; free_reg frees
+                // it and the receiver (with its inline registration,
+                // retired earlier).
+                unsafe { defer((o as *const Reg<R>).cast_mut().cast(), free_reg::<R>) };
+            }
             return Ok(changed);
         };
-        // The receiver: the existing one (`data` is dropped), or a new one,
-        // put on the map only once nothing can fail any more.
-        let spare = match old {
-            Some(_) => {
+        match old {
+            Some(rcv) => {
+                // A filter change: the receiver stays (`data` is dropped);
+                // the new registration is boxed.
                 drop(data);
-                None
-            }
-            None => Some(KBox::new(
-                Rcv {
-                    data,
-                    seen: CpuMarks::new()?,
-                    chain: Link::new(),
-                    reg: Cell::new(ptr::null()),
-                },
-                GFP_KERNEL,
-            )?),
-        };
-        let rcv: &Rcv<R> = match (old, &spare) {
-            (Some(r), _) => r,
-            (None, Some(s)) => s,
-            (None, None) => return Err(code::EINVAL),
-        };
-        reg.rcv = NonNull::from(rcv);
-        let fresh = self.new_keys(&w, &reg)?;
-        self.grow_groups(&mut w, &reg)?;
-        self.link_reg(&w, &reg, fresh);
-        let reg: &Reg<R> = KBox::leak(reg);
-        changed.ifindex[0] = (!reg.filters.is_empty()).then_some(reg.ifindex);
-        let prev = rcv.reg.replace(reg as *const Reg<R>);
-        match spare {
-            Some(s) => {
-                // The receiver now belongs to its registrations.
-                let s: &Rcv<R> = KBox::leak(s);
-                // SAFETY: writer mutex held; a new receiver, not on the map,
-                // at a stable address until free_reg frees it after its
-                // last registration (which takes it off the map first).
-                unsafe { chain.push(s) };
-            }
-            None => {
+                let mut b = KBox::new(reg, GFP_KERNEL)?;
+                b.place(NonNull::from(rcv));
+                let fresh = self.new_keys(&w, &b)?;
+                self.grow_groups(&mut w, &b)?;
+                self.link_reg(&w, &b, fresh);
+                let reg: &Reg<R> = KBox::leak(b);
+                changed.ifindex[0] = (!reg.filters.is_empty()).then_some(reg.ifindex);
+                let prev = rcv.reg.replace(reg as *const Reg<R>);
                 // SAFETY: the receiver was on the map: `prev` is its live
                 // registration, still linked.
                 let o = unsafe { &*prev };
@@ -687,18 +726,57 @@ impl<R: Receiver> RxTable<R> {
                     changed.ifindex[1] = Some(o.ifindex);
                 }
                 self.unlink_reg(&mut w, o);
-                // SAFETY: unlinked and no longer the receiver's live
-                // registration; the receiver lives on in the new one
-                // (`last` stays false); free_reg frees it.
-                unsafe { defer(prev.cast_mut().cast(), free_reg::<R>) };
+                if !rcv.is_first(o) {
+                    // SAFETY: unlinked and no longer the receiver's live
+                    // registration; the receiver lives on in the new one
+                    // (`last` stays false); free_reg frees it.
+                    unsafe { defer(prev.cast_mut().cast(), free_reg::<R>) };
+                }
+                // An inline first registration stays in its receiver,
+                // unused, until the receiver is freed.
+            }
+            None => {
+                // A new receiver, with the registration inside it; put on
+                // the map only once nothing can fail any more.
+                let mut s = KBox::new(
+                    Rcv {
+                        // SAFETY: an all-zero callback_head is what
+                        // call_rcu expects.
+                        rcu: unsafe { core::mem::zeroed() },
+                        data,
+                        seen: CpuMarks::new()?,
+                        chain: Link::new(),
+                        reg: Cell::new(ptr::null()),
+                        first: None,
+                    },
+                    GFP_KERNEL,
+                )?;
+                let home = NonNull::from(&*s);
+                let first = s.first.insert(reg);
+                first.place(home);
+                let first: &Reg<R> = first;
+                let fresh = self.new_keys(&w, first)?;
+                self.grow_groups(&mut w, first)?;
+                self.link_reg(&w, first, fresh);
+                changed.ifindex[0] = (!first.filters.is_empty()).then_some(first.ifindex);
+                let first: *const Reg<R> = first;
+                // The receiver now belongs to its registrations.
+                let s: &Rcv<R> = KBox::leak(s);
+                s.reg.set(first);
+                // SAFETY: writer mutex held; a new receiver, not on the map,
+                // at a stable address until free_rcv or free_reg frees it
+                // after its last registration (which takes it off the map
+                // first).
+                unsafe { chain.push(s) };
             }
         }
         self.shrink_groups(&mut w);
         Ok(changed)
     }
 
-    /// Builds an unlinked registration for `spec` (receiver still unset).
-    fn make_reg(spec: Spec) -> Result<KBox<Reg<R>>> {
+    /// Builds an unlinked, unplaced registration for `spec` (receiver and
+    /// the nodes' back pointers still unset: [`Reg::place`]).
+    fn make_reg(spec: Spec) -> Result<Reg<R>> {
         let join = rxtable::join_scanned(&spec.filters, spec.join);
         let filters = spec.filters;
         let mut scanned = KVec::new();
@@ -718,22 +796,6 @@ impl<R: Receiver> RxTable<R> {
         if extra > 0 {
             nodes.more = KVec::with_capacity(extra, GFP_KERNEL)?;
         }
-        let mut reg = KBox::new(
-            Reg {
-                // SAFETY: an all-zero callback_head is what call_rcu expects.
-                rcu: unsafe { core::mem::zeroed() },
-                rcv: NonNull::dangling(),
-                last: Cell::new(false),
-                cookie: spec.cookie,
-                ifindex: spec.ifindex,
-                filters,
-                scanned,
-                join,
-                nodes,
-            },
-            GFP_KERNEL,
-        )?;
-        let regp: *const Reg<R> = &*reg;
         let node = |kind, mask, value| Node {
             link: Link::new(),
             key: Cell::new(ptr::null()),
@@ -741,27 +803,38 @@ impl<R: Receiver> RxTable<R> {
             ifindex: spec.ifindex,
             mask,
             value,
-            reg: regp,
+            reg: ptr::null(),
         };
         // All nodes are added before any is linked (and within the
         // capacity reserved above).
         if !join {
-            for i in 0..reg.filters.len() {
-                if let Place::Hashed { mask, value } = reg.filters[i].place() {
-                    reg.nodes.push(node(Kind::Hashed, mask, value))?;
+            for f in filters.iter() {
+                if let Place::Hashed { mask, value } = f.place() {
+                    nodes.push(node(Kind::Hashed, mask, value))?;
                 }
             }
         }
-        if !reg.scanned.is_empty() {
-            reg.nodes.push(node(Kind::Scanned, 0, 0))?;
+        if !scanned.is_empty() {
+            nodes.push(node(Kind::Scanned, 0, 0))?;
         }
         if spec.err_mask != 0 {
-            reg.nodes.push(node(Kind::Err, spec.err_mask, 0))?;
+            nodes.push(node(Kind::Err, spec.err_mask, 0))?;
         }
-        if !reg.filters.is_empty() {
-            reg.nodes.push(node(Kind::ByIf, 0, 0))?;
+        if !filters.is_empty() {
+            nodes.push(node(Kind::ByIf, 0, 0))?;
         }
-        Ok(reg)
+        Ok(Reg {
+            // SAFETY: an all-zero callback_head is what call_rcu expects.
+            rcu: unsafe { core::mem::zeroed() },
+            rcv: NonNull::dangling(),
+            last: Cell::new(false),
+            cookie: spec.cookie,
+            ifindex: spec.ifindex,
+            filters,
+            scanned,
+            join,
+            nodes,
+        })
     }
 
     /// The list a non-hashed node belongs on.
