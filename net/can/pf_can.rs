@@ -97,6 +97,12 @@ impl Family for PfCan {
         Ok(())
     }
 
+    /// See [`rcan_api::rx_reserve`]. Process context; sleeps (allocates,
+    /// takes the table's mutex).
+    fn rx_reserve(id: usize, t: Target) -> Result {
+        TABLE.reserve(id, t)
+    }
+
     fn rx_filters(ifindex: i32, out: &mut [Filter]) -> Option<usize> {
         TABLE.filters(ifindex, out)
     }

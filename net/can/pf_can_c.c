@@ -30,6 +30,7 @@ struct mutex *rcan_rx_mutex_ptr(void)
 void rcan_proto_register(void);
 void rcan_proto_unregister(void);
 void rcan_rx_set(void);
+void rcan_rx_reserve(void);
 void rcan_send(void);
 void rcan_rx_set_kernel(void);
 void rcan_rx_listen(void);
@@ -38,6 +39,7 @@ void rcan_rx_filters(void);
 EXPORT_SYMBOL_GPL(rcan_proto_register);
 EXPORT_SYMBOL_GPL(rcan_proto_unregister);
 EXPORT_SYMBOL_GPL(rcan_rx_set);
+EXPORT_SYMBOL_GPL(rcan_rx_reserve);
 EXPORT_SYMBOL_GPL(rcan_send);
 EXPORT_SYMBOL_GPL(rcan_rx_set_kernel);
 EXPORT_SYMBOL_GPL(rcan_rx_listen);

@@ -173,6 +173,10 @@ type S = Sock<RawProto>;
 impl CanProtocol for RawProto {
     const PROTOCOL: i32 = CAN_RAW;
     const SOCK_TYPE: i32 = SOCK_RAW;
+    /// The receiver is made at `socket()` (mainline allocates its
+    /// per-socket receive state there too), so bind allocates nothing;
+    /// `release` always removes it.
+    const RESERVE_RX: bool = true;
 
     fn module() -> &'static ProtoModule<Self> {
         &MODULE
@@ -346,9 +350,8 @@ impl glue::sock::Proto for RawProto {
         let mut rtnl = Rtnl::lock();
         MODULE.sockets.get(&mut rtnl).remove(sk.as_ptr() as usize);
         let mut s = sk.lock();
-        if s.bound {
-            unregister(sk);
-        }
+        // Bound or not: the receiver made at socket() (RESERVE_RX) goes too.
+        unregister(sk);
         s.bound = false;
         s.ifindex = 0;
         s.filters = RawFilters::Default;

@@ -134,6 +134,15 @@ extern "C" {
         cookie: u32,
         spec: *const RxSpec,
     ) -> ffi::c_int;
+    /// Makes the receiver of (`func`, `sk`) ahead of its first
+    /// [`rcan_rx_set`] (at `socket()`), so that one allocates nothing. It
+    /// holds a reference on `sk` as a registration does, receives nothing
+    /// until set, and stays until removed (`rcan_rx_set` with NULL spec,
+    /// or a spec that wants nothing): the caller must remove it before
+    /// the socket can be freed (in `release`). Process context; may sleep.
+    /// ENOMEM (then nothing is reserved: the first `rcan_rx_set`
+    /// allocates as without reservation).
+    pub(crate) fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> ffi::c_int;
     /// Like [`rcan_rx_set`], for a receiver inside the kernel that has no
     /// socket: `data` is passed to `func` as its `owner`. No reference is
     /// taken; instead every call returns only after every running callback

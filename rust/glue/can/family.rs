@@ -46,6 +46,11 @@ pub(crate) trait Family: 'static {
     /// ([`notify_listeners`]). Process context; may sleep. ENOMEM, EINVAL
     /// (bad filter); on error the previous registration stays.
     fn rx_set(id: usize, new: Option<(RxRequest<'_>, Target)>) -> Result;
+    /// Makes receiver `id` (`t`) ahead of its first registration, which
+    /// then allocates nothing; it receives nothing until set, and stays
+    /// until removed (`rx_set(id, None)`). Process context; may sleep.
+    /// ENOMEM.
+    fn rx_reserve(id: usize, t: Target) -> Result;
     /// Copies the filters that apply to frames received on `ifindex` into
     /// `out`; `None` if there are more than fit. Any context.
     fn rx_filters(ifindex: i32, out: &mut [crate::rcan_core::rxtable::Filter]) -> Option<usize>;
@@ -269,6 +274,27 @@ extern "C" fn rcan_rx_set(
         (unsafe { request(spec, cookie) }, t)
     });
     match Impl::rx_set(id, new) {
+        Ok(()) => 0,
+        Err(e) => e.to_errno(),
+    }
+}
+
+/// See [`crate::glue::can::abi::rcan_rx_reserve`].
+#[no_mangle]
+extern "C" fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> ffi::c_int {
+    let Some(owner) = NonNull::new(sk.cast::<ffi::c_void>()) else {
+        return code::EINVAL.to_errno();
+    };
+    // SAFETY: the caller's `sk` is a live sock (abi contract); the Target
+    // keeps this reference until it is dropped.
+    unsafe { bindings::rcan_sock_hold(sk) };
+    // INVARIANT: one reference held, just taken.
+    let t = Target {
+        func,
+        owner,
+        sock: true,
+    };
+    match Impl::rx_reserve(owner.as_ptr() as usize, t) {
         Ok(()) => 0,
         Err(e) => e.to_errno(),
     }

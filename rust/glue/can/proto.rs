@@ -108,6 +108,13 @@ pub(crate) trait CanProtocol: Proto {
     /// type gets EPROTOTYPE.
     const SOCK_TYPE: i32;
 
+    /// Make every new socket's receiver at `socket()` time (as mainline
+    /// keeps its per-socket receive state in the socket), so that its
+    /// first [`rx_set`] (the bind) allocates nothing. A protocol that sets
+    /// this must call [`rx_remove`] in every `release`, bound or not (the
+    /// reserved receiver holds a reference on the sock). Default: no.
+    const RESERVE_RX: bool = false;
+
     /// The protocol's registrations (a static of its module).
     fn module() -> &'static ProtoModule<Self>;
 
@@ -285,8 +292,9 @@ impl<T: CanProtocol> ProtoModule<T> {
         Ok(ProtoRegistration(self))
     }
 
-    /// `CanProto.create`: allocates the sock and lists it in `sockets`.
-    /// Process context.
+    /// `CanProto.create`: allocates the sock and lists it in `sockets`;
+    /// with [`CanProtocol::RESERVE_RX`], makes its receiver too. Process
+    /// context.
     ///
     /// # Safety
     ///
@@ -310,6 +318,16 @@ impl<T: CanProtocol> ProtoModule<T> {
             // The socket layer calls release on failure, which copes with
             // a socket missing from the list.
             return code::ENOMEM.to_errno();
+        }
+        drop(rtnl);
+        if T::RESERVE_RX {
+            // Best effort: without a reservation (ENOMEM) the first rx_set
+            // allocates the receiver itself. The protocol's release
+            // removes it (RESERVE_RX contract), which drops the reference
+            // it holds.
+            // SAFETY: `sk` is our live new sock of `T`; rx_trampoline::<T>
+            // expects exactly such an owner.
+            let _ = unsafe { abi::rcan_rx_reserve(rx_trampoline::<T>, sk as *mut bindings::sock) };
         }
         0
     }

@@ -46,17 +46,20 @@
 //! * A registration is reached from a node only while the node is
 //!   reachable or a grace period has not passed since it was unlinked; the
 //!   receiver outlives all of its registrations (freed with the last).
+//!   A receiver's first registration is allocated inside it (see
+//!   [`Rcv`]), so a socket's bind allocates one object and its close
+//!   frees one.
 
 use super::super::bindings;
 use super::super::percpu::{rx_stamp, CpuMarks};
 use super::super::sync::{CMutex, RcuPtr, RcuReadGuard, StaticMutex};
 use crate::rcan_core::arb::CAN_ERR_FLAG;
 use crate::rcan_core::rxtable::{self, frame_key, Filter, Place, BUCKET_BITS};
-use core::cell::Cell;
+use core::cell::{Cell, UnsafeCell};
 use core::ptr::{self, NonNull};
 use core::sync::atomic::{AtomicPtr, Ordering};
 use kernel::alloc::{flags::GFP_KERNEL, KBox, KVec};
-use kernel::error::{code, Result};
+use kernel::error::Result;
 
 const NBUCKETS: usize = 1 << BUCKET_BITS;
 /// Interface lists for [`RxTable::filters`] (a power of two).
@@ -309,16 +312,83 @@ impl<T: Linked> List<T> {
     }
 }
 
-/// A receiver: the user's data and its per-CPU "seen" mark, and, for the
-/// writer only, its place in the receiver map and its live registration.
+/// A receiver: the user's data and its per-CPU "seen" mark, its first
+/// registration, and, for the writer only, its place in the receiver map
+/// and its live registration.
+///
+/// The first registration (a socket's bind) lives inside the receiver, so
+/// a new receiver costs one allocation, not two, and its removal one
+/// `call_rcu` and one free; a receiver made ahead of time
+/// ([`RxTable::reserve`], at `socket()`) makes that first registration
+/// allocate nothing. Later registrations (filter changes) are boxed on
+/// their own; the inline one, once replaced, is never reused and is freed
+/// with the receiver, after the last registration's grace period (which
+/// ends after the inline one's, unlinked earlier).
+#[repr(C)]
 struct Rcv<R: Receiver> {
+    /// For call_rcu when the inline registration is retired as the last
+    /// one; first, so the callback finds the receiver.
+    rcu: bindings::callback_head,
     data: R,
     seen: CpuMarks,
     /// Writer side only: the chain of the receiver map (`RxTable::rcvs`)
-    /// the receiver is on while it has a live registration.
+    /// the receiver is on from its reservation or first registration
+    /// until its removal.
     chain: Link<Rcv<R>>,
-    /// Writer side only: the live registration.
+    /// Writer side only: the live registration (NULL: a reserved
+    /// receiver that has had none yet).
     reg: Cell<*const Reg<R>>,
+    /// The first registration: filled once, under the writer mutex, before
+    /// any of its nodes is linked, and never changed afterwards (then only
+    /// read, through the table's lists and `reg`).
+    first: UnsafeCell<Option<Reg<R>>>,
+}
+
+impl<R: Receiver> Rcv<R> {
+    /// A receiver without registration. Process context (may allocate).
+    fn new(data: R) -> Result<Self> {
+        Ok(Rcv {
+            // SAFETY: an all-zero callback_head is what call_rcu expects.
+            rcu: unsafe { core::mem::zeroed() },
+            data,
+            seen: CpuMarks::new()?,
+            chain: Link::new(),
+            reg: Cell::new(ptr::null()),
+            first: UnsafeCell::new(None),
+        })
+    }
+
+    /// The inline first registration, if filled. Writer mutex held (the
+    /// slot is filled only under it).
+    fn first(&self) -> Option<&Reg<R>> {
+        // SAFETY: the slot is written only by `fill_first`, under the
+        // writer mutex that our caller holds, while it is empty; a filled
+        // slot is never written again.
+        unsafe { (*self.first.get()).as_ref() }
+    }
+
+    /// Whether `reg` is this receiver's inline first registration. Writer
+    /// mutex held.
+    fn is_first(&self, reg: &Reg<R>) -> bool {
+        self.first().is_some_and(|f| ptr::eq(f, reg))
+    }
+
+    /// Puts `reg` into the empty first slot and places it there
+    /// ([`Reg::place`]); returns it, to be linked.
+    ///
+    /// # Safety
+    ///
+    /// The caller holds the writer mutex, the slot is empty, and `self` is
+    /// at its final address (leaked from its KBox).
+    unsafe fn fill_first(&self, reg: Reg<R>) -> &Reg<R> {
+        // SAFETY: an empty slot: nothing refers into it (readers reach a
+        // registration only through its linked nodes, and it has none),
+        // and the writer mutex (caller) excludes other writers.
+        let slot = unsafe { &mut *self.first.get() };
+        let f = slot.insert(reg);
+        f.place(NonNull::from(self));
+        f
+    }
 }
 
 impl<R: Receiver> Linked for Rcv<R> {
@@ -333,8 +403,9 @@ struct Reg<R: Receiver> {
     /// For call_rcu; first, so the callback finds the registration.
     rcu: bindings::callback_head,
     rcv: NonNull<Rcv<R>>,
-    /// Set when retired as its receiver's last registration: the RCU
-    /// callback then frees the receiver too.
+    /// Set when a boxed registration is retired as its receiver's last
+    /// one: the RCU callback then frees the receiver too. (The inline first
+    /// registration is never freed on its own; see [`Rcv`].)
     last: Cell<bool>,
     cookie: u32,
     ifindex: i32,
@@ -383,6 +454,10 @@ impl<R: Receiver> Nodes<R> {
         self.inline.iter().flatten().chain(self.more.iter())
     }
 
+    fn iter_mut(&mut self) -> impl Iterator<Item = &mut Node<R>> {
+        self.inline.iter_mut().flatten().chain(self.more.iter_mut())
+    }
+
     fn len(&self) -> usize {
         self.iter().count()
     }
@@ -393,6 +468,17 @@ impl<R: Receiver> Reg<R> {
         // SAFETY: the receiver is freed only with (after) its last
         // registration.
         unsafe { self.rcv.as_ref() }
+    }
+
+    /// Points the registration at its receiver and its nodes at the
+    /// registration, once it is at its final address (boxed, or inside its
+    /// receiver). Before it is linked.
+    fn place(&mut self, rcv: NonNull<Rcv<R>>) {
+        self.rcv = rcv;
+        let me: *const Reg<R> = self;
+        for n in self.nodes.iter_mut() {
+            n.reg = me;
+        }
     }
 }
 
@@ -415,7 +501,7 @@ pub(crate) struct RxTable<R: Receiver> {
     writer: CMutex<Writer>,
     /// The receiver map, writer side only (under `writer`): receivers
     /// hashed by id, chained through [`Rcv::chain`]; a receiver is on it
-    /// from its first registration until its last is retired. Intrusive,
+    /// from its reservation or first registration until its removal. Intrusive,
     /// so adding a receiver allocates nothing and removing one searches
     /// nothing but its chain.
     rcvs: [List<Rcv<R>>; ID_BUCKETS],
@@ -458,6 +544,16 @@ unsafe extern "C" fn free_reg<R: Receiver>(head: *mut bindings::callback_head) {
     }
 }
 
+/// `call_rcu` callback: frees a receiver whose inline first registration
+/// was its last (with that registration). Softirq context.
+unsafe extern "C" fn free_rcv<R: Receiver>(head: *mut bindings::callback_head) {
+    // SAFETY: `head` is the first field of an `Rcv<R>` leaked from a KBox
+    // by `set` or `reserve`; its live registration (the inline one) was
+    // unlinked and the receiver taken off the map a grace period ago, so
+    // nothing refers to it any more.
+    drop(unsafe { KBox::from_raw(head.cast::<Rcv<R>>()) });
+}
+
 /// `call_rcu` callback: frees a key entry without members. Softirq
 /// context.
 unsafe extern "C" fn free_key<R: Receiver>(head: *mut bindings::callback_head) {
@@ -485,6 +581,27 @@ unsafe fn defer(
 ) {
     // SAFETY: per the caller's contract.
     unsafe { bindings::call_rcu(head, Some(func)) };
+}
+
+/// Where a new registration goes ([`RxTable::set`]).
+enum Home<'a, R: Receiver> {
+    /// Into the empty first slot of a reserved receiver.
+    Slot(&'a Rcv<R>, Reg<R>),
+    /// Into the first slot of a new receiver.
+    New(KBox<Rcv<R>>, Reg<R>),
+    /// Boxed on its own (the receiver has had a registration: a filter
+    /// change).
+    Boxed(&'a Rcv<R>, KBox<Reg<R>>),
+}
+
+impl<R: Receiver> Home<'_, R> {
+    /// The registration, unplaced: its values only.
+    fn reg(&self) -> &Reg<R> {
+        match self {
+            Home::Slot(_, r) | Home::New(_, r) => r,
+            Home::Boxed(_, b) => b,
+        }
+    }
 }
 
 impl<R: Receiver> RxTable<R> {
@@ -600,17 +717,47 @@ impl<R: Receiver> RxTable<R> {
         Some(n)
     }
 
+    /// Makes receiver `id` (with `data`) ahead of its first registration,
+    /// so that registration ([`RxTable::set`]) allocates nothing; if the
+    /// receiver exists already, `data` is dropped. A reserved receiver
+    /// receives nothing until it is set, and stays until removed
+    /// (`set(id, None)`, or a spec that wants nothing). Process context;
+    /// sleeps. ENOMEM.
+    pub(crate) fn reserve(&self, id: usize, data: R) -> Result {
+        // Allocated before locking; freed again if the receiver exists.
+        let s = KBox::new(Rcv::new(data)?, GFP_KERNEL)?;
+        let _w = self.writer.lock();
+        let chain = &self.rcvs[id_bucket(id)];
+        // SAFETY: writer mutex held (`_w`) while the chain is walked.
+        if unsafe { chain.iter_locked() }.any(|r| r.data.id() == id) {
+            return Ok(());
+        }
+        let s: &Rcv<R> = KBox::leak(s);
+        // SAFETY: writer mutex held; a new receiver, not on the map, at a
+        // stable address until `set` removes it (freeing it at once if it
+        // never had a registration, else through its last one's RCU
+        // callback).
+        unsafe { chain.push(s) };
+        Ok(())
+    }
+
     /// Sets the registration of receiver `id`: `new` is the spec and the
-    /// receiver's data (used only if the receiver has no registration yet;
+    /// receiver's data (used only if the receiver does not exist yet;
     /// else dropped here), `None` removes the receiver. A spec that wants
     /// nothing (no filters, no error mask) removes it too. On error (ENOMEM)
     /// the previous registration stays; removal never fails. Process
     /// context; sleeps.
+    ///
+    /// Allocations: none for the first registration of a reserved
+    /// receiver ([`RxTable::reserve`]); one for a new receiver (the
+    /// receiver with its first registration inside); one for a filter
+    /// change (the boxed registration); in each case plus a key entry per
+    /// key the table lacks and a group snapshot when a group is new. A
+    /// removal allocates nothing.
     pub(crate) fn set(&self, id: usize, new: Option<(Spec, R)>) -> Result<Changed> {
         let new = new.filter(|(s, _)| !s.filters.is_empty() || s.err_mask != 0);
-        // The registration is allocated before locking; the receiver only
-        // under the lock, once we know it is new (a filter change reuses
-        // it).
+        // The registration is built before locking (unplaced); where it
+        // goes (inside its receiver, or boxed) is decided under the lock.
         let prepared = match new {
             Some((spec, data)) => Some((Self::make_reg(spec)?, data)),
             None => None,
@@ -621,84 +768,105 @@ impl<R: Receiver> RxTable<R> {
         // map's receivers are unlinked and freed only under it.
         let old: Option<&Rcv<R>> = unsafe { chain.iter_locked() }.find(|r| r.data.id() == id);
         let mut changed = Changed::default();
-        let Some((mut reg, data)) = prepared else {
+        let Some((reg, data)) = prepared else {
             // Removal.
             let Some(rcv) = old else {
                 return Ok(changed);
             };
-            // SAFETY: a receiver on the map has a live registration.
-            let o = unsafe { &*rcv.reg.get() };
-            changed.ifindex[0] = (!o.filters.is_empty()).then_some(o.ifindex);
-            changed.removed = true;
             // SAFETY: writer mutex held; `rcv` is on the map.
             unsafe { List::unlink(rcv) };
+            let live = rcv.reg.get();
+            if live.is_null() {
+                // SAFETY: a reserved receiver that never had a registration:
+                // leaked from a KBox by `reserve`, now off the map, and
+                // never reachable by readers (they reach receivers only
+                // through registrations), so it is freed at once.
+                drop(unsafe { KBox::from_raw((rcv as *const Rcv<R>).cast_mut()) });
+                return Ok(changed);
+            }
+            // SAFETY: a non-NULL `reg` is the receiver's live registration.
+            let o = unsafe { &*live };
+            changed.ifindex[0] = (!o.filters.is_empty()).then_some(o.ifindex);
+            changed.removed = true;
             self.unlink_reg(&mut w, o);
             self.shrink_groups(&mut w);
-            o.last.set(true);
-            // SAFETY: unlinked above and the receiver is off the map:
-            // unreachable for new readers and writers; free_reg frees it
-            // and the receiver.
-            unsafe { defer((o as *const Reg<R>).cast_mut().cast(), free_reg::<R>) };
+            if rcv.is_first(o) {
+                // SAFETY: the receiver's only registration ever (inline) is
+                // unlinked and the receiver is off the map: unreachable
+                // for new readers and writers; free_rcv frees both.
+                unsafe { defer((rcv as *const Rcv<R>).cast_mut().cast(), free_rcv::<R>) };
+            } else {
+                o.last.set(true);
+                // SAFETY: unlinked above and the receiver is off the map:
+                // unreachable for new readers and writers; free_reg frees
+                // it and the receiver (with its inline registration,
+                // retired earlier).
+                unsafe { defer((o as *const Reg<R>).cast_mut().cast(), free_reg::<R>) };
+            }
             return Ok(changed);
         };
-        // The receiver: the existing one (`data` is dropped), or a new one,
-        // put on the map only once nothing can fail any more.
-        let spare = match old {
-            Some(_) => {
+        let home = match old {
+            Some(r) => {
+                // The existing receiver stays; `data` is not needed.
                 drop(data);
-                None
+                match r.first() {
+                    // A filter change: the new registration is boxed.
+                    Some(_) => Home::Boxed(r, KBox::new(reg, GFP_KERNEL)?),
+                    // A reserved receiver's first registration.
+                    None => Home::Slot(r, reg),
+                }
             }
-            None => Some(KBox::new(
-                Rcv {
-                    data,
-                    seen: CpuMarks::new()?,
-                    chain: Link::new(),
-                    reg: Cell::new(ptr::null()),
-                },
-                GFP_KERNEL,
-            )?),
+            None => Home::New(KBox::new(Rcv::new(data)?, GFP_KERNEL)?, reg),
         };
-        let rcv: &Rcv<R> = match (old, &spare) {
-            (Some(r), _) => r,
-            (None, Some(s)) => s,
-            (None, None) => return Err(code::EINVAL),
+        // Everything that can fail comes before anything is linked.
+        let fresh = self.new_keys(&w, home.reg())?;
+        self.grow_groups(&mut w, home.reg())?;
+        let (rcv, reg): (&Rcv<R>, &Reg<R>) = match home {
+            Home::Boxed(r, mut b) => {
+                b.place(NonNull::from(r));
+                (r, KBox::leak(b))
+            }
+            // SAFETY: writer mutex held; a reserved receiver without a
+            // registration has an empty slot; it is on the map, leaked.
+            Home::Slot(r, reg) => (r, unsafe { r.fill_first(reg) }),
+            Home::New(s, reg) => {
+                let s: &Rcv<R> = KBox::leak(s);
+                // SAFETY: writer mutex held; a new receiver, not on the
+                // map, at a stable address until free_rcv or free_reg
+                // frees it after its last registration (which takes it off
+                // the map first).
+                unsafe { chain.push(s) };
+                // SAFETY: writer mutex held; a new receiver's slot is
+                // empty; leaked above.
+                (s, unsafe { s.fill_first(reg) })
+            }
         };
-        reg.rcv = NonNull::from(rcv);
-        let fresh = self.new_keys(&w, &reg)?;
-        self.grow_groups(&mut w, &reg)?;
-        self.link_reg(&w, &reg, fresh);
-        let reg: &Reg<R> = KBox::leak(reg);
+        self.link_reg(&w, reg, fresh);
         changed.ifindex[0] = (!reg.filters.is_empty()).then_some(reg.ifindex);
         let prev = rcv.reg.replace(reg as *const Reg<R>);
-        match spare {
-            Some(s) => {
-                // The receiver now belongs to its registrations.
-                let s: &Rcv<R> = KBox::leak(s);
-                // SAFETY: writer mutex held; a new receiver, not on the map,
-                // at a stable address until free_reg frees it after its
-                // last registration (which takes it off the map first).
-                unsafe { chain.push(s) };
+        // SAFETY: NULL, or the receiver's previous live registration,
+        // still linked.
+        if let Some(o) = unsafe { prev.as_ref() } {
+            if !o.filters.is_empty() && Some(o.ifindex) != changed.ifindex[0] {
+                changed.ifindex[1] = Some(o.ifindex);
             }
-            None => {
-                // SAFETY: the receiver was on the map: `prev` is its live
-                // registration, still linked.
-                let o = unsafe { &*prev };
-                if !o.filters.is_empty() && Some(o.ifindex) != changed.ifindex[0] {
-                    changed.ifindex[1] = Some(o.ifindex);
-                }
-                self.unlink_reg(&mut w, o);
+            self.unlink_reg(&mut w, o);
+            if !rcv.is_first(o) {
                 // SAFETY: unlinked and no longer the receiver's live
                 // registration; the receiver lives on in the new one
                 // (`last` stays false); free_reg frees it.
                 unsafe { defer(prev.cast_mut().cast(), free_reg::<R>) };
             }
+            // An inline first registration stays in its receiver, unused,
+            // until the receiver is freed.
         }
         self.shrink_groups(&mut w);
         Ok(changed)
     }
 
-    /// Builds an unlinked registration for `spec` (receiver still unset).
-    fn make_reg(spec: Spec) -> Result<KBox<Reg<R>>> {
+    /// Builds an unlinked, unplaced registration for `spec` (receiver and
+    /// the nodes' back pointers still unset: [`Reg::place`]).
+    fn make_reg(spec: Spec) -> Result<Reg<R>> {
         let join = rxtable::join_scanned(&spec.filters, spec.join);
         let filters = spec.filters;
         let mut scanned = KVec::new();
@@ -718,22 +886,6 @@ impl<R: Receiver> RxTable<R> {
         if extra > 0 {
             nodes.more = KVec::with_capacity(extra, GFP_KERNEL)?;
         }
-        let mut reg = KBox::new(
-            Reg {
-                // SAFETY: an all-zero callback_head is what call_rcu expects.
-                rcu: unsafe { core::mem::zeroed() },
-                rcv: NonNull::dangling(),
-                last: Cell::new(false),
-                cookie: spec.cookie,
-                ifindex: spec.ifindex,
-                filters,
-                scanned,
-                join,
-                nodes,
-            },
-            GFP_KERNEL,
-        )?;
-        let regp: *const Reg<R> = &*reg;
         let node = |kind, mask, value| Node {
             link: Link::new(),
             key: Cell::new(ptr::null()),
@@ -741,27 +893,38 @@ impl<R: Receiver> RxTable<R> {
             ifindex: spec.ifindex,
             mask,
             value,
-            reg: regp,
+            reg: ptr::null(),
         };
         // All nodes are added before any is linked (and within the
         // capacity reserved above).
         if !join {
-            for i in 0..reg.filters.len() {
-                if let Place::Hashed { mask, value } = reg.filters[i].place() {
-                    reg.nodes.push(node(Kind::Hashed, mask, value))?;
+            for f in filters.iter() {
+                if let Place::Hashed { mask, value } = f.place() {
+                    nodes.push(node(Kind::Hashed, mask, value))?;
                 }
             }
         }
-        if !reg.scanned.is_empty() {
-            reg.nodes.push(node(Kind::Scanned, 0, 0))?;
+        if !scanned.is_empty() {
+            nodes.push(node(Kind::Scanned, 0, 0))?;
         }
         if spec.err_mask != 0 {
-            reg.nodes.push(node(Kind::Err, spec.err_mask, 0))?;
+            nodes.push(node(Kind::Err, spec.err_mask, 0))?;
         }
-        if !reg.filters.is_empty() {
-            reg.nodes.push(node(Kind::ByIf, 0, 0))?;
+        if !filters.is_empty() {
+            nodes.push(node(Kind::ByIf, 0, 0))?;
         }
-        Ok(reg)
+        Ok(Reg {
+            // SAFETY: an all-zero callback_head is what call_rcu expects.
+            rcu: unsafe { core::mem::zeroed() },
+            rcv: NonNull::dangling(),
+            last: Cell::new(false),
+            cookie: spec.cookie,
+            ifindex: spec.ifindex,
+            filters,
+            scanned,
+            join,
+            nodes,
+        })
     }
 
     /// The list a non-hashed node belongs on.

@@ -25,6 +25,7 @@ pub const TESTS: &[Test] = portable_table![
     raw_bind_interface_down,
     raw_bind_interface_removed,
     raw_socket_calls,
+    raw_close_in_every_state,
 ];
 
 const AF_CAN: u16 = libc::AF_CAN as u16;
@@ -282,6 +283,53 @@ fn raw_bind_interface_removed(ctx: &mut Ctx) -> TestResult {
         "write after the interface was unregistered",
     )?;
     expect_quiet(&[("socket bound to all interfaces", &all)])
+}
+
+/// Closing sockets in every state leaves nothing behind: never bound; a
+/// filter set but never bound; bound; bound, then its filters changed
+/// twice; bound to an interface that is then unregistered. Each state is
+/// checked first (the bound ones receive what they should), then all are
+/// closed and the whole stack must unload (a socket, or a receiver that
+/// holds one, left behind keeps CAN_RAW's module in use), and a stack
+/// loaded afresh delivers a frame.
+fn raw_close_in_every_state(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let tx = canraw::open(idx)?;
+    let mut socks = Vec::new();
+    for i in 0..40u16 {
+        let s = canraw::unbound()?;
+        let id = 0x100 + u32::from(i);
+        match i % 4 {
+            0 => {}
+            1 => s.set_filters(&[(id, 0x7FF)]).or_fail("set a filter")?,
+            2 => bind(&s, idx)?,
+            _ => {
+                bind(&s, idx)?;
+                s.set_filters(&[(id, 0x7FF)]).or_fail("set a filter")?;
+                s.set_filters(&[(id, 0x7FF), (0x300 + id, 0x7FF)])
+                    .or_fail("set two filters")?;
+            }
+        }
+        socks.push((i, s));
+    }
+    for (i, s) in &socks {
+        if i % 4 == 3 {
+            let f = std(0x100 + i, &[*i as u8]);
+            canraw::send(&tx, &f)?;
+            expect(s, &f, "socket whose filters changed twice")?;
+        }
+    }
+    let gone = canraw::open(idx)?;
+    ctx.remove_can_ifaces()?;
+    drop((tx, gone, socks));
+    ctx.unload_all()
+        .map_err(|e| format!("unloading after every socket was closed: {e}"))?;
+    let idx = raw1(ctx)?;
+    let s = canraw::open(idx)?;
+    let tx = canraw::open(idx)?;
+    let f = std(0x42, &[4, 2]);
+    canraw::send(&tx, &f)?;
+    expect(&s, &f, "socket of the reloaded stack")
 }
 
 /// socket() with SOCK_DGRAM is EPROTOTYPE; the socket reports its type
