@@ -9,6 +9,7 @@ mod errors;
 mod filter;
 mod gateway;
 mod i82527;
+mod install;
 mod lifecycle;
 mod loopdrv;
 mod mixed;
@@ -96,6 +97,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         capture::SJA1000_TESTS,
         i82527::TESTS,
         rxcontext::TESTS,
+        install::TESTS,
         // Until rcan_bcm lands (issue 13): mainline stage only.
         bcm::TESTS,
     ]
