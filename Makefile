@@ -7,6 +7,10 @@
 #   make fuzz     the syscall fuzzer on the debug kernel (SECONDS=N per seed,
 #                 SEED=S, THREADS=K; default 600 s, a time-derived seed)
 #   make modules  just the kernel modules (KDIR=... for your own kernel)
+#   make install  install what `make` built (modules, tools, man pages,
+#                 completions, /etc/modprobe.d/rcan.conf); builds nothing.
+#                 KDIR as for `make modules`; DESTDIR, PREFIX (/usr/local)
+#   make uninstall  remove exactly what make install put there
 #
 # RCAN_KERNEL=debug selects the KASAN/lockdep/kmemleak kernel.
 
@@ -33,9 +37,9 @@ RCAN_CONFIG := CONFIG_RCAN=m CONFIG_RCAN_PF=m CONFIG_RCAN_PROTO_CAN=m CONFIG_RCA
 	CONFIG_RCAN_PROTO_DSOR=m CONFIG_RCAN_DSOR_NODE_ID=0x00
 BINDINGS := rust/bindings/bindings_generated.rs
 
-.PHONY: all setup kernel modules bindings userspace man demo check fuzz bench clean
+.PHONY: all setup kernel modules bindings userspace man demo check fuzz bench clean install uninstall
 
-all: modules userspace
+all: modules userspace man
 
 setup:
 	bash $(T)/setup.sh
@@ -58,6 +62,16 @@ userspace:
 # own clap definitions (tools/mangen), into target/man.
 man: userspace
 	target/release/rcan-mangen target/man
+
+# Installs what `make` built and builds nothing, so that `sudo make install`
+# after `make` as yourself leaves no root-owned files in the tree. The
+# manifest of what it wrote is $(PREFIX)/share/rcan/install-manifest.
+PREFIX ?= /usr/local
+install:
+	KDIR='$(kdir)' DESTDIR='$(DESTDIR)' PREFIX='$(PREFIX)' bash scripts/install.sh install
+
+uninstall:
+	DESTDIR='$(DESTDIR)' PREFIX='$(PREFIX)' bash scripts/install.sh uninstall
 
 demo: setup modules userspace
 	bash $(T)/demo.sh

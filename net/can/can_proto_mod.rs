@@ -17,10 +17,15 @@ mod can_proto;
 
 use can_proto::CanProtoModule;
 
+// `alias`: what rcan_pf requests on socket(PF_CAN, ..., CANPROTO_CAN) while
+// no module has registered protocol 16 (`request_proto_module` in
+// rust/glue/can/family.rs); "rcan-" so that it never names mainline's
+// `can-proto-16`.
 module! {
     type: CanProtoModule,
     name: "rcan_can",
     author: "rcan developers",
     description: "CANPROTO_CAN: thesis CAN 2.0A/B socket protocol",
     license: "GPL",
+    alias: ["rcan-proto-16"],
 }

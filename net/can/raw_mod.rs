@@ -17,10 +17,15 @@ mod raw;
 
 use raw::RawModule;
 
+// `alias`: what rcan_pf requests on socket(PF_CAN, ..., CAN_RAW) while
+// no module has registered protocol 1 (`request_proto_module` in
+// rust/glue/can/family.rs); "rcan-" so that it never names mainline's
+// `can-proto-1`.
 module! {
     type: RawModule,
     name: "rcan_raw",
     author: "rcan developers",
     description: "CAN_RAW: SocketCAN-compatible raw CAN protocol",
     license: "GPL",
+    alias: ["rcan-proto-1"],
 }

@@ -16,6 +16,7 @@
 //! (high-resolution timers in statics), [`pci`] (PCI drivers and BARs),
 //! [`isa`] (claimed memory/port windows, interrupt autoprobe), [`percpu`]
 //! (per-CPU counters), [`params`] (module parameters of the C shims),
+//! [`kmod`] (loading modules on demand),
 //! [`can`] (the CAN framework: the receive table).
 #![allow(dead_code)]
 
@@ -44,6 +45,7 @@ pub(crate) mod can;
 pub(crate) mod hrtimer;
 pub(crate) mod iomap;
 pub(crate) mod isa;
+pub(crate) mod kmod;
 pub(crate) mod lock;
 pub(crate) mod netdev;
 pub(crate) mod params;

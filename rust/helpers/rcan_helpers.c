@@ -12,6 +12,7 @@
 #include <linux/delay.h>
 #include <linux/interrupt.h>
 #include <linux/io.h>
+#include <linux/kmod.h>
 #include <linux/ioport.h>
 #include <linux/module.h>
 #include <linux/mutex.h>
@@ -366,6 +367,11 @@ bool rcan_try_module_get(struct module *mod)
 void rcan_module_put(struct module *mod)
 {
 	module_put(mod);
+}
+
+int rcan_request_module(const char *name)
+{
+	return request_module("%s", name);
 }
 
 u32 rcan_get_random_u32(void)

@@ -147,6 +147,8 @@ void rcan_dev_stats_err(struct net_device *dev, int which);
 /* module references */
 bool rcan_try_module_get(struct module *mod);
 void rcan_module_put(struct module *mod);
+/* request_module("%s", name): the name is never used as a format */
+int rcan_request_module(const char *name);
 
 /* random */
 u32 rcan_get_random_u32(void);

@@ -19,10 +19,15 @@ mod candsor;
 
 use candsor::DsorModule;
 
+// `alias`: what rcan_pf requests on socket(PF_CAN, ..., CANPROTO_DSOR) while
+// no module has registered protocol 17 (`request_proto_module` in
+// rust/glue/can/family.rs); "rcan-" so that it never names mainline's
+// `can-proto-17`.
 module! {
     type: DsorModule,
     name: "rcan_dsor",
     author: "rcan developers",
     description: "CANPROTO_DSOR: the DSOR higher-layer CAN protocol and UDP/IP over CAN (thesis candsor)",
     license: "GPL",
+    alias: ["rcan-proto-17"],
 }

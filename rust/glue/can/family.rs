@@ -429,8 +429,26 @@ extern "C" fn rcan_proto_unregister(cp: *const CanProto) {
     synchronize_rcu();
 }
 
+/// Whether protocol `proto` (below [`CANPROTO_MAX`]) has an entry in the
+/// table now. Any context.
+fn proto_registered(proto: usize) -> bool {
+    let g = RcuReadGuard::new();
+    PROTOS[proto].read(&g).is_some()
+}
+
+/// Loads the module of protocol `protocol` through its alias
+/// `rcan-proto-<protocol>` (mainline's af_can requests `can-proto-<N>`;
+/// ours must not collide with it, so that `modprobe` never picks
+/// mainline's `can-raw` for our family or ours for mainline's). Process
+/// context; sleeps while modprobe runs: call it with no lock held and
+/// outside any RCU read-side section.
+fn request_proto_module(protocol: ffi::c_int) -> Result {
+    let name = kernel::str::CString::try_from_fmt(kernel::fmt!("rcan-proto-{}", protocol))?;
+    crate::glue::kmod::request_module(&name)
+}
+
 /// `net_proto_family.create`: socket(PF_CAN, type, protocol). Process
-/// context.
+/// context; may sleep (loading the protocol's module on demand).
 ///
 /// # Safety
 ///
@@ -450,6 +468,14 @@ unsafe extern "C" fn pf_can_create(
     }
     // SAFETY: `sock` is the new socket the socket layer is creating.
     let sock_type = unsafe { (*sock).type_ } as i32;
+    if !proto_registered(protocol as usize) {
+        // As af_can does with "can-proto-N": the protocol's module declares
+        // this alias (`module!`'s `alias:`). Outside the RCU section and
+        // without WRITERS: modprobe sleeps, and the module's init takes
+        // WRITERS to register. Any failure ends as EPROTONOSUPPORT below,
+        // when the table still has no entry.
+        let _ = request_proto_module(protocol);
+    }
     let (create, owner) = {
         let g = RcuReadGuard::new();
         let Some(cp) = PROTOS[protocol as usize].read(&g) else {

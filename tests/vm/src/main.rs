@@ -243,6 +243,17 @@ fn main() -> ExitCode {
                 .is_none_or(|f| f.split(',').any(|part| t.name.contains(part)))
         })
         .partition(|t| t.runs_on(opts.stack));
+    // Tests too slow for the debug kernel's per-test watchdog: listed,
+    // with the reason, and not run there.
+    let (tests, too_slow): (Vec<&Test>, Vec<&Test>) = tests
+        .into_iter()
+        .partition(|t| !(ctx::debug_kernel() && cases::RELEASE_ONLY.contains(&t.name)));
+    for t in &too_slow {
+        println!(
+            "# {}: release kernel only (past the debug kernel's per-test watchdog under TCG)",
+            t.name
+        );
+    }
     if opts.list {
         tests.iter().for_each(|t| println!("{}", t.name));
         return ExitCode::SUCCESS;

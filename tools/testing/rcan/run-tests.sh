@@ -2,7 +2,8 @@
 # SPDX-License-Identifier: GPL-2.0
 # The test command (make check, called by .ci/run): host tests (cargo test,
 # then tests/frontdoor.sh: how the kernel build fails and shares its cache,
-# then tests/unsafe.sh: the ceiling on unsafe outside rust/glue/),
+# then tests/unsafe.sh: the ceiling on unsafe outside rust/glue/, then
+# tests/dkms.sh: dkms.conf names every module Kbuild builds),
 # then the VM suite on the release kernel, its CAN_RAW/can-utils subset
 # against mainline SocketCAN (can.ko, can-raw.ko, vcan.ko of the same
 # kernel) in a VM boot of its own, and the suite again on the debug kernel
@@ -66,6 +67,11 @@ echo "=== host: unsafe outside rust/glue (ratchet)"
 bash "$RCAN_ROOT/tools/testing/rcan/tests/unsafe.sh" 2>&1 | tee "$log_dir/unsafe.log"
 tally unsafe "${PIPESTATUS[0]}" "$log_dir/unsafe.log"
 
+# dkms.conf names every module the Kbuild files build (seconds).
+echo "=== host: dkms.conf against the Kbuild files"
+bash "$RCAN_ROOT/tools/testing/rcan/tests/dkms.sh" 2>&1 | tee "$log_dir/dkms.log"
+tally dkms "${PIPESTATUS[0]}" "$log_dir/dkms.log"
+
 vm_stage() {
 	local variant=$1
 	echo "=== VM suite on the $variant kernel"
@@ -74,7 +80,10 @@ vm_stage() {
 		tally "vm-$variant" 1 /dev/null
 		return
 	fi
-	RCAN_KERNEL=$variant bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 --qemu-extra "$RCAN_QEMU_CAN" -- \
+	# RCAN_KBUILD: install_autoload installs the kernel's own modules
+	# beside ours and runs make install KDIR=... against it.
+	RCAN_KERNEL=$variant RCAN_KBUILD=$(RCAN_KERNEL=$variant bash "$RCAN_ROOT/tools/testing/rcan/build-kernel.sh") \
+		bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 --qemu-extra "$RCAN_QEMU_CAN" -- \
 		target/release/rcan-vmtest 2>&1 | tee "$log_dir/vm-$variant.log"
 	tally "vm-$variant" "${PIPESTATUS[0]}" "$log_dir/vm-$variant.log"
 }

@@ -83,11 +83,17 @@ impl pci::Driver for AdvantechPci {
     }
 }
 
-static IDS: [glue::bindings::pci_device_id; 3] = [
+/// The PCI ids the driver matches (`DRIVER.register` gets [`IDS`], a
+/// copy). The module root exports another copy under the symbol name
+/// modpost reads (`MODULE_DEVICE_TABLE(pci, ...)`), which makes these the
+/// module's `pci:v...` aliases: one list for matching and autoloading.
+pub(crate) const PCI_IDS: [glue::bindings::pci_device_id; 3] = [
     pci::id(0x13fe, 0xc002),
     pci::id(0x13fe, 0xc302),
     pci::ID_END,
 ];
+
+static IDS: [glue::bindings::pci_device_id; 3] = PCI_IDS;
 
 static DRIVER: pci::Registration<AdvantechPci> = pci::Registration::new();
 

@@ -22,6 +22,17 @@ mod sja1000;
 
 use kvaser_pci::KvaserPciModule;
 
+/// `MODULE_DEVICE_TABLE(pci, ...)`: the driver's id table
+/// ([`kvaser_pci::PCI_IDS`]) under the symbol name modpost looks for. modpost
+/// writes one `alias: pci:v...` per entry into the module, so `modinfo`
+/// shows them and udev (or `modprobe $(cat /sys/bus/pci/devices/*/modalias)`)
+/// loads the module for a matching card. Never read at run time.
+#[no_mangle]
+#[used]
+#[allow(non_upper_case_globals)]
+static __mod_pci__rcan_kvaser_pci_device_table: [glue::bindings::pci_device_id;
+    kvaser_pci::PCI_IDS.len()] = kvaser_pci::PCI_IDS;
+
 module! {
     type: KvaserPciModule,
     name: "rcan_kvaser_pci",

@@ -153,7 +153,14 @@ impl pci::Driver for PcanPci {
     }
 }
 
-static IDS: [glue::bindings::pci_device_id; 2] = [pci::id(0x001c, 0x0001), pci::ID_END];
+/// The PCI ids the driver matches (`DRIVER.register` gets [`IDS`], a
+/// copy). The module root exports another copy under the symbol name
+/// modpost reads (`MODULE_DEVICE_TABLE(pci, ...)`), which makes these the
+/// module's `pci:v...` aliases: one list for matching and autoloading.
+pub(crate) const PCI_IDS: [glue::bindings::pci_device_id; 2] =
+    [pci::id(0x001c, 0x0001), pci::ID_END];
+
+static IDS: [glue::bindings::pci_device_id; 2] = PCI_IDS;
 
 static DRIVER: pci::Registration<PcanPci> = pci::Registration::new();
 

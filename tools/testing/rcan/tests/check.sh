@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-2.0
-# Sourced by the shell test stages (frontdoor.sh, unsafe.sh): counts
+# Sourced by the shell test stages (frontdoor.sh, unsafe.sh, dkms.sh): counts
 # results as make check's tally expects them.
 #
 # check NAME STATUS [DETAIL]: counts one test, passed if STATUS is 0; a
