@@ -74,7 +74,10 @@ vm_stage() {
 		tally "vm-$variant" 1 /dev/null
 		return
 	fi
-	RCAN_KERNEL=$variant bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 --qemu-extra "$RCAN_QEMU_CAN" -- \
+	# RCAN_KBUILD: the same kernel's mainline CAN modules, for the tests
+	# that compare with mainline or need its can-dev in the same boot.
+	RCAN_KERNEL=$variant RCAN_KBUILD=$(RCAN_KERNEL=$variant bash "$RCAN_ROOT/tools/testing/rcan/build-kernel.sh") \
+		bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 --qemu-extra "$RCAN_QEMU_CAN" -- \
 		target/release/rcan-vmtest 2>&1 | tee "$log_dir/vm-$variant.log"
 	tally "vm-$variant" "${PIPESTATUS[0]}" "$log_dir/vm-$variant.log"
 }
