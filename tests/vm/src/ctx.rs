@@ -690,6 +690,7 @@ mod tests {
                 "rcan_time",
                 "rcan_rtime",
                 "rcan_dsor",
+                "rcan_dev",
                 "rcan_kvaser_pci",
                 "rcan_advantech_pci",
                 "rcan_sja1000_isa",
