@@ -398,9 +398,12 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
                 }
                 // The bit timing goes where `ip link set ... type can`
                 // puts it (one source of truth); the registers are
-                // written from it at open.
-                let (bt, triple) = bittiming::from_btr(s.btr0, s.btr1, p.xtal_hz / 2);
-                p.can.set_registers_timing(bt, triple);
+                // written from it at open. 0x00/0x00 (what GET reports
+                // while none is set) leaves it unset.
+                if s.btr0 != 0 || s.btr1 != 0 {
+                    let (bt, triple) = bittiming::from_btr(s.btr0, s.btr1, p.xtal_hz / 2);
+                    p.can.set_registers_timing(bt, triple);
+                }
                 let mut st = p.chip.lock();
                 st.chip.cfg.ocr = s.ocr;
                 st.chip.cfg.cdr = s.cdr & !CDR_PELICAN;
