@@ -392,6 +392,14 @@ fn sja1000_config_tool_agrees_with_ip(ctx: &mut Ctx) -> TestResult {
     ctx.sja1000_cards()?;
     let tool = ctx.root().join("target/release/sja1000config");
     let tool = tool.to_string_lossy().into_owned();
+    let unset = tools::run_ok(&tool, &["can0"])?;
+    ensure!(
+        unset
+            .stdout
+            .contains("btr0 0x00 btr1 0x00 (no bit timing set"),
+        "sja1000config on a device without bit timing: {}",
+        unset.stdout
+    );
     super::candev::ip_ok(&["link", "set", "can0", "type", "can", "bitrate", "125000"])?;
     let out = tools::run_ok(&tool, &["can0"])?;
     ensure!(
@@ -413,13 +421,13 @@ fn sja1000_config_tool_agrees_with_ip(ctx: &mut Ctx) -> TestResult {
 /// on the same card, in one boot, after the same `ip` commands (each
 /// command's errors too): the CAN attributes are identical except the
 /// control modes each driver supports (ours: triple sampling only so far).
+/// Seven steps: ten took 243 s on the debug kernel with a busy host (the
+/// `ip` starts dominate), too near its 360 s watchdog.
 fn sja1000_ip_matches_mainline(ctx: &mut Ctx) -> TestResult {
     let steps: &[&[&str]] = &[
         &["bitrate", "125000"],
         &["bitrate", "500000", "sample-point", "0.875"],
         &["bitrate", "800000", "sample-point", "0.75"],
-        &["bitrate", "33333"],
-        &["bitrate", "1000000", "sjw", "2"],
         &[
             "tq",
             "250",
@@ -440,7 +448,6 @@ fn sja1000_ip_matches_mainline(ctx: &mut Ctx) -> TestResult {
             "triple-sampling",
             "on",
         ],
-        &["bitrate", "10000", "sample-point", "0.5"],
         &["bitrate", "1000"],
         &["loopback", "off"],
     ];
