@@ -297,6 +297,12 @@ pub(crate) trait Driver: Sized + 'static {
     fn poll(_dev: &Dev<Self>, _priv: &Self::Priv, _napi: &Napi, _budget: usize) -> usize {
         0
     }
+    /// For a CAN controller driver: the device layer's link ops and hooks
+    /// (`glue::can::dev::link_setup::<Self>()`), so that `ip link set
+    /// canX type can ...` reaches it. Called at allocation.
+    fn link() -> Option<super::can::dev::LinkSetup> {
+        None
+    }
 }
 
 /// Proof of running inside a device's NAPI poll (NET_RX softirq,
@@ -533,6 +539,17 @@ impl<T: Driver> Adapter<T> {
                 bindings::rcan_netdev_set_no_queue(dev);
             }
             d.netdev_ops = &Self::OPS;
+            if let Some(l) = T::link() {
+                // rtnetlink calls these ops for this device only; they
+                // find the driver through `ml_priv` (type ML_PRIV_NONE:
+                // mainline af_can, which looks for ML_PRIV_CAN, never
+                // takes it for its own).
+                d.rtnl_link_ops = l.ops;
+                d.ml_priv = l.hooks.cast_mut().cast();
+                // No carrier until `open` (mainline register_candev), so
+                // the operstate follows: UP once open, not UNKNOWN.
+                bindings::rcan_netif_carrier(dev, false);
+            }
         }
     }
 

@@ -7,10 +7,14 @@
 //!   sending) that protocols and drivers use.
 //! * [`abi`]: the C ABI between the modules underneath it.
 //! * [`rx`]: the incremental receive table of `rcan_pf`.
+//! * [`dev`]: the CAN device layer, drivers' side (`CanDevice`), and the
+//!   C ABI to `rcan_dev`, which registers the "can" link kind (its
+//!   rtnetlink callbacks are `link.rs`, compiled into `rcan_dev` only).
 //!
 //! `family.rs` (the PF_CAN family and the C entry points `rcan_pf`
 //! exports) is compiled into `rcan_pf` only, by `pf_can_mod.rs`.
 
 pub(crate) mod abi;
+pub(crate) mod dev;
 pub(crate) mod proto;
 pub(crate) mod rx;

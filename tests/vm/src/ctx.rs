@@ -64,6 +64,9 @@ pub enum Module {
     Rtime,
     /// DSOR protocol and canip0 (`net/can/dsor/rcan_dsor.ko`).
     Dsor,
+    /// The CAN device layer, link kind "can" (`drivers/net/can/dev/rcan_dev.ko`):
+    /// the SJA1000 front-ends need it ([`Ctx::insmod`] loads it first).
+    Dev,
     /// SJA1000 front-end for Kvaser PCIcan cards.
     Kvaser,
     /// SJA1000 front-end for Advantech PCM-3680I / MIOe-3680 cards.
@@ -82,7 +85,7 @@ pub enum Module {
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 14] = [
+    pub const ALL: [Module; 15] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
@@ -90,6 +93,7 @@ impl Module {
         Module::Time,
         Module::Rtime,
         Module::Dsor,
+        Module::Dev,
         Module::Kvaser,
         Module::Advantech,
         Module::Isa,
@@ -109,6 +113,7 @@ impl Module {
             Module::Time => "rcan_time",
             Module::Rtime => "rcan_rtime",
             Module::Dsor => "rcan_dsor",
+            Module::Dev => "rcan_dev",
             Module::Kvaser => "rcan_kvaser_pci",
             Module::Advantech => "rcan_advantech_pci",
             Module::Isa => "rcan_sja1000_isa",
@@ -129,6 +134,7 @@ impl Module {
             Module::Time => "net/can/dsor/rcan_time.ko",
             Module::Rtime => "net/can/dsor/rcan_rtime.ko",
             Module::Dsor => "net/can/dsor/rcan_dsor.ko",
+            Module::Dev => "drivers/net/can/dev/rcan_dev.ko",
             Module::Kvaser => "drivers/net/can/sja1000/rcan_kvaser_pci.ko",
             Module::Advantech => "drivers/net/can/sja1000/rcan_advantech_pci.ko",
             Module::Isa => "drivers/net/can/sja1000/rcan_sja1000_isa.ko",
@@ -155,6 +161,12 @@ pub enum Mainline {
     /// Broadcast manager (`net/can/can-bcm.ko`): not in [`Mainline::ALL`],
     /// loaded only by [`Ctx::bcm_ifaces`].
     Bcm,
+    /// SJA1000 core (`drivers/net/can/sja1000/sja1000.ko`): not in
+    /// [`Mainline::ALL`], loaded only by [`Ctx::sja1000_cards`].
+    Sja1000,
+    /// Kvaser PCIcan front-end (`drivers/net/can/sja1000/kvaser_pci.ko`),
+    /// likewise.
+    KvaserPci,
 }
 
 impl Mainline {
@@ -169,6 +181,8 @@ impl Mainline {
             Mainline::Dev => "can_dev",
             Mainline::Vcan => "vcan",
             Mainline::Bcm => "can_bcm",
+            Mainline::Sja1000 => "sja1000",
+            Mainline::KvaserPci => "kvaser_pci",
         }
     }
 
@@ -180,6 +194,8 @@ impl Mainline {
             Mainline::Dev => "drivers/net/can/dev/can-dev.ko",
             Mainline::Vcan => "drivers/net/can/vcan.ko",
             Mainline::Bcm => "net/can/can-bcm.ko",
+            Mainline::Sja1000 => "drivers/net/can/sja1000/sja1000.ko",
+            Mainline::KvaserPci => "drivers/net/can/sja1000/kvaser_pci.ko",
         }
     }
 }
@@ -241,8 +257,20 @@ impl Ctx {
         self.root.join(m.rel_path())
     }
 
-    /// `insmod` module `m` with `params`.
+    /// `insmod` module `m` with `params`. An SJA1000 front-end needs
+    /// `rcan_dev` (the "can" link kind its devices use): it is loaded
+    /// first if it is not, as modprobe would.
     pub fn insmod(&mut self, m: Module, params: &[&str]) -> Result<(), String> {
+        let sja1000 = [
+            Module::Kvaser,
+            Module::Advantech,
+            Module::Isa,
+            Module::Pcan,
+            Module::Tscan1,
+        ];
+        if sja1000.contains(&m) && !self.is_loaded(Module::Dev) {
+            self.insmod(Module::Dev, &[])?;
+        }
         let ko = self.ko(m);
         sys::finit_module(&ko, params)
             .map_err(|e| format!("insmod {} {}: {e}", ko.display(), params.join(" ")))
@@ -330,6 +358,36 @@ impl Ctx {
         (0..n).map(|i| self.ifindex(&dev(i))).collect()
     }
 
+    /// Loads the SJA1000 driver of the stack under test for QEMU's Kvaser
+    /// cards (can0, can1: the VM runs with `RCAN_QEMU_CAN`), with no bit
+    /// timing set and the interfaces down, for the `ip ... type can`
+    /// tests. Ours: rcan_pf, rcan_dev, rcan_kvaser_pci. Mainline: can-dev,
+    /// sja1000, kvaser_pci (no PF_CAN needed for `ip`).
+    pub fn sja1000_cards(&mut self) -> Result<(), String> {
+        match self.stack {
+            Stack::Ours => {
+                self.insmod(Module::Pf, &[])?;
+                self.insmod(Module::Dev, &[])?;
+                self.insmod(Module::Kvaser, &[])?;
+            }
+            Stack::Mainline => {
+                for m in [Mainline::Dev, Mainline::Sja1000, Mainline::KvaserPci] {
+                    let ko = self
+                        .mainline_ko(m)
+                        .ok_or("no kernel build directory (RCAN_KBUILD or --kbuild)")?;
+                    sys::finit_module(&ko, &[])
+                        .map_err(|e| format!("insmod {}: {e}", ko.display()))?;
+                }
+            }
+        }
+        if !Path::new("/sys/class/net/can1").exists() {
+            return Err(
+                "fewer than two Kvaser channels (is the VM booted with RCAN_QEMU_CAN?)".into(),
+            );
+        }
+        Ok(())
+    }
+
     /// [`Ctx::can_ifaces`] plus the CAN_BCM protocol. Mainline: can-bcm.ko.
     /// Ours: an error until rcan_bcm exists (issue 13); the BCM tests are
     /// registered mainline-only until then.
@@ -381,7 +439,10 @@ impl Ctx {
                 }
             }
         }
-        for m in std::iter::once(Mainline::Bcm).chain(Mainline::ALL.into_iter().rev()) {
+        for m in [Mainline::Bcm, Mainline::KvaserPci, Mainline::Sja1000]
+            .into_iter()
+            .chain(Mainline::ALL.into_iter().rev())
+        {
             if let Err(e) = rmmod_retrying(m.name()) {
                 errors.push(e);
             }
@@ -629,6 +690,7 @@ mod tests {
                 "rcan_time",
                 "rcan_rtime",
                 "rcan_dsor",
+                "rcan_dev",
                 "rcan_kvaser_pci",
                 "rcan_advantech_pci",
                 "rcan_sja1000_isa",

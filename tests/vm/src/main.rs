@@ -24,7 +24,7 @@
 //! - `--stack STACK` (default `$RCAN_VMTEST_STACK`, else `ours`): `ours`
 //!   runs every test against the rcan modules except the mainline-only
 //!   ones; `mainline` runs only the portable tests (CAN_RAW, can-utils,
-//!   tcpdump) and the mainline-only ones (CAN_BCM with `can-bcm.ko`, until
+//!   tcpdump, `ip ... type can` on the Kvaser cards) and the mainline-only ones (CAN_BCM with `can-bcm.ko`, until
 //!   rcan_bcm lands, issue 13) against mainline SocketCAN (`can.ko`,
 //!   `can-raw.ko`, `vcan.ko echo=1`), to show that they encode mainline
 //!   behaviour. The other tests are skipped there, not counted.

@@ -12,6 +12,11 @@
 //!
 //! Setting needs CAP_NET_ADMIN and the interface down (`ip link set IFACE
 //! down`): the driver answers EPERM and EBUSY otherwise.
+//!
+//! The bit timing is the same one `ip link set IFACE type can bitrate ...`
+//! sets and `ip -details link show IFACE` shows (the driver keeps one);
+//! btr0 0x00 btr1 0x00 stands for "none set yet" (the interface does not
+//! come up until one is), in both directions.
 
 use clap::error::ErrorKind;
 use clap::Parser;
@@ -35,14 +40,14 @@ fn show(iface: &str, s: &Setup) {
     let state = ["error-active", "error-warning", "error-passive", "bus-off"]
         .get(usize::from(s.state))
         .unwrap_or(&"?");
+    let rate = if s.btr0 == 0 && s.btr1 == 0 {
+        "no bit timing set".to_string()
+    } else {
+        format!("{} bit/s", bitrate(s.btr0, s.btr1, s.xtal_hz.max(1)))
+    };
     println!(
-        "{iface}: btr0 {:#04x} btr1 {:#04x} ({} bit/s at {} Hz) ocr {:#04x} cdr {:#04x}",
-        s.btr0,
-        s.btr1,
-        bitrate(s.btr0, s.btr1, s.xtal_hz.max(1)),
-        s.xtal_hz,
-        s.ocr,
-        s.cdr
+        "{iface}: btr0 {:#04x} btr1 {:#04x} ({rate} at {} Hz) ocr {:#04x} cdr {:#04x}",
+        s.btr0, s.btr1, s.xtal_hz, s.ocr, s.cdr
     );
     println!(
         "{iface}: state {state}, rxerr {}, txerr {}, restarts {}",

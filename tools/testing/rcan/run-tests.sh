@@ -81,7 +81,8 @@ vm_stage() {
 		return
 	fi
 	# RCAN_KBUILD: install_autoload installs the kernel's own modules
-	# beside ours and runs make install KDIR=... against it.
+	# beside ours and runs make install KDIR=... against it; other tests
+	# load the same kernel's mainline CAN modules to compare in one boot.
 	RCAN_KERNEL=$variant RCAN_KBUILD=$(RCAN_KERNEL=$variant bash "$RCAN_ROOT/tools/testing/rcan/build-kernel.sh") \
 		bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 --qemu-extra "$RCAN_QEMU_CAN" -- \
 		target/release/rcan-vmtest 2>&1 | tee "$log_dir/vm-$variant.log"

@@ -36,6 +36,14 @@
 //! an Ethernet card whose MAC filter passes only the host's traffic. See
 //! Documentation/networking/rcan/sja1000.rst.
 //!
+//! The CAN device layer (`ip link set canX type can ...`, `rcan_dev`):
+//! the device's bit timing and control modes live in its
+//! [`CanDev`] (one source of truth, shared with `sja1000config`'s
+//! ioctl, which reads and writes them as BTR0/BTR1); `open` refuses a
+//! device without a bit timing (`EINVAL`, "bit-timing not yet defined",
+//! as mainline) and writes BTR0/BTR1 computed from it. The limits are
+//! mainline's `sja1000` ones, the clock half the board's crystal.
+//!
 //! Bus-off recovery: the chip enters reset mode by itself; the interrupt
 //! handler restarts it at once (clearing the error counters), and the chip
 //! then waits for 128 occurrences of 11 recessive bits before it takes
@@ -45,11 +53,14 @@
 #![forbid(unsafe_code)]
 
 use crate::glue::bindings;
+use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
 use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::params::Param;
 use crate::glue::skb::Skb;
 use crate::rcan_api::{self, FilterListener};
+use crate::rcan_core::bittiming::{self, SJA1000_BITTIMING_CONST};
+use crate::rcan_core::candev::{self, CanState, Settings};
 use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::sja1000::{
     bitrate, error_frame, hw_filter, restarted_frame, Chip, Config, Event, HwFilter, Regs, Setup,
@@ -107,22 +118,46 @@ impl crate::rcan_core::sja1000_boards::Io for crate::glue::pci::IoMem {
 }
 
 /// Module parameter `btr0` of every SJA1000 front-end (number 0 in each
-/// front-end's C shim; default from the thesis' Kconfig: 0x01).
-const BTR0: Param<u8> = Param::new(0);
-/// Module parameter `btr1` (number 1; default 0x14: 500 kbit/s with a
-/// 16 MHz crystal).
-const BTR1: Param<u8> = Param::new(1);
+/// front-end's C shim): with `btr1`, an optional preset of the bit timing
+/// (the thesis' CONFIG_SJA1000_BTR0/1 way); -1 (the default): none.
+const BTR0: Param<i32> = Param::new(0);
+/// Module parameter `btr1` (number 1).
+const BTR1: Param<i32> = Param::new(1);
+
+/// The BTR0/BTR1 preset of the module parameters, if both are given
+/// (0..255). Process context (probe).
+fn preset_btr() -> Option<(u8, u8)> {
+    let (b0, b1) = (BTR0.get(), BTR1.get());
+    Some((u8::try_from(b0).ok()?, u8::try_from(b1).ok()?))
+}
 
 /// The chip configuration of a front-end: its board's output control and
-/// clock divider, the bit timing from the module parameters `btr0` and
-/// `btr1`. Process context (probe).
+/// clock divider. The bit timing registers are written at `open` from the
+/// device's bit timing ([`CanDev`]); until then they hold the module
+/// parameters' preset, or 0. Process context (probe).
 pub(crate) fn module_config(ocr: u8, cdr: u8) -> Config {
+    let (btr0, btr1) = preset_btr().unwrap_or((0, 0));
     Config {
-        btr0: BTR0.get(),
-        btr1: BTR1.get(),
+        btr0,
+        btr1,
         ocr,
         cdr,
     }
+}
+
+/// The device's settings at probe: the module parameters' preset decoded
+/// (bit timing, triple sampling), else none (as mainline: no bit timing
+/// until user space sets one).
+fn preset_settings(clock_hz: u32) -> Settings {
+    let mut s = Settings::default();
+    if let Some((b0, b1)) = preset_btr() {
+        let (bt, triple) = bittiming::from_btr(b0, b1, clock_hz);
+        s.bittiming = bt;
+        if triple {
+            s.ctrlmode |= candev::ctrlmode::THREE_SAMPLES;
+        }
+    }
+    s
 }
 
 /// Interrupt causes handled per interrupt before returning (mainline
@@ -149,8 +184,9 @@ pub(crate) struct ChipState<R: Regs> {
     /// `filter` differs from what the chip has.
     filter_pending: bool,
     running: bool,
-    /// Automatic restarts after bus-off.
-    restarts: u32,
+    /// The worst error state reported since the chip last started (for
+    /// counting moves to a worse state, as mainline does).
+    worst: State,
 }
 
 /// Per-device driver data.
@@ -160,6 +196,8 @@ pub(crate) struct Sja1000Priv<R: Regs> {
     irq: u32,
     /// Crystal frequency of the board, for bit rates in logs and GET.
     xtal_hz: u32,
+    /// The device layer's state: bit timing, control modes, statistics.
+    can: CanDev,
 }
 
 impl<R: Regs + Send + 'static> Sja1000Priv<R> {
@@ -174,12 +212,13 @@ impl<R: Regs + Send + 'static> Sja1000Priv<R> {
                     filter: HwFilter::OPEN,
                     filter_pending: false,
                     running: false,
-                    restarts: 0,
+                    worst: State::Active,
                 },
                 "Sja1000Priv::chip"
             )?,
             irq,
             xtal_hz,
+            can: CanDev::new(preset_settings(xtal_hz / 2))?,
         })
     }
 }
@@ -317,20 +356,29 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     fn private_ioctl(dev: &Dev<Self>, p: &Self::Priv, cmd: u32, data: &UserBuf) -> Result {
         match cmd {
             SIOCRCANSJA1000GET => {
+                let set = p.can.settings();
+                let (btr0, btr1) = if set.bittiming.bitrate != 0 {
+                    bittiming::to_btr(
+                        &set.bittiming,
+                        set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
+                    )
+                } else {
+                    (0, 0)
+                };
                 let s = {
                     let mut st = p.chip.lock();
                     let cfg = st.chip.cfg;
                     let rxerr = st.chip.regs.read(crate::rcan_core::sja1000::reg::RXERR);
                     let txerr = st.chip.regs.read(crate::rcan_core::sja1000::reg::TXERR);
                     Setup {
-                        btr0: cfg.btr0,
-                        btr1: cfg.btr1,
+                        btr0,
+                        btr1,
                         ocr: cfg.ocr,
                         cdr: cfg.cdr,
                         state: st.chip.state() as u8,
                         rxerr,
                         txerr,
-                        restarts: st.restarts,
+                        restarts: p.can.stats().restarts,
                         xtal_hz: p.xtal_hz,
                     }
                 };
@@ -348,9 +396,15 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
                 if dev.is_up() {
                     return Err(EBUSY);
                 }
+                // The bit timing goes where `ip link set ... type can`
+                // puts it (one source of truth); the registers are
+                // written from it at open. 0x00/0x00 (what GET reports
+                // while none is set) leaves it unset.
+                if s.btr0 != 0 || s.btr1 != 0 {
+                    let (bt, triple) = bittiming::from_btr(s.btr0, s.btr1, p.xtal_hz / 2);
+                    p.can.set_registers_timing(bt, triple);
+                }
                 let mut st = p.chip.lock();
-                st.chip.cfg.btr0 = s.btr0;
-                st.chip.cfg.btr1 = s.btr1;
                 st.chip.cfg.ocr = s.ocr;
                 st.chip.cfg.cdr = s.cdr & !CDR_PELICAN;
                 drop(st);
@@ -378,11 +432,23 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         }
     }
 
+    fn link() -> Option<LinkSetup> {
+        Some(link_setup::<Self>())
+    }
+
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        let set = p.can.open_check(dev.name())?;
+        let (btr0, btr1) = bittiming::to_btr(
+            &set.bittiming,
+            set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
+        );
         let f = wanted_filter(dev);
         dev.request_irq(p.irq)?;
         let started = {
             let mut st = p.chip.lock();
+            st.chip.cfg.btr0 = btr0;
+            st.chip.cfg.btr1 = btr1;
+            st.worst = State::Active;
             st.filter = f;
             st.filter_pending = false;
             let ok = st.chip.init(&f).and_then(|()| st.chip.start(&f)).is_ok();
@@ -448,7 +514,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             filter,
             filter_pending,
             running,
-            restarts,
+            worst,
         } = &mut *st;
         if !*running {
             // A board latch left over from before `stop` (PCAN-PCI's PITA)
@@ -474,11 +540,23 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
                     dev.wake_queue();
                 }
                 Event::Overrun => dev.stats_err(Stat::RxOverErrors),
-                Event::State {
-                    state: State::BusOff,
-                    ..
-                } => bus_off = true,
-                Event::State { .. } | Event::ArbitrationLost { .. } => {}
+                Event::State { state, .. } => {
+                    // Moves to a worse state count (mainline
+                    // can_change_state).
+                    if (state as u8) > (*worst as u8) {
+                        match state {
+                            State::Warning => p.can.count(CanStat::ErrorWarning),
+                            State::Passive => p.can.count(CanStat::ErrorPassive),
+                            State::BusOff => p.can.count(CanStat::BusOff),
+                            State::Active => {}
+                        }
+                    }
+                    *worst = state;
+                    if state == State::BusOff {
+                        bus_off = true;
+                    }
+                }
+                Event::ArbitrationLost { .. } => p.can.count(CanStat::ArbitrationLost),
             }
             if let Some(ef) = error_frame(&ev) {
                 rx_frame(dev, &ef);
@@ -504,7 +582,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
                 chip.start(&f)
             };
             if restarted.is_ok() {
-                *restarts += 1;
+                *worst = State::Active;
+                p.can.count(CanStat::Restarts);
                 rx_frame(dev, &restarted_frame());
             } else {
                 *running = false;
@@ -523,5 +602,62 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
 impl<R: Regs + Send + 'static> FilterListener for Sja1000<R> {
     fn filters_changed(dev: &Dev<Self>, p: &Self::Priv) {
         refilter(dev, p);
+    }
+}
+
+/// The SJA1000 as the CAN device layer sees it: mainline `sja1000`'s
+/// bit-timing limits; of the control modes, triple sampling (BTR1's SAM
+/// bit) only so far (listen-only, loopback, one-shot, berr-reporting,
+/// presume-ack and cc-len8-dlc are refused with `EOPNOTSUPP` until the
+/// driver implements them); restart after bus-off.
+impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
+    const BITTIMING_CONST: &'static bittiming::BittimingConst = &SJA1000_BITTIMING_CONST;
+    const CTRLMODE_SUPPORTED: u32 = candev::ctrlmode::THREE_SAMPLES;
+    const CAN_RESTART: bool = true;
+
+    fn can_dev(p: &Self::Priv) -> &CanDev {
+        &p.can
+    }
+
+    /// The SJA1000 counts its bit timing in periods of half the crystal.
+    fn clock_hz(p: &Self::Priv) -> u32 {
+        p.xtal_hz / 2
+    }
+
+    fn state(_dev: &Dev<Self>, p: &Self::Priv) -> CanState {
+        let st = p.chip.lock();
+        if !st.running {
+            return CanState::Stopped;
+        }
+        match st.chip.state() {
+            State::Active => CanState::ErrorActive,
+            State::Warning => CanState::ErrorWarning,
+            State::Passive => CanState::ErrorPassive,
+            State::BusOff => CanState::BusOff,
+        }
+    }
+
+    fn berr_counter(_dev: &Dev<Self>, p: &Self::Priv) -> (u16, u16) {
+        let mut st = p.chip.lock();
+        let tx = st.chip.regs.read(crate::rcan_core::sja1000::reg::TXERR);
+        let rx = st.chip.regs.read(crate::rcan_core::sja1000::reg::RXERR);
+        (u16::from(tx), u16::from(rx))
+    }
+
+    /// Restarts the chip (the interrupt handler already does this at once
+    /// on bus-off; this is `ip link set canX type can restart`).
+    fn restart(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        let mut st = p.chip.lock();
+        if let Some(s) = st.echo.take() {
+            s.drop_any();
+        }
+        let f = st.filter;
+        st.chip.start(&f).map_err(|_| EIO)?;
+        st.worst = State::Active;
+        drop(st);
+        p.can.count(CanStat::Restarts);
+        rx_frame(dev, &restarted_frame());
+        dev.wake_queue();
+        Ok(())
     }
 }

@@ -330,7 +330,13 @@ fn split_tseg(
             t1 = btc.tseg1_max;
             t2 = tseg.wrapping_sub(t1);
         }
-        let sp = 1000u32.wrapping_mul(all.wrapping_sub(t2)) / all;
+        // `all` is 0 only for a TSEG total of u32::MAX (absurd limits),
+        // where mainline divides by zero: skip the candidate. (A checked
+        // division also keeps a panic path, which objtool cannot follow,
+        // out of the modules.)
+        let Some(sp) = 1000u32.wrapping_mul(all.wrapping_sub(t2)).checked_div(all) else {
+            continue;
+        };
         let err = abs_diff(nominal, sp);
         if sp <= nominal && err < best_err {
             best_sp = sp;

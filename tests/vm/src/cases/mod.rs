@@ -2,6 +2,7 @@
 //! The test cases, grouped by topic. Each file exports a `TESTS` table.
 
 mod bcm;
+mod candev;
 mod canutils;
 mod capture;
 mod dsor;
@@ -107,6 +108,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         timesvc::TESTS,
         dsor::TESTS,
         sja1000::TESTS,
+        candev::TESTS,
         capture::SJA1000_TESTS,
         i82527::TESTS,
         leak::OURS,
@@ -200,12 +202,15 @@ fn rmmod_card_during_traffic(ctx: &mut Ctx, m: Module, i0: u32, i1: u32) -> Test
 mod tests {
     #[test]
     fn portable_names() {
-        // The prefixes say what a test needs: raw_/canutils_ run on both
-        // stacks, bcm_ on mainline only (until rcan_bcm lands, issue 13),
+        // The prefixes say what a test needs: raw_/canutils_/candev_ run
+        // on both stacks, bcm_ on mainline only (until rcan_bcm lands, issue 13),
         // everything else (mixed_ included) on ours only.
         for t in super::all() {
             let bcm = t.name.starts_with("bcm_");
-            let portable = t.name.starts_with("raw_") || t.name.starts_with("canutils_") || bcm;
+            let portable = t.name.starts_with("raw_")
+                || t.name.starts_with("canutils_")
+                || t.name.starts_with("candev_")
+                || bcm;
             assert_eq!(t.portable, portable, "{}", t.name);
             assert_eq!(t.mainline_only, bcm, "{}", t.name);
         }

@@ -68,7 +68,13 @@ enum Stack {
 }
 
 const MAINLINE: [&str; 5] = ["kvaser_pci", "sja1000", "can_dev", "can_raw", "can"];
-const OURS: [&str; 4] = ["rcan_kvaser_pci", "rcan_raw", "rcan_can", "rcan_pf"];
+const OURS: [&str; 5] = [
+    "rcan_kvaser_pci",
+    "rcan_dev",
+    "rcan_raw",
+    "rcan_can",
+    "rcan_pf",
+];
 
 fn unload() -> Result<(), String> {
     for m in MAINLINE.iter().chain(&OURS) {
@@ -93,19 +99,21 @@ fn load(s: Stack, root: &Path, kb: &Path) -> Result<(), String> {
             insmod(kb.join("drivers/net/can/dev/can-dev.ko"))?;
             insmod(kb.join("drivers/net/can/sja1000/sja1000.ko"))?;
             insmod(kb.join("drivers/net/can/sja1000/kvaser_pci.ko"))?;
-            for d in ["can0", "can1"] {
-                run(
-                    "ip",
-                    &["link", "set", d, "type", "can", "bitrate", "500000"],
-                )?;
-            }
         }
         Stack::Ours => {
             insmod(root.join("net/can/rcan_pf.ko"))?;
             insmod(root.join("net/can/rcan_can.ko"))?;
             insmod(root.join("net/can/rcan_raw.ko"))?;
+            insmod(root.join("drivers/net/can/dev/rcan_dev.ko"))?;
             insmod(root.join("drivers/net/can/sja1000/rcan_kvaser_pci.ko"))?;
         }
+    }
+    // The same bit timing for both, set as users set it.
+    for d in ["can0", "can1"] {
+        run(
+            "ip",
+            &["link", "set", d, "type", "can", "bitrate", "500000"],
+        )?;
     }
     for d in ["can0", "can1"] {
         run("ip", &["link", "set", d, "up"])?;
