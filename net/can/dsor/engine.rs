@@ -98,9 +98,10 @@ pub(crate) struct Engine {
     /// `udpip::Canip::register`, taken back before it unregisters).
     pub(crate) canip: Option<DevRef>,
     pub(crate) stats: Stats,
-    /// A drainer ([`drain`](crate::timers::drain), from [`Tick`](crate::timers::Tick) or from the receive callback)
-    /// is running and will take every frame queued before it finds the
-    /// queue empty (it checks and clears this in one critical section), so
+    /// A drainer ([`drain`](crate::timers::drain), from
+    /// [`Tick`](crate::timers::Tick) or from the receive callback) is
+    /// running and will take every frame queued before it finds the queue
+    /// empty (it checks and clears this in one critical section), so
     /// queuing a frame needs no [`kick`]. At most one drainer runs at a
     /// time, so frames leave in queue order.
     pub(crate) draining: bool,
