@@ -2,7 +2,7 @@
 /*
  * C side of rcan_dsor: module parameters (read through
  * rust/glue/params.rs) and the module's private copy of the helpers.
- * candsor.rs validates the parameters at load and refuses bad ones with
+ * params.rs validates the parameters at load and refuses bad ones with
  * EINVAL.
  */
 #include <linux/moduleparam.h>
@@ -60,7 +60,7 @@ static bool canip = true;
 module_param(canip, bool, 0444);
 MODULE_PARM_DESC(canip, "create the canip0 UDP/IP device (default yes)");
 
-/* Parameter numbers shared with candsor.rs (the PARAM_* consts). */
+/* Parameter numbers shared with params.rs (the PARAM_* consts). */
 u64 rcan_module_param(unsigned int which, unsigned int idx)
 {
 	switch (which) {

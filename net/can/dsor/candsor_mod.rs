@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: GPL-2.0
 
 //! Crate root of `rcan_dsor`: the DSOR protocol and UDP/IP over CAN in
-//! [`candsor`] (`candsor.rs`, which is `#![forbid(unsafe_code)]`), the
-//! glue it builds on (`rust/glue/`, the only place with `unsafe` code) and the shared pure logic (`rcan_core`).
+//! one file per concern, each `#![forbid(unsafe_code)]` (the list is in
+//! [`candsor`], `candsor.rs`), the glue they build on (`rust/glue/`, the
+//! only place with `unsafe` code) and the shared pure logic (`rcan_core`).
 //! Nothing else lives here: `module!` expands to unsafe code and must be
 //! at the crate root (it defines the crate's log prefix).
 
@@ -16,6 +17,13 @@ mod rcan_api;
 mod rcan_core;
 
 mod candsor;
+mod engine;
+mod params;
+mod rx;
+mod socket;
+mod stats;
+mod timers;
+mod udpip;
 
 use candsor::DsorModule;
 

@@ -18,16 +18,19 @@
 //! taken back before unregistration; the functions here get it from
 //! their caller, who holds the engine lock.
 
+#![forbid(unsafe_code)]
+
 use core::sync::atomic::{AtomicU16, Ordering};
 use kernel::alloc::KVec;
 use kernel::prelude::*;
 
-use super::glue::bindings;
-use super::glue::netdev::{Dev, DevRef, Driver, NetDev, Registration, Setup, Xmit};
-use super::glue::skb::Skb;
-use super::rcan_core::dsor_addr::udp_node;
-use super::rcan_core::dsor_udp::{self, HDR_LEN};
-use super::rcan_core::dsor_wire::{AckStatus, Header, MsgKind};
+use crate::engine::{now_ms, restart_over_ms, Owner, ENGINE};
+use crate::glue::bindings;
+use crate::glue::netdev::{Dev, DevRef, Driver, NetDev, Registration, Setup, Xmit};
+use crate::glue::skb::Skb;
+use crate::rcan_core::dsor_addr::udp_node;
+use crate::rcan_core::dsor_udp::{self, HDR_LEN};
+use crate::rcan_core::dsor_wire::{AckStatus, Header, MsgKind};
 use kernel::c_str;
 
 /// IPv4 identification of rebuilt headers.
@@ -47,7 +50,7 @@ impl Canip {
         // The index names our device until we unregister it (dropping
         // `reg` on an error return does).
         let dev = DevRef::by_index(reg.dev().ifindex()).ok_or(ENODEV)?;
-        match super::ENGINE.lock().as_mut() {
+        match ENGINE.lock().as_mut() {
             Some(e) => e.canip = Some(dev),
             None => return Err(ENODEV),
         }
@@ -61,7 +64,7 @@ impl Drop for Canip {
         // Nothing reaches canip0 through the engine after this: every user
         // holds the engine lock. The reference is dropped outside it, and
         // before unregistering (which waits for every reference).
-        let dev = super::ENGINE.lock().as_mut().and_then(|e| e.canip.take());
+        let dev = ENGINE.lock().as_mut().and_then(|e| e.canip.take());
         drop(dev);
         self.reg = None;
     }
@@ -153,7 +156,7 @@ impl Driver for CanipDriver {
             return Xmit::Ok;
         }
         let max = {
-            let g = super::ENGINE.lock();
+            let g = ENGINE.lock();
             g.as_ref().map_or(0, |e| usize::from(e.cfg.limits_max_len))
         };
         let out = match dsor_udp::parse_outbound(pkt, max) {
@@ -179,12 +182,33 @@ impl Driver for CanipDriver {
                 daddr: out.daddr,
             },
         };
-        if super::start_udp(udp_node(out.daddr), header, msg) {
+        if start_udp(udp_node(out.daddr), header, msg) {
             dev.stats_tx(out.payload_len as u32);
         } else {
             dev.stats_tx_dropped();
         }
         skb.consume();
         Xmit::Ok
+    }
+}
+
+/// Starts a UDP/IP message for canip0 (its transmit path, BH disabled).
+/// Returns false when no slot or channel is free, and for an empty
+/// datagram while the restart rule holds (see `restart_hold` in
+/// socket.rs; this
+/// path cannot wait, and UDP may drop).
+fn start_udp(dst: u8, header: Header, payload: KVec<u8>) -> bool {
+    if payload.is_empty() && now_ms() < restart_over_ms() {
+        return false;
+    }
+    let mut g = ENGINE.lock();
+    let Some(e) = g.as_mut() else { return false };
+    let prio = e.cfg.udp_prio;
+    match e.start(dst, prio, header, payload, Owner::Canip) {
+        Ok(_) => {
+            e.kick();
+            true
+        }
+        Err(_) => false,
     }
 }

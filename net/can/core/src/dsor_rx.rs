@@ -485,6 +485,20 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
         };
         let deadline = now_ms + self.reasm_ms;
         let slot = &mut self.slots[i];
+        // While refusing or receiving, a body with the other Q than the
+        // next one's is the previous body again (or nothing).
+        if let St::Refusing {
+            header, hq, next, ..
+        }
+        | St::Receiving {
+            header, hq, next, ..
+        } = &slot.st
+        {
+            if id.seq != expected_q(*hq, *next) {
+                let (len, next) = (header.len, *next);
+                return previous_body_again(id, data, len, next, deadline, &mut slot.deadline);
+            }
+        }
         match &mut slot.st {
             St::Free => RxOutput::NONE,
             St::Done {
@@ -510,19 +524,9 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                 next,
                 status,
             } => {
-                // Frames acked before get their old answer (OK), so that
-                // a sender that missed that ack moves on; the first new
-                // frame (body `next`) gets the refusal.
-                if id.seq != expected_q(*hq, *next) {
-                    return previous_body_again(
-                        id,
-                        data,
-                        header.len,
-                        *next,
-                        deadline,
-                        &mut slot.deadline,
-                    );
-                }
+                // Frames acked before got their old answer (OK) above, so
+                // that a sender that missed that ack moves on; the first
+                // new frame (body `next`) gets the refusal.
                 let k = *next;
                 if data.len() != body_dlc(header.len, k) as usize {
                     return RxOutput::NONE;
@@ -545,16 +549,6 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                 buf,
                 ..
             } => {
-                if id.seq != expected_q(*hq, *next) {
-                    return previous_body_again(
-                        id,
-                        data,
-                        header.len,
-                        *next,
-                        deadline,
-                        &mut slot.deadline,
-                    );
-                }
                 let dlc = body_dlc(header.len, *next) as usize;
                 if data.len() != dlc {
                     return RxOutput::NONE;

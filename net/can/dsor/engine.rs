@@ -1,0 +1,417 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The DSOR protocol engine: all protocol state of `rcan_dsor` in one
+//! [`Engine`], one while the module is loaded, under one lock,
+//! [`ENGINE`]. It runs the pure machines of `rcan_core::dsor_tx` (a
+//! [`Transfer`] per outgoing message, channels and sequence bits in
+//! [`TxStreams`]) and `rcan_core::dsor_rx` (the [`Reassembler`]), feeds
+//! them frames (from `rx.rs`) and time (from `timers.rs`), and queues the
+//! frames they produce on a ring that `timers.rs` sends.
+//!
+//! Locks: [`ENGINE`] (BH spinlock) protects every field of the engine and
+//! is taken in process context, NET_RX softirq, HRTIMER_SOFTIRQ and
+//! canip0's transmit path (the list and the lock order are in
+//! `candsor.rs`). [`WAITQ`] has its own lock; it is woken after ENGINE is
+//! dropped.
+
+#![forbid(unsafe_code)]
+
+use core::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use kernel::alloc::{flags::GFP_KERNEL, KBox, KVec};
+use kernel::c_str;
+use kernel::prelude::*;
+
+use crate::glue::hrtimer::ktime_get_mono_ns;
+use crate::glue::lock::{BhSpinLock, WaitQueue};
+use crate::glue::netdev::DevRef;
+use crate::glue::neterr;
+use crate::glue::sock::SockRef;
+use crate::params::{Config, PARAM_REASM_TIMEOUT_MS};
+use crate::rcan_core::dsor_addr::DsorAddr;
+use crate::rcan_core::dsor_rx::{Incoming, Limits, Reassembler};
+use crate::rcan_core::dsor_tx::{Transfer, TxError, TxStep, TxStreams};
+use crate::rcan_core::dsor_wire::{AckStatus, DsorId, Frame, FrameType, Header};
+use crate::rx::{accept, deliver, wanted, RxBuf};
+use crate::socket::DsorProto;
+use crate::stats::Stats;
+use crate::timers::kick;
+use crate::udpip;
+
+/// Reassembly slots (concurrent incoming messages, Done states included).
+pub(crate) const RX_SLOTS: usize = 64;
+/// Concurrent outgoing messages (all sockets and canip0 together).
+const TX_SLOTS: usize = 64;
+/// Frames queued for [`Tick`](crate::timers::Tick) to send.
+const OUT_LEN: usize = 256;
+
+/// Who waits for an outgoing message.
+pub(crate) enum Owner {
+    /// A blocking `sendmsg`, sleeping on [`WAITQ`] for [`TxEntry::Finished`].
+    Waiter,
+    /// A non-blocking `sendmsg`: a failure is reported on the socket.
+    Sock(SockRef<DsorProto>),
+    /// `canip0`: failures are counted on the device.
+    Canip,
+}
+
+/// A running outgoing message.
+pub(crate) struct TxRun {
+    t: Transfer,
+    msg: KVec<u8>,
+    dst: u8,
+    chan: u8,
+    pub(crate) gen: u32,
+    owner: Owner,
+}
+
+pub(crate) enum TxEntry {
+    Free,
+    Running(TxRun),
+    /// Finished; kept until its blocking sender collects the result
+    /// (0 or a negative errno).
+    Finished {
+        gen: u32,
+        result: i32,
+    },
+}
+
+/// A bound socket.
+pub(crate) struct Bind {
+    /// The bound socket: the reference keeps it valid for the receive
+    /// path until `remove_bind` (from its release) drops the Bind.
+    pub(crate) sk: SockRef<DsorProto>,
+    pub(crate) addr: DsorAddr,
+}
+
+pub(crate) struct Engine {
+    pub(crate) cfg: Config,
+    rx: KBox<Reassembler<RxBuf, RX_SLOTS>>,
+    pub(crate) streams: KBox<TxStreams>,
+    pub(crate) tx: KVec<TxEntry>,
+    next_gen: u32,
+    /// Ring of frames to send: `out[(out_head + i) % OUT_LEN]`, i < out_len.
+    out: KVec<Frame>,
+    out_head: usize,
+    out_len: usize,
+    pub(crate) binds: KVec<Bind>,
+    /// canip0 while it is registered (a counted reference, set by
+    /// `udpip::Canip::register`, taken back before it unregisters).
+    pub(crate) canip: Option<DevRef>,
+    pub(crate) stats: Stats,
+    /// A drainer ([`drain`](crate::timers::drain), from
+    /// [`Tick`](crate::timers::Tick) or from the receive callback) is
+    /// running and will take every frame queued before it finds the queue
+    /// empty (it checks and clears this in one critical section), so
+    /// queuing a frame needs no [`kick`]. At most one drainer runs at a
+    /// time, so frames leave in queue order.
+    pub(crate) draining: bool,
+}
+
+/// All protocol state; `None` outside the module's lifetime.
+pub(crate) static ENGINE: BhSpinLock<Option<KBox<Engine>>> =
+    BhSpinLock::new(None, c_str!("rcan_dsor::ENGINE"));
+
+/// Blocking senders wait here.
+pub(crate) static WAITQ: WaitQueue = WaitQueue::new(c_str!("rcan_dsor::WAITQ"));
+
+/// When the module was loaded (monotonic ms), for the restart rule
+/// ([`restart_over_ms`]).
+pub(crate) static LOADED_MS: AtomicU64 = AtomicU64::new(0);
+/// The local node, for lock-free checks.
+pub(crate) static NODE: AtomicU32 = AtomicU32::new(0);
+
+pub(crate) fn now_ms() -> u64 {
+    (ktime_get_mono_ns() / 1_000_000) as u64
+}
+
+impl Engine {
+    /// Kicks [`Tick`](crate::timers::Tick) to send what was queued, unless it is draining the
+    /// queue anyway. Called with ENGINE held (it is the `&mut self`).
+    pub(crate) fn kick(&self) {
+        if !self.draining {
+            kick();
+        }
+    }
+
+    fn push_out(&mut self, f: Frame) {
+        if self.out_len == OUT_LEN {
+            // The protocol recovers by retransmission.
+            self.stats.out_overflow += 1;
+            return;
+        }
+        let i = (self.out_head + self.out_len) % OUT_LEN;
+        self.out[i] = f;
+        self.out_len += 1;
+    }
+
+    pub(crate) fn pop_out(&mut self) -> Option<Frame> {
+        if self.out_len == 0 {
+            return None;
+        }
+        let f = self.out[self.out_head].clone();
+        self.out_head = (self.out_head + 1) % OUT_LEN;
+        self.out_len -= 1;
+        Some(f)
+    }
+
+    /// Ends the transfer in slot `i` with `result` (0 or a negative errno):
+    /// frees its channel, tells its owner. Callers wake [`WAITQ`] after
+    /// dropping the lock (a channel was freed).
+    fn finish(&mut self, i: usize, result: i32) {
+        let entry = core::mem::replace(&mut self.tx[i], TxEntry::Free);
+        let TxEntry::Running(run) = entry else {
+            self.tx[i] = entry;
+            return;
+        };
+        self.streams.release(run.dst, run.chan, run.t.next_q());
+        if result == 0 {
+            self.stats.tx_ok += 1;
+        } else {
+            self.stats.tx_failed += 1;
+        }
+        match run.owner {
+            Owner::Waiter => {
+                self.tx[i] = TxEntry::Finished {
+                    gen: run.gen,
+                    result,
+                }
+            }
+            Owner::Sock(sk) => {
+                if result != 0 {
+                    sk.sock().report_error(-result);
+                }
+            }
+            Owner::Canip => {
+                if result != 0 {
+                    udpip::count_tx_error(self.canip.as_deref());
+                }
+            }
+        }
+    }
+
+    fn apply_step(&mut self, i: usize, step: TxStep) -> bool {
+        match step {
+            TxStep::Nothing => false,
+            TxStep::Send(f) => {
+                self.push_out(f);
+                true
+            }
+            TxStep::Done => {
+                self.finish(i, 0);
+                true
+            }
+            TxStep::Failed(e) => {
+                self.finish(i, tx_errno(e));
+                true
+            }
+        }
+    }
+
+    /// Starts a message to `dst`; returns the slot and its generation, or
+    /// `None` when no slot or no channel to `dst` is free.
+    pub(crate) fn start(
+        &mut self,
+        dst: u8,
+        prio: u8,
+        header: Header,
+        msg: KVec<u8>,
+        owner: Owner,
+    ) -> core::result::Result<(usize, u32), (KVec<u8>, Owner)> {
+        let Some(i) = self.tx.iter().position(|e| matches!(e, TxEntry::Free)) else {
+            return Err((msg, owner));
+        };
+        let Some((chan, first_q)) = self.streams.alloc(dst) else {
+            return Err((msg, owner));
+        };
+        let mut t = Transfer::new(
+            self.cfg.node,
+            dst,
+            chan,
+            prio,
+            header,
+            first_q,
+            &self.cfg.timers,
+        );
+        let f = t.start(&msg, now_ms());
+        self.push_out(f);
+        let gen = self.next_gen;
+        self.next_gen = self.next_gen.wrapping_add(1);
+        self.tx[i] = TxEntry::Running(TxRun {
+            t,
+            msg,
+            dst,
+            chan,
+            gen,
+            owner,
+        });
+        Ok((i, gen))
+    }
+
+    /// Aborts the running transfer `(i, gen)` of a blocking sender that
+    /// stopped waiting, or collects its result if it finished meanwhile.
+    pub(crate) fn abandon(&mut self, i: usize, gen: u32, errno: i32) -> i32 {
+        match &self.tx[i] {
+            TxEntry::Running(r) if r.gen == gen => {
+                self.finish(i, errno);
+                self.tx[i] = TxEntry::Free;
+                errno
+            }
+            TxEntry::Finished { gen: g, result } if *g == gen => {
+                let r = *result;
+                self.tx[i] = TxEntry::Free;
+                r
+            }
+            _ => errno,
+        }
+    }
+
+    /// Fails every running transfer (the interface went away).
+    pub(crate) fn fail_all(&mut self, errno: i32) {
+        for i in 0..self.tx.len() {
+            self.finish(i, errno);
+        }
+        self.stats.rx_flushed += self.rx.clear() as u64;
+    }
+
+    /// Handles one DSOR frame addressed to this node.
+    pub(crate) fn on_frame(&mut self, id: &DsorId, data: &[u8], now: u64) -> bool {
+        if matches!(id.ftype, FrameType::Ack) {
+            let mut kick = false;
+            for i in 0..self.tx.len() {
+                let step = match &mut self.tx[i] {
+                    TxEntry::Running(r) if r.dst == id.src && r.chan == id.chan => {
+                        r.t.on_ack(id, data, &r.msg, now)
+                    }
+                    _ => continue,
+                };
+                kick |= self.apply_step(i, step);
+                break;
+            }
+            return kick;
+        }
+        let canip_up = udpip::is_up(self.canip.as_deref());
+        let Engine {
+            rx,
+            binds,
+            cfg,
+            stats,
+            canip,
+            ..
+        } = self;
+        let out = rx.on_frame_with(
+            id,
+            data,
+            now,
+            |inc: &Incoming<'_>| accept(binds, canip_up, inc),
+            |d| deliver(binds, canip.as_deref(), cfg, stats, d),
+        );
+        match out.header_refused {
+            None => {}
+            Some(AckStatus::TooLong) => self.stats.rx_refused_too_long += 1,
+            Some(AckStatus::NoMemory) => self.stats.rx_refused_no_memory += 1,
+            Some(_) => self.stats.rx_refused_unwanted += 1,
+        }
+        match out.ack {
+            Some(ack) => {
+                self.push_out(ack);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// A socket was closed (its bind is already gone): partial messages
+    /// that no remaining socket wants are stopped; the next frame of each
+    /// is refused, so their senders fail with ECONNREFUSED instead of
+    /// sending the rest for nothing.
+    pub(crate) fn refuse_orphans(&mut self) {
+        let canip_up = udpip::is_up(self.canip.as_deref());
+        let binds = &self.binds;
+        let n = self.rx.refuse_partial(
+            |inc: &Incoming<'_>| wanted(binds, canip_up, inc),
+            AckStatus::Refused,
+        );
+        self.stats.rx_closed += n as u64;
+    }
+
+    /// Runs due timers; returns whether frames were queued.
+    pub(crate) fn on_timer(&mut self, now: u64) -> bool {
+        let mut kick = false;
+        self.stats.rx_timed_out += self.rx.on_timer(now) as u64;
+        for i in 0..self.tx.len() {
+            let step = match &mut self.tx[i] {
+                TxEntry::Running(r) if r.t.deadline().is_some_and(|d| d <= now) => {
+                    r.t.on_timer(&r.msg, now)
+                }
+                _ => continue,
+            };
+            kick |= self.apply_step(i, step);
+        }
+        kick
+    }
+
+    pub(crate) fn next_deadline(&self) -> Option<u64> {
+        let mut d = self.rx.next_deadline();
+        for e in self.tx.iter() {
+            if let TxEntry::Running(r) = e {
+                if let Some(t) = r.t.deadline() {
+                    d = Some(d.map_or(t, |x| x.min(t)));
+                }
+            }
+        }
+        d
+    }
+}
+
+fn tx_errno(e: TxError) -> i32 {
+    let err = match e {
+        TxError::TimedOut => neterr::ETIMEDOUT(),
+        TxError::Refused => neterr::ECONNREFUSED(),
+        TxError::NoMemory => neterr::ENOBUFS(),
+        TxError::TooLong => neterr::EMSGSIZE(),
+    };
+    err.to_errno()
+}
+
+/// When the restart rule (`restart_hold` in socket.rs) stops holding zero-length
+/// messages (monotonic ms). Any context.
+pub(crate) fn restart_over_ms() -> u64 {
+    LOADED_MS.load(Ordering::Relaxed) + u64::from(PARAM_REASM_TIMEOUT_MS.get())
+}
+
+pub(crate) fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
+    let limits = Limits {
+        max_len: cfg.limits_max_len,
+        max_per_peer: cfg.max_per_peer,
+        max_bytes_total: cfg.max_bytes,
+    };
+    let rx = KBox::new(Reassembler::new(cfg.node, limits, &cfg.timers), GFP_KERNEL)?;
+    let streams = KBox::new(TxStreams::new(), GFP_KERNEL)?;
+    let mut tx = KVec::with_capacity(TX_SLOTS, GFP_KERNEL)?;
+    for _ in 0..TX_SLOTS {
+        tx.push(TxEntry::Free, GFP_KERNEL)?;
+    }
+    let blank = Frame {
+        id: 0,
+        len: 0,
+        data: [0; 8],
+    };
+    let out = KVec::from_elem(blank, OUT_LEN, GFP_KERNEL)?;
+    Ok(KBox::new(
+        Engine {
+            cfg,
+            rx,
+            streams,
+            tx,
+            next_gen: 1,
+            out,
+            out_head: 0,
+            out_len: 0,
+            binds: KVec::new(),
+            canip: None,
+            stats: Stats::default(),
+            draining: false,
+        },
+        GFP_KERNEL,
+    )?)
+}

@@ -1,0 +1,191 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! Sending frames and running the protocol timers of `rcan_dsor`: one
+//! soft hrtimer, [`TIMER`] ([`Tick`]), kicked to "now" whenever frames are
+//! queued on the engine and otherwise armed for the earliest protocol
+//! deadline. [`drain`] takes the engine's queued frames in batches under
+//! [`ENGINE`] and sends them without it, from the timer
+//! (HRTIMER_SOFTIRQ) or from the receive callback (NET_RX softirq); at
+//! most one drainer runs at a time (`Engine::draining`, under ENGINE), so
+//! frames leave in queue order.
+
+#![forbid(unsafe_code)]
+
+use core::sync::atomic::{AtomicBool, Ordering};
+use kernel::prelude::*;
+
+use crate::engine::{now_ms, ENGINE, WAITQ};
+use crate::glue::hrtimer::{ktime_get_mono_ns, HrTimer, HrTimerCallback};
+use crate::glue::netdev::DevRef;
+use crate::glue::neterr;
+use crate::glue::skb::Skb;
+use crate::glue::{self, bindings};
+use crate::rcan_api;
+use crate::rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK};
+use crate::rcan_core::dsor_wire::Frame;
+use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+
+/// Frames sent per batch (taken from the queue under the lock).
+const BATCH: usize = 16;
+/// Frames one run of [`Tick`] sends at most before it re-arms itself for
+/// "now" and returns, so that one long message (which, with the direct
+/// echo, is acked within the same run: the queue then holds one frame at a
+/// time) does not hold the softirq for its whole length. About the 2 ms
+/// the kernel gives one softirq pass at ~2 us per frame (~8 ms under TCG).
+const FRAMES_PER_RUN: usize = 1024;
+/// Headroom for mainline's `struct can_skb_priv`.
+const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
+
+/// Set by module exit: the timer neither sends nor re-arms.
+pub(crate) static STOPPING: AtomicBool = AtomicBool::new(false);
+
+/// Kicks the sender timer. Call with ENGINE held (so that a kick is never
+/// overwritten by an older re-arm, see [`Tick`]).
+pub(crate) fn kick() {
+    TIMER.start(ktime_get_mono_ns());
+}
+
+/// The soft hrtimer that sends queued frames and runs protocol timers.
+pub(crate) struct Tick;
+
+pub(crate) static TIMER: HrTimer<Tick> = HrTimer::new();
+
+impl HrTimerCallback for Tick {
+    type State = ();
+
+    /// HRTIMER_SOFTIRQ. Runs the protocol timers, then drains the queue
+    /// unless another drainer (a receive callback on another CPU) is at
+    /// it; that one re-arms the timer when it is done.
+    fn run(_timer: &'static HrTimer<Self>, _state: &mut ()) {
+        drain(true);
+    }
+}
+
+/// Sends the queued frames. Softirq context (HRTIMER_SOFTIRQ or NET_RX).
+///
+/// With `timers`, first runs the protocol timers. Becomes the drainer if
+/// nobody is (`draining`), else returns at once: the running drainer takes
+/// what was queued. Takes frames from the queue in batches under ENGINE
+/// and sends them without it (on one device reference for the whole run);
+/// when the queue is empty, clears `draining` and re-arms the timer for
+/// the next deadline in the same critical section, so that a frame queued
+/// concurrently (also under ENGINE) is never left unsent. After
+/// [`FRAMES_PER_RUN`] frames it re-arms for "now" instead.
+pub(crate) fn drain(timers: bool) {
+    let mut first = true;
+    let mut wake = false;
+    let mut dev: Option<DevRef> = None;
+    let mut sent = 0;
+    loop {
+        if wake {
+            WAITQ.wake_all();
+            wake = false;
+        }
+        let mut batch: [Option<Frame>; BATCH] = Default::default();
+        let mut n = 0;
+        let ifname;
+        {
+            let mut g = ENGINE.lock();
+            let Some(e) = g.as_mut() else { return };
+            if STOPPING.load(Ordering::Relaxed) {
+                return;
+            }
+            if first {
+                first = false;
+                if timers {
+                    let before = e.stats.tx_ok + e.stats.tx_failed;
+                    e.on_timer(now_ms());
+                    wake = e.stats.tx_ok + e.stats.tx_failed != before;
+                }
+                if e.draining {
+                    // The running drainer sends what on_timer queued and
+                    // re-arms the timer when it finds the queue empty.
+                    drop(g);
+                    if wake {
+                        WAITQ.wake_all();
+                    }
+                    return;
+                }
+                e.draining = true;
+            }
+            if sent >= FRAMES_PER_RUN {
+                e.draining = false;
+                kick();
+                drop(g);
+                if wake {
+                    WAITQ.wake_all();
+                }
+                return;
+            }
+            while n < BATCH {
+                match e.pop_out() {
+                    Some(f) => {
+                        batch[n] = Some(f);
+                        n += 1;
+                    }
+                    None => break,
+                }
+            }
+            ifname = e.cfg.ifname;
+            if n == 0 {
+                e.draining = false;
+                if let Some(d) = e.next_deadline() {
+                    TIMER.start((d as i64).saturating_mul(1_000_000));
+                }
+                drop(g);
+                if wake {
+                    WAITQ.wake_all();
+                }
+                return;
+            }
+        }
+        sent += n;
+        if dev.is_none() {
+            dev = DevRef::by_name(ifname.as_cstr());
+        }
+        let errors = match &dev {
+            Some(d) => send_batch(d, &batch[..n]),
+            None => n as u64,
+        };
+        if errors != 0 {
+            if let Some(e) = ENGINE.lock().as_mut() {
+                e.stats.send_errors += errors;
+            }
+        }
+    }
+}
+
+/// Sends frames on the DSOR interface; returns how many failed. Softirq.
+fn send_batch(dev: &DevRef, frames: &[Option<Frame>]) -> u64 {
+    let mut errors = 0;
+    for f in frames.iter().flatten() {
+        if send_frame(dev, f).is_err() {
+            errors += 1;
+        }
+    }
+    errors
+}
+
+fn send_frame(dev: &DevRef, f: &Frame) -> Result {
+    if !dev.is_can() || !dev.is_up() {
+        return Err(neterr::ENETDOWN());
+    }
+    let mut cf = CanFrame {
+        can_id: (f.id & CAN_EFF_MASK) | CAN_EFF_FLAG,
+        len: f.len,
+        ..CanFrame::default()
+    };
+    let n = usize::from(f.len.min(8));
+    cf.data[..n].copy_from_slice(&f.data[..n]);
+    let mut skb = Skb::alloc(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, glue::GFP_ATOMIC)
+        .ok_or(neterr::ENOBUFS())?;
+    skb.reserve(SKB_PRIV_LEN);
+    let mut prv = [0u8; SKB_PRIV_LEN as usize];
+    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
+    if !skb.write_headroom(&prv) || !skb.put_data(&cf.to_bytes()) {
+        return Err(neterr::ENOBUFS());
+    }
+    // Looped back, so that a node can talk to itself over canloop and
+    // local CAN_RAW sockets see DSOR traffic.
+    rcan_api::send(skb, dev, true)
+}
