@@ -15,7 +15,7 @@
 
 use std::fmt::Write;
 
-use crate::frame::{Frame, CAN_EFF_FLAG, CAN_EFF_MASK, CAN_SFF_MASK};
+use crate::frame::{Frame, CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
 
 /// Longest message a client may send, brackets included: a `send` with
 /// 8 bytes is under 50; anything longer is garbage.
@@ -134,7 +134,14 @@ pub fn frame_msg(out: &mut String, f: &Frame, sec: i64, usec: i64) {
         let _ = write!(out, "< frame {:03X} ", f.id & CAN_SFF_MASK);
     }
     let _ = write!(out, "{sec}.{usec:06} ");
-    for b in f.payload() {
+    // The protocol has no remote-frame flag: a remote frame is sent
+    // without data, whatever its length.
+    let data = if f.id & CAN_RTR_FLAG != 0 {
+        &[][..]
+    } else {
+        f.payload()
+    };
+    for b in data {
         let _ = write!(out, "{b:02X}");
     }
     out.push_str(" >");
@@ -209,5 +216,13 @@ mod tests {
         };
         frame_msg(&mut s, &f, 1, 0);
         assert_eq!(s, "< frame 00001234 1.000000  >");
+        s.clear();
+        let f = Frame {
+            id: CAN_RTR_FLAG | 0x7FF,
+            len: 4,
+            data: [0; 8],
+        };
+        frame_msg(&mut s, &f, 1, 0);
+        assert_eq!(s, "< frame 7FF 1.000000  >");
     }
 }

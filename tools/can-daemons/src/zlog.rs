@@ -225,6 +225,22 @@ mod tests {
     }
 
     #[test]
+    fn age_rotates_at_each_flush_when_due() {
+        let d = tmp("age");
+        let mut c = cfg(&d, 1 << 20);
+        c.max_age = Duration::ZERO;
+        let mut z = ZLog::new(c).unwrap();
+        for i in 0..3 {
+            z.buf().push_str(&format!("line {i}\n"));
+            z.line_added();
+            z.flush().unwrap();
+        }
+        z.close().unwrap();
+        assert_eq!(read_all(&d), (3, "line 0\nline 1\nline 2\n".into()));
+        fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
     fn nothing_pending_writes_nothing() {
         let d = tmp("empty");
         let mut z = ZLog::new(cfg(&d, 1 << 20)).unwrap();

@@ -4,6 +4,7 @@
 mod bcm;
 mod canutils;
 mod capture;
+mod daemons;
 mod dsor;
 mod errors;
 mod filter;
@@ -85,6 +86,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         raw_send::TESTS,
         raw_efault::TESTS,
         canutils::TESTS,
+        daemons::TESTS,
         capture::TESTS,
         gateway::TESTS,
         mixed::TESTS,

@@ -1,0 +1,447 @@
+// SPDX-License-Identifier: GPL-2.0
+//! The vehicle's daemons (tools/can-daemons, issue 17) as a user runs
+//! them, over CAN_RAW only (so these tests also run against mainline):
+//!
+//! - `canzlogd` writes what `candump -l` writes, line for line, kernel
+//!   timestamps included; keeps its flush promise under SIGKILL; rotates;
+//!   reports SO_RXQ_OVFL drops so that logged + dropped = sent;
+//! - `cantcpd` carries frames both ways for python-can's `socketcand`
+//!   interface (a client nobody here wrote) and a second client at once.
+//!
+//! Log files are read back with `zcat`, as a user would.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::thread;
+use std::time::{Duration, Instant, SystemTime};
+
+use socketcan::CanFrame;
+
+use super::{portable_table, raw1};
+use crate::canraw::{self, err_frame, ext, rtr_ext, rtr_std, std, CAN_ERR_CRTL};
+use crate::check::{ensure, wait_for, OrFail, TestResult};
+use crate::ctx::Ctx;
+use crate::tools::{self, Bg, TempDir, TOOL_LIMIT};
+use crate::Test;
+
+pub const TESTS: &[Test] = portable_table![
+    canzlogd_matches_candump_log,
+    canzlogd_sigkill_loses_at_most_flush_interval,
+    canzlogd_rotates_by_size_and_age,
+    canzlogd_reports_rxq_overflow,
+    cantcpd_python_can_and_second_client,
+];
+
+/// Starts canzlogd on can0 into `dir` with `extra` options; returns once
+/// it waits for frames.
+fn canzlogd(dir: &Path, extra: &[&str]) -> Result<Bg, String> {
+    let d = dir.to_str().ok_or("non-UTF-8 dir")?;
+    let mut args = vec!["-d", d];
+    args.extend_from_slice(extra);
+    args.push("can0");
+    let mut z = tools::spawn_own("canzlogd", &args, None)?;
+    z.wait_stderr("canzlogd: logging")?;
+    z.wait_listening()?;
+    Ok(z)
+}
+
+/// SIGTERM, then the daemon must exit with status 0 on its own.
+fn stop(z: Bg, what: &str) -> TestResult {
+    z.signal("TERM")?;
+    let out = z.finish(TOOL_LIMIT)?;
+    ensure!(
+        out.status.success(),
+        "{what} after SIGTERM: {}: {}",
+        out.status,
+        out.stderr.trim()
+    );
+    Ok(())
+}
+
+/// The log files of `dir`, in name (= creation) order.
+fn log_files(dir: &Path) -> Result<Vec<PathBuf>, String> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .or_fail(dir.display())?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.to_str().is_some_and(|s| s.ends_with(".log.gz")))
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
+/// `zcat FILES...` (must exit 0): (frame lines, `# ` note lines).
+fn zcat(files: &[PathBuf]) -> Result<(Vec<String>, Vec<String>), String> {
+    ensure!(!files.is_empty(), "no log file");
+    let names: Vec<&str> = files.iter().filter_map(|p| p.to_str()).collect();
+    let out = tools::run_ok("zcat", &names)?;
+    let (notes, frames) = out
+        .stdout
+        .lines()
+        .map(str::to_string)
+        .partition(|l| l.starts_with("# "));
+    Ok((frames, notes))
+}
+
+/// A candump -l line without its timestamp: `can0 123#1122`.
+fn body(line: &str) -> &str {
+    line.split_once(") ").map_or(line, |x| x.1)
+}
+
+fn now_us() -> u64 {
+    SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .unwrap_or_default()
+        .as_micros() as u64
+}
+
+/// A frame carrying counter `i` (0x100, 4 bytes little endian).
+fn numbered(i: u32) -> CanFrame {
+    std(0x100, &i.to_le_bytes())
+}
+
+/// The counter of a `can0 100#XXXXXXXX` line.
+fn number_of(line: &str) -> Result<u32, String> {
+    let d = body(line)
+        .strip_prefix("can0 100#")
+        .filter(|d| d.len() == 8)
+        .ok_or_else(|| format!("unexpected line {line:?}"))?;
+    let b = u32::from_str_radix(d, 16).map_err(|_| format!("bad data in {line:?}"))?;
+    Ok(b.swap_bytes())
+}
+
+/// Sends a frame, retrying while the device queue is full (ENOBUFS).
+fn send_retry(s: &socketcan::CanSocket, f: &CanFrame) -> TestResult {
+    use socketcan::Socket;
+    for _ in 0..1000 {
+        match s.write_frame(f) {
+            Ok(()) => return Ok(()),
+            Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) => {
+                thread::sleep(Duration::from_millis(1))
+            }
+            Err(e) => return Err(format!("write {}: {e}", canraw::show(f))),
+        }
+    }
+    Err(format!("write {}: ENOBUFS for 1 s", canraw::show(f)))
+}
+
+/// canzlogd and `candump -l -e` log the same frames (data, extended,
+/// remote, error) as the same lines, timestamps included: both read the
+/// kernel's receive time. SIGTERM ends canzlogd with status 0, and its
+/// notes say so.
+fn canzlogd_matches_candump_log(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let tx = canraw::open(idx)?;
+    let zdir = TempDir::new("canzlogd")?;
+    let ddir = TempDir::new("candump")?;
+    let mut frames = vec![
+        std(0x123, &[0x11, 0x22]),
+        ext(0x1234567, &[]),
+        rtr_std(0x7FF, 0),
+        rtr_std(0x7FE, 4),
+        rtr_ext(5, 0),
+        std(0, &[1, 2, 3, 4, 5, 6, 7, 8]),
+        err_frame(CAN_ERR_CRTL, &[0, 4]),
+    ];
+    frames.extend((0..50).map(numbered));
+    let n = frames.len().to_string();
+    let mut dump = tools::spawn(
+        "candump",
+        &["-l", "-e", "can0", "-n", &n],
+        Some(ddir.path()),
+    )?;
+    dump.wait_listening()?;
+    let z = canzlogd(zdir.path(), &["--flush-ms", "100"])?;
+    for f in &frames {
+        send_retry(&tx, f)?;
+    }
+    let out = dump.finish(TOOL_LIMIT)?;
+    ensure!(
+        out.status.success(),
+        "candump -l: {}: {}",
+        out.status,
+        out.stderr.trim()
+    );
+    stop(z, "canzlogd")?;
+    let dlogs: Vec<PathBuf> = std::fs::read_dir(ddir.path())
+        .or_fail(ddir.path().display())?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .collect();
+    let [dlog] = dlogs.as_slice() else {
+        return Err(format!("expected one candump log, found {dlogs:?}"));
+    };
+    let want: Vec<String> = std::fs::read_to_string(dlog)
+        .or_fail(dlog.display())?
+        .lines()
+        .map(str::to_string)
+        .collect();
+    let (got, notes) = zcat(&log_files(zdir.path())?)?;
+    ensure!(
+        got == want,
+        "canzlogd logged\n{}\ncandump -l logged\n{}",
+        got.join("\n"),
+        want.join("\n")
+    );
+    ensure!(
+        notes.first().is_some_and(|l| l.contains("started on can0"))
+            && notes
+                .last()
+                .is_some_and(|l| l.contains("stopping on signal 15, 57 frames")),
+        "notes {notes:?}"
+    );
+    Ok(())
+}
+
+/// Flush policy under SIGKILL: with `--flush-ms 200`, every frame
+/// received more than 200 ms (plus 400 ms of slack for a slow emulated
+/// VM) before the kill is in the files, which `zcat` reads without error,
+/// and the logged frames are exactly the first ones sent, in order.
+fn canzlogd_sigkill_loses_at_most_flush_interval(ctx: &mut Ctx) -> TestResult {
+    const FLUSH_MS: u64 = 200;
+    const SLACK_MS: u64 = 400;
+    let idx = raw1(ctx)?;
+    let tx = canraw::open(idx)?;
+    let dir = TempDir::new("canzlogd-kill")?;
+    let z = canzlogd(dir.path(), &["--flush-ms", &FLUSH_MS.to_string()])?;
+    let mut sent_at = Vec::new();
+    let start = Instant::now();
+    let mut i = 0u32;
+    // Frames every 2 ms for at least 1.5 s, then SIGKILL mid-stream.
+    while start.elapsed() < Duration::from_millis(1500) || i < 300 {
+        sent_at.push(now_us());
+        send_retry(&tx, &numbered(i))?;
+        i += 1;
+        thread::sleep(Duration::from_millis(2));
+    }
+    let kill_us = now_us();
+    z.signal("KILL")?;
+    let out = z.finish(TOOL_LIMIT)?;
+    ensure!(
+        !out.status.success(),
+        "canzlogd survived SIGKILL: {}",
+        out.status
+    );
+    let (lines, _) = zcat(&log_files(dir.path())?)?;
+    for (k, l) in lines.iter().enumerate() {
+        let got = number_of(l)?;
+        ensure!(got == k as u32, "line {k} is frame {got}: {l:?}");
+    }
+    let logged = lines.len();
+    let must = sent_at
+        .iter()
+        .filter(|&&t| t + (FLUSH_MS + SLACK_MS) * 1000 <= kill_us)
+        .count();
+    ensure!(
+        logged >= must,
+        "{logged} of {i} frames logged; the {must} sent more than {} ms before SIGKILL must be",
+        FLUSH_MS + SLACK_MS
+    );
+    eprintln!(
+        "    canzlogd SIGKILL: {logged} of {i} frames logged, last logged sent {} ms before the kill",
+        logged
+            .checked_sub(1)
+            .map_or(0, |k| (kill_us - sent_at[k]) / 1000)
+    );
+    Ok(())
+}
+
+/// `--max-size`: several files, each a whole gzip stream on its own;
+/// `--max-age 1`: a new file after a second even when small. Read back in
+/// name order they hold every frame once, in order.
+fn canzlogd_rotates_by_size_and_age(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let tx = canraw::open(idx)?;
+    for (opts, n, gap_ms, what) in [
+        (
+            ["--max-size", "200", "--flush-ms", "50"],
+            100u32,
+            5u64,
+            "size",
+        ),
+        (["--max-age", "1", "--flush-ms", "100"], 60, 40, "age"),
+    ] {
+        let dir = TempDir::new("canzlogd-rot")?;
+        let z = canzlogd(dir.path(), &opts)?;
+        for i in 0..n {
+            send_retry(&tx, &numbered(i))?;
+            thread::sleep(Duration::from_millis(gap_ms));
+        }
+        stop(z, "canzlogd")?;
+        let files = log_files(dir.path())?;
+        ensure!(
+            files.len() >= 2,
+            "rotation by {what}: {} file(s)",
+            files.len()
+        );
+        for f in &files {
+            zcat(std::slice::from_ref(f)).map_err(|e| format!("{what}: {e}"))?;
+        }
+        let (lines, _) = zcat(&files)?;
+        let nums: Result<Vec<u32>, String> = lines.iter().map(|l| number_of(l)).collect();
+        let nums = nums?;
+        ensure!(
+            nums == (0..n).collect::<Vec<_>>(),
+            "rotation by {what}: frames {nums:?}"
+        );
+        drop(dir);
+    }
+    Ok(())
+}
+
+/// SO_RXQ_OVFL: canzlogd with a tiny receive buffer is stopped (SIGSTOP)
+/// while 200 frames arrive; after SIGCONT its notes report the drops, and
+/// logged + reported = sent.
+fn canzlogd_reports_rxq_overflow(ctx: &mut Ctx) -> TestResult {
+    const N: u32 = 200;
+    let idx = raw1(ctx)?;
+    let tx = canraw::open(idx)?;
+    let dir = TempDir::new("canzlogd-ovfl")?;
+    let z = canzlogd(dir.path(), &["--rcvbuf", "1", "--flush-ms", "100"])?;
+    z.signal("STOP")?;
+    for i in 0..N {
+        send_retry(&tx, &numbered(i))?;
+    }
+    // The loopback device echoes in softirq; give it time to finish.
+    thread::sleep(Duration::from_millis(300));
+    z.signal("CONT")?;
+    thread::sleep(Duration::from_millis(500));
+    stop(z, "canzlogd")?;
+    let (lines, notes) = zcat(&log_files(dir.path())?)?;
+    let mut dropped = 0u64;
+    for n in &notes {
+        if let Some((_, rest)) = n.split_once("can0: ") {
+            if let Some((k, _)) = rest.split_once(" frames dropped") {
+                dropped += k.parse::<u64>().map_err(|_| format!("bad note {n:?}"))?;
+            }
+        }
+    }
+    ensure!(
+        dropped > 0,
+        "no drop reported; {} frames logged; notes {notes:?}",
+        lines.len()
+    );
+    ensure!(
+        lines.len() as u64 + dropped == u64::from(N),
+        "{} logged + {dropped} reported dropped != {N} sent; notes {notes:?}",
+        lines.len()
+    );
+    Ok(())
+}
+
+/// Reads one `< ... >` message from a raw socketcand client connection.
+fn read_msg(s: &mut TcpStream, pending: &mut String) -> Result<String, String> {
+    let deadline = Instant::now() + TOOL_LIMIT;
+    loop {
+        if let Some(start) = pending.find('<') {
+            if let Some(end) = pending[start..].find('>') {
+                let m = pending[start..start + end + 1].to_string();
+                pending.drain(..start + end + 1);
+                return Ok(m);
+            }
+        }
+        ensure!(
+            Instant::now() < deadline,
+            "no message from cantcpd; have {pending:?}"
+        );
+        let mut b = [0u8; 512];
+        let n = s.read(&mut b).or_fail("read from cantcpd")?;
+        ensure!(n > 0, "cantcpd closed the connection; have {pending:?}");
+        pending.push_str(&String::from_utf8_lossy(&b[..n]));
+    }
+}
+
+/// The python-can side of the cantcpd test: sends two frames, then
+/// prints the two it receives.
+const PY_CLIENT: &str = r#"
+import can, sys
+bus = can.Bus(interface="socketcand", channel="can0", host="127.0.0.1", port=29536)
+bus.send(can.Message(arbitration_id=0x123, data=[1, 2, 3], is_extended_id=False))
+bus.send(can.Message(arbitration_id=0x1234567, data=[0xAA], is_extended_id=True))
+print("SENT", flush=True)
+for _ in range(2):
+    m = bus.recv(timeout=60)
+    if m is None:
+        print("TIMEOUT", flush=True)
+        sys.exit(1)
+    print("RX %X %s" % (m.arbitration_id, m.data.hex()), flush=True)
+bus.shutdown()
+"#;
+
+/// cantcpd on its default address (127.0.0.1:29536): python-can's
+/// `socketcand` interface sends two frames, which a CAN_RAW socket and a
+/// second (raw TCP) client receive; frames sent on can0 reach both
+/// clients. SIGTERM ends cantcpd with status 0.
+fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let rx = canraw::open(idx)?;
+    let mut srv = tools::spawn_own("cantcpd", &[], None)?;
+    srv.wait_stderr("listening on 127.0.0.1:29536")?;
+
+    let mut c2 = TcpStream::connect("127.0.0.1:29536").or_fail("connect")?;
+    c2.set_read_timeout(Some(Duration::from_secs(5)))
+        .or_fail("SO_RCVTIMEO")?;
+    let mut pend = String::new();
+    let expect = |c2: &mut TcpStream, pend: &mut String, want: &str| -> TestResult {
+        let m = read_msg(c2, pend)?;
+        ensure!(m == want, "second client: expected {want:?}, got {m:?}");
+        Ok(())
+    };
+    expect(&mut c2, &mut pend, "< hi >")?;
+    c2.write_all(b"< open can0 >").or_fail("write")?;
+    expect(&mut c2, &mut pend, "< ok >")?;
+    c2.write_all(b"< rawmode >").or_fail("write")?;
+    expect(&mut c2, &mut pend, "< ok >")?;
+
+    let py = tools::spawn("python3", &["-c", PY_CLIENT], None)?;
+    wait_for(TOOL_LIMIT, "python-can client to send", || {
+        if py.stdout_now().contains("SENT") {
+            return Ok(Some(()));
+        }
+        if !py.stderr_now().is_empty() && py.stderr_now().contains("Error") {
+            return Err(format!("python3: {}", py.stderr_now()));
+        }
+        Ok(None)
+    })?;
+    let from_py = [std(0x123, &[1, 2, 3]), ext(0x1234567, &[0xAA])];
+    canraw::expect_seq(&rx, &from_py, "CAN_RAW socket, frames from python-can")?;
+    let from_bus = [std(0x321, &[9, 8]), ext(0x1ABCDEF, &[])];
+    for f in &from_bus {
+        canraw::send(&rx, f)?;
+        // python-can 4.1's socketcand reader loses a message split across
+        // two reads: one frame at a time.
+        thread::sleep(Duration::from_millis(200));
+    }
+    let out = py.finish(TOOL_LIMIT)?;
+    ensure!(
+        out.status.success()
+            && out.stdout.contains("RX 321 0908")
+            && out.stdout.contains("RX 1ABCDEF \n"),
+        "python-can client: {}: stdout {:?}, stderr {:?}",
+        out.status,
+        out.stdout,
+        out.stderr
+    );
+    let want2 = [
+        ("< frame 123 ", " 010203 >"),
+        ("< frame 01234567 ", " AA >"),
+        ("< frame 321 ", " 0908 >"),
+        ("< frame 01ABCDEF ", "  >"),
+    ];
+    for (pre, post) in want2 {
+        let m = read_msg(&mut c2, &mut pend)?;
+        ensure!(
+            m.starts_with(pre) && m.ends_with(post),
+            "second client: expected {pre}SEC.USEC{post}, got {m:?}"
+        );
+    }
+    drop(c2);
+    srv.signal("TERM")?;
+    let out = srv.finish(TOOL_LIMIT)?;
+    ensure!(
+        out.status.success(),
+        "cantcpd after SIGTERM: {}: {}",
+        out.status,
+        out.stderr.trim()
+    );
+    Ok(())
+}
