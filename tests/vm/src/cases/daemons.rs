@@ -125,7 +125,7 @@ fn send_retry(s: &socketcan::CanSocket, f: &CanFrame) -> TestResult {
     Err(format!("write {}: ENOBUFS for 1 s", canraw::show(f)))
 }
 
-/// canzlogd and `candump -l -e` log the same frames (data, extended,
+/// canzlogd and `candump -l can0,0:0,#FFFFFFFF` log the same frames (data, extended,
 /// remote, error) as the same lines, timestamps included: both read the
 /// kernel's receive time. SIGTERM ends canzlogd with status 0, and its
 /// notes say so.
@@ -144,17 +144,15 @@ fn canzlogd_matches_candump_log(ctx: &mut Ctx) -> TestResult {
         err_frame(CAN_ERR_CRTL, &[0, 4]),
     ];
     frames.extend((0..50).map(numbered));
-    let n = frames.len().to_string();
-    let mut dump = tools::spawn(
-        "candump",
-        &["-l", "-e", "can0", "-n", &n],
-        Some(ddir.path()),
-    )?;
+    let mut dump = tools::spawn("candump", &["-l", "can0,0:0,#FFFFFFFF"], Some(ddir.path()))?;
     dump.wait_listening()?;
     let z = canzlogd(zdir.path(), &["--flush-ms", "100"])?;
     for f in &frames {
         send_retry(&tx, f)?;
     }
+    // Both read the frames as they come; give them a generous second.
+    thread::sleep(Duration::from_secs(1));
+    dump.signal("TERM")?;
     let out = dump.finish(TOOL_LIMIT)?;
     ensure!(
         out.status.success(),
@@ -289,8 +287,9 @@ fn canzlogd_rotates_by_size_and_age(ctx: &mut Ctx) -> TestResult {
 }
 
 /// SO_RXQ_OVFL: canzlogd with a tiny receive buffer is stopped (SIGSTOP)
-/// while 200 frames arrive; after SIGCONT its notes report the drops, and
-/// logged + reported = sent.
+/// while 200 frames arrive; after SIGCONT and one more frame (the kernel
+/// reports drops with the next frame it queues), its notes report the
+/// drops, and logged + reported = sent.
 fn canzlogd_reports_rxq_overflow(ctx: &mut Ctx) -> TestResult {
     const N: u32 = 200;
     let idx = raw1(ctx)?;
@@ -304,6 +303,10 @@ fn canzlogd_reports_rxq_overflow(ctx: &mut Ctx) -> TestResult {
     // The loopback device echoes in softirq; give it time to finish.
     thread::sleep(Duration::from_millis(300));
     z.signal("CONT")?;
+    thread::sleep(Duration::from_millis(500));
+    // SO_RXQ_OVFL reports drops with the next frame queued after them:
+    // one more frame, once canzlogd has drained its queue.
+    send_retry(&tx, &numbered(N))?;
     thread::sleep(Duration::from_millis(500));
     stop(z, "canzlogd")?;
     let (lines, notes) = zcat(&log_files(dir.path())?)?;
@@ -321,9 +324,10 @@ fn canzlogd_reports_rxq_overflow(ctx: &mut Ctx) -> TestResult {
         lines.len()
     );
     ensure!(
-        lines.len() as u64 + dropped == u64::from(N),
-        "{} logged + {dropped} reported dropped != {N} sent; notes {notes:?}",
-        lines.len()
+        lines.len() as u64 + dropped == u64::from(N + 1),
+        "{} logged + {dropped} reported dropped != {} sent; notes {notes:?}",
+        lines.len(),
+        N + 1
     );
     Ok(())
 }

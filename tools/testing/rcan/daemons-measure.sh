@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: GPL-2.0
+# canzlogd's cost, the figures in Documentation/networking/rcan/canzlogd.rst:
+# CPU time per second at a given frame rate, and bytes per frame on disk.
+# Runs INSIDE the test VM (as root), on rcan's canloop:
+#
+#   . tools/testing/rcan/lib.sh
+#   bash tools/testing/rcan/vm-run.sh --timeout 900 -- \
+#       bash tools/testing/rcan/daemons-measure.sh [FRAMES] [GAP_MS] [FLUSH_MS]
+#
+# cangen sends FRAMES (default 10000) random classic frames (random id,
+# length and data: the worst case for compression) every GAP_MS (default 1,
+# so at most 1000 frames/s); canzlogd's user+system time comes from
+# /proc/PID/stat. In a software-emulated VM every figure is several times
+# what the same work costs on hardware: compare runs, not absolutes.
+set -euo pipefail
+cd "$(dirname "$0")/../../.."
+n=${1:-10000}
+gap=${2:-1}
+flush=${3:-1000}
+insmod net/can/rcan_pf.ko
+insmod net/can/rcan_raw.ko
+insmod drivers/net/can/rcan_loop.ko
+ip link set can0 up
+dir=$(mktemp -d)
+target/release/canzlogd -d "$dir" --flush-ms "$flush" can0 2>"$dir.err" &
+pid=$!
+sleep 2
+hz=$(getconf CLK_TCK)
+ticks() { awk '{print $14 + $15}' "/proc/$pid/stat"; }
+t0=$(ticks)
+s0=$(date +%s.%N)
+cangen can0 -g "$gap" -n "$n"
+s1=$(date +%s.%N)
+sleep 1.2 # one flush interval, so the last frames are compressed too
+t1=$(ticks)
+kill -TERM "$pid"
+wait "$pid"
+bytes=$(cat "$dir"/*.log.gz | wc -c)
+lines=$(zcat "$dir"/*.log.gz | grep -c '^(')
+raw=$(zcat "$dir"/*.log.gz | grep '^(' | wc -c)
+awk -v n="$n" -v lines="$lines" -v s0="$s0" -v s1="$s1" -v t0="$t0" -v t1="$t1" \
+	-v hz="$hz" -v bytes="$bytes" -v raw="$raw" -v flush="$flush" 'BEGIN {
+	el = s1 - s0; fps = n / el; cpu = (t1 - t0) / hz
+	printf "canzlogd: %d frames sent in %.2f s (%.0f frames/s), %d logged, flush %d ms\n", n, el, fps, lines, flush
+	printf "canzlogd: CPU %.2f s = %.2f %% of one CPU, %.2f %% per 1,000 frames/s\n", cpu, 100 * cpu / el, 100 * cpu / el / (fps / 1000)
+	printf "canzlogd: %d bytes on disk = %.2f bytes/frame (text %.1f bytes/frame, ratio %.2f)\n", bytes, bytes / lines, raw / lines, raw / bytes
+}'
