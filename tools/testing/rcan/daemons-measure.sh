@@ -25,17 +25,39 @@ ip link set can0 up
 dir=$(mktemp -d)
 target/release/canzlogd -d "$dir" --flush-ms "$flush" can0 2>"$dir.err" &
 pid=$!
+# The baseline: can-utils' candump -l, uncompressed, on the same frames.
+(cd "$dir" && exec candump -l can0) &
+cpid=$!
 sleep 2
 hz=$(getconf CLK_TCK)
-ticks() { awk '{print $14 + $15}' "/proc/$pid/stat"; }
-t0=$(ticks)
+ticks() { awk '{print $14 + $15}' "/proc/$1/stat"; }
+i0=$(ticks $pid)
+sleep 5
+i1=$(ticks $pid)
+echo "canzlogd: idle: $((i1 - i0)) ticks of CPU in 5 s (CLK_TCK $hz); clocksource $(cat /sys/devices/system/clocksource/clocksource0/current_clocksource)"
+t0=$(ticks $pid)
+c0=$(ticks $cpid)
+# RCAN_MEASURE_STRACE=1: also count canzlogd's system calls (slows it).
+if [ "${RCAN_MEASURE_STRACE:-0}" = 1 ]; then
+	strace -c -f -p "$pid" -o "$dir.strace" &
+	spid=$!
+	sleep 1
+fi
 s0=$(date +%s.%N)
 cangen can0 -g "$gap" -n "$n"
 s1=$(date +%s.%N)
 sleep 1.2 # one flush interval, so the last frames are compressed too
-t1=$(ticks)
-kill -TERM "$pid"
+t1=$(ticks $pid)
+c1=$(ticks $cpid)
+if [ -n "${spid:-}" ]; then
+	kill -INT "$spid"
+	wait "$spid" || true
+	cat "$dir.strace"
+fi
+kill -TERM "$pid" "$cpid"
 wait "$pid"
+wait "$cpid" || true
+echo "candump -l: CPU $(awk -v a="$c0" -v b="$c1" -v hz="$hz" 'BEGIN { printf "%.2f", (b - a) / hz }') s for the same frames, $(wc -c < "$dir"/candump-*.log) bytes uncompressed"
 bytes=$(cat "$dir"/*.log.gz | wc -c)
 lines=$(zcat "$dir"/*.log.gz | grep -c '^(')
 raw=$(zcat "$dir"/*.log.gz | grep '^(' | wc -c)

@@ -87,11 +87,16 @@ fn run(cli: ZlogCli) -> Result<(), String> {
     let mut next_flush = Instant::now() + interval;
     let mut frames: u64 = 0;
     let mut errors = vec![0u64; ports.len()];
+    // Reused every round: no allocation per wakeup.
+    let mut fds = Vec::with_capacity(ports.len() + 1);
+    let mut ready = vec![false; ports.len()];
     loop {
-        let wait = next_flush.saturating_duration_since(Instant::now());
+        let now = Instant::now();
+        let wait = next_flush.saturating_duration_since(now);
         // Round up: waking a little early would spin until the deadline.
         let ms = wait.as_millis().saturating_add(1).min(60_000) as u32;
-        let mut fds = vec![PollFd::new(sfd.as_fd(), PollFlags::POLLIN)];
+        fds.clear();
+        fds.push(PollFd::new(sfd.as_fd(), PollFlags::POLLIN));
         fds.extend(
             ports
                 .iter()
@@ -105,8 +110,9 @@ fn run(cli: ZlogCli) -> Result<(), String> {
             Err(e) => return Err(format!("poll: {e}")),
         }
         let stop = fds[0].any().unwrap_or(false);
-        let ready: Vec<bool> = fds[1..].iter().map(|f| f.any().unwrap_or(false)).collect();
-        drop(fds);
+        for (r, f) in ready.iter_mut().zip(&fds[1..]) {
+            *r = f.any().unwrap_or(false);
+        }
         if stop {
             let sig = sfd
                 .read_signal()
