@@ -5,7 +5,7 @@
 //! identifiers, lengths and data (cangen's default mix: the worst case for
 //! compression) at RATE frames per second of simulated bus time.
 //!
-//!     cargo run --release -p rcan-daemons --example zlog_cost [N] [RATE] [FLUSH_MS]
+//!     cargo run --release -p rcan-daemons --example zlog_cost [N] [RATE] [FLUSH_MS] [LEVEL]
 //!
 //! Prints CPU time (user + system, getrusage: not wall time, which a
 //! loaded machine inflates) per frame and per 1,000 frames/s, and bytes per frame.
@@ -33,6 +33,7 @@ fn main() {
     let n = a.next().unwrap_or(1_000_000);
     let rate = a.next().unwrap_or(1000);
     let flush_ms = a.next().unwrap_or(1000);
+    let level = a.next().unwrap_or(1) as u32;
     let dir = std::env::temp_dir().join(format!("zlog-cost-{}", std::process::id()));
     let mut z = ZLog::new(Config {
         dir: dir.clone(),
@@ -40,7 +41,7 @@ fn main() {
         max_size: u64::MAX,
         max_age: Duration::from_secs(1 << 30),
         fsync: false,
-        level: 6,
+        level,
     })
     .expect("temp dir");
     let per_flush = (rate * flush_ms / 1000).max(1);
@@ -81,7 +82,7 @@ fn main() {
     z.close().expect("write");
     let per = (cpu_time() - t0) / n as f64;
     println!(
-        "zlog_cost: {n} frames, {rate} frames/s, flush {flush_ms} ms: {:.2} us/frame = {:.3} % of one CPU per 1,000 frames/s; {:.2} bytes/frame on disk",
+        "zlog_cost: {n} frames, {rate} frames/s, flush {flush_ms} ms, level {level}: {:.2} us/frame = {:.3} % of one CPU per 1,000 frames/s; {:.2} bytes/frame on disk",
         per * 1e6,
         per * 1000.0 * 100.0,
         z.bytes_written as f64 / n as f64

@@ -40,8 +40,9 @@ pub struct ZlogCli {
     /// Start a new file once the current one is this many seconds old.
     #[arg(short = 'a', long, default_value_t = 3600, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_age: u64,
-    /// gzip compression level (0-9).
-    #[arg(short = 'l', long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(0..=9))]
+    /// gzip compression level (0-9). 1 is the default: about 9 % larger
+    /// files than 6 for three times less CPU (canzlogd.rst, Measurements).
+    #[arg(short = 'l', long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=9))]
     pub level: u32,
     /// Do not fdatasync after each member (survives a crash of the
     /// daemon, not a power loss).

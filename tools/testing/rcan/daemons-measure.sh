@@ -18,25 +18,40 @@ cd "$(dirname "$0")/../../.."
 n=${1:-10000}
 gap=${2:-1}
 flush=${3:-1000}
-insmod net/can/rcan_pf.ko
-insmod net/can/rcan_raw.ko
-insmod drivers/net/can/rcan_loop.ko
-ip link set can0 up
+if ! grep -q '^rcan_loop ' /proc/modules; then
+	insmod net/can/rcan_pf.ko
+	insmod net/can/rcan_raw.ko
+	insmod drivers/net/can/rcan_loop.ko
+	ip link set can0 up
+fi
 dir=$(mktemp -d)
-target/release/canzlogd -d "$dir" --flush-ms "$flush" can0 2>"$dir.err" &
+# RCAN_MEASURE_OPTS: more canzlogd options (e.g. "--no-fsync --level 1").
+# shellcheck disable=SC2086
+# Pinned: the sender (and the loopback device's echo, which runs in the
+# NET_RX softirq of the sending CPU) on CPU 0, the loggers on CPU 1, so
+# the loggers' stime is their own system calls. With one CPU, no pinning.
+pin0= pin1=
+if [ "$(nproc)" -ge 2 ]; then pin0="taskset -c 0" pin1="taskset -c 1"; fi
+$pin1 target/release/canzlogd -d "$dir" --flush-ms "$flush" ${RCAN_MEASURE_OPTS:-} can0 2>"$dir.err" &
 pid=$!
 # The baseline: can-utils' candump -l, uncompressed, on the same frames.
-(cd "$dir" && exec candump -l can0) &
+(cd "$dir" && exec $pin1 candump -l can0) &
 cpid=$!
 sleep 2
 hz=$(getconf CLK_TCK)
+# utime and stime separately: tick-based accounting charges softirq work
+# (the CAN receive path of every socket) to whatever task it interrupts,
+# so stime is noisy; utime is the program's own work.
 ticks() { awk '{print $14 + $15}' "/proc/$1/stat"; }
+uticks() { awk '{print $14}' "/proc/$1/stat"; }
 i0=$(ticks $pid)
 sleep 5
 i1=$(ticks $pid)
 echo "canzlogd: idle: $((i1 - i0)) ticks of CPU in 5 s (CLK_TCK $hz); clocksource $(cat /sys/devices/system/clocksource/clocksource0/current_clocksource)"
 t0=$(ticks $pid)
+u0=$(uticks $pid)
 c0=$(ticks $cpid)
+cu0=$(uticks $cpid)
 # RCAN_MEASURE_STRACE=1: also count canzlogd's system calls (slows it).
 if [ "${RCAN_MEASURE_STRACE:-0}" = 1 ]; then
 	strace -c -f -p "$pid" -o "$dir.strace" &
@@ -44,11 +59,13 @@ if [ "${RCAN_MEASURE_STRACE:-0}" = 1 ]; then
 	sleep 1
 fi
 s0=$(date +%s.%N)
-cangen can0 -g "$gap" -n "$n"
+$pin0 cangen can0 -g "$gap" -n "$n"
 s1=$(date +%s.%N)
 sleep 1.2 # one flush interval, so the last frames are compressed too
 t1=$(ticks $pid)
+u1=$(uticks $pid)
 c1=$(ticks $cpid)
+cu1=$(uticks $cpid)
 if [ -n "${spid:-}" ]; then
 	kill -INT "$spid"
 	wait "$spid" || true
@@ -57,14 +74,17 @@ fi
 kill -TERM "$pid" "$cpid"
 wait "$pid"
 wait "$cpid" || true
-echo "candump -l: CPU $(awk -v a="$c0" -v b="$c1" -v hz="$hz" 'BEGIN { printf "%.2f", (b - a) / hz }') s for the same frames, $(wc -c < "$dir"/candump-*.log) bytes uncompressed"
+echo "candump -l: CPU $(awk -v a="$c0" -v b="$c1" -v hz="$hz" 'BEGIN { printf "%.2f", (b - a) / hz }') s (user $(awk -v a="$cu0" -v b="$cu1" -v hz="$hz" 'BEGIN { printf "%.2f", (b - a) / hz }') s) for the same frames, $(wc -c < "$dir"/candump-*.log) bytes uncompressed"
 bytes=$(cat "$dir"/*.log.gz | wc -c)
 lines=$(zcat "$dir"/*.log.gz | grep -c '^(')
 raw=$(zcat "$dir"/*.log.gz | grep '^(' | wc -c)
+zcat "$dir"/*.log.gz | grep '^#' | sed 's/^/canzlogd: note: /'
 awk -v n="$n" -v lines="$lines" -v s0="$s0" -v s1="$s1" -v t0="$t0" -v t1="$t1" \
-	-v hz="$hz" -v bytes="$bytes" -v raw="$raw" -v flush="$flush" 'BEGIN {
+	-v u0="$u0" -v u1="$u1" -v hz="$hz" -v bytes="$bytes" -v raw="$raw" -v flush="$flush" 'BEGIN {
 	el = s1 - s0; fps = n / el; cpu = (t1 - t0) / hz
 	printf "canzlogd: %d frames sent in %.2f s (%.0f frames/s), %d logged, flush %d ms\n", n, el, fps, lines, flush
 	printf "canzlogd: CPU %.2f s = %.2f %% of one CPU, %.2f %% per 1,000 frames/s\n", cpu, 100 * cpu / el, 100 * cpu / el / (fps / 1000)
+	ucpu = (u1 - u0) / hz
+	printf "canzlogd: user CPU %.2f s = %.2f %% of one CPU, %.2f %% per 1,000 frames/s\n", ucpu, 100 * ucpu / el, 100 * ucpu / el / (fps / 1000)
 	printf "canzlogd: %d bytes on disk = %.2f bytes/frame (text %.1f bytes/frame, ratio %.2f)\n", bytes, bytes / lines, raw / lines, raw / bytes
 }'
