@@ -13,6 +13,8 @@
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant, SystemTime};
 
@@ -201,18 +203,29 @@ fn canzlogd_sigkill_loses_at_most_flush_interval(ctx: &mut Ctx) -> TestResult {
     let tx = canraw::open(idx)?;
     let dir = TempDir::new("canzlogd-kill")?;
     let z = canzlogd(dir.path(), &["--flush-ms", &FLUSH_MS.to_string()])?;
-    let mut sent_at = Vec::new();
-    let start = Instant::now();
-    let mut i = 0u32;
-    // Frames every 2 ms for at least 1.5 s, then SIGKILL mid-stream.
-    while start.elapsed() < Duration::from_millis(1500) || i < 300 {
-        sent_at.push(now_us());
-        send_retry(&tx, &numbered(i))?;
-        i += 1;
-        thread::sleep(Duration::from_millis(2));
-    }
+    // A sender thread keeps frames coming every 2 ms while the kill
+    // happens, as on a running bus; it returns the send times.
+    let stop = Arc::new(AtomicBool::new(false));
+    let sender = {
+        let stop = Arc::clone(&stop);
+        thread::spawn(move || -> Result<Vec<u64>, String> {
+            let mut sent_at = Vec::new();
+            while !stop.load(Ordering::Relaxed) {
+                sent_at.push(now_us());
+                send_retry(&tx, &numbered(sent_at.len() as u32 - 1))?;
+                thread::sleep(Duration::from_millis(2));
+            }
+            Ok(sent_at)
+        })
+    };
+    thread::sleep(Duration::from_millis(1500));
     let kill_us = now_us();
-    z.signal("KILL")?;
+    let killed = z.signal("KILL");
+    thread::sleep(Duration::from_millis(100));
+    stop.store(true, Ordering::Relaxed);
+    let sent_at = sender.join().map_err(|_| "sender panicked")??;
+    killed?;
+    let i = sent_at.len();
     let out = z.finish(TOOL_LIMIT)?;
     ensure!(
         !out.status.success(),
@@ -235,10 +248,10 @@ fn canzlogd_sigkill_loses_at_most_flush_interval(ctx: &mut Ctx) -> TestResult {
         FLUSH_MS + SLACK_MS
     );
     eprintln!(
-        "    canzlogd SIGKILL: {logged} of {i} frames logged, last logged sent {} ms before the kill",
+        "    canzlogd SIGKILL: {logged} of {i} frames logged, last logged sent {} ms before kill(1) started",
         logged
             .checked_sub(1)
-            .map_or(0, |k| (kill_us - sent_at[k]) / 1000)
+            .map_or(0, |k| kill_us.saturating_sub(sent_at[k]) / 1000)
     );
     Ok(())
 }
