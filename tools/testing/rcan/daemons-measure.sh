@@ -25,13 +25,15 @@ if ! grep -q '^rcan_loop ' /proc/modules; then
 	ip link set can0 up
 fi
 dir=$(mktemp -d)
-# RCAN_MEASURE_OPTS: more canzlogd options (e.g. "--no-fsync --level 1").
-# shellcheck disable=SC2086
+# RCAN_MEASURE_OPTS: more canzlogd options (e.g. "--no-fsync --level 6").
 # Pinned: the sender (and the loopback device's echo, which runs in the
 # NET_RX softirq of the sending CPU) on CPU 0, the loggers on CPU 1, so
-# the loggers' stime is their own system calls. With one CPU, no pinning.
-pin0= pin1=
+# the loggers charge only their own system calls; in an overloaded
+# emulated VM system time stays noisy all the same (canzlogd.rst,
+# Measurements). With one CPU, no pinning.
+pin0='' pin1=''
 if [ "$(nproc)" -ge 2 ]; then pin0="taskset -c 0" pin1="taskset -c 1"; fi
+# shellcheck disable=SC2086 # word splitting of the options is meant
 $pin1 target/release/canzlogd -d "$dir" --flush-ms "$flush" ${RCAN_MEASURE_OPTS:-} can0 2>"$dir.err" &
 pid=$!
 # The baseline: can-utils' candump -l, uncompressed, on the same frames.
