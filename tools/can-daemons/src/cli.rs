@@ -82,6 +82,11 @@ pub struct TcpCli {
     /// Interfaces clients may open (default: any CAN interface).
     #[arg(short, long = "allow", value_name = "IFACE")]
     pub allow: Vec<String>,
+    /// SO_SNDBUF of each client connection in bytes (the kernel doubles
+    /// it); with --queue it bounds what a client that stops reading can
+    /// hold. Default: the system's (TCP autotuning, up to megabytes).
+    #[arg(long)]
+    pub sndbuf: Option<usize>,
     /// Most clients at once; more are refused.
     #[arg(short, long, default_value_t = 16)]
     pub max_clients: usize,

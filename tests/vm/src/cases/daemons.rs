@@ -33,6 +33,7 @@ pub const TESTS: &[Test] = portable_table![
     canzlogd_rotates_by_size_and_age,
     canzlogd_reports_rxq_overflow,
     cantcpd_python_can_and_second_client,
+    cantcpd_slow_client_drops_alone,
 ];
 
 /// Starts canzlogd on can0 into `dir` with `extra` options; returns once
@@ -452,6 +453,106 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
         );
     }
     drop(c2);
+    srv.signal("TERM")?;
+    let out = srv.finish(TOOL_LIMIT)?;
+    ensure!(
+        out.status.success(),
+        "cantcpd after SIGTERM: {}: {}",
+        out.status,
+        out.stderr.trim()
+    );
+    Ok(())
+}
+
+/// A socketcand client that reads nothing after `rawmode` (a small
+/// SO_RCVBUF set before connecting); it prints READY and sleeps.
+const PY_SLOW_CLIENT: &str = r#"
+import socket, time
+s = socket.socket()
+s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 2048)
+s.connect(("127.0.0.1", 29536))
+for cmd in (None, b"< open can0 >", b"< rawmode >"):
+    if cmd:
+        s.sendall(cmd)
+    reply = s.recv(64)
+    assert reply in (b"< hi >", b"< ok >"), reply
+print("READY", flush=True)
+time.sleep(600)
+"#;
+
+/// A client that stops reading never stalls another: with `--queue 256
+/// --sndbuf 4096`, 2,000 frames sent on can0 (one a millisecond, a busy
+/// bus) all reach a reading client in order while a python client that reads nothing is connected; when the
+/// latter goes, cantcpd reports the frames it dropped for it (and none for
+/// the reading client).
+fn cantcpd_slow_client_drops_alone(ctx: &mut Ctx) -> TestResult {
+    const N: u32 = 2000;
+    let idx = raw1(ctx)?;
+    let tx = canraw::open(idx)?;
+    let mut srv = tools::spawn_own("cantcpd", &["--queue", "256", "--sndbuf", "4096"], None)?;
+    srv.wait_stderr("listening on 127.0.0.1:29536")?;
+    let mut fast = TcpStream::connect("127.0.0.1:29536").or_fail("connect")?;
+    fast.set_read_timeout(Some(Duration::from_secs(10)))
+        .or_fail("SO_RCVTIMEO")?;
+    let mut pend = String::new();
+    for (cmd, want) in [
+        (None, "< hi >"),
+        (Some("< open can0 >"), "< ok >"),
+        (Some("< rawmode >"), "< ok >"),
+    ] {
+        if let Some(c) = cmd {
+            fast.write_all(c.as_bytes()).or_fail("write")?;
+        }
+        let m = read_msg(&mut fast, &mut pend)?;
+        ensure!(m == want, "reading client: expected {want:?}, got {m:?}");
+    }
+    let slow = tools::spawn("python3", &["-c", PY_SLOW_CLIENT], None)?;
+    wait_for(TOOL_LIMIT, "the slow client to be in raw mode", || {
+        if slow.stdout_now().contains("READY") {
+            return Ok(Some(()));
+        }
+        if slow.stderr_now().contains("Error") {
+            return Err(format!("python3: {}", slow.stderr_now()));
+        }
+        Ok(None)
+    })?;
+    // The reading client reads while the frames are sent, as a client on
+    // a busy bus does.
+    let reader = thread::spawn(move || -> TestResult {
+        for i in 0..N {
+            let m = read_msg(&mut fast, &mut pend)?;
+            let want = format!("{:08X}", i.swap_bytes());
+            ensure!(
+                m.starts_with("< frame 100 ") && m.ends_with(&format!(" {want} >")),
+                "reading client, frame {i}: got {m:?}"
+            );
+        }
+        Ok(())
+    });
+    for i in 0..N {
+        send_retry(&tx, &numbered(i))?;
+        thread::sleep(Duration::from_millis(1));
+    }
+    reader.join().map_err(|_| "reader panicked")??;
+    drop(slow);
+    // Both connections are closed now (the reading one when its thread
+    // ended): one "closed" line each, with its drop count.
+    let counts = |err: &str| -> Vec<u32> {
+        err.lines()
+            .filter(|l| l.ends_with("frames dropped in all"))
+            .filter_map(|l| l.split(", ").nth(1)?.split(' ').next()?.parse().ok())
+            .collect()
+    };
+    let mut c = wait_for(TOOL_LIMIT, "cantcpd to close both clients", || {
+        let c = counts(&srv.stderr_now());
+        Ok((c.len() == 2).then_some(c))
+    })?;
+    c.sort();
+    ensure!(
+        c[0] == 0 && c[1] > 0 && c[1] < N,
+        "drops reported for the two clients {c:?}, expected 0 for the reading one and some for the other: {}",
+        srv.stderr_now()
+    );
     srv.signal("TERM")?;
     let out = srv.finish(TOOL_LIMIT)?;
     ensure!(

@@ -41,6 +41,7 @@ struct Server {
     active: AtomicUsize,
     queue: usize,
     allow: Vec<String>,
+    sndbuf: Option<usize>,
 }
 
 /// One connection.
@@ -207,6 +208,12 @@ fn client(srv: Arc<Server>, stream: TcpStream) {
         .map(|a| a.to_string())
         .unwrap_or_else(|_| "?".into());
     let _ = stream.set_nodelay(true);
+    if let Some(b) = srv.sndbuf {
+        if let Err(e) = nix::sys::socket::setsockopt(&stream, nix::sys::socket::sockopt::SndBuf, &b)
+        {
+            eprintln!("cantcpd: {peer}: SO_SNDBUF: {e}");
+        }
+    }
     let _ = stream.set_read_timeout(Some(TICK));
     let mut input = match stream.try_clone() {
         Ok(s) => s,
@@ -278,6 +285,7 @@ fn run(cli: TcpCli) -> Result<(), String> {
         active: AtomicUsize::new(0),
         queue: usize::try_from(cli.queue).unwrap_or(usize::MAX),
         allow: cli.allow.clone(),
+        sndbuf: cli.sndbuf,
     });
     eprintln!(
         "cantcpd: listening on {}",
