@@ -96,6 +96,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         dsor::TESTS,
         sja1000::TESTS,
         capture::SJA1000_TESTS,
+        daemons::SJA1000_TESTS,
         i82527::TESTS,
         rxcontext::TESTS,
         // Until rcan_bcm lands (issue 13): mainline stage only.
