@@ -372,6 +372,9 @@ fn read_msg(s: &mut TcpStream, pending: &mut String) -> Result<String, String> {
     }
 }
 
+/// How long a python3 client may take to start and finish.
+const PY_LIMIT: Duration = Duration::from_secs(240);
+
 /// The python-can side of the cantcpd test: sends two frames, then
 /// prints the two it receives.
 const PY_CLIENT: &str = r#"
@@ -415,7 +418,9 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
     expect(&mut c2, &mut pend, "< ok >")?;
 
     let py = tools::spawn("python3", &["-c", PY_CLIENT], None)?;
-    wait_for(TOOL_LIMIT, "python-can client to send", || {
+    // Importing python-can over 9p takes over a minute on the debug
+    // kernel under TCG.
+    wait_for(PY_LIMIT, "python-can client to send", || {
         if py.stdout_now().contains("SENT") {
             return Ok(Some(()));
         }
@@ -433,7 +438,7 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
         // two reads: one frame at a time.
         thread::sleep(Duration::from_millis(200));
     }
-    let out = py.finish(TOOL_LIMIT)?;
+    let out = py.finish(PY_LIMIT)?;
     ensure!(
         out.status.success()
             && out.stdout.contains("RX 321 0908")
@@ -511,7 +516,7 @@ fn cantcpd_slow_client_drops_alone(ctx: &mut Ctx) -> TestResult {
         ensure!(m == want, "reading client: expected {want:?}, got {m:?}");
     }
     let slow = tools::spawn("python3", &["-c", PY_SLOW_CLIENT], None)?;
-    wait_for(TOOL_LIMIT, "the slow client to be in raw mode", || {
+    wait_for(PY_LIMIT, "the slow client to be in raw mode", || {
         if slow.stdout_now().contains("READY") {
             return Ok(Some(()));
         }
