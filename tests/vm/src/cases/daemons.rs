@@ -38,7 +38,7 @@ pub const TESTS: &[Test] = portable_table![
 ];
 
 /// canzlogd on the emulated SJA1000 cards (rcan_kvaser_pci): ours only.
-pub const SJA1000_TESTS: &[Test] = test_table![canzlogd_sja1000_two_cards];
+pub const SJA1000_TESTS: &[Test] = test_table![sja1000_canzlogd_two_cards];
 
 /// Starts canzlogd on can0 into `dir` with `extra` options; returns once
 /// it waits for frames.
@@ -578,7 +578,7 @@ fn cantcpd_slow_client_drops_alone(ctx: &mut Ctx) -> TestResult {
 /// frames sent on can0 with `cansend` (and a CAN_RAW socket) are logged
 /// twice, as can0's local echo and as can1's reception from the bus, each
 /// interface's lines in sending order.
-fn canzlogd_sja1000_two_cards(ctx: &mut Ctx) -> TestResult {
+fn sja1000_canzlogd_two_cards(ctx: &mut Ctx) -> TestResult {
     let (i0, _) = kvaser2(ctx)?;
     let tx = canraw::open(i0)?;
     let dir = TempDir::new("canzlogd-sja")?;

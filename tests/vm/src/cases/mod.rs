@@ -187,12 +187,16 @@ fn rmmod_card_during_traffic(ctx: &mut Ctx, m: Module, i0: u32, i1: u32) -> Test
 mod tests {
     #[test]
     fn portable_names() {
-        // The prefixes say what a test needs: raw_/canutils_ run on both
-        // stacks, bcm_ on mainline only (until rcan_bcm lands, issue 13),
-        // everything else (mixed_ included) on ours only.
+        // The prefixes say what a test needs: raw_/canutils_ and the
+        // daemons' canzlogd_/cantcpd_ run on both stacks, bcm_ on mainline
+        // only (until rcan_bcm lands, issue 13), everything else (mixed_,
+        // sja1000_ included) on ours only.
         for t in super::all() {
             let bcm = t.name.starts_with("bcm_");
-            let portable = t.name.starts_with("raw_") || t.name.starts_with("canutils_") || bcm;
+            let portable = ["raw_", "canutils_", "canzlogd_", "cantcpd_"]
+                .iter()
+                .any(|p| t.name.starts_with(p))
+                || bcm;
             assert_eq!(t.portable, portable, "{}", t.name);
             assert_eq!(t.mainline_only, bcm, "{}", t.name);
         }
