@@ -85,6 +85,16 @@ pub fn spawn(name: &str, args: &[&str], dir: Option<&Path>) -> Result<Bg, String
     })
 }
 
+/// Starts one of this tree's own programs (built beside the test binary,
+/// in target/release) like [`spawn`].
+pub fn spawn_own(name: &str, args: &[&str], dir: Option<&Path>) -> Result<Bg, String> {
+    let bin = std::env::current_exe()
+        .or_fail("current_exe")?
+        .with_file_name(name);
+    let bin = bin.to_str().ok_or("non-UTF-8 path")?.to_string();
+    spawn(&bin, args, dir)
+}
+
 /// Runs `name args...` to completion (at most [`TOOL_LIMIT`]) and fails
 /// unless it exits with status 0.
 pub fn run_ok(name: &str, args: &[&str]) -> Result<Output, String> {
@@ -103,6 +113,17 @@ pub fn run_ok(name: &str, args: &[&str]) -> Result<Output, String> {
 impl Bg {
     fn text(buf: &Arc<Mutex<Vec<u8>>>) -> String {
         String::from_utf8_lossy(&buf.lock().unwrap_or_else(|e| e.into_inner())).into_owned()
+    }
+
+    /// Sends it signal `sig` (a name kill(1) knows: TERM, KILL, STOP,
+    /// CONT) with kill(1).
+    pub fn signal(&self, sig: &str) -> Result<(), String> {
+        run_ok("kill", &["-s", sig, &self.child.id().to_string()]).map(drop)
+    }
+
+    /// What the program wrote to stdout so far.
+    pub fn stdout_now(&self) -> String {
+        Self::text(&self.stdout)
     }
 
     /// What the program wrote to stderr so far.

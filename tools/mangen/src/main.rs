@@ -26,6 +26,8 @@ fn commands() -> Vec<clap::Command> {
         i82527config::command(),
         dsor_peer::cli::command(),
         rcan_samples::canarb_demo_command(),
+        rcan_daemons::cli::zlog_command(),
+        rcan_daemons::cli::tcp_command(),
     ]
 }
 

@@ -17,6 +17,8 @@ fn pages_and_completions() {
         ("i82527config", "withdraw"),
         ("dsor-peer", "ack\\-timeout\\-ms"),
         ("canarb-demo", "IFACE"),
+        ("canzlogd", "flush\\-ms"),
+        ("cantcpd", "listen"),
     ] {
         let page = std::fs::read_to_string(dir.join(format!("man1/{tool}.1"))).unwrap();
         assert!(page.contains(&format!(".TH {tool}")), "{tool}.1: {page}");

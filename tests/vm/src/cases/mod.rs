@@ -5,6 +5,7 @@ mod bcm;
 mod candev;
 mod canutils;
 mod capture;
+mod daemons;
 mod dsor;
 mod errors;
 mod filter;
@@ -100,6 +101,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         raw_efault::TESTS,
         leak::TESTS,
         canutils::TESTS,
+        daemons::TESTS,
         capture::TESTS,
         gateway::TESTS,
         mixed::TESTS,
@@ -110,6 +112,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         sja1000::TESTS,
         candev::TESTS,
         capture::SJA1000_TESTS,
+        daemons::SJA1000_TESTS,
         i82527::TESTS,
         leak::OURS,
         rxcontext::TESTS,
@@ -202,14 +205,15 @@ fn rmmod_card_during_traffic(ctx: &mut Ctx, m: Module, i0: u32, i1: u32) -> Test
 mod tests {
     #[test]
     fn portable_names() {
-        // The prefixes say what a test needs: raw_/canutils_/candev_ run
-        // on both stacks, bcm_ on mainline only (until rcan_bcm lands, issue 13),
-        // everything else (mixed_ included) on ours only.
+        // The prefixes say what a test needs: raw_/canutils_/candev_ and
+        // the daemons' canzlogd_/cantcpd_ run on both stacks, bcm_ on
+        // mainline only (until rcan_bcm lands, issue 13), everything else
+        // (mixed_, sja1000_ included) on ours only.
         for t in super::all() {
             let bcm = t.name.starts_with("bcm_");
-            let portable = t.name.starts_with("raw_")
-                || t.name.starts_with("canutils_")
-                || t.name.starts_with("candev_")
+            let portable = ["raw_", "canutils_", "candev_", "canzlogd_", "cantcpd_"]
+                .iter()
+                .any(|p| t.name.starts_with(p))
                 || bcm;
             assert_eq!(t.portable, portable, "{}", t.name);
             assert_eq!(t.mainline_only, bcm, "{}", t.name);
