@@ -43,7 +43,7 @@ use crate::Test;
 /// run against our stack only.
 macro_rules! test_table {
     ($($f:ident),* $(,)?) => {
-        &[$(crate::Test { name: stringify!($f), run: $f, portable: false, mainline_only: false }),*]
+        &[$(crate::Test { name: stringify!($f), run: $f, portable: false }),*]
     };
 }
 pub(crate) use test_table;
@@ -52,20 +52,10 @@ pub(crate) use test_table;
 /// against mainline SocketCAN (`--stack mainline`).
 macro_rules! portable_table {
     ($($f:ident),* $(,)?) => {
-        &[$(crate::Test { name: stringify!($f), run: $f, portable: true, mainline_only: false }),*]
+        &[$(crate::Test { name: stringify!($f), run: $f, portable: true }),*]
     };
 }
 pub(crate) use portable_table;
-
-/// `mainline_only_table![a, b]`: portable tests of a protocol our stack
-/// does not have yet; they run only with `--stack mainline` (CAN_BCM:
-/// until rcan_bcm lands, issue 13; then they become a `portable_table`).
-macro_rules! mainline_only_table {
-    ($($f:ident),* $(,)?) => {
-        &[$(crate::Test { name: stringify!($f), run: $f, portable: true, mainline_only: true }),*]
-    };
-}
-pub(crate) use mainline_only_table;
 
 /// Every test, in running order.
 pub fn all() -> impl Iterator<Item = &'static Test> {
@@ -96,8 +86,8 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         capture::SJA1000_TESTS,
         i82527::TESTS,
         rxcontext::TESTS,
-        // Until rcan_bcm lands (issue 13): mainline stage only.
         bcm::TESTS,
+        bcm::OURS,
     ]
     .into_iter()
     .flatten()
@@ -184,14 +174,13 @@ fn rmmod_card_during_traffic(ctx: &mut Ctx, m: Module, i0: u32, i1: u32) -> Test
 mod tests {
     #[test]
     fn portable_names() {
-        // The prefixes say what a test needs: raw_/canutils_ run on both
-        // stacks, bcm_ on mainline only (until rcan_bcm lands, issue 13),
-        // everything else (mixed_ included) on ours only.
+        // The prefixes say what a test needs: raw_/canutils_/bcm_ run on
+        // both stacks, everything else (mixed_ included) on ours only.
         for t in super::all() {
-            let bcm = t.name.starts_with("bcm_");
-            let portable = t.name.starts_with("raw_") || t.name.starts_with("canutils_") || bcm;
+            let portable = t.name.starts_with("raw_")
+                || t.name.starts_with("canutils_")
+                || t.name.starts_with("bcm_");
             assert_eq!(t.portable, portable, "{}", t.name);
-            assert_eq!(t.mainline_only, bcm, "{}", t.name);
         }
     }
 
