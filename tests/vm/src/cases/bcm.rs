@@ -1146,8 +1146,9 @@ fn count_ids(s: &socketcan::CanSocket, ids: std::ops::Range<u32>, t: Duration) -
 /// 2. ifdown, then the interface goes away (rmmod rcan_loop): the
 ///    connected socket reads ENODEV, writes get ENOTCONN (as mainline),
 ///    and its close afterwards is clean.
-/// 3. rmmod rcan_bcm with the jobs running is refused (EBUSY: every
-///    socket holds the module); after close() it unloads at once.
+/// 3. rmmod rcan_bcm with the jobs running is refused (every socket
+///    holds the module: EAGAIN from a non-blocking delete_module); after
+///    close() it unloads at once.
 fn teardown_bcm_cyclic_jobs(ctx: &mut Ctx) -> TestResult {
     let ifs = ctx.bcm_ifaces(2)?;
     let ids = 0x100..0x100 + TEARDOWN_JOBS;
