@@ -245,6 +245,9 @@ struct TxEffects<'a, 'p> {
     cfsiz: usize,
     frames: &'a [u8],
     pending: &'p mut Pending,
+    /// Outside the timer callback: the expiry to arm once the pending
+    /// frames are sent (see [`with_tx`]); `None` arms at once.
+    arm_later: Option<&'p mut Option<u64>>,
 }
 
 impl TxOut for TxEffects<'_, '_> {
@@ -275,10 +278,16 @@ impl TxOut for TxEffects<'_, '_> {
     }
 
     fn arm(&mut self, at: u64) {
-        self.job.start(TX_TIMER, at);
+        match &mut self.arm_later {
+            Some(later) => **later = Some(at),
+            None => self.job.start(TX_TIMER, at),
+        }
     }
 
     fn cancel(&mut self) {
+        if let Some(later) = &mut self.arm_later {
+            **later = None;
+        }
         self.job.try_cancel(TX_TIMER);
     }
 }
@@ -342,10 +351,23 @@ impl RxOut for RxEffects<'_, '_> {
 
 /// Runs `f` on a transmit operation's state machine with its effects;
 /// sends afterwards. Any context but hardirq; `state` not held.
-fn with_tx(job: JobRef<'_, BcmOp>, f: impl FnOnce(&mut TxOp, &mut TxEffects<'_, '_>)) {
+///
+/// Outside the timer callback (`in_callback` false: sendmsg, notifier)
+/// the timer is armed only after the frame of `TX_ANNOUNCE`/`STARTTIMER`
+/// went out, so the first cyclic frame cannot overtake it (the callback
+/// may run on another CPU as soon as the timer is armed; mainline sends
+/// the announced frame before it starts the timer). Inside the callback,
+/// arming at once is safe: a timer re-armed by its running callback stays
+/// on that CPU and cannot expire before the callback returns.
+fn with_tx(
+    job: JobRef<'_, BcmOp>,
+    in_callback: bool,
+    f: impl FnOnce(&mut TxOp, &mut TxEffects<'_, '_>),
+) {
     let d = job.data();
     let sk = d.sk.sock();
     let mut pending = Pending::new();
+    let mut later = None;
     {
         let mut st = d.state.lock();
         if let OpState::Tx(t) = &mut *st {
@@ -362,11 +384,17 @@ fn with_tx(job: JobRef<'_, BcmOp>, f: impl FnOnce(&mut TxOp, &mut TxEffects<'_, 
                 cfsiz: *cfsiz,
                 frames,
                 pending: &mut pending,
+                arm_later: if in_callback { None } else { Some(&mut later) },
             };
             f(op, &mut out);
         }
     }
     pending.flush();
+    // A callback that runs meanwhile finds the recorded expiry in the
+    // future and does nothing.
+    if let Some(at) = later {
+        job.start(TX_TIMER, at);
+    }
 }
 
 /// Runs `f` on a receive operation's state machine with its effects and
@@ -408,7 +436,7 @@ impl JobCallback for BcmOp {
         let now = ktime_get_mono_ns() as u64;
         let due = |at: Option<u64>| at.is_some_and(|t| t <= now);
         if matches!(&*job.data().state.lock(), OpState::Tx(_)) {
-            with_tx(job, |op, out| {
+            with_tx(job, true, |op, out| {
                 if which == TX_TIMER && due(op.expires) {
                     op.timer_expired(now, out);
                 }
@@ -625,7 +653,7 @@ impl CanProtocol for BcmProto {
                 return;
             }
             for j in s.tx_ops.iter().filter(|j| j.data().key.ifindex == ifindex) {
-                with_tx(j.get(), |op, out| {
+                with_tx(j.get(), false, |op, out| {
                     if op.expires.take().is_some() {
                         out.cancel();
                     }
@@ -724,7 +752,7 @@ fn tx_setup(sk: &S, s: &mut BcmSock, req: &Request<'_>, ifindex: i32) -> Result<
             s.tx_ops.len() - 1
         }
     };
-    with_tx(s.tx_ops[i].get(), |op, out| op.setup(&h, now, out));
+    with_tx(s.tx_ops[i].get(), false, |op, out| op.setup(&h, now, out));
     Ok(ret)
 }
 
@@ -981,7 +1009,7 @@ impl glue::sock::Proto for BcmProto {
             }
             TX_READ => {
                 let i = find(&s.tx_ops, &key).ok_or(EINVAL)?;
-                with_tx(s.tx_ops[i].get(), |op, out| op.read(out));
+                with_tx(s.tx_ops[i].get(), false, |op, out| op.read(out));
                 Ok(MHSIZ)
             }
             RX_READ => {
