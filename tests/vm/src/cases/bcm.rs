@@ -929,11 +929,20 @@ print("done", flush=True)
         gap >= Duration::from_millis(300),
         format!("only {gap:?} between the last frame before stop() and the next task"),
     )?;
-    // duration ended the second task before bus.shutdown() 0.8 s later.
+    // duration ended the second task by itself: at most 25 frames above
+    // (about 40 would come by bus.shutdown() 0.8 s later), and their span
+    // as the recorder saw it. The debug kernel under emulation stretches
+    // 20 ms timers and delays the recorder (1.1 s seen once), hence a
+    // wider bound there.
     let span = b[b.len() - 1].0 - b[0].0;
+    let bound = if crate::ctx::debug_kernel() {
+        3000
+    } else {
+        600
+    };
     need(
-        span <= Duration::from_millis(600),
-        format!("the duration=0.3 s task sent for {span:?}"),
+        span <= Duration::from_millis(bound),
+        format!("the duration=0.3 s task sent for {span:?} (bound {bound} ms)"),
     )
 }
 
