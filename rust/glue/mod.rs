@@ -13,7 +13,8 @@
 //! [`lock`] (spinlocks and wait queues, each with its own lockdep class),
 //! [`skb`] (owned socket buffers), [`sock`] (socket protocols from a Rust
 //! trait), [`netdev`] (network devices from a Rust trait), [`hrtimer`]
-//! (high-resolution timers in statics), [`pci`] (PCI drivers and BARs),
+//! (high-resolution timers in statics), [`jobtimer`] (timers of jobs
+//! allocated at run time, cancelled when dropped), [`pci`] (PCI drivers and BARs),
 //! [`isa`] (claimed memory/port windows, interrupt autoprobe), [`percpu`]
 //! (per-CPU counters), [`params`] (module parameters of the C shims),
 //! [`kmod`] (loading modules on demand),
@@ -45,6 +46,7 @@ pub(crate) mod can;
 pub(crate) mod hrtimer;
 pub(crate) mod iomap;
 pub(crate) mod isa;
+pub(crate) mod jobtimer;
 pub(crate) mod kmod;
 pub(crate) mod lock;
 pub(crate) mod netdev;

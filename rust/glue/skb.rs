@@ -207,6 +207,25 @@ impl Skb {
         unsafe { bindings::rcan_skb_sock_params(self.as_ptr(), sk.as_ptr()) };
     }
 
+    /// Makes `sk` the skb's owner the way mainline's `can_skb_set_owner`
+    /// does (a counted reference, released by `sock_efree` when the skb
+    /// is freed; no send-buffer accounting), so that receivers see which
+    /// socket sent the frame. For frames sent outside a system call (timer
+    /// callbacks); an skb that has an owner keeps it. Any context.
+    pub(crate) fn set_owner<T: super::sock::Proto>(&mut self, sk: &super::sock::Sock<T>) {
+        // SAFETY: valid skb we own; `sk` is a live sock (Sock invariant),
+        // on which we take the reference that sock_efree drops.
+        unsafe {
+            let skb = &mut *self.as_ptr();
+            if !skb.sk.is_null() || skb.__bindgen_anon_3.__bindgen_anon_1.destructor.is_some() {
+                return;
+            }
+            bindings::rcan_sock_hold(sk.as_ptr());
+            skb.sk = sk.as_ptr();
+            skb.__bindgen_anon_3.__bindgen_anon_1.destructor = Some(bindings::sock_efree);
+        }
+    }
+
     /// Writes `src` into the control buffer at `off` (clamped to its 48
     /// bytes).
     pub(crate) fn cb_write(&mut self, off: usize, src: &[u8]) {

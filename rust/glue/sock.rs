@@ -264,6 +264,10 @@ pub(crate) struct SockRef<T: Proto> {
 // SAFETY: sock references may be dropped from any thread and context.
 unsafe impl<T: Proto> Send for SockRef<T> {}
 
+// SAFETY: shared access only hands out `Sock`s, whose methods may be called
+// from any thread (each names its context).
+unsafe impl<T: Proto> Sync for SockRef<T> {}
+
 impl<T: Proto> SockRef<T> {
     /// The sock, borrowed for as long as this reference lives.
     pub(crate) fn sock(&self) -> Sock<T> {

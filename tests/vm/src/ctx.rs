@@ -56,6 +56,8 @@ pub enum Module {
     Can,
     /// SocketCAN-compatible CAN_RAW (`net/can/rcan_raw.ko`).
     Raw,
+    /// SocketCAN-compatible CAN_BCM (`net/can/rcan_bcm.ko`).
+    Bcm,
     /// Loopback driver (`drivers/net/can/rcan_loop.ko`).
     Loop,
     /// DSOR time service (`net/can/dsor/rcan_time.ko`).
@@ -89,6 +91,7 @@ impl Module {
         Module::Pf,
         Module::Can,
         Module::Raw,
+        Module::Bcm,
         Module::Loop,
         Module::Time,
         Module::Rtime,
@@ -109,6 +112,7 @@ impl Module {
             Module::Pf => "rcan_pf",
             Module::Can => "rcan_can",
             Module::Raw => "rcan_raw",
+            Module::Bcm => "rcan_bcm",
             Module::Loop => "rcan_loop",
             Module::Time => "rcan_time",
             Module::Rtime => "rcan_rtime",
@@ -130,6 +134,7 @@ impl Module {
             Module::Pf => "net/can/rcan_pf.ko",
             Module::Can => "net/can/rcan_can.ko",
             Module::Raw => "net/can/rcan_raw.ko",
+            Module::Bcm => "net/can/rcan_bcm.ko",
             Module::Loop => "drivers/net/can/rcan_loop.ko",
             Module::Time => "net/can/dsor/rcan_time.ko",
             Module::Rtime => "net/can/dsor/rcan_rtime.ko",
@@ -389,11 +394,12 @@ impl Ctx {
     }
 
     /// [`Ctx::can_ifaces`] plus the CAN_BCM protocol. Mainline: can-bcm.ko.
-    /// Ours: an error until rcan_bcm exists (issue 13); the BCM tests are
-    /// registered mainline-only until then.
+    /// Ours: rcan_bcm.
     pub fn bcm_ifaces(&mut self, n: usize) -> Result<Vec<u32>, String> {
         if self.stack == Stack::Ours {
-            return Err("rcan_bcm does not exist yet (issue 13)".into());
+            let ifaces = self.can_ifaces(n)?;
+            self.insmod(Module::Bcm, &[])?;
+            return Ok(ifaces);
         }
         let ifaces = self.can_ifaces(n)?;
         let ko = self
@@ -686,6 +692,7 @@ mod tests {
                 "rcan_pf",
                 "rcan_can",
                 "rcan_raw",
+                "rcan_bcm",
                 "rcan_loop",
                 "rcan_time",
                 "rcan_rtime",

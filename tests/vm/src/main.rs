@@ -22,12 +22,12 @@
 //! - `--root DIR`: repository root holding the built `.ko` files (default:
 //!   `$RCAN_ROOT`, else the current directory).
 //! - `--stack STACK` (default `$RCAN_VMTEST_STACK`, else `ours`): `ours`
-//!   runs every test against the rcan modules except the mainline-only
-//!   ones; `mainline` runs only the portable tests (CAN_RAW, can-utils,
-//!   tcpdump, `ip ... type can` on the Kvaser cards) and the mainline-only ones (CAN_BCM with `can-bcm.ko`, until
-//!   rcan_bcm lands, issue 13) against mainline SocketCAN (`can.ko`,
-//!   `can-raw.ko`, `vcan.ko echo=1`), to show that they encode mainline
-//!   behaviour. The other tests are skipped there, not counted.
+//!   runs every test against the rcan modules; `mainline` runs only the
+//!   portable tests (CAN_RAW, can-utils, tcpdump, CAN_BCM, `ip ... type
+//!   can` on the Kvaser cards, the daemons) against mainline SocketCAN
+//!   (`can.ko`, `can-raw.ko`, `can-bcm.ko`, `can-dev.ko`, `vcan.ko
+//!   echo=1`), to show that they encode mainline behaviour. The other
+//!   tests are skipped there, not counted.
 //! - `--kbuild DIR`: kernel build directory with the mainline modules
 //!   (default: `$RCAN_KBUILD`); needed for `--stack mainline`.
 //! - `--timeout SECS`: per-test watchdog (default 180, or 360 on the debug
@@ -86,18 +86,14 @@ pub struct Test {
     /// the mainline API (CAN_RAW, can-utils, packet sockets) and sets up its
     /// interfaces with `Ctx::can_ifaces`.
     pub portable: bool,
-    /// Whether the test runs against mainline only: a portable test of a
-    /// protocol our stack does not have yet (CAN_BCM until rcan_bcm lands,
-    /// issue 13). Implies `portable`.
-    pub mainline_only: bool,
 }
 
 impl Test {
     /// Whether the test runs against `stack`.
     pub fn runs_on(&self, stack: Stack) -> bool {
         match stack {
-            Stack::Ours => !self.mainline_only,
-            Stack::Mainline => self.portable || self.mainline_only,
+            Stack::Ours => true,
+            Stack::Mainline => self.portable,
         }
     }
 }
@@ -277,11 +273,9 @@ fn main() -> ExitCode {
 
     match ctx.stack() {
         Stack::Ours => println!(
-            "# rcan-vmtest: {} tests against our stack, modules from {}; \
-             {} mainline-only tests skipped (CAN_BCM until rcan_bcm, issue 13)",
+            "# rcan-vmtest: {} tests against our stack, modules from {}",
             tests.len(),
             ctx.root().display(),
-            skipped.len()
         ),
         Stack::Mainline => println!(
             "# rcan-vmtest: {} tests against mainline SocketCAN, modules from {}; \

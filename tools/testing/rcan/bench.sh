@@ -10,11 +10,13 @@
 # sockets, the cost of a frame none of them wants, two senders on two
 # CPUs, memory per socket; then (dsor part) our DSOR message protocol
 # (rcan_dsor over rcan_loop) against mainline ISO-TP (can-isotp over
-# vcan): goodput and CPU time per KiB. Never fails on a missed target.
+# vcan): goodput and CPU time per KiB; on request (--part bcm) CAN_BCM:
+# kernel CPU per cyclic frame, 1,000 jobs at 10 ms, rcan_bcm against
+# can-bcm.ko. Never fails on a missed target.
 # See Documentation/networking/rcan/benchmarks.rst.
 #
 #   bench.sh [rcan-bench options]     e.g. --stack mainline, --quick,
-#                                     --part table, --part dsor
+#                                     --part table, --part dsor, --part bcm
 #                                     (make bench BENCH_ARGS=...)
 #
 # Expects the modules and target/release/rcan-bench to be built (make bench

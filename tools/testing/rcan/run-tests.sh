@@ -92,8 +92,8 @@ vm_stage() {
 # The portable tests against mainline: they must pass there, which shows
 # that they encode mainline behaviour. Needs only the kernel (its mainline
 # CAN modules) and rcan-vmtest, not our modules. The CAN_BCM tests
-# (tests/vm/src/cases/bcm.rs, can-bcm.ko) run only here until rcan_bcm
-# lands (issue 13): rcan-vmtest marks them mainline-only.
+# (tests/vm/src/cases/bcm.rs) run here against can-bcm.ko and in the VM
+# stages against rcan_bcm.
 mainline_stage() {
 	local kbuild
 	echo "=== VM suite, CAN_RAW, can-utils and CAN_BCM tests, against mainline SocketCAN (release kernel)"

@@ -3,8 +3,8 @@
 //! SOCK_DGRAM, CAN_BCM)`, `connect()` to an interface, one `struct
 //! bcm_msg_head` (+ frames) per `write()`, replies and notifications from
 //! `read()`. Frames are watched with a CAN_RAW socket on the same vcan.
-//! Written against mainline's can-bcm.ko (mainline stage); they run on our
-//! stack once rcan_bcm exists (issue 13). Timing is measured and printed,
+//! Portable: they pass against mainline's can-bcm.ko (mainline stage) and
+//! against rcan_bcm (issue 13). Timing is measured and printed,
 //! and checked only with generous bounds: the VM runs under emulation.
 //! The message layout is encoded here independently of rcan-core.
 
@@ -22,9 +22,9 @@ use crate::check::{OrFail, TestResult};
 use crate::ctx::Ctx;
 use crate::tools;
 
-use super::mainline_only_table;
+use super::portable_table;
 
-pub static TESTS: &[crate::Test] = mainline_only_table![
+pub static TESTS: &[crate::Test] = portable_table![
     bcm_tx_count_then_expired,
     bcm_tx_ival2_and_delete,
     bcm_tx_multi_frame_and_read,
@@ -880,7 +880,14 @@ print("done", flush=True)
         })
     };
     let start = Instant::now();
-    let out = tools::spawn("/usr/bin/python3", &["-c", script], None)?.finish(tools::TOOL_LIMIT);
+    // Starting python3 and importing can takes some 20 s under emulation on
+    // the release kernel, several times that on the debug kernel.
+    let limit = if crate::ctx::debug_kernel() {
+        tools::TOOL_LIMIT * 5
+    } else {
+        tools::TOOL_LIMIT
+    };
+    let out = tools::spawn("/usr/bin/python3", &["-c", script], None)?.finish(limit);
     thread::sleep(Duration::from_millis(300));
     stop.store(true, Ordering::Relaxed);
     let got = rec.join().map_err(|_| "recorder panicked")?;
@@ -922,11 +929,20 @@ print("done", flush=True)
         gap >= Duration::from_millis(300),
         format!("only {gap:?} between the last frame before stop() and the next task"),
     )?;
-    // duration ended the second task before bus.shutdown() 0.8 s later.
+    // duration ended the second task by itself: at most 25 frames above
+    // (about 40 would come by bus.shutdown() 0.8 s later), and their span
+    // as the recorder saw it. The debug kernel under emulation stretches
+    // 20 ms timers and delays the recorder (1.1 s seen once), hence a
+    // wider bound there.
     let span = b[b.len() - 1].0 - b[0].0;
+    let bound = if crate::ctx::debug_kernel() {
+        3000
+    } else {
+        600
+    };
     need(
-        span <= Duration::from_millis(600),
-        format!("the duration=0.3 s task sent for {span:?}"),
+        span <= Duration::from_millis(bound),
+        format!("the duration=0.3 s task sent for {span:?} (bound {bound} ms)"),
     )
 }
 
@@ -1094,4 +1110,135 @@ fn bcm_rx_any_interface(ctx: &mut Ctx) -> TestResult {
         got == want,
         format!("(opcode, ifindex) {got:?}, want {want:?}"),
     )
+}
+
+/// Tests of rcan_bcm's teardown (our stack only: they unload our modules).
+pub static OURS: &[crate::Test] = crate::cases::test_table![teardown_bcm_cyclic_jobs];
+
+/// Jobs per socket in [`teardown_bcm_cyclic_jobs`].
+const TEARDOWN_JOBS: u32 = 100;
+
+/// A socket on `ifindex` running [`TEARDOWN_JOBS`] cyclic transmissions
+/// every `ival_us` (ids `base..`) and ten receive operations with 5 ms
+/// receive timeouts on ids nobody sends (each fires once: RX_TIMEOUT), so
+/// that transmit timers, receive timers and receive subscriptions all
+/// exist when the socket goes.
+fn busy_socket(ifindex: u32, base: u32, ival_us: i64) -> Result<OwnedFd, String> {
+    let bcm = open(ifindex)?;
+    for i in 0..TEARDOWN_JOBS {
+        let id = base + i;
+        let h = tx_head(SETTIMER | STARTTIMER, 0, 0, ival_us, id, 1);
+        write(&bcm, h, &[frame_bytes(id, &[i as u8])])?;
+    }
+    for i in 0..10 {
+        let id = base + TEARDOWN_JOBS + i;
+        let h = rx_head(SETTIMER | STARTTIMER, 5_000, 0, id, 1);
+        write(&bcm, h, &[frame_bytes(id, &[0xff])])?;
+    }
+    Ok(bcm)
+}
+
+/// Frames `dev` transmitted during `t` (its `tx_packets` counter).
+fn sent_during(ctx: &Ctx, dev: &str, t: Duration) -> Result<u64, String> {
+    let a = ctx.stat(dev, "tx_packets")?;
+    thread::sleep(t);
+    Ok(ctx.stat(dev, "tx_packets")? - a)
+}
+
+/// Close, interface removal and rmmod while 100 cyclic jobs (and ten
+/// receive timeouts) run, each time checking with the interface's
+/// `tx_packets` that the frames flowed before and stop after; run on the
+/// debug kernel, KASAN, lockdep and kmemleak see the timers and receivers
+/// go (vm-run.sh fails the run on any report). The jobs run at 10 ms on
+/// the release kernel and 250 ms on the debug kernel, which cannot send
+/// 10,000 frames/s under emulation.
+/// 1. close(): not one frame afterwards (release cancels every timer and
+///    waits for running callbacks before close returns).
+/// 2. ifdown, then the interface goes away (rmmod rcan_loop): the
+///    connected socket reads ENODEV, writes get ENOTCONN (as mainline),
+///    and its close afterwards is clean.
+/// 3. rmmod rcan_bcm with the jobs running is refused (every socket
+///    holds the module: EAGAIN from a non-blocking delete_module); after
+///    close() it unloads at once.
+fn teardown_bcm_cyclic_jobs(ctx: &mut Ctx) -> TestResult {
+    let ifs = ctx.bcm_ifaces(2)?;
+    let debug = crate::ctx::debug_kernel();
+    let ival_us = if debug { 250_000 } else { 10_000 };
+    let window = Duration::from_millis(if debug { 1500 } else { 300 });
+    let (dev0, dev1) = (crate::ctx::dev(0), crate::ctx::dev(1));
+
+    // 1. close
+    let bcm = busy_socket(ifs[0], 0x100, ival_us)?;
+    let before = sent_during(ctx, &dev0, window)?;
+    drop(bcm);
+    thread::sleep(Duration::from_millis(50));
+    let after = sent_during(ctx, &dev0, window)?;
+    println!("# close: {before} frames sent in {window:?} before, {after} after");
+    need(
+        before >= u64::from(TEARDOWN_JOBS),
+        format!("only {before} frames before close"),
+    )?;
+    need(after == 0, format!("{after} frames after close"))?;
+
+    // 2. ifdown, then the interface goes away under the running jobs.
+    let bcm = busy_socket(ifs[1], 0x100, ival_us)?;
+    let before = sent_during(ctx, &dev1, window)?;
+    need(
+        before >= u64::from(TEARDOWN_JOBS),
+        format!("only {before} frames before ifdown"),
+    )?;
+    ctx.link_down(&dev1)?;
+    thread::sleep(Duration::from_millis(100));
+    ctx.remove_can_ifaces()?;
+    thread::sleep(Duration::from_millis(100));
+    let mut buf = [0u8; MHSIZ + 16];
+    let mut errs = Vec::new();
+    raw::set_timeout(&bcm, libc::SO_RCVTIMEO, Duration::from_millis(200)).or_fail("SO_RCVTIMEO")?;
+    // The socket error (ENODEV after ENETDOWN, which it replaces unless
+    // read in between) comes before the queued RX_TIMEOUT messages.
+    for _ in 0..50 {
+        match raw::recvfrom(&bcm, &mut buf, 0, None) {
+            Ok(_) => {}
+            Err(e) if e.raw_os_error() == Some(libc::EAGAIN) => break,
+            Err(e) => errs.push(e.raw_os_error().unwrap_or(0)),
+        }
+    }
+    println!("# ifdown + removal: socket errors {errs:?}");
+    need(
+        errs.last() == Some(&libc::ENODEV),
+        format!("socket errors {errs:?}, want ENODEV last"),
+    )?;
+    let h = tx_head(SETTIMER | STARTTIMER, 0, 0, 10_000, 0x100, 1);
+    let e = write_errno(
+        &bcm,
+        &msg(h, &[frame_bytes(0x100, &[1])]),
+        "TX_SETUP after removal",
+    )?;
+    need(
+        e == libc::ENOTCONN,
+        format!("TX_SETUP after removal: errno {e}, want ENOTCONN"),
+    )?;
+    drop(bcm);
+
+    // 3. rmmod
+    ctx.insmod(crate::ctx::Module::Loop, &["count=2"])?;
+    ctx.links_up()?;
+    let i0 = ctx.ifindex(&dev0)?;
+    let bcm = busy_socket(i0, 0x100, ival_us)?;
+    let before = sent_during(ctx, &dev0, window)?;
+    need(
+        before >= u64::from(TEARDOWN_JOBS),
+        format!("only {before} frames before rmmod"),
+    )?;
+    let busy = ctx.rmmod(crate::ctx::Module::Bcm);
+    need(busy.is_err(), "rmmod rcan_bcm succeeded with a socket open")?;
+    drop(bcm);
+    thread::sleep(Duration::from_millis(50));
+    ctx.rmmod(crate::ctx::Module::Bcm)?;
+    let after = sent_during(ctx, &dev0, window)?;
+    println!(
+        "# rmmod: {before} frames before, refused while open ({}), {after} after close + rmmod",
+        busy.err().unwrap_or_default()
+    );
+    need(after == 0, format!("{after} frames after rmmod"))
 }

@@ -288,6 +288,7 @@ fn install_autoload(ctx: &mut Ctx) -> TestResult {
     // Autoload by socket, from nothing loaded.
     for (ty, proto, module) in [
         ("SOCK_RAW", 1, "rcan_raw"),
+        ("SOCK_DGRAM", 2, "rcan_bcm"),
         ("SOCK_RAW", 16, "rcan_can"),
         ("SOCK_DGRAM", 17, "rcan_dsor"),
     ] {

@@ -48,7 +48,7 @@ use crate::Test;
 /// run against our stack only.
 macro_rules! test_table {
     ($($f:ident),* $(,)?) => {
-        &[$(crate::Test { name: stringify!($f), run: $f, portable: false, mainline_only: false }),*]
+        &[$(crate::Test { name: stringify!($f), run: $f, portable: false }),*]
     };
 }
 pub(crate) use test_table;
@@ -57,20 +57,10 @@ pub(crate) use test_table;
 /// against mainline SocketCAN (`--stack mainline`).
 macro_rules! portable_table {
     ($($f:ident),* $(,)?) => {
-        &[$(crate::Test { name: stringify!($f), run: $f, portable: true, mainline_only: false }),*]
+        &[$(crate::Test { name: stringify!($f), run: $f, portable: true }),*]
     };
 }
 pub(crate) use portable_table;
-
-/// `mainline_only_table![a, b]`: portable tests of a protocol our stack
-/// does not have yet; they run only with `--stack mainline` (CAN_BCM:
-/// until rcan_bcm lands, issue 13; then they become a `portable_table`).
-macro_rules! mainline_only_table {
-    ($($f:ident),* $(,)?) => {
-        &[$(crate::Test { name: stringify!($f), run: $f, portable: true, mainline_only: true }),*]
-    };
-}
-pub(crate) use mainline_only_table;
 
 /// Tests the runner leaves out on the debug kernel, where they run past
 /// the per-test watchdog (360 s) under TCG: `install_autoload` runs the
@@ -117,8 +107,8 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         leak::OURS,
         rxcontext::TESTS,
         install::TESTS,
-        // Until rcan_bcm lands (issue 13): mainline stage only.
         bcm::TESTS,
+        bcm::OURS,
     ]
     .into_iter()
     .flatten()
@@ -205,18 +195,14 @@ fn rmmod_card_during_traffic(ctx: &mut Ctx, m: Module, i0: u32, i1: u32) -> Test
 mod tests {
     #[test]
     fn portable_names() {
-        // The prefixes say what a test needs: raw_/canutils_/candev_ and
-        // the daemons' canzlogd_/cantcpd_ run on both stacks, bcm_ on
-        // mainline only (until rcan_bcm lands, issue 13), everything else
-        // (mixed_, sja1000_ included) on ours only.
+        // The prefixes say what a test needs: raw_/canutils_/candev_/bcm_
+        // and the daemons' canzlogd_/cantcpd_ run on both stacks,
+        // everything else (mixed_, sja1000_ included) on ours only.
         for t in super::all() {
-            let bcm = t.name.starts_with("bcm_");
-            let portable = ["raw_", "canutils_", "candev_", "canzlogd_", "cantcpd_"]
+            let portable = ["raw_", "canutils_", "candev_", "bcm_", "canzlogd_", "cantcpd_"]
                 .iter()
-                .any(|p| t.name.starts_with(p))
-                || bcm;
+                .any(|p| t.name.starts_with(p));
             assert_eq!(t.portable, portable, "{}", t.name);
-            assert_eq!(t.mainline_only, bcm, "{}", t.name);
         }
     }
 

@@ -29,7 +29,12 @@
 //! of frames: rcan's DSOR protocol against mainline ISO-TP, goodput and
 //! kernel CPU time per KiB. `--part raw,table,dsor` (the default) runs all
 //! three in that order.
+//!
+//! A fourth part, only on request (`--part bcm`, see `bcm.rs`), measures
+//! kernel CPU time per cyclic frame of CAN_BCM (1,000 jobs at 10 ms):
+//! rcan_bcm against mainline's can-bcm.ko.
 
+mod bcm;
 mod can;
 mod dsor;
 mod report;
@@ -49,7 +54,8 @@ const USAGE: &str = "\
 usage: rcan-bench [options]
   --part LIST           parts to run, comma-separated: raw (CAN_RAW, mainline vs
                         ours), table (many sockets, mainline vs ours), dsor (DSOR
-                        vs mainline ISO-TP) (default raw,table,dsor)
+                        vs mainline ISO-TP), bcm (CAN_BCM cyclic jobs, mainline
+                        vs ours; not in the default) (default raw,table,dsor)
   --stack S             raw and table parts: mainline, ours or both (default both)
   --only LIST           workloads to run, comma-separated: a|throughput, b|fanout,
                         c|latency (default all)
@@ -81,6 +87,9 @@ usage: rcan-bench [options]
   --msg-secs S          dsor part: seconds per measured run at least (default 2)
   --msg-min N           dsor part: messages per measured run at least (default 20)
   --msg-warmup N        dsor part: messages per warm-up run (default 5)
+  --bcm-jobs N          bcm part: cyclic jobs (default 1000)
+  --bcm-ival-ms N       bcm part: interval of each job in ms (default 10)
+  --bcm-secs S          bcm part: seconds per measured run (default 3)
   --table-rounds N      table part: rounds (default 3)
   --table-sockets L     table part: socket counts (default 1000,10000)
   --table-kinds L       table part: filter kinds, comma-separated: exact (one
@@ -107,6 +116,10 @@ struct Config {
     run_raw: bool,
     run_table: bool,
     run_dsor: bool,
+    run_bcm: bool,
+    bcm_jobs: u32,
+    bcm_ival_ms: u64,
+    bcm_secs: f64,
     table: table::Config,
     protos: Vec<Proto>,
     msg_sizes: Vec<usize>,
@@ -151,6 +164,10 @@ fn parse_args() -> Result<Config, String> {
         run_raw: true,
         run_table: true,
         run_dsor: true,
+        run_bcm: false,
+        bcm_jobs: 1000,
+        bcm_ival_ms: 10,
+        bcm_secs: 3.0,
         table: table::Config {
             counts: vec![1000, 10_000],
             kinds: table::Kind::ALL.to_vec(),
@@ -205,15 +222,37 @@ fn parse_args() -> Result<Config, String> {
         match a.as_str() {
             "--part" => {
                 let v = args.next().ok_or("--part wants a list")?;
-                (c.run_raw, c.run_table, c.run_dsor) = (false, false, false);
+                (c.run_raw, c.run_table, c.run_dsor, c.run_bcm) = (false, false, false, false);
                 for w in v.split(',') {
                     match w.trim() {
                         "raw" => c.run_raw = true,
                         "table" => c.run_table = true,
                         "dsor" => c.run_dsor = true,
+                        "bcm" => c.run_bcm = true,
                         other => return Err(format!("--part: unknown part '{other}'")),
                     }
                 }
+            }
+            "--bcm-jobs" => {
+                c.bcm_jobs = args
+                    .next()
+                    .and_then(|v| v.parse().ok())
+                    .filter(|&n| (1..=0x600).contains(&n))
+                    .ok_or("--bcm-jobs wants 1..1536")?;
+            }
+            "--bcm-ival-ms" => {
+                c.bcm_ival_ms = args
+                    .next()
+                    .and_then(|v| v.parse().ok())
+                    .filter(|&n| n > 0)
+                    .ok_or("--bcm-ival-ms wants a positive number")?;
+            }
+            "--bcm-secs" => {
+                c.bcm_secs = args
+                    .next()
+                    .and_then(|v| v.parse().ok())
+                    .filter(|&n: &f64| n > 0.0)
+                    .ok_or("--bcm-secs wants a positive number")?;
             }
             "--proto" => {
                 let v = args.next().ok_or("--proto wants a list")?;
@@ -903,6 +942,26 @@ fn main() -> ExitCode {
         println!();
         print!("{}", dsor::summary(&dc, &ds, &dhdr));
         failed |= !ds.errors.is_empty();
+    }
+    if c.run_bcm {
+        let bc = bcm::Config {
+            rounds: c.rounds,
+            jobs: c.bcm_jobs,
+            ival_ms: c.bcm_ival_ms,
+            secs: c.bcm_secs,
+            iface: c.iface.clone(),
+            stacks: c.stacks.clone(),
+        };
+        let (runs, errors) = bcm::bench(&bc, &c.paths);
+        let text = bcm::summary(&bc, &runs);
+        print!("{text}");
+        if let Some(p) = &c.summary {
+            let old = std::fs::read_to_string(p).unwrap_or_default();
+            if let Err(e) = std::fs::write(p, old + &text) {
+                eprintln!("rcan-bench: {}: {e}", p.display());
+            }
+        }
+        failed |= !errors.is_empty();
     }
     println!("rcan-bench: done in {:.0} s", t0.elapsed().as_secs_f64());
     if let Some(p) = &c.summary {

@@ -1,0 +1,1074 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! rcan_bcm: CAN_BCM, mainline SocketCAN's broadcast manager, on the rcan
+//! stack (DESIGN decision 12, issue 13).
+//!
+//! `socket(PF_CAN, SOCK_DGRAM, CAN_BCM)`, `connect()` to an interface
+//! (ifindex 0: any), then one `struct bcm_msg_head` plus frames per
+//! `write()`; replies and notifications come back from `read()` in the
+//! same format. The message checks, the transmit schedule and the receive
+//! change detection are the pure, host-tested state machines of
+//! `rcan_core::bcm`, `bcm_tx` and `bcm_rx`; this file gives them sockets,
+//! timers, a receive subscription and a transmit path. See
+//! Documentation/networking/rcan/bcm.rst.
+//!
+//! Objects and their locks (lock order: RTNL, socket lock, `rx_ops`,
+//! an operation's `state`; the receive table's mutex inside `rx_set` is
+//! only taken with the socket lock and neither spinlock held):
+//!
+//! * [`BcmSock`] (socket lock): connection, transmit operations.
+//! * [`BcmShared`]: `bound` (atomic, the lockless ENOTCONN check of
+//!   sendmsg) and the receive operations `rx_ops`, an `IrqSpinLock`
+//!   (lockdep class `bcm_rx_ops`) because the receive callback walks them
+//!   in softirq context; only process context with the socket lock held
+//!   changes the list.
+//! * An operation ([`OpData`], one [`JobTimers`] with two timers) holds
+//!   its state machine, frames and last received frames under `state`, an
+//!   `IrqSpinLock` of class `bcm_op_state`, taken by sendmsg (process),
+//!   the receive callback (NET_RX softirq) and its timer callbacks
+//!   (HRTIMER_SOFTIRQ softirq). Frames are sent after `state` is
+//!   released (the transmit path must not run with interrupts off);
+//!   messages for user space are queued under it.
+//!
+//! Contexts: system calls and the netdevice notifier run in process
+//! context; [`BcmProto::rx`] in NET_RX softirq under RCU; the timer
+//! callbacks ([`BcmOp::expired`]) in the HRTIMER_SOFTIRQ softirq (the
+//! timers are `HRTIMER_MODE_ABS_SOFT` on CLOCK_MONOTONIC, like mainline's
+//! `_SOFT` timers).
+//!
+//! Timers never outlive their socket: every operation holds a counted
+//! reference on the sock; `release` unsubscribes the socket, takes every
+//! operation off its lists and drops it, and dropping a [`JobTimers`]
+//! cancels its timers and waits for a running callback before the memory
+//! goes (rust/glue/jobtimer.rs). A callback that lost a race with a
+//! cancellation (it was already running when sendmsg or the notifier
+//! cancelled without waiting) finds the operation's recorded expiry gone
+//! or in the future and does nothing. The module cannot be unloaded while
+//! a socket exists (each socket holds a module reference).
+
+#![forbid(unsafe_code)]
+
+use crate::{glue, rcan_api, rcan_core};
+use core::sync::atomic::{AtomicBool, Ordering};
+use kernel::prelude::*;
+
+use glue::bindings;
+use glue::hrtimer::ktime_get_mono_ns;
+use glue::jobtimer::{JobCallback, JobRef, JobTimers, OnceBox};
+use glue::lock::{new_irq_spinlock, IrqSpinLock};
+use glue::netdev::{DevRef, NetDev};
+use glue::neterr;
+use glue::skb::Skb;
+use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
+use glue::sync::Rtnl;
+use kernel::c_str;
+use rcan_api::{
+    CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets,
+    RX_FILTER_CAN_ID, SOCK_DGRAM,
+};
+use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
+use rcan_core::bcm::{
+    self as wire, MsgHead, OpKey, Request, CANFD_FRAME_LEN, MAX_NFRAMES, MHSIZ, RX_DELETE, RX_READ,
+    RX_RTR_FRAME, RX_SETUP, TX_CP_CAN_ID, TX_DELETE, TX_READ, TX_SEND, TX_SETUP,
+};
+use rcan_core::bcm_rx::{RxOp, RxOut, RxSlot, TRAFFIC_LOCAL, TRAFFIC_OWN};
+use rcan_core::bcm_tx::{TxOp, TxOut};
+use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+
+/// `CAN_BCM` in `<linux/can.h>`.
+const CAN_BCM: i32 = 2;
+/// Bytes of `struct sockaddr_can` BCM requires and returns
+/// (`BCM_MIN_NAMELEN`: family, padding, ifindex).
+const BCM_MIN_NAMELEN: usize = 8;
+/// Offsets in `skb->cb` of a queued message: the source address, then
+/// the recvmsg flags (mainline's `bcm_flags()`).
+const CB_NAME: usize = 0;
+const CB_FLAGS: usize = BCM_MIN_NAMELEN;
+/// Headroom for mainline's `struct can_skb_priv`.
+const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
+/// The CAN FD flags mainline leaves in a frame it hands to user space
+/// (`BCM_CAN_FLAGS_MASK`).
+const CAN_FLAGS_MASK: u8 = 0x07;
+
+/// Timer slots of an operation: a transmit operation uses its first as
+/// the cyclic timer; a receive operation its first for the timeout
+/// (`ival1`) and its second for the throttle (`ival2`).
+const TX_TIMER: usize = 0;
+const RX_TIMEOUT_TIMER: usize = 0;
+const RX_THROTTLE_TIMER: usize = 1;
+
+/// The most a write is read: a head and 257 frames of the larger kind
+/// (more can never pass the checks, which then see only as many bytes as
+/// mainline would have read).
+const fn max_read(cfsiz: usize) -> usize {
+    MHSIZ + (MAX_NFRAMES as usize + 1) * cfsiz
+}
+
+/// Mainline's `REGMASK`: the identifier with its frame format and RTR
+/// bit must match exactly.
+fn regmask(can_id: u32) -> u32 {
+    if can_id & CAN_EFF_FLAG != 0 {
+        CAN_EFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG
+    } else {
+        CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG
+    }
+}
+
+fn errno(e: i32) -> Error {
+    glue::errno(e)
+}
+
+// ---------------------------------------------------------------------------
+// Operations
+
+/// An operation's timers and callbacks (the [`JobCallback`] marker).
+struct BcmOp;
+
+type Job = JobTimers<BcmOp>;
+
+/// One operation: what names it, its socket and its locked state.
+struct OpData {
+    /// The socket it belongs to (a counted reference: the sock outlives
+    /// the operation's timers).
+    sk: SockRef<BcmProto>,
+    /// Identifier, interface, CAN FD: fixed for the operation's life.
+    key: OpKey,
+    /// Receive operations: whether it is part of the socket's receive
+    /// subscription (cleared when its interface goes away). Written with
+    /// the socket lock held.
+    active: AtomicBool,
+    /// The state machine, frames and last frames. Lock class
+    /// `bcm_op_state`; see the module documentation.
+    state: IrqSpinLock<OpState>,
+}
+
+enum OpState {
+    Tx(TxState),
+    Rx(RxState),
+}
+
+struct TxState {
+    op: TxOp,
+    /// Interface the frames go out on (never 0).
+    ifindex: i32,
+    /// Bytes per frame (16, or 72 with CAN_FD_FRAME).
+    cfsiz: usize,
+    /// Room for the frames of the first setup (updates may use fewer).
+    frames: KVec<u8>,
+}
+
+struct RxState {
+    op: RxOp,
+    /// Bytes per frame (16, or 72 with CAN_FD_FRAME).
+    cfsiz: usize,
+    /// The filter frames as set (RX_STATUS returns them), with room for
+    /// the first setup's number.
+    raw: KVec<u8>,
+    /// The same frames as classic frames, for the comparison.
+    filters: KVec<CanFrame>,
+    /// Last frame received per filter entry (at least one slot).
+    last: KVec<RxSlot>,
+}
+
+/// Frames to send once the state lock is released. A transmit operation
+/// sends at most one frame per event; a received frame makes at most one
+/// remote-frame reply per matching operation, and at most two operations
+/// of a socket match a frame (its interface's and "any"'s).
+struct Pending {
+    sends: [Option<(Skb, DevRef)>; 2],
+}
+
+impl Pending {
+    fn new() -> Self {
+        Pending {
+            sends: [None, None],
+        }
+    }
+
+    fn push(&mut self, skb: Skb, dev: DevRef) {
+        if let Some(slot) = self.sends.iter_mut().find(|s| s.is_none()) {
+            *slot = Some((skb, dev));
+        }
+        // Full (cannot happen, see above): the skb is freed here.
+    }
+
+    /// Sends with loopback, as mainline's BCM always does; errors are
+    /// dropped as mainline's `bcm_can_tx` drops them. Process or softirq
+    /// context, no spinlock held.
+    fn flush(self) {
+        for (skb, dev) in self.sends.into_iter().flatten() {
+            let _ = rcan_api::send(skb, &dev, true);
+        }
+    }
+}
+
+/// An skb carrying one frame (`bytes`) for `dev`, owned by `sk`. Any
+/// context (GFP_ATOMIC).
+fn frame_skb(sk: &S, dev: &NetDev, bytes: &[u8]) -> Option<Skb> {
+    let mut skb = Skb::alloc(SKB_PRIV_LEN + bytes.len() as u32, glue::GFP_ATOMIC)?;
+    skb.reserve(SKB_PRIV_LEN);
+    // struct can_skb_priv { int ifindex; int skbcnt; }
+    let mut prv = [0u8; SKB_PRIV_LEN as usize];
+    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
+    if !skb.write_headroom(&prv) || !skb.put_data(bytes) {
+        return None;
+    }
+    skb.set_owner(sk);
+    skb.set_sock_params(sk);
+    Some(skb)
+}
+
+/// Queues a message (`head` and the frame bytes in `frames`) for `sk`'s
+/// reader, naming `ifindex` as its source and with `flags` for recvmsg.
+/// Any context (GFP_ATOMIC); a full receive queue drops it, as mainline.
+fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32) {
+    let len: usize = MHSIZ + frames.iter().map(|f| f.len()).sum::<usize>();
+    let Some(mut skb) = Skb::alloc(len as u32, glue::GFP_ATOMIC) else {
+        return;
+    };
+    if !skb.put_data(&head.to_bytes()) || !frames.iter().all(|f| skb.put_data(f)) {
+        return;
+    }
+    let mut name = [0u8; BCM_MIN_NAMELEN];
+    name[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
+    name[4..].copy_from_slice(&ifindex.to_ne_bytes());
+    skb.cb_write(CB_NAME, &name);
+    skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
+    let _ = sk.queue_rcv(skb);
+}
+
+/// The effects of a transmit operation's state machine.
+struct TxEffects<'a, 'p> {
+    job: JobRef<'a, BcmOp>,
+    sk: &'a S,
+    ifindex: i32,
+    cfsiz: usize,
+    frames: &'a [u8],
+    pending: &'p mut Pending,
+    /// Outside the timer callback: the expiry to arm once the pending
+    /// frames are sent (see [`with_tx`]); `None` arms at once.
+    arm_later: Option<&'p mut Option<u64>>,
+}
+
+impl TxOut for TxEffects<'_, '_> {
+    fn send(&mut self, index: usize) -> bool {
+        let Some(dev) = DevRef::by_index(self.ifindex) else {
+            return false;
+        };
+        let Some(bytes) = self
+            .frames
+            .get(index * self.cfsiz..(index + 1) * self.cfsiz)
+        else {
+            return true;
+        };
+        if let Some(skb) = frame_skb(self.sk, &dev, bytes) {
+            self.pending.push(skb, dev);
+        }
+        true
+    }
+
+    fn to_user(&mut self, head: &MsgHead, with_frames: bool) {
+        let n = if with_frames {
+            (head.nframes as usize * self.cfsiz).min(self.frames.len())
+        } else {
+            0
+        };
+        // Mainline names no interface in transmit notifications.
+        to_user(self.sk, head, &[&self.frames[..n]], 0, 0);
+    }
+
+    fn arm(&mut self, at: u64) {
+        match &mut self.arm_later {
+            Some(later) => **later = Some(at),
+            None => self.job.start(TX_TIMER, at),
+        }
+    }
+
+    fn cancel(&mut self) {
+        if let Some(later) = &mut self.arm_later {
+            **later = None;
+        }
+        self.job.try_cancel(TX_TIMER);
+    }
+}
+
+/// The effects of a receive operation's state machine.
+struct RxEffects<'a, 'p> {
+    job: JobRef<'a, BcmOp>,
+    sk: &'a S,
+    raw: &'a [u8],
+    cfsiz: usize,
+    pending: &'p mut Pending,
+}
+
+impl RxOut for RxEffects<'_, '_> {
+    fn to_user(&mut self, head: &MsgHead, frame: Option<(&CanFrame, u8)>, rx_ifindex: i32) {
+        match frame {
+            Some((f, traffic)) => {
+                let mut f = *f;
+                f.pad &= CAN_FLAGS_MASK;
+                let mut flags = 0;
+                if traffic & TRAFFIC_LOCAL != 0 {
+                    flags |= bindings::MSG_DONTROUTE;
+                }
+                if traffic & TRAFFIC_OWN != 0 {
+                    flags |= bindings::MSG_CONFIRM;
+                }
+                to_user(self.sk, head, &[&f.to_bytes()], rx_ifindex, flags);
+            }
+            None => {
+                let n = (head.nframes as usize * self.cfsiz).min(self.raw.len());
+                to_user(self.sk, head, &[&self.raw[..n]], rx_ifindex, 0);
+            }
+        }
+    }
+
+    fn send_reply(&mut self, reply: &CanFrame, ifindex: i32) {
+        let Some(dev) = DevRef::by_index(ifindex) else {
+            return;
+        };
+        if let Some(skb) = frame_skb(self.sk, &dev, &reply.to_bytes()) {
+            self.pending.push(skb, dev);
+        }
+    }
+
+    fn arm_timeout(&mut self, at: u64) {
+        self.job.start(RX_TIMEOUT_TIMER, at);
+    }
+
+    fn cancel_timeout(&mut self) {
+        self.job.try_cancel(RX_TIMEOUT_TIMER);
+    }
+
+    fn arm_throttle(&mut self, at: u64) {
+        self.job.start(RX_THROTTLE_TIMER, at);
+    }
+
+    fn cancel_throttle(&mut self) {
+        self.job.try_cancel(RX_THROTTLE_TIMER);
+    }
+}
+
+/// Runs `f` on a transmit operation's state machine with its effects;
+/// sends afterwards. Any context but hardirq; `state` not held.
+///
+/// Outside the timer callback (`in_callback` false: sendmsg, notifier)
+/// the timer is armed only after the frame of `TX_ANNOUNCE`/`STARTTIMER`
+/// went out, so the first cyclic frame cannot overtake it (the callback
+/// may run on another CPU as soon as the timer is armed; mainline sends
+/// the announced frame before it starts the timer). Inside the callback,
+/// arming at once is safe: a timer re-armed by its running callback stays
+/// on that CPU and cannot expire before the callback returns.
+fn with_tx(
+    job: JobRef<'_, BcmOp>,
+    in_callback: bool,
+    f: impl FnOnce(&mut TxOp, &mut TxEffects<'_, '_>),
+) {
+    let d = job.data();
+    let sk = d.sk.sock();
+    let mut pending = Pending::new();
+    let mut later = None;
+    {
+        let mut st = d.state.lock();
+        if let OpState::Tx(t) = &mut *st {
+            let TxState {
+                op,
+                ifindex,
+                cfsiz,
+                frames,
+            } = t;
+            let mut out = TxEffects {
+                job,
+                sk: &sk,
+                ifindex: *ifindex,
+                cfsiz: *cfsiz,
+                frames,
+                pending: &mut pending,
+                arm_later: if in_callback { None } else { Some(&mut later) },
+            };
+            f(op, &mut out);
+        }
+    }
+    pending.flush();
+    // A callback that runs meanwhile finds the recorded expiry in the
+    // future and does nothing.
+    if let Some(at) = later {
+        job.start(TX_TIMER, at);
+    }
+}
+
+/// Runs `f` on a receive operation's state machine with its effects and
+/// its filters and last frames; sends afterwards. Any context but
+/// hardirq; `state` not held.
+fn with_rx(
+    job: JobRef<'_, BcmOp>,
+    pending: &mut Pending,
+    f: impl FnOnce(&mut RxOp, &[CanFrame], &mut [RxSlot], &mut RxEffects<'_, '_>),
+) {
+    let d = job.data();
+    let sk = d.sk.sock();
+    let mut st = d.state.lock();
+    if let OpState::Rx(r) = &mut *st {
+        let RxState {
+            op,
+            cfsiz,
+            raw,
+            filters,
+            last,
+        } = r;
+        let mut out = RxEffects {
+            job,
+            sk: &sk,
+            raw,
+            cfsiz: *cfsiz,
+            pending,
+        };
+        f(op, filters, last, &mut out);
+    }
+}
+
+impl JobCallback for BcmOp {
+    type Data = OpData;
+
+    /// HRTIMER_SOFTIRQ softirq. A stale expiry (the operation's record
+    /// says the timer was cancelled or moved later) does nothing.
+    fn expired(job: JobRef<'_, Self>, which: usize) {
+        let now = ktime_get_mono_ns() as u64;
+        let due = |at: Option<u64>| at.is_some_and(|t| t <= now);
+        if matches!(&*job.data().state.lock(), OpState::Tx(_)) {
+            with_tx(job, true, |op, out| {
+                if which == TX_TIMER && due(op.expires) {
+                    op.timer_expired(now, out);
+                }
+            });
+            return;
+        }
+        let mut pending = Pending::new();
+        with_rx(job, &mut pending, |op, _filters, last, out| {
+            if which == RX_TIMEOUT_TIMER && due(op.timeout_at) {
+                op.timeout_expired(last, out);
+            } else if which == RX_THROTTLE_TIMER && due(op.throttle_at) {
+                op.throttle_expired(now, last, out);
+            }
+        });
+        pending.flush();
+    }
+}
+
+/// A new operation of `sk` with `state`. Process context.
+fn new_job(sk: &S, key: OpKey, state: OpState) -> Result<Job> {
+    let state = new_irq_spinlock!(state, "bcm_op_state")?;
+    JobTimers::new(OpData {
+        sk: sk.to_ref(),
+        key,
+        active: AtomicBool::new(true),
+        state,
+    })
+}
+
+// ---------------------------------------------------------------------------
+// The socket
+
+/// A socket's receive operations, walked by the receive callback.
+struct RxOps {
+    ops: KVec<Job>,
+}
+
+/// A CAN_BCM socket's state, protected by its socket lock.
+struct BcmSock {
+    /// connect() succeeded (and no device removal undid it).
+    bound: bool,
+    /// The interface of connect() (0: any).
+    ifindex: i32,
+    /// Transmit operations.
+    tx_ops: KVec<Job>,
+}
+
+/// What the receive path and the lockless checks need.
+struct BcmShared {
+    /// Mirrors `BcmSock::bound` (written under the socket lock).
+    bound: AtomicBool,
+    /// The receive operations (lock class `bcm_rx_ops`), allocated by the
+    /// first connect(). Changed only with the socket lock held.
+    rx: OnceBox<IrqSpinLock<RxOps>>,
+}
+
+struct BcmProto;
+
+/// This module's registrations (proto, CAN protocol, notifier).
+static MODULE: ProtoModule<BcmProto> = ProtoModule::new();
+
+type S = Sock<BcmProto>;
+
+/// Finds the position of the operation named `key` in `ops`.
+fn find(ops: &[Job], key: &OpKey) -> Option<usize> {
+    ops.iter().position(|j| j.data().key == *key)
+}
+
+/// (Re)subscribes `sk` to the identifiers of its active receive
+/// operations, on their interface if they share one, else on all
+/// (the callback then checks each operation's interface); with none, the
+/// subscription goes. Process context; socket lock held (it serialises
+/// changes of the list, so its length cannot change between the two
+/// looks). ENOMEM.
+fn rx_register(sk: &S) -> Result {
+    let Some(list) = sk.shared().rx.get() else {
+        rcan_api::rx_remove(sk);
+        return Ok(());
+    };
+    let n = list.lock().ops.len();
+    let mut fs: KVec<RxFilter> = KVec::with_capacity(n, GFP_KERNEL)?;
+    let mut ifindex: Option<i32> = None;
+    let mut mixed = false;
+    {
+        let l = list.lock();
+        for j in l.ops.iter() {
+            let d = j.data();
+            if !d.active.load(Ordering::Relaxed) {
+                continue;
+            }
+            // Within the capacity reserved above: no allocation.
+            fs.push(
+                RxFilter {
+                    kind: RX_FILTER_CAN_ID,
+                    id: d.key.can_id,
+                    mask: regmask(d.key.can_id),
+                },
+                GFP_ATOMIC,
+            )?;
+            match ifindex {
+                None => ifindex = Some(d.key.ifindex),
+                Some(i) if i != d.key.ifindex => mixed = true,
+                _ => {}
+            }
+        }
+    }
+    if fs.is_empty() {
+        rcan_api::rx_remove(sk);
+        return Ok(());
+    }
+    let ifindex = if mixed { 0 } else { ifindex.unwrap_or(0) };
+    rcan_api::rx_set(sk, 0, ifindex, &fs, false, 0)
+}
+
+/// Adds `job` to the receive list. Process context; socket lock held.
+fn rx_add(list: &IrqSpinLock<RxOps>, job: Job) -> Result {
+    let n = list.lock().ops.len();
+    // Grow outside the spinlock: move the operations into a larger vector
+    // under it (no allocation there).
+    let mut bigger: KVec<Job> = KVec::with_capacity(n + 1, GFP_KERNEL)?;
+    let old = {
+        let mut l = list.lock();
+        if l.ops.len() < l.ops.capacity() {
+            l.ops.push(job, GFP_ATOMIC)?;
+            return Ok(());
+        }
+        while let Some(j) = glue::kvec_swap_remove(&mut l.ops, 0) {
+            bigger.push(j, GFP_ATOMIC)?;
+        }
+        bigger.push(job, GFP_ATOMIC)?;
+        core::mem::replace(&mut l.ops, bigger)
+    };
+    drop(old);
+    Ok(())
+}
+
+/// Takes the receive operation named `key` off the list. Process context;
+/// socket lock held. The caller drops it after the lock is released.
+fn rx_take(list: &IrqSpinLock<RxOps>, key: &OpKey) -> Option<Job> {
+    let mut l = list.lock();
+    let i = find(&l.ops, key)?;
+    glue::kvec_swap_remove(&mut l.ops, i)
+}
+
+impl CanProtocol for BcmProto {
+    const PROTOCOL: i32 = CAN_BCM;
+    const SOCK_TYPE: i32 = SOCK_DGRAM;
+
+    fn module() -> &'static ProtoModule<Self> {
+        &MODULE
+    }
+
+    /// NET_RX softirq, RCU read side (mainline `bcm_rx_handler`, for every
+    /// operation of the socket the frame is for).
+    fn rx(sk: &S, skb: RxSkb<'_>, _cookie: u32) {
+        let s = skb.skb();
+        let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(s.data()) else {
+            skb.done();
+            return;
+        };
+        let frame = CanFrame::from_bytes(bytes);
+        let ifindex = s.ifindex();
+        let origin = s.sk_ptr();
+        let mut traffic = 0;
+        if !origin.is_null() {
+            traffic |= TRAFFIC_LOCAL;
+        }
+        if origin == sk.as_ptr() {
+            traffic |= TRAFFIC_OWN;
+        }
+        skb.done();
+        let Some(list) = sk.shared().rx.get() else {
+            return;
+        };
+        let now = ktime_get_mono_ns() as u64;
+        let mut pending = Pending::new();
+        {
+            let l = list.lock();
+            for j in l.ops.iter() {
+                let d = j.data();
+                if d.key.can_id != frame.can_id
+                    || (d.key.ifindex != 0 && d.key.ifindex != ifindex)
+                    || !d.active.load(Ordering::Relaxed)
+                {
+                    continue;
+                }
+                with_rx(j.get(), &mut pending, |op, filters, last, out| {
+                    op.frame_received(&frame, ifindex, traffic, now, filters, last, out)
+                });
+            }
+        }
+        pending.flush();
+    }
+
+    /// Mainline `bcm_notify`. Process context, RTNL held. A CAN device
+    /// going away stops the operations on it (transmit timers cancelled,
+    /// receive operations unsubscribed with their timers stopped; they
+    /// stay, as in mainline, for TX_READ/RX_READ/..._DELETE) and
+    /// disconnects the sockets connected to it (ENODEV); one going down
+    /// reports ENETDOWN to them.
+    fn netdev_event(event: NetdevEvent, dev: &NetDev, sockets: &Sockets<'_, Self>) {
+        if !dev.is_can() {
+            return;
+        }
+        let ifindex = dev.ifindex();
+        sockets.for_each(|sk| {
+            let mut s = sk.lock();
+            if event == NetdevEvent::Down {
+                let hit = s.bound && s.ifindex == ifindex;
+                drop(s);
+                if hit {
+                    sk.report_error(bindings::ENETDOWN as i32);
+                }
+                return;
+            }
+            for j in s.tx_ops.iter().filter(|j| j.data().key.ifindex == ifindex) {
+                with_tx(j.get(), false, |op, out| {
+                    if op.expires.take().is_some() {
+                        out.cancel();
+                    }
+                });
+            }
+            let mut changed = false;
+            if let Some(list) = sk.shared().rx.get() {
+                let l = list.lock();
+                for j in l.ops.iter() {
+                    let d = j.data();
+                    let gone = d.key.ifindex == ifindex && d.active.swap(false, Ordering::Relaxed);
+                    changed |= gone;
+                    let mut pending = Pending::new();
+                    with_rx(j.get(), &mut pending, |op, _, _, out| {
+                        if gone {
+                            if op.timeout_at.take().is_some() {
+                                out.cancel_timeout();
+                            }
+                            if op.throttle_at.take().is_some() {
+                                out.cancel_throttle();
+                            }
+                        }
+                        if op.ifindex == 0 && op.if_detected == ifindex {
+                            op.if_detected = 0;
+                        }
+                    });
+                }
+            }
+            if changed {
+                // ENOMEM keeps the old subscription; the callback skips
+                // inactive operations anyway.
+                let _ = rx_register(sk);
+            }
+            let enodev = s.bound && s.ifindex == ifindex;
+            if enodev {
+                s.bound = false;
+                s.ifindex = 0;
+                sk.shared().bound.store(false, Ordering::Relaxed);
+            }
+            drop(s);
+            if enodev {
+                sk.report_error(bindings::ENODEV as i32);
+            }
+        });
+    }
+}
+
+/// Copies the `nframes` frames of a request into `dst` (which has room),
+/// with `TX_CP_CAN_ID` applied.
+fn copy_frames(req: &Request<'_>, dst: &mut [u8]) {
+    let h = &req.head;
+    let cfsiz = h.cfsiz();
+    let n = h.nframes as usize * cfsiz;
+    dst[..n].copy_from_slice(&req.payload[..n]);
+    if h.flags & TX_CP_CAN_ID != 0 {
+        for f in dst[..n].chunks_exact_mut(cfsiz) {
+            f[..4].copy_from_slice(&h.can_id.to_ne_bytes());
+        }
+    }
+}
+
+/// `TX_SETUP` (mainline `bcm_tx_setup`). Process context, socket locked.
+fn tx_setup(sk: &S, s: &mut BcmSock, req: &Request<'_>, ifindex: i32) -> Result<usize> {
+    let h = req.head;
+    let key = OpKey::of(&h, ifindex);
+    let found = find(&s.tx_ops, &key);
+    let existing = found.and_then(|i| match &*s.tx_ops[i].data().state.lock() {
+        OpState::Tx(t) => Some(t.op.nframes),
+        OpState::Rx(_) => None,
+    });
+    let ret = wire::check_tx_setup(req, ifindex, existing).map_err(errno)?;
+    let now = ktime_get_mono_ns() as u64;
+    let i = match found {
+        Some(i) => {
+            let mut st = s.tx_ops[i].data().state.lock();
+            if let OpState::Tx(t) = &mut *st {
+                copy_frames(req, &mut t.frames);
+            }
+            i
+        }
+        None => {
+            let cfsiz = h.cfsiz();
+            let mut frames = KVec::from_elem(0u8, h.nframes as usize * cfsiz, GFP_KERNEL)?;
+            copy_frames(req, &mut frames);
+            let job = new_job(
+                sk,
+                key,
+                OpState::Tx(TxState {
+                    op: TxOp::new(&h),
+                    ifindex,
+                    cfsiz,
+                    frames,
+                }),
+            )?;
+            s.tx_ops.push(job, GFP_KERNEL)?;
+            s.tx_ops.len() - 1
+        }
+    };
+    with_tx(s.tx_ops[i].get(), false, |op, out| op.setup(&h, now, out));
+    Ok(ret)
+}
+
+/// `RX_SETUP` (mainline `bcm_rx_setup`). Process context, socket locked.
+fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
+    let list = sk.shared().rx.get().ok_or(neterr::ENOTCONN())?;
+    let h = wire::rx_setup_head(&req.head);
+    let key = OpKey::of(&h, ifindex);
+    let existing = {
+        let l = list.lock();
+        find(&l.ops, &key).and_then(|i| match &*l.ops[i].data().state.lock() {
+            OpState::Rx(r) => Some(r.op.nframes),
+            OpState::Tx(_) => None,
+        })
+    };
+    let ret = wire::check_rx_setup(req, existing).map_err(errno)?;
+    let cfsiz = h.cfsiz();
+    let n = h.nframes as usize;
+    // The frames, prepared outside the spinlocks.
+    let mut raw = KVec::from_elem(0u8, n * cfsiz, GFP_KERNEL)?;
+    raw.copy_from_slice(&req.payload[..n * cfsiz]);
+    let mut filters = KVec::with_capacity(n, GFP_KERNEL)?;
+    for f in raw.chunks_exact(cfsiz) {
+        let mut b = [0u8; CAN_FRAME_LEN];
+        b.copy_from_slice(&f[..CAN_FRAME_LEN]);
+        filters.push(CanFrame::from_bytes(&b), GFP_KERNEL)?;
+    }
+    if h.flags & RX_RTR_FRAME != 0 {
+        if let Some(f) = filters.first_mut() {
+            *f = wire::rtr_reply_frame(&h, *f);
+            raw[..CAN_FRAME_LEN].copy_from_slice(&f.to_bytes());
+        }
+    }
+    let now = ktime_get_mono_ns() as u64;
+    if existing.is_some() {
+        let mut pending = Pending::new();
+        let l = list.lock();
+        if let Some(i) = find(&l.ops, &key) {
+            let j = l.ops[i].get();
+            {
+                let mut st = j.data().state.lock();
+                if let OpState::Rx(r) = &mut *st {
+                    if n > 0 {
+                        r.raw[..n * cfsiz].copy_from_slice(&raw);
+                        r.filters[..n].copy_from_slice(&filters);
+                        r.last.iter_mut().for_each(|s| *s = RxSlot::default());
+                    }
+                }
+            }
+            with_rx(j, &mut pending, |op, _, last, out| {
+                op.setup(&h, now, last, out)
+            });
+        }
+        drop(l);
+        pending.flush();
+        return Ok(ret);
+    }
+    let last = KVec::from_elem(RxSlot::default(), n.max(1), GFP_KERNEL)?;
+    let job = new_job(
+        sk,
+        key,
+        OpState::Rx(RxState {
+            op: RxOp::new(&h, ifindex),
+            cfsiz,
+            raw,
+            filters,
+            last,
+        }),
+    )?;
+    rx_add(list, job)?;
+    if let Err(e) = rx_register(sk) {
+        drop(rx_take(list, &key));
+        return Err(e);
+    }
+    let mut pending = Pending::new();
+    {
+        let l = list.lock();
+        if let Some(i) = find(&l.ops, &key) {
+            with_rx(l.ops[i].get(), &mut pending, |op, _, last, out| {
+                op.setup(&h, now, last, out)
+            });
+        }
+    }
+    pending.flush();
+    Ok(ret)
+}
+
+/// `TX_SEND` (mainline `bcm_tx_send`). Process context.
+fn tx_send(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
+    let ret = wire::check_tx_send(req, ifindex).map_err(errno)?;
+    let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+    let cfsiz = req.head.cfsiz();
+    if cfsiz == CANFD_FRAME_LEN {
+        // A CAN FD frame: mainline's can_send checks its length, then the
+        // device's MTU; every rcan device is classic (MTU 16).
+        return Err(if req.payload[4] > 64 {
+            EINVAL
+        } else if (CANFD_FRAME_LEN as u32) > dev.mtu() {
+            neterr::EMSGSIZE()
+        } else {
+            EINVAL
+        });
+    }
+    let mut skb = Skb::alloc(SKB_PRIV_LEN + cfsiz as u32, glue::GFP_KERNEL).ok_or(ENOMEM)?;
+    skb.reserve(SKB_PRIV_LEN);
+    let mut prv = [0u8; SKB_PRIV_LEN as usize];
+    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
+    if !skb.write_headroom(&prv) || !skb.put_data(&req.payload[..cfsiz]) {
+        return Err(neterr::ENOBUFS());
+    }
+    skb.set_owner(sk);
+    skb.set_sock_params(sk);
+    rcan_api::send(skb, &dev, true)?;
+    Ok(ret)
+}
+
+impl glue::sock::Proto for BcmProto {
+    type Data = BcmSock;
+    type Shared = BcmShared;
+
+    fn new_shared() -> BcmShared {
+        BcmShared {
+            bound: AtomicBool::new(false),
+            rx: OnceBox::new(),
+        }
+    }
+
+    fn new_data() -> BcmSock {
+        BcmSock {
+            bound: false,
+            ifindex: 0,
+            tx_ops: KVec::new(),
+        }
+    }
+
+    /// Mainline `bcm_release`: unsubscribe, then every operation goes
+    /// (timers cancelled and waited for, see the module documentation).
+    fn release(sk: &S) {
+        {
+            let mut rtnl = Rtnl::lock();
+            MODULE.sockets.get(&mut rtnl).remove(sk.as_ptr() as usize);
+        }
+        rcan_api::rx_remove(sk);
+        let mut s = sk.lock();
+        let tx = core::mem::replace(&mut s.tx_ops, KVec::new());
+        let rx = match sk.shared().rx.get() {
+            Some(l) => core::mem::replace(&mut l.lock().ops, KVec::new()),
+            None => KVec::new(),
+        };
+        s.bound = false;
+        s.ifindex = 0;
+        sk.shared().bound.store(false, Ordering::Relaxed);
+        drop(s);
+        drop(tx);
+        drop(rx);
+    }
+
+    fn bind(_sk: &S, _addr: &[u8]) -> Result {
+        Err(neterr::EOPNOTSUPP())
+    }
+
+    /// Mainline `bcm_connect`.
+    fn connect(sk: &S, addr: &[u8], _flags: i32) -> Result {
+        if addr.len() < BCM_MIN_NAMELEN {
+            return Err(EINVAL);
+        }
+        let mut ifindex = i32::from_ne_bytes([addr[4], addr[5], addr[6], addr[7]]);
+        let mut s = sk.lock();
+        if s.bound {
+            return Err(glue::errno(bindings::EISCONN as i32));
+        }
+        if ifindex != 0 {
+            let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+            if !dev.is_can() {
+                return Err(ENODEV);
+            }
+            ifindex = dev.ifindex();
+        }
+        if sk.shared().rx.get().is_none() {
+            let l = new_irq_spinlock!(RxOps { ops: KVec::new() }, "bcm_rx_ops")?;
+            sk.shared().rx.set(KBox::new(l, GFP_KERNEL)?)?;
+        }
+        s.bound = true;
+        s.ifindex = ifindex;
+        sk.shared().bound.store(true, Ordering::Relaxed);
+        Ok(())
+    }
+
+    fn getname(_sk: &S, _peer: bool, _out: &mut [u8]) -> Result<usize> {
+        Err(neterr::EOPNOTSUPP())
+    }
+
+    /// Mainline `bcm_sendmsg`: the checks every message gets, then the
+    /// opcode's. Returns the bytes mainline returns.
+    fn sendmsg(sk: &S, msg: &mut Msg, len: usize) -> Result<usize> {
+        if !sk.shared().bound.load(Ordering::Relaxed) {
+            return Err(neterr::ENOTCONN());
+        }
+        if len < MHSIZ {
+            return Err(EINVAL);
+        }
+        let mut hb = [0u8; MHSIZ];
+        msg.copy_from_user(&mut hb)?;
+        let head = MsgHead::from_bytes(&hb);
+        let cfsiz = head.cfsiz();
+        if (len - MHSIZ) % cfsiz != 0 {
+            return Err(EINVAL);
+        }
+        let take = len.min(max_read(cfsiz));
+        let mut buf = KVec::from_elem(0u8, take, GFP_KERNEL)?;
+        buf[..MHSIZ].copy_from_slice(&hb);
+        msg.copy_from_user(&mut buf[MHSIZ..])?;
+
+        let mut s = sk.lock();
+        if !s.bound {
+            return Err(neterr::ENOTCONN());
+        }
+        let mut ifindex = s.ifindex;
+        if ifindex == 0 {
+            if let Some(name) = msg.name() {
+                if name.len() < BCM_MIN_NAMELEN
+                    || u16::from_ne_bytes([name[0], name[1]]) != bindings::AF_CAN as u16
+                {
+                    return Err(EINVAL);
+                }
+                ifindex = i32::from_ne_bytes([name[4], name[5], name[6], name[7]]);
+                if ifindex != 0 {
+                    let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+                    if !dev.is_can() {
+                        return Err(ENODEV);
+                    }
+                }
+            }
+        }
+        let req = wire::parse(&buf).map_err(errno)?;
+        let key = OpKey::of(&req.head, ifindex);
+        match req.head.opcode {
+            TX_SETUP => tx_setup(sk, &mut s, &req, ifindex),
+            RX_SETUP => rx_setup(sk, &req, ifindex),
+            TX_DELETE => {
+                let i = find(&s.tx_ops, &key).ok_or(EINVAL)?;
+                let job = glue::kvec_swap_remove(&mut s.tx_ops, i);
+                drop(job);
+                Ok(MHSIZ)
+            }
+            RX_DELETE => {
+                let list = sk.shared().rx.get().ok_or(EINVAL)?;
+                let job = rx_take(list, &key).ok_or(EINVAL)?;
+                // ENOMEM keeps the old subscription; the operation is gone
+                // from the list, so its frames find nobody.
+                let _ = rx_register(sk);
+                drop(job);
+                Ok(MHSIZ)
+            }
+            TX_READ => {
+                let i = find(&s.tx_ops, &key).ok_or(EINVAL)?;
+                with_tx(s.tx_ops[i].get(), false, |op, out| op.read(out));
+                Ok(MHSIZ)
+            }
+            RX_READ => {
+                let list = sk.shared().rx.get().ok_or(EINVAL)?;
+                let mut pending = Pending::new();
+                let l = list.lock();
+                let i = find(&l.ops, &key).ok_or(EINVAL)?;
+                with_rx(l.ops[i].get(), &mut pending, |op, _, _, out| op.read(out));
+                Ok(MHSIZ)
+            }
+            TX_SEND => tx_send(sk, &req, ifindex),
+            _ => Err(EINVAL),
+        }
+    }
+
+    /// Mainline `bcm_recvmsg`.
+    fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
+        let skb = sk.recv_datagram(flags)?;
+        let n = skb.len() as usize;
+        let size = if len < n {
+            msg.add_flags(bindings::MSG_TRUNC);
+            len
+        } else {
+            n
+        };
+        if let Err(e) = msg.copy_from_skb(&skb, 0, size) {
+            sk.free_datagram(skb);
+            return Err(e);
+        }
+        msg.recv_cmsgs(sk, &skb);
+        let mut name = [0u8; BCM_MIN_NAMELEN];
+        skb.cb_read(CB_NAME, &mut name);
+        msg.set_name(&name);
+        let mut f = [0u8; 4];
+        skb.cb_read(CB_FLAGS, &mut f);
+        msg.add_flags(u32::from_ne_bytes(f));
+        sk.free_datagram(skb);
+        Ok(size)
+    }
+
+    /// Mainline's BCM has no socket options (`sock_no_setsockopt`).
+    fn setsockopt(_sk: &S, _level: i32, _name: i32, _opt: &OptIn) -> Result {
+        Err(neterr::EOPNOTSUPP())
+    }
+
+    fn getsockopt(_sk: &S, _level: i32, _name: i32, _opt: &OptOut) -> Result {
+        Err(neterr::EOPNOTSUPP())
+    }
+}
+
+/// The module: its registrations, undone when it is dropped (unload).
+pub(crate) struct BcmModule {
+    _reg: ProtoRegistration<BcmProto>,
+}
+
+impl kernel::Module for BcmModule {
+    fn init(_module: &'static ThisModule) -> Result<Self> {
+        let reg = MODULE.register(c_str!("CAN_BCM"))?;
+        pr_info!("CAN_BCM ({}) registered\n", CAN_BCM);
+        Ok(BcmModule { _reg: reg })
+    }
+}
