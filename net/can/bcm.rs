@@ -797,7 +797,11 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
                 if let OpState::Rx(r) = &mut *st {
                     if n > 0 {
                         r.raw[..n * cfsiz].copy_from_slice(&raw);
-                        r.filters[..n].copy_from_slice(&filters);
+                        // Element by element: filters.len() == n <= r.filters.len(),
+                        // and no length-mismatch panic path for objtool to flag.
+                        for (d, s) in r.filters.iter_mut().zip(filters.iter()) {
+                            *d = *s;
+                        }
                         r.last.iter_mut().for_each(|s| *s = RxSlot::default());
                     }
                 }

@@ -87,7 +87,7 @@ pub enum Module {
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 15] = [
+    pub const ALL: [Module; 16] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
