@@ -199,9 +199,16 @@ mod tests {
         // and the daemons' canzlogd_/cantcpd_ run on both stacks,
         // everything else (mixed_, sja1000_ included) on ours only.
         for t in super::all() {
-            let portable = ["raw_", "canutils_", "candev_", "bcm_", "canzlogd_", "cantcpd_"]
-                .iter()
-                .any(|p| t.name.starts_with(p));
+            let portable = [
+                "raw_",
+                "canutils_",
+                "candev_",
+                "bcm_",
+                "canzlogd_",
+                "cantcpd_",
+            ]
+            .iter()
+            .any(|p| t.name.starts_with(p));
             assert_eq!(t.portable, portable, "{}", t.name);
         }
     }
