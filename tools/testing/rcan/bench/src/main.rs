@@ -112,6 +112,7 @@ Environment: RCAN_KBUILD (test kernel build directory: mainline modules),
 RCAN_ROOT (project tree with our modules; default the current directory).";
 
 /// Command line settings.
+#[derive(Debug, PartialEq)]
 struct Config {
     run_raw: bool,
     run_table: bool,
@@ -154,12 +155,33 @@ fn parse_num<T: std::str::FromStr>(opt: &str, v: Option<String>) -> Result<T, St
         .map_err(|_| format!("{opt}: bad number '{v}'"))
 }
 
-fn parse_args() -> Result<Config, String> {
-    let env_path = |k: &str| {
-        std::env::var_os(k)
-            .filter(|v| !v.is_empty())
-            .map(PathBuf::from)
-    };
+/// What the defaults take from the process: `RCAN_OUT` (the summary's
+/// directory), `RCAN_ROOT` (else the current directory) and `RCAN_KBUILD`;
+/// empty variables count as unset.
+struct Env {
+    out: Option<PathBuf>,
+    root: PathBuf,
+    kbuild: Option<PathBuf>,
+}
+
+impl Env {
+    fn from_process() -> Env {
+        let env_path = |k: &str| {
+            std::env::var_os(k)
+                .filter(|v| !v.is_empty())
+                .map(PathBuf::from)
+        };
+        Env {
+            out: env_path("RCAN_OUT"),
+            root: env_path("RCAN_ROOT")
+                .or_else(|| std::env::current_dir().ok())
+                .unwrap_or_else(|| PathBuf::from(".")),
+            kbuild: env_path("RCAN_KBUILD"),
+        }
+    }
+}
+
+fn parse_args(args: impl IntoIterator<Item = String>, env: Env) -> Result<Config, String> {
     let mut c = Config {
         run_raw: true,
         run_table: true,
@@ -208,16 +230,14 @@ fn parse_args() -> Result<Config, String> {
         fan_counts: vec![1, 100, 1000],
         batch: 64,
         lat_frames: 100_000,
-        summary: env_path("RCAN_OUT").map(|d| d.join("bench-summary.txt")),
+        summary: env.out.map(|d| d.join("bench-summary.txt")),
         paths: Paths {
-            root: env_path("RCAN_ROOT")
-                .or_else(|| std::env::current_dir().ok())
-                .unwrap_or_else(|| PathBuf::from(".")),
-            kbuild: env_path("RCAN_KBUILD"),
+            root: env.root,
+            kbuild: env.kbuild,
         },
     };
     let mut quick = false;
-    let mut args = std::env::args().skip(1);
+    let mut args = args.into_iter();
     while let Some(a) = args.next() {
         match a.as_str() {
             "--part" => {
@@ -821,7 +841,7 @@ fn header(c: &Config) -> String {
 }
 
 fn main() -> ExitCode {
-    let c = match parse_args() {
+    let c = match parse_args(std::env::args().skip(1), Env::from_process()) {
         Ok(c) => c,
         Err(e) => {
             eprintln!("rcan-bench: {e}\n{USAGE}");
@@ -971,5 +991,402 @@ fn main() -> ExitCode {
         ExitCode::FAILURE
     } else {
         ExitCode::SUCCESS
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use table::Kind;
+
+    /// The environment of every test: as `bench.sh` sets it up in the VM.
+    fn env() -> Env {
+        Env {
+            out: Some(PathBuf::from("/out")),
+            root: PathBuf::from("/rcan"),
+            kbuild: Some(PathBuf::from("/kbuild")),
+        }
+    }
+
+    fn parse(args: &[&str]) -> Result<Config, String> {
+        parse_args(args.iter().map(|a| a.to_string()), env())
+    }
+
+    /// What `rcan-bench` with no options runs, written out in full.
+    fn defaults() -> Config {
+        Config {
+            run_raw: true,
+            run_table: true,
+            run_dsor: true,
+            run_bcm: false,
+            bcm_jobs: 1000,
+            bcm_ival_ms: 10,
+            bcm_secs: 3.0,
+            table: table::Config {
+                counts: vec![1000, 10_000],
+                kinds: vec![Kind::Exact, Kind::Same, Kind::Masked, Kind::Masks],
+                masks: 64,
+                rounds: 3,
+                frames: 6400,
+                warmup: 640,
+                batch: 64,
+                fan_frames: 50_000,
+                sockets: true,
+                fan: true,
+                secs: 2.0,
+                pair: true,
+                iface: "can0".into(),
+                iface2: "can1".into(),
+                load: true,
+                unwanted_id: 0x555,
+            },
+            protos: vec![Proto::Isotp, Proto::IsotpNoGap, Proto::Dsor],
+            msg_sizes: vec![1024, 4096],
+            msg_secs: 2.0,
+            msg_min: 20,
+            msg_warmup: 5,
+            stacks: vec![Stack::Mainline, Stack::Ours],
+            iface: "can0".into(),
+            load: true,
+            run_a: true,
+            run_b: true,
+            run_c: true,
+            cpu: Some(0),
+            rx_cpu: None,
+            rounds: 5,
+            reps: 2,
+            warmup: 2000,
+            tp_frames: 100_000,
+            window: 256,
+            fan_frames: 50_000,
+            fan_counts: vec![1, 100, 1000],
+            batch: 64,
+            lat_frames: 100_000,
+            summary: Some(PathBuf::from("/out/bench-summary.txt")),
+            paths: Paths {
+                root: PathBuf::from("/rcan"),
+                kbuild: Some(PathBuf::from("/kbuild")),
+            },
+        }
+    }
+
+    fn parts(c: &mut Config, raw: bool, table: bool, dsor: bool, bcm: bool) {
+        (c.run_raw, c.run_table, c.run_dsor, c.run_bcm) = (raw, table, dsor, bcm);
+    }
+
+    #[test]
+    fn defaults_without_options() {
+        assert_eq!(parse(&[]), Ok(defaults()));
+        assert_eq!(parse(&["--part", "raw,table,dsor"]), Ok(defaults()));
+        let mut e = defaults();
+        e.summary = None;
+        let no_out = Env { out: None, ..env() };
+        assert_eq!(parse_args(Vec::new(), no_out), Ok(e));
+    }
+
+    /// The examples of `bench.sh` and of benchmarks.rst.
+    #[test]
+    fn bench_sh_option_sets() {
+        let mut e = defaults();
+        e.stacks = vec![Stack::Mainline];
+        assert_eq!(parse(&["--stack", "mainline"]), Ok(e));
+
+        let mut e = defaults();
+        (e.rounds, e.reps, e.warmup) = (1, 1, 200);
+        (e.tp_frames, e.fan_frames, e.lat_frames) = (10_000, 5000, 10_000);
+        (e.msg_secs, e.msg_min, e.msg_warmup) = (0.5, 5, 2);
+        (e.table.rounds, e.table.frames, e.table.warmup) = (1, 640, 64);
+        (e.table.secs, e.table.fan_frames) = (0.5, 5000);
+        assert_eq!(parse(&["--quick"]), Ok(e));
+
+        for (part, raw, table, dsor, bcm) in [
+            ("raw", true, false, false, false),
+            ("table", false, true, false, false),
+            ("dsor", false, false, true, false),
+            ("bcm", false, false, false, true),
+        ] {
+            let mut e = defaults();
+            parts(&mut e, raw, table, dsor, bcm);
+            assert_eq!(parse(&["--part", part]), Ok(e), "--part {part}");
+        }
+
+        let mut e = defaults();
+        parts(&mut e, false, false, true, false);
+        e.rounds = 3;
+        assert_eq!(parse(&["--part", "dsor", "--rounds", "3"]), Ok(e));
+
+        let mut e = defaults();
+        parts(&mut e, true, false, false, false);
+        e.rounds = 3;
+        assert_eq!(parse(&["--part", "raw", "--rounds", "3"]), Ok(e));
+
+        let mut e = defaults();
+        parts(&mut e, false, true, false, false);
+        e.table.rounds = 1;
+        e.table.kinds = vec![Kind::Exact, Kind::Same];
+        (e.table.fan, e.table.pair) = (false, false);
+        e.table.unwanted_id = 0xC000_04DD;
+        assert_eq!(
+            parse(&[
+                "--part",
+                "table",
+                "--table-rounds",
+                "1",
+                "--table-kinds",
+                "exact,same",
+                "--table-sockets",
+                "1000,10000",
+                "--table-only",
+                "sockets",
+                "--table-unwanted-id",
+                "C00004DD",
+            ]),
+            Ok(e)
+        );
+
+        let mut e = defaults();
+        parts(&mut e, false, true, false, false);
+        e.stacks = vec![Stack::Ours];
+        (e.load, e.table.load) = (false, false);
+        e.table.kinds = vec![Kind::Exact];
+        e.table.counts = vec![10_000];
+        (e.table.fan, e.table.pair) = (false, false);
+        assert_eq!(
+            parse(&[
+                "--part",
+                "table",
+                "--stack",
+                "ours",
+                "--no-load",
+                "--table-kinds",
+                "exact",
+                "--table-sockets",
+                "10000",
+                "--table-only",
+                "sockets",
+            ]),
+            Ok(e)
+        );
+
+        let mut e = defaults();
+        parts(&mut e, true, false, false, false);
+        e.stacks = vec![Stack::Ours];
+        (e.load, e.table.load) = (false, false);
+        (e.run_b, e.run_c) = (false, false);
+        (e.rounds, e.reps) = (1, 2);
+        assert_eq!(
+            parse(&[
+                "--part",
+                "raw",
+                "--stack",
+                "ours",
+                "--no-load",
+                "--only",
+                "throughput",
+                "--rounds",
+                "1",
+                "--reps",
+                "2",
+            ]),
+            Ok(e)
+        );
+
+        let mut e = defaults();
+        parts(&mut e, false, true, false, false);
+        (e.table.fan, e.table.pair) = (false, false);
+        e.table.kinds = vec![Kind::Exact];
+        e.table.counts = vec![10_000];
+        e.table.rounds = 3;
+        assert_eq!(
+            parse(&[
+                "--part",
+                "table",
+                "--table-only",
+                "sockets",
+                "--table-kinds",
+                "exact",
+                "--table-sockets",
+                "10000",
+                "--table-rounds",
+                "3",
+            ]),
+            Ok(e)
+        );
+
+        let mut e = defaults();
+        parts(&mut e, false, true, false, false);
+        (e.table.fan, e.table.pair) = (false, false);
+        e.table.counts = vec![10_000];
+        e.table.rounds = 2;
+        e.paths.root = PathBuf::from("/tmp/base");
+        assert_eq!(
+            parse(&[
+                "--part",
+                "table",
+                "--table-only",
+                "sockets",
+                "--table-sockets",
+                "10000",
+                "--table-rounds",
+                "2",
+                "--ours-dir",
+                "/tmp/base",
+            ]),
+            Ok(e)
+        );
+
+        let mut e = defaults();
+        parts(&mut e, false, false, true, false);
+        e.cpu = None;
+        (e.load, e.table.load) = (false, false);
+        e.protos = vec![Proto::Dsor];
+        assert_eq!(
+            parse(&[
+                "--part",
+                "dsor",
+                "--cpu",
+                "any",
+                "--no-load",
+                "--proto",
+                "dsor"
+            ]),
+            Ok(e)
+        );
+    }
+
+    /// Value syntax: lists, underscores in numbers, hex ids, the last of a
+    /// repeated option, `--quick` wherever it stands.
+    #[test]
+    fn value_syntax() {
+        let mut e = defaults();
+        parts(&mut e, false, true, false, true);
+        e.protos = vec![Proto::Dsor, Proto::Isotp];
+        e.msg_sizes = vec![4096, 8, 4096];
+        e.fan_counts = vec![1, 7, 2031];
+        e.run_a = false;
+        e.tp_frames = 1_000_000;
+        e.rounds = 4;
+        e.cpu = Some(1);
+        e.rx_cpu = Some(0);
+        e.iface = "vcan3".into();
+        e.table.iface = "vcan3".into();
+        e.table.iface2 = "vcan4".into();
+        e.table.unwanted_id = 0x123;
+        e.table.kinds = vec![Kind::Masks, Kind::Masked];
+        e.table.masks = 255;
+        e.table.secs = 1.5;
+        e.table.counts = vec![5, 5];
+        (e.table.sockets, e.table.fan) = (false, false);
+        (e.bcm_jobs, e.bcm_ival_ms, e.bcm_secs) = (1536, 1, 0.25);
+        (e.batch, e.table.batch) = (8, 8);
+        e.summary = Some(PathBuf::from("s.txt"));
+        assert_eq!(
+            parse(&[
+                "--part",
+                "bcm, table",
+                "--proto",
+                "dsor,isotp,dsor",
+                "--msg-sizes",
+                "4_096, 8,4096",
+                "--fanout-receivers",
+                "2031,1,7,1",
+                "--only",
+                "b,latency,fan-out",
+                "--throughput-frames",
+                "1_000_000",
+                "--rounds",
+                "2",
+                "--rounds",
+                "4",
+                "--cpu",
+                "1",
+                "--rx-cpu",
+                "0",
+                "--iface",
+                "vcan3",
+                "--iface2",
+                "vcan4",
+                "--table-unwanted-id",
+                "0x123",
+                "--table-kinds",
+                "masks,masked,masks",
+                "--table-masks",
+                "255",
+                "--table-secs",
+                "1.5",
+                "--table-sockets",
+                "5,5",
+                "--table-only",
+                "pair",
+                "--bcm-jobs",
+                "1536",
+                "--bcm-ival-ms",
+                "1",
+                "--bcm-secs",
+                "0.25",
+                "--batch",
+                "8",
+                "--summary",
+                "s.txt",
+            ]),
+            Ok(e)
+        );
+
+        // --quick scales what the other options set, before or after it.
+        let mut e = defaults();
+        (e.rounds, e.reps, e.warmup) = (1, 1, 100);
+        (e.tp_frames, e.fan_frames, e.lat_frames) = (10_000, 5000, 10_000);
+        (e.msg_secs, e.msg_min, e.msg_warmup) = (0.5, 5, 2);
+        (e.table.rounds, e.table.frames, e.table.warmup) = (1, 640, 64);
+        (e.table.secs, e.table.fan_frames) = (0.5, 5000);
+        assert_eq!(parse(&["--quick", "--warmup", "1000"]), Ok(e));
+    }
+
+    /// Values the parser refuses, each with everything else valid.
+    #[test]
+    fn refused() {
+        for args in [
+            &["--part", "nosuch"][..],
+            &["--part", ""],
+            &["--stack", "neither"],
+            &["--only", "d"],
+            &["--proto", "tcp"],
+            &["--table-kinds", "exact,"],
+            &["--table-only", "all"],
+            &["--bcm-jobs", "0"],
+            &["--bcm-jobs", "1537"],
+            &["--bcm-jobs", "1_000"],
+            &["--bcm-ival-ms", "0"],
+            &["--bcm-secs", "0"],
+            &["--bcm-secs", "NaN"],
+            &["--table-masks", "0"],
+            &["--table-masks", "256"],
+            &["--table-sockets", "1000,0"],
+            &["--table-unwanted-id", "55a"],
+            &["--table-unwanted-id", "8000055A"],
+            &["--table-unwanted-id", "xyz"],
+            &["--msg-sizes", "7"],
+            &["--msg-sizes", "8301"],
+            &["--msg-sizes", "1024,,4096"],
+            &["--rounds", "0"],
+            &["--reps", "0"],
+            &["--window", "0"],
+            &["--batch", "0"],
+            &["--fanout-receivers", "1,0"],
+            &["--fanout-receivers", "2032"],
+            &["--window", "4294967296"],
+            &["--throughput-frames", "4294967296"],
+            &["--no-load"],
+            &["--no-load", "--part", "dsor", "--stack", "ours"],
+            &["--rounds"],
+            &["--rounds", "x"],
+            &["--rounds", "-1"],
+            &["--rx-cpu", "any"],
+            &["--cpu", "first"],
+            &["--bogus"],
+            &["can0"],
+        ] {
+            assert!(parse(args).is_err(), "{args:?} accepted");
+        }
     }
 }

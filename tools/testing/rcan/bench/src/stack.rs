@@ -53,6 +53,7 @@ impl fmt::Display for Stack {
 }
 
 /// Where the modules are.
+#[derive(Debug, PartialEq)]
 pub struct Paths {
     /// The project tree (`RCAN_ROOT`, else the current directory).
     pub root: PathBuf,

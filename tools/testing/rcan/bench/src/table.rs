@@ -148,6 +148,7 @@ impl Kind {
 }
 
 /// Settings of the table part.
+#[derive(Debug, PartialEq)]
 pub struct Config {
     pub counts: Vec<usize>,
     pub kinds: Vec<Kind>,
