@@ -76,28 +76,28 @@ pub struct Cli {
     /// Frames per latency run (default 100000)
     #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = num::<u64>)]
     latency_frames: Option<u64>,
-    /// Dsor part: protocols, comma-separated: isotp (ISO-TP, default options), isotp0 (ISO-TP, frame_txtime 0), dsor (default isotp,isotp0,dsor)
+    /// DSOR part: protocols, comma-separated: isotp (ISO-TP, default options), isotp0 (ISO-TP, frame_txtime 0), dsor (default isotp,isotp0,dsor)
     #[arg(long, value_name = "LIST", allow_hyphen_values = true, value_parser = protos)]
     proto: Option<List<Proto>>,
-    /// Dsor part: message sizes in bytes, 8 to 8300, comma-separated (default 1024,4096)
+    /// DSOR part: message sizes in bytes, 8 to 8300, comma-separated (default 1024,4096)
     #[arg(long, value_name = "L", allow_hyphen_values = true, value_parser = nums)]
     msg_sizes: Option<List<usize>>,
-    /// Dsor part: seconds per measured run at least (default 2)
+    /// DSOR part: seconds per measured run at least (default 2)
     #[arg(long, value_name = "S", allow_hyphen_values = true, value_parser = num::<f64>)]
     msg_secs: Option<f64>,
-    /// Dsor part: messages per measured run at least (default 20)
+    /// DSOR part: messages per measured run at least (default 20)
     #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = num::<u64>)]
     msg_min: Option<u64>,
-    /// Dsor part: messages per warm-up run (default 5)
+    /// DSOR part: messages per warm-up run (default 5)
     #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = num::<u64>)]
     msg_warmup: Option<u64>,
-    /// Bcm part: cyclic jobs, 1 to 1536 (default 1000)
+    /// BCM part: cyclic jobs, 1 to 1536 (default 1000)
     #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = bcm_jobs)]
     bcm_jobs: Option<u32>,
-    /// Bcm part: interval of each job in ms (default 10)
+    /// BCM part: interval of each job in ms (default 10)
     #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = bcm_ival_ms)]
     bcm_ival_ms: Option<u64>,
-    /// Bcm part: seconds per measured run (default 3)
+    /// BCM part: seconds per measured run (default 3)
     #[arg(long, value_name = "S", allow_hyphen_values = true, value_parser = bcm_secs)]
     bcm_secs: Option<f64>,
     /// Table part: rounds (default 3)
