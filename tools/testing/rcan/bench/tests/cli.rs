@@ -28,3 +28,20 @@ fn help_version_and_usage_errors() {
         assert!(err.contains("Usage: rcan-bench"), "{args:?}: {err}");
     }
 }
+
+/// `rcan-bench-sja` (the SJA1000 part bench.sh runs) likewise.
+#[test]
+fn sja_help_version_and_usage_errors() {
+    let bin = env!("CARGO_BIN_EXE_rcan-bench-sja");
+    rcan_cli_check::check(
+        bin,
+        "rcan-bench-sja",
+        env!("CARGO_PKG_VERSION"),
+        &[
+            &["can0"],
+            &["--frames"],
+            &["--frames", "x"],
+            &["--rounds", "0"],
+        ],
+    );
+}

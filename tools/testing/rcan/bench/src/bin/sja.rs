@@ -223,8 +223,27 @@ fn phase(frames: u32) -> Result<f64, String> {
     Ok(t.elapsed().as_secs_f64())
 }
 
+/// The command line (`bench.sh` passes `--frames 4000 --rounds 3`).
+#[derive(clap::Parser, Debug)]
+#[command(
+    name = "rcan-bench-sja",
+    version,
+    about = "SJA1000 receive path, ours vs mainline, on two emulated Kvaser cards (run by bench.sh in the VM)",
+    long_about = None
+)]
+struct Cli {
+    /// 8-byte frames sent per phase.
+    #[arg(long, default_value_t = 5000, value_parser = clap::value_parser!(u32).range(1..))]
+    frames: u32,
+    /// Rounds; each measures mainline, then ours.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..))]
+    rounds: u64,
+}
+
 fn main() -> std::process::ExitCode {
-    match real_main() {
+    // Usage errors exit 2 (clap) before anything is loaded or pinned.
+    let cli = <Cli as clap::Parser>::parse();
+    match real_main(cli.frames, cli.rounds as usize) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("rcan-bench-sja: {e}");
@@ -233,22 +252,7 @@ fn main() -> std::process::ExitCode {
     }
 }
 
-fn real_main() -> Result<(), String> {
-    let mut frames = 5000u32;
-    let mut rounds = 2usize;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        let mut num = || {
-            args.next()
-                .and_then(|v| v.parse().ok())
-                .ok_or(format!("{a}: number"))
-        };
-        match a.as_str() {
-            "--frames" => frames = num()? as u32,
-            "--rounds" => rounds = num()?,
-            _ => return Err(format!("unknown option {a}")),
-        }
-    }
+fn real_main(frames: u32, rounds: usize) -> Result<(), String> {
     let env = |k: &str| std::env::var_os(k).map(PathBuf::from);
     let root = env("RCAN_ROOT").unwrap_or_else(|| PathBuf::from("."));
     let kb = env("RCAN_KBUILD").ok_or("RCAN_KBUILD not set")?;
