@@ -76,7 +76,7 @@ uninstall:
 demo: setup modules userspace
 	bash $(T)/demo.sh
 
-check: setup modules userspace
+check: setup modules userspace man
 	bash $(T)/run-tests.sh
 
 # A longer run of the syscall fuzzer (tests/fuzz) than make check's, on the
