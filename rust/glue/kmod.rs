@@ -21,10 +21,10 @@ use kernel::str::CStr;
 /// the kernel's error (`ENOSYS` without `CONFIG_MODULES`, `EPERM` while
 /// module autoloading is disabled, ...).
 pub(crate) fn request_module(name: &CStr) -> Result {
+    // The helper may sleep, which the documented process context allows
+    // (a violation is a might_sleep() report, not memory unsafety).
     // SAFETY: `name` is NUL-terminated and outlives the call; the helper
-    // passes it as the argument of a "%s" format, never as the format
-    // itself. The helper may sleep, which the documented process context
-    // allows (a violation is a might_sleep() report, not memory unsafety).
+    // passes it as the argument of a "%s" format, never as the format.
     let ret = unsafe { bindings::rcan_request_module(name.as_char_ptr()) };
     match ret {
         0 => Ok(()),

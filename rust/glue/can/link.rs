@@ -84,10 +84,10 @@ impl LinkKind {
 
 impl Drop for LinkKind {
     fn drop(&mut self) {
-        // SAFETY: registered by `register`. No device can still point to
-        // the ops: each driver module that made one references
-        // `rcan_can_link_ops`, so this module cannot be unloaded before
-        // those modules (and their devices) are gone.
+        // Each driver module that made a device references
+        // `rcan_can_link_ops`, so this module outlives those devices.
+        // SAFETY: registered by `register`; no device can still point to
+        // the ops (above).
         unsafe { rcan_can_link_unregister() };
     }
 }

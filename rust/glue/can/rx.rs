@@ -547,10 +547,10 @@ unsafe extern "C" fn free_reg<R: Receiver>(head: *mut bindings::callback_head) {
 /// `call_rcu` callback: frees a receiver whose inline first registration
 /// was its last (with that registration). Softirq context.
 unsafe extern "C" fn free_rcv<R: Receiver>(head: *mut bindings::callback_head) {
+    // Its live registration (the inline one) was unlinked and the
+    // receiver taken off the map a grace period ago.
     // SAFETY: `head` is the first field of an `Rcv<R>` leaked from a KBox
-    // by `set` or `reserve`; its live registration (the inline one) was
-    // unlinked and the receiver taken off the map a grace period ago, so
-    // nothing refers to it any more.
+    // by `set` or `reserve`, and nothing refers to it any more (above).
     drop(unsafe { KBox::from_raw(head.cast::<Rcv<R>>()) });
 }
 
@@ -733,10 +733,10 @@ impl<R: Receiver> RxTable<R> {
             return Ok(());
         }
         let s: &Rcv<R> = KBox::leak(s);
+        // `set` removes it later, freeing it at once if it never had a
+        // registration, else through its last one's RCU callback.
         // SAFETY: writer mutex held; a new receiver, not on the map, at a
-        // stable address until `set` removes it (freeing it at once if it
-        // never had a registration, else through its last one's RCU
-        // callback).
+        // stable address until `set` removes it.
         unsafe { chain.push(s) };
         Ok(())
     }
@@ -777,10 +777,10 @@ impl<R: Receiver> RxTable<R> {
             unsafe { List::unlink(rcv) };
             let live = rcv.reg.get();
             if live.is_null() {
+                // Readers reach receivers only through registrations.
                 // SAFETY: a reserved receiver that never had a registration:
-                // leaked from a KBox by `reserve`, now off the map, and
-                // never reachable by readers (they reach receivers only
-                // through registrations), so it is freed at once.
+                // leaked from a KBox by `reserve`, now off the map, never
+                // reachable by readers, so it is freed at once.
                 drop(unsafe { KBox::from_raw((rcv as *const Rcv<R>).cast_mut()) });
                 return Ok(changed);
             }
@@ -797,10 +797,10 @@ impl<R: Receiver> RxTable<R> {
                 unsafe { defer((rcv as *const Rcv<R>).cast_mut().cast(), free_rcv::<R>) };
             } else {
                 o.last.set(true);
+                // free_reg frees it and the receiver (with its inline
+                // registration, retired earlier).
                 // SAFETY: unlinked above and the receiver is off the map:
-                // unreachable for new readers and writers; free_reg frees
-                // it and the receiver (with its inline registration,
-                // retired earlier).
+                // unreachable for new readers and writers.
                 unsafe { defer((o as *const Reg<R>).cast_mut().cast(), free_reg::<R>) };
             }
             return Ok(changed);
@@ -831,10 +831,10 @@ impl<R: Receiver> RxTable<R> {
             Home::Slot(r, reg) => (r, unsafe { r.fill_first(reg) }),
             Home::New(s, reg) => {
                 let s: &Rcv<R> = KBox::leak(s);
+                // free_rcv or free_reg frees it after its last
+                // registration, which takes it off the map first.
                 // SAFETY: writer mutex held; a new receiver, not on the
-                // map, at a stable address until free_rcv or free_reg
-                // frees it after its last registration (which takes it off
-                // the map first).
+                // map, at a stable address until then.
                 unsafe { chain.push(s) };
                 // SAFETY: writer mutex held; a new receiver's slot is
                 // empty; leaked above.
