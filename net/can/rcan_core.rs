@@ -44,6 +44,8 @@ pub(crate) mod rxtable;
 pub(crate) mod sja1000;
 #[path = "core/src/sja1000_boards.rs"]
 pub(crate) mod sja1000_boards;
+#[path = "core/src/sja1000_model.rs"]
+pub(crate) mod sja1000_model;
 #[path = "core/src/sockaddr.rs"]
 pub(crate) mod sockaddr;
 #[path = "core/src/timesvc.rs"]

@@ -976,7 +976,7 @@ impl<R: Regs> Chip<R> {
 /// Mainline `<linux/can/error.h>` error frame for `ev`; `None` for events
 /// that are not errors.
 pub fn error_frame(ev: &Event) -> Option<CanFrame> {
-    use super::sja1000::err;
+    use super::candev::err;
     let mut f = CanFrame {
         len: 8,
         ..CanFrame::default()

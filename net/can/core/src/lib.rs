@@ -28,5 +28,6 @@ pub mod i82527_model;
 pub mod rxtable;
 pub mod sja1000;
 pub mod sja1000_boards;
+pub mod sja1000_model;
 pub mod sockaddr;
 pub mod timesvc;

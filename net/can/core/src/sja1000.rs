@@ -12,6 +12,7 @@
 
 use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK, MAX_DLC};
 use super::bittiming::{self, Bittiming};
+use super::candev::{self, ctrlmode, CanState, CanStats, NetErrStats, Sja1000ErrRegs};
 use super::frame::CanFrame;
 
 /// Register offsets (PeliCAN mode).
@@ -242,24 +243,31 @@ pub enum Event {
     Rx(CanFrame),
     /// The frame in the TX buffer was sent.
     TxDone,
-    /// The frame in the TX buffer was aborted (not sent).
+    /// The TX buffer was released without the frame being sent: aborted,
+    /// or a single-shot transmission (`CAN_CTRLMODE_ONE_SHOT`) failed.
     TxAborted,
-    /// Frames were lost: the receive FIFO overflowed.
-    Overrun,
-    /// The error state changed (`rxerr`/`txerr` are the counters).
-    State {
-        /// New state.
-        state: State,
-        /// Receive error counter.
-        rxerr: u8,
-        /// Transmit error counter.
-        txerr: u8,
-    },
-    /// Arbitration was lost at bit `bit` (the frame is retried by the chip).
-    ArbitrationLost {
-        /// ALC bits 4..0.
-        bit: u8,
-    },
+    /// Error causes (data overrun, error warning, bus error, error
+    /// passive, arbitration lost), decoded as mainline's `sja1000_err`
+    /// decodes them ([`candev::sja1000_error`]): the error frame, whether
+    /// the chip went bus-off, and what to add to the CAN device and
+    /// interface statistics.
+    Error(ErrReport),
+}
+
+/// One error interrupt round, decoded.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct ErrReport {
+    /// The error frame for sockets with `CAN_RAW_ERR_FILTER`.
+    pub frame: CanFrame,
+    /// The chip went bus-off (and is in reset mode): the driver turns the
+    /// carrier off and restarts it after `restart-ms` or on request.
+    pub bus_off: bool,
+    /// The CAN device statistics this round counted.
+    pub stats: CanStats,
+    /// The interface error statistics this round counted.
+    pub net: NetErrStats,
+    /// The error state after this round.
+    pub state: CanState,
 }
 
 /// Static configuration of one chip, from the front-end and the bit
@@ -300,7 +308,13 @@ pub struct Chip<R: Regs> {
     pub regs: R,
     /// Configuration applied by [`Chip::init`].
     pub cfg: Config,
-    state: State,
+    /// Control modes (`CAN_CTRLMODE_*` of [`candev::ctrlmode`]) applied by
+    /// [`Chip::start`] and [`Chip::xmit`]: listen-only (MOD.LOM),
+    /// presume-ack (MOD.STM, self-test: no acknowledgement needed),
+    /// berr-reporting (IER.BEI), one-shot (CMR.AT with TR). Triple
+    /// sampling is in BTR1 ([`Config::btr1`]).
+    pub ctrlmode: u32,
+    state: CanState,
 }
 
 impl<R: Regs> Chip<R> {
@@ -309,13 +323,34 @@ impl<R: Regs> Chip<R> {
         Chip {
             regs,
             cfg,
-            state: State::Active,
+            ctrlmode: 0,
+            state: CanState::ErrorActive,
         }
     }
 
-    /// The last error state reported.
+    /// The last error state reported (as `sja1000config` shows it).
     pub fn state(&self) -> State {
+        match self.state {
+            CanState::ErrorWarning => State::Warning,
+            CanState::ErrorPassive => State::Passive,
+            CanState::BusOff => State::BusOff,
+            _ => State::Active,
+        }
+    }
+
+    /// The device layer's error state since the last start.
+    pub fn can_state(&self) -> CanState {
         self.state
+    }
+
+    /// The interrupts [`Chip::start`] enables: all but wake-up, bus error
+    /// only with berr-reporting (as mainline's `set_normal_mode`).
+    pub fn ier(&self) -> u8 {
+        if self.ctrlmode & ctrlmode::BERR_REPORTING != 0 {
+            irq::ENABLED | irq::BEI
+        } else {
+            irq::ENABLED
+        }
     }
 
     /// Probes for a chip (mainline `sja1000_probe_chip`-style): after a
@@ -401,7 +436,17 @@ impl<R: Regs> Chip<R> {
         self.regs.write(reg::TXERR, 0);
         self.regs.write(reg::RXERR, 0);
         let _ = self.regs.read(reg::ECC);
-        let afm = if filter.single { mode::AFM } else { 0 };
+        let mut afm = if filter.single { mode::AFM } else { 0 };
+        if self.ctrlmode & ctrlmode::LISTENONLY != 0 {
+            afm |= mode::LOM;
+        }
+        if self.ctrlmode & ctrlmode::PRESUME_ACK != 0 {
+            afm |= mode::STM;
+        }
+        if afm & (mode::LOM | mode::STM) != 0 {
+            // LOM and STM are written in reset mode, then RM cleared.
+            self.regs.write(reg::MOD, mode::RM | afm);
+        }
         let mut operating = false;
         for _ in 0..MODE_POLLS {
             if self.regs.read(reg::MOD) & mode::RM == 0 {
@@ -424,8 +469,9 @@ impl<R: Regs> Chip<R> {
         }
         self.regs.write(reg::CMR, cmd::CDO);
         let _ = self.regs.read(reg::IR);
-        self.regs.write(reg::IER, irq::ENABLED);
-        self.state = State::Active;
+        let ier = self.ier();
+        self.regs.write(reg::IER, ier);
+        self.state = CanState::ErrorActive;
         Ok(())
     }
 
@@ -443,7 +489,12 @@ impl<R: Regs> Chip<R> {
             return Err(Sja1000Error::Busy);
         }
         self.regs.writen(reg::FI, &img[..n]);
-        self.regs.write(reg::CMR, cmd::TR);
+        let at = if self.ctrlmode & ctrlmode::ONE_SHOT != 0 {
+            cmd::AT
+        } else {
+            0
+        };
+        self.regs.write(reg::CMR, cmd::TR | at);
         Ok(())
     }
 
@@ -461,8 +512,10 @@ impl<R: Regs> Chip<R> {
                 break;
             }
             handled = true;
+            // The status as the round began (mainline reads it once per
+            // round too, for the error decoding).
+            let sr = self.regs.read(reg::SR);
             if ir & irq::TI != 0 {
-                let sr = self.regs.read(reg::SR);
                 ev(if sr & status::TCS != 0 {
                     Event::TxDone
                 } else {
@@ -474,20 +527,56 @@ impl<R: Regs> Chip<R> {
             }
             if ir & irq::DOI != 0 {
                 self.regs.write(reg::CMR, cmd::CDO);
-                ev(Event::Overrun);
                 // Whatever made it into the FIFO before the overrun.
                 self.drain_rx(&mut ev);
             }
-            if ir & irq::ALI != 0 {
-                let bit = self.regs.read(reg::ALC) & 0x1F;
-                ev(Event::ArbitrationLost { bit });
-            }
-            if ir & (irq::EI | irq::EPI | irq::BEI) != 0 {
-                let _ = self.regs.read(reg::ECC);
-                self.update_state(&mut ev);
+            if ir & (irq::DOI | irq::EI | irq::BEI | irq::EPI | irq::ALI) != 0 {
+                let r = self.err(ir, sr);
+                let bus_off = r.bus_off;
+                ev(Event::Error(r));
+                if bus_off {
+                    // The chip is in reset mode: nothing more to read.
+                    break;
+                }
             }
         }
         handled
+    }
+
+    /// Reads what an error interrupt needs (the counters; ECC only for a
+    /// bus error and ALC only for lost arbitration, as reading each
+    /// re-arms its capture) and decodes it as mainline's `sja1000_err`.
+    fn err(&mut self, ir: u8, sr: u8) -> ErrReport {
+        let txerr = self.regs.read(reg::TXERR);
+        let rxerr = self.regs.read(reg::RXERR);
+        let ecc = if ir & irq::BEI != 0 {
+            self.regs.read(reg::ECC)
+        } else {
+            0
+        };
+        let alc = if ir & irq::ALI != 0 {
+            self.regs.read(reg::ALC)
+        } else {
+            0
+        };
+        let regs = Sja1000ErrRegs {
+            ir,
+            sr,
+            txerr,
+            rxerr,
+            ecc,
+            alc,
+        };
+        let mut stats = CanStats::default();
+        let mut net = NetErrStats::default();
+        let e = candev::sja1000_error(&mut self.state, &mut stats, &mut net, &regs);
+        ErrReport {
+            frame: e.frame,
+            bus_off: e.bus_off,
+            stats,
+            net,
+            state: self.state,
+        }
     }
 
     /// Reads every frame in the receive FIFO, releasing each buffer.
@@ -501,31 +590,6 @@ impl<R: Regs> Chip<R> {
             self.regs.readn(reg::FI, &mut img);
             self.regs.write(reg::CMR, cmd::RRB);
             ev(Event::Rx(decode(&img)));
-        }
-    }
-
-    /// Recomputes the error state from SR and the counters; reports a
-    /// change.
-    fn update_state(&mut self, ev: &mut impl FnMut(Event)) {
-        let sr = self.regs.read(reg::SR);
-        let rxerr = self.regs.read(reg::RXERR);
-        let txerr = self.regs.read(reg::TXERR);
-        let state = if sr & status::BS != 0 {
-            State::BusOff
-        } else if rxerr > 127 || txerr > 127 {
-            State::Passive
-        } else if sr & status::ES != 0 {
-            State::Warning
-        } else {
-            State::Active
-        };
-        if state != self.state {
-            self.state = state;
-            ev(Event::State {
-                state,
-                rxerr,
-                txerr,
-            });
         }
     }
 }
@@ -629,68 +693,11 @@ impl HwFilter {
     }
 }
 
-/// Mainline `<linux/can/error.h>` classes and details used by
-/// [`error_frame`]: the device layer's definitions
-/// ([`super::candev::err`]).
-pub mod err {
-    pub use super::super::candev::err::{
-        BUSOFF, CNT, CRTL, CRTL_ACTIVE, CRTL_RX_OVERFLOW, CRTL_RX_PASSIVE, CRTL_RX_WARNING,
-        CRTL_TX_PASSIVE, CRTL_TX_WARNING, LOSTARB, RESTARTED,
-    };
-}
-
-/// The mainline-format error frame (`CAN_ERR_FLAG`, DLC 8) that reports
-/// `ev` to sockets with a matching `CAN_RAW_ERR_FILTER`; `None` for events
-/// that are not errors.
-pub fn error_frame(ev: &Event) -> Option<CanFrame> {
-    let mut f = CanFrame {
-        len: 8,
-        ..CanFrame::default()
-    };
-    let class = match *ev {
-        Event::Overrun => {
-            f.data[1] = err::CRTL_RX_OVERFLOW;
-            err::CRTL
-        }
-        Event::ArbitrationLost { bit } => {
-            f.data[0] = bit;
-            err::LOSTARB
-        }
-        Event::State {
-            state,
-            rxerr,
-            txerr,
-        } => {
-            f.data[6] = txerr;
-            f.data[7] = rxerr;
-            let (rx, tx) = (rxerr >= txerr, txerr >= rxerr);
-            let bits = |r: u8, t: u8| (if rx { r } else { 0 }) | (if tx { t } else { 0 });
-            match state {
-                State::BusOff => err::BUSOFF | err::CNT,
-                State::Passive => {
-                    f.data[1] = bits(err::CRTL_RX_PASSIVE, err::CRTL_TX_PASSIVE);
-                    err::CRTL | err::CNT
-                }
-                State::Warning => {
-                    f.data[1] = bits(err::CRTL_RX_WARNING, err::CRTL_TX_WARNING);
-                    err::CRTL | err::CNT
-                }
-                State::Active => {
-                    f.data[1] = err::CRTL_ACTIVE;
-                    err::CRTL | err::CNT
-                }
-            }
-        }
-        Event::Rx(_) | Event::TxDone | Event::TxAborted => return None,
-    };
-    f.can_id = CAN_ERR_FLAG | class;
-    Some(f)
-}
-
-/// The error frame sent after an automatic restart from bus-off.
+/// The error frame sent after a restart from bus-off (mainline
+/// `can_restart`: `CAN_ERR_RESTARTED`).
 pub fn restarted_frame() -> CanFrame {
     CanFrame {
-        can_id: CAN_ERR_FLAG | err::RESTARTED,
+        can_id: CAN_ERR_FLAG | candev::err::RESTARTED,
         len: 8,
         ..CanFrame::default()
     }
@@ -1247,27 +1254,10 @@ mod tests {
     }
 
     #[test]
-    fn error_frames() {
-        let f = error_frame(&Event::State {
-            state: State::BusOff,
-            rxerr: 0,
-            txerr: 255,
-        })
-        .unwrap();
-        assert_eq!(f.can_id, CAN_ERR_FLAG | err::BUSOFF | err::CNT);
-        assert_eq!((f.data[6], f.data[7]), (255, 0));
-        let f = error_frame(&Event::State {
-            state: State::Warning,
-            rxerr: 0,
-            txerr: 100,
-        })
-        .unwrap();
-        assert_eq!(f.data[1], err::CRTL_TX_WARNING);
-        assert_eq!(
-            error_frame(&Event::Overrun).unwrap().data[1],
-            err::CRTL_RX_OVERFLOW
-        );
-        assert_eq!(error_frame(&Event::TxDone), None);
+    fn restarted_frame_is_mainlines() {
+        let f = restarted_frame();
+        assert_eq!(f.can_id, CAN_ERR_FLAG | candev::err::RESTARTED);
+        assert_eq!((f.len, f.data), (8, [0; 8]));
     }
 
     #[test]

@@ -358,7 +358,7 @@ fn object_15_double_buffer_and_overrun() {
         vec![Event::Overrun { obj: STD_RX }, Event::Rx(frame(0x11, &[1]))]
     );
     let e = error_frame(&Event::Overrun { obj: STD_RX }).unwrap();
-    assert_eq!(e.data[1], rcan_core::sja1000::err::CRTL_RX_OVERFLOW);
+    assert_eq!(e.data[1], rcan_core::candev::err::CRTL_RX_OVERFLOW);
 }
 
 #[test]
@@ -448,8 +448,8 @@ fn warning_and_bus_off_with_recovery() {
     assert_eq!(irq(&mut a), vec![Event::TxDone]);
     let e = error_frame(&Event::State(State::BusOff)).unwrap();
     assert_eq!(
-        e.can_id & rcan_core::sja1000::err::BUSOFF,
-        rcan_core::sja1000::err::BUSOFF
+        e.can_id & rcan_core::candev::err::BUSOFF,
+        rcan_core::candev::err::BUSOFF
     );
 }
 

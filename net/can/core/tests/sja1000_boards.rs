@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::sja1000_model::Sja1000Model;
+use common::sja1000_model::{Fault, Sja1000Model, TxAttempt};
 use rcan_core::frame::CanFrame;
 use rcan_core::sja1000::{Chip, Config, Event, HwFilter, Regs, CDR_CBP};
 use rcan_core::sja1000_boards::*;
@@ -62,7 +62,11 @@ fn exchange<R: Regs>(chip: &mut Chip<R>, model: impl Fn(&mut Chip<R>) -> &mut Sj
     chip.init(&HwFilter::OPEN).unwrap();
     chip.start(&HwFilter::OPEN).unwrap();
     chip.xmit(&frame(0x123, &[1, 2])).unwrap();
-    assert_eq!(model(chip).sent, vec![frame(0x123, &[1, 2])]);
+    assert_eq!(
+        model(chip).transmit(Fault::None, true),
+        TxAttempt::Sent(frame(0x123, &[1, 2]))
+    );
+    assert_eq!(model(chip).last_sent, Some(frame(0x123, &[1, 2])));
     let mut ev = Vec::new();
     chip.irq(20, |e| ev.push(e));
     assert_eq!(ev, vec![Event::TxDone]);
@@ -281,7 +285,7 @@ fn tscan1_identify_jumpers_and_map() {
     );
     chip.probe().unwrap();
     exchange(&mut chip, |c| &mut c.regs.io.chips[2]);
-    assert!(ports.chips[0].sent.is_empty(), "board 0's chip untouched");
+    assert_eq!(ports.chips[0].sent, 0, "board 0's chip untouched");
     tscan1_unmap(&mut ports, &b);
     assert_eq!(ports.plds[2].unwrap()[pld::MODE], 0);
     // Unmapped: nothing answers at the address any more.
