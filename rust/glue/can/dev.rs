@@ -24,8 +24,10 @@
 //! the statistics are atomics, counted from the interrupt handler.
 
 use crate::glue::bindings;
+use crate::glue::hrtimer::ktime_get_mono_ns;
+use crate::glue::jobtimer::{JobCallback, JobRef, JobTimers};
 use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
-use crate::glue::netdev::{Dev, Driver};
+use crate::glue::netdev::{Dev, Driver, NetDev};
 use crate::rcan_core::bittiming::{Bittiming, BittimingConst, Msg, BITTIMING_LEN};
 use crate::rcan_core::candev::{self, CanState, Settings};
 use core::marker::PhantomData;
@@ -218,10 +220,56 @@ pub(crate) enum CanStat {
 pub(crate) struct CanDev {
     /// Bit timing, control modes, restart-ms. Changed under RTNL (and by
     /// `sja1000config` with the device down); the lock makes every read a
-    /// consistent copy. Never held across a call out.
+    /// consistent copy. Never held across a call out. Lock order: a
+    /// driver's chip lock, then this (the interrupt handler reads
+    /// `restart_ms` at bus-off).
     settings: IrqSpinLock<Settings>,
     /// `struct can_device_stats`, counted from any context.
     stats: [AtomicU32; 6],
+    /// The bus-off restart timer (mainline's `restart_work`), there from
+    /// `open` ([`CanDev::arm_restart`]) to `stop`
+    /// ([`CanDev::disarm_restart`]); armed from the interrupt handler at
+    /// bus-off when `restart-ms` is not 0. The lock only guards the
+    /// `Option` (taken in any context, innermost); the timer is dropped
+    /// outside it.
+    restart: IrqSpinLock<Option<JobTimers<RestartJob>>>,
+}
+
+/// What the restart timer needs: the device and the driver's restart
+/// entry point ([`Adapter::restart_expired`] of its driver).
+struct RestartData {
+    dev: *mut bindings::net_device,
+    /// # Safety (of calling it)
+    ///
+    /// `dev` is a registered, open device of the driver whose adapter
+    /// this is.
+    hook: unsafe fn(*mut bindings::net_device),
+}
+
+// SAFETY: the pointer is only handed to `hook`, which is sound from any
+// CPU while the device is open; the timer holding it is dropped (waiting
+// for a running callback) in `stop`, before the device can go away.
+unsafe impl Send for RestartData {}
+// SAFETY: as above; the data is never mutated.
+unsafe impl Sync for RestartData {}
+
+/// The restart timer's callback.
+struct RestartJob;
+
+impl JobCallback for RestartJob {
+    type Data = RestartData;
+
+    /// `restart-ms` after bus-off: restart the controller (mainline
+    /// `can_restart`). HRTIMER_SOFTIRQ softirq context; the driver's
+    /// restart takes only spinlocks.
+    fn expired(job: JobRef<'_, Self>, _which: usize) {
+        let d = job.data();
+        // SAFETY: the timer only runs between `arm_restart` (called by
+        // the driver's `open` for its own device, which stored this
+        // hook) and `disarm_restart` (the driver's `stop`, which waits
+        // for this callback): the device is registered and open.
+        unsafe { (d.hook)(d.dev) };
+    }
 }
 
 impl CanDev {
@@ -232,7 +280,48 @@ impl CanDev {
         Ok(CanDev {
             settings: new_irq_spinlock!(preset, "CanDev::settings")?,
             stats: Default::default(),
+            restart: new_irq_spinlock!(None, "CanDev::restart")?,
         })
+    }
+
+    /// Prepares the bus-off restart timer of `dev` (the driver's `open`,
+    /// process context, RTNL held). Each `arm_restart` is undone by
+    /// [`CanDev::disarm_restart`] in the driver's `stop`.
+    pub(crate) fn arm_restart<T: CanDevice>(&self, dev: &Dev<T>) -> Result {
+        let t = JobTimers::new(RestartData {
+            dev: dev.as_ptr(),
+            hook: Adapter::<T>::restart_expired,
+        })?;
+        let old = self.restart.lock().replace(t);
+        drop(old);
+        Ok(())
+    }
+
+    /// Cancels the restart timer and waits for a running restart (the
+    /// driver's `stop`, process context; call it before stopping the
+    /// chip, so that no restart starts it again).
+    pub(crate) fn disarm_restart(&self) {
+        let t = self.restart.lock().take();
+        drop(t);
+    }
+
+    /// The controller went bus-off (mainline `can_bus_off`): carrier off,
+    /// the kernel log says so, and with `restart-ms` set the restart
+    /// timer is armed. Any context (the interrupt handler).
+    pub(crate) fn bus_off(&self, dev: &NetDev) {
+        let ms = self.settings.lock().restart_ms;
+        if ms != 0 {
+            pr_info!("{}: bus-off, scheduling restart in {} ms\n", dev.name(), ms);
+        } else {
+            pr_info!("{}: bus-off\n", dev.name());
+        }
+        dev.set_carrier(false);
+        if ms != 0 {
+            let at = ktime_get_mono_ns() as u64 + u64::from(ms) * 1_000_000;
+            if let Some(t) = self.restart.lock().as_ref() {
+                t.get().start(0, at);
+            }
+        }
     }
 
     /// A copy of the settings. Any context.
@@ -267,7 +356,14 @@ impl CanDev {
 
     /// Counts one event. Any context.
     pub(crate) fn count(&self, which: CanStat) {
-        self.stats[which as usize].fetch_add(1, Ordering::Relaxed);
+        self.add(which, 1);
+    }
+
+    /// Counts `n` events. Any context.
+    pub(crate) fn add(&self, which: CanStat, n: u32) {
+        if n != 0 {
+            self.stats[which as usize].fetch_add(n, Ordering::Relaxed);
+        }
     }
 
     /// A copy of the statistics. Any context.
@@ -307,8 +403,11 @@ pub(crate) trait CanDevice: Driver {
     fn state(dev: &Dev<Self>, p: &Self::Priv) -> CanState;
     /// The (TX, RX) error counters.
     fn berr_counter(dev: &Dev<Self>, p: &Self::Priv) -> (u16, u16);
-    /// Restarts a bus-off controller now (mainline `do_set_mode` with
-    /// `CAN_MODE_START`, for `ip link set canX type can restart`).
+    /// Restarts a bus-off controller now (mainline `can_restart`:
+    /// flush the echo, send `CAN_ERR_RESTARTED`, carrier on, count the
+    /// restart, `do_set_mode(CAN_MODE_START)`): for `ip link set canX
+    /// type can restart` (process context, RTNL) and the `restart-ms`
+    /// timer (softirq context). Must not sleep.
     fn restart(dev: &Dev<Self>, p: &Self::Priv) -> Result;
 }
 
@@ -320,6 +419,19 @@ impl<T: CanDevice> Adapter<T> {
         changelink: Self::changelink,
         info: Self::info,
     };
+
+    /// The restart timer's entry (softirq context).
+    ///
+    /// # Safety
+    ///
+    /// `dev` is a registered, open device of driver `T`.
+    unsafe fn restart_expired(dev: *mut bindings::net_device) {
+        // SAFETY: per the contract.
+        let (d, p) = unsafe { crate::glue::netdev::from_cookie::<T>(dev) };
+        if let Err(e) = T::restart(d, p) {
+            pr_err!("{}: restart failed: {:?}\n", d.name(), e);
+        }
+    }
 
     fn device() -> candev::Device {
         candev::Device {

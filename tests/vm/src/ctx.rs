@@ -83,11 +83,13 @@ pub enum Module {
     I82527Sim,
     /// Intel 82527 front-end for memory-mapped ISA cards.
     I82527Isa,
+    /// Simulated SJA1000 cards on a simulated bus, with fault injection.
+    Sja1000Sim,
 }
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 16] = [
+    pub const ALL: [Module; 17] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
@@ -104,6 +106,7 @@ impl Module {
         Module::Tscan1,
         Module::I82527Sim,
         Module::I82527Isa,
+        Module::Sja1000Sim,
     ];
 
     /// Name as shown by `/proc/modules` and taken by `rmmod`.
@@ -125,6 +128,7 @@ impl Module {
             Module::Tscan1 => "rcan_tscan1",
             Module::I82527Sim => "rcan_i82527_sim",
             Module::I82527Isa => "rcan_i82527_isa",
+            Module::Sja1000Sim => "rcan_sja1000_sim",
         }
     }
 
@@ -147,6 +151,7 @@ impl Module {
             Module::Tscan1 => "drivers/net/can/sja1000/rcan_tscan1.ko",
             Module::I82527Sim => "drivers/net/can/i82527/rcan_i82527_sim.ko",
             Module::I82527Isa => "drivers/net/can/i82527/rcan_i82527_isa.ko",
+            Module::Sja1000Sim => "drivers/net/can/sja1000/rcan_sja1000_sim.ko",
         }
     }
 }
@@ -272,6 +277,7 @@ impl Ctx {
             Module::Isa,
             Module::Pcan,
             Module::Tscan1,
+            Module::Sja1000Sim,
         ];
         if sja1000.contains(&m) && !self.is_loaded(Module::Dev) {
             self.insmod(Module::Dev, &[])?;

@@ -44,12 +44,26 @@
 //! as mainline) and writes BTR0/BTR1 computed from it. The limits are
 //! mainline's `sja1000` ones, the clock half the board's crystal.
 //!
-//! Bus-off recovery: the chip enters reset mode by itself; the interrupt
-//! handler restarts it at once (clearing the error counters), and the chip
-//! then waits for 128 occurrences of 11 recessive bits before it takes
-//! part in bus traffic again. Each restart is counted and reported to
-//! sockets as a `CAN_ERR_RESTARTED` error frame after the
-//! `CAN_ERR_BUSOFF` one.
+//! Errors (mainline `sja1000_err`): data overrun, error warning, error
+//! passive, arbitration lost and, with `berr-reporting on`, bus errors are
+//! decoded by the pure core ([`Event::Error`]) into one mainline-format
+//! error frame per interrupt round, handed up like a received frame
+//! (sockets with `CAN_RAW_ERR_FILTER`, `candump -e`), and counted in the
+//! CAN device statistics (`ip -s -d`) and the interface's error counters.
+//!
+//! Bus-off (mainline `can_bus_off`): the chip enters reset mode by itself;
+//! the handler turns the carrier off and, with `restart-ms` set, arms the
+//! device's restart timer ([`CanDev::bus_off`]). The restart (the timer,
+//! or `ip link set canX type can restart` when `restart-ms` is 0) drops
+//! the frame that was in the TX buffer, sends `CAN_ERR_RESTARTED`, counts
+//! the restart and starts the chip again (mainline `can_restart`).
+//!
+//! Control modes (mainline `sja1000`'s, but loopback, which needs the
+//! chip's self reception that QEMU's model lacks, and cc-len8-dlc):
+//! triple sampling (BTR1.SAM), listen-only (MOD.LOM; frames to send are
+//! dropped, as mainline's `can_dev_dropped_skb`), presume-ack (MOD.STM),
+//! one-shot (CMR.AT: a failed transmission is not retried and counts as
+//! a TX error), berr-reporting (IER.BEI).
 #![forbid(unsafe_code)]
 
 use crate::glue::bindings;
@@ -63,8 +77,8 @@ use crate::rcan_core::bittiming::{self, SJA1000_BITTIMING_CONST};
 use crate::rcan_core::candev::{self, CanState, Settings};
 use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::sja1000::{
-    bitrate, error_frame, hw_filter, restarted_frame, Chip, Config, Event, HwFilter, Regs, Setup,
-    State, CDR_PELICAN, SETUP_LEN,
+    bitrate, hw_filter, restarted_frame, Chip, Config, Event, HwFilter, Regs, Setup, CDR_PELICAN,
+    SETUP_LEN,
 };
 use core::marker::PhantomData;
 use kernel::prelude::*;
@@ -184,15 +198,13 @@ pub(crate) struct ChipState<R: Regs> {
     /// `filter` differs from what the chip has.
     filter_pending: bool,
     running: bool,
-    /// The worst error state reported since the chip last started (for
-    /// counting moves to a worse state, as mainline does).
-    worst: State,
 }
 
 /// Per-device driver data.
 pub(crate) struct Sja1000Priv<R: Regs> {
     pub(crate) chip: IrqSpinLock<ChipState<R>>,
-    /// Interrupt line (shared).
+    /// Interrupt line (shared); 0: none, the front-end calls the handler
+    /// itself ([`Channel::irq`]).
     irq: u32,
     /// Crystal frequency of the board, for bit rates in logs and GET.
     xtal_hz: u32,
@@ -212,7 +224,6 @@ impl<R: Regs + Send + 'static> Sja1000Priv<R> {
                     filter: HwFilter::OPEN,
                     filter_pending: false,
                     running: false,
-                    worst: State::Active,
                 },
                 "Sja1000Priv::chip"
             )?,
@@ -227,7 +238,18 @@ impl<R: Regs + Send + 'static> Sja1000Priv<R> {
 /// pointing into it (declared first, so it is dropped first).
 pub(crate) struct Channel<R: Regs + Send + 'static> {
     _listen: rcan_api::Listening<Sja1000<R>>,
-    _reg: crate::glue::netdev::Registration<Sja1000<R>>,
+    reg: crate::glue::netdev::Registration<Sja1000<R>>,
+}
+
+impl<R: Regs + Send + 'static> Channel<R> {
+    /// Runs the device's interrupt handler, for a front-end without an
+    /// interrupt line (irq 0: the simulated card, whose bus is a softirq
+    /// timer). Whether the chip had a cause. Any context that may take
+    /// the chip lock (not under it).
+    #[allow(dead_code)]
+    pub(crate) fn irq(&self) -> bool {
+        <Sja1000<R> as Driver>::irq(self.reg.dev(), self.reg.priv_data())
+    }
 }
 
 /// Probes the chip behind `regs` and, if one answers, registers a `can%d`
@@ -266,7 +288,7 @@ pub(crate) fn add_probed<R: Regs + Send + 'static>(
     let listen = rcan_api::Listening::new(&reg)?;
     Ok(Channel {
         _listen: listen,
-        _reg: reg,
+        reg,
     })
 }
 
@@ -298,6 +320,10 @@ fn refilter<R: Regs + Send + 'static>(dev: &NetDev, p: &Sja1000Priv<R>) {
 /// Chip lock held (any context).
 fn apply_pending_filter<R: Regs>(dev: &NetDev, st: &mut ChipState<R>) {
     if !st.filter_pending || st.echo.is_some() {
+        return;
+    }
+    if st.chip.can_state() == CanState::BusOff {
+        // Leaving reset mode would end bus-off: the restart programs it.
         return;
     }
     st.filter_pending = false;
@@ -443,12 +469,18 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
         );
         let f = wanted_filter(dev);
-        dev.request_irq(p.irq)?;
+        p.can.arm_restart(dev)?;
+        if p.irq != 0 {
+            if let Err(e) = dev.request_irq(p.irq) {
+                p.can.disarm_restart();
+                return Err(e);
+            }
+        }
         let started = {
             let mut st = p.chip.lock();
             st.chip.cfg.btr0 = btr0;
             st.chip.cfg.btr1 = btr1;
-            st.worst = State::Active;
+            st.chip.ctrlmode = set.ctrlmode;
             st.filter = f;
             st.filter_pending = false;
             let ok = st.chip.init(&f).and_then(|()| st.chip.start(&f)).is_ok();
@@ -457,6 +489,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         };
         if !started {
             dev.free_irq();
+            p.can.disarm_restart();
             pr_err!("{}: SJA1000 does not leave reset mode\n", dev.name());
             return Err(EIO);
         }
@@ -467,6 +500,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
 
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         dev.stop_queue();
+        // First, so that no restart starts the chip again.
+        p.can.disarm_restart();
         let echo = {
             let mut st = p.chip.lock();
             st.running = false;
@@ -483,9 +518,17 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         let Some((skb, frame)) = skb.can_xmit_start(dev) else {
             return Xmit::Ok;
         };
+        let mut st = p.chip.lock();
+        if st.chip.ctrlmode & candev::ctrlmode::LISTENONLY != 0 {
+            // Mainline can_dev_dropped_skb: a listen-only controller
+            // sends nothing.
+            drop(st);
+            dev.stats_tx_dropped();
+            drop(skb);
+            return Xmit::Ok;
+        }
         // One TX buffer: no next frame until this one is done.
         dev.stop_queue();
-        let mut st = p.chip.lock();
         match st.chip.xmit(&frame) {
             Ok(()) => st.echo = Some(skb),
             Err(_) => {
@@ -511,84 +554,62 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         let ChipState {
             chip,
             echo,
-            filter,
-            filter_pending,
             running,
-            worst,
+            ..
         } = &mut *st;
         if !*running {
             // A board latch left over from before `stop` (PCAN-PCI's PITA)
             // is still acknowledged, or a shared line would keep firing.
             return chip.regs.irq_done();
         }
+        let one_shot = chip.ctrlmode & candev::ctrlmode::ONE_SHOT != 0;
         let mut bus_off = false;
-        let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| {
-            match ev {
-                Event::Rx(f) => rx_frame(dev, &f),
-                Event::TxDone => {
-                    if let Some(skb) = echo.take().and_then(|s| s.can_echo_done(dev)) {
-                        dev.rx(skb);
-                    }
-                    dev.wake_queue();
+        let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| match ev {
+            Event::Rx(f) => rx_frame(dev, &f),
+            Event::TxDone => {
+                if let Some(skb) = echo.take().and_then(|s| s.can_echo_done(dev)) {
+                    dev.rx(skb);
                 }
-                Event::TxAborted => {
-                    // Interrupts are off: the free is deferred.
-                    if let Some(s) = echo.take() {
-                        s.drop_any();
-                    }
-                    dev.stats_err(Stat::TxAborted);
-                    dev.wake_queue();
-                }
-                Event::Overrun => dev.stats_err(Stat::RxOverErrors),
-                Event::State { state, .. } => {
-                    // Moves to a worse state count (mainline
-                    // can_change_state).
-                    if (state as u8) > (*worst as u8) {
-                        match state {
-                            State::Warning => p.can.count(CanStat::ErrorWarning),
-                            State::Passive => p.can.count(CanStat::ErrorPassive),
-                            State::BusOff => p.can.count(CanStat::BusOff),
-                            State::Active => {}
-                        }
-                    }
-                    *worst = state;
-                    if state == State::BusOff {
-                        bus_off = true;
-                    }
-                }
-                Event::ArbitrationLost { .. } => p.can.count(CanStat::ArbitrationLost),
+                dev.wake_queue();
             }
-            if let Some(ef) = error_frame(&ev) {
-                rx_frame(dev, &ef);
+            Event::TxAborted => {
+                // Interrupts are off: the free is deferred.
+                if let Some(s) = echo.take() {
+                    s.drop_any();
+                }
+                // Mainline: a failed one-shot transmission is a TX error.
+                dev.stats_err(if one_shot {
+                    Stat::TxErrors
+                } else {
+                    Stat::TxAborted
+                });
+                dev.wake_queue();
+            }
+            Event::Error(r) => {
+                p.can.add(CanStat::BusError, r.stats.bus_error);
+                p.can.add(CanStat::ErrorWarning, r.stats.error_warning);
+                p.can.add(CanStat::ErrorPassive, r.stats.error_passive);
+                p.can.add(CanStat::BusOff, r.stats.bus_off);
+                p.can
+                    .add(CanStat::ArbitrationLost, r.stats.arbitration_lost);
+                // RxOverErrors counts an rx error too.
+                for _ in 0..r.net.rx_over_errors {
+                    dev.stats_err(Stat::RxOverErrors);
+                }
+                for _ in 0..r.net.rx_errors.saturating_sub(r.net.rx_over_errors) {
+                    dev.stats_err(Stat::RxErrors);
+                }
+                for _ in 0..r.net.tx_errors {
+                    dev.stats_err(Stat::TxErrors);
+                }
+                rx_frame(dev, &r.frame);
+                bus_off |= r.bus_off;
             }
         });
         if bus_off {
-            // The frame in the TX buffer is lost with the reset.
-            if let Some(s) = echo.take() {
-                s.drop_any();
-                dev.stats_err(Stat::TxErrors);
-            }
-            let f = *filter;
-            let restarted = if *filter_pending {
-                // A filter change waited for the TX buffer: program it
-                // with the restart.
-                *filter_pending = false;
-                chip.set_filter(&f, true, |ev| {
-                    if let Event::Rx(fr) = ev {
-                        rx_frame(dev, &fr);
-                    }
-                })
-            } else {
-                chip.start(&f)
-            };
-            if restarted.is_ok() {
-                *worst = State::Active;
-                p.can.count(CanStat::Restarts);
-                rx_frame(dev, &restarted_frame());
-            } else {
-                *running = false;
-            }
-            dev.wake_queue();
+            // The chip is in reset mode until restarted; the frame in the
+            // TX buffer (if any) stays with its echo until then.
+            p.can.bus_off(dev);
         }
         // The board's acknowledgement (PITA on PCAN-PCI) comes after the
         // chip's causes are cleared, or the line would fire again at once.
@@ -606,13 +627,16 @@ impl<R: Regs + Send + 'static> FilterListener for Sja1000<R> {
 }
 
 /// The SJA1000 as the CAN device layer sees it: mainline `sja1000`'s
-/// bit-timing limits; of the control modes, triple sampling (BTR1's SAM
-/// bit) only so far (listen-only, loopback, one-shot, berr-reporting,
-/// presume-ack and cc-len8-dlc are refused with `EOPNOTSUPP` until the
-/// driver implements them); restart after bus-off.
+/// bit-timing limits; of its control modes triple sampling, listen-only,
+/// one-shot, berr-reporting and presume-ack (loopback and cc-len8-dlc are
+/// refused with `EOPNOTSUPP`); restart after bus-off.
 impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
     const BITTIMING_CONST: &'static bittiming::BittimingConst = &SJA1000_BITTIMING_CONST;
-    const CTRLMODE_SUPPORTED: u32 = candev::ctrlmode::THREE_SAMPLES;
+    const CTRLMODE_SUPPORTED: u32 = candev::ctrlmode::THREE_SAMPLES
+        | candev::ctrlmode::LISTENONLY
+        | candev::ctrlmode::ONE_SHOT
+        | candev::ctrlmode::BERR_REPORTING
+        | candev::ctrlmode::PRESUME_ACK;
     const CAN_RESTART: bool = true;
 
     fn can_dev(p: &Self::Priv) -> &CanDev {
@@ -629,12 +653,7 @@ impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
         if !st.running {
             return CanState::Stopped;
         }
-        match st.chip.state() {
-            State::Active => CanState::ErrorActive,
-            State::Warning => CanState::ErrorWarning,
-            State::Passive => CanState::ErrorPassive,
-            State::BusOff => CanState::BusOff,
-        }
+        st.chip.can_state()
     }
 
     fn berr_counter(_dev: &Dev<Self>, p: &Self::Priv) -> (u16, u16) {
@@ -644,19 +663,46 @@ impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
         (u16::from(tx), u16::from(rx))
     }
 
-    /// Restarts the chip (the interrupt handler already does this at once
-    /// on bus-off; this is `ip link set canX type can restart`).
+    /// Restarts the chip after bus-off (mainline `can_restart` and
+    /// `sja1000_set_mode(CAN_MODE_START)`): the frame lost with the
+    /// bus-off is dropped (a TX error), `CAN_ERR_RESTARTED` goes up, the
+    /// carrier comes back, the restart is counted, the chip starts (with
+    /// a filter change that waited, if any) and the queue wakes. Process
+    /// context (`ip link ... restart`) or softirq (the `restart-ms`
+    /// timer); takes the chip lock.
     fn restart(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         let mut st = p.chip.lock();
+        if !st.running {
+            return Err(EINVAL);
+        }
         if let Some(s) = st.echo.take() {
             s.drop_any();
+            dev.stats_err(Stat::TxErrors);
         }
-        let f = st.filter;
-        st.chip.start(&f).map_err(|_| EIO)?;
-        st.worst = State::Active;
-        drop(st);
-        p.can.count(CanStat::Restarts);
         rx_frame(dev, &restarted_frame());
+        dev.set_carrier(true);
+        p.can.count(CanStat::Restarts);
+        let f = st.filter;
+        let started = if core::mem::replace(&mut st.filter_pending, false) {
+            // A filter change waited for the restart.
+            st.chip.set_filter(&f, true, |ev| {
+                if let Event::Rx(fr) = ev {
+                    rx_frame(dev, &fr);
+                }
+            })
+        } else {
+            st.chip.start(&f)
+        };
+        if started.is_err() {
+            drop(st);
+            dev.set_carrier(false);
+            pr_err!(
+                "{}: restart failed: SJA1000 does not leave reset mode\n",
+                dev.name()
+            );
+            return Err(EIO);
+        }
+        drop(st);
         dev.wake_queue();
         Ok(())
     }

@@ -1,0 +1,79 @@
+// SPDX-License-Identifier: GPL-2.0
+/*
+ * C side of rcan_sja1000_sim: its module parameters (6.12's Rust module!
+ * macro has none; read through rust/glue/params.rs) and the module's
+ * private copy of the helpers.
+ */
+#include <linux/kernel.h>
+#include <linux/moduleparam.h>
+#include <linux/string.h>
+
+#include "../../../../rust/helpers/rcan_helpers.c"
+#include "../../../../rust/helpers/rcan_params.h"
+
+/* The SJA1000 core's optional bit-timing preset (sja1000.rs: 0, 1). */
+static short btr0 = -1;
+static short btr1 = -1;
+module_param(btr0, short, 0444);
+MODULE_PARM_DESC(btr0, "SJA1000 bus timing register 0 preset (with btr1; default: none)");
+module_param(btr1, short, 0444);
+MODULE_PARM_DESC(btr1, "SJA1000 bus timing register 1 preset (with btr0; default: none)");
+
+static unsigned int cards = 2;
+module_param(cards, uint, 0444);
+MODULE_PARM_DESC(cards, "Number of simulated SJA1000 cards on the bus (1..8, default 2)");
+
+/*
+ * Fault injection, writable at run time through
+ * /sys/module/rcan_sja1000_sim/parameters/ (see sja1000.rst). A fixed
+ * buffer (module_param_string), not a charp: the bus reads it in softirq
+ * context without the parameter lock, and a buffer that is being
+ * rewritten can at worst give a torn name (read as unknown: no fault),
+ * never freed memory.
+ */
+static char fault[16] = "none";
+module_param_string(fault, fault, sizeof(fault), 0644);
+MODULE_PARM_DESC(fault, "Bus fault: none, noack, biterr, arblost, overrun (default none)");
+
+static int fault_ecc = -1;
+module_param(fault_ecc, int, 0644);
+MODULE_PARM_DESC(fault_ecc, "ECC value of the biterr fault's bus errors (0..255; default -1: 0x0a, bit error in the data field)");
+
+static unsigned int fault_bit = 5;
+module_param(fault_bit, uint, 0644);
+MODULE_PARM_DESC(fault_bit, "Bit position (ALC) at which the arblost fault loses arbitration (0..31, default 5)");
+
+/*
+ * Parameter numbers shared with sim.rs and sja1000.rs: 0 btr0, 1 btr1,
+ * 2 cards, 3 fault_ecc, 4 fault_bit.
+ */
+u64 rcan_module_param(unsigned int which, unsigned int idx)
+{
+	switch (which) {
+	case 0: return (u64)(s64)READ_ONCE(btr0);
+	case 1: return (u64)(s64)READ_ONCE(btr1);
+	case 2: return READ_ONCE(cards);
+	case 3: return (u64)(s64)READ_ONCE(fault_ecc);
+	case 4: return READ_ONCE(fault_bit);
+	default: return 0;
+	}
+}
+
+/*
+ * String parameter 5: fault. Any context here (a fixed buffer, no lock).
+ * Copies at most len - 1 bytes, NUL-padded; returns the full length.
+ */
+size_t rcan_module_param_str(unsigned int which, char *buf, size_t len)
+{
+	char copy[sizeof(fault)];
+
+	if (len)
+		memset(buf, 0, len);
+	if (which != 5)
+		return 0;
+	memcpy(copy, fault, sizeof(copy));
+	copy[sizeof(copy) - 1] = 0;
+	if (len)
+		strscpy(buf, copy, len);
+	return strlen(copy);
+}
