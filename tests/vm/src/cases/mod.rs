@@ -3,6 +3,7 @@
 
 mod bcm;
 mod candev;
+mod candev_err;
 mod canutils;
 mod capture;
 mod daemons;
@@ -104,6 +105,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         capture::SJA1000_TESTS,
         daemons::SJA1000_TESTS,
         i82527::TESTS,
+        candev_err::TESTS,
         leak::OURS,
         rxcontext::TESTS,
         install::TESTS,
