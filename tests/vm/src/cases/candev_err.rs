@@ -24,12 +24,12 @@ use crate::ctx::{Ctx, Module};
 use crate::tools;
 
 pub const TESTS: &[crate::Test] = test_table![
-    candev_err_bus_off_auto_restart,
-    candev_err_bus_off_manual_restart,
-    candev_err_bus_errors_candump,
-    candev_err_arblost_overrun,
-    candev_err_one_shot,
-    candev_err_listen_only_presume_ack,
+    sja1000_sim_bus_off_auto_restart,
+    sja1000_sim_bus_off_manual_restart,
+    sja1000_sim_bus_errors_candump,
+    sja1000_sim_arblost_overrun,
+    sja1000_sim_one_shot,
+    sja1000_sim_listen_only_presume_ack,
 ];
 
 /// Error classes (`<linux/can/error.h>`).
@@ -150,7 +150,7 @@ fn send_one(ifindex: u32, f: &CanFrame) -> TestResult {
 /// bus-off, then `restart-ms 100` restarts the controller
 /// (`CAN_ERR_RESTARTED`); `ip -d -s` counts one of each and shows the
 /// controller ERROR-ACTIVE again; the bus works afterwards.
-fn candev_err_bus_off_auto_restart(ctx: &mut Ctx) -> TestResult {
+fn sja1000_sim_bus_off_auto_restart(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = sim2(ctx, &["restart-ms", "100"], &[])?;
     let e = err_socket(i0)?;
     let rx1 = canraw::open(i1)?;
@@ -204,7 +204,7 @@ fn candev_err_bus_off_auto_restart(ctx: &mut Ctx) -> TestResult {
 /// BUS-OFF, the carrier is off) until `ip link set can0 type can
 /// restart`, which brings `CAN_ERR_RESTARTED`; a second `restart` is
 /// refused with EBUSY (not bus-off), as mainline.
-fn candev_err_bus_off_manual_restart(ctx: &mut Ctx) -> TestResult {
+fn sja1000_sim_bus_off_manual_restart(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = sim2(ctx, &["berr-reporting", "on"], &[])?;
     let e = err_socket(i0)?;
     let rx1 = canraw::open(i1)?;
@@ -277,7 +277,7 @@ fn candev_err_bus_off_manual_restart(ctx: &mut Ctx) -> TestResult {
 /// (the can-utils way: `candump -e can0,0:0,#FFFFFFFF`): one bus error
 /// per attempt, ACK slot, on transmission, TXERR rising by 8. Then the
 /// acknowledgement comes back and the frame reaches can1.
-fn candev_err_bus_errors_candump(ctx: &mut Ctx) -> TestResult {
+fn sja1000_sim_bus_errors_candump(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = sim2(ctx, &["berr-reporting", "on", "restart-ms", "100"], &[])?;
     let rx1 = canraw::open(i1)?;
     let mut dump = tools::spawn("candump", &["-e", "-n", "3", "can0,0:0,#FFFFFFFF"], None)?;
@@ -316,7 +316,7 @@ fn candev_err_bus_errors_candump(ctx: &mut Ctx) -> TestResult {
 /// the bit in data[0], counted as arbit-lost, and the frame goes out on
 /// the retry. Data overrun (`fault=overrun`): the frames that fit, then
 /// `CAN_ERR_CRTL_RX_OVERFLOW`, counted as an rx overrun.
-fn candev_err_arblost_overrun(ctx: &mut Ctx) -> TestResult {
+fn sja1000_sim_arblost_overrun(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = sim2(ctx, &[], &[])?;
     let e0 = err_socket(i0)?;
     let rx1 = canraw::open(i1)?;
@@ -354,7 +354,7 @@ fn candev_err_arblost_overrun(ctx: &mut Ctx) -> TestResult {
 /// `one-shot on`: a transmission nobody acknowledges is tried once and
 /// dropped, counted as a TX error (mainline sja1000); the sender's echo
 /// never comes; the next frame goes out.
-fn candev_err_one_shot(ctx: &mut Ctx) -> TestResult {
+fn sja1000_sim_one_shot(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = sim2(ctx, &["one-shot", "on"], &[])?;
     let rx1 = canraw::open(i1)?;
     let tx = canraw::open(i0)?;
@@ -384,7 +384,7 @@ fn candev_err_one_shot(ctx: &mut Ctx) -> TestResult {
 /// mainline's `can_dev_dropped_skb`) and acknowledges nothing; can1 with
 /// `presume-ack on` needs no acknowledgement, so can0 still receives.
 /// `loopback on` (not supported here) is refused with EOPNOTSUPP.
-fn candev_err_listen_only_presume_ack(ctx: &mut Ctx) -> TestResult {
+fn sja1000_sim_listen_only_presume_ack(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = sim2(ctx, &["listen-only", "on"], &["presume-ack", "on"])?;
     let rx0 = canraw::open(i0)?;
     let rx1 = canraw::open(i1)?;
