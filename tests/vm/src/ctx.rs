@@ -710,7 +710,8 @@ mod tests {
                 "rcan_pcan_pci",
                 "rcan_tscan1",
                 "rcan_i82527_sim",
-                "rcan_i82527_isa"
+                "rcan_i82527_isa",
+                "rcan_sja1000_sim"
             ]
         );
         assert_eq!(
