@@ -671,30 +671,34 @@ impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
     /// context (`ip link ... restart`) or softirq (the `restart-ms`
     /// timer); takes the chip lock.
     fn restart(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        let mut st = p.chip.lock();
-        if !st.running {
-            return Err(EINVAL);
-        }
-        if let Some(s) = st.echo.take() {
+        let echo = {
+            let mut st = p.chip.lock();
+            if !st.running {
+                return Err(EINVAL);
+            }
+            st.echo.take()
+        };
+        if let Some(s) = echo {
             s.drop_any();
             dev.stats_err(Stat::TxErrors);
         }
+        // Handed up without the chip lock: from process context, netif_rx
+        // must not run with interrupts off.
         rx_frame(dev, &restarted_frame());
         dev.set_carrier(true);
         p.can.count(CanStat::Restarts);
-        let f = st.filter;
-        let started = if core::mem::replace(&mut st.filter_pending, false) {
-            // A filter change waited for the restart.
-            st.chip.set_filter(&f, true, |ev| {
-                if let Event::Rx(fr) = ev {
-                    rx_frame(dev, &fr);
-                }
-            })
-        } else {
-            st.chip.start(&f)
+        let started = {
+            let mut st = p.chip.lock();
+            let f = st.filter;
+            if core::mem::replace(&mut st.filter_pending, false) {
+                // A filter change waited for the restart: the whole
+                // initialisation, in reset mode, then start.
+                st.chip.init(&f).and_then(|()| st.chip.start(&f))
+            } else {
+                st.chip.start(&f)
+            }
         };
         if started.is_err() {
-            drop(st);
             dev.set_carrier(false);
             pr_err!(
                 "{}: restart failed: SJA1000 does not leave reset mode\n",
@@ -702,7 +706,6 @@ impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
             );
             return Err(EIO);
         }
-        drop(st);
         dev.wake_queue();
         Ok(())
     }
