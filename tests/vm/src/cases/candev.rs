@@ -7,9 +7,8 @@
 //! rcan_kvaser_pci. Every command is the plain `ip` command a user types.
 //!
 //! What differs on purpose is not checked here: our SJA1000 announces
-//! triple sampling only among the control modes (the others are refused
-//! with EOPNOTSUPP until the driver implements them), and its transmit
-//! queue is longer (1000, not 10). `sja1000_ip_matches_mainline`
+//! neither loopback nor cc-len8-dlc among the control modes (refused with
+//! EOPNOTSUPP), and its transmit queue is longer (1000, not 10). `sja1000_ip_matches_mainline`
 //! (sja1000.rs) compares the whole `ip -j -d` output of both in one boot.
 
 use super::portable_table;

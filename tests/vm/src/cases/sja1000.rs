@@ -420,7 +420,7 @@ fn sja1000_config_tool_agrees_with_ip(ctx: &mut Ctx) -> TestResult {
 /// `ip -j -d link show` of mainline's sja1000 + kvaser_pci and of ours
 /// on the same card, in one boot, after the same `ip` commands (each
 /// command's errors too): the CAN attributes are identical except the
-/// control modes each driver supports (ours: triple sampling only so far).
+/// control modes each driver supports (ours: not loopback, cc-len8-dlc).
 /// Seven steps: ten took 243 s on the debug kernel with a busy host (the
 /// `ip` starts dominate), too near its 360 s watchdog.
 fn sja1000_ip_matches_mainline(ctx: &mut Ctx) -> TestResult {
