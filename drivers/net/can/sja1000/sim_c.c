@@ -11,13 +11,7 @@
 #include "../../../../rust/helpers/rcan_helpers.c"
 #include "../../../../rust/helpers/rcan_params.h"
 
-/* The SJA1000 core's optional bit-timing preset (sja1000.rs: 0, 1). */
-static short btr0 = -1;
-static short btr1 = -1;
-module_param(btr0, short, 0444);
-MODULE_PARM_DESC(btr0, "SJA1000 bus timing register 0 preset (with btr1; default: none)");
-module_param(btr1, short, 0444);
-MODULE_PARM_DESC(btr1, "SJA1000 bus timing register 1 preset (with btr0; default: none)");
+#include "btr_params.h"
 
 static unsigned int cards = 2;
 module_param(cards, uint, 0444);
@@ -50,8 +44,7 @@ MODULE_PARM_DESC(fault_bit, "Bit position (ALC) at which the arblost fault loses
 u64 rcan_module_param(unsigned int which, unsigned int idx)
 {
 	switch (which) {
-	case 0: return (u64)(s64)READ_ONCE(btr0);
-	case 1: return (u64)(s64)READ_ONCE(btr1);
+	RCAN_SJA1000_BTR_CASES;
 	case 2: return READ_ONCE(cards);
 	case 3: return (u64)(s64)READ_ONCE(fault_ecc);
 	case 4: return READ_ONCE(fault_bit);
