@@ -14,6 +14,7 @@
 
 #![forbid(unsafe_code)]
 
+pub mod bcm;
 pub mod canrx;
 pub mod cli;
 pub mod frame;
