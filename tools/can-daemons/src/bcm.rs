@@ -4,7 +4,22 @@
 //! classic frames; the layout is the one of the target's C ABI (`struct
 //! bcm_timeval` holds two `long`s).
 
+use std::io::{self, IoSliceMut};
+use std::os::fd::{AsFd, AsRawFd, BorrowedFd};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use nix::errno::Errno;
+use nix::sys::socket::{self as nsock, sockopt, ControlMessageOwned, MsgFlags};
+use nix::sys::time::TimeVal;
+use socket2::{Domain, Protocol, Socket, Type};
+use socketcan::CanAddr;
+
 use crate::frame::{Frame, CAN_MTU};
+
+/// `CAN_BCM`, the protocol number of the broadcast manager.
+const CAN_BCM: i32 = 2;
+/// `AF_CAN`.
+const AF_CAN: i32 = 29;
 
 /// `TX_SETUP`: create or update a transmission job.
 pub const TX_SETUP: u32 = 1;
@@ -30,12 +45,12 @@ const LONG: usize = std::mem::size_of::<std::ffi::c_long>();
 /// Offsets in `struct bcm_msg_head`: opcode, flags, count (u32 each),
 /// then `ival1`, `ival2` (two longs each, aligned to a long), can_id,
 /// nframes; the frames follow at the next 8-byte boundary.
-const IVAL1: usize = (12 + LONG - 1) / LONG * LONG;
+const IVAL1: usize = 12usize.div_ceil(LONG) * LONG;
 const IVAL2: usize = IVAL1 + 2 * LONG;
 const CAN_ID: usize = IVAL2 + 2 * LONG;
 const NFRAMES: usize = CAN_ID + 4;
 /// `sizeof(struct bcm_msg_head)` (`can_frame` is 8-byte aligned).
-pub const HEAD_LEN: usize = (NFRAMES + 4 + 7) / 8 * 8;
+pub const HEAD_LEN: usize = (NFRAMES + 4).div_ceil(8) * 8;
 
 /// One BCM message with at most one frame (all cantcpd needs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -96,6 +111,84 @@ impl Msg {
             Some(Frame::from_bytes(b.get(HEAD_LEN..HEAD_LEN + CAN_MTU)?)?)
         };
         Some((u32_at(0), u32_at(CAN_ID), frame))
+    }
+}
+
+/// A CAN_BCM socket connected to one interface. Its jobs and filters end
+/// when it is closed (dropped).
+pub struct BcmSocket {
+    sock: Socket,
+}
+
+/// A message read from the socket: opcode, head can_id, frame, receive
+/// time (seconds, microseconds; the kernel's SO_TIMESTAMP when it gives
+/// one, the time of reading otherwise).
+pub type Received = (u32, u32, Option<Frame>, i64, i64);
+
+impl BcmSocket {
+    /// `socket(PF_CAN, SOCK_DGRAM, CAN_BCM)` and `connect()` to `iface`.
+    pub fn open(iface: &str) -> io::Result<Self> {
+        let addr = CanAddr::from_iface(iface)?;
+        let sock = Socket::new(
+            Domain::from(AF_CAN),
+            Type::DGRAM,
+            Some(Protocol::from(CAN_BCM)),
+        )?;
+        sock.connect(&addr.into_sock_addr())?;
+        nsock::setsockopt(&sock, sockopt::ReceiveTimestamp, &true)?;
+        Ok(Self { sock })
+    }
+
+    /// Writes one message; the kernel's errno as the error.
+    pub fn send(&self, m: &Msg) -> io::Result<()> {
+        let b = m.encode();
+        let n = self.sock.send(&b)?;
+        if n != b.len() {
+            return Err(io::Error::other(format!("short write: {n} bytes")));
+        }
+        Ok(())
+    }
+
+    /// Waits up to `timeout` for one message; `Ok(None)` when none came.
+    pub fn recv(&self, timeout: Duration) -> io::Result<Option<Received>> {
+        self.sock.set_read_timeout(Some(timeout))?;
+        let mut buf = [0u8; HEAD_LEN + CAN_MTU];
+        let mut cmsg = nix::cmsg_space!(TimeVal);
+        let mut iov = [IoSliceMut::new(&mut buf)];
+        let (n, ts) = match nsock::recvmsg::<()>(
+            self.sock.as_raw_fd(),
+            &mut iov,
+            Some(&mut cmsg),
+            MsgFlags::empty(),
+        ) {
+            Ok(m) => {
+                let mut ts = None;
+                for c in m.cmsgs().map_err(io::Error::from)? {
+                    if let ControlMessageOwned::ScmTimestamp(tv) = c {
+                        ts = Some((tv.tv_sec(), tv.tv_usec()));
+                    }
+                }
+                (m.bytes, ts)
+            }
+            Err(Errno::EAGAIN | Errno::EINTR) => return Ok(None),
+            Err(e) => return Err(e.into()),
+        };
+        let (op, id, f) = Msg::decode(&buf[..n]).ok_or_else(|| {
+            io::Error::new(io::ErrorKind::InvalidData, format!("{n}-byte BCM message"))
+        })?;
+        let (sec, usec) = ts.unwrap_or_else(|| {
+            let t = SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .unwrap_or_default();
+            (t.as_secs() as i64, i64::from(t.subsec_micros()))
+        });
+        Ok(Some((op, id, f, sec, usec)))
+    }
+}
+
+impl AsFd for BcmSocket {
+    fn as_fd(&self) -> BorrowedFd<'_> {
+        self.sock.as_fd()
     }
 }
 
