@@ -18,5 +18,7 @@ pub mod bcm;
 pub mod canrx;
 pub mod cli;
 pub mod frame;
+pub mod logd;
+pub mod powerd;
 pub mod socketcand;
 pub mod zlog;
