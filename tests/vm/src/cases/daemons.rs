@@ -704,6 +704,7 @@ fn until_frame(rx: &socketcan::CanSocket, id: u16, data: &[u8], n: usize) -> Tes
 /// the bus are sent on can0 by a CAN_RAW socket, which also watches what
 /// cantcpd sends.
 fn cantcpd_bcm_mode_jobs_and_subscriptions(ctx: &mut Ctx) -> TestResult {
+    use socketcan::Socket;
     let idx = ctx.bcm_ifaces(1)?[0];
     let rx = canraw::open(idx)?;
     rx.set_read_timeout(Duration::from_secs(5))
