@@ -1091,7 +1091,7 @@ fn logd_logs_dsor_messages_from_peer(ctx: &mut Ctx) -> TestResult {
         out.status,
         out.stderr.trim()
     );
-    let text = std::fs::read_to_string(&log).or_fail(&log.display())?;
+    let text = std::fs::read_to_string(&log).or_fail(log.display())?;
     let (notes, lines): (Vec<&str>, Vec<&str>) = text.lines().partition(|l| l.starts_with("# "));
     let hex = |b: &[u8]| {
         if b.is_empty() {
