@@ -58,15 +58,20 @@ pub struct ZlogCli {
     pub rcvbuf: Option<usize>,
 }
 
-/// Serve CAN interfaces to TCP clients with the socketcand protocol (raw
-/// mode): python-can's `socketcand` interface and other socketcand
-/// clients connect unchanged.
+/// Serve CAN interfaces to TCP clients with the socketcand protocol (BCM
+/// and raw mode): python-can's `socketcand` interface and other
+/// socketcand clients connect unchanged.
 #[derive(Parser, Debug)]
 #[command(name = "cantcpd", version)]
 #[command(
     after_help = "Protocol: the server greets with `< hi >`; the client sends \
-`< open IFACE >` and `< rawmode >` (each answered `< ok >`), then `< send ID DLC B0 B1 ... >` \
-to transmit; every frame on IFACE reaches the client as `< frame ID SEC.USEC DATA >`. \
+`< open IFACE >` (answered `< ok >`) and is in BCM mode (a CAN_BCM socket): \
+`< send ID DLC B0 ... >` transmits once, `< add SEC USEC ID DLC B0 ... >` cyclically, \
+`< update ID DLC B0 ... >` changes a job's content, `< delete ID >` ends it; \
+`< subscribe SEC USEC ID >` and `< filter SEC USEC ID DLC M0 ... >` deliver frames of ID \
+(every one, or those changing under the mask) as `< frame ID SEC.USEC B0 B1 ... >`; \
+`< unsubscribe ID >` ends that. `< rawmode >` switches to raw mode (every frame on IFACE \
+as `< frame ID SEC.USEC DATA >`, `send` as before), `< bcmmode >` back. \
 Frames sent by one client reach the others like any frame on the bus.\n\nEach client has its \
 own queue of --queue frames: a client that reads too slowly loses frames (counted, reported \
 on stderr and as `< error dropped N >`), never stalls the bus or other clients.\n\nSIGTERM and \

@@ -1,14 +1,15 @@
 // SPDX-License-Identifier: GPL-2.0
 //! `cantcpd`: the vehicle's CAN-over-TCP proxy (thesis 3.3), speaking
-//! socketcand's raw mode (`socketcand.rs`) so existing clients connect
-//! unchanged.
+//! socketcand's BCM mode (CAN_BCM, `bcm.rs`) and raw mode
+//! (`socketcand.rs`) so existing clients connect unchanged.
 //!
 //! Threads: the main thread accepts connections and watches a signalfd
 //! (SIGTERM, SIGINT). Each client has three: the command reader (its
-//! TCP input, owns the CAN socket's sending side), the CAN receiver
-//! (started by `< rawmode >`; never blocks on the client: it puts frames
-//! into the client's bounded queue or counts them dropped) and the
-//! writer (drains the queue into TCP, as slowly as the client reads).
+//! TCP input, owns the mode's socket and sends BCM requests and frames),
+//! the receiver of the current mode (started by `< open >`, replaced on a
+//! mode switch; never blocks on the client: it puts messages into the
+//! client's bounded queue or counts them dropped) and the writer (drains
+//! the queue into TCP, as slowly as the client reads; started by `open`).
 //! Replies and frames share the TCP stream under `Client::out`, a mutex
 //! held for one whole message, so messages never interleave.
 
