@@ -84,7 +84,7 @@ fn shutdown(cli: &PowerCli) -> bool {
         // before sync and unmount.
         let mut alive: Vec<&(Pid, String)> = pids.iter().collect();
         while !alive.is_empty() && t0.elapsed() < limit {
-            alive.retain(|(p, _)| kill(*p, None::<Signal>) != Err(Errno::ESRCH));
+            alive.retain(|(p, _)| running(*p));
             if !alive.is_empty() {
                 thread::sleep(POLL);
             }
@@ -133,6 +133,19 @@ fn shutdown(cli: &PowerCli) -> bool {
         }
     );
     errors.is_empty()
+}
+
+/// True while `pid` exists and is not a zombie (a zombie has closed its
+/// files and left its working directory: it holds no mount busy, only its
+/// parent has yet to reap it).
+fn running(pid: Pid) -> bool {
+    if kill(pid, None::<Signal>) == Err(Errno::ESRCH) {
+        return false;
+    }
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    // `PID (COMM) STATE ...`; COMM may contain spaces and parentheses.
+    let state = stat.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().next());
+    !matches!(state, Some("Z") | Some("X") | None)
 }
 
 /// umount(2), retried while EBUSY until `limit` after `t0`.
