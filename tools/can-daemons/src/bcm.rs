@@ -128,7 +128,11 @@ pub type Received = (u32, u32, Option<Frame>, i64, i64);
 impl BcmSocket {
     /// `socket(PF_CAN, SOCK_DGRAM, CAN_BCM)` and `connect()` to `iface`.
     pub fn open(iface: &str) -> io::Result<Self> {
-        let addr = CanAddr::from_iface(iface)?;
+        Self::open_addr(CanAddr::from_iface(iface)?)
+    }
+
+    /// [`open`](Self::open) with the interface looked up already.
+    pub fn open_addr(addr: CanAddr) -> io::Result<Self> {
         let sock = Socket::new(
             Domain::from(AF_CAN),
             Type::DGRAM,
@@ -139,13 +143,11 @@ impl BcmSocket {
         Ok(Self { sock })
     }
 
-    /// Writes one message; the kernel's errno as the error.
+    /// Writes one message; the kernel's errno as the error. (The count
+    /// written may be less than the message: `RX_SETUP` with
+    /// `RX_FILTER_ID` returns the head's size, the frame being ignored.)
     pub fn send(&self, m: &Msg) -> io::Result<()> {
-        let b = m.encode();
-        let n = self.sock.send(&b)?;
-        if n != b.len() {
-            return Err(io::Error::other(format!("short write: {n} bytes")));
-        }
+        self.sock.send(&m.encode())?;
         Ok(())
     }
 

@@ -186,8 +186,10 @@ fn tx_loop(srv: Arc<Server>, cl: Arc<Client>, q: Receiver<String>) {
 
 /// The socket of the current mode.
 enum Mode {
-    /// BCM mode (socketcand's default after `open`): a CAN_BCM socket.
-    Bcm(Arc<BcmSocket>),
+    /// BCM mode (socketcand's default after `open`): a CAN_BCM socket, or
+    /// why there is none (CAN_BCM not available: the BCM commands are
+    /// answered with this error, raw mode works).
+    Bcm(Result<Arc<BcmSocket>, String>),
     /// Raw mode: a CAN_RAW socket.
     Raw(Arc<CanPort>),
 }
@@ -224,10 +226,11 @@ impl Session {
             Arc::clone(&stop),
         );
         let t = match mode {
-            Mode::Bcm(b) => {
+            Mode::Bcm(Ok(b)) => {
                 let b = Arc::clone(b);
                 thread::spawn(move || bcm_rx_loop(s, c, b, q, st))
             }
+            Mode::Bcm(Err(_)) => return,
             Mode::Raw(p) => {
                 let p = Arc::clone(p);
                 thread::spawn(move || rx_loop(s, c, p, q, st))
@@ -246,10 +249,26 @@ impl Session {
     }
 }
 
+/// A CAN_BCM socket on `addr`; `Ok(Err(why))` when the kernel has no
+/// CAN_BCM (`EPROTONOSUPPORT`: rcan_bcm or can-bcm not loaded), other
+/// failures as errors.
+fn bcm_socket(addr: socketcan::CanAddr, peer: &str) -> io::Result<Result<Arc<BcmSocket>, String>> {
+    match BcmSocket::open_addr(addr) {
+        Ok(b) => Ok(Ok(Arc::new(b))),
+        Err(e) if e.raw_os_error() == Some(nix::libc::EPROTONOSUPPORT) => {
+            eprintln!("cantcpd: {peer}: no CAN_BCM ({e}): BCM commands will fail, raw mode works");
+            Ok(Err(format!("no CAN_BCM: {e}")))
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// A BCM request, or the error reply for it.
 fn bcm_req(mode: &Mode, what: &str, m: bcm::Msg) -> Option<String> {
-    let Mode::Bcm(b) = mode else {
-        return Some(format!("< error {what} needs bcmmode >"));
+    let b = match mode {
+        Mode::Raw(_) => return Some(format!("< error {what} needs bcmmode >")),
+        Mode::Bcm(Err(e)) => return Some(format!("< error {what}: {e} >")),
+        Mode::Bcm(Ok(b)) => b,
     };
     match b.send(&m) {
         Ok(()) => None,
@@ -291,9 +310,13 @@ fn handle(
         if !srv.allow.is_empty() && !srv.allow.contains(iface) {
             return Some(format!("< error {iface} not allowed >"));
         }
-        return match BcmSocket::open(iface) {
+        let addr = match socketcan::CanAddr::from_iface(iface) {
+            Ok(a) => a,
+            Err(e) => return Some(format!("< error open {iface}: {e} >")),
+        };
+        return match bcm_socket(addr, &cl.peer) {
             Ok(b) => {
-                ses.mode = Some((iface.clone(), Mode::Bcm(Arc::new(b))));
+                ses.mode = Some((iface.clone(), Mode::Bcm(b)));
                 let (tx, rx) = sync_channel(srv.queue);
                 let (s2, c2) = (Arc::clone(srv), Arc::clone(cl));
                 ses.q = Some((tx, thread::spawn(move || tx_loop(s2, c2, rx))));
@@ -335,12 +358,14 @@ fn handle(
             return None;
         }
         Command::BcmMode => {
-            let b = match BcmSocket::open(&iface) {
+            let b = match socketcan::CanAddr::from_iface(&iface)
+                .and_then(|a| bcm_socket(a, &cl.peer))
+            {
                 Ok(b) => b,
                 Err(e) => return Some(format!("< error bcmmode {iface}: {e} >")),
             };
             ses.stop_rx();
-            ses.mode = Some((iface, Mode::Bcm(Arc::new(b))));
+            ses.mode = Some((iface, Mode::Bcm(b)));
             ses.start_rx(srv, cl);
             return Some("< ok >".into());
         }
