@@ -144,7 +144,9 @@ fn running(pid: Pid) -> bool {
     }
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
     // `PID (COMM) STATE ...`; COMM may contain spaces and parentheses.
-    let state = stat.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().next());
+    let state = stat
+        .rsplit_once(')')
+        .and_then(|(_, r)| r.split_whitespace().next());
     !matches!(state, Some("Z") | Some("X") | None)
 }
 
