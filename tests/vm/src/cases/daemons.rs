@@ -923,13 +923,15 @@ fn not_shutdown_frames() -> Vec<CanFrame> {
 /// nothing; the shutdown frame (matching under the mask) makes it signal
 /// both victims (by pid file and by name), which die of SIGTERM, and
 /// unmount the tmpfs, which only works once the named victim (working
-/// directory on it) is gone; powerd names the frame it acted on (the
-/// first matching one) and exits 0.
+/// directory on it) is gone, then run `--exec` with no signal blocked;
+/// powerd names the frame it acted on (the first matching one) and exits
+/// 0.
 fn powerd_shuts_down_on_its_frame_only(ctx: &mut Ctx) -> TestResult {
     let idx = raw1(ctx)?;
     let tx = canraw::open(idx)?;
     let mut sc = PowerScene::new()?;
-    let args = powerd_args(&sc, &[])?;
+    // --exec's command must not inherit powerd's blocked signals.
+    let args = powerd_args(&sc, &["--exec", "grep SigBlk /proc/self/status"])?;
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let mut pd = tools::spawn_own("powerd", &args, None)?;
     pd.wait_stderr("powerd: waiting on can0")?;
@@ -956,9 +958,11 @@ fn powerd_shuts_down_on_its_frame_only(ctx: &mut Ctx) -> TestResult {
             && err.contains("shutdown frame 7E0#DEA701 ")
             && err.contains("send SIGTERM to pid")
             && err.contains("(pwrvictim)")
-            && err.contains("shutdown sequence done"),
-        "powerd: {}: {err}",
-        out.status
+            && err.contains("shutdown sequence done")
+            && out.stdout.trim() == "SigBlk:\t0000000000000000",
+        "powerd: {}: {err}; --exec printed {:?}",
+        out.status,
+        out.stdout
     );
     use std::os::unix::process::ExitStatusExt;
     for v in &mut sc.victims {

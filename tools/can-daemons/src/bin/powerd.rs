@@ -13,8 +13,10 @@ use std::time::{Duration, Instant};
 use clap::Parser;
 use nix::errno::Errno;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+use nix::spawn::{posix_spawn, PosixSpawnAttr, PosixSpawnFileActions, PosixSpawnFlags};
 use nix::sys::signal::{kill, SigSet, Signal};
 use nix::sys::signalfd::{SfdFlags, SignalFd};
+use nix::sys::wait::{waitpid, WaitStatus};
 use nix::unistd::Pid;
 use rcan_daemons::canrx::CanPort;
 use rcan_daemons::cli::PowerCli;
@@ -111,12 +113,9 @@ fn shutdown(cli: &PowerCli) -> bool {
     if let Some(c) = &cli.exec {
         eprintln!("powerd: {dry}run {c}");
         if !cli.dry_run {
-            match std::process::Command::new("/bin/sh")
-                .args(["-c", c])
-                .status()
-            {
-                Ok(s) if s.success() => {}
-                Ok(s) => errors.push(format!("{c}: {s}")),
+            match shell(c) {
+                Ok(WaitStatus::Exited(_, 0)) => {}
+                Ok(s) => errors.push(format!("{c}: {s:?}")),
                 Err(e) => errors.push(format!("{c}: {e}")),
             }
         }
@@ -133,6 +132,36 @@ fn shutdown(cli: &PowerCli) -> bool {
         }
     );
     errors.is_empty()
+}
+
+/// Runs `/bin/sh -c COMMAND` and waits for it. posix_spawn with an empty
+/// signal mask: powerd blocks SIGTERM and SIGINT (its signalfd), and a
+/// child started with std's Command would inherit that mask and could
+/// not be stopped with them.
+fn shell(command: &str) -> Result<WaitStatus, String> {
+    use std::ffi::CString;
+    use std::os::unix::ffi::OsStringExt;
+    let e = |e: Errno| e.to_string();
+    let mut attr = PosixSpawnAttr::init().map_err(e)?;
+    attr.set_sigmask(&SigSet::empty()).map_err(e)?;
+    attr.set_flags(PosixSpawnFlags::POSIX_SPAWN_SETSIGMASK)
+        .map_err(e)?;
+    let actions = PosixSpawnFileActions::init().map_err(e)?;
+    let args = [
+        CString::new("sh").map_err(|x| x.to_string())?,
+        CString::new("-c").map_err(|x| x.to_string())?,
+        CString::new(command).map_err(|x| x.to_string())?,
+    ];
+    let env: Vec<CString> = std::env::vars_os()
+        .filter_map(|(k, v)| {
+            let mut b = k.into_vec();
+            b.push(b'=');
+            b.extend(v.into_vec());
+            CString::new(b).ok()
+        })
+        .collect();
+    let pid = posix_spawn(Path::new("/bin/sh"), &actions, &attr, &args, &env).map_err(e)?;
+    waitpid(pid, None).map_err(e)
 }
 
 /// True while `pid` exists and is not a zombie (a zombie has closed its
