@@ -118,6 +118,8 @@ impl Msg {
 /// when it is closed (dropped).
 pub struct BcmSocket {
     sock: Socket,
+    /// The SO_RCVTIMEO set last (set again only when it changes).
+    timeout: Option<Duration>,
 }
 
 /// A message read from the socket: opcode, head can_id, frame, receive
@@ -140,7 +142,10 @@ impl BcmSocket {
         )?;
         sock.connect(&addr.into_sock_addr())?;
         nsock::setsockopt(&sock, sockopt::ReceiveTimestamp, &true)?;
-        Ok(Self { sock })
+        Ok(Self {
+            sock,
+            timeout: None,
+        })
     }
 
     /// Writes one message; the kernel's errno as the error. (The count
@@ -151,9 +156,18 @@ impl BcmSocket {
         Ok(())
     }
 
-    /// Waits up to `timeout` for one message; `Ok(None)` when none came.
-    pub fn recv(&self, timeout: Duration) -> io::Result<Option<Received>> {
-        self.sock.set_read_timeout(Some(timeout))?;
+    /// Sets how long [`recv`](Self::recv) waits for a message.
+    pub fn set_read_timeout(&mut self, timeout: Duration) -> io::Result<()> {
+        if self.timeout != Some(timeout) {
+            self.sock.set_read_timeout(Some(timeout))?;
+            self.timeout = Some(timeout);
+        }
+        Ok(())
+    }
+
+    /// Waits (up to the read timeout, if set) for one message; `Ok(None)`
+    /// when none came.
+    pub fn recv(&self) -> io::Result<Option<Received>> {
         let mut buf = [0u8; HEAD_LEN + CAN_MTU];
         let mut cmsg = nix::cmsg_space!(TimeVal);
         let mut iov = [IoSliceMut::new(&mut buf)];

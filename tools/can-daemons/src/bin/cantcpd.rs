@@ -131,7 +131,7 @@ fn bcm_rx_loop(
     stop: Arc<AtomicBool>,
 ) {
     while !cl.done(&srv) && !stop.load(Ordering::Relaxed) {
-        match sock.recv(TICK) {
+        match sock.recv() {
             Ok(Some((bcm::RX_CHANGED, _, Some(f), sec, usec))) => {
                 let mut m = String::with_capacity(64);
                 bcm_frame_msg(&mut m, &f, sec, usec);
@@ -254,7 +254,10 @@ impl Session {
 /// failures as errors.
 fn bcm_socket(addr: socketcan::CanAddr, peer: &str) -> io::Result<Result<Arc<BcmSocket>, String>> {
     match BcmSocket::open_addr(addr) {
-        Ok(b) => Ok(Ok(Arc::new(b))),
+        Ok(mut b) => {
+            b.set_read_timeout(TICK)?;
+            Ok(Ok(Arc::new(b)))
+        }
         Err(e) if e.raw_os_error() == Some(nix::libc::EPROTONOSUPPORT) => {
             eprintln!("cantcpd: {peer}: no CAN_BCM ({e}): BCM commands will fail, raw mode works");
             Ok(Err(format!("no CAN_BCM: {e}")))
