@@ -50,6 +50,13 @@ impl CanPort {
         })
     }
 
+    /// Lets only frames through whose `can_id & mask == id & mask`
+    /// (CAN_RAW_FILTER with one filter).
+    pub fn set_filter(&self, id: u32, mask: u32) -> io::Result<()> {
+        self.sock
+            .set_filters(&[socketcan::CanFilter::new(id, mask)])
+    }
+
     /// Sets SO_RCVBUF (the kernel doubles it; CAP_NET_ADMIN may exceed
     /// rmem_max with SO_RCVBUFFORCE, which we do not use).
     pub fn set_rcvbuf(&self, bytes: usize) -> io::Result<()> {

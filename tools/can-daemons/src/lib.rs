@@ -5,8 +5,11 @@
 //!   timestamps and error frames included, into rotating gzip files in
 //!   can-utils' `candump -l` format (the vehicle's black box);
 //! - `cantcpd`: a CAN-over-TCP server speaking the socketcand protocol
-//!   (raw mode), so python-can's `socketcand` interface and other
-//!   socketcand clients connect unchanged.
+//!   (BCM and raw mode), so python-can's `socketcand` interface and other
+//!   socketcand clients connect unchanged;
+//! - `powerd`: waits for the CAN frame that commands a shutdown, then
+//!   signals the log writers, syncs and unmounts the log partition;
+//! - `logd`: logs DSOR segmented messages, one timestamped line each.
 //!
 //! The pure parts (line formats, the socketcand parser, the rotating
 //! writer) are here and host-tested; `src/bin/` holds the event loops.
@@ -14,8 +17,11 @@
 
 #![forbid(unsafe_code)]
 
+pub mod bcm;
 pub mod canrx;
 pub mod cli;
 pub mod frame;
+pub mod logd;
+pub mod powerd;
 pub mod socketcand;
 pub mod zlog;

@@ -43,7 +43,13 @@ fn greeting_echo_and_errors() {
         ("< echo >", "< echo >"),
         ("< send 123 1 1 >", "< error no interface open >"),
         ("< rawmode >", "< error no interface open >"),
-        ("< bcmmode >", "< error unsupported command bcmmode >"),
+        ("< bcmmode >", "< error no interface open >"),
+        ("< subscribe 0 0 123 >", "< error no interface open >"),
+        ("< isotpmode >", "< error unsupported command isotpmode >"),
+        (
+            "< add 0 1000000 123 0 >",
+            "< error interval 0 s 1000000 us out of range >",
+        ),
         ("< send 123 9 >", "< error dlc 9 over 8 >"),
         ("< >", "< error empty message >"),
     ] {

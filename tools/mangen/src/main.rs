@@ -28,6 +28,8 @@ fn commands() -> Vec<clap::Command> {
         rcan_samples::canarb_demo_command(),
         rcan_daemons::cli::zlog_command(),
         rcan_daemons::cli::tcp_command(),
+        rcan_daemons::cli::power_command(),
+        rcan_daemons::cli::logd_command(),
     ]
 }
 

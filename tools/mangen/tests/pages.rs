@@ -19,6 +19,8 @@ fn pages_and_completions() {
         ("canarb-demo", "IFACE"),
         ("canzlogd", "flush\\-ms"),
         ("cantcpd", "listen"),
+        ("powerd", "dry\\-run"),
+        ("logd", "SOURCE"),
     ] {
         let page = std::fs::read_to_string(dir.join(format!("man1/{tool}.1"))).unwrap();
         assert!(page.contains(&format!(".TH {tool}")), "{tool}.1: {page}");

@@ -117,6 +117,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         candev::TESTS,
         capture::SJA1000_TESTS,
         daemons::SJA1000_TESTS,
+        daemons::DSOR_TESTS,
         i82527::TESTS,
         candev_err::TESTS,
         leak::OURS,
@@ -211,7 +212,7 @@ mod tests {
     #[test]
     fn portable_names() {
         // The prefixes say what a test needs: raw_/canutils_/candev_/bcm_
-        // and the daemons' canzlogd_/cantcpd_ run on both stacks,
+        // and the daemons' canzlogd_/cantcpd_/powerd_ run on both stacks,
         // everything else (mixed_, sja1000_ included) on ours only.
         for t in super::all() {
             let portable = [
@@ -221,6 +222,7 @@ mod tests {
                 "bcm_",
                 "canzlogd_",
                 "cantcpd_",
+                "powerd_",
             ]
             .iter()
             .any(|p| t.name.starts_with(p));

@@ -1,14 +1,15 @@
 // SPDX-License-Identifier: GPL-2.0
 //! `cantcpd`: the vehicle's CAN-over-TCP proxy (thesis 3.3), speaking
-//! socketcand's raw mode (`socketcand.rs`) so existing clients connect
-//! unchanged.
+//! socketcand's BCM mode (CAN_BCM, `bcm.rs`) and raw mode
+//! (`socketcand.rs`) so existing clients connect unchanged.
 //!
 //! Threads: the main thread accepts connections and watches a signalfd
 //! (SIGTERM, SIGINT). Each client has three: the command reader (its
-//! TCP input, owns the CAN socket's sending side), the CAN receiver
-//! (started by `< rawmode >`; never blocks on the client: it puts frames
-//! into the client's bounded queue or counts them dropped) and the
-//! writer (drains the queue into TCP, as slowly as the client reads).
+//! TCP input, owns the mode's socket and sends BCM requests and frames),
+//! the receiver of the current mode (started by `< open >`, replaced on a
+//! mode switch; never blocks on the client: it puts messages into the
+//! client's bounded queue or counts them dropped) and the writer (drains
+//! the queue into TCP, as slowly as the client reads; started by `open`).
 //! Replies and frames share the TCP stream under `Client::out`, a mutex
 //! held for one whole message, so messages never interleave.
 
@@ -17,7 +18,7 @@ use std::net::{Shutdown, TcpListener, TcpStream};
 use std::os::fd::AsFd;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
-use std::sync::mpsc::{sync_channel, RecvTimeoutError, TrySendError};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
@@ -26,9 +27,11 @@ use clap::Parser;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::signal::{SigSet, Signal};
 use nix::sys::signalfd::{SfdFlags, SignalFd};
+use rcan_daemons::bcm::{self, BcmSocket};
 use rcan_daemons::canrx::CanPort;
 use rcan_daemons::cli::TcpCli;
-use rcan_daemons::socketcand::{frame_msg, parse, Command, Splitter};
+use rcan_daemons::frame::Frame;
+use rcan_daemons::socketcand::{bcm_frame_msg, frame_msg, parse, Command, Splitter};
 
 /// How often blocked threads look at the stop flags.
 const TICK: Duration = Duration::from_millis(200);
@@ -66,15 +69,18 @@ impl Client {
     }
 }
 
-/// CAN receiver: frames into the bounded queue, never waiting for it.
+/// Raw-mode receiver: every frame of the interface into the bounded
+/// queue, never waiting for it. Ends when `stop` is set (mode switch) or
+/// the client ends.
 fn rx_loop(
     srv: Arc<Server>,
     cl: Arc<Client>,
     port: Arc<CanPort>,
-    q: std::sync::mpsc::SyncSender<String>,
+    q: SyncSender<String>,
+    stop: Arc<AtomicBool>,
 ) {
     let mut last_ovfl = 0;
-    while !cl.done(&srv) {
+    while !cl.done(&srv) && !stop.load(Ordering::Relaxed) {
         match port.recv(false) {
             Ok(Some(r)) => {
                 if r.dropped != last_ovfl {
@@ -88,12 +94,8 @@ fn rx_loop(
                 }
                 let mut m = String::with_capacity(48);
                 frame_msg(&mut m, &r.frame, r.sec, r.usec);
-                match q.try_send(m) {
-                    Ok(()) => {}
-                    Err(TrySendError::Full(_)) => {
-                        cl.dropped.fetch_add(1, Ordering::Relaxed);
-                    }
-                    Err(TrySendError::Disconnected(_)) => break,
+                if !queue(&cl, &q, m) {
+                    break;
                 }
             }
             Ok(None) => {}
@@ -106,8 +108,50 @@ fn rx_loop(
     }
 }
 
+/// Puts one message into the client's queue, or counts it dropped when
+/// the queue is full; false once the writer is gone.
+fn queue(cl: &Client, q: &SyncSender<String>, m: String) -> bool {
+    match q.try_send(m) {
+        Ok(()) => true,
+        Err(TrySendError::Full(_)) => {
+            cl.dropped.fetch_add(1, Ordering::Relaxed);
+            true
+        }
+        Err(TrySendError::Disconnected(_)) => false,
+    }
+}
+
+/// BCM-mode receiver: what the broadcast manager reports for the
+/// client's filters and subscriptions (`RX_CHANGED`), into the queue.
+fn bcm_rx_loop(
+    srv: Arc<Server>,
+    cl: Arc<Client>,
+    sock: Arc<BcmSocket>,
+    q: SyncSender<String>,
+    stop: Arc<AtomicBool>,
+) {
+    while !cl.done(&srv) && !stop.load(Ordering::Relaxed) {
+        match sock.recv() {
+            Ok(Some((bcm::RX_CHANGED, _, Some(f), sec, usec))) => {
+                let mut m = String::with_capacity(64);
+                bcm_frame_msg(&mut m, &f, sec, usec);
+                if !queue(&cl, &q, m) {
+                    break;
+                }
+            }
+            // RX_TIMEOUT, TX_EXPIRED and the like: cantcpd sets up
+            // nothing that produces them; ignored.
+            Ok(_) => {}
+            Err(e) => {
+                let _ = cl.send(&format!("< error receive: {e} >"));
+                thread::sleep(TICK);
+            }
+        }
+    }
+}
+
 /// Writer: the queue into TCP; reports drops at most once a second.
-fn tx_loop(srv: Arc<Server>, cl: Arc<Client>, q: std::sync::mpsc::Receiver<String>) {
+fn tx_loop(srv: Arc<Server>, cl: Arc<Client>, q: Receiver<String>) {
     let mut reported = 0;
     let mut last_report = Instant::now();
     while !cl.done(&srv) {
@@ -140,64 +184,259 @@ fn tx_loop(srv: Arc<Server>, cl: Arc<Client>, q: std::sync::mpsc::Receiver<Strin
     cl.closed.store(true, Ordering::Relaxed);
 }
 
+/// The socket of the current mode.
+enum Mode {
+    /// BCM mode (socketcand's default after `open`): a CAN_BCM socket, or
+    /// why there is none (CAN_BCM not available: the BCM commands are
+    /// answered with this error, raw mode works).
+    Bcm(Result<Arc<BcmSocket>, String>),
+    /// Raw mode: a CAN_RAW socket.
+    Raw(Arc<CanPort>),
+}
+
+/// One connection's state, owned by its command reader.
+struct Session {
+    /// The opened interface and the current mode; `None` before `open`.
+    mode: Option<(String, Mode)>,
+    /// The queue's sending side (receivers get clones); the writer thread.
+    q: Option<(SyncSender<String>, thread::JoinHandle<()>)>,
+    /// The current receiver thread and its stop flag.
+    rx: Option<(Arc<AtomicBool>, thread::JoinHandle<()>)>,
+}
+
+impl Session {
+    /// Stops the current receiver and waits for it (at most one TICK).
+    fn stop_rx(&mut self) {
+        if let Some((stop, t)) = self.rx.take() {
+            stop.store(true, Ordering::Relaxed);
+            let _ = t.join();
+        }
+    }
+
+    /// Starts the receiver of the current mode.
+    fn start_rx(&mut self, srv: &Arc<Server>, cl: &Arc<Client>) {
+        let (Some((_, mode)), Some((q, _))) = (&self.mode, &self.q) else {
+            return;
+        };
+        let stop = Arc::new(AtomicBool::new(false));
+        let (s, c, q, st) = (
+            Arc::clone(srv),
+            Arc::clone(cl),
+            q.clone(),
+            Arc::clone(&stop),
+        );
+        let t = match mode {
+            Mode::Bcm(Ok(b)) => {
+                let b = Arc::clone(b);
+                thread::spawn(move || bcm_rx_loop(s, c, b, q, st))
+            }
+            Mode::Bcm(Err(_)) => return,
+            Mode::Raw(p) => {
+                let p = Arc::clone(p);
+                thread::spawn(move || rx_loop(s, c, p, q, st))
+            }
+        };
+        self.rx = Some((stop, t));
+    }
+
+    /// Ends the receiver and the writer.
+    fn end(mut self) {
+        self.stop_rx();
+        if let Some((q, t)) = self.q.take() {
+            drop(q);
+            let _ = t.join();
+        }
+    }
+}
+
+/// A CAN_BCM socket on `addr`; `Ok(Err(why))` when the kernel has no
+/// CAN_BCM (`EPROTONOSUPPORT`: rcan_bcm or can-bcm not loaded), other
+/// failures as errors.
+fn bcm_socket(addr: socketcan::CanAddr, peer: &str) -> io::Result<Result<Arc<BcmSocket>, String>> {
+    match BcmSocket::open_addr(addr) {
+        Ok(mut b) => {
+            b.set_read_timeout(TICK)?;
+            Ok(Ok(Arc::new(b)))
+        }
+        Err(e) if e.raw_os_error() == Some(nix::libc::EPROTONOSUPPORT) => {
+            eprintln!("cantcpd: {peer}: no CAN_BCM ({e}): BCM commands will fail, raw mode works");
+            Ok(Err(format!("no CAN_BCM: {e}")))
+        }
+        Err(e) => Err(e),
+    }
+}
+
+/// A BCM request, or the error reply for it.
+fn bcm_req(mode: &Mode, what: &str, m: bcm::Msg) -> Option<String> {
+    let b = match mode {
+        Mode::Raw(_) => return Some(format!("< error {what} needs bcmmode >")),
+        Mode::Bcm(Err(e)) => return Some(format!("< error {what}: {e} >")),
+        Mode::Bcm(Ok(b)) => b,
+    };
+    match b.send(&m) {
+        Ok(()) => None,
+        Err(e) => Some(format!("< error {what}: {e} >")),
+    }
+}
+
+fn bcm_msg(
+    opcode: u32,
+    flags: u32,
+    ival2: (u64, u64),
+    can_id: u32,
+    frame: Option<Frame>,
+) -> bcm::Msg {
+    bcm::Msg {
+        opcode,
+        flags,
+        ival2,
+        can_id,
+        frame,
+    }
+}
+
 /// One command; the reply, if any.
 fn handle(
     srv: &Arc<Server>,
     cl: &Arc<Client>,
-    port: &mut Option<Arc<CanPort>>,
-    threads: &mut Vec<thread::JoinHandle<()>>,
+    ses: &mut Session,
     msg: Result<String, String>,
 ) -> Option<String> {
     let cmd = match msg.and_then(|m| parse(&m)) {
         Ok(c) => c,
         Err(e) => return Some(format!("< error {e} >")),
     };
+    if let Command::Open(iface) = &cmd {
+        if ses.mode.is_some() {
+            return Some("< error already open >".into());
+        }
+        if !srv.allow.is_empty() && !srv.allow.contains(iface) {
+            return Some(format!("< error {iface} not allowed >"));
+        }
+        let addr = match socketcan::CanAddr::from_iface(iface) {
+            Ok(a) => a,
+            Err(e) => return Some(format!("< error open {iface}: {e} >")),
+        };
+        return match bcm_socket(addr, &cl.peer) {
+            Ok(b) => {
+                ses.mode = Some((iface.clone(), Mode::Bcm(b)));
+                let (tx, rx) = sync_channel(srv.queue);
+                let (s2, c2) = (Arc::clone(srv), Arc::clone(cl));
+                ses.q = Some((tx, thread::spawn(move || tx_loop(s2, c2, rx))));
+                ses.start_rx(srv, cl);
+                Some("< ok >".into())
+            }
+            Err(e) => Some(format!("< error open {iface}: {e} >")),
+        };
+    }
     match cmd {
-        Command::Open(iface) => {
-            if port.is_some() {
-                return Some("< error already open >".into());
-            }
-            if !srv.allow.is_empty() && !srv.allow.contains(&iface) {
-                return Some(format!("< error {iface} not allowed >"));
-            }
-            match CanPort::open(&iface, false)
+        Command::Echo => return Some("< echo >".into()),
+        Command::Unsupported(w) => return Some(format!("< error unsupported command {w} >")),
+        _ => {}
+    }
+    let Some((iface, mode)) = &ses.mode else {
+        return Some("< error no interface open >".into());
+    };
+    let iface = iface.clone();
+    let raw = matches!(mode, Mode::Raw(_));
+    match cmd {
+        Command::RawMode if raw => return Some("< ok >".into()),
+        Command::BcmMode if !raw => return Some("< ok >".into()),
+        Command::RawMode => {
+            let p = match CanPort::open(&iface, false)
                 .and_then(|p| p.set_read_timeout(Some(TICK)).map(|()| p))
             {
-                Ok(p) => {
-                    *port = Some(Arc::new(p));
-                    Some("< ok >".into())
-                }
-                Err(e) => Some(format!("< error open {iface}: {e} >")),
-            }
-        }
-        Command::RawMode => {
-            let Some(p) = port else {
-                return Some("< error no interface open >".into());
+                Ok(p) => p,
+                Err(e) => return Some(format!("< error rawmode {iface}: {e} >")),
             };
-            if !threads.is_empty() {
-                return Some("< ok >".into());
-            }
+            ses.stop_rx();
+            // The BCM socket closes here: its jobs and filters end.
+            ses.mode = Some((iface, Mode::Raw(Arc::new(p))));
             // The reply goes out before the first frame can.
             if cl.send("< ok >").is_err() {
                 cl.closed.store(true, Ordering::Relaxed);
                 return None;
             }
-            let (tx, rx) = sync_channel(srv.queue);
-            let (s1, c1, p1) = (Arc::clone(srv), Arc::clone(cl), Arc::clone(p));
-            threads.push(thread::spawn(move || rx_loop(s1, c1, p1, tx)));
-            let (s2, c2) = (Arc::clone(srv), Arc::clone(cl));
-            threads.push(thread::spawn(move || tx_loop(s2, c2, rx)));
-            None
+            ses.start_rx(srv, cl);
+            return None;
         }
-        Command::Send(f) => match port {
-            None => Some("< error no interface open >".into()),
-            Some(p) => match p.send(&f) {
+        Command::BcmMode => {
+            let b = match socketcan::CanAddr::from_iface(&iface)
+                .and_then(|a| bcm_socket(a, &cl.peer))
+            {
+                Ok(b) => b,
+                Err(e) => return Some(format!("< error bcmmode {iface}: {e} >")),
+            };
+            ses.stop_rx();
+            ses.mode = Some((iface, Mode::Bcm(b)));
+            ses.start_rx(srv, cl);
+            return Some("< ok >".into());
+        }
+        _ => {}
+    }
+    let Some((_, mode)) = &ses.mode else {
+        return None;
+    };
+    match cmd {
+        Command::Open(_)
+        | Command::Echo
+        | Command::Unsupported(_)
+        | Command::RawMode
+        | Command::BcmMode => None,
+        Command::Send(f) => match mode {
+            Mode::Raw(p) => match p.send(&f) {
                 Ok(()) => None,
                 Err(e) => Some(format!("< error send: {e} >")),
             },
+            Mode::Bcm(_) => bcm_req(
+                mode,
+                "send",
+                bcm_msg(bcm::TX_SEND, 0, (0, 0), f.id, Some(f)),
+            ),
         },
-        Command::Echo => Some("< echo >".into()),
-        Command::Unsupported(w) => Some(format!("< error unsupported command {w} >")),
+        Command::Add { ival, frame } => bcm_req(
+            mode,
+            "add",
+            bcm_msg(
+                bcm::TX_SETUP,
+                bcm::SETTIMER | bcm::STARTTIMER,
+                ival,
+                frame.id,
+                Some(frame),
+            ),
+        ),
+        Command::Update(frame) => bcm_req(
+            mode,
+            "update",
+            bcm_msg(bcm::TX_SETUP, 0, (0, 0), frame.id, Some(frame)),
+        ),
+        Command::Delete(id) => {
+            bcm_req(mode, "delete", bcm_msg(bcm::TX_DELETE, 0, (0, 0), id, None))
+        }
+        Command::Filter { ival, mask } => bcm_req(
+            mode,
+            "filter",
+            bcm_msg(bcm::RX_SETUP, bcm::SETTIMER, ival, mask.id, Some(mask)),
+        ),
+        Command::Subscribe { ival, id } => bcm_req(
+            mode,
+            "subscribe",
+            bcm_msg(
+                bcm::RX_SETUP,
+                bcm::RX_FILTER_ID | bcm::SETTIMER,
+                ival,
+                id,
+                Some(Frame {
+                    id,
+                    ..Frame::default()
+                }),
+            ),
+        ),
+        Command::Unsubscribe(id) => bcm_req(
+            mode,
+            "unsubscribe",
+            bcm_msg(bcm::RX_DELETE, 0, (0, 0), id, None),
+        ),
     }
 }
 
@@ -228,8 +467,11 @@ fn client(srv: Arc<Server>, stream: TcpStream) {
         dropped: AtomicU64::new(0),
         peer,
     });
-    let mut port = None;
-    let mut threads = Vec::new();
+    let mut ses = Session {
+        mode: None,
+        q: None,
+        rx: None,
+    };
     let mut split = Splitter::default();
     let mut buf = [0u8; 1024];
     if cl.send("< hi >").is_ok() {
@@ -248,7 +490,7 @@ fn client(srv: Arc<Server>, stream: TcpStream) {
                 Err(_) => break,
             }
             while let Some(m) = split.next_msg() {
-                if let Some(reply) = handle(&srv, &cl, &mut port, &mut threads, m) {
+                if let Some(reply) = handle(&srv, &cl, &mut ses, m) {
                     if cl.send(&reply).is_err() {
                         cl.closed.store(true, Ordering::Relaxed);
                     }
@@ -258,9 +500,7 @@ fn client(srv: Arc<Server>, stream: TcpStream) {
     }
     cl.closed.store(true, Ordering::Relaxed);
     let _ = input.shutdown(Shutdown::Both);
-    for t in threads {
-        let _ = t.join();
-    }
+    ses.end();
     let d = cl.dropped.load(Ordering::Relaxed);
     eprintln!("cantcpd: {}: closed, {d} frames dropped in all", cl.peer);
     srv.active.fetch_sub(1, Ordering::SeqCst);
