@@ -76,12 +76,21 @@ pub(crate) use portable_table;
 /// (bus-off, the restart timer, error frames) and
 /// `sja1000_sim_arblost_overrun`, which reach the same driver paths
 /// under lockdep and KASAN.
+///
+/// And the daemons added with powerd and logd (40-130 s each on the
+/// loaded debug kernel): they test user-space tools; the kernel paths
+/// they use (CAN_BCM jobs, CANPROTO_DSOR receive, CAN_RAW filters) run
+/// on the debug kernel in the bcm, dsor and raw tests.
 pub const RELEASE_ONLY: &[&str] = &[
     "install_autoload",
     "sja1000_sim_bus_off_manual_restart",
     "sja1000_sim_bus_errors_candump",
     "sja1000_sim_one_shot",
     "sja1000_sim_listen_only_presume_ack",
+    "cantcpd_bcm_mode_jobs_and_subscriptions",
+    "powerd_shuts_down_on_its_frame_only",
+    "powerd_dry_run_and_sigterm_change_nothing",
+    "logd_logs_dsor_messages_from_peer",
 ];
 
 /// Every test, in running order.
