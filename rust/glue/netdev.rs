@@ -13,7 +13,9 @@
 //!   NET_RX softirq hands frames up through [`Napi::receive`].
 
 use super::bindings;
+use super::net::Net;
 use super::skb::Skb;
+use super::sync::RcuReadGuard;
 use core::marker::PhantomData;
 use core::ptr::NonNull;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -54,8 +56,23 @@ impl NetDev {
 
     pub(crate) fn ifindex(&self) -> i32 {
         // SAFETY: valid device (type invariant); ifindex is fixed while
-        // registered.
+        // registered in one namespace (a move may change it, under RTNL).
         unsafe { (*self.as_ptr()).ifindex }
+    }
+
+    /// The device's namespace (`dev_net`), for the read-side section `_g`:
+    /// a device moves between namespaces only under RTNL, and a namespace
+    /// it left is freed only after a grace period. Any context.
+    pub(crate) fn net<'g>(&self, _g: &'g RcuReadGuard) -> &'g Net {
+        // SAFETY: a valid device; its namespace stays valid until `_g`
+        // ends (above).
+        unsafe { Net::from_raw(bindings::rcan_dev_net(self.as_ptr())) }
+    }
+
+    /// Whether the device is in namespace `net` now. Any context.
+    pub(crate) fn is_in(&self, net: &Net) -> bool {
+        let g = RcuReadGuard::new();
+        *self.net(&g) == *net
     }
 
     /// ARPHRD_CAN device.
@@ -196,23 +213,29 @@ pub(crate) struct DevRef(NonNull<bindings::net_device>);
 unsafe impl Send for DevRef {}
 
 impl DevRef {
-    /// `dev_get_by_index(&init_net, ifindex)`. Process or softirq context.
-    pub(crate) fn by_index(ifindex: i32) -> Option<DevRef> {
-        // SAFETY: returns a held device or NULL.
-        NonNull::new(unsafe { bindings::rcan_dev_get_by_index(ifindex) }).map(DevRef)
+    /// `dev_get_by_index(net, ifindex)`: an interface index means a device
+    /// of one namespace (a socket's: [`Sock::net`](super::sock::Sock::net)).
+    /// Process or softirq context.
+    pub(crate) fn by_index(net: &Net, ifindex: i32) -> Option<DevRef> {
+        // SAFETY: `net` is alive for the call; returns a held device or
+        // NULL.
+        NonNull::new(unsafe { bindings::rcan_dev_get_by_index(net.as_ptr(), ifindex) }).map(DevRef)
     }
 
-    /// `dev_get_by_name(&init_net, name)`. Process or softirq context.
-    pub(crate) fn by_name(name: &kernel::str::CStr) -> Option<DevRef> {
-        // SAFETY: `name` is NUL-terminated and lives for the call; the
-        // function returns a held device or NULL.
-        NonNull::new(unsafe { bindings::rcan_dev_get_by_name(name.as_char_ptr()) }).map(DevRef)
+    /// `dev_get_by_name(net, name)`. Process or softirq context.
+    pub(crate) fn by_name(net: &Net, name: &kernel::str::CStr) -> Option<DevRef> {
+        // SAFETY: `net` is alive and `name` NUL-terminated for the call;
+        // the function returns a held device or NULL.
+        NonNull::new(unsafe { bindings::rcan_dev_get_by_name(net.as_ptr(), name.as_char_ptr()) })
+            .map(DevRef)
     }
 
-    /// The CAN device (ARPHRD_CAN) with the smallest ifindex above `after`.
-    pub(crate) fn next_can(after: i32) -> Option<DevRef> {
-        // SAFETY: returns a held device or NULL.
-        NonNull::new(unsafe { bindings::rcan_next_can_dev(after) }).map(DevRef)
+    /// The CAN device (ARPHRD_CAN) of `net` with the smallest ifindex above
+    /// `after`. Process or softirq context.
+    pub(crate) fn next_can(net: &Net, after: i32) -> Option<DevRef> {
+        // SAFETY: `net` is alive for the call; returns a held device or
+        // NULL.
+        NonNull::new(unsafe { bindings::rcan_next_can_dev(net.as_ptr(), after) }).map(DevRef)
     }
 }
 
