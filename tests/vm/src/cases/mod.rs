@@ -17,6 +17,7 @@ mod lifecycle;
 mod loopdrv;
 mod mixed;
 mod modules;
+mod netns;
 mod raw_bind;
 mod raw_efault;
 mod raw_filter;
@@ -109,6 +110,8 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         install::TESTS,
         bcm::TESTS,
         bcm::OURS,
+        netns::TESTS,
+        netns::OURS,
     ]
     .into_iter()
     .flatten()
