@@ -246,7 +246,7 @@ fn raw_netns_isolation(ctx: &mut Ctx) -> TestResult {
     let taken = ifindex_here("can0").is_err() && ifindex_here("can1").is_err();
     ensure!(taken, "can0/can1 still in the initial namespace");
     ensure!(
-        e == Some(libc::ENODEV) || ia == 1,
+        e == Some(libc::ENODEV),
         "bind in the initial namespace to A's can0 (ifindex {ia}): expected ENODEV, got {e:?}"
     );
     Ok(())
@@ -347,10 +347,9 @@ fn raw_netns_delete_with_sockets(ctx: &mut Ctx) -> TestResult {
         if back || t0.elapsed() > Duration::from_secs(20) {
             break back;
         }
-        if ctx.stack() == Stack::Mainline
-            && t0.elapsed() > Duration::from_secs(2)
-            && !std::path::Path::new("/sys/devices/virtual/net/can1").exists()
-        {
+        // Mainline's vcan is deleted, not returned: there is nothing to
+        // wait for beyond a moment for the teardown worker.
+        if ctx.stack() == Stack::Mainline && t0.elapsed() > Duration::from_secs(2) {
             break false;
         }
         thread::sleep(Duration::from_millis(50));
