@@ -286,6 +286,11 @@ pub(crate) trait Driver: Sized + 'static {
     type Priv: Send + Sync;
     /// Whether `set_rx_mode` is implemented (fills `ndo_set_rx_mode`).
     const HAS_SET_RX_MODE: bool = false;
+    /// The device stays in the namespace it was registered in (the
+    /// initial one): `ip link set DEV netns ...` is refused (EINVAL), as
+    /// for `lo` (`netns_immutable`). For devices that belong to state of
+    /// the initial namespace (DSOR's `canip0`). Default: movable.
+    const NETNS_IMMUTABLE: bool = false;
 
     fn setup() -> Setup;
     fn open(dev: &Dev<Self>, priv_: &Self::Priv) -> Result;
@@ -560,6 +565,9 @@ impl<T: Driver> Adapter<T> {
             d.tx_queue_len = s.tx_queue_len;
             if s.no_queue {
                 bindings::rcan_netdev_set_no_queue(dev);
+            }
+            if T::NETNS_IMMUTABLE {
+                bindings::rcan_netdev_set_netns_immutable(dev);
             }
             d.netdev_ops = &Self::OPS;
             if let Some(l) = T::link() {

@@ -557,6 +557,11 @@ void rcan_netdev_set_no_queue(struct net_device *dev)
 	dev->priv_flags |= IFF_NO_QUEUE;
 }
 
+void rcan_netdev_set_netns_immutable(struct net_device *dev)
+{
+	dev->netns_immutable = true;
+}
+
 void rcan_netif_wake_queue(struct net_device *dev)
 {
 	netif_wake_queue(dev);

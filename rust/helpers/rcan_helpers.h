@@ -140,6 +140,7 @@ void rcan_udelay(unsigned long usecs);
 /* net_device queue, carrier and error counters */
 void rcan_netif_wake_queue(struct net_device *dev);
 void rcan_netdev_set_no_queue(struct net_device *dev);
+void rcan_netdev_set_netns_immutable(struct net_device *dev);
 void rcan_netif_carrier(struct net_device *dev, bool on);
 enum {
 	RCAN_STAT_RX_ERRORS,

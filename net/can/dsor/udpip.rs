@@ -123,6 +123,9 @@ pub(crate) fn deliver(
 
 impl Driver for CanipDriver {
     type Priv = ();
+    /// DSOR is one engine of the initial namespace (netns.rst): its UDP/IP
+    /// device stays there.
+    const NETNS_IMMUTABLE: bool = true;
 
     fn setup() -> Setup {
         Setup {

@@ -41,6 +41,7 @@ pub const TESTS: &[crate::Test] = portable_table![
     raw_netns_move_under_traffic,
     raw_netns_delete_with_sockets,
     bcm_netns_send,
+    candev_netns_returns,
 ];
 
 pub const OURS: &[crate::Test] = test_table![netns_thesis_api, netns_canloop_returns];
@@ -409,11 +410,33 @@ fn bcm_netns_send(ctx: &mut Ctx) -> TestResult {
     Ok(())
 }
 
+/// An SJA1000 controller (QEMU's Kvaser card; link kind "can") in a
+/// namespace that goes comes back to the initial namespace, as mainline's
+/// can-dev devices do (`netns_refund`), rather than being unregistered
+/// under its driver; the driver then unloads cleanly.
+fn candev_netns_returns(ctx: &mut Ctx) -> TestResult {
+    ctx.sja1000_cards()?;
+    let ns = Ns::new()?;
+    ns.take("can0")?;
+    ns.ifindex("can0")?;
+    ensure!(!in_init("can0"), "can0 still in the initial namespace");
+    drop(ns);
+    let t0 = Instant::now();
+    while !in_init("can0") {
+        ensure!(
+            t0.elapsed() < Duration::from_secs(20),
+            "can0 did not come back from its namespace"
+        );
+        thread::sleep(Duration::from_millis(50));
+    }
+    ctx.unload_all()
+}
+
 /// The thesis API (CANPROTO_CAN) in two namespaces: a socket bound to
 /// every interface receives what is sent in its namespace only; sending to
 /// ifindex 0 ("every CAN interface", thesis 5.2.2) sends on the
 /// namespace's interfaces only. DSOR stays in the initial namespace:
-/// socket() elsewhere is EAFNOSUPPORT.
+/// socket() elsewhere is EAFNOSUPPORT, and `canip0` cannot be moved.
 fn netns_thesis_api(ctx: &mut Ctx) -> TestResult {
     ctx.load_stack(&["count=2"])?;
     let (a, b) = (Ns::new()?, Ns::new()?);
@@ -458,6 +481,10 @@ fn netns_thesis_api(ctx: &mut Ctx) -> TestResult {
     ensure!(
         e == Some(libc::EAFNOSUPPORT),
         "socket(CANPROTO_DSOR) in a namespace: expected EAFNOSUPPORT, got {e:?}"
+    );
+    ensure!(
+        a.take("canip0").is_err() && in_init("canip0"),
+        "DSOR's canip0 moved out of the initial namespace"
     );
     Ok(())
 }
