@@ -69,7 +69,18 @@ pub(crate) use portable_table;
 /// it reaches in the kernel, `rcan_pf`'s request_module on `socket()`,
 /// also runs on the debug kernel in `socket_create` (an unregistered
 /// protocol).
-pub const RELEASE_ONLY: &[&str] = &["install_autoload"];
+/// Of the namespace tests, only the two that exercise teardown
+/// (`raw_netns_move_under_traffic`, `raw_netns_delete_with_sockets`) run
+/// on the debug kernel: creating and tearing down namespaces there costs
+/// tens of seconds per test under TCG.
+pub const RELEASE_ONLY: &[&str] = &[
+    "install_autoload",
+    "raw_netns_isolation",
+    "bcm_netns_send",
+    "candev_netns_returns",
+    "netns_thesis_api",
+    "netns_canloop_returns",
+];
 
 /// Every test, in running order.
 pub fn all() -> impl Iterator<Item = &'static Test> {
