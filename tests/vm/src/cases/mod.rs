@@ -69,6 +69,7 @@ pub(crate) use portable_table;
 /// it reaches in the kernel, `rcan_pf`'s request_module on `socket()`,
 /// also runs on the debug kernel in `socket_create` (an unregistered
 /// protocol).
+///
 /// Of the namespace tests, only the two that exercise teardown
 /// (`raw_netns_move_under_traffic`, `raw_netns_delete_with_sockets`) run
 /// on the debug kernel: creating and tearing down namespaces there costs
