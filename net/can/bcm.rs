@@ -252,7 +252,7 @@ struct TxEffects<'a, 'p> {
 
 impl TxOut for TxEffects<'_, '_> {
     fn send(&mut self, index: usize) -> bool {
-        let Some(dev) = DevRef::by_index(self.ifindex) else {
+        let Some(dev) = DevRef::by_index(self.sk.net(), self.ifindex) else {
             return false;
         };
         let Some(bytes) = self
@@ -324,7 +324,7 @@ impl RxOut for RxEffects<'_, '_> {
     }
 
     fn send_reply(&mut self, reply: &CanFrame, ifindex: i32) {
-        let Some(dev) = DevRef::by_index(ifindex) else {
+        let Some(dev) = DevRef::by_index(self.sk.net(), ifindex) else {
             return;
         };
         if let Some(skb) = frame_skb(self.sk, &dev, &reply.to_bytes()) {
@@ -584,6 +584,9 @@ fn rx_take(list: &IrqSpinLock<RxOps>, key: &OpKey) -> Option<Job> {
 impl CanProtocol for BcmProto {
     const PROTOCOL: i32 = CAN_BCM;
     const SOCK_TYPE: i32 = SOCK_DGRAM;
+    /// All state is in the socket; devices are looked up in the
+    /// socket's namespace.
+    const ALL_NAMESPACES: bool = true;
 
     fn module() -> &'static ProtoModule<Self> {
         &MODULE
@@ -847,7 +850,7 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
 /// `TX_SEND` (mainline `bcm_tx_send`). Process context.
 fn tx_send(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
     let ret = wire::check_tx_send(req, ifindex).map_err(errno)?;
-    let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+    let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
     let cfsiz = req.head.cfsiz();
     if cfsiz == CANFD_FRAME_LEN {
         // A CAN FD frame: mainline's can_send checks its length, then the
@@ -929,7 +932,7 @@ impl glue::sock::Proto for BcmProto {
             return Err(glue::errno(bindings::EISCONN as i32));
         }
         if ifindex != 0 {
-            let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+            let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
             if !dev.is_can() {
                 return Err(ENODEV);
             }
@@ -984,7 +987,7 @@ impl glue::sock::Proto for BcmProto {
                 }
                 ifindex = i32::from_ne_bytes([name[4], name[5], name[6], name[7]]);
                 if ifindex != 0 {
-                    let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+                    let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
                     if !dev.is_can() {
                         return Err(ENODEV);
                     }

@@ -63,6 +63,9 @@ const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 impl CanProtocol for CanProtoOps {
     const PROTOCOL: i32 = CANPROTO_CAN;
     const SOCK_TYPE: i32 = SOCK_RAW;
+    /// All state is in the socket; devices are looked up in the
+    /// socket's namespace.
+    const ALL_NAMESPACES: bool = true;
 
     fn module() -> &'static ProtoModule<Self> {
         &MODULE
@@ -118,13 +121,13 @@ fn set_receivers(sk: &S, filter: Option<&SockaddrArb>) -> Result {
     }
 }
 
-/// Checks that `ifindex` is 0 or a CAN device. Caller holds RTNL, so the
-/// answer stays true until it is dropped.
-fn check_ifindex(ifindex: i32, _rtnl: &dyn RtnlProof) -> Result {
+/// Checks that `ifindex` is 0 or a CAN device of `sk`'s namespace. Caller
+/// holds RTNL, so the answer stays true until it is dropped.
+fn check_ifindex(sk: &S, ifindex: i32, _rtnl: &dyn RtnlProof) -> Result {
     if ifindex == 0 {
         return Ok(());
     }
-    match DevRef::by_index(ifindex) {
+    match DevRef::by_index(sk.net(), ifindex) {
         Some(dev) if dev.is_can() => Ok(()),
         _ => Err(ENODEV),
     }
@@ -155,7 +158,7 @@ impl glue::sock::Proto for CanProtoOps {
         let a = sockaddr::parse(addr).map_err(|e| glue::errno(e.errno()))?;
         let rx = a.bind_filter().map_err(|e| glue::errno(e.errno()))?;
         let rtnl = Rtnl::lock();
-        check_ifindex(rx.ifindex, &rtnl)?;
+        check_ifindex(sk, rx.ifindex, &rtnl)?;
         let mut s = sk.lock();
         set_receivers(sk, Some(&a))?;
         s.bound = Some(a);
@@ -170,7 +173,7 @@ impl glue::sock::Proto for CanProtoOps {
         let a = sockaddr::parse(addr).map_err(|e| glue::errno(e.errno()))?;
         let dest = a.dest().map_err(|e| glue::errno(e.errno()))?;
         let rtnl = Rtnl::lock();
-        check_ifindex(dest.1, &rtnl)?;
+        check_ifindex(sk, dest.1, &rtnl)?;
         sk.lock().peer = Some(dest);
         Ok(())
     }
@@ -220,14 +223,15 @@ impl glue::sock::Proto for CanProtoOps {
             CanFrame::from_arb(arb, len, &data[..len]).map_err(|e| glue::errno(e.errno()))?;
         let nonblock = flags & bindings::MSG_DONTWAIT != 0;
         if ifindex != 0 {
-            let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+            let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
             send_one(sk, &dev, &frame, nonblock)?;
             return Ok(len);
         }
-        // ifindex 0: every CAN interface that is up (thesis 5.2.2).
+        // ifindex 0: every CAN interface of the socket's namespace that is
+        // up (thesis 5.2.2).
         let (mut any, mut sent) = (false, false);
         let mut after = 0;
-        while let Some(dev) = DevRef::next_can(after) {
+        while let Some(dev) = DevRef::next_can(sk.net(), after) {
             after = dev.ifindex();
             any = true;
             if dev.is_up() {

@@ -27,7 +27,12 @@
 //!   `rcan_rx_set` (process context). Removed registrations are freed by
 //!   `call_rcu` callbacks, so neither writers nor `close()` wait for a grace
 //!   period; each socket receiver holds a reference on its socket until
-//!   then.
+//!   then. `TABLE` serves the initial namespace; every other network
+//!   namespace gets a table of its own at its first subscription (kept by
+//!   the glue as pernet data, freed at the namespace's exit), so interface
+//!   indexes, "every interface" receivers and frames stay inside their
+//!   namespace (mainline keeps its receive lists per namespace too). All
+//!   tables share `rcan_rx_mutex`.
 //!
 //! Lock order (outermost first): RTNL, socket lock, `rcan_rx_mutex`;
 //! `rcan_pf_mutex` is never held together with `rcan_rx_mutex`.
@@ -43,6 +48,7 @@ use kernel::prelude::*;
 
 use family::{Family, RxRequest, Target};
 use glue::can::rx::{Filters, RxTable, Spec};
+use glue::net::Net;
 use glue::netdev::NetDev;
 use glue::skb::Skb;
 use glue::sync::{rcu_barrier, RcuReadGuard};
@@ -51,9 +57,33 @@ use rcan_core::filter::ArbFilter;
 use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use rcan_core::rxtable::{self, CanFilterKind, Filter};
 
-/// The receive table (RCU readers in softirq, `rcan_rx_mutex` for
-/// writers).
+/// The receive table of the initial namespace, which also holds every
+/// in-kernel receiver (RCU readers in softirq, `rcan_rx_mutex` for
+/// writers). Every other namespace has a table of its own
+/// (`family::net_table`), made at its first subscription: its sockets'
+/// interface indexes (and 0, "every interface") mean its devices, and
+/// frames never cross namespaces.
 static TABLE: RxTable<Target> = RxTable::new(family::RX_MUTEX);
+
+/// The receive table of `net`, if it has one. Any context; the table
+/// lives as long as `net` is borrowed.
+fn table(net: &Net) -> Option<&RxTable<Target>> {
+    if net.is_init() {
+        Some(&TABLE)
+    } else {
+        family::net_table(net)
+    }
+}
+
+/// The receive table of `net`, made if it has none yet. Process context;
+/// sleeps. ENOMEM.
+fn table_make(net: &Net) -> Result<&RxTable<Target>> {
+    if net.is_init() {
+        Ok(&TABLE)
+    } else {
+        family::net_table_make(net)
+    }
+}
 
 /// Converts the C filters of a spec.
 fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<Filters> {
@@ -77,7 +107,7 @@ fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<Filters> {
 impl Family for PfCan {
     /// See [`rcan_api::rx_set`]. Process context; sleeps (allocates, takes
     /// the table's mutex, then `rcan_pf_mutex` to tell the drivers).
-    fn rx_set(id: usize, new: Option<(RxRequest<'_>, Target)>) -> Result {
+    fn rx_set(net: &Net, id: usize, new: Option<(RxRequest<'_>, Target)>) -> Result {
         let changed = match new {
             Some((req, t)) => {
                 let mut err_mask = req.err_mask & rxtable::CAN_ERR_MASK;
@@ -89,9 +119,13 @@ impl Family for PfCan {
                     err_mask,
                     cookie: req.cookie,
                 };
-                TABLE.set(id, Some((s, t)))?
+                table_make(net)?.set(id, Some((s, t)))?
             }
-            None => TABLE.set(id, None)?,
+            // A namespace without a table has no receiver to remove.
+            None => match table(net) {
+                Some(t) => t.set(id, None)?,
+                None => return Ok(()),
+            },
         };
         family::notify_listeners(&changed.ifindex);
         Ok(())
@@ -99,12 +133,16 @@ impl Family for PfCan {
 
     /// See [`rcan_api::rx_reserve`]. Process context; sleeps (allocates,
     /// takes the table's mutex).
-    fn rx_reserve(id: usize, t: Target) -> Result {
-        TABLE.reserve(id, t)
+    fn rx_reserve(net: &Net, id: usize, t: Target) -> Result {
+        table_make(net)?.reserve(id, t)
     }
 
-    fn rx_filters(ifindex: i32, out: &mut [Filter]) -> Option<usize> {
-        TABLE.filters(ifindex, out)
+    fn rx_filters(dev: &NetDev, out: &mut [Filter]) -> Option<usize> {
+        let g = RcuReadGuard::new();
+        match table(dev.net(&g)) {
+            Some(t) => t.filters(dev.ifindex(), out),
+            None => Some(0),
+        }
     }
 
     /// Mainline `can_send`. Process or softirq context.
@@ -154,8 +192,14 @@ impl Family for PfCan {
             return false;
         };
         let g = RcuReadGuard::new();
+        // The table of the device's namespace: only its receivers see the
+        // frame.
+        let Some(table) = table(dev.net(&g)) else {
+            skb.consume();
+            return true;
+        };
         let mut pending: Option<(&Target, u32)> = None;
-        TABLE.for_each_match(&g, dev.ifindex(), frame.can_id, |t, cookie| {
+        table.for_each_match(&g, dev.ifindex(), frame.can_id, |t, cookie| {
             if let Some((prev, c)) = pending.replace((t, cookie)) {
                 // The receiver was found in the table inside our read-side
                 // section, so it (with the sock reference it holds, or a

@@ -173,6 +173,9 @@ type S = Sock<RawProto>;
 impl CanProtocol for RawProto {
     const PROTOCOL: i32 = CAN_RAW;
     const SOCK_TYPE: i32 = SOCK_RAW;
+    /// All state is in the socket; devices are looked up in the
+    /// socket's namespace.
+    const ALL_NAMESPACES: bool = true;
     /// The receiver is made at `socket()` (mainline allocates its
     /// per-socket receive state there too), so bind allocates nothing;
     /// `release` always removes it.
@@ -368,7 +371,7 @@ impl glue::sock::Proto for RawProto {
                 return Ok(());
             }
             if ifindex != 0 {
-                let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+                let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
                 if !dev.is_can() {
                     return Err(ENODEV);
                 }
@@ -420,7 +423,7 @@ impl glue::sock::Proto for RawProto {
             Some(name) => parse_addr(name)?,
             None => bound_ifindex,
         };
-        let dev = DevRef::by_index(ifindex).ok_or(ENXIO)?;
+        let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENXIO)?;
         let nonblock = msg.flags() & bindings::MSG_DONTWAIT != 0;
         let mut skb = sk.alloc_send_skb(SKB_PRIV_LEN + len as u32, nonblock)?;
         skb.reserve(SKB_PRIV_LEN);

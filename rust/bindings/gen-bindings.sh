@@ -24,14 +24,14 @@ cflags=$(sed -n 's/^savedcmd_[^ ]* := bindgen .* -- \(.*\)$/\1/p' "$saved" |
 	sed -e 's/;.*$//' -e 's/-Wp,-MMD,[^ ]*//' -e "s/-DKBUILD_[A-Z]*='[^']*'//g" \
 	    -e 's/-D__KBUILD_MODNAME=[^ ]*//')
 params=$(grep -Ev '^#|^$' "$ksrc/rust/bindgen_parameters")
-allow_fn='(ioread|iowrite|sock|sk|skb|__skb|kfree_skb|consume_skb|dev|__dev|netdev|netif|alloc_netdev|free_netdev|register_netdev|unregister_netdev|register_netdevice|unregister_netdevice|datagram|proto|synchronize_rcu|rcu_barrier|call_rcu|try_module_get|module_put|get_random|rtnl|__rtnl|pci|__pci|request_threaded_irq|free_irq|hrtimer|ktime|rcan|memcpy_from_msg|memcpy_to_msg|put_cmsg|kfree|__kmalloc|_printk|ether|can)_?.*'
+allow_fn='(ioread|iowrite|sock|sk|skb|__skb|kfree_skb|consume_skb|dev|__dev|netdev|netif|register_pernet|unregister_pernet|alloc_netdev|free_netdev|register_netdev|unregister_netdev|register_netdevice|unregister_netdevice|datagram|proto|synchronize_rcu|rcu_barrier|call_rcu|try_module_get|module_put|get_random|rtnl|__rtnl|pci|__pci|request_threaded_irq|free_irq|hrtimer|ktime|rcan|memcpy_from_msg|memcpy_to_msg|put_cmsg|kfree|__kmalloc|_printk|ether|can)_?.*'
 tmp=$(mktemp)
 # shellcheck disable=SC2086
 (cd "$kbuild" && bindgen "$here/rcan_bindings.h" $params \
 	--rust-target 1.68 --use-core --with-derive-default --ctypes-prefix ffi \
 	--no-layout-tests --no-debug '.*' --enable-function-attribute-detection \
 	--allowlist-function "$allow_fn" \
-	--allowlist-type '(napi_struct|net_device_flags|sock_type|netdev_priv_flags|sock|socket|sk_buff|net_device|proto|proto_ops|net_proto_family|packet_type|can_frame|can_skb_priv|notifier_block|netdev_notifier_info|msghdr|sockaddr|hrtimer|pci_dev|pci_driver|pci_device_id|callback_head|rtnl_link_stats64|ifreq)' \
+	--allowlist-type '(napi_struct|net_device_flags|sock_type|netdev_priv_flags|sock|socket|sk_buff|net_device|proto|proto_ops|net_proto_family|packet_type|can_frame|can_skb_priv|notifier_block|netdev_notifier_info|msghdr|sockaddr|hrtimer|pci_dev|pci_driver|pci_device_id|callback_head|rtnl_link_stats64|ifreq|pernet_operations)' \
 	--allowlist-var '(AF|PF|SOCK|SOL|SO|MSG|IFF|ARPHRD|ETH_P|CAN|NETDEV|NET_RX|NET_XMIT|NETDEV_TX|PACKET|CHECKSUM|E[A-Z0-9]+|HRTIMER|CLOCK|IRQF|SIOC|NOTIFY|SOCK_RCU|RCAN|NET_NAME|CONFIG_PROVE|__GFP|___GFP)_?.*' \
 	-o "$tmp" -- $cflags -DMODULE '-DKBUILD_MODNAME="rcan"' \
 	'-DKBUILD_BASENAME="rcan"' -D__KBUILD_MODNAME=kmod_rcan)

@@ -23,5 +23,6 @@
 #include <linux/socket.h>
 #include <linux/sockios.h>
 #include <linux/wait.h>
+#include <net/net_namespace.h>
 #include <net/sock.h>
 #include "../helpers/rcan_helpers.h"

@@ -17,7 +17,7 @@
 //! allocated at run time, cancelled when dropped), [`pci`] (PCI drivers and BARs),
 //! [`isa`] (claimed memory/port windows, interrupt autoprobe), [`percpu`]
 //! (per-CPU counters), [`params`] (module parameters of the C shims),
-//! [`kmod`] (loading modules on demand),
+//! [`kmod`] (loading modules on demand), [`net`] (network namespaces),
 //! [`can`] (the CAN framework: the receive table).
 #![allow(dead_code)]
 
@@ -49,6 +49,7 @@ pub(crate) mod isa;
 pub(crate) mod jobtimer;
 pub(crate) mod kmod;
 pub(crate) mod lock;
+pub(crate) mod net;
 pub(crate) mod netdev;
 pub(crate) mod params;
 pub(crate) mod pci;

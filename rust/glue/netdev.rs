@@ -13,7 +13,9 @@
 //!   NET_RX softirq hands frames up through [`Napi::receive`].
 
 use super::bindings;
+use super::net::Net;
 use super::skb::Skb;
+use super::sync::RcuReadGuard;
 use core::marker::PhantomData;
 use core::ptr::NonNull;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -54,8 +56,23 @@ impl NetDev {
 
     pub(crate) fn ifindex(&self) -> i32 {
         // SAFETY: valid device (type invariant); ifindex is fixed while
-        // registered.
+        // registered in one namespace (a move may change it, under RTNL).
         unsafe { (*self.as_ptr()).ifindex }
+    }
+
+    /// The device's namespace (`dev_net`), for the read-side section `_g`:
+    /// a device moves between namespaces only under RTNL, and a namespace
+    /// it left is freed only after a grace period. Any context.
+    pub(crate) fn net<'g>(&self, _g: &'g RcuReadGuard) -> &'g Net {
+        // SAFETY: a valid device; its namespace stays valid until `_g`
+        // ends (above).
+        unsafe { Net::from_raw(bindings::rcan_dev_net(self.as_ptr())) }
+    }
+
+    /// Whether the device is in namespace `net` now. Any context.
+    pub(crate) fn is_in(&self, net: &Net) -> bool {
+        let g = RcuReadGuard::new();
+        *self.net(&g) == *net
     }
 
     /// ARPHRD_CAN device.
@@ -196,23 +213,29 @@ pub(crate) struct DevRef(NonNull<bindings::net_device>);
 unsafe impl Send for DevRef {}
 
 impl DevRef {
-    /// `dev_get_by_index(&init_net, ifindex)`. Process or softirq context.
-    pub(crate) fn by_index(ifindex: i32) -> Option<DevRef> {
-        // SAFETY: returns a held device or NULL.
-        NonNull::new(unsafe { bindings::rcan_dev_get_by_index(ifindex) }).map(DevRef)
+    /// `dev_get_by_index(net, ifindex)`: an interface index means a device
+    /// of one namespace (a socket's: [`Sock::net`](super::sock::Sock::net)).
+    /// Process or softirq context.
+    pub(crate) fn by_index(net: &Net, ifindex: i32) -> Option<DevRef> {
+        // SAFETY: `net` is alive for the call; returns a held device or
+        // NULL.
+        NonNull::new(unsafe { bindings::rcan_dev_get_by_index(net.as_ptr(), ifindex) }).map(DevRef)
     }
 
-    /// `dev_get_by_name(&init_net, name)`. Process or softirq context.
-    pub(crate) fn by_name(name: &kernel::str::CStr) -> Option<DevRef> {
-        // SAFETY: `name` is NUL-terminated and lives for the call; the
-        // function returns a held device or NULL.
-        NonNull::new(unsafe { bindings::rcan_dev_get_by_name(name.as_char_ptr()) }).map(DevRef)
+    /// `dev_get_by_name(net, name)`. Process or softirq context.
+    pub(crate) fn by_name(net: &Net, name: &kernel::str::CStr) -> Option<DevRef> {
+        // SAFETY: `net` is alive and `name` NUL-terminated for the call;
+        // the function returns a held device or NULL.
+        NonNull::new(unsafe { bindings::rcan_dev_get_by_name(net.as_ptr(), name.as_char_ptr()) })
+            .map(DevRef)
     }
 
-    /// The CAN device (ARPHRD_CAN) with the smallest ifindex above `after`.
-    pub(crate) fn next_can(after: i32) -> Option<DevRef> {
-        // SAFETY: returns a held device or NULL.
-        NonNull::new(unsafe { bindings::rcan_next_can_dev(after) }).map(DevRef)
+    /// The CAN device (ARPHRD_CAN) of `net` with the smallest ifindex above
+    /// `after`. Process or softirq context.
+    pub(crate) fn next_can(net: &Net, after: i32) -> Option<DevRef> {
+        // SAFETY: `net` is alive for the call; returns a held device or
+        // NULL.
+        NonNull::new(unsafe { bindings::rcan_next_can_dev(net.as_ptr(), after) }).map(DevRef)
     }
 }
 
@@ -263,6 +286,11 @@ pub(crate) trait Driver: Sized + 'static {
     type Priv: Send + Sync;
     /// Whether `set_rx_mode` is implemented (fills `ndo_set_rx_mode`).
     const HAS_SET_RX_MODE: bool = false;
+    /// The device stays in the namespace it was registered in (the
+    /// initial one): `ip link set DEV netns ...` is refused (EINVAL), as
+    /// for `lo` (`netns_immutable`). For devices that belong to state of
+    /// the initial namespace (DSOR's `canip0`). Default: movable.
+    const NETNS_IMMUTABLE: bool = false;
 
     fn setup() -> Setup;
     fn open(dev: &Dev<Self>, priv_: &Self::Priv) -> Result;
@@ -537,6 +565,9 @@ impl<T: Driver> Adapter<T> {
             d.tx_queue_len = s.tx_queue_len;
             if s.no_queue {
                 bindings::rcan_netdev_set_no_queue(dev);
+            }
+            if T::NETNS_IMMUTABLE {
+                bindings::rcan_netdev_set_netns_immutable(dev);
             }
             d.netdev_ops = &Self::OPS;
             if let Some(l) = T::link() {

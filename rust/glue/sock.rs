@@ -14,6 +14,7 @@
 //! [`Sock::queue_rcv`], which uses the receive queue's own spinlock.
 
 use super::bindings;
+use super::net::Net;
 use super::skb::Skb;
 use core::marker::PhantomData;
 use kernel::error::{code, Error, Result};
@@ -145,6 +146,16 @@ impl<T: Proto> Sock<T> {
 
     pub(crate) fn as_ptr(&self) -> *mut bindings::sock {
         self.sk
+    }
+
+    /// The socket's network namespace (`sock_net`), fixed for its life.
+    /// A user socket holds a reference on it (`sk_alloc` with `kern` 0);
+    /// a kernel socket's creator closes it before its namespace exits, by
+    /// the kernel's rule for kernel sockets. Any context.
+    pub(crate) fn net(&self) -> &Net {
+        // SAFETY: a live sock (type invariant), whose namespace outlives
+        // it (above).
+        unsafe { Net::from_raw(bindings::rcan_sock_net(self.sk)) }
     }
 
     /// The state readable without the socket lock.

@@ -28,6 +28,8 @@
 #include <linux/sockptr.h>
 #include <linux/uaccess.h>
 #include <linux/wait.h>
+#include <net/net_namespace.h>
+#include <net/netns/generic.h>
 #include <net/sock.h>
 
 #include "rcan_helpers.h"
@@ -295,27 +297,42 @@ void rcan_dev_put(struct net_device *dev)
 	dev_put(dev);
 }
 
-struct net_device *rcan_dev_get_by_index(int ifindex)
+struct net_device *rcan_dev_get_by_index(struct net *net, int ifindex)
 {
-	return dev_get_by_index(&init_net, ifindex);
+	return dev_get_by_index(net, ifindex);
 }
 
-struct net_device *rcan_dev_get_by_name(const char *name)
+struct net_device *rcan_dev_get_by_name(struct net *net, const char *name)
 {
-	return dev_get_by_name(&init_net, name);
+	return dev_get_by_name(net, name);
+}
+
+struct net *rcan_init_net(void)
+{
+	return &init_net;
+}
+
+struct net *rcan_dev_net(const struct net_device *dev)
+{
+	return dev_net(dev);
+}
+
+void *rcan_net_generic(const struct net *net, unsigned int id)
+{
+	return net_generic(net, id);
 }
 
 /*
- * The CAN device with the smallest ifindex above @after_ifindex, with a
+ * The CAN device of @net with the smallest ifindex above @after_ifindex, with a
  * reference held, or NULL. Lets Rust walk the device list without holding
  * the RCU read lock across sleeping calls.
  */
-struct net_device *rcan_next_can_dev(int after_ifindex)
+struct net_device *rcan_next_can_dev(struct net *net, int after_ifindex)
 {
 	struct net_device *dev, *best = NULL;
 
 	rcu_read_lock();
-	for_each_netdev_rcu(&init_net, dev) {
+	for_each_netdev_rcu(net, dev) {
 		if (dev->type != ARPHRD_CAN || dev->ifindex <= after_ifindex)
 			continue;
 		if (!best || dev->ifindex < best->ifindex)
@@ -538,6 +555,11 @@ void rcan_udelay(unsigned long usecs)
 void rcan_netdev_set_no_queue(struct net_device *dev)
 {
 	dev->priv_flags |= IFF_NO_QUEUE;
+}
+
+void rcan_netdev_set_netns_immutable(struct net_device *dev)
+{
+	dev->netns_immutable = true;
 }
 
 void rcan_netif_wake_queue(struct net_device *dev)

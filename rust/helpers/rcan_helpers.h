@@ -73,9 +73,14 @@ void rcan_netif_start_queue(struct net_device *dev);
 void rcan_netif_stop_queue(struct net_device *dev);
 void rcan_dev_hold(struct net_device *dev);
 void rcan_dev_put(struct net_device *dev);
-struct net_device *rcan_dev_get_by_index(int ifindex);
-struct net_device *rcan_dev_get_by_name(const char *name);
-struct net_device *rcan_next_can_dev(int after_ifindex);
+struct net_device *rcan_dev_get_by_index(struct net *net, int ifindex);
+struct net_device *rcan_dev_get_by_name(struct net *net, const char *name);
+struct net_device *rcan_next_can_dev(struct net *net, int after_ifindex);
+
+/* network namespaces */
+struct net *rcan_init_net(void);
+struct net *rcan_dev_net(const struct net_device *dev);
+void *rcan_net_generic(const struct net *net, unsigned int id);
 int rcan_dev_queue_xmit(struct sk_buff *skb);
 struct net_device *rcan_netdev_notifier_dev(void *info);
 void rcan_dev_stats_tx(struct net_device *dev, unsigned int bytes);
@@ -135,6 +140,7 @@ void rcan_udelay(unsigned long usecs);
 /* net_device queue, carrier and error counters */
 void rcan_netif_wake_queue(struct net_device *dev);
 void rcan_netdev_set_no_queue(struct net_device *dev);
+void rcan_netdev_set_netns_immutable(struct net_device *dev);
 void rcan_netif_carrier(struct net_device *dev, bool on);
 enum {
 	RCAN_STAT_RX_ERRORS,

@@ -16,6 +16,7 @@ use kernel::prelude::*;
 
 use crate::engine::{now_ms, restart_over_ms, Bind, Owner, TxEntry, ENGINE, NODE, WAITQ};
 use crate::glue::lock::Waited;
+use crate::glue::net::Net;
 use crate::glue::netdev::{DevRef, NetDev};
 use crate::glue::neterr;
 use crate::glue::sock::{Msg, Sock};
@@ -44,6 +45,9 @@ pub(crate) static MODULE: ProtoModule<DsorProto> = ProtoModule::new();
 impl CanProtocol for DsorProto {
     const PROTOCOL: i32 = CANPROTO_DSOR;
     const SOCK_TYPE: i32 = SOCK_DGRAM;
+    // ALL_NAMESPACES stays off: one engine, node id, port table and
+    // `canip0` per host (Documentation/networking/rcan/netns.rst), so
+    // socket() outside the initial namespace fails with EAFNOSUPPORT.
 
     fn module() -> &'static ProtoModule<Self> {
         &MODULE
@@ -421,7 +425,7 @@ fn check_device() -> Result {
         let g = ENGINE.lock();
         g.as_ref().ok_or(ENODEV)?.cfg.ifname
     };
-    let dev = DevRef::by_name(ifname.as_cstr()).ok_or(ENODEV)?;
+    let dev = DevRef::by_name(Net::init(), ifname.as_cstr()).ok_or(ENODEV)?;
     if !dev.is_can() {
         return Err(ENODEV);
     }

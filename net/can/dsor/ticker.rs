@@ -52,6 +52,7 @@ use crate::glue::bindings;
 use crate::glue::hrtimer::{
     ktime_get_mono_ns, ktime_get_real_ns, ClockId, HrTimer, HrTimerCallback, HrTimerMode,
 };
+use crate::glue::net::Net;
 use crate::glue::netdev::DevRef;
 use crate::glue::skb::Skb;
 use crate::rcan_api;
@@ -300,7 +301,7 @@ impl TickState {
 /// `p`, with local loopback. Softirq context.
 fn send_frame(p: &Params, source: u8, second: i64) -> core::result::Result<(), DevState> {
     let frame = TimeFrame::for_second(second, source).encode(p.vehicle);
-    let dev = DevRef::by_name(p.dev.as_cstr()).ok_or(DevState::Missing)?;
+    let dev = DevRef::by_name(Net::init(), p.dev.as_cstr()).ok_or(DevState::Missing)?;
     if !dev.is_up() {
         return Err(DevState::Down);
     }

@@ -16,6 +16,7 @@ use kernel::prelude::*;
 
 use crate::engine::{now_ms, ENGINE, WAITQ};
 use crate::glue::hrtimer::{ktime_get_mono_ns, HrTimer, HrTimerCallback};
+use crate::glue::net::Net;
 use crate::glue::netdev::DevRef;
 use crate::glue::neterr;
 use crate::glue::skb::Skb;
@@ -141,7 +142,7 @@ pub(crate) fn drain(timers: bool) {
         }
         sent += n;
         if dev.is_none() {
-            dev = DevRef::by_name(ifname.as_cstr());
+            dev = DevRef::by_name(Net::init(), ifname.as_cstr());
         }
         let errors = match &dev {
             Some(d) => send_batch(d, &batch[..n]),

@@ -26,6 +26,7 @@ use kernel::prelude::*;
 
 use crate::engine::{now_ms, restart_over_ms, Owner, ENGINE};
 use crate::glue::bindings;
+use crate::glue::net::Net;
 use crate::glue::netdev::{Dev, DevRef, Driver, NetDev, Registration, Setup, Xmit};
 use crate::glue::skb::Skb;
 use crate::rcan_core::dsor_addr::udp_node;
@@ -49,7 +50,7 @@ impl Canip {
         let reg = Registration::<CanipDriver>::register(c_str!("canip%d"), ())?;
         // The index names our device until we unregister it (dropping
         // `reg` on an error return does).
-        let dev = DevRef::by_index(reg.dev().ifindex()).ok_or(ENODEV)?;
+        let dev = DevRef::by_index(Net::init(), reg.dev().ifindex()).ok_or(ENODEV)?;
         match ENGINE.lock().as_mut() {
             Some(e) => e.canip = Some(dev),
             None => return Err(ENODEV),
@@ -122,6 +123,9 @@ pub(crate) fn deliver(
 
 impl Driver for CanipDriver {
     type Priv = ();
+    /// DSOR is one engine of the initial namespace (netns.rst): its UDP/IP
+    /// device stays there.
+    const NETNS_IMMUTABLE: bool = true;
 
     fn setup() -> Setup {
         Setup {

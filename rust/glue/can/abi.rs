@@ -98,9 +98,13 @@ pub(crate) type ListenFn = unsafe extern "C" fn(data: *mut ffi::c_void);
 
 extern "C" {
     /// Adds (`add`) or removes the listener (`func`, `data`), called after
-    /// every change of the filters that apply to interface `ifindex`
-    /// (registrations on it or on every interface). Removal returns only
-    /// after any running call has finished. Process context. ENOMEM.
+    /// every change of the filters that apply to the device `data` (a
+    /// registered `net_device`, until the listener is removed): changes on
+    /// its interface index at the time of the change (a move to another
+    /// namespace may change it; `ifindex` is its index when added, kept
+    /// for the record), or on every interface, in any namespace (a call
+    /// too many only recomputes a filter). Removal returns only after any
+    /// running call has finished. Process context. ENOMEM.
     pub(crate) fn rcan_rx_listen(
         func: ListenFn,
         data: *mut ffi::c_void,
@@ -108,10 +112,11 @@ extern "C" {
         add: bool,
     ) -> ffi::c_int;
     /// Copies into `out` (room for `cap`) every filter that applies to
-    /// frames received on `ifindex`; returns how many, or -1 if there are
-    /// more than `cap` (then a driver must not filter). Any context.
+    /// frames received on `dev` (a valid device, in the namespace it is
+    /// in now); returns how many, or -1 if there are more than `cap` (then
+    /// a driver must not filter). Any context.
     pub(crate) fn rcan_rx_filters(
-        ifindex: i32,
+        dev: *const bindings::net_device,
         out: *mut crate::rcan_core::rxtable::Filter,
         cap: usize,
     ) -> isize;
@@ -127,7 +132,9 @@ extern "C" {
     /// period once the receiver is removed, so `func` may run for a removed
     /// receiver until then, and the sock stays valid while it does.
     /// Process context; may sleep. On error (ENOMEM, EINVAL for a bad
-    /// filter) the previous receiver stays; removal never fails.
+    /// filter) the previous receiver stays; removal never fails. The
+    /// receiver is in the receive table of `sk`'s namespace: `ifindex`
+    /// names a device of it, 0 every CAN device of it.
     pub(crate) fn rcan_rx_set(
         func: RxFn,
         sk: *mut bindings::sock,
@@ -147,7 +154,8 @@ extern "C" {
     /// socket: `data` is passed to `func` as its `owner`. No reference is
     /// taken; instead every call returns only after every running callback
     /// with a registration it replaced or removed has finished, so the
-    /// caller may free `data` (or unload) then. Process context.
+    /// caller may free `data` (or unload) then. Process context. Kernel
+    /// receivers see the initial namespace's devices only.
     pub(crate) fn rcan_rx_set_kernel(
         func: RxFn,
         data: *mut ffi::c_void,

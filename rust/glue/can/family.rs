@@ -23,10 +23,17 @@
 //!   (which takes it) waits for a running call.
 //! * The receive table is pf_can's (`rcan_rx_mutex`, [`RX_MUTEX`]);
 //!   `WRITERS` is never held together with it.
+//! * [`NetTable`], the receive table of a network namespace other than the
+//!   initial one (whose table is pf_can's static): published under RCU in
+//!   the namespace's pernet data, made at the namespace's first
+//!   subscription under `WRITERS` (not together with `rcan_rx_mutex`),
+//!   unpublished at the namespace's `pre_exit` and freed at its exit, a
+//!   grace period later.
 
 use crate::glue::bindings;
 use crate::glue::can::abi::{CanProto, ListenFn, RxFilter, RxFn, RxSpec, CANPROTO_MAX};
-use crate::glue::can::rx::Receiver;
+use crate::glue::can::rx::{Receiver, RxTable};
+use crate::glue::net::{Net, Pernet, PernetData, PernetReg};
 use crate::glue::netdev::NetDev;
 use crate::glue::skb::Skb;
 use crate::glue::sync::{synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard, StaticMutex};
@@ -42,18 +49,19 @@ type Impl = crate::pf_can::PfCan;
 pub(crate) trait Family: 'static {
     /// Sets (`new`: a request and its receiver, replacing the previous
     /// registration of receiver `id`) or removes (`None`) a registration
-    /// in the receive table, then tells the listeners
+    /// in the receive table of namespace `net` (the socket's; the initial
+    /// one for kernel receivers), then tells the listeners
     /// ([`notify_listeners`]). Process context; may sleep. ENOMEM, EINVAL
     /// (bad filter); on error the previous registration stays.
-    fn rx_set(id: usize, new: Option<(RxRequest<'_>, Target)>) -> Result;
-    /// Makes receiver `id` (`t`) ahead of its first registration, which
-    /// then allocates nothing; it receives nothing until set, and stays
-    /// until removed (`rx_set(id, None)`). Process context; may sleep.
-    /// ENOMEM.
-    fn rx_reserve(id: usize, t: Target) -> Result;
-    /// Copies the filters that apply to frames received on `ifindex` into
+    fn rx_set(net: &Net, id: usize, new: Option<(RxRequest<'_>, Target)>) -> Result;
+    /// Makes receiver `id` (`t`) of namespace `net` ahead of its first
+    /// registration, which then allocates nothing; it receives nothing
+    /// until set, and stays until removed (`rx_set(net, id, None)`).
+    /// Process context; may sleep. ENOMEM.
+    fn rx_reserve(net: &Net, id: usize, t: Target) -> Result;
+    /// Copies the filters that apply to frames received on `dev` into
     /// `out`; `None` if there are more than fit. Any context.
-    fn rx_filters(ifindex: i32, out: &mut [crate::rcan_core::rxtable::Filter]) -> Option<usize>;
+    fn rx_filters(dev: &NetDev, out: &mut [crate::rcan_core::rxtable::Filter]) -> Option<usize>;
     /// `rcan_send` (see [`crate::glue::can::abi::rcan_send`]). Process or softirq
     /// context.
     fn send(skb: Skb, dev: &NetDev, loopback: bool) -> Result;
@@ -177,8 +185,8 @@ const PF_MUTEX: StaticMutex = {
 #[derive(Clone, Copy)]
 struct Listener {
     func: ListenFn,
+    /// The device (abi contract of `rcan_rx_listen`).
     data: *mut ffi::c_void,
-    ifindex: i32,
 }
 
 /// What `WRITERS` protects besides `PROTOS`.
@@ -211,11 +219,13 @@ pub(crate) fn notify_listeners(ifindexes: &[Option<i32>]) {
     }
     let reg = WRITERS.lock();
     for l in reg.listeners.iter() {
-        if ifindexes
-            .iter()
-            .flatten()
-            .any(|&i| i == 0 || i == l.ifindex)
-        {
+        // The device's index now: a move to another namespace may have
+        // changed it since the listener was added.
+        // SAFETY: a listener's data is its registered device (abi
+        // contract), valid until rcan_rx_listen removes it, which needs
+        // `WRITERS` (held here).
+        let now = unsafe { NetDev::from_raw(l.data.cast()) }.ifindex();
+        if ifindexes.iter().flatten().any(|&i| i == 0 || i == now) {
             // SAFETY: a registered listener's data stays valid until
             // rcan_rx_listen removes it, which needs `WRITERS` (held here).
             unsafe { (l.func)(l.data) };
@@ -258,6 +268,9 @@ extern "C" fn rcan_rx_set(
         return code::EINVAL.to_errno();
     };
     let id = owner.as_ptr() as usize;
+    // SAFETY: `sk` is a live sock (abi contract), which keeps its
+    // namespace alive.
+    let net = unsafe { Net::from_raw(bindings::rcan_sock_net(sk)) };
     // SAFETY: NULL or a valid spec, with its filters, for the duration of
     // the call (abi contract).
     let new = unsafe { spec.as_ref() }.map(|spec| {
@@ -273,7 +286,7 @@ extern "C" fn rcan_rx_set(
         // SAFETY: the spec's filters are valid for the call (above).
         (unsafe { request(spec, cookie) }, t)
     });
-    match Impl::rx_set(id, new) {
+    match Impl::rx_set(net, id, new) {
         Ok(()) => 0,
         Err(e) => e.to_errno(),
     }
@@ -294,7 +307,9 @@ extern "C" fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> ffi::c_int
         owner,
         sock: true,
     };
-    match Impl::rx_reserve(owner.as_ptr() as usize, t) {
+    // SAFETY: as in rcan_rx_set.
+    let net = unsafe { Net::from_raw(bindings::rcan_sock_net(sk)) };
+    match Impl::rx_reserve(net, owner.as_ptr() as usize, t) {
         Ok(()) => 0,
         Err(e) => e.to_errno(),
     }
@@ -324,7 +339,7 @@ extern "C" fn rcan_rx_set_kernel(
         // SAFETY: as in rcan_rx_set.
         (unsafe { request(spec, cookie) }, t)
     });
-    let ret = Impl::rx_set(id, new);
+    let ret = Impl::rx_set(Net::init(), id, new);
     // A registration this call replaced or removed is unlinked now; the
     // caller may free `data` (or unload) once we return: wait out every
     // callback that may still use it.
@@ -340,7 +355,7 @@ extern "C" fn rcan_rx_set_kernel(
 extern "C" fn rcan_rx_listen(
     func: ListenFn,
     data: *mut ffi::c_void,
-    ifindex: i32,
+    _ifindex: i32,
     add: bool,
 ) -> ffi::c_int {
     let mut reg = WRITERS.lock();
@@ -352,14 +367,7 @@ extern "C" fn rcan_rx_listen(
         crate::glue::kvec_swap_remove(&mut reg.listeners, i);
     }
     if add {
-        if let Err(e) = reg.listeners.push(
-            Listener {
-                func,
-                data,
-                ifindex,
-            },
-            GFP_KERNEL,
-        ) {
+        if let Err(e) = reg.listeners.push(Listener { func, data }, GFP_KERNEL) {
             return Error::from(e).to_errno();
         }
     }
@@ -369,10 +377,15 @@ extern "C" fn rcan_rx_listen(
 /// See [`crate::glue::can::abi::rcan_rx_filters`].
 #[no_mangle]
 extern "C" fn rcan_rx_filters(
-    ifindex: i32,
+    dev: *const bindings::net_device,
     out: *mut crate::rcan_core::rxtable::Filter,
     cap: usize,
 ) -> isize {
+    if dev.is_null() {
+        return -1;
+    }
+    // SAFETY: the caller's device, valid for the call (abi contract).
+    let dev = unsafe { NetDev::from_raw(dev.cast_mut()) };
     let out = if cap == 0 || out.is_null() {
         &mut [][..]
     } else {
@@ -380,7 +393,7 @@ extern "C" fn rcan_rx_filters(
         // `Filter` is plain `Copy` data, so overwriting is fine.
         unsafe { core::slice::from_raw_parts_mut(out, cap) }
     };
-    match Impl::rx_filters(ifindex, out) {
+    match Impl::rx_filters(dev, out) {
         Some(n) => n as isize,
         None => -1,
     }
@@ -459,10 +472,9 @@ unsafe extern "C" fn pf_can_create(
     protocol: ffi::c_int,
     kern: ffi::c_int,
 ) -> ffi::c_int {
-    // SAFETY: `net` is the caller's namespace, valid for the call.
-    if !unsafe { bindings::rcan_net_is_init(net) } {
-        return -(bindings::EAFNOSUPPORT as ffi::c_int);
-    }
+    // Whether the protocol works outside the initial namespace is the
+    // protocol's to say (`CanProtocol::ALL_NAMESPACES`, checked in its
+    // create).
     if protocol < 0 || protocol as usize >= CANPROTO_MAX {
         return -(bindings::EPROTONOSUPPORT as ffi::c_int);
     }
@@ -577,14 +589,24 @@ static PACKET: CCell<bindings::packet_type> = CCell::new(bindings::packet_type {
     ..unsafe { core::mem::zeroed() }
 });
 
-/// PF_CAN and the ETH_P_CAN handler registered; dropping it unregisters
-/// both (waiting for running handlers). Process context.
-pub(crate) struct FamilyReg(());
+/// PF_CAN and the ETH_P_CAN handler registered, and the per-namespace
+/// receive tables; dropping it unregisters the family and the handler
+/// (waiting for running handlers), then drops the namespaces' tables.
+/// Process context.
+pub(crate) struct FamilyReg {
+    _pernet: PernetReg<NetTable>,
+}
 
 /// Registers PF_CAN with the socket layer (EEXIST if another family, e.g.
 /// mainline's can.ko, has it) and the ETH_P_CAN packet handler. Module
 /// init only (process context); at most once at a time: EBUSY.
 pub(crate) fn register() -> Result<FamilyReg> {
+    // Before the family and the handler, so every namespace has its slot
+    // when the first socket or frame comes. `get` (net_table*) is only
+    // called from the entry points, the handler and `create`, which run
+    // while the family is registered: FamilyReg unregisters those first.
+    // SAFETY: see above; the registration is dropped after them.
+    let pernet = unsafe { NET_TABLES.register() }?;
     // SAFETY: module init is single-threaded with respect to FAMILY:
     // nothing uses it before sock_register, and a second call while
     // registered is refused here.
@@ -603,7 +625,7 @@ pub(crate) fn register() -> Result<FamilyReg> {
     }
     // SAFETY: PACKET is a static packet_type, removed in FamilyReg's Drop.
     unsafe { bindings::dev_add_pack(PACKET.get()) };
-    Ok(FamilyReg(()))
+    Ok(FamilyReg { _pernet: pernet })
 }
 
 impl Drop for FamilyReg {
@@ -616,7 +638,106 @@ impl Drop for FamilyReg {
             bindings::sock_unregister(bindings::PF_CAN as i32);
             (*FAMILY.get()).owner = core::ptr::null_mut();
         }
+        // `_pernet` is dropped now: every namespace's table goes.
     }
+}
+
+/// pf_can's data in each network namespace: the receive table of the
+/// namespace, made at its first subscription (most namespaces never use
+/// CAN, and a table is about 66 KB) and published under RCU; NULL (no
+/// receivers) until then. The initial namespace's table is pf_can's
+/// static one instead, which this leaves NULL. Writers (publishing it)
+/// hold `WRITERS`.
+pub(crate) struct NetTable {
+    table: RcuPtr<RxTable<Target>>,
+    /// The table unpublished at `pre_exit`, freed by Drop (exit), a grace
+    /// period later.
+    retired: core::sync::atomic::AtomicPtr<RxTable<Target>>,
+}
+
+static NET_TABLES: Pernet<NetTable> = Pernet::new();
+
+impl PernetData for NetTable {
+    fn pernet() -> &'static Pernet<Self> {
+        &NET_TABLES
+    }
+
+    fn init(_net: &Net) -> Result<Self> {
+        Ok(NetTable {
+            table: RcuPtr::null(),
+            retired: core::sync::atomic::AtomicPtr::new(core::ptr::null_mut()),
+        })
+    }
+
+    /// Every device of the namespace is gone and no socket is left (each
+    /// holds a reference on its namespace): unpublish the table, so the
+    /// grace period before exit ends every reader.
+    fn pre_exit(&self, _net: &Net) {
+        let _w = WRITERS.lock();
+        // SAFETY: writers' lock held; NULL is always valid; the old table
+        // is freed by Drop, after the grace period the namespace core
+        // guarantees between pre_exit and exit.
+        let old = unsafe { self.table.replace(core::ptr::null_mut()) };
+        self.retired
+            .store(old, core::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+impl Drop for NetTable {
+    /// The namespace's exit. Process context; sleeps.
+    fn drop(&mut self) {
+        let p = *self.retired.get_mut();
+        if p.is_null() {
+            return;
+        }
+        // SAFETY: made by `net_table_make` from a KVBox, unpublished in
+        // pre_exit a grace period ago: nothing refers to it.
+        let t = unsafe { kernel::alloc::KVBox::from_raw(p) };
+        // Registrations' RCU callbacks do not touch the table itself. A
+        // table with receivers left (a kernel bug elsewhere) is leaked
+        // with them rather than freed under them.
+        if !t.shutdown() {
+            core::mem::forget(t);
+        }
+    }
+}
+
+/// The receive table of `net` (not the initial namespace), if it has one
+/// yet. It lives until the namespace's exit, so as long as `net` is
+/// borrowed alive. Any context.
+pub(crate) fn net_table(net: &Net) -> Option<&RxTable<Target>> {
+    let d = NET_TABLES.get(net)?;
+    let g = RcuReadGuard::new();
+    let t = d.table.read(&g)? as *const RxTable<Target>;
+    // SAFETY: published, and freed only at the namespace's exit, which
+    // cannot come while `net` is borrowed alive (a socket or device of it
+    // exists).
+    Some(unsafe { &*t })
+}
+
+/// The receive table of `net` (not the initial namespace), made now if it
+/// has none. Process context; sleeps. ENOMEM.
+pub(crate) fn net_table_make(net: &Net) -> Result<&RxTable<Target>> {
+    if let Some(t) = net_table(net) {
+        return Ok(t);
+    }
+    let d = NET_TABLES.get(net).ok_or(code::ENODEV)?;
+    // Allocated outside the lock; dropped unpublished if another
+    // subscription made one first.
+    let fresh = RxTable::new_boxed(RX_MUTEX)?;
+    let _w = WRITERS.lock();
+    let cur = d.table.get_locked();
+    if !cur.is_null() {
+        // SAFETY: as in net_table.
+        return Ok(unsafe { &*cur });
+    }
+    let p = kernel::alloc::KVBox::into_raw(fresh);
+    // SAFETY: writers' lock held; a fully built table, freed only at the
+    // namespace's exit after being unpublished (pre_exit) and a grace
+    // period; the previous value is NULL (checked above).
+    unsafe { d.table.replace(p) };
+    // SAFETY: as in net_table.
+    Ok(unsafe { &*p })
 }
 
 /// Module exit: frees the (empty) listener list; statics are never

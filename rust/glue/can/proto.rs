@@ -32,10 +32,11 @@ use super::abi::{self, CanProto, RxSpec};
 #[allow(unused_imports)]
 pub(crate) use super::abi::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use crate::glue::bindings;
+use crate::glue::net::Net;
 use crate::glue::netdev::{self as gnetdev, DevRef, NetDev};
 use crate::glue::skb::Skb;
 use crate::glue::sock::{Proto, ProtoReg, Sock};
-use crate::glue::sync::{CCell, Rtnl, RtnlLocked};
+use crate::glue::sync::{CCell, RcuReadGuard, Rtnl, RtnlLocked};
 use core::marker::PhantomData;
 use core::mem::ManuallyDrop;
 use kernel::error::{code, Result};
@@ -115,6 +116,13 @@ pub(crate) trait CanProtocol: Proto {
     /// reserved receiver holds a reference on the sock). Default: no.
     const RESERVE_RX: bool = false;
 
+    /// Sockets may be created in every network namespace: the protocol
+    /// keeps its state in its sockets and finds devices in the socket's
+    /// namespace ([`Sock::net`]). A protocol with state of its own outside
+    /// the sockets (DSOR's engine and node) leaves it off, and `socket()`
+    /// outside the initial namespace fails with EAFNOSUPPORT. Default: no.
+    const ALL_NAMESPACES: bool = false;
+
     /// The protocol's registrations (a static of its module).
     fn module() -> &'static ProtoModule<Self>;
 
@@ -129,10 +137,13 @@ pub(crate) trait CanProtocol: Proto {
     }
 
     /// A network device (any type: check [`NetDev::is_can`]) went down or
-    /// is going away. Process context, RTNL held; may take socket locks
-    /// (RTNL comes first in the lock order) and call [`rx_set`] /
-    /// [`rx_remove`]. `sockets` are the protocol's open sockets. The
-    /// default does nothing.
+    /// is going away (unregistered, or moving to another namespace, which
+    /// the kernel announces as an unregistration in the old one). Process
+    /// context, RTNL held; may take socket locks (RTNL comes first in the
+    /// lock order) and call [`rx_set`] / [`rx_remove`]. `sockets` are the
+    /// protocol's open sockets in the device's namespace (mainline's
+    /// `net_eq(dev_net(dev), sock_net(sk))` test). The default does
+    /// nothing.
     fn netdev_event(_event: NetdevEvent, _dev: &NetDev, _sockets: &Sockets<'_, Self>) {}
 }
 
@@ -193,17 +204,20 @@ impl<T: CanProtocol> SockSet<T> {
     }
 }
 
-/// The open sockets of protocol `T`, as its netdevice notifier sees them
-/// (RTNL held for `'a`).
+/// The open sockets of protocol `T` in one namespace, as its netdevice
+/// notifier sees them (RTNL held for `'a`).
 pub(crate) struct Sockets<'a, T: CanProtocol> {
     set: &'a SockSet<T>,
+    /// The device's namespace, compared, never dereferenced: it cannot
+    /// change while RTNL is held.
+    net: *const bindings::net,
     _t: PhantomData<T>,
 }
 
 impl<T: CanProtocol> Sockets<'_, T> {
-    /// Calls `f` for every open socket, in no particular order. The
-    /// sockets stay alive during the call: `release` needs RTNL to leave
-    /// the set.
+    /// Calls `f` for every open socket of the namespace, in no particular
+    /// order. The sockets stay alive during the call: `release` needs RTNL
+    /// to leave the set.
     pub(crate) fn for_each(&self, mut f: impl FnMut(&Sock<T>)) {
         for &p in self.set.buckets.iter().flat_map(|b| b.iter()) {
             // The borrow handed to `f` cannot outlive this call.
@@ -211,7 +225,9 @@ impl<T: CanProtocol> Sockets<'_, T> {
             // release removes them under RTNL, which our caller holds for
             // 'a (SockSet invariant).
             let sk = unsafe { Sock::<T>::from_raw(p as *mut bindings::sock) };
-            f(&sk);
+            if core::ptr::eq(sk.net().as_ptr(), self.net) {
+                f(&sk);
+            }
         }
     }
 }
@@ -306,6 +322,11 @@ impl<T: CanProtocol> ProtoModule<T> {
         protocol: ffi::c_int,
         kern: ffi::c_int,
     ) -> ffi::c_int {
+        // SAFETY: the namespace of the socket being created, alive for
+        // the call.
+        if !T::ALL_NAMESPACES && !unsafe { Net::from_raw(net) }.is_init() {
+            return -(bindings::EAFNOSUPPORT as ffi::c_int);
+        }
         // SAFETY: the socket layer's arguments (this function's contract).
         if let Err(e) = unsafe { self.proto.create(net, sock, protocol, kern) } {
             return e.to_errno();
@@ -397,8 +418,10 @@ unsafe extern "C" fn notifier_trampoline<T: CanProtocol>(
     // device that stays registered for the call.
     let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
     let mut held = Rtnl::assert_held();
+    let net = dev.net(&RcuReadGuard::new()).as_ptr().cast_const();
     let sockets = Sockets::<T> {
         set: T::module().sockets.get(&mut held),
+        net,
         _t: PhantomData,
     };
     T::netdev_event(event, dev, &sockets);
@@ -634,14 +657,15 @@ impl<T: FilterListener> Drop for Listening<T> {
     }
 }
 
-/// The filters that apply to frames received on `ifindex`, in `out`;
-/// `None` if there are more than fit. Any context.
+/// The filters that apply to frames received on `dev` (in its namespace
+/// now), in `out`; `None` if there are more than fit. Any context.
 pub(crate) fn rx_filters(
-    ifindex: i32,
+    dev: &NetDev,
     out: &mut [crate::rcan_core::rxtable::Filter],
 ) -> Option<usize> {
-    // SAFETY: `out` has room for `out.len()` filters.
-    let n = unsafe { abi::rcan_rx_filters(ifindex, out.as_mut_ptr(), out.len()) };
+    // SAFETY: `dev` is valid for the call; `out` has room for `out.len()`
+    // filters.
+    let n = unsafe { abi::rcan_rx_filters(dev.as_ptr(), out.as_mut_ptr(), out.len()) };
     usize::try_from(n).ok()
 }
 
@@ -668,7 +692,7 @@ pub(crate) fn wanted<T>(
         mask: 0,
         inv: false,
     }; MAX_WANTED];
-    let n = rx_filters(dev.ifindex(), &mut fs)?;
+    let n = rx_filters(dev, &mut fs)?;
     let mut w = [Wanted::ALL; MAX_WANTED];
     for (o, f) in w.iter_mut().zip(&fs[..n]) {
         *o = Wanted::of(f);

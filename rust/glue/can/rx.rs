@@ -58,7 +58,7 @@ use crate::rcan_core::rxtable::{self, frame_key, Filter, Place, BUCKET_BITS};
 use core::cell::{Cell, UnsafeCell};
 use core::ptr::{self, NonNull};
 use core::sync::atomic::{AtomicPtr, Ordering};
-use kernel::alloc::{flags::GFP_KERNEL, KBox, KVec};
+use kernel::alloc::{flags::GFP_KERNEL, KBox, KVBox, KVec};
 use kernel::error::Result;
 
 const NBUCKETS: usize = 1 << BUCKET_BITS;
@@ -624,6 +624,29 @@ impl<R: Receiver> RxTable<R> {
         }
     }
 
+    /// An empty table on the heap, for a network namespace other than the
+    /// initial one (whose table is a static). Built in place: at about
+    /// 66 KB the table does not fit on a kernel stack. Process context;
+    /// sleeps. ENOMEM.
+    pub(crate) fn new_boxed(lock: StaticMutex) -> Result<KVBox<Self>> {
+        let mut b = KVBox::<Self>::new_uninit(GFP_KERNEL)?;
+        let p = b.as_mut_ptr();
+        // SAFETY: `p` is our allocation of one table. All-zero is a valid
+        // value of every field but `writer` (NULL list heads and group
+        // pointer, whose atomics are plain integers), which is written
+        // right after; then every field is initialised.
+        unsafe {
+            ptr::write_bytes(p, 0, 1);
+            ptr::addr_of_mut!((*p).writer).write(CMutex::new(
+                lock,
+                Writer {
+                    groups: KVec::new(),
+                },
+            ));
+            Ok(b.assume_init())
+        }
+    }
+
     /// Calls `f(receiver, cookie)` once for every receiver that wants the
     /// frame `can_id` received on `ifindex`. NET_RX softirq context only
     /// (the per-CPU marks assume one frame at a time per CPU); `f` runs
@@ -1133,10 +1156,13 @@ impl<R: Receiver> RxTable<R> {
         Ok(())
     }
 
-    /// Module exit, once every receiver is removed: frees the writer's
-    /// bookkeeping and the group snapshot. Process context; sleeps. The
-    /// caller runs `rcu_barrier` afterwards.
-    pub(crate) fn shutdown(&self) {
+    /// Module exit (or a namespace's), once every receiver is removed:
+    /// frees the writer's bookkeeping and the group snapshot; false (with
+    /// a warning) if receivers are left, whose registrations then leak.
+    /// Process context; sleeps. The caller runs `rcu_barrier` before its
+    /// module goes.
+    pub(crate) fn shutdown(&self) -> bool {
+        let mut empty = true;
         let old = {
             let mut w = self.writer.lock();
             if self
@@ -1145,6 +1171,7 @@ impl<R: Receiver> RxTable<R> {
                 .any(|c| !c.first.load(Ordering::Relaxed).is_null())
             {
                 kernel::pr_warn!("receive table not empty at exit: registrations leaked\n");
+                empty = false;
             }
             w.groups = KVec::new();
             // SAFETY: writer mutex held (`w`); NULL is always valid; the
@@ -1155,5 +1182,6 @@ impl<R: Receiver> RxTable<R> {
             // SAFETY: unpublished above; free_groups frees it.
             unsafe { defer(old.cast(), free_groups) };
         }
+        empty
     }
 }

@@ -48,6 +48,10 @@ static const struct nla_policy rcan_can_policy[IFLA_CAN_MAX + 1] = {
 /* Filled in by rcan_can_link_register() (rtnl_link_register links it). */
 struct rtnl_link_ops rcan_can_link_ops = {
 	.kind = "can",
+	/* As mainline's can_link_ops: a controller in a namespace that is
+	 * deleted comes back to init_net instead of being unregistered
+	 * under its driver (which still owns it). */
+	.netns_refund = true,
 	.maxtype = IFLA_CAN_MAX,
 	.policy = rcan_can_policy,
 	.validate = rcan_can_validate,

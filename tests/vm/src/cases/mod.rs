@@ -18,6 +18,7 @@ mod lifecycle;
 mod loopdrv;
 mod mixed;
 mod modules;
+mod netns;
 mod raw_bind;
 mod raw_efault;
 mod raw_filter;
@@ -81,6 +82,11 @@ pub(crate) use portable_table;
 /// loaded debug kernel): they test user-space tools; the kernel paths
 /// they use (CAN_BCM jobs, CANPROTO_DSOR receive, CAN_RAW filters) run
 /// on the debug kernel in the bcm, dsor and raw tests.
+///
+/// Of the namespace tests, only the two that exercise teardown
+/// (`raw_netns_move_under_traffic`, `raw_netns_delete_with_sockets`) run
+/// on the debug kernel: creating and tearing down namespaces there costs
+/// tens of seconds per test under TCG.
 pub const RELEASE_ONLY: &[&str] = &[
     "install_autoload",
     "sja1000_sim_bus_off_manual_restart",
@@ -91,6 +97,11 @@ pub const RELEASE_ONLY: &[&str] = &[
     "powerd_shuts_down_on_its_frame_only",
     "powerd_dry_run_and_sigterm_change_nothing",
     "logd_logs_dsor_messages_from_peer",
+    "raw_netns_isolation",
+    "bcm_netns_send",
+    "candev_netns_returns",
+    "netns_thesis_api",
+    "netns_canloop_returns",
 ];
 
 /// Every test, in running order.
@@ -134,6 +145,8 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         install::TESTS,
         bcm::TESTS,
         bcm::OURS,
+        netns::TESTS,
+        netns::OURS,
     ]
     .into_iter()
     .flatten()
