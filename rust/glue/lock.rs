@@ -19,9 +19,9 @@
 //! The statics are initialised in place on first use ([`Once`]): 6.12's
 //! Rust cannot run `spin_lock_init` at compile time. Their methods take
 //! `&'static self`, so an initialised lock or wait queue never moves (an
-//! empty wait queue's list points to itself). Make the first use in
-//! process context (module init): a first use from an interrupt on the
-//! CPU that is in the middle of initialising would spin forever.
+//! empty wait queue's list points to itself). The first use may come
+//! from any context: [`Once`] initialises with local interrupts off, so
+//! an interrupt never waits for an initialisation it interrupted.
 
 use super::bindings;
 use core::cell::UnsafeCell;
@@ -69,8 +69,8 @@ impl Once {
     }
 
     /// Runs `init` the first time it is called; every caller returns only
-    /// once `init` has completed. `init` must not sleep. Any context (see
-    /// the module doc about a first use from an interrupt).
+    /// once `init` has completed. `init` must not sleep; it runs with
+    /// local interrupts off. Any context.
     #[inline]
     fn call(&self, init: impl FnOnce()) {
         if self.0.load(Ordering::Acquire) == READY {
@@ -81,18 +81,29 @@ impl Once {
 
     #[cold]
     fn slow(&self, init: impl FnOnce()) {
-        match self
+        // Interrupts stay off on this CPU from the claim to READY, so no
+        // hardirq or softirq can interrupt the initialiser and then spin
+        // below for it on the same CPU (a livelock seen when a DSOR
+        // receive softirq met its wait queue's first use by a sender).
+        // Spinners are therefore always on other CPUs, and `init` (a lock
+        // or wait-queue init) is short and never sleeps.
+        // SAFETY: paired with the restore below on every path; nothing in
+        // between sleeps.
+        let flags = unsafe { bindings::rcan_local_irq_save() };
+        let claimed = self
             .0
             .compare_exchange(UNINIT, INITIALISING, Ordering::Acquire, Ordering::Acquire)
-        {
-            Ok(_) => {
-                init();
-                self.0.store(READY, Ordering::Release);
-            }
-            Err(_) => {
-                while self.0.load(Ordering::Acquire) != READY {
-                    core::hint::spin_loop();
-                }
+            .is_ok();
+        if claimed {
+            init();
+            self.0.store(READY, Ordering::Release);
+        }
+        // SAFETY: restores what the save above returned, on this CPU
+        // (interrupts off: no migration in between).
+        unsafe { bindings::rcan_local_irq_restore(flags) };
+        if !claimed {
+            while self.0.load(Ordering::Acquire) != READY {
+                core::hint::spin_loop();
             }
         }
     }

@@ -469,6 +469,19 @@ void rcan_spinlock_free(spinlock_t *lock)
 	kfree(lock);
 }
 
+unsigned long rcan_local_irq_save(void)
+{
+	unsigned long flags;
+
+	local_irq_save(flags);
+	return flags;
+}
+
+void rcan_local_irq_restore(unsigned long flags)
+{
+	local_irq_restore(flags);
+}
+
 unsigned long rcan_spin_lock_irqsave(spinlock_t *lock)
 {
 	unsigned long flags;

@@ -112,6 +112,9 @@ struct wait_queue_head;
 void rcan_init_waitqueue_head_key(struct wait_queue_head *wq, const char *name,
 				  struct lock_class_key *key);
 void rcan_spinlock_free(spinlock_t *lock);
+/* local interrupts off on this CPU (the glue's one-time initialisation) */
+unsigned long rcan_local_irq_save(void);
+void rcan_local_irq_restore(unsigned long flags);
 unsigned long rcan_spin_lock_irqsave(spinlock_t *lock);
 void rcan_spin_unlock_irqrestore(spinlock_t *lock, unsigned long flags);
 
