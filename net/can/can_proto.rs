@@ -72,6 +72,12 @@ impl CanProtocol for CanProtoOps {
     /// socket's own ones included (on canloop the sender sees its frames
     /// come back, thesis 5.3.5).
     fn rx(sk: &S, skb: RxSkb<'_>, _cookie: u32) {
+        // The thesis API is CAN 2.0 only: CAN FD frames (72 bytes) from an
+        // FD-capable device are not for it (can-fd.rst).
+        if skb.skb().len() as usize != CAN_FRAME_LEN {
+            skb.done();
+            return;
+        }
         let Some(mut skb) = skb.into_owned() else {
             return;
         };

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: GPL-2.0
 
 //! The C side of `rcan_pf`: the PF_CAN protocol family, the ETH_P_CAN
-//! packet handler, and the entry points `rcan_pf` exports to the protocol
+//! and ETH_P_CANFD packet handlers, and the entry points `rcan_pf` exports to the protocol
 //! and driver modules ([`crate::glue::can::abi`]). Compiled into `rcan_pf` only
 //! (`pf_can_mod.rs` includes it as `mod family` next to `mod glue`): the
 //! `#[no_mangle]` definitions must exist once.
@@ -57,10 +57,11 @@ pub(crate) trait Family: 'static {
     /// `rcan_send` (see [`crate::glue::can::abi::rcan_send`]). Process or softirq
     /// context.
     fn send(skb: Skb, dev: &NetDev, loopback: bool) -> Result;
-    /// The ETH_P_CAN packet handler: a frame received on `dev`. NET_RX
-    /// softirq, inside the core's RCU read-side section. Returns false if
-    /// the frame was dropped as malformed.
-    fn rcv(skb: Skb, dev: &NetDev) -> bool;
+    /// The ETH_P_CAN (`fd` false) and ETH_P_CANFD (`fd` true) packet
+    /// handlers: a frame received on `dev`. NET_RX softirq, inside the
+    /// core's RCU read-side section. Returns false if the frame was
+    /// dropped as malformed.
+    fn rcv(skb: Skb, dev: &NetDev, fd: bool) -> bool;
 }
 
 /// A registration request as a receiver made it.
@@ -502,8 +503,8 @@ unsafe extern "C" fn pf_can_create(
     ret
 }
 
-/// ETH_P_CAN packet handler: every CAN frame received on any device.
-/// NET_RX softirq context, inside the core's RCU read-side section.
+/// ETH_P_CAN packet handler: every classic CAN frame received on any
+/// device. NET_RX softirq context, inside the core's RCU read-side section.
 ///
 /// # Safety
 ///
@@ -515,6 +516,37 @@ unsafe extern "C" fn can_rcv(
     _pt: *mut bindings::packet_type,
     _orig_dev: *mut bindings::net_device,
 ) -> ffi::c_int {
+    // SAFETY: same contract as ours.
+    unsafe { rcv_common(skb, dev, false) }
+}
+
+/// ETH_P_CANFD packet handler (mainline `canfd_rcv`): every CAN FD frame
+/// received on any device. NET_RX softirq context, inside the core's RCU
+/// read-side section.
+///
+/// # Safety
+///
+/// As [`can_rcv`].
+unsafe extern "C" fn canfd_rcv(
+    skb: *mut bindings::sk_buff,
+    dev: *mut bindings::net_device,
+    _pt: *mut bindings::packet_type,
+    _orig_dev: *mut bindings::net_device,
+) -> ffi::c_int {
+    // SAFETY: same contract as ours.
+    unsafe { rcv_common(skb, dev, true) }
+}
+
+/// The body of both packet handlers.
+///
+/// # Safety
+///
+/// As [`can_rcv`].
+unsafe fn rcv_common(
+    skb: *mut bindings::sk_buff,
+    dev: *mut bindings::net_device,
+    fd: bool,
+) -> ffi::c_int {
     // SAFETY: the core hands us one skb reference and the receiving
     // device, alive for the call.
     let (skb, dev) = unsafe {
@@ -523,7 +555,7 @@ unsafe extern "C" fn can_rcv(
             None => return bindings::NET_RX_DROP as ffi::c_int,
         }
     };
-    if Impl::rcv(skb, dev) {
+    if Impl::rcv(skb, dev, fd) {
         bindings::NET_RX_SUCCESS as ffi::c_int
     } else {
         bindings::NET_RX_DROP as ffi::c_int
@@ -577,12 +609,20 @@ static PACKET: CCell<bindings::packet_type> = CCell::new(bindings::packet_type {
     ..unsafe { core::mem::zeroed() }
 });
 
-/// PF_CAN and the ETH_P_CAN handler registered; dropping it unregisters
-/// both (waiting for running handlers). Process context.
+static PACKET_FD: CCell<bindings::packet_type> = CCell::new(bindings::packet_type {
+    type_: (bindings::ETH_P_CANFD as u16).to_be(),
+    func: Some(canfd_rcv),
+    // SAFETY: as for PACKET.
+    ..unsafe { core::mem::zeroed() }
+});
+
+/// PF_CAN and the ETH_P_CAN and ETH_P_CANFD handlers registered; dropping
+/// it unregisters them (waiting for running handlers). Process context.
 pub(crate) struct FamilyReg(());
 
 /// Registers PF_CAN with the socket layer (EEXIST if another family, e.g.
-/// mainline's can.ko, has it) and the ETH_P_CAN packet handler. Module
+/// mainline's can.ko, has it) and the ETH_P_CAN and ETH_P_CANFD packet
+/// handlers. Module
 /// init only (process context); at most once at a time: EBUSY.
 pub(crate) fn register() -> Result<FamilyReg> {
     // SAFETY: module init is single-threaded with respect to FAMILY:
@@ -601,8 +641,12 @@ pub(crate) fn register() -> Result<FamilyReg> {
         unsafe { (*FAMILY.get()).owner = core::ptr::null_mut() };
         return Err(e);
     }
-    // SAFETY: PACKET is a static packet_type, removed in FamilyReg's Drop.
-    unsafe { bindings::dev_add_pack(PACKET.get()) };
+    // SAFETY: PACKET and PACKET_FD are static packet_types, removed in
+    // FamilyReg's Drop.
+    unsafe {
+        bindings::dev_add_pack(PACKET.get());
+        bindings::dev_add_pack(PACKET_FD.get());
+    }
     Ok(FamilyReg(()))
 }
 
@@ -612,6 +656,7 @@ impl Drop for FamilyReg {
         // running handlers (synchronize_net), sock_unregister for running
         // creates.
         unsafe {
+            bindings::dev_remove_pack(PACKET_FD.get());
             bindings::dev_remove_pack(PACKET.get());
             bindings::sock_unregister(bindings::PF_CAN as i32);
             (*FAMILY.get()).owner = core::ptr::null_mut();
