@@ -8,6 +8,7 @@ mod capture;
 mod daemons;
 mod dsor;
 mod errors;
+mod fd;
 mod filter;
 mod gateway;
 mod i82527;
@@ -109,6 +110,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         install::TESTS,
         bcm::TESTS,
         bcm::OURS,
+        fd::TESTS,
     ]
     .into_iter()
     .flatten()
