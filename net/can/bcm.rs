@@ -68,8 +68,8 @@ use rcan_api::{
 };
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
 use rcan_core::bcm::{
-    self as wire, MsgHead, OpKey, Request, CANFD_FRAME_LEN, MAX_NFRAMES, MHSIZ, RX_DELETE, RX_READ,
-    RX_RTR_FRAME, RX_SETUP, TX_CP_CAN_ID, TX_DELETE, TX_READ, TX_SEND, TX_SETUP,
+    self as wire, MsgHead, OpKey, Request, MAX_NFRAMES, MHSIZ, RX_DELETE, RX_READ, RX_RTR_FRAME,
+    RX_SETUP, TX_CP_CAN_ID, TX_DELETE, TX_READ, TX_SEND, TX_SETUP,
 };
 use rcan_core::bcm_rx::{RxOp, RxOut, RxSlot, TRAFFIC_LOCAL, TRAFFIC_OWN};
 use rcan_core::bcm_tx::{TxOp, TxOut};
@@ -848,18 +848,10 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
 fn tx_send(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
     let ret = wire::check_tx_send(req, ifindex).map_err(errno)?;
     let dev = DevRef::by_index(ifindex).ok_or(ENODEV)?;
+    // A CAN FD frame (CAN_FD_FRAME) goes the same way: rcan_send checks
+    // its length (EINVAL) and the device's MTU (EMSGSIZE on a classic
+    // device), as mainline's can_send.
     let cfsiz = req.head.cfsiz();
-    if cfsiz == CANFD_FRAME_LEN {
-        // A CAN FD frame: mainline's can_send checks its length, then the
-        // device's MTU; every rcan device is classic (MTU 16).
-        return Err(if req.payload[4] > 64 {
-            EINVAL
-        } else if (CANFD_FRAME_LEN as u32) > dev.mtu() {
-            neterr::EMSGSIZE()
-        } else {
-            EINVAL
-        });
-    }
     let mut skb = Skb::alloc(SKB_PRIV_LEN + cfsiz as u32, glue::GFP_KERNEL).ok_or(ENOMEM)?;
     skb.reserve(SKB_PRIV_LEN);
     let mut prv = [0u8; SKB_PRIV_LEN as usize];

@@ -36,6 +36,7 @@ pub const TESTS: &[Test] = portable_table![
     canutils_fd_cansend_candump,
     canutils_fd_cangen,
     canutils_fd_python_can,
+    bcm_fd_tx_send,
 ];
 
 /// `CANFD_BRS`, `CANFD_ESI`, `CANFD_FDF` (`<linux/can.h>`).
@@ -668,4 +669,47 @@ fn packet_recv(fd: &OwnedFd, flags: libc::c_int) -> std::io::Result<(Vec<u8>, u1
         return Err(std::io::Error::last_os_error());
     }
     Ok((buf[..n as usize].to_vec(), u16::from_be(sll.sll_protocol)))
+}
+
+/// `CAN_BCM` `TX_SEND` with `CAN_FD_FRAME` on a CAN FD interface: the FD
+/// frame goes out (an FD socket reads it, `CANFD_FDF` set by the stack).
+fn bcm_fd_tx_send(ctx: &mut Ctx) -> TestResult {
+    let idx = ctx.bcm_ifaces(1)?[0];
+    let c0 = dev(0);
+    ctx.link_down(&c0)?;
+    set_mtu(&c0, CANFD_MTU)?;
+    ctx.link_up(&c0)?;
+    let rx = fd_open(idx)?;
+    const CAN_BCM: libc::c_int = 2;
+    const TX_SEND: u32 = 4;
+    const CAN_FD_FRAME: u32 = 0x800;
+    const MHSIZ: usize = 56;
+    // SAFETY: plain socket(2).
+    let fd = unsafe { libc::socket(libc::PF_CAN, libc::SOCK_DGRAM, CAN_BCM) };
+    ensure!(
+        fd >= 0,
+        "socket(PF_CAN, SOCK_DGRAM, CAN_BCM): {}",
+        errno_text(&std::io::Error::last_os_error())
+    );
+    // SAFETY: a new descriptor we own.
+    let bcm = unsafe { OwnedFd::from_raw_fd(fd) };
+    let a = canraw::addr_bytes(libc::AF_CAN as u16, idx);
+    // SAFETY: `a` is valid for its length for the call.
+    let r = unsafe { libc::connect(bcm.as_raw_fd(), a.as_ptr().cast(), a.len() as u32) };
+    ensure!(
+        r == 0,
+        "connect CAN_BCM: {}",
+        errno_text(&std::io::Error::last_os_error())
+    );
+    // struct bcm_msg_head (56 bytes on 64-bit) + one struct canfd_frame.
+    let data = payload(64);
+    let mut m = vec![0u8; MHSIZ];
+    m[..4].copy_from_slice(&TX_SEND.to_ne_bytes());
+    m[4..8].copy_from_slice(&CAN_FD_FRAME.to_ne_bytes());
+    m[48..52].copy_from_slice(&0x3C1u32.to_ne_bytes());
+    m[52..56].copy_from_slice(&1u32.to_ne_bytes());
+    m.extend_from_slice(&fd_wire(0x3C1, &data, CANFD_BRS));
+    let n = canraw::write_bytes(bcm.as_fd(), &m).or_fail("TX_SEND CAN_FD_FRAME")?;
+    ensure!(n == MHSIZ + CANFD_MTU, "TX_SEND returned {n}");
+    expect_fd(&rx, 0x3C1, &data, CANFD_BRS, "FD socket (BCM TX_SEND)")
 }
