@@ -81,12 +81,6 @@ const MAX_WRITE: usize = 2060;
 /// `cookie` bit of the registration: deliver the socket's own frames.
 const COOKIE_RECV_OWN: u32 = 1;
 
-/// Offsets in `skb->cb` of a queued frame: the source address
-/// (`RAW_MIN_NAMELEN` bytes of `struct sockaddr_can`), then the recvmsg
-/// flags.
-const CB_NAME: usize = 0;
-const CB_FLAGS: usize = RAW_MIN_NAMELEN;
-
 /// Device MTUs of CAN XL (`CANXL_MIN_MTU`..=`CANXL_MAX_MTU`): mainline
 /// lets CAN FD frames through to those devices too.
 const CANXL_MTUS: core::ops::RangeInclusive<u32> = 76..=2060;
@@ -216,11 +210,8 @@ impl CanProtocol for RawProto {
         let Some(mut skb) = skb.into_owned() else {
             return;
         };
-        let mut name = [0u8; RAW_MIN_NAMELEN];
-        name[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
-        name[4..].copy_from_slice(&skb.ifindex().to_ne_bytes());
-        skb.cb_write(CB_NAME, &name);
-        skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
+        let ifindex = skb.ifindex();
+        glue::can::skb::set_rx_meta(&mut skb, ifindex, flags);
         // A full receive queue drops the frame (counted by the socket layer).
         let _ = sk.queue_rcv(skb);
     }
@@ -463,27 +454,7 @@ impl glue::sock::Proto for RawProto {
         if flags as u32 & bindings::MSG_ERRQUEUE != 0 {
             return sk.recv_errqueue(msg, len, SOL_CAN_RAW, SCM_CAN_RAW_ERRQUEUE);
         }
-        let skb = sk.recv_datagram(flags)?;
-        let n = skb.len() as usize;
-        let size = if len < n {
-            msg.add_flags(bindings::MSG_TRUNC);
-            len
-        } else {
-            n
-        };
-        if let Err(e) = msg.copy_from_skb(&skb, 0, size) {
-            sk.free_datagram(skb);
-            return Err(e);
-        }
-        msg.recv_cmsgs(sk, &skb);
-        let mut name = [0u8; RAW_MIN_NAMELEN];
-        skb.cb_read(CB_NAME, &mut name);
-        msg.set_name(&name);
-        let mut f = [0u8; 4];
-        skb.cb_read(CB_FLAGS, &mut f);
-        msg.add_flags(u32::from_ne_bytes(f));
-        sk.free_datagram(skb);
-        Ok(size)
+        glue::can::skb::recvmsg_queued(sk, msg, len, flags)
     }
 
     fn setsockopt(sk: &S, level: i32, name: i32, opt: &OptIn) -> Result {

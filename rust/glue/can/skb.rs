@@ -75,3 +75,61 @@ pub(crate) fn alloc_rx(dev: &NetDev, frame: &AnyFrame) -> Option<Skb> {
     skb.set_can_rx(dev);
     Some(skb)
 }
+
+/// Bytes of `struct sockaddr_can` that CAN_RAW and CAN_BCM return from
+/// recvmsg (`can_family`, padding, `can_ifindex`; mainline's
+/// `RAW_MIN_NAMELEN`/`BCM_MIN_NAMELEN`).
+pub(crate) const MIN_NAMELEN: usize = 8;
+/// Offsets in `skb->cb` of a frame queued for [`recvmsg_queued`]: the
+/// source address, then the recvmsg flags.
+const CB_NAME: usize = 0;
+const CB_FLAGS: usize = MIN_NAMELEN;
+
+/// Records in `skb->cb`, for [`recvmsg_queued`], that the skb came from
+/// interface `ifindex` and is read with `flags` (MSG_DONTROUTE,
+/// MSG_CONFIRM) set: mainline keeps the `sockaddr_can` in the cb too
+/// (`raw_rcv`, `bcm_send_to_user`). Any context; the skb is about to be
+/// queued on a socket, whose queue owns the cb from then on.
+pub(crate) fn set_rx_meta(skb: &mut Skb, ifindex: i32, flags: u32) {
+    let mut name = [0u8; MIN_NAMELEN];
+    name[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
+    name[4..].copy_from_slice(&ifindex.to_ne_bytes());
+    skb.cb_write(CB_NAME, &name);
+    skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
+}
+
+/// The recvmsg of CAN_RAW and CAN_BCM (mainline `raw_recvmsg`,
+/// `bcm_recvmsg`): dequeues one skb queued with [`set_rx_meta`], copies
+/// up to `len` bytes of it (`MSG_TRUNC` if it is longer: a 72-byte CAN FD
+/// frame read into 16 bytes gives 16 and `MSG_TRUNC`), adds the receive
+/// control messages (timestamps), the source address ([`MIN_NAMELEN`]
+/// bytes) and the recorded flags; returns the bytes copied. Process
+/// context; may sleep (blocking read, SO_RCVTIMEO).
+pub(crate) fn recvmsg_queued<T: Proto>(
+    sk: &Sock<T>,
+    msg: &mut crate::glue::sock::Msg,
+    len: usize,
+    flags: i32,
+) -> Result<usize> {
+    let skb = sk.recv_datagram(flags)?;
+    let n = skb.len() as usize;
+    let size = if len < n {
+        msg.add_flags(bindings::MSG_TRUNC);
+        len
+    } else {
+        n
+    };
+    if let Err(e) = msg.copy_from_skb(&skb, 0, size) {
+        sk.free_datagram(skb);
+        return Err(e);
+    }
+    msg.recv_cmsgs(sk, &skb);
+    let mut name = [0u8; MIN_NAMELEN];
+    skb.cb_read(CB_NAME, &mut name);
+    msg.set_name(&name);
+    let mut f = [0u8; 4];
+    skb.cb_read(CB_FLAGS, &mut f);
+    msg.add_flags(u32::from_ne_bytes(f));
+    sk.free_datagram(skb);
+    Ok(size)
+}
