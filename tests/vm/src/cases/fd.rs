@@ -13,9 +13,10 @@
 //! the debug kernel runs the same tests.
 
 use std::io::ErrorKind;
-use std::os::fd::{AsFd, AsRawFd, FromRawFd, OwnedFd};
+use std::os::fd::{AsFd, OwnedFd};
 use std::time::Duration;
 
+use rcan_uapi::raw;
 use socketcan::id::FdFlags;
 use socketcan::{CanAnyFrame, CanFdFrame, CanFdSocket, EmbeddedFrame, Frame, Socket, StandardId};
 
@@ -272,7 +273,7 @@ fn raw_fd_errnos(ctx: &mut Ctx) -> TestResult {
     let (fd_if, classic_if) = (idx[0], idx[1]);
     let s = canraw::open(fd_if)?;
     let frame = fd_wire(0x123, &payload(64), CANFD_BRS);
-    let write = |s: &dyn AsFd, b: &[u8]| canraw::write_bytes(s.as_fd(), b);
+    let write = |s: &socketcan::CanSocket, b: &[u8]| canraw::write_bytes(s, b);
     let einval = |r: std::io::Result<usize>, what: &str| -> TestResult {
         match r {
             Err(e) if e.raw_os_error() == Some(libc::EINVAL) => Ok(()),
@@ -528,147 +529,52 @@ bus.shutdown()
 }
 
 /// `setsockopt(SOL_CAN_RAW, name, bytes)` with any option length.
-fn setsockopt_raw(s: &impl AsRawFd, name: libc::c_int, v: &[u8]) -> std::io::Result<()> {
-    // SAFETY: `v` is valid for `v.len()` bytes for the call.
-    let r = unsafe {
-        libc::setsockopt(
-            s.as_raw_fd(),
-            SOL_CAN_RAW,
-            name,
-            v.as_ptr().cast(),
-            v.len() as libc::socklen_t,
-        )
-    };
-    if r < 0 {
-        Err(std::io::Error::last_os_error())
-    } else {
-        Ok(())
-    }
+fn setsockopt_raw(s: impl AsFd, name: libc::c_int, v: &[u8]) -> std::io::Result<()> {
+    raw::setsockopt(s, SOL_CAN_RAW, name, v)
 }
 
-/// `getsockopt(SOL_CAN_RAW, name)` with a buffer of `len` bytes: the
-/// bytes and the length the kernel returned.
+/// `getsockopt(SOL_CAN_RAW, name)` with a buffer of `len` (<= 16) bytes:
+/// the bytes and the length the kernel returned.
 fn getsockopt_raw(
-    s: &impl AsRawFd,
+    s: impl AsFd,
     name: libc::c_int,
     len: usize,
 ) -> std::io::Result<([u8; 16], usize)> {
     let mut buf = [0u8; 16];
-    let mut l = len.min(16) as libc::socklen_t;
-    // SAFETY: `buf` has room for `l` bytes; `l` is a valid socklen_t.
-    let r = unsafe {
-        libc::getsockopt(
-            s.as_raw_fd(),
-            SOL_CAN_RAW,
-            name,
-            buf.as_mut_ptr().cast(),
-            &mut l,
-        )
-    };
-    if r < 0 {
-        Err(std::io::Error::last_os_error())
-    } else {
-        Ok((buf, l as usize))
-    }
+    let n = raw::getsockopt(s, SOL_CAN_RAW, name, &mut buf[..len.min(16)])?;
+    Ok((buf, n as usize))
 }
 
 /// `sendto` of raw bytes to interface `ifindex`.
-fn sendto_raw(s: &impl AsRawFd, b: &[u8], ifindex: u32) -> std::io::Result<usize> {
+fn sendto_raw(s: impl AsFd, b: &[u8], ifindex: u32) -> std::io::Result<usize> {
     let a = canraw::addr_bytes(libc::AF_CAN as u16, ifindex);
-    // SAFETY: `b` and `a` are valid for their lengths for the call.
-    let r = unsafe {
-        libc::sendto(
-            s.as_raw_fd(),
-            b.as_ptr().cast(),
-            b.len(),
-            0,
-            a.as_ptr().cast(),
-            a.len() as libc::socklen_t,
-        )
-    };
-    if r < 0 {
-        Err(std::io::Error::last_os_error())
-    } else {
-        Ok(r as usize)
-    }
+    raw::sendto(s, b, 0, Some(&a))
 }
 
+/// `sizeof(struct sockaddr_ll)`.
+const SOCKADDR_LL_LEN: usize = 20;
+
 /// An `AF_PACKET` `SOCK_RAW` socket for protocol `proto`, bound to
-/// `ifindex`, with a receive timeout.
+/// `ifindex`, with the suite's receive timeout.
 fn packet_socket(ifindex: u32, proto: u16) -> Result<OwnedFd, String> {
-    // SAFETY: plain socket(2).
-    let fd = unsafe {
-        libc::socket(
-            libc::AF_PACKET,
-            libc::SOCK_RAW | libc::SOCK_CLOEXEC,
-            i32::from(proto.to_be()),
-        )
-    };
-    if fd < 0 {
-        return Err(format!(
-            "socket(AF_PACKET, {proto:#06x}): {}",
-            errno_text(&std::io::Error::last_os_error())
-        ));
-    }
-    // SAFETY: a new descriptor we own.
-    let fd = unsafe { OwnedFd::from_raw_fd(fd) };
-    // SAFETY: sockaddr_ll is plain data; all-zero is valid.
-    let mut sll: libc::sockaddr_ll = unsafe { std::mem::zeroed() };
-    sll.sll_family = libc::AF_PACKET as u16;
-    sll.sll_protocol = proto.to_be();
-    sll.sll_ifindex = ifindex as i32;
-    // SAFETY: `sll` is a valid sockaddr_ll for the call.
-    let r = unsafe {
-        libc::bind(
-            fd.as_raw_fd(),
-            (&sll as *const libc::sockaddr_ll).cast(),
-            std::mem::size_of::<libc::sockaddr_ll>() as libc::socklen_t,
-        )
-    };
-    if r < 0 {
-        return Err(format!(
-            "bind AF_PACKET {proto:#06x}: {}",
-            errno_text(&std::io::Error::last_os_error())
-        ));
-    }
-    let tv = libc::timeval {
-        tv_sec: canraw::RAW_RX_TIMEOUT.as_secs() as libc::time_t,
-        tv_usec: 0,
-    };
-    // SAFETY: `tv` is a valid timeval for the call.
-    unsafe {
-        libc::setsockopt(
-            fd.as_raw_fd(),
-            libc::SOL_SOCKET,
-            libc::SO_RCVTIMEO,
-            (&tv as *const libc::timeval).cast(),
-            std::mem::size_of::<libc::timeval>() as libc::socklen_t,
-        )
-    };
+    let fd = raw::socket(libc::AF_PACKET, libc::SOCK_RAW, i32::from(proto.to_be()))
+        .or_fail(format_args!("socket(AF_PACKET, SOCK_RAW, {proto:#06x})"))?;
+    // struct sockaddr_ll: family, protocol (network order), ifindex, ...
+    let mut a = [0u8; SOCKADDR_LL_LEN];
+    a[..2].copy_from_slice(&(libc::AF_PACKET as u16).to_ne_bytes());
+    a[2..4].copy_from_slice(&proto.to_be_bytes());
+    a[4..8].copy_from_slice(&(ifindex as i32).to_ne_bytes());
+    raw::bind(&fd, &a).or_fail(format_args!("bind AF_PACKET {proto:#06x}"))?;
+    raw::set_timeout(&fd, libc::SO_RCVTIMEO, canraw::RAW_RX_TIMEOUT).or_fail("SO_RCVTIMEO")?;
     Ok(fd)
 }
 
 /// One packet from a packet socket: its bytes and `sll_protocol`.
 fn packet_recv(fd: &OwnedFd, flags: libc::c_int) -> std::io::Result<(Vec<u8>, u16)> {
     let mut buf = [0u8; 128];
-    // SAFETY: as in packet_socket.
-    let mut sll: libc::sockaddr_ll = unsafe { std::mem::zeroed() };
-    let mut l = std::mem::size_of::<libc::sockaddr_ll>() as libc::socklen_t;
-    // SAFETY: `buf` and `sll` are valid for their lengths for the call.
-    let n = unsafe {
-        libc::recvfrom(
-            fd.as_raw_fd(),
-            buf.as_mut_ptr().cast(),
-            buf.len(),
-            flags,
-            (&mut sll as *mut libc::sockaddr_ll).cast(),
-            &mut l,
-        )
-    };
-    if n < 0 {
-        return Err(std::io::Error::last_os_error());
-    }
-    Ok((buf[..n as usize].to_vec(), u16::from_be(sll.sll_protocol)))
+    let mut a = [0u8; SOCKADDR_LL_LEN];
+    let (n, _) = raw::recvfrom(fd, &mut buf, flags, Some(&mut a))?;
+    Ok((buf[..n].to_vec(), u16::from_be_bytes([a[2], a[3]])))
 }
 
 /// `CAN_BCM` `TX_SEND` with `CAN_FD_FRAME` on a CAN FD interface: the FD
@@ -684,23 +590,10 @@ fn bcm_fd_tx_send(ctx: &mut Ctx) -> TestResult {
     const TX_SEND: u32 = 4;
     const CAN_FD_FRAME: u32 = 0x800;
     const MHSIZ: usize = 56;
-    // SAFETY: plain socket(2).
-    let fd = unsafe { libc::socket(libc::PF_CAN, libc::SOCK_DGRAM, CAN_BCM) };
-    ensure!(
-        fd >= 0,
-        "socket(PF_CAN, SOCK_DGRAM, CAN_BCM): {}",
-        errno_text(&std::io::Error::last_os_error())
-    );
-    // SAFETY: a new descriptor we own.
-    let bcm = unsafe { OwnedFd::from_raw_fd(fd) };
+    let bcm = raw::socket(libc::PF_CAN, libc::SOCK_DGRAM, CAN_BCM)
+        .or_fail("socket(PF_CAN, SOCK_DGRAM, CAN_BCM)")?;
     let a = canraw::addr_bytes(libc::AF_CAN as u16, idx);
-    // SAFETY: `a` is valid for its length for the call.
-    let r = unsafe { libc::connect(bcm.as_raw_fd(), a.as_ptr().cast(), a.len() as u32) };
-    ensure!(
-        r == 0,
-        "connect CAN_BCM: {}",
-        errno_text(&std::io::Error::last_os_error())
-    );
+    raw::connect(&bcm, &a).or_fail("connect CAN_BCM")?;
     // struct bcm_msg_head (56 bytes on 64-bit) + one struct canfd_frame.
     let data = payload(64);
     let mut m = vec![0u8; MHSIZ];
