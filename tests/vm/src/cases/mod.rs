@@ -69,7 +69,10 @@ pub(crate) use portable_table;
 /// it reaches in the kernel, `rcan_pf`'s request_module on `socket()`,
 /// also runs on the debug kernel in `socket_create` (an unregistered
 /// protocol).
-pub const RELEASE_ONLY: &[&str] = &["install_autoload"];
+/// `canutils_fd_python_can` starts python3 (some 100 s under TCG on the
+/// debug kernel); the FD paths of CAN_RAW it reaches run there in the
+/// other `fd.rs` tests.
+pub const RELEASE_ONLY: &[&str] = &["install_autoload", "canutils_fd_python_can"];
 
 /// Every test, in running order.
 pub fn all() -> impl Iterator<Item = &'static Test> {
