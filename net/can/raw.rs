@@ -6,9 +6,8 @@
 //! `socket(PF_CAN, SOCK_RAW, CAN_RAW)` with mainline's ABI: 16-byte
 //! `struct can_frame` reads and writes, and with CAN_RAW_FD_FRAMES 72-byte
 //! `struct canfd_frame` ones on CAN FD devices (MTU 72), `struct
-//! sockaddr_can` (only
-//! `can_family` and `can_ifindex` are used; 8 bytes are required and
-//! returned), `SOL_CAN_RAW` options. Programs written for mainline
+//! sockaddr_can` (only `can_family` and `can_ifindex` are used; 8 bytes
+//! are required and returned), `SOL_CAN_RAW` options. Programs written for mainline
 //! (can-utils, python-can, the `socketcan` crate) run unchanged. Every
 //! errno is mainline's for the same input; see
 //! Documentation/networking/rcan/can-raw.rst for the reference and for the
