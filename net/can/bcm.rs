@@ -68,8 +68,8 @@ use rcan_api::{
 };
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
 use rcan_core::bcm::{
-    self as wire, MsgHead, OpKey, Request, CANFD_FRAME_LEN, MAX_NFRAMES, MHSIZ, RX_DELETE, RX_READ,
-    RX_RTR_FRAME, RX_SETUP, TX_CP_CAN_ID, TX_DELETE, TX_READ, TX_SEND, TX_SETUP,
+    self as wire, MsgHead, OpKey, Request, MAX_NFRAMES, MHSIZ, RX_DELETE, RX_READ, RX_RTR_FRAME,
+    RX_SETUP, TX_CP_CAN_ID, TX_DELETE, TX_READ, TX_SEND, TX_SETUP,
 };
 use rcan_core::bcm_rx::{RxOp, RxOut, RxSlot, TRAFFIC_LOCAL, TRAFFIC_OWN};
 use rcan_core::bcm_tx::{TxOp, TxOut};
@@ -80,10 +80,6 @@ const CAN_BCM: i32 = 2;
 /// Bytes of `struct sockaddr_can` BCM requires and returns
 /// (`BCM_MIN_NAMELEN`: family, padding, ifindex).
 const BCM_MIN_NAMELEN: usize = 8;
-/// Offsets in `skb->cb` of a queued message: the source address, then
-/// the recvmsg flags (mainline's `bcm_flags()`).
-const CB_NAME: usize = 0;
-const CB_FLAGS: usize = BCM_MIN_NAMELEN;
 /// Headroom for mainline's `struct can_skb_priv`.
 const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 /// The CAN FD flags mainline leaves in a frame it hands to user space
@@ -229,11 +225,7 @@ fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32) {
     if !skb.put_data(&head.to_bytes()) || !frames.iter().all(|f| skb.put_data(f)) {
         return;
     }
-    let mut name = [0u8; BCM_MIN_NAMELEN];
-    name[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
-    name[4..].copy_from_slice(&ifindex.to_ne_bytes());
-    skb.cb_write(CB_NAME, &name);
-    skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
+    glue::can::skb::set_rx_meta(&mut skb, ifindex, flags);
     let _ = sk.queue_rcv(skb);
 }
 
@@ -851,18 +843,10 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
 fn tx_send(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
     let ret = wire::check_tx_send(req, ifindex).map_err(errno)?;
     let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
+    // A CAN FD frame (CAN_FD_FRAME) goes the same way: rcan_send checks
+    // its length (EINVAL) and the device's MTU (EMSGSIZE on a classic
+    // device), as mainline's can_send.
     let cfsiz = req.head.cfsiz();
-    if cfsiz == CANFD_FRAME_LEN {
-        // A CAN FD frame: mainline's can_send checks its length, then the
-        // device's MTU; every rcan device is classic (MTU 16).
-        return Err(if req.payload[4] > 64 {
-            EINVAL
-        } else if (CANFD_FRAME_LEN as u32) > dev.mtu() {
-            neterr::EMSGSIZE()
-        } else {
-            EINVAL
-        });
-    }
     let mut skb = Skb::alloc(SKB_PRIV_LEN + cfsiz as u32, glue::GFP_KERNEL).ok_or(ENOMEM)?;
     skb.reserve(SKB_PRIV_LEN);
     let mut prv = [0u8; SKB_PRIV_LEN as usize];
@@ -1034,27 +1018,7 @@ impl glue::sock::Proto for BcmProto {
 
     /// Mainline `bcm_recvmsg`.
     fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
-        let skb = sk.recv_datagram(flags)?;
-        let n = skb.len() as usize;
-        let size = if len < n {
-            msg.add_flags(bindings::MSG_TRUNC);
-            len
-        } else {
-            n
-        };
-        if let Err(e) = msg.copy_from_skb(&skb, 0, size) {
-            sk.free_datagram(skb);
-            return Err(e);
-        }
-        msg.recv_cmsgs(sk, &skb);
-        let mut name = [0u8; BCM_MIN_NAMELEN];
-        skb.cb_read(CB_NAME, &mut name);
-        msg.set_name(&name);
-        let mut f = [0u8; 4];
-        skb.cb_read(CB_FLAGS, &mut f);
-        msg.add_flags(u32::from_ne_bytes(f));
-        sk.free_datagram(skb);
-        Ok(size)
+        glue::can::skb::recvmsg_queued(sk, msg, len, flags)
     }
 
     /// Mainline's BCM has no socket options (`sock_no_setsockopt`).

@@ -7,7 +7,8 @@
 //! `struct sockaddr_canarb` (thesis figure 5-5 arbitration field). `bind`
 //! sets the acceptance filter, `connect` the default arbitration field,
 //! `sendmsg` sends one frame (data length = DLC), `recvmsg` returns one
-//! frame's data bytes. Reference: Documentation/networking/rcan/canproto-can.rst.
+//! frame's data bytes. CAN 2.0 only: on a CAN FD interface these sockets
+//! send and receive classic frames, never FD ones. Reference: Documentation/networking/rcan/canproto-can.rst.
 //!
 //! Contexts and locks:
 //!
@@ -71,10 +72,16 @@ impl CanProtocol for CanProtoOps {
         &MODULE
     }
 
-    /// NET_RX softirq, RCU read side. Every frame is delivered, the
-    /// socket's own ones included (on canloop the sender sees its frames
+    /// NET_RX softirq, RCU read side. Every classic frame is delivered,
+    /// the socket's own ones included (on canloop the sender sees its frames
     /// come back, thesis 5.3.5).
     fn rx(sk: &S, skb: RxSkb<'_>, _cookie: u32) {
+        // The thesis API is CAN 2.0 only: CAN FD frames (72 bytes) from an
+        // FD-capable device are not for it (can-fd.rst).
+        if skb.skb().len() as usize != CAN_FRAME_LEN {
+            skb.done();
+            return;
+        }
         let Some(mut skb) = skb.into_owned() else {
             return;
         };

@@ -5,8 +5,9 @@
 //! * Registers PF_CAN (29) with the socket layer and hands `socket()` to the
 //!   CAN protocol registered for its protocol number, holding a reference
 //!   on that protocol's module while its `create` runs.
-//! * Receives every ETH_P_CAN frame (packet_type handler, NET_RX softirq)
-//!   and dispatches it to the receivers whose filters match, through one
+//! * Receives every ETH_P_CAN and ETH_P_CANFD frame (two packet_type
+//!   handlers, NET_RX softirq; mainline `can_rcv` and `canfd_rcv`) and
+//!   dispatches it to the receivers whose filters match, through one
 //!   receive table shared by every protocol (`rcan_core::rxtable`). This is
 //!   the only way in: drivers hand up bus frames and echoes alike through
 //!   the network core (`netif_rx` or NAPI), so receive callbacks always run
@@ -54,7 +55,7 @@ use glue::skb::Skb;
 use glue::sync::{rcu_barrier, RcuReadGuard};
 use rcan_api::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use rcan_core::filter::ArbFilter;
-use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use rcan_core::frame::{AnyFrame, CANFD_FDF};
 use rcan_core::rxtable::{self, CanFilterKind, Filter};
 
 /// The receive table of the initial namespace, which also holds every
@@ -145,13 +146,20 @@ impl Family for PfCan {
         }
     }
 
-    /// Mainline `can_send`. Process or softirq context.
+    /// Mainline `can_send`. Process or softirq context. A classic frame
+    /// (16 bytes) or a CAN FD frame (72 bytes, which gets `CANFD_FDF` set
+    /// as mainline sets it); an FD frame on a classic device (MTU 16) is
+    /// EMSGSIZE here (CAN_RAW refuses it earlier, with EINVAL).
     fn send(mut skb: Skb, dev: &NetDev, loopback: bool) -> Result {
-        let frame_ok = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data())
-            .map(|b| usize::from(CanFrame::from_bytes(b).len) <= rcan_core::arb::MAX_DLC)
-            .unwrap_or(false);
-        if !frame_ok {
+        let Some(frame) = AnyFrame::parse(skb.data()) else {
             return Err(EINVAL);
+        };
+        if frame.is_fd() {
+            // The caller built this skb and has not shared it (the
+            // rcan_send contract), so it is ours to write.
+            if let Some(flags) = skb.data_mut().get_mut(5) {
+                *flags |= CANFD_FDF;
+            }
         }
         if skb.len() > dev.mtu() {
             return Err(glue::neterr::EMSGSIZE());
@@ -185,9 +193,13 @@ impl Family for PfCan {
     /// All but the last receiver get the skb borrowed (they clone it); the
     /// last one gets our reference, so the common single-receiver case
     /// queues the skb without cloning it. Returns false if the frame was
-    /// malformed (dropped).
-    fn rcv(skb: Skb, dev: &NetDev) -> bool {
-        let Some(frame) = valid_frame(&skb, dev) else {
+    /// malformed (dropped). `fd`: the frame came by the ETH_P_CANFD handler
+    /// and must be a CAN FD frame, else a classic one (mainline
+    /// `canfd_rcv` / `can_rcv`). Receivers get both flavours; each protocol
+    /// takes what it understands (CAN_RAW FD frames only with
+    /// CAN_RAW_FD_FRAMES, the others classic frames only).
+    fn rcv(skb: Skb, dev: &NetDev, fd: bool) -> bool {
+        let Some(frame) = valid_frame(&skb, dev, fd) else {
             drop(skb); // counted as a drop
             return false;
         };
@@ -199,7 +211,7 @@ impl Family for PfCan {
             return true;
         };
         let mut pending: Option<(&Target, u32)> = None;
-        table.for_each_match(&g, dev.ifindex(), frame.can_id, |t, cookie| {
+        table.for_each_match(&g, dev.ifindex(), frame.can_id(), |t, cookie| {
             if let Some((prev, c)) = pending.replace((t, cookie)) {
                 // The receiver was found in the table inside our read-side
                 // section, so it (with the sock reference it holds, or a
@@ -216,15 +228,14 @@ impl Family for PfCan {
     }
 }
 
-/// The frame in `skb` if it is a well-formed classic CAN frame from a CAN
-/// device; drivers are trusted for nothing else.
-fn valid_frame(skb: &Skb, dev: &NetDev) -> Option<CanFrame> {
+/// The frame in `skb` if it is a well-formed CAN frame of the flavour its
+/// handler takes (`fd`) from a CAN device; drivers are trusted for nothing
+/// else.
+fn valid_frame(skb: &Skb, dev: &NetDev, fd: bool) -> Option<AnyFrame> {
     if !dev.is_can() {
         return None;
     }
-    let bytes: &[u8; CAN_FRAME_LEN] = skb.data().try_into().ok()?;
-    let frame = CanFrame::from_bytes(bytes);
-    (usize::from(frame.len) <= rcan_core::arb::MAX_DLC).then_some(frame)
+    AnyFrame::parse(skb.data()).filter(|f| f.is_fd() == fd)
 }
 
 /// The module: PF_CAN and the packet handler while loaded.

@@ -3,15 +3,16 @@
 //! rcan_raw: CAN_RAW, the raw protocol of mainline SocketCAN, on the rcan
 //! stack (DESIGN decision 5).
 //!
-//! `socket(PF_CAN, SOCK_RAW, CAN_RAW)` with mainline's ABI for classic CAN:
-//! 16-byte `struct can_frame` reads and writes, `struct sockaddr_can` (only
-//! `can_family` and `can_ifindex` are used; 8 bytes are required and
-//! returned), `SOL_CAN_RAW` options. Programs written for mainline
+//! `socket(PF_CAN, SOCK_RAW, CAN_RAW)` with mainline's ABI: 16-byte
+//! `struct can_frame` reads and writes, and with CAN_RAW_FD_FRAMES 72-byte
+//! `struct canfd_frame` ones on CAN FD devices (MTU 72), `struct
+//! sockaddr_can` (only `can_family` and `can_ifindex` are used; 8 bytes
+//! are required and returned), `SOL_CAN_RAW` options. Programs written for mainline
 //! (can-utils, python-can, the `socketcan` crate) run unchanged. Every
 //! errno is mainline's for the same input; see
 //! Documentation/networking/rcan/can-raw.rst for the reference and for the
-//! few deliberate differences (classic CAN only: the FD/XL options are
-//! accepted as mainline accepts them, but every rcan device has MTU 16).
+//! few deliberate differences (no CAN XL: CAN_RAW_XL_FRAMES is accepted as
+//! mainline accepts it, but no rcan device has a CAN XL MTU).
 //!
 //! Contexts and locks:
 //!
@@ -26,7 +27,8 @@
 //!   bus frames and echoes alike (every frame comes up through the network
 //!   core; a receive callback may transmit, this one only queues). It
 //!   reads only its arguments (the socket's receive options travel in the
-//!   registration's `cookie`), never the socket lock.
+//!   registration's `cookie`, CAN_RAW_FD_FRAMES in an atomic of the
+//!   socket's shared part), never the socket lock.
 //! * `MODULE.sockets`, every open socket (for the notifier), is protected by
 //!   RTNL.
 
@@ -46,7 +48,7 @@ use rcan_api::{
     CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets, CAN_RAW,
     RX_FILTER_CAN_ID, SOCK_RAW,
 };
-use rcan_core::frame::CAN_FRAME_LEN;
+use rcan_core::frame::{AnyFrame, CANFD_MTU};
 use rcan_core::rxtable::CAN_ERR_MASK;
 
 /// `SOL_CAN_RAW` (`SOL_CAN_BASE + CAN_RAW`).
@@ -78,14 +80,9 @@ const MAX_WRITE: usize = 2060;
 /// `cookie` bit of the registration: deliver the socket's own frames.
 const COOKIE_RECV_OWN: u32 = 1;
 
-/// Offsets in `skb->cb` of a queued frame: the source address
-/// (`RAW_MIN_NAMELEN` bytes of `struct sockaddr_can`), then the recvmsg
-/// flags.
-const CB_NAME: usize = 0;
-const CB_FLAGS: usize = RAW_MIN_NAMELEN;
-
-/// Headroom for mainline's `struct can_skb_priv`.
-const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
+/// Device MTUs of CAN XL (`CANXL_MIN_MTU`..=`CANXL_MAX_MTU`): mainline
+/// lets CAN FD frames through to those devices too.
+const CANXL_MTUS: core::ops::RangeInclusive<u32> = 76..=2060;
 
 /// A `struct can_filter` as the user set it, kept in the form pf_can
 /// takes (`id` = `can_id`, `mask` = `can_mask`), so that bind and every
@@ -117,9 +114,10 @@ struct RawSock {
     loopback: i32,
     recv_own_msgs: i32,
     join_filters: i32,
-    /// CAN_RAW_FD_FRAMES / CAN_RAW_XL_FRAMES as set. Accepted and kept as
-    /// mainline does, but no frame other than a classic one is ever sent
-    /// or received: every rcan device is a classic CAN device (MTU 16).
+    /// CAN_RAW_FD_FRAMES / CAN_RAW_XL_FRAMES as set (mainline keeps the
+    /// int). FD frames are sent and received with `fd_frames` (mirrored
+    /// in [`RawShared::fd_frames`]); XL is accepted and kept, but no rcan
+    /// device carries CAN XL frames.
     fd_frames: i32,
     xl_frames: i32,
 }
@@ -143,6 +141,9 @@ struct RawShared {
     ifindex: AtomicI32,
     /// CAN_RAW_LOOPBACK is on.
     loopback: AtomicBool,
+    /// CAN_RAW_FD_FRAMES is on (read by sendmsg and by the receive
+    /// callback, as mainline reads `ro->fd_frames`).
+    fd_frames: AtomicBool,
 }
 
 impl RawSock {
@@ -186,12 +187,18 @@ impl CanProtocol for RawProto {
     }
 
     /// NET_RX softirq, RCU read side. Mainline `raw_rcv`: own frames only
-    /// with CAN_RAW_RECV_OWN_MSGS, MSG_DONTROUTE for frames sent from this
-    /// host, MSG_CONFIRM for frames sent by this socket.
+    /// with CAN_RAW_RECV_OWN_MSGS, CAN FD frames only with
+    /// CAN_RAW_FD_FRAMES (pf_can hands up only well-formed 16- and 72-byte
+    /// frames), MSG_DONTROUTE for frames sent from this host, MSG_CONFIRM
+    /// for frames sent by this socket.
     fn rx(sk: &S, skb: RxSkb<'_>, cookie: u32) {
         let origin = skb.skb().sk_ptr();
         let own = origin == sk.as_ptr();
         if own && cookie & COOKIE_RECV_OWN == 0 {
+            skb.done();
+            return;
+        }
+        if skb.skb().len() as usize == CANFD_MTU && !sk.shared().fd_frames.load(Ordering::Relaxed) {
             skb.done();
             return;
         }
@@ -205,11 +212,8 @@ impl CanProtocol for RawProto {
         let Some(mut skb) = skb.into_owned() else {
             return;
         };
-        let mut name = [0u8; RAW_MIN_NAMELEN];
-        name[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
-        name[4..].copy_from_slice(&skb.ifindex().to_ne_bytes());
-        skb.cb_write(CB_NAME, &name);
-        skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
+        let ifindex = skb.ifindex();
+        glue::can::skb::set_rx_meta(&mut skb, ifindex, flags);
         // A full receive queue drops the frame (counted by the socket layer).
         let _ = sk.queue_rcv(skb);
     }
@@ -332,6 +336,7 @@ impl glue::sock::Proto for RawProto {
         RawShared {
             ifindex: AtomicI32::new(0),
             loopback: AtomicBool::new(true),
+            fd_frames: AtomicBool::new(false),
         }
     }
 
@@ -425,19 +430,20 @@ impl glue::sock::Proto for RawProto {
         };
         let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENXIO)?;
         let nonblock = msg.flags() & bindings::MSG_DONTWAIT != 0;
-        let mut skb = sk.alloc_send_skb(SKB_PRIV_LEN + len as u32, nonblock)?;
-        skb.reserve(SKB_PRIV_LEN);
-        // struct can_skb_priv { int ifindex; int skbcnt; }
-        let mut prv = [0u8; SKB_PRIV_LEN as usize];
-        prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-        if !skb.write_headroom(&prv) {
-            return Err(neterr::ENOBUFS());
-        }
+        let mut skb = glue::can::skb::alloc_tx(sk, &dev, len, nonblock)?;
         skb.put_from_msg(msg, len)?;
-        // Only a classic frame (16 bytes, len <= 8) is valid here.
-        let ok = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data())
-            .map(|b| usize::from(b[4]) <= rcan_core::arb::MAX_DLC)
-            .unwrap_or(false);
+        // Mainline raw_check_txframe: a classic frame anywhere; a CAN FD
+        // frame only with CAN_RAW_FD_FRAMES on a CAN FD (or CAN XL)
+        // device; nothing else (no CAN XL here).
+        let ok = match AnyFrame::parse(skb.data()) {
+            Some(AnyFrame::Classic(_)) => true,
+            Some(AnyFrame::Fd(_)) => {
+                let mtu = dev.mtu();
+                sh.fd_frames.load(Ordering::Relaxed)
+                    && (mtu == CANFD_MTU as u32 || CANXL_MTUS.contains(&mtu))
+            }
+            None => false,
+        };
         if !ok {
             return Err(EINVAL);
         }
@@ -450,27 +456,7 @@ impl glue::sock::Proto for RawProto {
         if flags as u32 & bindings::MSG_ERRQUEUE != 0 {
             return sk.recv_errqueue(msg, len, SOL_CAN_RAW, SCM_CAN_RAW_ERRQUEUE);
         }
-        let skb = sk.recv_datagram(flags)?;
-        let n = skb.len() as usize;
-        let size = if len < n {
-            msg.add_flags(bindings::MSG_TRUNC);
-            len
-        } else {
-            n
-        };
-        if let Err(e) = msg.copy_from_skb(&skb, 0, size) {
-            sk.free_datagram(skb);
-            return Err(e);
-        }
-        msg.recv_cmsgs(sk, &skb);
-        let mut name = [0u8; RAW_MIN_NAMELEN];
-        skb.cb_read(CB_NAME, &mut name);
-        msg.set_name(&name);
-        let mut f = [0u8; 4];
-        skb.cb_read(CB_FLAGS, &mut f);
-        msg.add_flags(u32::from_ne_bytes(f));
-        sk.free_datagram(skb);
-        Ok(size)
+        glue::can::skb::recvmsg_queued(sk, msg, len, flags)
     }
 
     fn setsockopt(sk: &S, level: i32, name: i32, opt: &OptIn) -> Result {
@@ -531,7 +517,8 @@ impl glue::sock::Proto for RawProto {
                 update(sk, Change::Join(v))
             }
             // Mainline accepts these on any interface; they only widen
-            // what may be written and read, and our devices are classic.
+            // what may be written and read. Socket lock only, as mainline:
+            // the receive callback and sendmsg read the atomic.
             CAN_RAW_FD_FRAMES => {
                 let v = read_int(opt)?;
                 let mut s = sk.lock();
@@ -540,6 +527,7 @@ impl glue::sock::Proto for RawProto {
                     return Err(EINVAL);
                 }
                 s.fd_frames = v;
+                sk.shared().fd_frames.store(v != 0, Ordering::Relaxed);
                 Ok(())
             }
             CAN_RAW_XL_FRAMES => {
@@ -548,6 +536,7 @@ impl glue::sock::Proto for RawProto {
                 s.xl_frames = v;
                 if v != 0 {
                     s.fd_frames = v;
+                    sk.shared().fd_frames.store(true, Ordering::Relaxed);
                 }
                 Ok(())
             }

@@ -331,6 +331,16 @@ pub(crate) trait Driver: Sized + 'static {
     fn link() -> Option<super::can::dev::LinkSetup> {
         None
     }
+    /// Whether `change_mtu` is implemented (fills `ndo_change_mtu`; the
+    /// device then has no `min_mtu`/`max_mtu`, so every value reaches
+    /// `change_mtu`, as for mainline's vcan).
+    const HAS_CHANGE_MTU: bool = false;
+    /// `ip link set DEV mtu N`: whether the device takes `new_mtu` (the
+    /// glue then stores it). Process context, RTNL held; the kernel has
+    /// already returned for a value equal to the current MTU.
+    fn change_mtu(_dev: &Dev<Self>, _priv: &Self::Priv, _new_mtu: u32) -> Result {
+        Err(EINVAL)
+    }
 }
 
 /// Proof of running inside a device's NAPI poll (NET_RX softirq,
@@ -505,6 +515,11 @@ impl<T: Driver> Adapter<T> {
         } else {
             None
         },
+        ndo_change_mtu: if T::HAS_CHANGE_MTU {
+            Some(Self::change_mtu)
+        } else {
+            None
+        },
         // SAFETY: all-zero is a valid net_device_ops (every hook NULL).
         ..unsafe { core::mem::zeroed() }
     };
@@ -529,6 +544,27 @@ impl<T: Driver> Adapter<T> {
         let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
         match T::private_ioctl(d, p, cmd as u32, &UserBuf(data)) {
             Ok(()) => 0,
+            Err(e) => e.to_errno(),
+        }
+    }
+
+    unsafe extern "C" fn change_mtu(
+        dev: *mut bindings::net_device,
+        new_mtu: ffi::c_int,
+    ) -> ffi::c_int {
+        // SAFETY: the kernel passes a registered device of ours, under RTNL.
+        let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
+        let Ok(mtu) = u32::try_from(new_mtu) else {
+            return EINVAL.to_errno();
+        };
+        match T::change_mtu(d, p, mtu) {
+            Ok(()) => {
+                // Readers (the transmit paths) read the MTU without RTNL
+                // (READ_ONCE); this is mainline's WRITE_ONCE(dev->mtu, ...).
+                // SAFETY: a live device; we hold RTNL, the MTU's writers' lock.
+                unsafe { core::ptr::write_volatile(&raw mut (*dev).mtu, mtu) };
+                0
+            }
             Err(e) => e.to_errno(),
         }
     }
@@ -559,8 +595,14 @@ impl<T: Driver> Adapter<T> {
             d.type_ = s.type_;
             d.flags = s.flags;
             d.mtu = s.mtu;
-            d.min_mtu = s.mtu;
-            d.max_mtu = s.mtu;
+            // With change_mtu the driver decides every value (0: no bound).
+            let (min, max) = if T::HAS_CHANGE_MTU {
+                (0, 0)
+            } else {
+                (s.mtu, s.mtu)
+            };
+            d.min_mtu = min;
+            d.max_mtu = max;
             d.hard_header_len = s.hard_header_len;
             d.tx_queue_len = s.tx_queue_len;
             if s.no_queue {

@@ -129,28 +129,43 @@ impl Skb {
         unsafe { Skb::from_raw(bindings::skb_clone(self.as_ptr(), super::GFP_ATOMIC)) }
     }
 
+    /// The ethertype of the CAN frame the skb holds, told by its length as
+    /// mainline tells it (`can_send`): ETH_P_CANFD for a 72-byte
+    /// `struct canfd_frame`, ETH_P_CAN otherwise.
+    pub(crate) fn can_eth_p(&self) -> u16 {
+        if self.len() as usize == crate::rcan_core::frame::CANFD_MTU {
+            bindings::ETH_P_CANFD as u16
+        } else {
+            bindings::ETH_P_CAN as u16
+        }
+    }
+
     /// Marks the skb as a CAN frame leaving by `dev` (mainline `can_send`):
-    /// protocol ETH_P_CAN, headers reset, `CHECKSUM_UNNECESSARY` (built by
-    /// the CAN stack, not by a packet socket), and `PACKET_LOOPBACK` if the
-    /// sender asks for the echo ([`Skb::wants_echo`]), else `PACKET_HOST`.
+    /// protocol ETH_P_CAN or ETH_P_CANFD ([`Skb::can_eth_p`]), headers
+    /// reset, `CHECKSUM_UNNECESSARY` (built by the CAN stack, not by a
+    /// packet socket), and `PACKET_LOOPBACK` if the sender asks for the
+    /// echo ([`Skb::wants_echo`]), else `PACKET_HOST`.
     ///
     /// The caller holds a reference on `dev` for as long as the skb may use
     /// it (the transmit path holds it until dev_queue_xmit returns).
     pub(crate) fn set_can_tx(&mut self, dev: &super::netdev::NetDev, loopback: bool) {
+        let eth_p = self.can_eth_p();
         // SAFETY: valid skb we own; `dev` is a live device (NetDev invariant).
-        unsafe { bindings::rcan_skb_set_can_tx(self.as_ptr(), dev.as_ptr(), loopback) };
+        unsafe { bindings::rcan_skb_set_can_tx(self.as_ptr(), dev.as_ptr(), loopback, eth_p) };
     }
 
     /// Marks the skb as a CAN frame arriving on `dev`, as mainline marks
     /// bus frames (`alloc_can_skb`) and echoes (`__can_get_echo_skb`,
     /// `vcan_rx`): `PACKET_BROADCAST`, `CHECKSUM_UNNECESSARY`, protocol
-    /// ETH_P_CAN, headers reset. `skb->sk` is kept: an echo still names its
-    /// sending socket, which is how protocols tell their own frames.
+    /// ETH_P_CAN or ETH_P_CANFD ([`Skb::can_eth_p`]), headers reset.
+    /// `skb->sk` is kept: an echo still names its sending socket, which
+    /// is how protocols tell their own frames.
     ///
     /// The caller is `dev`'s driver (or holds a reference on `dev`).
     pub(crate) fn set_can_rx(&mut self, dev: &super::netdev::NetDev) {
+        let eth_p = self.can_eth_p();
         // SAFETY: valid skb we own; `dev` is a live device (NetDev invariant).
-        unsafe { bindings::rcan_skb_set_can_rx(self.as_ptr(), dev.as_ptr()) };
+        unsafe { bindings::rcan_skb_set_can_rx(self.as_ptr(), dev.as_ptr(), eth_p) };
     }
 
     /// For a driver's `start_xmit` (mainline `can_skb_headroom_valid`):
@@ -422,16 +437,54 @@ impl Skb {
             drop(self);
             return None;
         };
-        let skb = if self.wants_echo() {
-            let Some(e) = self.into_echo() else {
-                dev.stats_tx_dropped();
-                return None;
+        self.into_echo_if_wanted(dev).map(|skb| (skb, frame))
+    }
+
+    /// [`Skb::can_xmit_start`] for a driver of a CAN FD capable device
+    /// (MTU 72): the classic or CAN FD frame the skb holds. As mainline's
+    /// `can_dropped_invalid_skb`, the skb's protocol must say which:
+    /// ETH_P_CAN with a 16-byte frame (`len <= 8`) or ETH_P_CANFD with a
+    /// 72-byte one (`len <= 64`); anything else is dropped and counted.
+    /// Transmit path of `dev`.
+    pub(crate) fn can_xmit_start_any(
+        mut self,
+        dev: &super::netdev::NetDev,
+    ) -> Option<(Skb, crate::rcan_core::frame::AnyFrame)> {
+        use crate::rcan_core::frame::AnyFrame;
+        let frame = AnyFrame::parse(self.data()).filter(|f| {
+            let want = if f.is_fd() {
+                bindings::ETH_P_CANFD
+            } else {
+                bindings::ETH_P_CAN
             };
-            e
-        } else {
-            self
+            u32::from(self.protocol()) == want
+        });
+        let Some(frame) = frame.filter(|_| self.can_tx_prepare(dev)) else {
+            dev.stats_tx_dropped();
+            drop(self);
+            return None;
         };
-        Some((skb, frame))
+        self.into_echo_if_wanted(dev).map(|skb| (skb, frame))
+    }
+
+    /// The end of [`Skb::can_xmit_start`]: if the sender wants an echo,
+    /// the skb made the driver's to keep ([`Skb::into_echo`]); `None` (and
+    /// a `tx_dropped`) if that needs a clone that cannot be allocated.
+    fn into_echo_if_wanted(self, dev: &super::netdev::NetDev) -> Option<Skb> {
+        if !self.wants_echo() {
+            return Some(self);
+        }
+        let e = self.into_echo();
+        if e.is_none() {
+            dev.stats_tx_dropped();
+        }
+        e
+    }
+
+    /// `ntohs(skb->protocol)`.
+    pub(crate) fn protocol(&self) -> u16 {
+        // SAFETY: valid skb; reading a header field of an skb we hold.
+        unsafe { bindings::rcan_skb_protocol(self.as_ptr()) }
     }
 
     /// The end of an IFF_ECHO driver's transmission (mainline

@@ -116,6 +116,12 @@ void rcan_skb_reset_headers(struct sk_buff *skb)
 	skb_reset_transport_header(skb);
 }
 
+/* ntohs(skb->protocol), for code that cannot reach the bitfield union. */
+u16 rcan_skb_protocol(const struct sk_buff *skb)
+{
+	return ntohs(skb->protocol);
+}
+
 void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev)
 {
 	skb->dev = dev;
@@ -133,15 +139,17 @@ bool rcan_dev_nit_active(struct net_device *dev)
 	return dev_nit_active(dev);
 }
 
-/* Marks @skb as a classic CAN frame leaving by @dev (mainline can_send):
- * PACKET_LOOPBACK asks an IFF_ECHO driver for the echo, PACKET_HOST does
+/* Marks @skb as a CAN frame leaving by @dev (mainline can_send), with
+ * protocol @eth_p (ETH_P_CAN or ETH_P_CANFD, chosen by the caller from the
+ * frame's length): PACKET_LOOPBACK asks an IFF_ECHO driver for the echo, PACKET_HOST does
  * not. CHECKSUM_UNNECESSARY tells drivers that the CAN stack built the skb
  * (a packet socket's skb has CHECKSUM_NONE, see rcan_can_skb_tx_prepare).
  */
-void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopback)
+void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopback,
+			 u16 eth_p)
 {
 	skb->dev = dev;
-	skb->protocol = htons(ETH_P_CAN);
+	skb->protocol = htons(eth_p);
 	skb->pkt_type = loopback ? PACKET_LOOPBACK : PACKET_HOST;
 	skb->ip_summed = CHECKSUM_UNNECESSARY;
 	skb_reset_mac_header(skb);
@@ -149,15 +157,15 @@ void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopb
 	skb_reset_transport_header(skb);
 }
 
-/* Marks @skb as a classic CAN frame arriving on @dev: a frame from the bus
+/* Marks @skb as a CAN frame (protocol @eth_p) arriving on @dev: a frame from the bus
  * (mainline alloc_can_skb) or an echo (mainline __can_get_echo_skb,
  * vcan_rx, can_send's clone). Every CAN frame is a broadcast; skb->sk is
  * left as it is, so an echo still names its sending socket.
  */
-void rcan_skb_set_can_rx(struct sk_buff *skb, struct net_device *dev)
+void rcan_skb_set_can_rx(struct sk_buff *skb, struct net_device *dev, u16 eth_p)
 {
 	skb->dev = dev;
-	skb->protocol = htons(ETH_P_CAN);
+	skb->protocol = htons(eth_p);
 	skb->pkt_type = PACKET_BROADCAST;
 	skb->ip_summed = CHECKSUM_UNNECESSARY;
 	skb_reset_mac_header(skb);

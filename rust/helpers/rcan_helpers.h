@@ -44,8 +44,10 @@ void rcan_skb_reset_headers(struct sk_buff *skb);
 void rcan_skb_stamp_if_unset(struct sk_buff *skb);
 bool rcan_dev_nit_active(struct net_device *dev);
 void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev);
-void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopback);
-void rcan_skb_set_can_rx(struct sk_buff *skb, struct net_device *dev);
+u16 rcan_skb_protocol(const struct sk_buff *skb);
+void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopback,
+			 u16 eth_p);
+void rcan_skb_set_can_rx(struct sk_buff *skb, struct net_device *dev, u16 eth_p);
 bool rcan_can_skb_tx_prepare(struct sk_buff *skb, struct net_device *dev);
 struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp);
 int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len);

@@ -14,6 +14,11 @@
 //! mainline's sense (IFF_ECHO), like `vcan echo=1`. With `verbose`, each
 //! frame is logged with the device name.
 //!
+//! A device starts as a classic CAN device (MTU 16); `ip link set canN mtu
+//! 72` while it is down makes it a CAN FD device that carries both
+//! flavours, `mtu 16` a classic one again (mainline vcan's rule: EBUSY
+//! while up, EINVAL for other values; CAN XL MTUs are not taken).
+//!
 //! The echo takes the path every received frame takes: marked
 //! `PACKET_BROADCAST` (the sending socket stays in `skb->sk`), queued on
 //! the device's receive FIFO and handed up by the device's NAPI poll to
@@ -51,7 +56,7 @@ use glue::params::Param;
 use glue::skb::Skb;
 use kernel::c_str;
 use rcan_core::canloop::{DropRate, FrameDump};
-use rcan_core::frame::CAN_FRAME_LEN;
+use rcan_core::frame::{CANFD_MTU, CAN_MTU};
 
 /// Most devices one module instance registers.
 const MAX_COUNT: u32 = 16;
@@ -136,13 +141,26 @@ impl Driver for LoopDriver {
         Setup {
             type_: bindings::ARPHRD_CAN as u16,
             flags: bindings::net_device_flags_IFF_NOARP | bindings::net_device_flags_IFF_ECHO,
-            mtu: CAN_FRAME_LEN as u32,
+            mtu: CAN_MTU as u32,
             hard_header_len: 0,
             tx_queue_len: 0,
             // start_xmit never stops the queue: a qdisc would only add
             // work per frame.
             no_queue: true,
         }
+    }
+
+    const HAS_CHANGE_MTU: bool = true;
+
+    /// Mainline `vcan_change_mtu` without CAN XL. Process context, RTNL.
+    fn change_mtu(dev: &Dev<Self>, _p: &Self::Priv, new_mtu: u32) -> Result {
+        if dev.is_up() {
+            return Err(EBUSY);
+        }
+        if new_mtu != CAN_MTU as u32 && new_mtu != CANFD_MTU as u32 {
+            return Err(EINVAL);
+        }
+        Ok(())
     }
 
     fn open(dev: &Dev<Self>, _p: &Self::Priv) -> Result {
@@ -178,13 +196,19 @@ impl Driver for LoopDriver {
     }
 
     fn start_xmit(skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
-        // Not a classic frame, or no room to prepare a packet socket's
-        // frame (mainline can_skb_headroom_valid): dropped and counted.
-        let Some((mut skb, frame)) = skb.can_xmit_start(dev) else {
+        // Not a well-formed classic or FD frame, or no room to prepare a
+        // packet socket's frame (mainline can_dropped_invalid_skb):
+        // dropped and counted. Only a device with MTU 72 is handed FD
+        // frames (pf_can and af_packet check the MTU).
+        let Some((mut skb, frame)) = skb.can_xmit_start_any(dev) else {
             return Xmit::Ok;
         };
         if VERBOSE.get() {
-            pr_info!("{}: tx {}\n", dev.name(), FrameDump::new(&frame).as_str());
+            pr_info!(
+                "{}: tx {}\n",
+                dev.name(),
+                FrameDump::new_any(&frame).as_str()
+            );
         }
         // The parameter setter only stores valid rates.
         let drop_it = match DropRate::new(DROPRATE.get()) {
@@ -196,7 +220,7 @@ impl Driver for LoopDriver {
             drop(skb);
             return Xmit::Ok;
         }
-        let bytes = frame.dlc() as u32;
+        let bytes = frame.len() as u32;
         dev.stats_tx(bytes);
         if !skb.wants_echo() {
             // Nobody asked for the echo: the frame "left on the bus".

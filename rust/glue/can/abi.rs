@@ -163,12 +163,14 @@ extern "C" {
         spec: *const RxSpec,
     ) -> ffi::c_int;
     /// Sends one CAN frame (mainline `can_send`): `skb` holds a
-    /// `struct can_frame`, `skb->dev` is the device (the caller holds a
+    /// `struct can_frame` or a `struct canfd_frame` (then `CANFD_FDF` is
+    /// set in it: the caller built `skb` and has not shared it),
+    /// `skb->dev` is the device (the caller holds a
     /// reference until this returns), `skb->sk` the sending socket. With
     /// `loopback` the frame is also delivered to local receivers (by the
     /// driver if the device has IFF_ECHO, else by a clone made here).
-    /// Always consumes `skb`. Returns 0, or EINVAL (not a classic frame),
-    /// EMSGSIZE, EPERM (not a CAN device), ENETDOWN, ENOBUFS (queue full),
+    /// Always consumes `skb`. Returns 0, or EINVAL (neither a classic nor
+    /// an FD frame), EMSGSIZE (an FD frame on a classic device), EPERM (not a CAN device), ENETDOWN, ENOBUFS (queue full),
     /// ENOMEM. Process or softirq context.
     pub(crate) fn rcan_send(skb: *mut bindings::sk_buff, loopback: bool) -> ffi::c_int;
 }

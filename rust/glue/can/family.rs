@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: GPL-2.0
 
 //! The C side of `rcan_pf`: the PF_CAN protocol family, the ETH_P_CAN
-//! packet handler, and the entry points `rcan_pf` exports to the protocol
+//! and ETH_P_CANFD packet handlers, and the entry points `rcan_pf` exports to the protocol
 //! and driver modules ([`crate::glue::can::abi`]). Compiled into `rcan_pf` only
 //! (`pf_can_mod.rs` includes it as `mod family` next to `mod glue`): the
 //! `#[no_mangle]` definitions must exist once.
@@ -65,10 +65,11 @@ pub(crate) trait Family: 'static {
     /// `rcan_send` (see [`crate::glue::can::abi::rcan_send`]). Process or softirq
     /// context.
     fn send(skb: Skb, dev: &NetDev, loopback: bool) -> Result;
-    /// The ETH_P_CAN packet handler: a frame received on `dev`. NET_RX
-    /// softirq, inside the core's RCU read-side section. Returns false if
-    /// the frame was dropped as malformed.
-    fn rcv(skb: Skb, dev: &NetDev) -> bool;
+    /// The ETH_P_CAN (`fd` false) and ETH_P_CANFD (`fd` true) packet
+    /// handlers: a frame received on `dev`. NET_RX softirq, inside the
+    /// core's RCU read-side section. Returns false if the frame was
+    /// dropped as malformed.
+    fn rcv(skb: Skb, dev: &NetDev, fd: bool) -> bool;
 }
 
 /// A registration request as a receiver made it.
@@ -514,8 +515,8 @@ unsafe extern "C" fn pf_can_create(
     ret
 }
 
-/// ETH_P_CAN packet handler: every CAN frame received on any device.
-/// NET_RX softirq context, inside the core's RCU read-side section.
+/// ETH_P_CAN packet handler: every classic CAN frame received on any
+/// device. NET_RX softirq context, inside the core's RCU read-side section.
 ///
 /// # Safety
 ///
@@ -527,6 +528,37 @@ unsafe extern "C" fn can_rcv(
     _pt: *mut bindings::packet_type,
     _orig_dev: *mut bindings::net_device,
 ) -> ffi::c_int {
+    // SAFETY: same contract as ours.
+    unsafe { rcv_common(skb, dev, false) }
+}
+
+/// ETH_P_CANFD packet handler (mainline `canfd_rcv`): every CAN FD frame
+/// received on any device. NET_RX softirq context, inside the core's RCU
+/// read-side section.
+///
+/// # Safety
+///
+/// As [`can_rcv`].
+unsafe extern "C" fn canfd_rcv(
+    skb: *mut bindings::sk_buff,
+    dev: *mut bindings::net_device,
+    _pt: *mut bindings::packet_type,
+    _orig_dev: *mut bindings::net_device,
+) -> ffi::c_int {
+    // SAFETY: same contract as ours.
+    unsafe { rcv_common(skb, dev, true) }
+}
+
+/// The body of both packet handlers.
+///
+/// # Safety
+///
+/// As [`can_rcv`].
+unsafe fn rcv_common(
+    skb: *mut bindings::sk_buff,
+    dev: *mut bindings::net_device,
+    fd: bool,
+) -> ffi::c_int {
     // SAFETY: the core hands us one skb reference and the receiving
     // device, alive for the call.
     let (skb, dev) = unsafe {
@@ -535,7 +567,7 @@ unsafe extern "C" fn can_rcv(
             None => return bindings::NET_RX_DROP as ffi::c_int,
         }
     };
-    if Impl::rcv(skb, dev) {
+    if Impl::rcv(skb, dev, fd) {
         bindings::NET_RX_SUCCESS as ffi::c_int
     } else {
         bindings::NET_RX_DROP as ffi::c_int
@@ -589,8 +621,15 @@ static PACKET: CCell<bindings::packet_type> = CCell::new(bindings::packet_type {
     ..unsafe { core::mem::zeroed() }
 });
 
-/// PF_CAN and the ETH_P_CAN handler registered, and the per-namespace
-/// receive tables; dropping it unregisters the family and the handler
+static PACKET_FD: CCell<bindings::packet_type> = CCell::new(bindings::packet_type {
+    type_: (bindings::ETH_P_CANFD as u16).to_be(),
+    func: Some(canfd_rcv),
+    // SAFETY: as for PACKET.
+    ..unsafe { core::mem::zeroed() }
+});
+
+/// PF_CAN and the ETH_P_CAN and ETH_P_CANFD handlers registered, and the per-namespace
+/// receive tables; dropping it unregisters the family and the handlers
 /// (waiting for running handlers), then drops the namespaces' tables.
 /// Process context.
 pub(crate) struct FamilyReg {
@@ -598,7 +637,8 @@ pub(crate) struct FamilyReg {
 }
 
 /// Registers PF_CAN with the socket layer (EEXIST if another family, e.g.
-/// mainline's can.ko, has it) and the ETH_P_CAN packet handler. Module
+/// mainline's can.ko, has it) and the ETH_P_CAN and ETH_P_CANFD packet
+/// handlers. Module
 /// init only (process context); at most once at a time: EBUSY.
 pub(crate) fn register() -> Result<FamilyReg> {
     // Before the family and the handler, so every namespace has its slot
@@ -623,8 +663,12 @@ pub(crate) fn register() -> Result<FamilyReg> {
         unsafe { (*FAMILY.get()).owner = core::ptr::null_mut() };
         return Err(e);
     }
-    // SAFETY: PACKET is a static packet_type, removed in FamilyReg's Drop.
-    unsafe { bindings::dev_add_pack(PACKET.get()) };
+    // SAFETY: PACKET and PACKET_FD are static packet_types, removed in
+    // FamilyReg's Drop.
+    unsafe {
+        bindings::dev_add_pack(PACKET.get());
+        bindings::dev_add_pack(PACKET_FD.get());
+    }
     Ok(FamilyReg { _pernet: pernet })
 }
 
@@ -634,6 +678,7 @@ impl Drop for FamilyReg {
         // running handlers (synchronize_net), sock_unregister for running
         // creates.
         unsafe {
+            bindings::dev_remove_pack(PACKET_FD.get());
             bindings::dev_remove_pack(PACKET.get());
             bindings::sock_unregister(bindings::PF_CAN as i32);
             (*FAMILY.get()).owner = core::ptr::null_mut();

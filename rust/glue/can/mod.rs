@@ -7,6 +7,7 @@
 //!   sending) that protocols and drivers use.
 //! * [`abi`]: the C ABI between the modules underneath it.
 //! * [`rx`]: the incremental receive table of `rcan_pf`.
+//! * [`skb`]: the one place a CAN skb (classic or CAN FD) is built.
 //! * [`dev`]: the CAN device layer, drivers' side (`CanDevice`), and the
 //!   C ABI to `rcan_dev`, which registers the "can" link kind (its
 //!   rtnetlink callbacks are `link.rs`, compiled into `rcan_dev` only).
@@ -18,3 +19,4 @@ pub(crate) mod abi;
 pub(crate) mod dev;
 pub(crate) mod proto;
 pub(crate) mod rx;
+pub(crate) mod skb;

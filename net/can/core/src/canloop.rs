@@ -4,7 +4,7 @@
 
 use core::fmt::Write;
 
-use super::frame::CanFrame;
+use super::frame::{AnyFrame, CanFdFrame, CanFrame, CANFD_BRS, CANFD_ESI};
 
 /// Probability, in percent, that the loopback driver drops a frame.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -38,8 +38,9 @@ impl DropRate {
     }
 }
 
-/// Capacity of a [`FrameDump`]; the longest dump is 40 bytes.
-const DUMP_CAP: usize = 64;
+/// Capacity of a [`FrameDump`]; the longest dump (a 64-byte CAN FD
+/// frame) is 225 bytes.
+const DUMP_CAP: usize = 232;
 
 /// A text rendering of a frame in a fixed buffer:
 ///
@@ -47,8 +48,11 @@ const DUMP_CAP: usize = 64;
 /// - remote frames: `STD 7FF [8] remote`
 /// - error frames: `ERR 20000004` (the whole `can_id`)
 ///
+/// - CAN FD frames: `FD STD 123 [12] BRS ESI 01 02 ...` (the payload
+///   length, then the flags that are set)
+///
 /// Identifiers are uppercase hex, 3 digits for standard and 8 for extended
-/// frames; the data length code is clamped to 8.
+/// frames; the data length code is clamped to 8, an FD length to 64.
 pub struct FrameDump {
     buf: [u8; DUMP_CAP],
     len: usize,
@@ -64,6 +68,24 @@ impl FrameDump {
         // The longest dump fits the buffer, so the writes cannot fail; were
         // one to fail, the dump would merely be cut short.
         let _ = render(&mut w, frame);
+        FrameDump {
+            buf: w.buf,
+            len: w.len,
+        }
+    }
+
+    /// Renders a frame of either flavour.
+    pub fn new_any(frame: &AnyFrame) -> FrameDump {
+        let fd = match frame {
+            AnyFrame::Classic(f) => return FrameDump::new(f),
+            AnyFrame::Fd(f) => f,
+        };
+        let mut w = Cursor {
+            buf: [0; DUMP_CAP],
+            len: 0,
+        };
+        // As in `new`: the longest dump fits.
+        let _ = render_fd(&mut w, fd);
         FrameDump {
             buf: w.buf,
             len: w.len,
@@ -89,6 +111,32 @@ fn render(w: &mut Cursor, frame: &CanFrame) -> core::fmt::Result {
     write!(w, " [{}]", frame.dlc())?;
     if arb.is_rtr() {
         return w.write_str(" remote");
+    }
+    for b in frame.payload() {
+        write!(w, " {b:02X}")?;
+    }
+    Ok(())
+}
+
+fn render_fd(w: &mut Cursor, frame: &CanFdFrame) -> core::fmt::Result {
+    let classic = CanFrame {
+        can_id: frame.can_id,
+        ..CanFrame::default()
+    };
+    let Some(arb) = classic.arb() else {
+        return write!(w, "FD ERR {:08X}", frame.can_id);
+    };
+    if arb.is_ext() {
+        write!(w, "FD EXT {:08X}", arb.id())?;
+    } else {
+        write!(w, "FD STD {:03X}", arb.id())?;
+    }
+    write!(w, " [{}]", frame.payload().len())?;
+    if frame.flags & CANFD_BRS != 0 {
+        w.write_str(" BRS")?;
+    }
+    if frame.flags & CANFD_ESI != 0 {
+        w.write_str(" ESI")?;
     }
     for b in frame.payload() {
         write!(w, " {b:02X}")?;
@@ -158,6 +206,36 @@ mod tests {
             ..CanFrame::default()
         };
         assert_eq!(dump(&f).as_str(), "ERR 20000004");
+    }
+
+    #[test]
+    fn fd_dumps() {
+        let mut f = CanFdFrame {
+            can_id: 0x123,
+            len: 3,
+            flags: CANFD_BRS,
+            ..CanFdFrame::default()
+        };
+        f.data[..3].copy_from_slice(&[1, 2, 3]);
+        let d = FrameDump::new_any(&AnyFrame::Fd(f));
+        assert_eq!(d.as_str(), "FD STD 123 [3] BRS 01 02 03");
+        // The longest dump fits whole.
+        let f = CanFdFrame {
+            can_id: 0x9FFF_FFFF,
+            len: 64,
+            flags: CANFD_BRS | CANFD_ESI,
+            data: [0xAB; 64],
+            ..CanFdFrame::default()
+        };
+        let d = FrameDump::new_any(&AnyFrame::Fd(f));
+        assert!(d.as_str().starts_with("FD EXT 1FFFFFFF [64] BRS ESI AB AB"));
+        assert!(d.as_str().ends_with(" AB"));
+        assert_eq!(d.as_str().len(), 28 + 64 * 3);
+        let c = CanFrame::from_arb(Arb::std(0x5, false).unwrap(), 1, &[0x0A]).unwrap();
+        assert_eq!(
+            FrameDump::new_any(&AnyFrame::Classic(c)).as_str(),
+            "STD 005 [1] 0A"
+        );
     }
 
     #[test]

@@ -9,6 +9,7 @@ mod capture;
 mod daemons;
 mod dsor;
 mod errors;
+mod fd;
 mod filter;
 mod gateway;
 mod i82527;
@@ -87,6 +88,10 @@ pub(crate) use portable_table;
 /// (`raw_netns_move_under_traffic`, `raw_netns_delete_with_sockets`) run
 /// on the debug kernel: creating and tearing down namespaces there costs
 /// tens of seconds per test under TCG.
+///
+/// `canutils_fd_python_can` starts python3 (some 100 s under TCG on the
+/// debug kernel); the FD paths of CAN_RAW it reaches run there in the
+/// other `fd.rs` tests.
 pub const RELEASE_ONLY: &[&str] = &[
     "install_autoload",
     "sja1000_sim_bus_off_manual_restart",
@@ -102,6 +107,7 @@ pub const RELEASE_ONLY: &[&str] = &[
     "candev_netns_returns",
     "netns_thesis_api",
     "netns_canloop_returns",
+    "canutils_fd_python_can",
 ];
 
 /// Every test, in running order.
@@ -147,6 +153,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         bcm::OURS,
         netns::TESTS,
         netns::OURS,
+        fd::TESTS,
     ]
     .into_iter()
     .flatten()

@@ -490,3 +490,53 @@ fn driver_ioctl_structs_agree_with_the_headers() {
     assert_eq!(a.to_bytes().to_vec(), want);
     assert_eq!(i82527::AnswerReq::from_bytes(&want.try_into().unwrap()), a);
 }
+
+#[test]
+fn canfd_frame_agrees_with_mainline() {
+    use rcan_core::frame::{
+        can_fd_dlc2len, CanFdFrame, CANFD_BRS, CANFD_ESI, CANFD_FDF, CANFD_MAX_DLC, CANFD_MAX_DLEN,
+        CANFD_MTU, CAN_MTU,
+    };
+    let vals = values();
+    assert_eq!(v(&vals, "CANFD_MTU"), CANFD_MTU as i128);
+    assert_eq!(v(&vals, "CAN_MTU"), CAN_MTU as i128);
+    assert_eq!(v(&vals, "CANFD_MAX_DLEN"), CANFD_MAX_DLEN as i128);
+    assert_eq!(v(&vals, "CANFD_MAX_DLC"), i128::from(CANFD_MAX_DLC));
+    assert_eq!(v(&vals, "CANFD_BRS"), i128::from(CANFD_BRS));
+    assert_eq!(v(&vals, "CANFD_ESI"), i128::from(CANFD_ESI));
+    assert_eq!(v(&vals, "CANFD_FDF"), i128::from(CANFD_FDF));
+    assert_eq!(can_fd_dlc2len(CANFD_MAX_DLC) as usize, CANFD_MAX_DLEN);
+    let c = c_eval(
+        &repo_root(),
+        &[
+            "sizeof(struct canfd_frame)",
+            "offsetof(struct canfd_frame, can_id)",
+            "offsetof(struct canfd_frame, len)",
+            "offsetof(struct canfd_frame, flags)",
+            "offsetof(struct canfd_frame, data)",
+        ],
+    )
+    .unwrap();
+    assert_eq!(c["sizeof(struct canfd_frame)"], CANFD_MTU as i128);
+    let mut f = CanFdFrame {
+        can_id: 0x123,
+        len: 12,
+        flags: CANFD_BRS,
+        ..CanFdFrame::default()
+    };
+    f.data[11] = 0x5a;
+    let b = f.to_bytes();
+    assert_eq!(
+        b[c["offsetof(struct canfd_frame, can_id)"] as usize..][..4],
+        0x123u32.to_ne_bytes()
+    );
+    assert_eq!(b[c["offsetof(struct canfd_frame, len)"] as usize], 12);
+    assert_eq!(
+        b[c["offsetof(struct canfd_frame, flags)"] as usize],
+        CANFD_BRS
+    );
+    assert_eq!(
+        b[c["offsetof(struct canfd_frame, data)"] as usize + 11],
+        0x5a
+    );
+}

@@ -1,0 +1,135 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! The one place a CAN skb is built (issue 19): the buffer, mainline's
+//! `struct can_skb_priv` in front of the frame (`can_skb_reserve`,
+//! `can_skb_prv(skb)->ifindex`), and the frame itself, classic (16 bytes,
+//! ETH_P_CAN) or CAN FD (72 bytes, ETH_P_CANFD) in mainline's canonical
+//! layout. The protocol (ETH_P_CAN or ETH_P_CANFD) is set from the length
+//! when the skb is marked for sending ([`Skb::set_can_tx`], by pf_can) or
+//! as received ([`Skb::set_can_rx`]), as mainline's `can_send` decides it.
+//!
+//! Protocols' send paths use [`alloc_tx`] (charged to the socket) or
+//! [`alloc_frame`]; drivers use [`alloc_rx`] for frames from the bus.
+
+use crate::glue::bindings;
+use crate::glue::netdev::NetDev;
+use crate::glue::skb::Skb;
+use crate::glue::sock::{Proto, Sock};
+use crate::rcan_core::frame::AnyFrame;
+use kernel::prelude::*;
+
+/// Headroom for mainline's `struct can_skb_priv { int ifindex; int
+/// skbcnt; }`.
+pub(crate) const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
+
+/// Reserves and fills the `struct can_skb_priv` of a fresh skb: the
+/// interface it is sent by or received on, `skbcnt` 0.
+fn put_priv(skb: &mut Skb, ifindex: i32) -> bool {
+    skb.reserve(SKB_PRIV_LEN);
+    let mut prv = [0u8; SKB_PRIV_LEN as usize];
+    prv[..4].copy_from_slice(&ifindex.to_ne_bytes());
+    skb.write_headroom(&prv)
+}
+
+/// Appends the frame's image (16 or 72 bytes).
+fn put_frame(skb: &mut Skb, frame: &AnyFrame) -> bool {
+    match frame {
+        AnyFrame::Classic(f) => skb.put_data(&f.to_bytes()),
+        AnyFrame::Fd(f) => skb.put_data(&f.to_bytes()),
+    }
+}
+
+/// An skb for `len` bytes a socket sends by `dev`, charged to the
+/// socket's send buffer (mainline `raw_sendmsg`: `sock_alloc_send_skb`,
+/// `can_skb_reserve`, `can_skb_prv(skb)->ifindex`); the caller appends
+/// the frame. Process context; blocks while the send buffer is full
+/// unless `nonblock` (EAGAIN), honouring SO_SNDTIMEO.
+pub(crate) fn alloc_tx<T: Proto>(
+    sk: &Sock<T>,
+    dev: &NetDev,
+    len: usize,
+    nonblock: bool,
+) -> Result<Skb> {
+    let len = u32::try_from(len).map_err(|_| EINVAL)?;
+    let mut skb = sk.alloc_send_skb(SKB_PRIV_LEN + len, nonblock)?;
+    if !put_priv(&mut skb, dev.ifindex()) {
+        return Err(crate::glue::neterr::ENOBUFS());
+    }
+    Ok(skb)
+}
+
+/// An skb holding `frame`, to be sent by `dev` by a sender without a
+/// socket buffer to charge (timers, kernel receivers). Any context with
+/// `GFP_ATOMIC`; `None` without memory.
+pub(crate) fn alloc_frame(dev: &NetDev, frame: &AnyFrame, gfp: bindings::gfp_t) -> Option<Skb> {
+    let mut skb = Skb::alloc(SKB_PRIV_LEN + frame.mtu() as u32, gfp)?;
+    (put_priv(&mut skb, dev.ifindex()) && put_frame(&mut skb, frame)).then_some(skb)
+}
+
+/// An skb holding `frame` as received on `dev` (mainline `alloc_can_skb`
+/// / `alloc_canfd_skb`): marked with [`Skb::set_can_rx`], ready for the
+/// driver to hand up. Any context (allocates with `GFP_ATOMIC`); `None`
+/// without memory (the driver counts an `rx_dropped`).
+pub(crate) fn alloc_rx(dev: &NetDev, frame: &AnyFrame) -> Option<Skb> {
+    let mut skb = alloc_frame(dev, frame, crate::glue::GFP_ATOMIC)?;
+    skb.set_can_rx(dev);
+    Some(skb)
+}
+
+/// Bytes of `struct sockaddr_can` that CAN_RAW and CAN_BCM return from
+/// recvmsg (`can_family`, padding, `can_ifindex`; mainline's
+/// `RAW_MIN_NAMELEN`/`BCM_MIN_NAMELEN`).
+pub(crate) const MIN_NAMELEN: usize = 8;
+/// Offsets in `skb->cb` of a frame queued for [`recvmsg_queued`]: the
+/// source address, then the recvmsg flags.
+const CB_NAME: usize = 0;
+const CB_FLAGS: usize = MIN_NAMELEN;
+
+/// Records in `skb->cb`, for [`recvmsg_queued`], that the skb came from
+/// interface `ifindex` and is read with `flags` (MSG_DONTROUTE,
+/// MSG_CONFIRM) set: mainline keeps the `sockaddr_can` in the cb too
+/// (`raw_rcv`, `bcm_send_to_user`). Any context; the skb is about to be
+/// queued on a socket, whose queue owns the cb from then on.
+pub(crate) fn set_rx_meta(skb: &mut Skb, ifindex: i32, flags: u32) {
+    let mut name = [0u8; MIN_NAMELEN];
+    name[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
+    name[4..].copy_from_slice(&ifindex.to_ne_bytes());
+    skb.cb_write(CB_NAME, &name);
+    skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
+}
+
+/// The recvmsg of CAN_RAW and CAN_BCM (mainline `raw_recvmsg`,
+/// `bcm_recvmsg`): dequeues one skb queued with [`set_rx_meta`], copies
+/// up to `len` bytes of it (`MSG_TRUNC` if it is longer: a 72-byte CAN FD
+/// frame read into 16 bytes gives 16 and `MSG_TRUNC`), adds the receive
+/// control messages (timestamps), the source address ([`MIN_NAMELEN`]
+/// bytes) and the recorded flags; returns the bytes copied. Process
+/// context; may sleep (blocking read, SO_RCVTIMEO).
+pub(crate) fn recvmsg_queued<T: Proto>(
+    sk: &Sock<T>,
+    msg: &mut crate::glue::sock::Msg,
+    len: usize,
+    flags: i32,
+) -> Result<usize> {
+    let skb = sk.recv_datagram(flags)?;
+    let n = skb.len() as usize;
+    let size = if len < n {
+        msg.add_flags(bindings::MSG_TRUNC);
+        len
+    } else {
+        n
+    };
+    if let Err(e) = msg.copy_from_skb(&skb, 0, size) {
+        sk.free_datagram(skb);
+        return Err(e);
+    }
+    msg.recv_cmsgs(sk, &skb);
+    let mut name = [0u8; MIN_NAMELEN];
+    skb.cb_read(CB_NAME, &mut name);
+    msg.set_name(&name);
+    let mut f = [0u8; 4];
+    skb.cb_read(CB_FLAGS, &mut f);
+    msg.add_flags(u32::from_ne_bytes(f));
+    sk.free_datagram(skb);
+    Ok(size)
+}
