@@ -428,15 +428,23 @@ impl Worker<'_> {
                 self.store(s, fd, pi);
                 // Half the new sockets get a well-formed bind at once, so
                 // that frames and messages flow and the receive paths run.
+                // (BCM has no bind: its sockets are connect()-ed.)
                 if valid && self.rng.chance(1, 2) {
                     let a = self.valid_addr(p);
+                    let bcm = p.msg == table::Msg::Bcm;
                     self.begin(format!(
-                        "bind({} fd {fd}, well-formed [{}])",
+                        "{}({} fd {fd}, well-formed [{}])",
+                        if bcm { "connect" } else { "bind" },
                         p.name,
                         hex(&a)
                     ));
-                    let r = sys::bind(fd, &a);
-                    self.end(Call::Bind, &r);
+                    if bcm {
+                        let r = sys::connect(fd, &a);
+                        self.end(Call::Connect, &r);
+                    } else {
+                        let r = sys::bind(fd, &a);
+                        self.end(Call::Bind, &r);
+                    }
                 }
             }
             Err(e) if valid && ![libc::ENOBUFS, libc::ENOMEM, libc::EMFILE].contains(&e) => {
