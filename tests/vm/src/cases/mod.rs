@@ -26,6 +26,7 @@ mod raw_send;
 mod raw_sockopt;
 mod recv;
 mod remote;
+mod robust;
 mod rxcontext;
 mod sja1000;
 mod socket;
@@ -109,6 +110,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         install::TESTS,
         bcm::TESTS,
         bcm::OURS,
+        robust::OURS,
     ]
     .into_iter()
     .flatten()
