@@ -23,7 +23,12 @@ use crate::Test;
 
 pub const TESTS: &[Test] = portable_table![raw_leak_poisoned_buffers, bcm_leak_replies];
 
-pub const OURS: &[Test] = test_table![leak_sja1000_frames, leak_i82527_frames, leak_time_frame];
+pub const OURS: &[Test] = test_table![
+    leak_sja1000_frames,
+    leak_i82527_frames,
+    leak_time_frame,
+    leak_dsor_bodies,
+];
 
 /// `SO_RCVMARK`: an `SO_MARK` control message (4 bytes) with every frame.
 const SO_RCVMARK: libc::c_int = 75;
@@ -412,6 +417,105 @@ fn leak_time_frame(ctx: &mut Ctx) -> TestResult {
     ctx.insmod(Module::Time, &[])?;
     let w = kernel_built(&rx, "rcan_time frame")?;
     ctx.note(format!("time frame {}", canraw::show_wire(&w)));
+    Ok(())
+}
+
+/// DSOR message bodies, reassembled in the kernel from frames: messages
+/// of 0, 1, 6, 7, 8, 13, 14, 100 and 1000 bytes (and 4000 on the release
+/// kernel), largest first so that later, shorter ones reuse what the
+/// earlier ones left, each received into a buffer 64 bytes longer than
+/// the message and filled with [`FILL`]: the message's bytes as sent and
+/// nothing after them; then one received into a buffer half its length:
+/// the first half, `MSG_TRUNC` in `recvmsg`'s flags, an 8-byte address
+/// and nothing after it.
+fn leak_dsor_bodies(ctx: &mut Ctx) -> TestResult {
+    use rcan_uapi::dsor::{DsorAddr, DsorSocket, DSOR_ID_ANY};
+    ctx.load_stack(&[])?;
+    ctx.insmod(Module::Dsor, &["ifname=can0"])?;
+    let rx = DsorSocket::new().or_fail("DSOR socket")?;
+    rx.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: 0,
+        id: DSOR_ID_ANY,
+    })
+    .or_fail("bind")?;
+    rx.set_rcvtimeo(Duration::from_secs(20))
+        .or_fail("SO_RCVTIMEO")?;
+    let tx = DsorSocket::new().or_fail("DSOR socket")?;
+    let mut lens = vec![1000, 100, 14, 13, 8, 7, 6, 1, 0];
+    if !crate::ctx::debug_kernel() {
+        lens.insert(0, 4000);
+    }
+    let body = |id: u32, len: usize| -> Vec<u8> {
+        (0..len)
+            .map(|i| (i as u32 * 7 + id * 13 + 1) as u8 | 1)
+            .collect()
+    };
+    for (j, &len) in lens.iter().enumerate() {
+        let id = 0x1eaf_0000 | j as u32;
+        let a = DsorAddr::Segm {
+            prio: 0x20,
+            node: 0,
+            id,
+        };
+        tx.send_to(&body(id, len), &a)
+            .or_fail(format_args!("send {len} bytes"))?;
+        let mut buf = vec![FILL; len + 64];
+        let (n, from) = rx
+            .recv_from(&mut buf)
+            .or_fail(format_args!("recv {len} bytes"))?;
+        ensure!(
+            matches!(from, Some(DsorAddr::Segm { id: i, .. }) if i == id),
+            "message of {len} bytes from {from:?}"
+        );
+        ensure!(
+            n == len && buf[..n] == body(id, len)[..],
+            "message of {len} bytes: {n} bytes received, content {}",
+            if buf[..n.min(len)] == body(id, len)[..n.min(len)] {
+                "as sent"
+            } else {
+                "differs"
+            }
+        );
+        ensure!(
+            buf[n..].iter().all(|&b| b == FILL),
+            "message of {len} bytes: buffer written past it: {:02X?}",
+            &buf[n..(n + 16).min(buf.len())]
+        );
+    }
+    // Into a buffer half the message's length.
+    let id = 0x1eaf_1000;
+    let len = 100;
+    tx.send_to(
+        &body(id, len),
+        &DsorAddr::Segm {
+            prio: 0x20,
+            node: 0,
+            id,
+        },
+    )
+    .or_fail("send 100 bytes")?;
+    let mut data = [FILL; 50];
+    let mut name = [FILL; 128];
+    let mut control = [0u64; 0];
+    let r = sys::recvmsg_into(&rx, &mut data, &mut name, &mut control, 0)
+        .or_fail("recvmsg into 50 bytes")?;
+    ensure!(
+        r.len == 50 && r.flags & libc::MSG_TRUNC != 0 && data[..50] == body(id, len)[..50],
+        "100-byte message into 50 bytes: returned {}, msg_flags {:#x}",
+        r.len,
+        r.flags
+    );
+    ensure!(
+        name[r.namelen.min(128)..].iter().all(|&b| b == FILL) && r.namelen == 8,
+        "100-byte message: msg_namelen {} (sockaddr_cansegm: 8), address bytes {:02X?}",
+        r.namelen,
+        &name[..16]
+    );
+    ctx.note(format!(
+        "{} messages of {lens:?} bytes and a truncated one checked",
+        lens.len()
+    ));
     Ok(())
 }
 
