@@ -308,8 +308,12 @@ fn bcm_leak_replies(ctx: &mut Ctx) -> TestResult {
     let f = canraw::std(0x123, &[1, 2, 3]);
     canraw::send(&tx, &f)?;
     let r = bcm_reply(&bcm, idx, "RX_CHANGED")?;
+    // The frame as sent, but for byte 5 (`flags`/`__pad`), where mainline
+    // marks RX_LOCAL (0x40) and RX_OWN (0x80) traffic.
+    let mut want = canraw::wire(&f);
+    want[5] = r[56 + 5] & 0xC0;
     ensure!(
-        head(&r) == (12, RX_FILTER_ID, 0, 0x123, 1) && r[56..72] == canraw::wire(&f),
+        head(&r) == (12, RX_FILTER_ID, 0, 0x123, 1) && r[56..72] == want,
         "RX_CHANGED: head {:?}, frame {}",
         head(&r),
         canraw::show_wire(&r[56..r.len().min(72)])
