@@ -276,6 +276,29 @@ impl Worker<'_> {
         true
     }
 
+    /// [`Self::end_with`] for a send on `fd`, a socket of `p` when the slot
+    /// was read: `p`'s own errnos are allowed too. If the errno is not in
+    /// either set, the descriptor may have been closed and reused by
+    /// another thread for a socket of another protocol meanwhile (the
+    /// lowest free number is reused at once): then that protocol's errnos
+    /// apply (e.g. `ENOTCONN` of a BCM socket on a slot that held a DSOR
+    /// socket; found by seed 7).
+    fn end_send(&mut self, call: Call, r: &sys::Res<usize>, fd: c_int, p: &Proto) -> bool {
+        let extra = match r {
+            Err(e) if !call.allowed().contains(e) && !p.extra_send.contains(e) => {
+                match Self::ident(fd).and_then(|(_, k)| k) {
+                    Some(leak::Kind::Bcm) => PROTOS
+                        .iter()
+                        .find(|q| q.msg == table::Msg::Bcm)
+                        .map_or(p.extra_send, |q| q.extra_send),
+                    _ => p.extra_send,
+                }
+            }
+            _ => p.extra_send,
+        };
+        self.end_with(call, r, extra)
+    }
+
     fn violation(&self, what: String) {
         let p = &self.sh.progress[self.id];
         let desc = p.desc.lock().unwrap().clone();
@@ -831,7 +854,7 @@ impl Worker<'_> {
                     p.name
                 ));
                 let r = sys::sendto(fd, &data, flags, None);
-                if self.end_with(Call::Send, &r, p.extra_send) {
+                if self.end_send(Call::Send, &r, fd, p) {
                     self.check_sent(&r, n);
                 }
             }
@@ -844,7 +867,7 @@ impl Worker<'_> {
                     a.len()
                 ));
                 let r = sys::sendto(fd, &data, flags, Some(&a));
-                if self.end_with(Call::Sendto, &r, p.extra_send) {
+                if self.end_send(Call::Sendto, &r, fd, p) {
                     self.check_sent(&r, n);
                 }
             }
@@ -862,7 +885,7 @@ impl Worker<'_> {
                     hex(&c.0[..clen])
                 ));
                 let r = sys::sendmsg(fd, &data, a.as_deref(), &c, clen, flags);
-                if self.end_with(Call::Sendmsg, &r, p.extra_send) {
+                if self.end_send(Call::Sendmsg, &r, fd, p) {
                     self.check_sent(&r, n);
                 }
             }
