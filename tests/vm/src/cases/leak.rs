@@ -201,7 +201,9 @@ fn bcm_head(
 /// `nframes` 16-byte frames, the head's hole (bytes 12..16, the
 /// CVE-2021-34693 bytes) is zero, nothing past the returned length and
 /// `msg_namelen` changed, the address is `AF_CAN`, zero padding, `ifindex`,
-/// the rest of what was reported zero. Returns the reply.
+/// the rest of what was reported zero. Returns the reply. (Replies of a
+/// transmission carry ifindex 0: mainline fills in the operation's
+/// receive interface, which a TX operation has not.)
 fn bcm_reply(fd: impl AsFd, ifindex: u32, what: &str) -> Result<Vec<u8>, String> {
     let mut data = [FILL; 4096];
     let mut name = [FILL; 128];
@@ -278,7 +280,7 @@ fn bcm_leak_replies(ctx: &mut Ctx) -> TestResult {
     frames.iter().for_each(|f| m.extend_from_slice(f));
     raw::write(&bcm, &m).or_fail("TX_SETUP")?;
     raw::write(&bcm, &bcm_head(TX_READ, 0, 0, 0, 0, 0x101, 0)).or_fail("TX_READ")?;
-    let r = bcm_reply(&bcm, idx, "TX_STATUS")?;
+    let r = bcm_reply(&bcm, 0, "TX_STATUS")?;
     ensure!(
         head(&r) == (8, 0, 0, 0x101, 2) && r[56..72] == frames[0] && r[72..88] == frames[1],
         "TX_STATUS: head {:?}, frames {:02X?}",
@@ -297,7 +299,7 @@ fn bcm_leak_replies(ctx: &mut Ctx) -> TestResult {
     );
     m.extend_from_slice(&canraw::wire(&canraw::std(0x102, &[7])));
     raw::write(&bcm, &m).or_fail("TX_SETUP with a count")?;
-    let r = bcm_reply(&bcm, idx, "TX_EXPIRED")?;
+    let r = bcm_reply(&bcm, 0, "TX_EXPIRED")?;
     ensure!(
         head(&r).0 == 9 && head(&r).3 == 0x102,
         "TX_EXPIRED: head {:?}",
