@@ -27,6 +27,7 @@ pub const OURS: &[Test] = test_table![
     leak_sja1000_frames,
     leak_i82527_frames,
     leak_time_frame,
+    leak_rtime_frame,
     leak_dsor_bodies,
 ];
 
@@ -165,6 +166,20 @@ fn raw_leak_poisoned_buffers(ctx: &mut Ctx) -> TestResult {
         a[n..].iter().all(|&b| b == FILL),
         "getsockname wrote past its {n} bytes"
     );
+    Ok(())
+}
+
+/// The frame rcan_rtime builds when it hears no other time source (it
+/// takes over after `timeout_ms`, here its minimum of 1200 ms), read by a
+/// CAN_RAW socket on can0 ([`kernel_built`]).
+fn leak_rtime_frame(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let rx = canraw::open(idx)?;
+    rx.set_read_timeout(Duration::from_secs(10))
+        .or_fail("SO_RCVTIMEO")?;
+    ctx.insmod(Module::Rtime, &["timeout_ms=1200"])?;
+    let w = kernel_built(&rx, "rcan_rtime frame")?;
+    ctx.note(format!("rtime frame {}", canraw::show_wire(&w)));
     Ok(())
 }
 
