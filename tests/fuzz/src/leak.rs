@@ -49,6 +49,9 @@ pub enum Kind {
     Arb,
     /// CANPROTO_DSOR: `struct sockaddr_cansegm` or `sockaddr_canport`.
     Dsor,
+    /// CAN_BCM: `struct sockaddr_can` (mainline reports 16 bytes), and
+    /// replies that start with a `struct bcm_msg_head`.
+    Bcm,
 }
 
 /// Offsets of the padding bytes in an address of `kind` that the kernel
@@ -65,7 +68,7 @@ pub enum Kind {
 ///   padding.
 pub fn addr_padding(kind: Kind, len: usize) -> Vec<usize> {
     match (kind, len) {
-        (Kind::Raw, _) => [2, 3].into_iter().chain(8..len.max(8)).collect(),
+        (Kind::Raw | Kind::Bcm, _) => [2, 3].into_iter().chain(8..len.max(8)).collect(),
         (Kind::Arb, _) => vec![2, 3],
         (Kind::Dsor, 6) => vec![5],
         (Kind::Dsor, _) => vec![],
@@ -107,6 +110,30 @@ pub fn check_addr(
                  (neither zero nor the 0x{POISON:02x} poison): uninitialised kernel memory? [{}]",
                 buf[off],
                 hex(&buf[..written])
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Bytes 12..16 of a `struct bcm_msg_head` on x86_64: the hole between
+/// `count` (8..12) and `ival1` (16, 8-byte aligned). Mainline's
+/// CVE-2021-34693 was exactly these bytes, copied from the stack.
+pub const BCM_HEAD_HOLE: std::ops::Range<usize> = 12..16;
+
+/// A BCM reply of `ret` bytes in `buf`: if it holds a whole
+/// `bcm_msg_head`, its hole is zero or poison.
+pub fn check_bcm_reply(buf: &[u8], ret: usize, what: &str) -> Result<(), String> {
+    if ret < 56 || buf.len() < 56 {
+        return Ok(());
+    }
+    for off in BCM_HEAD_HOLE {
+        if !is_clean(buf[off]) {
+            return Err(format!(
+                "{what}: byte {off} of a bcm_msg_head (the hole after count) is {:#04x} \
+                 (neither zero nor the 0x{POISON:02x} poison): uninitialised kernel memory? [{}]",
+                buf[off],
+                hex(&buf[..56])
             ));
         }
     }
@@ -199,6 +226,29 @@ mod tests {
 
     fn poisoned(n: usize) -> Vec<u8> {
         vec![POISON; n]
+    }
+
+    #[test]
+    fn bcm_reply_hole() {
+        // A reply head: opcode TX_STATUS, flags, count 0, then the hole.
+        let mut b = poisoned(128);
+        b[..56].fill(0);
+        b[0] = 8;
+        assert!(check_bcm_reply(&b, 56, "x").is_ok());
+        b[12..16].fill(POISON);
+        assert!(check_bcm_reply(&b, 72, "x").is_ok());
+        b[14] = 0x5c;
+        let e = check_bcm_reply(&b, 56, "x").unwrap_err();
+        assert!(e.contains("byte 14"), "{e}");
+        // Shorter than a head (a short buffer): not checked.
+        assert!(check_bcm_reply(&b, 55, "x").is_ok());
+        assert!(check_bcm_reply(&b[..40], 56, "x").is_ok());
+        // A BCM address is a sockaddr_can: padding 2..4 and past 8.
+        let mut a = poisoned(24);
+        a[..16].copy_from_slice(&[29, 0, 0, 0, 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+        assert!(check_addr(Some(Kind::Bcm), &a, 16, "x").is_ok());
+        a[9] = 1;
+        assert!(check_addr(Some(Kind::Bcm), &a, 16, "x").is_err());
     }
 
     #[test]

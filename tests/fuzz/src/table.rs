@@ -85,7 +85,35 @@ pub struct Proto {
     pub max_msg: usize,
     /// Send lengths worth trying besides random ones.
     pub send_lens: &'static [usize],
+    /// How a message body is built: random bytes, or a structure the
+    /// protocol parses (mostly well-formed, so the paths past the first
+    /// check run).
+    pub msg: Msg,
+    /// Errnos a send may return on this protocol besides [`Call::allowed`]
+    /// (documented, protocol-specific ones; e.g. BCM's `EFAULT` for a
+    /// message shorter than its `nframes`, as mainline; `ENOTCONN` before
+    /// `connect`; `E2BIG` for an update with more frames).
+    pub extra_send: &'static [c_int],
 }
+
+/// How the fuzzer builds a message for a protocol.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Msg {
+    /// Random bytes of a random or interesting length.
+    Random,
+    /// `struct bcm_msg_head` and frames ([`BCM_HEAD`] bytes, then 16- or
+    /// 72-byte frames).
+    Bcm,
+}
+
+/// `sizeof(struct bcm_msg_head)` on x86_64.
+pub const BCM_HEAD: usize = 56;
+/// BCM opcodes a user sends (1..=7); the replies are 8..=12.
+pub const BCM_OPCODES: &[u32] = &[1, 2, 3, 4, 5, 6, 7];
+/// BCM flags (bcm.rst): SETTIMER .. CAN_FD_FRAME.
+pub const BCM_FLAGS: &[u32] = &[
+    0x1, 0x2, 0x4, 0x8, 0x10, 0x20, 0x40, 0x80, 0x100, 0x200, 0x400, 0x800,
+];
 
 /// `struct sockaddr_can` (24 bytes): family, pad, ifindex, the 16-byte
 /// union of transport addresses.
@@ -172,6 +200,8 @@ pub const PROTOS: &[Proto] = &[
         level: Some(SOL_CAN_RAW),
         max_msg: 72,
         send_lens: &[16, 72, 2060, 13],
+        msg: Msg::Random,
+        extra_send: &[],
     },
     Proto {
         name: "CANPROTO_CAN",
@@ -182,6 +212,8 @@ pub const PROTOS: &[Proto] = &[
         level: None,
         max_msg: 8,
         send_lens: &[0, 1, 8, 9],
+        msg: Msg::Random,
+        extra_send: &[],
     },
     Proto {
         name: "CANPROTO_DSOR",
@@ -192,6 +224,23 @@ pub const PROTOS: &[Proto] = &[
         level: None,
         max_msg: 65535,
         send_lens: &[0, 1, 5, 6, 7, 8, 13, 14, 100, 65535, 65536],
+        msg: Msg::Random,
+        extra_send: &[],
+    },
+    // CAN_BCM (bcm.rst): connect()-ed to an interface (sockaddr_can), no
+    // protocol options; each write one bcm_msg_head and its frames, each
+    // read one reply (at most the head and 257 CAN FD frames).
+    Proto {
+        name: "CAN_BCM",
+        sock_type: libc::SOCK_DGRAM,
+        protocol: 2,
+        addrs: &[SOCKADDR_CAN],
+        opts: &[],
+        level: None,
+        max_msg: BCM_HEAD + 257 * 72,
+        send_lens: &[0, 55, 56, 57, 72, 88, 128, 200],
+        msg: Msg::Bcm,
+        extra_send: &[libc::EFAULT, libc::ENOTCONN, libc::E2BIG],
     },
 ];
 

@@ -21,9 +21,15 @@ use crate::ctx::{Ctx, Module};
 use crate::sys::{self, FILL};
 use crate::Test;
 
-pub const TESTS: &[Test] = portable_table![raw_leak_poisoned_buffers];
+pub const TESTS: &[Test] = portable_table![raw_leak_poisoned_buffers, bcm_leak_replies];
 
-pub const OURS: &[Test] = test_table![leak_sja1000_frames, leak_i82527_frames, leak_time_frame];
+pub const OURS: &[Test] = test_table![
+    leak_sja1000_frames,
+    leak_i82527_frames,
+    leak_time_frame,
+    leak_rtime_frame,
+    leak_dsor_bodies,
+];
 
 /// `SO_RCVMARK`: an `SO_MARK` control message (4 bytes) with every frame.
 const SO_RCVMARK: libc::c_int = 75;
@@ -163,6 +169,204 @@ fn raw_leak_poisoned_buffers(ctx: &mut Ctx) -> TestResult {
     Ok(())
 }
 
+/// The frame rcan_rtime builds when it hears no other time source (it
+/// takes over after `timeout_ms`, here its minimum of 1200 ms), read by a
+/// CAN_RAW socket on can0 ([`kernel_built`]).
+fn leak_rtime_frame(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let rx = canraw::open(idx)?;
+    rx.set_read_timeout(Duration::from_secs(10))
+        .or_fail("SO_RCVTIMEO")?;
+    ctx.insmod(Module::Rtime, &["timeout_ms=1200"])?;
+    let w = kernel_built(&rx, "rcan_rtime frame")?;
+    ctx.note(format!("rtime frame {}", canraw::show_wire(&w)));
+    Ok(())
+}
+
+/// `sizeof(struct bcm_msg_head)` on x86_64 (bcm.rst); encoded here
+/// independently of bcm.rs and rcan-core.
+const BCM_HEAD: usize = 56;
+
+/// A `struct bcm_msg_head` as written: opcode, flags, count, ival1 and
+/// ival2 (µs), can_id, nframes; the 4-byte hole at 12..16 stays zero.
+fn bcm_head(
+    op: u32,
+    flags: u32,
+    count: u32,
+    ival1_us: i64,
+    ival2_us: i64,
+    id: u32,
+    n: u32,
+) -> Vec<u8> {
+    let mut b = vec![0u8; BCM_HEAD];
+    b[0..4].copy_from_slice(&op.to_ne_bytes());
+    b[4..8].copy_from_slice(&flags.to_ne_bytes());
+    b[8..12].copy_from_slice(&count.to_ne_bytes());
+    for (i, us) in [ival1_us, ival2_us].into_iter().enumerate() {
+        b[16 + 16 * i..24 + 16 * i].copy_from_slice(&(us / 1_000_000).to_ne_bytes());
+        b[24 + 16 * i..32 + 16 * i].copy_from_slice(&(us % 1_000_000).to_ne_bytes());
+    }
+    b[48..52].copy_from_slice(&id.to_ne_bytes());
+    b[52..56].copy_from_slice(&n.to_ne_bytes());
+    b
+}
+
+/// Reads one BCM reply into a 4096-byte data buffer and a 128-byte name
+/// buffer, both [`FILL`]ed, and checks: its length is the head plus
+/// `nframes` 16-byte frames, the head's hole (bytes 12..16, the
+/// CVE-2021-34693 bytes) is zero, nothing past the returned length and
+/// `msg_namelen` changed, the address is `AF_CAN`, zero padding, `ifindex`,
+/// the rest of what was reported zero. Returns the reply. (Replies of a
+/// transmission carry ifindex 0: mainline fills in the operation's
+/// receive interface, which a TX operation has not.)
+fn bcm_reply(fd: impl AsFd, ifindex: u32, what: &str) -> Result<Vec<u8>, String> {
+    let mut data = [FILL; 4096];
+    let mut name = [FILL; 128];
+    let mut control = [0u64; 0];
+    let r = sys::recvmsg_into(&fd, &mut data, &mut name, &mut control, 0)
+        .or_fail(format_args!("{what}: recvmsg"))?;
+    ensure!(r.len >= BCM_HEAD, "{what}: {} bytes", r.len);
+    let nframes = u32::from_ne_bytes(data[52..56].try_into().unwrap()) as usize;
+    ensure!(
+        r.len == BCM_HEAD + 16 * nframes,
+        "{what}: {} bytes for nframes {nframes}",
+        r.len
+    );
+    ensure!(
+        data[12..16] == [0; 4],
+        "{what}: the hole of bcm_msg_head (bytes 12..16) is {:02X?}: uninitialised kernel memory",
+        &data[12..16]
+    );
+    ensure!(
+        data[r.len..].iter().all(|&b| b == FILL),
+        "{what}: data buffer written past the {} bytes returned",
+        r.len
+    );
+    ensure!(
+        (8..=24).contains(&r.namelen),
+        "{what}: msg_namelen {}",
+        r.namelen
+    );
+    ensure!(
+        name[r.namelen..].iter().all(|&b| b == FILL),
+        "{what}: address buffer written past msg_namelen {}",
+        r.namelen
+    );
+    ensure!(
+        u16::from_ne_bytes([name[0], name[1]]) == libc::AF_CAN as u16
+            && name[2..4] == [0, 0]
+            && addr_ifindex(&name)? == ifindex
+            && name[8..r.namelen].iter().all(|&b| b == 0),
+        "{what}: address [{:02X?}] (AF_CAN, zero padding, ifindex {ifindex})",
+        &name[..r.namelen]
+    );
+    Ok(data[..r.len].to_vec())
+}
+
+/// CAN_BCM replies and notifications into poisoned buffers
+/// ([`bcm_reply`]): the kernel builds each head itself, the timer ones
+/// (`TX_EXPIRED`, `RX_TIMEOUT`) from a head on the stack in mainline,
+/// where CVE-2021-34693 leaked its 4-byte hole. `TX_STATUS` (`TX_READ`:
+/// the frames as written, with their padding bytes set by us, come
+/// back as written), `TX_EXPIRED`, `RX_CHANGED` (the received frame),
+/// `RX_TIMEOUT` and `RX_STATUS`: every defined field as expected.
+fn bcm_leak_replies(ctx: &mut Ctx) -> TestResult {
+    const TX_SETUP: u32 = 1;
+    const TX_READ: u32 = 3;
+    const RX_SETUP: u32 = 5;
+    const RX_READ: u32 = 7;
+    const SETTIMER: u32 = 0x1;
+    const STARTTIMER: u32 = 0x2;
+    const TX_COUNTEVT: u32 = 0x4;
+    const RX_FILTER_ID: u32 = 0x20;
+    let idx = ctx.bcm_ifaces(1)?[0];
+    let bcm = raw::socket(libc::AF_CAN, libc::SOCK_DGRAM, 2).or_fail("socket(CAN_BCM)")?;
+    raw::connect(&bcm, &canraw::addr_bytes(libc::AF_CAN as u16, idx)).or_fail("connect")?;
+    raw::set_timeout(&bcm, libc::SO_RCVTIMEO, Duration::from_secs(5)).or_fail("SO_RCVTIMEO")?;
+    let tx = canraw::open(idx)?;
+    let head = |b: &[u8]| -> (u32, u32, u32, u32, u32) {
+        let u = |o: usize| u32::from_ne_bytes(b[o..o + 4].try_into().unwrap());
+        (u(0), u(4), u(8), u(48), u(52))
+    };
+    // TX_STATUS: two frames with 0x5C in __pad/__res0/len8_dlc and the
+    // data past len (user bytes: they come back as written).
+    let frames = [sff_with_tail(0x101, 2, 0x5C), sff_with_tail(0x101, 5, 0x5C)];
+    let mut m = bcm_head(TX_SETUP, 0, 0, 0, 0, 0x101, 2);
+    frames.iter().for_each(|f| m.extend_from_slice(f));
+    raw::write(&bcm, &m).or_fail("TX_SETUP")?;
+    raw::write(&bcm, &bcm_head(TX_READ, 0, 0, 0, 0, 0x101, 0)).or_fail("TX_READ")?;
+    let r = bcm_reply(&bcm, 0, "TX_STATUS")?;
+    ensure!(
+        head(&r) == (8, 0, 0, 0x101, 2) && r[56..72] == frames[0] && r[72..88] == frames[1],
+        "TX_STATUS: head {:?}, frames {:02X?}",
+        head(&r),
+        &r[56..]
+    );
+    // TX_EXPIRED: two frames at 10 ms, counted.
+    let mut m = bcm_head(
+        TX_SETUP,
+        SETTIMER | STARTTIMER | TX_COUNTEVT,
+        2,
+        10_000,
+        0,
+        0x102,
+        1,
+    );
+    m.extend_from_slice(&canraw::wire(&canraw::std(0x102, &[7])));
+    raw::write(&bcm, &m).or_fail("TX_SETUP with a count")?;
+    let r = bcm_reply(&bcm, 0, "TX_EXPIRED")?;
+    ensure!(
+        head(&r).0 == 9 && head(&r).3 == 0x102,
+        "TX_EXPIRED: head {:?}",
+        head(&r)
+    );
+    // RX_CHANGED: any frame 0x123 (RX_FILTER_ID), sent through CAN_RAW.
+    raw::write(&bcm, &bcm_head(RX_SETUP, RX_FILTER_ID, 0, 0, 0, 0x123, 0)).or_fail("RX_SETUP")?;
+    let f = canraw::std(0x123, &[1, 2, 3]);
+    canraw::send(&tx, &f)?;
+    let r = bcm_reply(&bcm, idx, "RX_CHANGED")?;
+    // The frame as sent, but for byte 5 (`flags`/`__pad`), where mainline
+    // marks RX_LOCAL (0x40) and RX_OWN (0x80) traffic.
+    let mut want = canraw::wire(&f);
+    want[5] = r[56 + 5] & 0xC0;
+    ensure!(
+        head(&r) == (12, RX_FILTER_ID, 0, 0x123, 1) && r[56..72] == want,
+        "RX_CHANGED: head {:?}, frame {}",
+        head(&r),
+        canraw::show_wire(&r[56..r.len().min(72)])
+    );
+    // RX_TIMEOUT: nothing with 0x124 within 20 ms.
+    raw::write(
+        &bcm,
+        &bcm_head(
+            RX_SETUP,
+            SETTIMER | STARTTIMER | RX_FILTER_ID,
+            0,
+            20_000,
+            0,
+            0x124,
+            0,
+        ),
+    )
+    .or_fail("RX_SETUP with a timeout")?;
+    let r = bcm_reply(&bcm, idx, "RX_TIMEOUT")?;
+    ensure!(
+        head(&r).0 == 11 && head(&r).3 == 0x124,
+        "RX_TIMEOUT: head {:?}",
+        head(&r)
+    );
+    // RX_STATUS of the first receive operation.
+    raw::write(&bcm, &bcm_head(RX_READ, 0, 0, 0, 0, 0x123, 0)).or_fail("RX_READ")?;
+    let r = bcm_reply(&bcm, idx, "RX_STATUS")?;
+    ensure!(
+        head(&r).0 == 10 && head(&r).3 == 0x123,
+        "RX_STATUS: head {:?}",
+        head(&r)
+    );
+    ctx.note("TX_STATUS, TX_EXPIRED, RX_CHANGED, RX_TIMEOUT, RX_STATUS checked");
+    Ok(())
+}
+
 /// Reads one frame from `rx` into a poisoned buffer and checks what a
 /// frame built by the kernel must look like: 16 bytes, `__pad`, `__res0`
 /// and `len8_dlc` zero, data bytes past `len` zero (not the sender's
@@ -234,6 +438,106 @@ fn leak_time_frame(ctx: &mut Ctx) -> TestResult {
     ctx.insmod(Module::Time, &[])?;
     let w = kernel_built(&rx, "rcan_time frame")?;
     ctx.note(format!("time frame {}", canraw::show_wire(&w)));
+    Ok(())
+}
+
+/// DSOR message bodies, reassembled in the kernel from frames: messages
+/// of 0, 1, 6, 7, 8, 13, 14 and 100 bytes (and 1000 and 4000 on the
+/// release kernel), largest first so that later, shorter ones reuse what the
+/// earlier ones left, each received into a buffer 64 bytes longer than
+/// the message and filled with [`FILL`]: the message's bytes as sent and
+/// nothing after them; then one received into a buffer half its length:
+/// the first half, `MSG_TRUNC` in `recvmsg`'s flags, an 8-byte address
+/// and nothing after it.
+fn leak_dsor_bodies(ctx: &mut Ctx) -> TestResult {
+    use rcan_uapi::dsor::{DsorAddr, DsorSocket, DSOR_ID_ANY};
+    ctx.load_stack(&[])?;
+    ctx.insmod(Module::Dsor, &["ifname=can0"])?;
+    let rx = DsorSocket::new().or_fail("DSOR socket")?;
+    rx.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: 0,
+        id: DSOR_ID_ANY,
+    })
+    .or_fail("bind")?;
+    rx.set_rcvtimeo(Duration::from_secs(20))
+        .or_fail("SO_RCVTIMEO")?;
+    let tx = DsorSocket::new().or_fail("DSOR socket")?;
+    // The debug kernel under TCG takes minutes for the long ones.
+    let mut lens = vec![100, 14, 13, 8, 7, 6, 1, 0];
+    if !crate::ctx::debug_kernel() {
+        lens.splice(0..0, [4000, 1000]);
+    }
+    let body = |id: u32, len: usize| -> Vec<u8> {
+        (0..len)
+            .map(|i| (i as u32 * 7 + id * 13 + 1) as u8 | 1)
+            .collect()
+    };
+    for (j, &len) in lens.iter().enumerate() {
+        let id = 0x1eaf_0000 | j as u32;
+        let a = DsorAddr::Segm {
+            prio: 0x20,
+            node: 0,
+            id,
+        };
+        tx.send_to(&body(id, len), &a)
+            .or_fail(format_args!("send {len} bytes"))?;
+        let mut buf = vec![FILL; len + 64];
+        let (n, from) = rx
+            .recv_from(&mut buf)
+            .or_fail(format_args!("recv {len} bytes"))?;
+        ensure!(
+            matches!(from, Some(DsorAddr::Segm { id: i, .. }) if i == id),
+            "message of {len} bytes from {from:?}"
+        );
+        ensure!(
+            n == len && buf[..n] == body(id, len)[..],
+            "message of {len} bytes: {n} bytes received, content {}",
+            if buf[..n.min(len)] == body(id, len)[..n.min(len)] {
+                "as sent"
+            } else {
+                "differs"
+            }
+        );
+        ensure!(
+            buf[n..].iter().all(|&b| b == FILL),
+            "message of {len} bytes: buffer written past it: {:02X?}",
+            &buf[n..(n + 16).min(buf.len())]
+        );
+    }
+    // Into a buffer half the message's length.
+    let id = 0x1eaf_1000;
+    let len = 100;
+    tx.send_to(
+        &body(id, len),
+        &DsorAddr::Segm {
+            prio: 0x20,
+            node: 0,
+            id,
+        },
+    )
+    .or_fail("send 100 bytes")?;
+    let mut data = [FILL; 50];
+    let mut name = [FILL; 128];
+    let mut control = [0u64; 0];
+    let r = sys::recvmsg_into(&rx, &mut data, &mut name, &mut control, 0)
+        .or_fail("recvmsg into 50 bytes")?;
+    ensure!(
+        r.len == 50 && r.flags & libc::MSG_TRUNC != 0 && data[..50] == body(id, len)[..50],
+        "100-byte message into 50 bytes: returned {}, msg_flags {:#x}",
+        r.len,
+        r.flags
+    );
+    ensure!(
+        name[r.namelen.min(128)..].iter().all(|&b| b == FILL) && r.namelen == 8,
+        "100-byte message: msg_namelen {} (sockaddr_cansegm: 8), address bytes {:02X?}",
+        r.namelen,
+        &name[..16]
+    );
+    ctx.note(format!(
+        "{} messages of {lens:?} bytes and a truncated one checked",
+        lens.len()
+    ));
     Ok(())
 }
 

@@ -29,6 +29,7 @@ mod raw_send;
 mod raw_sockopt;
 mod recv;
 mod remote;
+mod robust;
 mod rxcontext;
 mod sja1000;
 mod socket;
@@ -89,6 +90,11 @@ pub(crate) use portable_table;
 /// on the debug kernel: creating and tearing down namespaces there costs
 /// tens of seconds per test under TCG.
 ///
+/// The info-leak checks of DSOR bodies and the rtime frame, and the DSOR
+/// loss accounting at 30 and 50 % drop rate (1-5 min each on the loaded
+/// debug kernel): what they check does not depend on the kernel variant;
+/// the DSOR engine's paths run on the debug kernel in the dsor tests.
+///
 /// `canutils_fd_python_can` starts python3 (some 100 s under TCG on the
 /// debug kernel); the FD paths of CAN_RAW it reaches run there in the
 /// other `fd.rs` tests.
@@ -108,6 +114,9 @@ pub const RELEASE_ONLY: &[&str] = &[
     "netns_thesis_api",
     "netns_canloop_returns",
     "canutils_fd_python_can",
+    "leak_dsor_bodies",
+    "leak_rtime_frame",
+    "dsor_loss_accounting",
 ];
 
 /// Every test, in running order.
@@ -154,6 +163,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         netns::TESTS,
         netns::OURS,
         fd::TESTS,
+        robust::OURS,
     ]
     .into_iter()
     .flatten()
