@@ -256,7 +256,7 @@ fn modules_load_unload_cycles(ctx: &mut Ctx) -> TestResult {
     let before = kmemleak_reports(false)?;
     // (module, parameters, modules it needs, loads: false if it must fail)
     let stack = [Module::Pf, Module::Can, Module::Raw, Module::Loop];
-    let plan: [(Module, &[&str], &[Module], bool); 16] = [
+    let plan: [(Module, &[&str], &[Module], bool); 17] = [
         (Module::Pf, &[], &[], true),
         (Module::Can, &[], &[Module::Pf], true),
         (Module::Raw, &[], &[Module::Pf], true),
@@ -288,12 +288,27 @@ fn modules_load_unload_cycles(ctx: &mut Ctx) -> TestResult {
         (Module::Tscan1, &[], &[Module::Pf, Module::Dev], false),
         (Module::I82527Sim, &["cards=2"], &[Module::Pf], true),
         (
+            Module::Sja1000Sim,
+            &["cards=2"],
+            &[Module::Pf, Module::Dev],
+            true,
+        ),
+        (
             Module::I82527Isa,
             &["iomem=0xd0000", "irq=5"],
             &[Module::Pf],
             false,
         ),
     ];
+    // A module added to Module::ALL without a line here would go
+    // untested: fail instead.
+    for m in Module::ALL {
+        ensure!(
+            plan.iter().any(|p| p.0 == m),
+            "{} is in Module::ALL but not in this test's plan",
+            m.name()
+        );
+    }
     let mut total = 0.0;
     for (m, params, deps, loads) in plan {
         ctx.unload_all()?;
