@@ -18,17 +18,26 @@
 //!
 //! * [`BcmSock`] (socket lock): connection, transmit operations.
 //! * [`BcmShared`]: `bound` (atomic, the lockless ENOTCONN check of
-//!   sendmsg) and the receive operations `rx_ops`, an `IrqSpinLock`
-//!   (lockdep class `bcm_rx_ops`) because the receive callback walks them
-//!   in softirq context; only process context with the socket lock held
-//!   changes the list.
+//!   sendmsg) and the receive operations `rx_ops`, a `BhLock`
+//!   (`spin_lock_bh`, lockdep class `bcm_rx_ops`) because the receive
+//!   callback walks them in NET_RX softirq context; only process context
+//!   with the socket lock held changes the list.
 //! * An operation ([`OpData`], one [`JobTimers`] with two timers) holds
-//!   its state machine, frames and last received frames under `state`, an
-//!   `IrqSpinLock` of class `bcm_op_state`, taken by sendmsg (process),
-//!   the receive callback (NET_RX softirq) and its timer callbacks
-//!   (HRTIMER_SOFTIRQ softirq). Frames are sent after `state` is
-//!   released (the transmit path must not run with interrupts off);
-//!   messages for user space are queued under it.
+//!   its state machine, frames and last received frames under `state`, a
+//!   `BhLock` of class `bcm_op_state`, taken by sendmsg (process), the
+//!   receive callback (NET_RX softirq) and its timer callbacks
+//!   (HRTIMER_SOFTIRQ softirq).
+//!
+//! No hardirq handler takes either lock, so they disable bottom halves,
+//! not interrupts (mainline's `bcm_rx_update_lock` and `bcm_tx_lock` are
+//! `spin_lock_bh` locks too). Messages for user space are queued under
+//! `state` (`sock_queue_rcv_skb`: it takes the receive queue's lock with
+//! interrupts saved, may run a socket filter and wakes readers, all of
+//! which softirq context allows; mainline queues RX_CHANGED under
+//! `bcm_rx_update_lock` in the same way), so one operation's messages
+//! keep their order. Frames are sent after `state` is released (`Pending`):
+//! the driver's transmit path runs outside the operation's lock, as in
+//! mainline.
 //!
 //! Contexts: system calls and the netdevice notifier run in process
 //! context; [`BcmProto::rx`] in NET_RX softirq under RCU; the timer
@@ -55,7 +64,7 @@ use kernel::prelude::*;
 use glue::bindings;
 use glue::hrtimer::ktime_get_mono_ns;
 use glue::jobtimer::{JobCallback, JobRef, JobTimers, OnceBox};
-use glue::lock::{new_irq_spinlock, IrqSpinLock};
+use glue::lock::{new_bh_spinlock, BhLock};
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::skb::Skb;
@@ -137,9 +146,10 @@ struct OpData {
     /// subscription (cleared when its interface goes away). Written with
     /// the socket lock held.
     active: AtomicBool,
-    /// The state machine, frames and last frames. Lock class
-    /// `bcm_op_state`; see the module documentation.
-    state: IrqSpinLock<OpState>,
+    /// The state machine, frames and last frames. `spin_lock_bh`, lock
+    /// class `bcm_op_state`: process context and softirqs, never hardirq;
+    /// see the module documentation.
+    state: BhLock<OpState>,
 }
 
 enum OpState {
@@ -168,6 +178,10 @@ struct RxState {
     filters: KVec<CanFrame>,
     /// Last frame received per filter entry (at least one slot).
     last: KVec<RxSlot>,
+    /// `skb->tstamp` (ns) of the last frame received for this operation:
+    /// RX_CHANGED carries it, as mainline's `op->rx_stamp` (SO_TIMESTAMP
+    /// reports the frame's reception, not the message's creation).
+    rx_stamp: i64,
 }
 
 /// Frames to send once the state lock is released. A transmit operation
@@ -219,9 +233,11 @@ fn frame_skb(sk: &S, dev: &NetDev, bytes: &[u8]) -> Option<Skb> {
 }
 
 /// Queues a message (`head` and the frame bytes in `frames`) for `sk`'s
-/// reader, naming `ifindex` as its source and with `flags` for recvmsg.
-/// Any context (GFP_ATOMIC); a full receive queue drops it, as mainline.
-fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32) {
+/// reader, naming `ifindex` as its source and with `flags` for recvmsg;
+/// `tstamp` (ns, 0: none) becomes the skb's timestamp, which recvmsg
+/// reports (SO_TIMESTAMP...). Process or softirq context (GFP_ATOMIC),
+/// `state` may be held; a full receive queue drops it, as mainline.
+fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32, tstamp: i64) {
     let len: usize = MHSIZ + frames.iter().map(|f| f.len()).sum::<usize>();
     let Some(mut skb) = Skb::alloc(len as u32, glue::GFP_ATOMIC) else {
         return;
@@ -234,6 +250,9 @@ fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32) {
     name[4..].copy_from_slice(&ifindex.to_ne_bytes());
     skb.cb_write(CB_NAME, &name);
     skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
+    if tstamp != 0 {
+        skb.set_tstamp(tstamp);
+    }
     let _ = sk.queue_rcv(skb);
 }
 
@@ -274,7 +293,7 @@ impl TxOut for TxEffects<'_, '_> {
             0
         };
         // Mainline names no interface in transmit notifications.
-        to_user(self.sk, head, &[&self.frames[..n]], 0, 0);
+        to_user(self.sk, head, &[&self.frames[..n]], 0, 0, 0);
     }
 
     fn arm(&mut self, at: u64) {
@@ -298,6 +317,8 @@ struct RxEffects<'a, 'p> {
     sk: &'a S,
     raw: &'a [u8],
     cfsiz: usize,
+    /// The operation's `rx_stamp`, for RX_CHANGED.
+    rx_stamp: i64,
     pending: &'p mut Pending,
 }
 
@@ -314,11 +335,21 @@ impl RxOut for RxEffects<'_, '_> {
                 if traffic & TRAFFIC_OWN != 0 {
                     flags |= bindings::MSG_CONFIRM;
                 }
-                to_user(self.sk, head, &[&f.to_bytes()], rx_ifindex, flags);
+                // RX_CHANGED: the timestamp of the last frame received
+                // (mainline's bcm_rx_changed: has_timestamp).
+                to_user(
+                    self.sk,
+                    head,
+                    &[&f.to_bytes()],
+                    rx_ifindex,
+                    flags,
+                    self.rx_stamp,
+                );
             }
             None => {
+                // RX_TIMEOUT, RX_STATUS: none, as mainline.
                 let n = (head.nframes as usize * self.cfsiz).min(self.raw.len());
-                to_user(self.sk, head, &[&self.raw[..n]], rx_ifindex, 0);
+                to_user(self.sk, head, &[&self.raw[..n]], rx_ifindex, 0, 0);
             }
         }
     }
@@ -398,11 +429,13 @@ fn with_tx(
 }
 
 /// Runs `f` on a receive operation's state machine with its effects and
-/// its filters and last frames; sends afterwards. Any context but
-/// hardirq; `state` not held.
+/// its filters and last frames; frames to send go to `pending`.
+/// `rx_stamp`: a received frame's timestamp to record first. Process or
+/// softirq context; `state` not held.
 fn with_rx(
     job: JobRef<'_, BcmOp>,
     pending: &mut Pending,
+    rx_stamp: Option<i64>,
     f: impl FnOnce(&mut RxOp, &[CanFrame], &mut [RxSlot], &mut RxEffects<'_, '_>),
 ) {
     let d = job.data();
@@ -415,12 +448,17 @@ fn with_rx(
             raw,
             filters,
             last,
+            rx_stamp: stamp,
         } = r;
+        if let Some(t) = rx_stamp {
+            *stamp = t;
+        }
         let mut out = RxEffects {
             job,
             sk: &sk,
             raw,
             cfsiz: *cfsiz,
+            rx_stamp: *stamp,
             pending,
         };
         f(op, filters, last, &mut out);
@@ -444,7 +482,7 @@ impl JobCallback for BcmOp {
             return;
         }
         let mut pending = Pending::new();
-        with_rx(job, &mut pending, |op, _filters, last, out| {
+        with_rx(job, &mut pending, None, |op, _filters, last, out| {
             if which == RX_TIMEOUT_TIMER && due(op.timeout_at) {
                 op.timeout_expired(last, out);
             } else if which == RX_THROTTLE_TIMER && due(op.throttle_at) {
@@ -457,7 +495,7 @@ impl JobCallback for BcmOp {
 
 /// A new operation of `sk` with `state`. Process context.
 fn new_job(sk: &S, key: OpKey, state: OpState) -> Result<Job> {
-    let state = new_irq_spinlock!(state, "bcm_op_state")?;
+    let state = new_bh_spinlock!(state, "bcm_op_state")?;
     JobTimers::new(OpData {
         sk: sk.to_ref(),
         key,
@@ -488,9 +526,10 @@ struct BcmSock {
 struct BcmShared {
     /// Mirrors `BcmSock::bound` (written under the socket lock).
     bound: AtomicBool,
-    /// The receive operations (lock class `bcm_rx_ops`), allocated by the
-    /// first connect(). Changed only with the socket lock held.
-    rx: OnceBox<IrqSpinLock<RxOps>>,
+    /// The receive operations (`spin_lock_bh`, lock class `bcm_rx_ops`:
+    /// process context and the NET_RX softirq), allocated by the first
+    /// connect(). Changed only with the socket lock held.
+    rx: OnceBox<BhLock<RxOps>>,
 }
 
 struct BcmProto;
@@ -552,7 +591,7 @@ fn rx_register(sk: &S) -> Result {
 }
 
 /// Adds `job` to the receive list. Process context; socket lock held.
-fn rx_add(list: &IrqSpinLock<RxOps>, job: Job) -> Result {
+fn rx_add(list: &BhLock<RxOps>, job: Job) -> Result {
     let n = list.lock().ops.len();
     // Grow outside the spinlock: move the operations into a larger vector
     // under it (no allocation there).
@@ -575,7 +614,7 @@ fn rx_add(list: &IrqSpinLock<RxOps>, job: Job) -> Result {
 
 /// Takes the receive operation named `key` off the list. Process context;
 /// socket lock held. The caller drops it after the lock is released.
-fn rx_take(list: &IrqSpinLock<RxOps>, key: &OpKey) -> Option<Job> {
+fn rx_take(list: &BhLock<RxOps>, key: &OpKey) -> Option<Job> {
     let mut l = list.lock();
     let i = find(&l.ops, key)?;
     glue::kvec_swap_remove(&mut l.ops, i)
@@ -599,6 +638,7 @@ impl CanProtocol for BcmProto {
         };
         let frame = CanFrame::from_bytes(bytes);
         let ifindex = s.ifindex();
+        let tstamp = s.tstamp();
         let origin = s.sk_ptr();
         let mut traffic = 0;
         if !origin.is_null() {
@@ -623,20 +663,28 @@ impl CanProtocol for BcmProto {
                 {
                     continue;
                 }
-                with_rx(j.get(), &mut pending, |op, filters, last, out| {
-                    op.frame_received(&frame, ifindex, traffic, now, filters, last, out)
-                });
+                with_rx(
+                    j.get(),
+                    &mut pending,
+                    Some(tstamp),
+                    |op, filters, last, out| {
+                        op.frame_received(&frame, ifindex, traffic, now, filters, last, out)
+                    },
+                );
             }
         }
         pending.flush();
     }
 
     /// Mainline `bcm_notify`. Process context, RTNL held. A CAN device
-    /// going away stops the operations on it (transmit timers cancelled,
-    /// receive operations unsubscribed with their timers stopped; they
-    /// stay, as in mainline, for TX_READ/RX_READ/..._DELETE) and
-    /// disconnects the sockets connected to it (ENODEV); one going down
-    /// reports ENETDOWN to them.
+    /// going away stops the transmit operations on it (timers cancelled)
+    /// and unsubscribes the receive operations on it, whose timers keep
+    /// running as mainline's `bcm_rx_unreg` leaves them: an armed receive
+    /// timeout still fires once (RX_TIMEOUT naming the last interface a
+    /// frame came from), held-back changes are still flushed by the
+    /// throttle. The operations stay, as in mainline, for
+    /// TX_READ/RX_READ/..._DELETE. Sockets connected to the device are
+    /// disconnected (ENODEV); one going down reports ENETDOWN to them.
     fn netdev_event(event: NetdevEvent, dev: &NetDev, sockets: &Sockets<'_, Self>) {
         if !dev.is_can() {
             return;
@@ -664,18 +712,11 @@ impl CanProtocol for BcmProto {
                 let l = list.lock();
                 for j in l.ops.iter() {
                     let d = j.data();
-                    let gone = d.key.ifindex == ifindex && d.active.swap(false, Ordering::Relaxed);
-                    changed |= gone;
+                    changed |= d.key.ifindex == ifindex && d.active.swap(false, Ordering::Relaxed);
+                    // Release an "any" operation's claim on the vanishing
+                    // interface (mainline: if_detected).
                     let mut pending = Pending::new();
-                    with_rx(j.get(), &mut pending, |op, _, _, out| {
-                        if gone {
-                            if op.timeout_at.take().is_some() {
-                                out.cancel_timeout();
-                            }
-                            if op.throttle_at.take().is_some() {
-                                out.cancel_throttle();
-                            }
-                        }
+                    with_rx(j.get(), &mut pending, None, |op, _, _, _| {
                         if op.ifindex == 0 && op.if_detected == ifindex {
                             op.if_detected = 0;
                         }
@@ -806,7 +847,7 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
                     }
                 }
             }
-            with_rx(j, &mut pending, |op, _, last, out| {
+            with_rx(j, &mut pending, None, |op, _, last, out| {
                 op.setup(&h, now, last, out)
             });
         }
@@ -824,6 +865,7 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
             raw,
             filters,
             last,
+            rx_stamp: 0,
         }),
     )?;
     rx_add(list, job)?;
@@ -835,7 +877,7 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
     {
         let l = list.lock();
         if let Some(i) = find(&l.ops, &key) {
-            with_rx(l.ops[i].get(), &mut pending, |op, _, last, out| {
+            with_rx(l.ops[i].get(), &mut pending, None, |op, _, last, out| {
                 op.setup(&h, now, last, out)
             });
         }
@@ -936,7 +978,7 @@ impl glue::sock::Proto for BcmProto {
             ifindex = dev.ifindex();
         }
         if sk.shared().rx.get().is_none() {
-            let l = new_irq_spinlock!(RxOps { ops: KVec::new() }, "bcm_rx_ops")?;
+            let l = new_bh_spinlock!(RxOps { ops: KVec::new() }, "bcm_rx_ops")?;
             sk.shared().rx.set(KBox::new(l, GFP_KERNEL)?)?;
         }
         s.bound = true;
@@ -1021,7 +1063,9 @@ impl glue::sock::Proto for BcmProto {
                 let mut pending = Pending::new();
                 let l = list.lock();
                 let i = find(&l.ops, &key).ok_or(EINVAL)?;
-                with_rx(l.ops[i].get(), &mut pending, |op, _, _, out| op.read(out));
+                with_rx(l.ops[i].get(), &mut pending, None, |op, _, _, out| {
+                    op.read(out)
+                });
                 Ok(MHSIZ)
             }
             TX_SEND => tx_send(sk, &req, ifindex),

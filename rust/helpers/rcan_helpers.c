@@ -687,3 +687,14 @@ int rcan_netif_receive_skb(struct sk_buff *skb)
 {
 	return netif_receive_skb(skb);
 }
+
+/* skb->tstamp (a union member bindgen names unpredictably), in ns. */
+s64 rcan_skb_tstamp(const struct sk_buff *skb)
+{
+	return ktime_to_ns(skb->tstamp);
+}
+
+void rcan_skb_set_tstamp(struct sk_buff *skb, s64 ns)
+{
+	skb->tstamp = ns_to_ktime(ns);
+}

@@ -42,6 +42,8 @@ void rcan_skb_reserve(struct sk_buff *skb, int len);
 unsigned int rcan_skb_headroom(const struct sk_buff *skb);
 void rcan_skb_reset_headers(struct sk_buff *skb);
 void rcan_skb_stamp_if_unset(struct sk_buff *skb);
+s64 rcan_skb_tstamp(const struct sk_buff *skb);
+void rcan_skb_set_tstamp(struct sk_buff *skb, s64 ns);
 bool rcan_dev_nit_active(struct net_device *dev);
 void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev);
 void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopback);
