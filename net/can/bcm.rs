@@ -58,7 +58,8 @@
 #![forbid(unsafe_code)]
 
 use crate::{glue, rcan_api, rcan_core};
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::fmt::Write;
+use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use kernel::prelude::*;
 
 use glue::bindings;
@@ -67,18 +68,21 @@ use glue::jobtimer::{JobCallback, JobRef, JobTimers, OnceBox};
 use glue::lock::{new_bh_spinlock, BhLock};
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
+use glue::procfs::{ProcDir, ProcDirReg, ProcEntry, ProcShow, SeqFile};
 use glue::skb::Skb;
 use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
 use glue::sync::Rtnl;
 use kernel::c_str;
+use kernel::str::CString;
 use rcan_api::{
     CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets,
     RX_FILTER_CAN_ID, SOCK_DGRAM,
 };
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
 use rcan_core::bcm::{
-    self as wire, MsgHead, OpKey, Request, CANFD_FRAME_LEN, MAX_NFRAMES, MHSIZ, RX_DELETE, RX_READ,
-    RX_RTR_FRAME, RX_SETUP, TX_CP_CAN_ID, TX_DELETE, TX_READ, TX_SEND, TX_SETUP,
+    self as wire, MsgHead, OpKey, Request, CANFD_FRAME_LEN, CAN_FD_FRAME, MAX_NFRAMES, MHSIZ,
+    RX_CHECK_DLC, RX_DELETE, RX_READ, RX_RTR_FRAME, RX_SETUP, TX_CP_CAN_ID, TX_DELETE, TX_READ,
+    TX_SEND, TX_SETUP,
 };
 use rcan_core::bcm_rx::{RxOp, RxOut, RxSlot, TRAFFIC_LOCAL, TRAFFIC_OWN};
 use rcan_core::bcm_tx::{TxOp, TxOut};
@@ -146,6 +150,11 @@ struct OpData {
     /// subscription (cleared when its interface goes away). Written with
     /// the socket lock held.
     active: AtomicBool,
+    /// Transmit: frames sent (the driver took them); receive: frames
+    /// received. Mainline's `frames_abs`, shown in /proc/net/can-bcm.
+    frames_abs: AtomicU64,
+    /// Receive: RX_CHANGED messages made (mainline's `frames_filtered`).
+    frames_filtered: AtomicU64,
     /// The state machine, frames and last frames. `spin_lock_bh`, lock
     /// class `bcm_op_state`: process context and softirqs, never hardirq;
     /// see the module documentation.
@@ -209,10 +218,16 @@ impl Pending {
     /// Sends with loopback, as mainline's BCM always does; errors are
     /// dropped as mainline's `bcm_can_tx` drops them. Process or softirq
     /// context, no spinlock held.
-    fn flush(self) {
+    ///
+    /// Returns how many went out.
+    fn flush(self) -> u64 {
+        let mut sent = 0;
         for (skb, dev) in self.sends.into_iter().flatten() {
-            let _ = rcan_api::send(skb, &dev, true);
+            if rcan_api::send(skb, &dev, true).is_ok() {
+                sent += 1;
+            }
         }
+        sent
     }
 }
 
@@ -253,7 +268,10 @@ fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32, t
     if tstamp != 0 {
         skb.set_tstamp(tstamp);
     }
-    let _ = sk.queue_rcv(skb);
+    if sk.queue_rcv(skb).is_err() {
+        // Mainline's dropped_usr_msgs.
+        sk.shared().dropped.fetch_add(1, Ordering::Relaxed);
+    }
 }
 
 /// The effects of a transmit operation's state machine.
@@ -337,6 +355,10 @@ impl RxOut for RxEffects<'_, '_> {
                 }
                 // RX_CHANGED: the timestamp of the last frame received
                 // (mainline's bcm_rx_changed: has_timestamp).
+                self.job
+                    .data()
+                    .frames_filtered
+                    .fetch_add(1, Ordering::Relaxed);
                 to_user(
                     self.sk,
                     head,
@@ -420,7 +442,8 @@ fn with_tx(
             f(op, &mut out);
         }
     }
-    pending.flush();
+    let sent = pending.flush();
+    d.frames_abs.fetch_add(sent, Ordering::Relaxed);
     // A callback that runs meanwhile finds the recorded expiry in the
     // future and does nothing.
     if let Some(at) = later {
@@ -500,6 +523,8 @@ fn new_job(sk: &S, key: OpKey, state: OpState) -> Result<Job> {
         sk: sk.to_ref(),
         key,
         active: AtomicBool::new(true),
+        frames_abs: AtomicU64::new(0),
+        frames_filtered: AtomicU64::new(0),
         state,
     })
 }
@@ -520,12 +545,20 @@ struct BcmSock {
     ifindex: i32,
     /// Transmit operations.
     tx_ops: KVec<Job>,
+    /// `/proc/net/can-bcm/<inode>` while connected (made by connect,
+    /// removed by release and by the removal of the connected interface,
+    /// as mainline). Dropped only after the socket lock is released: the
+    /// drop waits for readers, whose `show` takes the socket lock.
+    proc: Option<ProcEntry<ProcView>>,
 }
 
 /// What the receive path and the lockless checks need.
 struct BcmShared {
     /// Mirrors `BcmSock::bound` (written under the socket lock).
     bound: AtomicBool,
+    /// Messages for user space dropped because the receive queue was
+    /// full (mainline's `dropped_usr_msgs`).
+    dropped: AtomicU64,
     /// The receive operations (`spin_lock_bh`, lock class `bcm_rx_ops`:
     /// process context and the NET_RX softirq), allocated by the first
     /// connect(). Changed only with the socket lock held.
@@ -536,6 +569,130 @@ struct BcmProto;
 
 /// This module's registrations (proto, CAN protocol, notifier).
 static MODULE: ProtoModule<BcmProto> = ProtoModule::new();
+
+/// `/proc/net/can-bcm`: one file per connected socket, named by its inode
+/// number (mainline's `bcm_proc_show` format).
+static PROC: ProcDir = ProcDir::new(c_str!("can-bcm"));
+
+/// What `/proc/net/can-bcm/<inode>` shows: its socket (a counted
+/// reference, dropped with the file).
+struct ProcView {
+    sk: SockRef<BcmProto>,
+}
+
+/// An interface as mainline's `bcm_proc_getifname` names it: "Any" for
+/// 0, "???" if it is gone. Pads (`{:<5}`) like `%-5s`.
+struct IfName(i32);
+
+impl core::fmt::Display for IfName {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        if self.0 == 0 {
+            return f.pad("Any");
+        }
+        match DevRef::by_index(self.0) {
+            Some(d) => f.pad(d.name()),
+            None => f.pad("???"),
+        }
+    }
+}
+
+/// `[n]` for classic operations, `(n)` for CAN FD ones.
+fn nframes_text(flags: u32, n: u32) -> (char, u32, char) {
+    if flags & CAN_FD_FRAME != 0 {
+        ('(', n, ')')
+    } else {
+        ('[', n, ']')
+    }
+}
+
+impl ProcShow for ProcView {
+    /// Mainline's `bcm_proc_show`: a header, then each receive operation
+    /// that has received something, then each transmit operation, newest
+    /// first, then an empty line. Process context (a read of the file):
+    /// takes the socket lock, the receive list's and each operation's
+    /// `state` lock.
+    fn show(&self, m: &mut SeqFile<'_>) {
+        let sk = self.sk.sock();
+        let s = sk.lock();
+        let _ = m.write_str(">>> socket ");
+        m.write_kptr(sk.socket_addr());
+        let _ = m.write_str(" / sk ");
+        m.write_kptr(sk.as_ptr() as usize);
+        let _ = m.write_str(" / bo ");
+        m.write_kptr(sk.as_ptr() as usize);
+        let _ = writeln!(
+            m,
+            " / dropped {} / bound {} <<<",
+            sk.shared().dropped.load(Ordering::Relaxed),
+            IfName(s.ifindex)
+        );
+        if let Some(list) = sk.shared().rx.get() {
+            let l = list.lock();
+            for j in l.ops.iter().rev() {
+                let d = j.data();
+                let abs = d.frames_abs.load(Ordering::Relaxed);
+                if abs == 0 {
+                    continue;
+                }
+                let filtered = d.frames_filtered.load(Ordering::Relaxed);
+                let st = d.state.lock();
+                let OpState::Rx(r) = &*st else {
+                    continue;
+                };
+                let op = &r.op;
+                let (o, n, c) = nframes_text(op.flags, op.nframes);
+                let dlc = if op.flags & RX_CHECK_DLC != 0 {
+                    'd'
+                } else {
+                    ' '
+                };
+                let _ = write!(
+                    m,
+                    "rx_op: {:03X} {:<5} {o}{n}{c}{dlc} ",
+                    op.can_id,
+                    IfName(op.ifindex)
+                );
+                let (t1, t2) = (op.ival1.to_ns() / 1000, op.ival2.to_ns() / 1000);
+                if t1 != 0 {
+                    let _ = write!(m, "timeo={t1} ");
+                }
+                if t2 != 0 {
+                    let _ = write!(m, "thr={t2} ");
+                }
+                let reduction = 100 - (filtered.saturating_mul(100) / abs) as i64;
+                let near = if reduction == 100 { "near " } else { "" };
+                let _ = writeln!(
+                    m,
+                    "# recv {filtered} ({abs}) => reduction: {near}{reduction}%"
+                );
+            }
+        }
+        for j in s.tx_ops.iter().rev() {
+            let d = j.data();
+            let st = d.state.lock();
+            let OpState::Tx(t) = &*st else {
+                continue;
+            };
+            let op = &t.op;
+            let (o, n, c) = nframes_text(op.flags, op.nframes);
+            let _ = write!(
+                m,
+                "tx_op: {:03X} {} {o}{n}{c} ",
+                op.can_id,
+                IfName(t.ifindex)
+            );
+            let (t1, t2) = (op.ival1.to_ns() / 1000, op.ival2.to_ns() / 1000);
+            if t1 != 0 {
+                let _ = write!(m, "t1={t1} ");
+            }
+            if t2 != 0 {
+                let _ = write!(m, "t2={t2} ");
+            }
+            let _ = writeln!(m, "# sent {}", d.frames_abs.load(Ordering::Relaxed));
+        }
+        let _ = m.write_str("\n");
+    }
+}
 
 type S = Sock<BcmProto>;
 
@@ -663,6 +820,7 @@ impl CanProtocol for BcmProto {
                 {
                     continue;
                 }
+                d.frames_abs.fetch_add(1, Ordering::Relaxed);
                 with_rx(
                     j.get(),
                     &mut pending,
@@ -729,12 +887,17 @@ impl CanProtocol for BcmProto {
                 let _ = rx_register(sk);
             }
             let enodev = s.bound && s.ifindex == ifindex;
+            let mut proc = None;
             if enodev {
                 s.bound = false;
                 s.ifindex = 0;
                 sk.shared().bound.store(false, Ordering::Relaxed);
+                proc = s.proc.take();
             }
             drop(s);
+            // Mainline removes the file with the binding; waits for its
+            // readers (they take the socket lock, not RTNL).
+            drop(proc);
             if enodev {
                 sk.report_error(bindings::ENODEV as i32);
             }
@@ -922,6 +1085,7 @@ impl glue::sock::Proto for BcmProto {
     fn new_shared() -> BcmShared {
         BcmShared {
             bound: AtomicBool::new(false),
+            dropped: AtomicU64::new(0),
             rx: OnceBox::new(),
         }
     }
@@ -931,6 +1095,7 @@ impl glue::sock::Proto for BcmProto {
             bound: false,
             ifindex: 0,
             tx_ops: KVec::new(),
+            proc: None,
         }
     }
 
@@ -951,7 +1116,10 @@ impl glue::sock::Proto for BcmProto {
         s.bound = false;
         s.ifindex = 0;
         sk.shared().bound.store(false, Ordering::Relaxed);
+        let proc = s.proc.take();
         drop(s);
+        // Waits for readers of the file (they take the socket lock).
+        drop(proc);
         drop(tx);
         drop(rx);
     }
@@ -984,6 +1152,11 @@ impl glue::sock::Proto for BcmProto {
         s.bound = true;
         s.ifindex = ifindex;
         sk.shared().bound.store(true, Ordering::Relaxed);
+        // /proc/net/can-bcm/<inode>; as in mainline, a socket without it
+        // (no directory, no memory) still works.
+        if let Ok(name) = CString::try_from_fmt(format_args!("{}", sk.ino())) {
+            s.proc = ProcEntry::new(&PROC, &name, ProcView { sk: sk.to_ref() }).ok();
+        }
         Ok(())
     }
 
@@ -1111,12 +1284,25 @@ impl glue::sock::Proto for BcmProto {
 /// The module: its registrations, undone when it is dropped (unload).
 pub(crate) struct BcmModule {
     _reg: ProtoRegistration<BcmProto>,
+    /// Dropped after `_reg`: no socket, so no file, is left then.
+    _proc: Option<ProcDirReg>,
 }
 
 impl kernel::Module for BcmModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
+        // Before the protocol: a socket may connect at once.
+        let proc = match PROC.create() {
+            Ok(p) => Some(p),
+            Err(e) => {
+                pr_warn!("no /proc/net/can-bcm ({:?})\n", e);
+                None
+            }
+        };
         let reg = MODULE.register(c_str!("CAN_BCM"))?;
         pr_info!("CAN_BCM ({}) registered\n", CAN_BCM);
-        Ok(BcmModule { _reg: reg })
+        Ok(BcmModule {
+            _reg: reg,
+            _proc: proc,
+        })
     }
 }

@@ -188,3 +188,16 @@ void rcan_napi_schedule(struct napi_struct *napi);
 void rcan_napi_complete_done(struct napi_struct *napi, int work_done);
 struct net_device *rcan_napi_dev(const struct napi_struct *napi);
 int rcan_netif_receive_skb(struct sk_buff *skb);
+
+/* procfs (rust/glue/procfs.rs) */
+struct proc_dir_entry;
+struct seq_file;
+struct proc_dir_entry *rcan_proc_net_mkdir(const char *name);
+struct proc_dir_entry *rcan_proc_create_single(const char *name,
+					       struct proc_dir_entry *parent,
+					       int (*show)(struct seq_file *, void *),
+					       void *data);
+void rcan_proc_remove(struct proc_dir_entry *pde);
+void *rcan_seq_private(struct seq_file *m);
+void rcan_seq_write(struct seq_file *m, const char *s, size_t len);
+void rcan_seq_kptr(struct seq_file *m, unsigned long addr);

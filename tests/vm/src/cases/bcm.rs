@@ -44,6 +44,7 @@ pub static TESTS: &[crate::Test] = portable_table![
     bcm_rx_any_interface,
     bcm_rx_changed_timestamp,
     bcm_rx_timeout_after_unregister,
+    bcm_proc_net_file,
 ];
 
 /// A failure with `what` unless `cond`.
@@ -1224,6 +1225,120 @@ fn bcm_rx_timeout_after_unregister(ctx: &mut Ctx) -> TestResult {
     need(
         recv(&bcm, Duration::from_millis(500))?.is_none(),
         "another message after RX_TIMEOUT",
+    )
+}
+
+/// The inode number of socket `fd`, as `ls -l /proc/self/fd` shows it
+/// (`socket:[N]`).
+fn socket_ino(fd: impl AsFd) -> Result<u64, String> {
+    use std::os::fd::AsRawFd;
+    let link = std::fs::read_link(format!("/proc/self/fd/{}", fd.as_fd().as_raw_fd()))
+        .or_fail("readlink /proc/self/fd")?;
+    let l = link.to_string_lossy();
+    l.strip_prefix("socket:[")
+        .and_then(|r| r.strip_suffix(']'))
+        .and_then(|n| n.parse().ok())
+        .ok_or_else(|| format!("fd link {l}, want socket:[N]"))
+}
+
+/// `cat FILE`: its text, or None if cat fails (no such file).
+fn cat(path: &str) -> Result<Option<String>, String> {
+    let out = std::process::Command::new("cat")
+        .arg(path)
+        .output()
+        .or_fail("run cat")?;
+    Ok(out
+        .status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).into_owned()))
+}
+
+/// `/proc/net/can-bcm/<inode>` as a user reads it with `cat`: one file
+/// per connected socket, named by its inode number; a header naming the
+/// bound interface ("Any" for 0) and the dropped messages; a line per
+/// receive operation that has received frames (received and reported
+/// counts, the reduction in per cent) and per transmit operation (its
+/// interval and frames sent), in mainline's format; an empty line last.
+/// The file goes with the socket.
+fn bcm_proc_net_file(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let dev = crate::ctx::dev(0);
+    let bcm = open(i0)?;
+    let path = format!("/proc/net/can-bcm/{}", socket_ino(&bcm)?);
+    let any = open(0)?;
+    let any_path = format!("/proc/net/can-bcm/{}", socket_ino(&any)?);
+    let text = cat(&any_path)?.ok_or_else(|| format!("cat {any_path} failed"))?;
+    need(
+        text.lines().next().is_some_and(|l| {
+            l.starts_with(">>> socket ") && l.ends_with(" / dropped 0 / bound Any <<<")
+        }),
+        format!("{any_path} of a socket connected to any interface: {text:?}"),
+    )?;
+    drop(any);
+
+    let h = tx_head(SETTIMER | STARTTIMER, 0, 0, 100_000, 0x123, 1);
+    write(&bcm, h, &[frame_bytes(0x123, &[1])])?;
+    write(
+        &bcm,
+        rx_head(0, 0, 0, 0x321, 1),
+        &[frame_bytes(0x321, &[0xff])],
+    )?;
+    // Never receives: not listed.
+    write(
+        &bcm,
+        rx_head(0, 0, 0, 0x322, 1),
+        &[frame_bytes(0x322, &[0xff])],
+    )?;
+    let tx = canraw::open(i0)?;
+    for _ in 0..3 {
+        canraw::send(&tx, &sff(0x321, &[1]))?;
+    }
+    let m = recv_some(&bcm, Duration::from_secs(5), "RX_CHANGED")?;
+    need(m.head.opcode == RX_CHANGED, format!("{:?}", m.head))?;
+    let want_rx = format!("rx_op: 321 {dev:<5} [1]  # recv 1 (3) => reduction: 67%");
+    let want_tx = format!("tx_op: 123 {dev} [1] t2=100000 # sent ");
+    // The three frames reach the socket soon; read until they are counted.
+    let end = Instant::now() + Duration::from_secs(10);
+    let text = loop {
+        let t = cat(&path)?.ok_or_else(|| format!("cat {path} failed"))?;
+        if t.lines().any(|l| l == want_rx) || Instant::now() > end {
+            break t;
+        }
+        thread::sleep(Duration::from_millis(50));
+    };
+    println!("# {path}:");
+    text.lines().for_each(|l| println!("#   {l}"));
+    let lines: Vec<&str> = text.lines().collect();
+    need(
+        lines.first().is_some_and(|l| {
+            l.starts_with(">>> socket ") && l.ends_with(&format!(" / dropped 0 / bound {dev} <<<"))
+        }),
+        format!("header of {path}: {:?}", lines.first()),
+    )?;
+    need(
+        lines
+            .iter()
+            .filter(|l| l.starts_with("rx_op: "))
+            .eq([&want_rx.as_str()]),
+        format!("rx_op lines {lines:?}, want only {want_rx:?}"),
+    )?;
+    let sent = lines
+        .iter()
+        .filter_map(|l| l.strip_prefix(want_tx.as_str()))
+        .map(|n| n.parse::<u64>())
+        .collect::<Vec<_>>();
+    need(
+        matches!(sent.as_slice(), [Ok(n)] if *n >= 1),
+        format!("tx_op lines {lines:?}, want one {want_tx:?}N with N >= 1"),
+    )?;
+    need(
+        text.ends_with("\n\n") && lines.len() == 4,
+        format!("{path}: want header, rx_op, tx_op and an empty line: {text:?}"),
+    )?;
+    drop(bcm);
+    need(
+        cat(&path)?.is_none(),
+        format!("{path} still readable after close"),
     )
 }
 
