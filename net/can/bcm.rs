@@ -146,6 +146,9 @@ struct OpData {
     sk: SockRef<BcmProto>,
     /// Identifier, interface, CAN FD: fixed for the operation's life.
     key: OpKey,
+    /// A transmit operation (`state` holds `OpState::Tx`); fixed, so that
+    /// a timer callback knows its kind without taking `state` twice.
+    tx: bool,
     /// Receive operations: whether it is part of the socket's receive
     /// subscription (cleared when its interface goes away). Written with
     /// the socket lock held.
@@ -496,7 +499,7 @@ impl JobCallback for BcmOp {
     fn expired(job: JobRef<'_, Self>, which: usize) {
         let now = ktime_get_mono_ns() as u64;
         let due = |at: Option<u64>| at.is_some_and(|t| t <= now);
-        if matches!(&*job.data().state.lock(), OpState::Tx(_)) {
+        if job.data().tx {
             with_tx(job, true, |op, out| {
                 if which == TX_TIMER && due(op.expires) {
                     op.timer_expired(now, out);
@@ -518,10 +521,12 @@ impl JobCallback for BcmOp {
 
 /// A new operation of `sk` with `state`. Process context.
 fn new_job(sk: &S, key: OpKey, state: OpState) -> Result<Job> {
+    let tx = matches!(state, OpState::Tx(_));
     let state = new_bh_spinlock!(state, "bcm_op_state")?;
     JobTimers::new(OpData {
         sk: sk.to_ref(),
         key,
+        tx,
         active: AtomicBool::new(true),
         frames_abs: AtomicU64::new(0),
         frames_filtered: AtomicU64::new(0),
