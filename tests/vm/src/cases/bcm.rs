@@ -1137,6 +1137,24 @@ fn bcm_rx_changed_timestamp(ctx: &mut Ctx) -> TestResult {
         .or_fail("SO_TIMESTAMP on CAN_RAW")?;
     raw::set_timeout(&rx, libc::SO_RCVTIMEO, Duration::from_secs(5)).or_fail("SO_RCVTIMEO")?;
     let tx = canraw::open(i0)?;
+    // The kernel turns receive timestamping on (netstamp_needed) in a
+    // deferred work after the first SO_TIMESTAMP: until then frames come
+    // unstamped and recvmsg stamps them when read. Wait until a frame read
+    // 20 ms after it was sent carries an earlier time.
+    let mut stamped = false;
+    for _ in 0..50 {
+        canraw::send(&tx, &sff(0x651, &[0]))?;
+        thread::sleep(Duration::from_millis(20));
+        let before_read = std::time::SystemTime::now();
+        let r = crate::sys::recvmsg(&rx, 16, 0).or_fail("recvmsg CAN_RAW")?;
+        let tv = r.timeval.ok_or("CAN_RAW: no SCM_TIMESTAMP")?;
+        let t = std::time::UNIX_EPOCH + Duration::new(tv.tv_sec as u64, tv.tv_usec as u32 * 1000);
+        if t < before_read {
+            stamped = true;
+            break;
+        }
+    }
+    need(stamped, "frames never came with a receive timestamp")?;
     write(&bcm, rx_head(RX_FILTER_ID, 0, 0, 0x650, 0), &[])?;
     for i in 0..2u8 {
         canraw::send(&tx, &sff(0x650, &[i]))?;
