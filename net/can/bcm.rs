@@ -585,14 +585,14 @@ struct ProcView {
     sk: SockRef<BcmProto>,
 }
 
-/// An interface as mainline's `bcm_proc_getifname` names it: "Any" for
+/// An interface as mainline's `bcm_proc_getifname` names it: "any" for
 /// 0, "???" if it is gone. Pads (`{:<5}`) like `%-5s`.
 struct IfName(i32);
 
 impl core::fmt::Display for IfName {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         if self.0 == 0 {
-            return f.pad("Any");
+            return f.pad("any");
         }
         match DevRef::by_index(self.0) {
             Some(d) => f.pad(d.name()),

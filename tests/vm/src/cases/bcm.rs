@@ -1273,7 +1273,7 @@ fn cat(path: &str) -> Result<Option<String>, String> {
 
 /// `/proc/net/can-bcm/<inode>` as a user reads it with `cat`: one file
 /// per connected socket, named by its inode number; a header naming the
-/// bound interface ("Any" for 0) and the dropped messages; a line per
+/// bound interface ("any" for 0) and the dropped messages; a line per
 /// receive operation that has received frames (received and reported
 /// counts, the reduction in per cent) and per transmit operation (its
 /// interval and frames sent), in mainline's format; an empty line last.
@@ -1288,7 +1288,7 @@ fn bcm_proc_net_file(ctx: &mut Ctx) -> TestResult {
     let text = cat(&any_path)?.ok_or_else(|| format!("cat {any_path} failed"))?;
     need(
         text.lines().next().is_some_and(|l| {
-            l.starts_with(">>> socket ") && l.ends_with(" / dropped 0 / bound Any <<<")
+            l.starts_with(">>> socket ") && l.ends_with(" / dropped 0 / bound any <<<")
         }),
         format!("{any_path} of a socket connected to any interface: {text:?}"),
     )?;
