@@ -18,17 +18,26 @@
 //!
 //! * [`BcmSock`] (socket lock): connection, transmit operations.
 //! * [`BcmShared`]: `bound` (atomic, the lockless ENOTCONN check of
-//!   sendmsg) and the receive operations `rx_ops`, an `IrqSpinLock`
-//!   (lockdep class `bcm_rx_ops`) because the receive callback walks them
-//!   in softirq context; only process context with the socket lock held
-//!   changes the list.
+//!   sendmsg) and the receive operations `rx_ops`, a `BhLock`
+//!   (`spin_lock_bh`, lockdep class `bcm_rx_ops`) because the receive
+//!   callback walks them in NET_RX softirq context; only process context
+//!   with the socket lock held changes the list.
 //! * An operation ([`OpData`], one [`JobTimers`] with two timers) holds
-//!   its state machine, frames and last received frames under `state`, an
-//!   `IrqSpinLock` of class `bcm_op_state`, taken by sendmsg (process),
-//!   the receive callback (NET_RX softirq) and its timer callbacks
-//!   (HRTIMER_SOFTIRQ softirq). Frames are sent after `state` is
-//!   released (the transmit path must not run with interrupts off);
-//!   messages for user space are queued under it.
+//!   its state machine, frames and last received frames under `state`, a
+//!   `BhLock` of class `bcm_op_state`, taken by sendmsg (process), the
+//!   receive callback (NET_RX softirq) and its timer callbacks
+//!   (HRTIMER_SOFTIRQ softirq).
+//!
+//! No hardirq handler takes either lock, so they disable bottom halves,
+//! not interrupts (mainline's `bcm_rx_update_lock` and `bcm_tx_lock` are
+//! `spin_lock_bh` locks too). Messages for user space are queued under
+//! `state` (`sock_queue_rcv_skb`: it takes the receive queue's lock with
+//! interrupts saved, may run a socket filter and wakes readers, all of
+//! which softirq context allows; mainline queues RX_CHANGED under
+//! `bcm_rx_update_lock` in the same way), so one operation's messages
+//! keep their order. Frames are sent after `state` is released (`Pending`):
+//! the driver's transmit path runs outside the operation's lock, as in
+//! mainline.
 //!
 //! Contexts: system calls and the netdevice notifier run in process
 //! context; [`BcmProto::rx`] in NET_RX softirq under RCU; the timer
@@ -49,27 +58,32 @@
 #![forbid(unsafe_code)]
 
 use crate::{glue, rcan_api, rcan_core};
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::fmt::Write;
+use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use kernel::prelude::*;
 
 use glue::bindings;
 use glue::hrtimer::ktime_get_mono_ns;
 use glue::jobtimer::{JobCallback, JobRef, JobTimers, OnceBox};
-use glue::lock::{new_irq_spinlock, IrqSpinLock};
+use glue::lock::{new_bh_spinlock, BhLock};
+use glue::net::Net;
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
+use glue::procfs::{ProcDir, ProcDirReg, ProcEntry, ProcShow, SeqFile};
 use glue::skb::Skb;
 use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
 use glue::sync::Rtnl;
 use kernel::c_str;
+use kernel::str::CString;
 use rcan_api::{
     CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets,
     RX_FILTER_CAN_ID, SOCK_DGRAM,
 };
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
 use rcan_core::bcm::{
-    self as wire, MsgHead, OpKey, Request, MAX_NFRAMES, MHSIZ, RX_DELETE, RX_READ, RX_RTR_FRAME,
-    RX_SETUP, TX_CP_CAN_ID, TX_DELETE, TX_READ, TX_SEND, TX_SETUP,
+    self as wire, MsgHead, OpKey, Request, CAN_FD_FRAME, MAX_NFRAMES, MHSIZ, RX_CHECK_DLC,
+    RX_DELETE, RX_READ, RX_RTR_FRAME, RX_SETUP, TX_CP_CAN_ID, TX_DELETE, TX_READ, TX_SEND,
+    TX_SETUP,
 };
 use rcan_core::bcm_rx::{RxOp, RxOut, RxSlot, TRAFFIC_LOCAL, TRAFFIC_OWN};
 use rcan_core::bcm_tx::{TxOp, TxOut};
@@ -129,13 +143,22 @@ struct OpData {
     sk: SockRef<BcmProto>,
     /// Identifier, interface, CAN FD: fixed for the operation's life.
     key: OpKey,
+    /// A transmit operation (`state` holds `OpState::Tx`); fixed, so that
+    /// a timer callback knows its kind without taking `state` twice.
+    tx: bool,
     /// Receive operations: whether it is part of the socket's receive
     /// subscription (cleared when its interface goes away). Written with
     /// the socket lock held.
     active: AtomicBool,
-    /// The state machine, frames and last frames. Lock class
-    /// `bcm_op_state`; see the module documentation.
-    state: IrqSpinLock<OpState>,
+    /// Transmit: frames sent (the driver took them); receive: frames
+    /// received. Mainline's `frames_abs`, shown in /proc/net/can-bcm.
+    frames_abs: AtomicU64,
+    /// Receive: RX_CHANGED messages made (mainline's `frames_filtered`).
+    frames_filtered: AtomicU64,
+    /// The state machine, frames and last frames. `spin_lock_bh`, lock
+    /// class `bcm_op_state`: process context and softirqs, never hardirq;
+    /// see the module documentation.
+    state: BhLock<OpState>,
 }
 
 enum OpState {
@@ -164,6 +187,10 @@ struct RxState {
     filters: KVec<CanFrame>,
     /// Last frame received per filter entry (at least one slot).
     last: KVec<RxSlot>,
+    /// `skb->tstamp` (ns) of the last frame received for this operation:
+    /// RX_CHANGED carries it, as mainline's `op->rx_stamp` (SO_TIMESTAMP
+    /// reports the frame's reception, not the message's creation).
+    rx_stamp: i64,
 }
 
 /// Frames to send once the state lock is released. A transmit operation
@@ -191,10 +218,16 @@ impl Pending {
     /// Sends with loopback, as mainline's BCM always does; errors are
     /// dropped as mainline's `bcm_can_tx` drops them. Process or softirq
     /// context, no spinlock held.
-    fn flush(self) {
+    ///
+    /// Returns how many went out.
+    fn flush(self) -> u64 {
+        let mut sent = 0;
         for (skb, dev) in self.sends.into_iter().flatten() {
-            let _ = rcan_api::send(skb, &dev, true);
+            if rcan_api::send(skb, &dev, true).is_ok() {
+                sent += 1;
+            }
         }
+        sent
     }
 }
 
@@ -215,9 +248,11 @@ fn frame_skb(sk: &S, dev: &NetDev, bytes: &[u8]) -> Option<Skb> {
 }
 
 /// Queues a message (`head` and the frame bytes in `frames`) for `sk`'s
-/// reader, naming `ifindex` as its source and with `flags` for recvmsg.
-/// Any context (GFP_ATOMIC); a full receive queue drops it, as mainline.
-fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32) {
+/// reader, naming `ifindex` as its source and with `flags` for recvmsg;
+/// `tstamp` (ns, 0: none) becomes the skb's timestamp, which recvmsg
+/// reports (SO_TIMESTAMP...). Process or softirq context (GFP_ATOMIC),
+/// `state` may be held; a full receive queue drops it, as mainline.
+fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32, tstamp: i64) {
     let len: usize = MHSIZ + frames.iter().map(|f| f.len()).sum::<usize>();
     let Some(mut skb) = Skb::alloc(len as u32, glue::GFP_ATOMIC) else {
         return;
@@ -226,7 +261,13 @@ fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32) {
         return;
     }
     glue::can::skb::set_rx_meta(&mut skb, ifindex, flags);
-    let _ = sk.queue_rcv(skb);
+    if tstamp != 0 {
+        skb.set_tstamp(tstamp);
+    }
+    if sk.queue_rcv(skb).is_err() {
+        // Mainline's dropped_usr_msgs.
+        sk.shared().dropped.fetch_add(1, Ordering::Relaxed);
+    }
 }
 
 /// The effects of a transmit operation's state machine.
@@ -266,7 +307,7 @@ impl TxOut for TxEffects<'_, '_> {
             0
         };
         // Mainline names no interface in transmit notifications.
-        to_user(self.sk, head, &[&self.frames[..n]], 0, 0);
+        to_user(self.sk, head, &[&self.frames[..n]], 0, 0, 0);
     }
 
     fn arm(&mut self, at: u64) {
@@ -290,6 +331,8 @@ struct RxEffects<'a, 'p> {
     sk: &'a S,
     raw: &'a [u8],
     cfsiz: usize,
+    /// The operation's `rx_stamp`, for RX_CHANGED.
+    rx_stamp: i64,
     pending: &'p mut Pending,
 }
 
@@ -306,11 +349,25 @@ impl RxOut for RxEffects<'_, '_> {
                 if traffic & TRAFFIC_OWN != 0 {
                     flags |= bindings::MSG_CONFIRM;
                 }
-                to_user(self.sk, head, &[&f.to_bytes()], rx_ifindex, flags);
+                // RX_CHANGED: the timestamp of the last frame received
+                // (mainline's bcm_rx_changed: has_timestamp).
+                self.job
+                    .data()
+                    .frames_filtered
+                    .fetch_add(1, Ordering::Relaxed);
+                to_user(
+                    self.sk,
+                    head,
+                    &[&f.to_bytes()],
+                    rx_ifindex,
+                    flags,
+                    self.rx_stamp,
+                );
             }
             None => {
+                // RX_TIMEOUT, RX_STATUS: none, as mainline.
                 let n = (head.nframes as usize * self.cfsiz).min(self.raw.len());
-                to_user(self.sk, head, &[&self.raw[..n]], rx_ifindex, 0);
+                to_user(self.sk, head, &[&self.raw[..n]], rx_ifindex, 0, 0);
             }
         }
     }
@@ -381,7 +438,8 @@ fn with_tx(
             f(op, &mut out);
         }
     }
-    pending.flush();
+    let sent = pending.flush();
+    d.frames_abs.fetch_add(sent, Ordering::Relaxed);
     // A callback that runs meanwhile finds the recorded expiry in the
     // future and does nothing.
     if let Some(at) = later {
@@ -390,11 +448,13 @@ fn with_tx(
 }
 
 /// Runs `f` on a receive operation's state machine with its effects and
-/// its filters and last frames; sends afterwards. Any context but
-/// hardirq; `state` not held.
+/// its filters and last frames; frames to send go to `pending`.
+/// `rx_stamp`: a received frame's timestamp to record first. Process or
+/// softirq context; `state` not held.
 fn with_rx(
     job: JobRef<'_, BcmOp>,
     pending: &mut Pending,
+    rx_stamp: Option<i64>,
     f: impl FnOnce(&mut RxOp, &[CanFrame], &mut [RxSlot], &mut RxEffects<'_, '_>),
 ) {
     let d = job.data();
@@ -407,12 +467,17 @@ fn with_rx(
             raw,
             filters,
             last,
+            rx_stamp: stamp,
         } = r;
+        if let Some(t) = rx_stamp {
+            *stamp = t;
+        }
         let mut out = RxEffects {
             job,
             sk: &sk,
             raw,
             cfsiz: *cfsiz,
+            rx_stamp: *stamp,
             pending,
         };
         f(op, filters, last, &mut out);
@@ -427,7 +492,7 @@ impl JobCallback for BcmOp {
     fn expired(job: JobRef<'_, Self>, which: usize) {
         let now = ktime_get_mono_ns() as u64;
         let due = |at: Option<u64>| at.is_some_and(|t| t <= now);
-        if matches!(&*job.data().state.lock(), OpState::Tx(_)) {
+        if job.data().tx {
             with_tx(job, true, |op, out| {
                 if which == TX_TIMER && due(op.expires) {
                     op.timer_expired(now, out);
@@ -436,7 +501,7 @@ impl JobCallback for BcmOp {
             return;
         }
         let mut pending = Pending::new();
-        with_rx(job, &mut pending, |op, _filters, last, out| {
+        with_rx(job, &mut pending, None, |op, _filters, last, out| {
             if which == RX_TIMEOUT_TIMER && due(op.timeout_at) {
                 op.timeout_expired(last, out);
             } else if which == RX_THROTTLE_TIMER && due(op.throttle_at) {
@@ -449,11 +514,15 @@ impl JobCallback for BcmOp {
 
 /// A new operation of `sk` with `state`. Process context.
 fn new_job(sk: &S, key: OpKey, state: OpState) -> Result<Job> {
-    let state = new_irq_spinlock!(state, "bcm_op_state")?;
+    let tx = matches!(state, OpState::Tx(_));
+    let state = new_bh_spinlock!(state, "bcm_op_state")?;
     JobTimers::new(OpData {
         sk: sk.to_ref(),
         key,
+        tx,
         active: AtomicBool::new(true),
+        frames_abs: AtomicU64::new(0),
+        frames_filtered: AtomicU64::new(0),
         state,
     })
 }
@@ -474,21 +543,154 @@ struct BcmSock {
     ifindex: i32,
     /// Transmit operations.
     tx_ops: KVec<Job>,
+    /// `/proc/net/can-bcm/<inode>` while connected (made by connect,
+    /// removed by release and by the removal of the connected interface,
+    /// as mainline). Dropped only after the socket lock is released: the
+    /// drop waits for readers, whose `show` takes the socket lock.
+    proc: Option<ProcEntry<ProcView>>,
 }
 
 /// What the receive path and the lockless checks need.
 struct BcmShared {
     /// Mirrors `BcmSock::bound` (written under the socket lock).
     bound: AtomicBool,
-    /// The receive operations (lock class `bcm_rx_ops`), allocated by the
-    /// first connect(). Changed only with the socket lock held.
-    rx: OnceBox<IrqSpinLock<RxOps>>,
+    /// Messages for user space dropped because the receive queue was
+    /// full (mainline's `dropped_usr_msgs`).
+    dropped: AtomicU64,
+    /// The receive operations (`spin_lock_bh`, lock class `bcm_rx_ops`:
+    /// process context and the NET_RX softirq), allocated by the first
+    /// connect(). Changed only with the socket lock held.
+    rx: OnceBox<BhLock<RxOps>>,
 }
 
 struct BcmProto;
 
 /// This module's registrations (proto, CAN protocol, notifier).
 static MODULE: ProtoModule<BcmProto> = ProtoModule::new();
+
+/// `/proc/net/can-bcm`: one file per connected socket, named by its inode
+/// number (mainline's `bcm_proc_show` format).
+static PROC: ProcDir = ProcDir::new(c_str!("can-bcm"));
+
+/// What `/proc/net/can-bcm/<inode>` shows: its socket (a counted
+/// reference, dropped with the file).
+struct ProcView {
+    sk: SockRef<BcmProto>,
+}
+
+/// An interface as mainline's `bcm_proc_getifname` names it: "any" for
+/// 0, "???" if it is gone. Pads (`{:<5}`) like `%-5s`.
+struct IfName<'a>(i32, &'a Net);
+
+impl core::fmt::Display for IfName<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        if self.0 == 0 {
+            return f.pad("any");
+        }
+        match DevRef::by_index(self.1, self.0) {
+            Some(d) => f.pad(d.name()),
+            None => f.pad("???"),
+        }
+    }
+}
+
+/// `[n]` for classic operations, `(n)` for CAN FD ones.
+fn nframes_text(flags: u32, n: u32) -> (char, u32, char) {
+    if flags & CAN_FD_FRAME != 0 {
+        ('(', n, ')')
+    } else {
+        ('[', n, ']')
+    }
+}
+
+impl ProcShow for ProcView {
+    /// Mainline's `bcm_proc_show`: a header, then each receive operation
+    /// that has received something, then each transmit operation, newest
+    /// first, then an empty line. Process context (a read of the file):
+    /// takes the socket lock, the receive list's and each operation's
+    /// `state` lock.
+    fn show(&self, m: &mut SeqFile<'_>) {
+        let sk = self.sk.sock();
+        let s = sk.lock();
+        let _ = m.write_str(">>> socket ");
+        m.write_kptr(sk.socket_addr());
+        let _ = m.write_str(" / sk ");
+        m.write_kptr(sk.as_ptr() as usize);
+        let _ = m.write_str(" / bo ");
+        m.write_kptr(sk.as_ptr() as usize);
+        let _ = writeln!(
+            m,
+            " / dropped {} / bound {} <<<",
+            sk.shared().dropped.load(Ordering::Relaxed),
+            IfName(s.ifindex, sk.net())
+        );
+        if let Some(list) = sk.shared().rx.get() {
+            let l = list.lock();
+            for j in l.ops.iter().rev() {
+                let d = j.data();
+                let abs = d.frames_abs.load(Ordering::Relaxed);
+                if abs == 0 {
+                    continue;
+                }
+                let filtered = d.frames_filtered.load(Ordering::Relaxed);
+                let st = d.state.lock();
+                let OpState::Rx(r) = &*st else {
+                    continue;
+                };
+                let op = &r.op;
+                let (o, n, c) = nframes_text(op.flags, op.nframes);
+                let dlc = if op.flags & RX_CHECK_DLC != 0 {
+                    'd'
+                } else {
+                    ' '
+                };
+                let _ = write!(
+                    m,
+                    "rx_op: {:03X} {:<5} {o}{n}{c}{dlc} ",
+                    op.can_id,
+                    IfName(op.ifindex, sk.net())
+                );
+                let (t1, t2) = (op.ival1.to_ns() / 1000, op.ival2.to_ns() / 1000);
+                if t1 != 0 {
+                    let _ = write!(m, "timeo={t1} ");
+                }
+                if t2 != 0 {
+                    let _ = write!(m, "thr={t2} ");
+                }
+                let reduction = 100 - (filtered.saturating_mul(100) / abs) as i64;
+                let near = if reduction == 100 { "near " } else { "" };
+                let _ = writeln!(
+                    m,
+                    "# recv {filtered} ({abs}) => reduction: {near}{reduction}%"
+                );
+            }
+        }
+        for j in s.tx_ops.iter().rev() {
+            let d = j.data();
+            let st = d.state.lock();
+            let OpState::Tx(t) = &*st else {
+                continue;
+            };
+            let op = &t.op;
+            let (o, n, c) = nframes_text(op.flags, op.nframes);
+            let _ = write!(
+                m,
+                "tx_op: {:03X} {} {o}{n}{c} ",
+                op.can_id,
+                IfName(t.ifindex, sk.net())
+            );
+            let (t1, t2) = (op.ival1.to_ns() / 1000, op.ival2.to_ns() / 1000);
+            if t1 != 0 {
+                let _ = write!(m, "t1={t1} ");
+            }
+            if t2 != 0 {
+                let _ = write!(m, "t2={t2} ");
+            }
+            let _ = writeln!(m, "# sent {}", d.frames_abs.load(Ordering::Relaxed));
+        }
+        let _ = m.write_str("\n");
+    }
+}
 
 type S = Sock<BcmProto>;
 
@@ -544,7 +746,7 @@ fn rx_register(sk: &S) -> Result {
 }
 
 /// Adds `job` to the receive list. Process context; socket lock held.
-fn rx_add(list: &IrqSpinLock<RxOps>, job: Job) -> Result {
+fn rx_add(list: &BhLock<RxOps>, job: Job) -> Result {
     let n = list.lock().ops.len();
     // Grow outside the spinlock: move the operations into a larger vector
     // under it (no allocation there).
@@ -567,7 +769,7 @@ fn rx_add(list: &IrqSpinLock<RxOps>, job: Job) -> Result {
 
 /// Takes the receive operation named `key` off the list. Process context;
 /// socket lock held. The caller drops it after the lock is released.
-fn rx_take(list: &IrqSpinLock<RxOps>, key: &OpKey) -> Option<Job> {
+fn rx_take(list: &BhLock<RxOps>, key: &OpKey) -> Option<Job> {
     let mut l = list.lock();
     let i = find(&l.ops, key)?;
     glue::kvec_swap_remove(&mut l.ops, i)
@@ -594,6 +796,7 @@ impl CanProtocol for BcmProto {
         };
         let frame = CanFrame::from_bytes(bytes);
         let ifindex = s.ifindex();
+        let tstamp = s.tstamp();
         let origin = s.sk_ptr();
         let mut traffic = 0;
         if !origin.is_null() {
@@ -618,20 +821,29 @@ impl CanProtocol for BcmProto {
                 {
                     continue;
                 }
-                with_rx(j.get(), &mut pending, |op, filters, last, out| {
-                    op.frame_received(&frame, ifindex, traffic, now, filters, last, out)
-                });
+                d.frames_abs.fetch_add(1, Ordering::Relaxed);
+                with_rx(
+                    j.get(),
+                    &mut pending,
+                    Some(tstamp),
+                    |op, filters, last, out| {
+                        op.frame_received(&frame, ifindex, traffic, now, filters, last, out)
+                    },
+                );
             }
         }
         pending.flush();
     }
 
     /// Mainline `bcm_notify`. Process context, RTNL held. A CAN device
-    /// going away stops the operations on it (transmit timers cancelled,
-    /// receive operations unsubscribed with their timers stopped; they
-    /// stay, as in mainline, for TX_READ/RX_READ/..._DELETE) and
-    /// disconnects the sockets connected to it (ENODEV); one going down
-    /// reports ENETDOWN to them.
+    /// going away stops the transmit operations on it (timers cancelled)
+    /// and unsubscribes the receive operations on it, whose timers keep
+    /// running as mainline's `bcm_rx_unreg` leaves them: an armed receive
+    /// timeout still fires once (RX_TIMEOUT naming the last interface a
+    /// frame came from), held-back changes are still flushed by the
+    /// throttle. The operations stay, as in mainline, for
+    /// TX_READ/RX_READ/..._DELETE. Sockets connected to the device are
+    /// disconnected (ENODEV); one going down reports ENETDOWN to them.
     fn netdev_event(event: NetdevEvent, dev: &NetDev, sockets: &Sockets<'_, Self>) {
         if !dev.is_can() {
             return;
@@ -659,18 +871,11 @@ impl CanProtocol for BcmProto {
                 let l = list.lock();
                 for j in l.ops.iter() {
                     let d = j.data();
-                    let gone = d.key.ifindex == ifindex && d.active.swap(false, Ordering::Relaxed);
-                    changed |= gone;
+                    changed |= d.key.ifindex == ifindex && d.active.swap(false, Ordering::Relaxed);
+                    // Release an "any" operation's claim on the vanishing
+                    // interface (mainline: if_detected).
                     let mut pending = Pending::new();
-                    with_rx(j.get(), &mut pending, |op, _, _, out| {
-                        if gone {
-                            if op.timeout_at.take().is_some() {
-                                out.cancel_timeout();
-                            }
-                            if op.throttle_at.take().is_some() {
-                                out.cancel_throttle();
-                            }
-                        }
+                    with_rx(j.get(), &mut pending, None, |op, _, _, _| {
                         if op.ifindex == 0 && op.if_detected == ifindex {
                             op.if_detected = 0;
                         }
@@ -683,12 +888,17 @@ impl CanProtocol for BcmProto {
                 let _ = rx_register(sk);
             }
             let enodev = s.bound && s.ifindex == ifindex;
+            let mut proc = None;
             if enodev {
                 s.bound = false;
                 s.ifindex = 0;
                 sk.shared().bound.store(false, Ordering::Relaxed);
+                proc = s.proc.take();
             }
             drop(s);
+            // Mainline removes the file with the binding; waits for its
+            // readers (they take the socket lock, not RTNL).
+            drop(proc);
             if enodev {
                 sk.report_error(bindings::ENODEV as i32);
             }
@@ -801,7 +1011,7 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
                     }
                 }
             }
-            with_rx(j, &mut pending, |op, _, last, out| {
+            with_rx(j, &mut pending, None, |op, _, last, out| {
                 op.setup(&h, now, last, out)
             });
         }
@@ -819,6 +1029,7 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
             raw,
             filters,
             last,
+            rx_stamp: 0,
         }),
     )?;
     rx_add(list, job)?;
@@ -830,7 +1041,7 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
     {
         let l = list.lock();
         if let Some(i) = find(&l.ops, &key) {
-            with_rx(l.ops[i].get(), &mut pending, |op, _, last, out| {
+            with_rx(l.ops[i].get(), &mut pending, None, |op, _, last, out| {
                 op.setup(&h, now, last, out)
             });
         }
@@ -867,6 +1078,7 @@ impl glue::sock::Proto for BcmProto {
     fn new_shared() -> BcmShared {
         BcmShared {
             bound: AtomicBool::new(false),
+            dropped: AtomicU64::new(0),
             rx: OnceBox::new(),
         }
     }
@@ -876,6 +1088,7 @@ impl glue::sock::Proto for BcmProto {
             bound: false,
             ifindex: 0,
             tx_ops: KVec::new(),
+            proc: None,
         }
     }
 
@@ -896,7 +1109,10 @@ impl glue::sock::Proto for BcmProto {
         s.bound = false;
         s.ifindex = 0;
         sk.shared().bound.store(false, Ordering::Relaxed);
+        let proc = s.proc.take();
         drop(s);
+        // Waits for readers of the file (they take the socket lock).
+        drop(proc);
         drop(tx);
         drop(rx);
     }
@@ -923,12 +1139,22 @@ impl glue::sock::Proto for BcmProto {
             ifindex = dev.ifindex();
         }
         if sk.shared().rx.get().is_none() {
-            let l = new_irq_spinlock!(RxOps { ops: KVec::new() }, "bcm_rx_ops")?;
+            let l = new_bh_spinlock!(RxOps { ops: KVec::new() }, "bcm_rx_ops")?;
             sk.shared().rx.set(KBox::new(l, GFP_KERNEL)?)?;
         }
         s.bound = true;
         s.ifindex = ifindex;
         sk.shared().bound.store(true, Ordering::Relaxed);
+        // /proc/net/can-bcm/<inode>; as in mainline, a socket without it
+        // (no directory, no memory) still works. The directory is the
+        // initial namespace's only (bcm.rst): a socket elsewhere gets no
+        // file, so that init_net's /proc never lists another namespace's.
+        if !sk.net().is_init() {
+            return Ok(());
+        }
+        if let Ok(name) = CString::try_from_fmt(format_args!("{}", sk.ino())) {
+            s.proc = ProcEntry::new(&PROC, &name, ProcView { sk: sk.to_ref() }).ok();
+        }
         Ok(())
     }
 
@@ -1008,7 +1234,9 @@ impl glue::sock::Proto for BcmProto {
                 let mut pending = Pending::new();
                 let l = list.lock();
                 let i = find(&l.ops, &key).ok_or(EINVAL)?;
-                with_rx(l.ops[i].get(), &mut pending, |op, _, _, out| op.read(out));
+                with_rx(l.ops[i].get(), &mut pending, None, |op, _, _, out| {
+                    op.read(out)
+                });
                 Ok(MHSIZ)
             }
             TX_SEND => tx_send(sk, &req, ifindex),
@@ -1034,12 +1262,25 @@ impl glue::sock::Proto for BcmProto {
 /// The module: its registrations, undone when it is dropped (unload).
 pub(crate) struct BcmModule {
     _reg: ProtoRegistration<BcmProto>,
+    /// Dropped after `_reg`: no socket, so no file, is left then.
+    _proc: Option<ProcDirReg>,
 }
 
 impl kernel::Module for BcmModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
+        // Before the protocol: a socket may connect at once.
+        let proc = match PROC.create() {
+            Ok(p) => Some(p),
+            Err(e) => {
+                pr_warn!("no /proc/net/can-bcm ({:?})\n", e);
+                None
+            }
+        };
         let reg = MODULE.register(c_str!("CAN_BCM"))?;
         pr_info!("CAN_BCM ({}) registered\n", CAN_BCM);
-        Ok(BcmModule { _reg: reg })
+        Ok(BcmModule {
+            _reg: reg,
+            _proc: proc,
+        })
     }
 }

@@ -486,3 +486,118 @@ impl WaitQueue {
         unsafe { bindings::rcan_wake_up_all(self.get()) };
     }
 }
+
+// ---------------------------------------------------------------------------
+// BhLock: in a value that moves, shared with softirqs
+
+/// Data protected by a spinlock taken with bottom halves disabled
+/// (`spin_lock_bh`), in a value that may move before it is shared (a
+/// per-socket or per-job lock), of the lockdep class of its
+/// [`new_bh_spinlock!`] site: for state shared between process context
+/// and softirqs (NET_RX, HRTIMER_SOFTIRQ), never with a hardirq handler.
+/// Usable in process and softirq context; never sleep while holding it.
+/// Holding it, one may queue skbs on a socket and wake its readers
+/// (`sock_queue_rcv_skb`), as softirqs do.
+///
+/// # Invariants
+///
+/// `lock` is an initialised spinlock allocated by `rcan_spinlock_alloc`,
+/// freed in Drop.
+pub(crate) struct BhLock<T> {
+    lock: core::ptr::NonNull<bindings::spinlock_t>,
+    data: UnsafeCell<T>,
+}
+
+// SAFETY: `data` is only reached through a guard holding the lock.
+unsafe impl<T: Send> Sync for BhLock<T> {}
+// SAFETY: the lock allocation may be freed from any thread.
+unsafe impl<T: Send> Send for BhLock<T> {}
+
+/// `BhLock::new(data, name)` with a lockdep class of this call site.
+/// Process context (allocates with GFP_KERNEL); `Result`.
+#[allow(unused_macros)]
+macro_rules! new_bh_spinlock {
+    ($data:expr, $name:literal $(,)?) => {{
+        static CLASS: $crate::glue::lock::LockClassKey = $crate::glue::lock::LockClassKey::new();
+        $crate::glue::lock::BhLock::new($data, ::kernel::c_str!($name), &CLASS)
+    }};
+}
+#[allow(unused_imports)]
+pub(crate) use new_bh_spinlock;
+
+impl<T> BhLock<T> {
+    /// A new unlocked lock of class `key`, named `name` in lockdep
+    /// reports. Process context (allocates with GFP_KERNEL). Use
+    /// [`new_bh_spinlock!`], which makes the key.
+    pub(crate) fn new(
+        data: T,
+        name: &'static CStr,
+        key: &'static LockClassKey,
+    ) -> kernel::error::Result<Self> {
+        // SAFETY: allocates and initialises a spinlock, or returns NULL;
+        // `name` and `key` are 'static, as lockdep keeps them.
+        let lock = unsafe { bindings::rcan_spinlock_alloc(name.as_char_ptr(), key.as_ptr()) };
+        let lock = core::ptr::NonNull::new(lock).ok_or(kernel::error::code::ENOMEM)?;
+        // INVARIANT: just allocated and initialised.
+        Ok(BhLock {
+            lock,
+            data: UnsafeCell::new(data),
+        })
+    }
+
+    /// Takes the lock with bottom halves disabled. Process or softirq
+    /// context (not hardirq, not with interrupts disabled).
+    pub(crate) fn lock(&self) -> BhGuard<'_, T> {
+        // SAFETY: an initialised spinlock (invariant).
+        unsafe { bindings::rcan_spin_lock_bh(self.lock.as_ptr()) };
+        // INVARIANT: taken above.
+        BhGuard {
+            lock: self.lock,
+            data: &self.data,
+            _not_send: PhantomData,
+        }
+    }
+}
+
+impl<T> Drop for BhLock<T> {
+    fn drop(&mut self) {
+        // SAFETY: nobody can hold the lock (we have `&mut self`); allocated
+        // by rcan_spinlock_alloc (invariant).
+        unsafe { bindings::rcan_spinlock_free(self.lock.as_ptr()) };
+    }
+}
+
+/// A held [`BhLock`]: `&mut` access to the data.
+///
+/// # Invariants
+///
+/// `lock` is held, taken with `spin_lock_bh` on this CPU; it protects
+/// `data`.
+pub(crate) struct BhGuard<'a, T> {
+    lock: core::ptr::NonNull<bindings::spinlock_t>,
+    data: &'a UnsafeCell<T>,
+    _not_send: PhantomData<*mut ()>,
+}
+
+impl<T> Deref for BhGuard<'_, T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        // SAFETY: the lock is held while the guard lives (invariant).
+        unsafe { &*self.data.get() }
+    }
+}
+
+impl<T> DerefMut for BhGuard<'_, T> {
+    fn deref_mut(&mut self) -> &mut T {
+        // SAFETY: the lock is held while the guard lives, exclusively.
+        unsafe { &mut *self.data.get() }
+    }
+}
+
+impl<T> Drop for BhGuard<'_, T> {
+    fn drop(&mut self) {
+        // SAFETY: locked with spin_lock_bh on this CPU (invariant; the
+        // guard is not Send).
+        unsafe { bindings::rcan_spin_unlock_bh(self.lock.as_ptr()) };
+    }
+}

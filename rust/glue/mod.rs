@@ -54,6 +54,7 @@ pub(crate) mod netdev;
 pub(crate) mod params;
 pub(crate) mod pci;
 pub(crate) mod percpu;
+pub(crate) mod procfs;
 pub(crate) mod skb;
 pub(crate) mod sock;
 pub(crate) mod sync;

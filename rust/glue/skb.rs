@@ -342,6 +342,20 @@ impl Skb {
         unsafe { bindings::rcan_skb_stamp_if_unset(self.as_ptr()) };
     }
 
+    /// The receive timestamp (`skb->tstamp`, ns; 0: none).
+    pub(crate) fn tstamp(&self) -> i64 {
+        // SAFETY: valid skb.
+        unsafe { bindings::rcan_skb_tstamp(self.as_ptr()) }
+    }
+
+    /// Sets `skb->tstamp` (ns; 0: none), as a protocol does that hands
+    /// user space a frame's receive time in a message of its own
+    /// (SO_TIMESTAMP and friends report it).
+    pub(crate) fn set_tstamp(&mut self, ns: i64) {
+        // SAFETY: valid skb we own.
+        unsafe { bindings::rcan_skb_set_tstamp(self.as_ptr(), ns) };
+    }
+
     /// The linear data, writable.
     pub(crate) fn data_mut(&mut self) -> &mut [u8] {
         // SAFETY: we own a reference; the head holds `len - data_len`

@@ -166,6 +166,20 @@ impl<T: Proto> Sock<T> {
         unsafe { &(*self.sk.cast::<ObjOf<T>>()).shared }
     }
 
+    /// The inode number of the socket's file (`sock_i_ino`; 0 without
+    /// one), which names it in /proc files.
+    pub(crate) fn ino(&self) -> u64 {
+        // SAFETY: live sock (type invariant).
+        unsafe { bindings::sock_i_ino(self.sk) as u64 }
+    }
+
+    /// The address of the sock's `struct socket` (`sk->sk_socket`; 0
+    /// once orphaned), for /proc files that print it with `%pK`.
+    pub(crate) fn socket_addr(&self) -> usize {
+        // SAFETY: live sock (type invariant); reads one pointer field.
+        unsafe { (*self.sk).sk_socket as usize }
+    }
+
     /// A counted reference to this sock (`sock_hold`).
     pub(crate) fn to_ref(&self) -> SockRef<T> {
         // SAFETY: live sock (type invariant); SockRef drops the reference.

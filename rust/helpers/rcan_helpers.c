@@ -730,3 +730,53 @@ int rcan_netif_receive_skb(struct sk_buff *skb)
 {
 	return netif_receive_skb(skb);
 }
+
+/* skb->tstamp (a union member bindgen names unpredictably), in ns. */
+s64 rcan_skb_tstamp(const struct sk_buff *skb)
+{
+	return ktime_to_ns(skb->tstamp);
+}
+
+void rcan_skb_set_tstamp(struct sk_buff *skb, s64 ns)
+{
+	skb->tstamp = ns_to_ktime(ns);
+}
+
+/* procfs: a directory in /proc/net of the initial namespace, single_open files. */
+#include <linux/proc_fs.h>
+#include <linux/seq_file.h>
+#include <net/net_namespace.h>
+
+struct proc_dir_entry *rcan_proc_net_mkdir(const char *name)
+{
+	return proc_net_mkdir(&init_net, name, init_net.proc_net);
+}
+
+struct proc_dir_entry *rcan_proc_create_single(const char *name,
+					       struct proc_dir_entry *parent,
+					       int (*show)(struct seq_file *, void *),
+					       void *data)
+{
+	return proc_create_single_data(name, 0644, parent, show, data);
+}
+
+void rcan_proc_remove(struct proc_dir_entry *pde)
+{
+	proc_remove(pde);
+}
+
+void *rcan_seq_private(struct seq_file *m)
+{
+	return m->private;
+}
+
+void rcan_seq_write(struct seq_file *m, const char *s, size_t len)
+{
+	seq_write(m, s, len);
+}
+
+/* An address as %pK prints it (hashed, or zeros under kptr_restrict). */
+void rcan_seq_kptr(struct seq_file *m, unsigned long addr)
+{
+	seq_printf(m, "%pK", (void *)addr);
+}

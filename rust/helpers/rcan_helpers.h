@@ -42,6 +42,8 @@ void rcan_skb_reserve(struct sk_buff *skb, int len);
 unsigned int rcan_skb_headroom(const struct sk_buff *skb);
 void rcan_skb_reset_headers(struct sk_buff *skb);
 void rcan_skb_stamp_if_unset(struct sk_buff *skb);
+s64 rcan_skb_tstamp(const struct sk_buff *skb);
+void rcan_skb_set_tstamp(struct sk_buff *skb, s64 ns);
 bool rcan_dev_nit_active(struct net_device *dev);
 void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev);
 u16 rcan_skb_protocol(const struct sk_buff *skb);
@@ -197,3 +199,16 @@ void rcan_napi_schedule(struct napi_struct *napi);
 void rcan_napi_complete_done(struct napi_struct *napi, int work_done);
 struct net_device *rcan_napi_dev(const struct napi_struct *napi);
 int rcan_netif_receive_skb(struct sk_buff *skb);
+
+/* procfs (rust/glue/procfs.rs) */
+struct proc_dir_entry;
+struct seq_file;
+struct proc_dir_entry *rcan_proc_net_mkdir(const char *name);
+struct proc_dir_entry *rcan_proc_create_single(const char *name,
+					       struct proc_dir_entry *parent,
+					       int (*show)(struct seq_file *, void *),
+					       void *data);
+void rcan_proc_remove(struct proc_dir_entry *pde);
+void *rcan_seq_private(struct seq_file *m);
+void rcan_seq_write(struct seq_file *m, const char *s, size_t len);
+void rcan_seq_kptr(struct seq_file *m, unsigned long addr);

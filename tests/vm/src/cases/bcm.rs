@@ -15,7 +15,7 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use rcan_uapi::raw;
-use socketcan::{EmbeddedFrame, Frame, Socket};
+use socketcan::{EmbeddedFrame, Frame, Socket, SocketOptions};
 
 use crate::canraw::{self, std as sff};
 use crate::check::{OrFail, TestResult};
@@ -42,6 +42,9 @@ pub static TESTS: &[crate::Test] = portable_table![
     bcm_tx_announce_and_reset_multi_idx,
     bcm_rx_no_autotimer,
     bcm_rx_any_interface,
+    bcm_rx_changed_timestamp,
+    bcm_rx_timeout_after_unregister,
+    bcm_proc_net_file,
 ];
 
 /// A failure with `what` unless `cond`.
@@ -1109,6 +1112,251 @@ fn bcm_rx_any_interface(ctx: &mut Ctx) -> TestResult {
     need(
         got == want,
         format!("(opcode, ifindex) {got:?}, want {want:?}"),
+    )
+}
+
+/// RX_CHANGED carries the receive time of the frame that caused it
+/// (mainline's `bcm_rx_changed` restores the frame's skb timestamp): with
+/// SO_TIMESTAMP, its SCM_TIMESTAMP equals the one a CAN_RAW socket on the
+/// same interface gets for the same frame, though the BCM message is read
+/// 50 ms after the raw frame (a message stamped when it was made or read
+/// would differ). Twice, with changing data.
+fn bcm_rx_changed_timestamp(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let bcm = open(i0)?;
+    raw::setsockopt(
+        &bcm,
+        libc::SOL_SOCKET,
+        libc::SO_TIMESTAMP,
+        &1i32.to_ne_bytes(),
+    )
+    .or_fail("SO_TIMESTAMP on CAN_BCM")?;
+    raw::set_timeout(&bcm, libc::SO_RCVTIMEO, Duration::from_secs(5)).or_fail("SO_RCVTIMEO")?;
+    let rx = canraw::open(i0)?;
+    rx.set_socket_option_int(libc::SOL_SOCKET, libc::SO_TIMESTAMP, 1)
+        .or_fail("SO_TIMESTAMP on CAN_RAW")?;
+    raw::set_timeout(&rx, libc::SO_RCVTIMEO, Duration::from_secs(5)).or_fail("SO_RCVTIMEO")?;
+    let tx = canraw::open(i0)?;
+    // The kernel turns receive timestamping on (netstamp_needed) in a
+    // deferred work after the first SO_TIMESTAMP: until then frames come
+    // unstamped and recvmsg stamps them when read. Wait until a frame read
+    // 20 ms after it was sent carries an earlier time.
+    let mut stamped = false;
+    for _ in 0..50 {
+        canraw::send(&tx, &sff(0x651, &[0]))?;
+        thread::sleep(Duration::from_millis(20));
+        let before_read = std::time::SystemTime::now();
+        let r = crate::sys::recvmsg(&rx, 16, 0).or_fail("recvmsg CAN_RAW")?;
+        let tv = r.timeval.ok_or("CAN_RAW: no SCM_TIMESTAMP")?;
+        let t = std::time::UNIX_EPOCH + Duration::new(tv.tv_sec as u64, tv.tv_usec as u32 * 1000);
+        if t < before_read {
+            stamped = true;
+            break;
+        }
+    }
+    need(stamped, "frames never came with a receive timestamp")?;
+    write(&bcm, rx_head(RX_FILTER_ID, 0, 0, 0x650, 0), &[])?;
+    for i in 0..2u8 {
+        canraw::send(&tx, &sff(0x650, &[i]))?;
+        let r = crate::sys::recvmsg(&rx, 16, 0).or_fail("recvmsg CAN_RAW")?;
+        thread::sleep(Duration::from_millis(50));
+        let b = crate::sys::recvmsg(&bcm, MHSIZ + 16, 0).or_fail("recvmsg CAN_BCM")?;
+        let m = parse(&b.data[..b.len])?;
+        need(
+            m.head.opcode == RX_CHANGED && m.frames.first().map(|f| f.1.as_slice()) == Some(&[i]),
+            format!("message {i}: {:?}, want RX_CHANGED with [{i}]", m.head),
+        )?;
+        let tr = r.timeval.ok_or("CAN_RAW: no SCM_TIMESTAMP")?;
+        let tb = b
+            .timeval
+            .ok_or_else(|| format!("RX_CHANGED: no SCM_TIMESTAMP (cmsgs {:?})", b.cmsgs))?;
+        println!(
+            "# frame {i}: CAN_RAW {}.{:06}, RX_CHANGED {}.{:06}",
+            tr.tv_sec, tr.tv_usec, tb.tv_sec, tb.tv_usec
+        );
+        need(
+            (tr.tv_sec, tr.tv_usec) == (tb.tv_sec, tb.tv_usec),
+            format!(
+                "frame {i}: RX_CHANGED stamped {}.{:06}, the frame was received at {}.{:06}",
+                tb.tv_sec, tb.tv_usec, tr.tv_sec, tr.tv_usec
+            ),
+        )?;
+    }
+    Ok(())
+}
+
+/// A receive operation whose interface goes away keeps its timers
+/// (mainline's `bcm_notify` only unsubscribes it, `bcm_rx_unreg`): the
+/// connected socket reads ENODEV, and the timeout armed before still
+/// brings one RX_TIMEOUT, naming the interface, and nothing after it.
+/// The timeout (2 s; 4 s on the debug kernel) must not have fired before
+/// the interface was gone (checked: nothing queued then), else the test
+/// would prove nothing.
+fn bcm_rx_timeout_after_unregister(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let ival_us: i64 = if crate::ctx::debug_kernel() {
+        4_000_000
+    } else {
+        2_000_000
+    };
+    let bcm = open(i0)?;
+    let h = rx_head(SETTIMER | STARTTIMER, ival_us, 0, 0x660, 1);
+    write(&bcm, h, &[frame_bytes(0x660, &[0xff])])?;
+    let t0 = Instant::now();
+    ctx.remove_can_ifaces()?;
+    let removed = t0.elapsed();
+    raw::set_nonblocking(&bcm, true).or_fail("O_NONBLOCK")?;
+    let mut buf = [0u8; MHSIZ + 16];
+    match raw::recvfrom(&bcm, &mut buf, 0, None) {
+        Err(e) if e.raw_os_error() == Some(libc::ENODEV) => {}
+        other => return Err(format!("first read after removal: {other:?}, want ENODEV")),
+    }
+    match raw::recvfrom(&bcm, &mut buf, 0, None) {
+        Err(e) if e.raw_os_error() == Some(libc::EAGAIN) => {}
+        Ok((n, _)) => {
+            return Err(format!(
+                "a {n}-byte message was queued before the timeout could fire after the \
+                 removal (which took {removed:?} against ival1 {ival_us} us): inconclusive"
+            ))
+        }
+        Err(e) => return Err(format!("second read after removal: {e}, want EAGAIN")),
+    }
+    raw::set_nonblocking(&bcm, false).or_fail("O_NONBLOCK off")?;
+    let m = recv_some(
+        &bcm,
+        Duration::from_secs(20),
+        "RX_TIMEOUT after the removal",
+    )?;
+    println!(
+        "# interface gone after {:.0} ms, RX_TIMEOUT after {:.0} ms (ival1 {} ms)",
+        removed.as_secs_f64() * 1e3,
+        t0.elapsed().as_secs_f64() * 1e3,
+        ival_us / 1000
+    );
+    need(
+        m.head.opcode == RX_TIMEOUT && m.head.can_id == 0x660 && m.ifindex == i0,
+        format!(
+            "{:?} from ifindex {}, want RX_TIMEOUT for 0x660 from {i0}",
+            m.head, m.ifindex
+        ),
+    )?;
+    need(
+        recv(&bcm, Duration::from_millis(500))?.is_none(),
+        "another message after RX_TIMEOUT",
+    )
+}
+
+/// The inode number of socket `fd`, as `ls -l /proc/self/fd` shows it
+/// (`socket:[N]`).
+fn socket_ino(fd: impl AsFd) -> Result<u64, String> {
+    use std::os::fd::AsRawFd;
+    let link = std::fs::read_link(format!("/proc/self/fd/{}", fd.as_fd().as_raw_fd()))
+        .or_fail("readlink /proc/self/fd")?;
+    let l = link.to_string_lossy();
+    l.strip_prefix("socket:[")
+        .and_then(|r| r.strip_suffix(']'))
+        .and_then(|n| n.parse().ok())
+        .ok_or_else(|| format!("fd link {l}, want socket:[N]"))
+}
+
+/// `cat FILE`: its text, or None if cat fails (no such file).
+fn cat(path: &str) -> Result<Option<String>, String> {
+    let out = std::process::Command::new("cat")
+        .arg(path)
+        .output()
+        .or_fail("run cat")?;
+    Ok(out
+        .status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).into_owned()))
+}
+
+/// `/proc/net/can-bcm/<inode>` as a user reads it with `cat`: one file
+/// per connected socket, named by its inode number; a header naming the
+/// bound interface ("any" for 0) and the dropped messages; a line per
+/// receive operation that has received frames (received and reported
+/// counts, the reduction in per cent) and per transmit operation (its
+/// interval and frames sent), in mainline's format; an empty line last.
+/// The file goes with the socket.
+fn bcm_proc_net_file(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.bcm_ifaces(1)?[0];
+    let dev = crate::ctx::dev(0);
+    let bcm = open(i0)?;
+    let path = format!("/proc/net/can-bcm/{}", socket_ino(&bcm)?);
+    let any = open(0)?;
+    let any_path = format!("/proc/net/can-bcm/{}", socket_ino(&any)?);
+    let text = cat(&any_path)?.ok_or_else(|| format!("cat {any_path} failed"))?;
+    need(
+        text.lines().next().is_some_and(|l| {
+            l.starts_with(">>> socket ") && l.ends_with(" / dropped 0 / bound any <<<")
+        }),
+        format!("{any_path} of a socket connected to any interface: {text:?}"),
+    )?;
+    drop(any);
+
+    let h = tx_head(SETTIMER | STARTTIMER, 0, 0, 100_000, 0x123, 1);
+    write(&bcm, h, &[frame_bytes(0x123, &[1])])?;
+    write(
+        &bcm,
+        rx_head(0, 0, 0, 0x321, 1),
+        &[frame_bytes(0x321, &[0xff])],
+    )?;
+    // Never receives: not listed.
+    write(
+        &bcm,
+        rx_head(0, 0, 0, 0x322, 1),
+        &[frame_bytes(0x322, &[0xff])],
+    )?;
+    let tx = canraw::open(i0)?;
+    for _ in 0..3 {
+        canraw::send(&tx, &sff(0x321, &[1]))?;
+    }
+    let m = recv_some(&bcm, Duration::from_secs(5), "RX_CHANGED")?;
+    need(m.head.opcode == RX_CHANGED, format!("{:?}", m.head))?;
+    let want_rx = format!("rx_op: 321 {dev:<5} [1]  # recv 1 (3) => reduction: 67%");
+    let want_tx = format!("tx_op: 123 {dev} [1] t2=100000 # sent ");
+    // The three frames reach the socket soon; read until they are counted.
+    let end = Instant::now() + Duration::from_secs(10);
+    let text = loop {
+        let t = cat(&path)?.ok_or_else(|| format!("cat {path} failed"))?;
+        if t.lines().any(|l| l == want_rx) || Instant::now() > end {
+            break t;
+        }
+        thread::sleep(Duration::from_millis(50));
+    };
+    println!("# {path}:");
+    text.lines().for_each(|l| println!("#   {l}"));
+    let lines: Vec<&str> = text.lines().collect();
+    need(
+        lines.first().is_some_and(|l| {
+            l.starts_with(">>> socket ") && l.ends_with(&format!(" / dropped 0 / bound {dev} <<<"))
+        }),
+        format!("header of {path}: {:?}", lines.first()),
+    )?;
+    need(
+        lines
+            .iter()
+            .filter(|l| l.starts_with("rx_op: "))
+            .eq([&want_rx.as_str()]),
+        format!("rx_op lines {lines:?}, want only {want_rx:?}"),
+    )?;
+    let sent = lines
+        .iter()
+        .filter_map(|l| l.strip_prefix(want_tx.as_str()))
+        .map(|n| n.parse::<u64>())
+        .collect::<Vec<_>>();
+    need(
+        matches!(sent.as_slice(), [Ok(n)] if *n >= 1),
+        format!("tx_op lines {lines:?}, want one {want_tx:?}N with N >= 1"),
+    )?;
+    need(
+        text.ends_with("\n\n") && lines.len() == 4,
+        format!("{path}: want header, rx_op, tx_op and an empty line: {text:?}"),
+    )?;
+    drop(bcm);
+    need(
+        cat(&path)?.is_none(),
+        format!("{path} still readable after close"),
     )
 }
 
