@@ -264,10 +264,11 @@ impl JobCallback for RestartJob {
     /// restart takes only spinlocks.
     fn expired(job: JobRef<'_, Self>, _which: usize) {
         let d = job.data();
-        // SAFETY: the timer only runs between `arm_restart` (called by
-        // the driver's `open` for its own device, which stored this
-        // hook) and `disarm_restart` (the driver's `stop`, which waits
-        // for this callback): the device is registered and open.
+        // The timer only runs between `arm_restart` (called by the
+        // driver's `open` for its own device, which stored this hook) and
+        // `disarm_restart` (the driver's `stop`, which waits for this
+        // callback).
+        // SAFETY: so the device is registered and open (above).
         unsafe { (d.hook)(d.dev) };
     }
 }

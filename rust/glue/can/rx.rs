@@ -631,10 +631,11 @@ impl<R: Receiver> RxTable<R> {
     pub(crate) fn new_boxed(lock: StaticMutex) -> Result<KVBox<Self>> {
         let mut b = KVBox::<Self>::new_uninit(GFP_KERNEL)?;
         let p = b.as_mut_ptr();
-        // SAFETY: `p` is our allocation of one table. All-zero is a valid
-        // value of every field but `writer` (NULL list heads and group
-        // pointer, whose atomics are plain integers), which is written
-        // right after; then every field is initialised.
+        // `p` is our allocation of one table. All-zero is a valid value
+        // of every field but `writer` (NULL list heads and group pointer,
+        // whose atomics are plain integers), which is written right after;
+        // then every field is initialised.
+        // SAFETY: as said above.
         unsafe {
             ptr::write_bytes(p, 0, 1);
             ptr::addr_of_mut!((*p).writer).write(CMutex::new(
