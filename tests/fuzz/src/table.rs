@@ -493,8 +493,9 @@ impl Call {
         // close(2) of a socket never fails but with EBADF (raced) or
         // EINTR; dup only with EBADF/EMFILE.
         const CLOSE: &[c_int] = &[EBADF, EINTR, EMFILE];
-        // Device churn: SIOCSIFMTU on a classic CAN device takes only 16
-        // (EINVAL else); the device may be gone (ENODEV); rmmod of a
+        // Device churn: SIOCSIFMTU on canloop takes 16 or 72 (CAN FD)
+        // while down (EBUSY up, EINVAL for other values); the device may
+        // be gone (ENODEV); rmmod of a
         // module in use is EWOULDBLOCK/EBUSY, of one that is not loaded
         // ENOENT; insmod of a loaded one EEXIST.
         const DEV: &[c_int] = &[EINVAL, ENODEV, EBUSY, EAGAIN, ENOENT, EEXIST];
