@@ -20,9 +20,10 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::thread;
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use rcan_uapi::dsor::{dsor_port, DsorAddr, DsorSocket, DSOR_ID_ANY, DSOR_NODE_ANY};
+use socketcan::SocketOptions;
 
 use super::test_table;
 use crate::canraw;
@@ -1741,6 +1742,112 @@ fn wait_bodies(raw: &socketcan::CanSocket, src: u32, count: usize) -> TestResult
     Ok(())
 }
 
+/// Whether `id` is a DSOR body frame from node `src` to node 0.
+fn is_body_to_0(id: u32, src: u32) -> bool {
+    id & libc::CAN_EFF_FLAG != 0 && {
+        let id = id & libc::CAN_EFF_MASK;
+        (id >> 14) & 0x7f == 0 && (id >> 7) & 0x7f == src && (id >> 5) & 3 == 1
+    }
+}
+
+/// A CAN_RAW socket on `idx` whose frames carry their receive time
+/// (SO_TIMESTAMP), with room for a whole message's frames (64 MiB).
+fn stamped_raw(idx: u32) -> Result<socketcan::CanSocket, String> {
+    let raw = canraw::open(idx)?;
+    raw.set_socket_option_int(libc::SOL_SOCKET, libc::SO_TIMESTAMP, 1)
+        .or_fail("SO_TIMESTAMP")?;
+    crate::sys::set_rcvbufforce(&raw, 64 << 20).or_fail("SO_RCVBUFFORCE")?;
+    Ok(raw)
+}
+
+/// Turns receive timestamping on for the whole test: the kernel enables
+/// it (netstamp_needed) in deferred work after the first SO_TIMESTAMP,
+/// and until then frames come unstamped and are stamped when read. Waits
+/// until a frame read 20 ms after it was sent carries an earlier time;
+/// stamping stays on while the returned socket is open.
+fn stamps_on(idx: u32) -> Result<socketcan::CanSocket, String> {
+    let keep = stamped_raw(idx)?;
+    let tx = canraw::open(idx)?;
+    for _ in 0..100 {
+        canraw::send(&tx, &canraw::std(0x5a5, &[]))?;
+        thread::sleep(Duration::from_millis(20));
+        let before_read = SystemTime::now();
+        let r = crate::sys::recvmsg(&keep, 16, 0).or_fail("recvmsg CAN_RAW")?;
+        if r.timeval.is_some_and(|tv| tv_time(&tv) < before_read) {
+            return Ok(keep);
+        }
+    }
+    Err("frames never came with a receive timestamp".into())
+}
+
+fn tv_time(tv: &libc::timeval) -> SystemTime {
+    UNIX_EPOCH + Duration::new(tv.tv_sec as u64, tv.tv_usec as u32 * 1000)
+}
+
+/// The receive time of the last DSOR body frame from node `src` to node
+/// 0 still queued on `raw` (read until it stays empty for 200 ms).
+fn last_body_time(raw: &socketcan::CanSocket, src: u32) -> Result<Option<SystemTime>, String> {
+    let (mut last, mut idle) = (None, 0);
+    while idle < 2 {
+        match crate::sys::recvmsg(raw, 16, libc::MSG_DONTWAIT) {
+            Ok(r) => {
+                idle = 0;
+                let id = u32::from_ne_bytes([r.data[0], r.data[1], r.data[2], r.data[3]]);
+                if is_body_to_0(id, src) {
+                    let tv = r.timeval.ok_or("CAN_RAW frame without SCM_TIMESTAMP")?;
+                    last = Some(tv_time(&tv));
+                }
+            }
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                idle += 1;
+                thread::sleep(Duration::from_millis(100));
+            }
+            Err(e) => return Err(format!("recvmsg CAN_RAW: {e}")),
+        }
+    }
+    Ok(last)
+}
+
+/// The only receiver closes: peeks whether the message was already
+/// queued to it, closes it, and notes when the close had returned.
+struct Closed {
+    queued: bool,
+    at: SystemTime,
+}
+
+fn close_receiver(rx: DsorSocket) -> Closed {
+    let mut b = [0u8; 1];
+    let queued = rx
+        .recv_from_flags(&mut b, libc::MSG_PEEK | libc::MSG_DONTWAIT)
+        .is_ok();
+    drop(rx);
+    Closed {
+        queued,
+        at: SystemTime::now(),
+    }
+}
+
+/// A send to a receiver that closed succeeded: right only if the message
+/// was complete before the close had returned, i.e. it was queued when
+/// peeked, or its last body frame (stamped by the kernel on `raw`, in
+/// the same softirq pass that delivered it) came before the close
+/// returned (delivery and close raced: either outcome is right). A test
+/// thread delayed past the whole transfer makes the first case; a
+/// success for a body that came after the close is the bug.
+fn success_after_close(raw: &socketcan::CanSocket, src: u32, c: &Closed) -> Result<(), String> {
+    if c.queued {
+        return Ok(());
+    }
+    match last_body_time(raw, src)? {
+        Some(t) if t <= c.at => Ok(()),
+        Some(t) => Err(format!(
+            "succeeded, though its last body frame came {:?} after the receiver's close returned",
+            t.duration_since(c.at).unwrap_or_default()
+        )),
+        None => Err("succeeded; no body frame left on CAN_RAW to time it".into()),
+    }
+}
+
 /// Sends one message in a thread; returns its handle.
 fn send_in_thread(
     len: usize,
@@ -1757,7 +1864,10 @@ fn send_in_thread(
 /// ECONNREFUSED (the next body after the close is refused), never
 /// success. After 100 body frames of a 20000-byte message, and 1 to 5 ms
 /// into a 40000-byte message; kernel to kernel, dsor-peer to kernel and
-/// kernel to dsor-peer.
+/// kernel to dsor-peer. A success is right only when the message was
+/// complete before the close returned (the test thread can be delayed
+/// past the whole transfer on a loaded host): [`success_after_close`]
+/// judges it by the kernel's receive time of the last body frame.
 fn dsor_delivery_receiver_closes(ctx: &mut Ctx) -> TestResult {
     let idx = dsor_stack(ctx, &PEER_TIMERS)?;
     let rounds = crate::ctx::sized("RCAN_DSOR_CLOSE_ROUNDS", 5, 2) as u64;
@@ -1769,29 +1879,32 @@ fn dsor_delivery_receiver_closes(ctx: &mut Ctx) -> TestResult {
         id,
     };
     let mut problems = Vec::new();
+    let _stamps = stamps_on(idx)?;
     // Kernel -> kernel, close after `after` body frames.
-    let (mut ok, mut refused) = (0, 0);
+    let (mut ok, mut early, mut refused) = (0, 0, 0);
     for r in 0..rounds {
         let id = 0x6000 + r as u32;
-        let raw = canraw::open(idx)?;
+        let raw = stamped_raw(idx)?;
         let rx = sock()?;
         rx.bind(&seg(id)).or_fail("bind")?;
         let h = send_in_thread(len20, r, seg(id));
         wait_bodies(&raw, 0, after)?;
-        drop(rx);
+        let closed = close_receiver(rx);
         match h.join().map_err(|_| "sender panicked")?? {
-            Ok(_) => {
-                ok += 1;
-                problems.push(format!(
-                    "round {r}: send succeeded after the receiver closed"
-                ))
-            }
+            Ok(_) => match success_after_close(&raw, 0, &closed) {
+                Ok(()) => early += 1,
+                Err(e) => {
+                    ok += 1;
+                    problems.push(format!("round {r}: {e}"))
+                }
+            },
             Err(e) if errno_of(&e) == libc::ECONNREFUSED => refused += 1,
             Err(e) => problems.push(format!("round {r}: {e}")),
         }
     }
     ctx.note(format!(
-        "receiver closes after {after} frames of {len20} bytes, kernel -> kernel: {ok} of {rounds} sends succeeded, 0 delivered, {refused} ECONNREFUSED"
+        "receiver closes after {after} frames of {len20} bytes, kernel -> kernel: {} of {rounds} sends succeeded, {early} complete before the close, {refused} ECONNREFUSED",
+        ok + early
     ));
     // Kernel -> kernel, close 1 to 5 ms into a longer message.
     let rounds40 = crate::ctx::sized("RCAN_DSOR_CLOSE40_ROUNDS", 9, 3) as u64;
@@ -1799,24 +1912,21 @@ fn dsor_delivery_receiver_closes(ctx: &mut Ctx) -> TestResult {
     let (mut ok, mut early, mut refused) = (0, 0, 0);
     for r in 0..rounds40 {
         let id = 0x6100 + r as u32;
+        let raw = stamped_raw(idx)?;
         let rx = sock()?;
         rx.bind(&seg(id)).or_fail("bind")?;
         let h = send_in_thread(len40, r, seg(id));
         thread::sleep(Duration::from_millis(1 + r % 5));
-        // Delivered before the close? Then success is right.
-        let mut b = [0u8; 1];
-        let queued = rx
-            .recv_from_flags(&mut b, libc::MSG_PEEK | libc::MSG_DONTWAIT)
-            .is_ok();
-        drop(rx);
+        // Complete before the close? Then success is right.
+        let closed = close_receiver(rx);
         match h.join().map_err(|_| "sender panicked")?? {
-            Ok(_) if queued => early += 1,
-            Ok(_) => {
-                ok += 1;
-                problems.push(format!(
-                    "40000-byte round {r}: send succeeded, nothing was queued when the receiver closed"
-                ))
-            }
+            Ok(_) => match success_after_close(&raw, 0, &closed) {
+                Ok(()) => early += 1,
+                Err(e) => {
+                    ok += 1;
+                    problems.push(format!("{len40}-byte round {r}: {e}"))
+                }
+            },
             Err(e) if errno_of(&e) == libc::ECONNREFUSED => refused += 1,
             Err(e) => problems.push(format!("40000-byte round {r}: {e}")),
         }
@@ -1828,11 +1938,11 @@ fn dsor_delivery_receiver_closes(ctx: &mut Ctx) -> TestResult {
     // dsor-peer -> kernel.
     let len_s = len20.to_string();
     let prounds = crate::ctx::sized("RCAN_DSOR_CLOSE_PEER_ROUNDS", 3, 1) as u64;
-    let (mut ok, mut refused) = (0, 0);
+    let (mut ok, mut early, mut refused) = (0, 0, 0);
     for r in 0..prounds {
         let id = 0x6200 + r as u32;
         let ids = format!("{id:#x}");
-        let raw = canraw::open(idx)?;
+        let raw = stamped_raw(idx)?;
         let rx = sock()?;
         rx.bind(&DsorAddr::Segm {
             prio: 0,
@@ -1846,19 +1956,23 @@ fn dsor_delivery_receiver_closes(ctx: &mut Ctx) -> TestResult {
         ]);
         let p = peer(&args)?;
         wait_bodies(&raw, u32::from(PEER), after)?;
-        drop(rx);
+        let closed = close_receiver(rx);
         let lines = peer_lines(p, "send")?;
         match peer_tx(&lines).as_slice() {
             [(_, Some(r))] if r == "refused" => refused += 1,
-            [(_, None)] => {
-                ok += 1;
-                problems.push(format!("dsor-peer round {r}: success after the close"))
-            }
+            [(_, None)] => match success_after_close(&raw, u32::from(PEER), &closed) {
+                Ok(()) => early += 1,
+                Err(e) => {
+                    ok += 1;
+                    problems.push(format!("dsor-peer round {r}: {e}"))
+                }
+            },
             _ => problems.push(format!("dsor-peer round {r}: {lines:?}")),
         }
     }
     ctx.note(format!(
-        "receiver closes after {after} frames of {len20} bytes, dsor-peer -> kernel: {ok} of {prounds} sends succeeded, {refused} refused"
+        "receiver closes after {after} frames of {len20} bytes, dsor-peer -> kernel: {} of {prounds} sends succeeded, {early} complete before the close, {refused} refused",
+        ok + early
     ));
     // Kernel -> dsor-peer: its application goes away after `after` body
     // frames, or 3 ms after the header.
