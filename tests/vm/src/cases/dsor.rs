@@ -1932,7 +1932,7 @@ fn dsor_delivery_receiver_closes(ctx: &mut Ctx) -> TestResult {
         }
     }
     ctx.note(format!(
-        "receiver closes 1-5 ms into {len40} bytes, kernel -> kernel: {} of {rounds40} sends succeeded, {early} delivered before the close, {refused} ECONNREFUSED",
+        "receiver closes 1-5 ms into {len40} bytes, kernel -> kernel: {} of {rounds40} sends succeeded, {early} complete before the close, {refused} ECONNREFUSED",
         ok + early
     ));
     // dsor-peer -> kernel.
