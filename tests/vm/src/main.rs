@@ -155,6 +155,21 @@ struct Progress {
     failed: usize,
 }
 
+/// The run's progress, for [`heartbeat`].
+static PROGRESS: std::sync::OnceLock<Arc<Mutex<Progress>>> = std::sync::OnceLock::new();
+
+/// Restarts the watchdog's clock for the running test: a test made of
+/// many bounded steps (one module's load/unload cycles, say) calls it
+/// after each, so the watchdog bounds each step rather than their sum.
+pub fn heartbeat() {
+    if let Some(p) = PROGRESS.get() {
+        let mut p = p.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((name, _)) = p.current {
+            p.current = Some((name, Instant::now()));
+        }
+    }
+}
+
 /// Ends the run if a test exceeds `limit` (e.g. a kernel hang in rmmod or
 /// recv), reporting that test as failed. Modules stay loaded then, but the
 /// VM is about to be discarded anyway.
@@ -269,6 +284,7 @@ fn main() -> ExitCode {
 
     let progress = Arc::new(Mutex::new(Progress::default()));
     spawn_watchdog(Arc::clone(&progress), opts.timeout);
+    let _ = PROGRESS.set(Arc::clone(&progress));
     let lock = || progress.lock().unwrap_or_else(|e| e.into_inner());
 
     match ctx.stack() {

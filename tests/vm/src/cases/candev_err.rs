@@ -54,7 +54,7 @@ const PARAMS: &str = "/sys/module/rcan_sja1000_sim/parameters";
 
 /// Sets the simulated bus's fault (`none`, `noack`, `biterr`, `arblost`,
 /// `overrun`).
-fn fault(name: &str) -> TestResult {
+pub(super) fn fault(name: &str) -> TestResult {
     let p = format!("{PARAMS}/fault");
     std::fs::write(&p, name).or_fail(format_args!("echo {name} > {p}"))
 }
@@ -62,7 +62,11 @@ fn fault(name: &str) -> TestResult {
 /// Loads rcan_pf, rcan_raw and rcan_sja1000_sim (two cards), gives can0
 /// `bitrate 500000` and `can0_args`, can1 `bitrate 500000` and
 /// `can1_args`, brings both up, and returns their ifindexes.
-fn sim2(ctx: &mut Ctx, can0_args: &[&str], can1_args: &[&str]) -> Result<(u32, u32), String> {
+pub(super) fn sim2(
+    ctx: &mut Ctx,
+    can0_args: &[&str],
+    can1_args: &[&str],
+) -> Result<(u32, u32), String> {
     ctx.insmod(Module::Pf, &[])?;
     ctx.insmod(Module::Raw, &[])?;
     ctx.insmod(Module::Sja1000Sim, &["cards=2"])?;
@@ -82,7 +86,7 @@ fn sim2(ctx: &mut Ctx, can0_args: &[&str], can1_args: &[&str]) -> Result<(u32, u
 
 /// A CAN_RAW socket on `ifindex` that receives every error frame and no
 /// data frame.
-fn err_socket(ifindex: u32) -> Result<CanSocket, String> {
+pub(super) fn err_socket(ifindex: u32) -> Result<CanSocket, String> {
     let s = canraw::open(ifindex)?;
     s.set_filter_drop_all().or_fail("CAN_RAW_FILTER: none")?;
     s.set_error_filter(CAN_ERR_MASK)

@@ -15,7 +15,9 @@ use rcan_uapi::raw;
 use socketcan::{Socket, SocketOptions};
 
 use super::{portable_table, raw1, test_table};
-use crate::canraw::{self, addr_ifindex, sff_with_tail, CAN_MTU, MIN_NAMELEN, SOL_CAN_RAW};
+use crate::canraw::{
+    self, addr_ifindex, sff_with_tail, CAN_ERR_MASK, CAN_MTU, MIN_NAMELEN, SOL_CAN_RAW,
+};
 use crate::check::{ensure, OrFail, TestResult};
 use crate::ctx::{Ctx, Module};
 use crate::sys::{self, FILL};
@@ -29,6 +31,7 @@ pub const OURS: &[Test] = test_table![
     leak_time_frame,
     leak_rtime_frame,
     leak_dsor_bodies,
+    leak_error_frames,
 ];
 
 /// `SO_RCVMARK`: an `SO_MARK` control message (4 bytes) with every frame.
@@ -426,6 +429,92 @@ fn leak_sja1000_frames(ctx: &mut Ctx) -> TestResult {
 fn leak_i82527_frames(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = super::i82527::sim2(ctx)?;
     driver_frames(ctx, i0, i1, "rcan_i82527_sim")
+}
+
+/// The bytes of an error frame's data that its class (`can_id`) defines
+/// (`<linux/can/error.h>`): data[0] lost arbitration, data[1] controller,
+/// data[2..4] protocol, data[4] transceiver, data[6..8] the error
+/// counters (CAN_ERR_CNT); data[5], controller-specific, is never set by
+/// the SJA1000 drivers (mainline's or ours).
+fn err_defined(can_id: u32) -> [bool; 8] {
+    let mut d = [false; 8];
+    for (class, bytes) in [
+        (0x02u32, 0..1),
+        (0x04, 1..2),
+        (0x08, 2..4),
+        (0x10, 4..5),
+        (0x200, 6..8),
+    ] {
+        if can_id & class != 0 {
+            d[bytes].fill(true);
+        }
+    }
+    d
+}
+
+/// Error frames, which the driver builds from scratch in its interrupt
+/// path (mainline's `alloc_can_err_skb` zeroes them), read into poisoned
+/// buffers ([`kernel_built`]): every data byte the frame's class does not
+/// define must be zero, len 8 (CAN_ERR_DLC). The simulated SJA1000 card
+/// with berr-reporting: bit errors on transmission up to bus-off and the
+/// restart, then lost arbitration, then a data overrun.
+fn leak_error_frames(ctx: &mut Ctx) -> TestResult {
+    use super::candev_err::{err_socket, fault, sim2};
+    let (i0, i1) = sim2(ctx, &["berr-reporting", "on", "restart-ms", "100"], &[])?;
+    let e0 = err_socket(i0)?;
+    let mut seen = 0u32;
+    let mut check = |e0: &socketcan::CanSocket, what: &str| -> Result<u32, String> {
+        let w = kernel_built(e0, what)?;
+        let id = u32::from_ne_bytes(w[..4].try_into().unwrap());
+        let def = err_defined(id);
+        ensure!(
+            id & libc::CAN_ERR_FLAG != 0 && w[4] == 8,
+            "{what}: {} is not an error frame of len 8",
+            canraw::show_wire(&w)
+        );
+        if let Some(i) = (0..8).find(|&i| !def[i] && w[8 + i] != 0) {
+            return Err(format!(
+                "{what}: {}: data[{i}] is {:#04x}, not defined for class {:#x}",
+                canraw::show_wire(&w),
+                w[8 + i],
+                id & CAN_ERR_MASK
+            ));
+        }
+        seen |= id & CAN_ERR_MASK;
+        Ok(id)
+    };
+    fault("biterr")?;
+    raw::write(&canraw::open(i0)?, &sff_with_tail(0x55, 1, 0)).or_fail("write")?;
+    // Bus errors, warning, passive, bus-off: then the restart.
+    let mut n = 0;
+    loop {
+        n += 1;
+        ensure!(n < 200, "no bus-off in 200 error frames");
+        if check(&e0, &format!("bit-error frame {n}"))? & 0x40 != 0 {
+            break;
+        }
+    }
+    fault("none")?;
+    while check(&e0, "after bus-off")? & 0x100 == 0 {
+        n += 1;
+        ensure!(n < 250, "no CAN_ERR_RESTARTED after bus-off");
+    }
+    fault("arblost")?;
+    raw::write(&canraw::open(i0)?, &sff_with_tail(0x300, 1, 0)).or_fail("write")?;
+    while check(&e0, "lost arbitration")? & 0x02 == 0 {}
+    // The card's acceptance filter lets data frames in only while a
+    // socket wants them.
+    let _rx0 = canraw::open(i0)?;
+    fault("overrun")?;
+    raw::write(&canraw::open(i1)?, &sff_with_tail(0x42, 0, 0)).or_fail("write")?;
+    while check(&e0, "overrun")? & 0x04 == 0 {}
+    fault("none")?;
+    ensure!(
+        seen & 0x3ce == 0x3ce,
+        "error classes seen {seen:#x}: want lost arbitration, controller, protocol, bus-off, bus error, restarted and counters"
+    );
+    ctx.note(format!("{n} error frames checked, classes {seen:#x}"));
+    Ok(())
 }
 
 /// The time frame rcan_time builds every second, read by a CAN_RAW socket
