@@ -13,6 +13,7 @@ mod fd;
 mod filter;
 mod gateway;
 mod i82527;
+mod i82527_dev;
 mod install;
 mod leak;
 mod lifecycle;
@@ -155,6 +156,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         daemons::DSOR_TESTS,
         i82527::TESTS,
         candev_err::TESTS,
+        i82527_dev::TESTS,
         leak::OURS,
         rxcontext::TESTS,
         install::TESTS,
