@@ -260,6 +260,9 @@ fn i82527_sim_bus_off_restarts(ctx: &mut Ctx) -> TestResult {
     ip_ok(&["link", "set", "can0", "down"])?;
     set_can("can0", &["restart-ms", "0"])?;
     ip_ok(&["link", "set", "can0", "up"])?;
+    // The down reported ENETDOWN to the bound sockets: fresh ones.
+    let e = err_socket(i0)?;
+    let rx1 = canraw::open(i1)?;
     fault("biterr")?;
     send_one(i0, &canraw::std(0x7, &[]))?;
     let (_, before) = until(&e, BUSOFF, 10)?;
