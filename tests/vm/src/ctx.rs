@@ -267,8 +267,8 @@ impl Ctx {
         self.root.join(m.rel_path())
     }
 
-    /// `insmod` module `m` with `params`. An SJA1000 front-end needs
-    /// `rcan_dev` (the "can" link kind its devices use): it is loaded
+    /// `insmod` module `m` with `params`. An SJA1000 or 82527 front-end
+    /// needs `rcan_dev` (the "can" link kind its devices use): it is loaded
     /// first if it is not, as modprobe would.
     pub fn insmod(&mut self, m: Module, params: &[&str]) -> Result<(), String> {
         let sja1000 = [
@@ -278,6 +278,8 @@ impl Ctx {
             Module::Pcan,
             Module::Tscan1,
             Module::Sja1000Sim,
+            Module::I82527Sim,
+            Module::I82527Isa,
         ];
         if sja1000.contains(&m) && !self.is_loaded(Module::Dev) {
             self.insmod(Module::Dev, &[])?;

@@ -29,21 +29,48 @@
 //! varying CPUs, where `netif_rx`'s per-CPU backlogs could reorder them).
 //! No receiver ever runs under the chip lock or with interrupts off.
 //!
-//! Bus-off recovery: the chip sets INIT by itself; the interrupt handler
-//! (core) clears it at once, the chip then waits for 128 occurrences of
-//! 11 recessive bits and rejoins the bus; sockets see `CAN_ERR_BUSOFF`
-//! and then `CAN_ERR_RESTARTED`.
+//! The CAN device layer (`ip link set canX type can ...`, `rcan_dev`):
+//! the device's bit timing and control modes live in its [`CanDev`] (one
+//! source of truth; `i82527config`'s GET ioctl reports BT0/BT1 computed
+//! from it). At probe the front-end's configured BT0/BT1 (module
+//! parameters; the simulated card's default 500 kbit/s) become the
+//! device's bit timing, if not both 0; `open` refuses a device without a
+//! bit timing (`EINVAL`, "bit-timing not yet defined", as mainline) and
+//! writes BT0/BT1 computed from it. The clock is the chip's system clock
+//! (the crystal, halved with the CPU interface register's DSC), the
+//! limits [`I82527_BITTIMING_CONST`]; control modes: triple sampling
+//! (BT1.SPL) and berr-reporting (the status change interrupt); the rest
+//! is refused with `EOPNOTSUPP`.
+//!
+//! Errors (the status register: LEC, WARN, BOFF): error warning, leaving
+//! it, receive overruns and, with `berr-reporting on`, each last error
+//! code become mainline-format error frames, queued like received frames
+//! (sockets with `CAN_RAW_ERR_FILTER`, `candump -e`) and counted in the
+//! CAN device statistics (`ip -s -d`). The 82527 has no readable error
+//! counters and no error-passive flag: `ip -d` shows ERROR-ACTIVE,
+//! ERROR-WARNING or BUS-OFF and `berr-counter tx 0 rx 0`.
+//!
+//! Bus-off (mainline `can_bus_off`): the chip sets INIT by itself and
+//! stays off the bus; the handler turns the carrier off, keeps the queue
+//! stopped and, with `restart-ms` set, arms the device's restart timer
+//! ([`CanDev::bus_off`]). The restart (the timer, or `ip link set canX
+//! type can restart`) sends `CAN_ERR_RESTARTED`, counts the restart and
+//! initialises and starts the chip again, which rejoins the bus after 128
+//! occurrences of 11 recessive bits.
 #![forbid(unsafe_code)]
 
 use crate::glue::bindings;
-use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
+use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
+use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::skb::Skb;
 use crate::rcan_api::{self, FilterListener};
+use crate::rcan_core::bittiming::{self, I82527_BITTIMING_CONST};
+use crate::rcan_core::candev::{self, CanState, Settings};
 use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::i82527::{
-    bitrate, error_frame, masks_for, AnswerReq, Chip, Config, Event, I82527Error, Masks, Regs,
-    ANSWER_LEN,
+    bitrate, error_frame, masks_for, sys_clock, AnswerReq, Chip, Config, Event, I82527Error, Masks,
+    Regs, State, ANSWER_LEN, CTRLMODE_SUPPORTED,
 };
 use core::marker::PhantomData;
 use kernel::prelude::*;
@@ -121,6 +148,31 @@ pub(crate) struct I82527Priv<R: Regs> {
     /// Interrupt line; 0: the front-end calls the handler itself (the
     /// simulated card, whose "interrupt" is a softirq on varying CPUs).
     irq: u32,
+    /// The system clock the bit timing counts, Hz (fixed at probe: the
+    /// crystal and the configured DSC bit).
+    clock_hz: u32,
+    /// The device layer's state: bit timing, control modes, statistics.
+    can: CanDev,
+    /// Serialises restarts (`ip ... restart` in process context, the
+    /// `restart-ms` timer in softirq) with bottom halves off, so the NAPI
+    /// poll a restart schedules for `CAN_ERR_RESTARTED` runs when they
+    /// come back on. Lock order: this, then the chip lock.
+    restart: BhLock<()>,
+}
+
+/// The device's settings at probe: the configured BT0/BT1 decoded (bit
+/// timing, triple sampling), none if both are 0 (as mainline: no bit
+/// timing until user space sets one).
+fn preset_settings(cfg: &Config, clock_hz: u32) -> Settings {
+    let mut s = Settings::default();
+    if cfg.bt0 != 0 || cfg.bt1 != 0 {
+        let (bt, triple) = bittiming::from_btr(cfg.bt0, cfg.bt1, clock_hz);
+        s.bittiming = bt;
+        if triple {
+            s.ctrlmode |= candev::ctrlmode::THREE_SAMPLES;
+        }
+    }
+    s
 }
 
 /// One registered channel: its network device and the filter listener
@@ -155,6 +207,7 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
     if chip.probe().is_err() {
         return Ok(None);
     }
+    let clock_hz = sys_clock(cfg.cpu_if, xtal_hz);
     let prv = I82527Priv {
         chip: new_irq_spinlock!(
             ChipState {
@@ -166,6 +219,9 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
             "I82527Priv::chip"
         )?,
         irq,
+        clock_hz,
+        can: CanDev::new(preset_settings(&cfg, clock_hz))?,
+        restart: new_bh_spinlock!((), "I82527Priv::restart")?,
     };
     let reg =
         crate::glue::netdev::Registration::<I82527<R>>::register(kernel::c_str!("can%d"), prv)?;
@@ -255,7 +311,21 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     fn private_ioctl(_dev: &Dev<Self>, p: &Self::Priv, cmd: u32, data: &UserBuf) -> Result {
         match cmd {
             SIOCRCANI82527GET => {
-                let s = p.chip.lock().chip.setup();
+                // BT0/BT1 from the device's bit timing (what `ip link`
+                // set), 0/0 while none is set.
+                let set = p.can.settings();
+                let (bt0, bt1) = if set.bittiming.bitrate != 0 {
+                    bittiming::to_btr(
+                        &set.bittiming,
+                        set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
+                    )
+                } else {
+                    (0, 0)
+                };
+                let mut s = p.chip.lock().chip.setup();
+                s.bt0 = bt0;
+                s.bt1 = bt1;
+                s.restarts = p.can.stats().restarts;
                 data.write(&s.to_bytes())
             }
             SIOCRCANI82527ANSWER => {
@@ -288,13 +358,29 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
         }
     }
 
+    fn link() -> Option<LinkSetup> {
+        Some(link_setup::<Self>())
+    }
+
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        let set = p.can.open_check(dev.name())?;
+        let (bt0, bt1) = bittiming::to_btr(
+            &set.bittiming,
+            set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
+        );
         let m = wanted_masks(dev);
+        p.can.arm_restart(dev)?;
         if p.irq != 0 {
-            dev.request_irq(p.irq)?;
+            if let Err(e) = dev.request_irq(p.irq) {
+                p.can.disarm_restart();
+                return Err(e);
+            }
         }
         {
             let mut st = p.chip.lock();
+            st.chip.cfg.bt0 = bt0;
+            st.chip.cfg.bt1 = bt1;
+            st.chip.berr_reporting = set.ctrlmode & candev::ctrlmode::BERR_REPORTING != 0;
             st.chip.init(&m);
             st.chip.start();
             st.running = true;
@@ -306,6 +392,8 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
 
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         dev.stop_queue();
+        // First, so that no restart starts the chip again.
+        p.can.disarm_restart();
         // The glue has disabled NAPI: no poll runs or starts until the
         // next open, so what is left in the queue is freed here.
         let (echo, rxq) = {
@@ -331,7 +419,9 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
         // One transmit object: no next frame until this one is done.
         dev.stop_queue();
         let mut st = p.chip.lock();
-        if !st.running {
+        if !st.running || st.chip.state() == State::BusOff {
+            // Down, or off the bus until the restart (which wakes the
+            // queue): nothing to send it with.
             drop(st);
             dev.stats_tx_dropped();
             drop(skb);
@@ -367,6 +457,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
             if !*running {
                 return false;
             }
+            let mut bus_off = false;
             let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| {
                 match ev {
                     Event::Rx(f) => rx_frame(dev, rxq, &f),
@@ -377,20 +468,37 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                         dev.wake_queue();
                     }
                     Event::TxAborted => {
-                        // Interrupts are off: the free is deferred.
+                        // The frame is lost with the bus-off (mainline's
+                        // can_flush_echo_skb counts it as a TX error).
+                        // Interrupts are off: the free is deferred. The
+                        // queue stays stopped until the restart.
                         if let Some(s) = echo.take() {
                             s.drop_any();
+                            dev.stats_err(Stat::TxErrors);
                         }
-                        dev.stats_err(Stat::TxAborted);
-                        dev.wake_queue();
                     }
                     Event::Overrun { .. } => dev.stats_err(Stat::RxOverErrors),
-                    Event::State(_) | Event::Restarted => {}
+                    Event::BusError { .. } => {
+                        p.can.count(CanStat::BusError);
+                        dev.stats_err(Stat::RxErrors);
+                    }
+                    Event::State(State::Warning) => p.can.count(CanStat::ErrorWarning),
+                    Event::State(State::BusOff) => {
+                        p.can.count(CanStat::BusOff);
+                        bus_off = true;
+                    }
+                    Event::State(State::Active) | Event::Restarted => {}
                 }
                 if let Some(ef) = error_frame(&ev) {
                     rx_frame(dev, rxq, &ef);
                 }
             });
+            if bus_off {
+                // Off the bus until restarted: carrier off, the restart
+                // timer armed (restart-ms), the queue stopped.
+                dev.stop_queue();
+                p.can.bus_off(dev);
+            }
             (handled, rxq.len != 0)
         };
         // Outside the chip lock (the poll takes it).
@@ -423,5 +531,79 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
 impl<R: Regs + Send + 'static> FilterListener for I82527<R> {
     fn filters_changed(dev: &Dev<Self>, p: &Self::Priv) {
         remask(dev, p);
+    }
+}
+
+/// The 82527 as the CAN device layer sees it: [`I82527_BITTIMING_CONST`]
+/// over the chip's system clock; control modes triple sampling and
+/// berr-reporting ([`CTRLMODE_SUPPORTED`]; the others are refused with
+/// `EOPNOTSUPP`); restart after bus-off.
+impl<R: Regs + Send + 'static> CanDevice for I82527<R> {
+    const BITTIMING_CONST: &'static bittiming::BittimingConst = &I82527_BITTIMING_CONST;
+    const CTRLMODE_SUPPORTED: u32 = CTRLMODE_SUPPORTED;
+    const CAN_RESTART: bool = true;
+
+    fn can_dev(p: &Self::Priv) -> &CanDev {
+        &p.can
+    }
+
+    fn clock_hz(p: &Self::Priv) -> u32 {
+        p.clock_hz
+    }
+
+    /// From the status register's WARN and BOFF: the chip tells no
+    /// error-passive state.
+    fn state(_dev: &Dev<Self>, p: &Self::Priv) -> CanState {
+        let st = p.chip.lock();
+        if !st.running {
+            return CanState::Stopped;
+        }
+        match st.chip.state() {
+            State::Active => CanState::ErrorActive,
+            State::Warning => CanState::ErrorWarning,
+            State::BusOff => CanState::BusOff,
+        }
+    }
+
+    /// The 82527 has no readable error counters.
+    fn berr_counter(_dev: &Dev<Self>, _p: &Self::Priv) -> (u16, u16) {
+        (0, 0)
+    }
+
+    /// Restarts the chip after bus-off (mainline `can_restart` with
+    /// `cc770`'s `CAN_MODE_START`): `CAN_ERR_RESTARTED` is queued, the
+    /// carrier comes back, the restart is counted, the chip is
+    /// initialised with the current masks and started, and the queue
+    /// wakes. Process context (`ip link ... restart`) or softirq (the
+    /// `restart-ms` timer); takes the chip lock.
+    fn restart(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        let m = wanted_masks(dev);
+        let _bh = p.restart.lock();
+        let echo = {
+            let mut st = p.chip.lock();
+            if !st.running {
+                return Err(EINVAL);
+            }
+            let ChipState {
+                chip, echo, rxq, ..
+            } = &mut *st;
+            if let Some(ef) = error_frame(&Event::Restarted) {
+                rx_frame(dev, rxq, &ef);
+            }
+            chip.restart(&m);
+            echo.take()
+        };
+        if let Some(s) = echo {
+            // Not expected (dropped at bus-off); freed outside the lock.
+            dev.stats_err(Stat::TxErrors);
+            drop(s);
+        }
+        // Outside the chip lock (the poll takes it); the poll runs when
+        // `_bh` lets bottom halves run again.
+        dev.napi_schedule();
+        dev.set_carrier(true);
+        p.can.count(CanStat::Restarts);
+        dev.wake_queue();
+        Ok(())
     }
 }

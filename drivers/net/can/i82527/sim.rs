@@ -26,6 +26,15 @@
 //! cannot unregister a card meanwhile); lock order CHANNELS -> chip lock
 //! -> BUS.
 //!
+//! Fault injection (module parameter `fault`, writable at run time under
+//! `/sys/module/rcan_i82527_sim/parameters/`, read at each attempt, as
+//! `rcan_sja1000_sim`'s): `none`; `noack` (no node acknowledges: an ACK
+//! error per attempt, the transmit error counter climbs to error passive,
+//! which the 82527 shows as warning, and stays there); `biterr` (a bit 0
+//! error per attempt: warning after 12 attempts, bus-off after 32). A
+//! failed attempt re-arms the timer after [`RETRY_NS`] (the chip retries
+//! by itself).
+//!
 //! Module parameter `cards` (default 2, at most [`MAX_CARDS`]).
 //!
 //! Teardown: `DYING` stops the callback from touching anything, the
@@ -43,11 +52,11 @@ use crate::{glue, i82527, rcan_core};
 use core::sync::atomic::{AtomicBool, Ordering};
 use glue::hrtimer::{ClockId, HrTimer, HrTimerCallback, HrTimerMode};
 use glue::lock::StaticIrqSpinLock;
-use glue::params::Param;
+use glue::params::{Param, ParamStr};
 use i82527::{add_channel, Channel};
 use kernel::c_str;
 use rcan_core::i82527::{bits, reg, Config, Regs};
-use rcan_core::i82527_model::I82527Model;
+use rcan_core::i82527_model::{Fault, I82527Model, TxAttempt};
 
 /// Most simulated cards.
 const MAX_CARDS: usize = 8;
@@ -65,8 +74,25 @@ const REARM_NS: i64 = 20_000;
 /// Rounds of a run without moving frames (interrupt handling only)
 /// before re-arming.
 const MAX_ROUNDS: usize = 64;
+/// Delay before a failed attempt is retried, ns: bounds the rate of
+/// error interrupts on a faulty bus (2 ms: 500 attempts/s per card).
+const RETRY_NS: i64 = 2_000_000;
 /// Module parameter `cards` (number 0 in sim_c.c).
 const CARDS: Param<u32> = Param::new(0);
+/// `fault` (string 1).
+const FAULT: ParamStr = ParamStr::new(1);
+
+/// The bus fault the parameter names now. Any context (a fixed buffer
+/// in sim_c.c, no lock).
+fn fault() -> Fault {
+    let mut buf = [0u8; 16];
+    let n = FAULT.read(&mut buf).min(buf.len() - 1);
+    match buf[..n].trim_ascii() {
+        b"noack" => Fault::NoAck,
+        b"biterr" => Fault::BitErr,
+        _ => Fault::None,
+    }
+}
 
 /// The simulated bus: every card's chip.
 struct Bus {
@@ -135,29 +161,34 @@ impl HrTimerCallback for SimBus {
         if DYING.load(Ordering::SeqCst) {
             return;
         }
+        let fault = fault();
         let mut frames = 0;
         for _ in 0..MAX_ROUNDS {
             if frames == FRAMES_PER_RUN {
                 break;
             }
             let mut lines = [false; MAX_CARDS];
-            let (n, moved) = {
+            let (n, moved, failed) = {
                 let mut g = BUS.lock();
                 let Some(b) = g.as_mut() else {
                     return;
                 };
                 let n = b.n;
-                let mut moved = false;
+                let (mut moved, mut failed) = (false, false);
                 for k in 0..n {
                     let i = (b.next + k) % n;
-                    if let Some(f) = b.models[i].transmit() {
-                        for j in (0..n).filter(|&j| j != i) {
-                            b.models[j].receive(&f);
+                    match b.models[i].attempt(fault) {
+                        TxAttempt::Sent(f) => {
+                            for j in (0..n).filter(|&j| j != i) {
+                                b.models[j].receive(&f);
+                            }
+                            moved = true;
                         }
-                        b.next = (i + 1) % n;
-                        moved = true;
-                        break;
+                        TxAttempt::Failed => failed = true,
+                        TxAttempt::Idle => continue,
                     }
+                    b.next = (i + 1) % n;
+                    break;
                 }
                 for (i, l) in lines.iter_mut().enumerate().take(n) {
                     // A bus-off chip whose driver cleared INIT sees the
@@ -165,7 +196,7 @@ impl HrTimerCallback for SimBus {
                     b.models[i].bus_idle();
                     *l = b.models[i].irq_line();
                 }
-                (n, moved)
+                (n, moved, failed)
             };
             // The bus lock is released: the handlers take their chip lock
             // and then the bus lock for each register access.
@@ -177,6 +208,11 @@ impl HrTimerCallback for SimBus {
                         handled |= c.irq();
                     }
                 }
+            }
+            if failed {
+                // The chip retries by itself, a little later.
+                timer.start(RETRY_NS);
+                return;
             }
             frames += usize::from(moved);
             if !moved && !handled {

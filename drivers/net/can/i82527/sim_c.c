@@ -6,6 +6,7 @@
  */
 #include <linux/kernel.h>
 #include <linux/moduleparam.h>
+#include <linux/string.h>
 
 #include "../../../../rust/helpers/rcan_helpers.c"
 #include "../../../../rust/helpers/rcan_params.h"
@@ -14,8 +15,37 @@ static unsigned int cards = 2;
 module_param(cards, uint, 0444);
 MODULE_PARM_DESC(cards, "Number of simulated 82527 cards on the bus (1..8, default 2)");
 
-/* Parameter numbers shared with sim.rs: 0 cards. */
+/*
+ * Fault injection, writable at run time through
+ * /sys/module/rcan_i82527_sim/parameters/ (see i82527.rst). A fixed
+ * buffer, as rcan_sja1000_sim's: the bus reads it in softirq context
+ * without the parameter lock; a torn name reads as unknown (no fault).
+ */
+static char fault[16] = "none";
+module_param_string(fault, fault, sizeof(fault), 0644);
+MODULE_PARM_DESC(fault, "Bus fault: none, noack, biterr (default none)");
+
+/* Parameter numbers shared with sim.rs: 0 cards, string 1 fault. */
 u64 rcan_module_param(unsigned int which, unsigned int idx)
 {
 	return which == 0 ? READ_ONCE(cards) : 0;
+}
+
+/*
+ * String parameter 1: fault. Any context (a fixed buffer, no lock).
+ * Copies at most len - 1 bytes, NUL-padded; returns the full length.
+ */
+size_t rcan_module_param_str(unsigned int which, char *buf, size_t len)
+{
+	char copy[sizeof(fault)];
+
+	if (len)
+		memset(buf, 0, len);
+	if (which != 1)
+		return 0;
+	memcpy(copy, fault, sizeof(copy));
+	copy[sizeof(copy) - 1] = 0;
+	if (len)
+		strscpy(buf, copy, len);
+	return strlen(copy);
 }

@@ -300,10 +300,25 @@ pub enum Event {
     },
     /// The error state changed.
     State(State),
+    /// A bus error (status change interrupt, only with
+    /// [`Chip::berr_reporting`]): the status register's last error code
+    /// (1..6; datasheet: stuff, form, ACK, bit 1, bit 0, CRC).
+    BusError {
+        /// LEC, status register bits 2..0.
+        lec: u8,
+    },
     /// The chip is back on the bus after bus-off (the recovery the driver
     /// started when it saw BOFF completed).
     Restarted,
 }
+
+/// The control modes the 82527 driver implements (`ip link set canX
+/// type can ...`): triple sampling (BT1's SPL bit, as mainline's
+/// `cc770`) and berr-reporting (the status change interrupt, whose last
+/// error code the driver turns into bus-error frames). The chip has no
+/// loopback, listen-only, single-shot or presume-ack mode.
+pub const CTRLMODE_SUPPORTED: u32 =
+    super::candev::ctrlmode::THREE_SAMPLES | super::candev::ctrlmode::BERR_REPORTING;
 
 /// Static configuration of one chip (module parameters and board).
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -546,8 +561,13 @@ pub struct Chip<R: Regs> {
     pub masks: Masks,
     state: State,
     tx_busy: bool,
-    /// Automatic restarts after bus-off.
+    /// Restarts after bus-off ([`Chip::restart`]).
     pub restarts: u32,
+    /// Bus errors reported (`berr-reporting on`): the status change
+    /// interrupt (SIE) is enabled at [`Chip::start`] and every last error
+    /// code becomes an [`Event::BusError`]. Off by default: with SIE the
+    /// chip interrupts for every frame on the bus (TXOK/RXOK).
+    pub berr_reporting: bool,
     answers: [Option<CanFrame>; ANSWERS],
 }
 
@@ -566,6 +586,7 @@ impl<R: Regs> Chip<R> {
             state: State::Active,
             tx_busy: false,
             restarts: 0,
+            berr_reporting: false,
             answers: [None; ANSWERS],
         }
     }
@@ -691,14 +712,27 @@ impl<R: Regs> Chip<R> {
     }
 
     /// Goes on the bus (thesis: `open`): clears pending status, enables
-    /// the interrupt line and error interrupts (not SIE: one interrupt per
-    /// frame on the bus would wake the host for frames nobody wants) and
-    /// clears INIT.
+    /// the interrupt line and error interrupts (SIE only with
+    /// [`Chip::berr_reporting`]: one interrupt per frame on the bus would
+    /// otherwise wake the host for frames nobody wants) and clears INIT.
     pub fn start(&mut self) {
         self.regs.write(reg::STATUS, 0);
         let _ = self.regs.read(reg::STATUS);
         self.state = State::Active;
-        self.regs.write(reg::CONTROL, ctrl::IE | ctrl::EIE);
+        let sie = if self.berr_reporting { ctrl::SIE } else { 0 };
+        self.regs.write(reg::CONTROL, ctrl::IE | ctrl::EIE | sie);
+    }
+
+    /// Restarts a chip after bus-off (mainline `cc770`'s
+    /// `CAN_MODE_START`): full initialisation with `masks`, then
+    /// [`Chip::start`]. Clearing INIT starts the datasheet's recovery: the
+    /// chip waits for 128 occurrences of 11 recessive bits before it
+    /// sends or receives again; the error state is active from here on
+    /// (BOFF clearing later raises no second event).
+    pub fn restart(&mut self, masks: &Masks) {
+        self.init(masks);
+        self.start();
+        self.restarts += 1;
     }
 
     /// Leaves the bus (thesis: `stop`): INIT, interrupts off, the
@@ -917,16 +951,24 @@ impl<R: Regs> Chip<R> {
         }
     }
 
-    /// The status interrupt: reading the status register clears it. BOFF
-    /// starts the documented recovery: the chip set INIT by itself; the
-    /// driver clears INIT again, after which the chip waits for 128
-    /// occurrences of 11 recessive bits and rejoins the bus (BOFF clears,
-    /// another status interrupt, [`Event::Restarted`]).
+    /// The status interrupt: reading the status register clears it. With
+    /// [`Chip::berr_reporting`] a last error code becomes an
+    /// [`Event::BusError`] (first: the error that changed the state comes
+    /// before the state change). BOFF: the chip set INIT by itself and
+    /// stays off the bus (mainline `can_bus_off`) until the driver
+    /// restarts it ([`Chip::restart`], after `restart-ms` or `ip link set
+    /// canX type can restart`). A chip whose INIT someone else cleared
+    /// rejoins by itself after the recovery sequence: BOFF clears,
+    /// [`Event::Restarted`].
     fn status_change(&mut self, ev: &mut impl FnMut(Event)) {
         let st = self.regs.read(reg::STATUS);
-        // TXOK/RXOK/LEC are not used (SIE is off); clear them.
+        // TXOK/RXOK/LEC are consumed here; clear them (LEC 0: no error).
         self.regs
             .write(reg::STATUS, st & (status::WARN | status::BOFF));
+        let lec = st & status::LEC;
+        if self.berr_reporting && lec != 0 && lec != 7 {
+            ev(Event::BusError { lec });
+        }
         let state = if st & status::BOFF != 0 {
             State::BusOff
         } else if st & status::WARN != 0 {
@@ -941,13 +983,13 @@ impl<R: Regs> Chip<R> {
         self.state = state;
         ev(Event::State(state));
         if state == State::BusOff {
-            // The transmit object's frame is lost with the bus.
+            // The transmit object's frame is lost with the bus; the chip
+            // stays in INIT until restarted.
             self.invalidate(TX_OBJ);
             if self.tx_busy {
                 self.tx_busy = false;
                 ev(Event::TxAborted);
             }
-            self.regs.write(reg::CONTROL, ctrl::IE | ctrl::EIE);
         } else if was == State::BusOff {
             self.restarts += 1;
             ev(Event::Restarted);
@@ -997,6 +1039,12 @@ pub fn error_frame(ev: &Event) -> Option<CanFrame> {
             err::CRTL
         }
         Event::Restarted => err::RESTARTED,
+        Event::BusError { lec } => {
+            // i82527_lec adds PROT (with data[2]/[3]) or ACK to can_id.
+            f.can_id = err::BUSERROR;
+            super::candev::i82527_lec(&mut f, lec);
+            f.can_id
+        }
         Event::Rx(_) | Event::TxDone | Event::TxAborted => return None,
     };
     f.can_id = CAN_ERR_FLAG | class;
@@ -1022,7 +1070,7 @@ pub struct Setup {
     pub state: u8,
     /// 1 when standard answer objects answer only their own identifier.
     pub std_answers_exact: u8,
-    /// Automatic restarts after bus-off.
+    /// Restarts after bus-off.
     pub restarts: u32,
 }
 

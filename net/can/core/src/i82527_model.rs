@@ -21,9 +21,16 @@
 //! sets MsgLst), the interrupt register's priority order (status change,
 //! object 15, objects 1..14), and bus-off with the recovery sequence.
 //!
+//! Fault injection ([`Fault`], [`I82527Model::attempt`]): a transmission
+//! attempt on a faulty bus fails with the last error code the chip would
+//! set (ACK error for a missing acknowledgement, bit 0 error for a
+//! stuck-recessive bit), the transmit error counter moving as the CAN
+//! rules say (+8 per error; an error-passive transmitter's ACK errors do
+//! not count), and with it WARN (96) and BOFF (256, INIT set).
+//!
 //! What it does not model: bit timing on a wire (frames move instantly,
 //! the caller is the bus), error counters other than through
-//! [`I82527Model::set_errors`], the ports, serial/parallel interface
+//! [`I82527Model::set_errors`] and [`I82527Model::attempt`], the ports, serial/parallel interface
 //! modes, the high-speed read registers, sleep and wake up.
 
 use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK, MAX_DLC};
@@ -36,6 +43,33 @@ struct Buf {
     arb: [u8; 4],
     cfg: u8,
     data: [u8; 8],
+}
+
+/// A bus fault for [`I82527Model::attempt`].
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub enum Fault {
+    /// Every attempt succeeds.
+    #[default]
+    None,
+    /// No node acknowledges: LEC 3 (ACK error), the transmit error
+    /// counter climbs by 8 per attempt up to error passive (128) and
+    /// stays there (CAN 2.0B 7.1, exception 1).
+    NoAck,
+    /// Every attempt ends in a bit 0 error (LEC 5: a dominant bit sent,
+    /// recessive read): +8 per attempt, warning after 12, bus-off after
+    /// 32.
+    BitErr,
+}
+
+/// What one transmission attempt did.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum TxAttempt {
+    /// Nothing to send (or off the bus).
+    Idle,
+    /// The frame went out (the caller offers it to the other nodes).
+    Sent(CanFrame),
+    /// The attempt failed with a bus error; the chip retries by itself.
+    Failed,
 }
 
 /// One 82527.
@@ -146,6 +180,50 @@ impl I82527Model {
 
     fn control(&self) -> u8 {
         self.r(reg::CONTROL)
+    }
+
+    /// A transmission attempt on a bus with `fault`: as
+    /// [`I82527Model::transmit`] without a fault; with one, a chip that
+    /// has a frame to send records the error (LEC, status interrupt with
+    /// SIE) and its counters move (WARN/BOFF, status interrupt with EIE).
+    pub fn attempt(&mut self, fault: Fault) -> TxAttempt {
+        if fault == Fault::None {
+            return match self.transmit() {
+                Some(f) => TxAttempt::Sent(f),
+                None => TxAttempt::Idle,
+            };
+        }
+        if !self.tx_pending() {
+            return TxAttempt::Idle;
+        }
+        let (lec, tec) = match fault {
+            Fault::NoAck if self.tec >= 128 => (3, self.tec),
+            Fault::NoAck => (3, self.tec + 8),
+            _ => (5, self.tec.saturating_add(8)),
+        };
+        let s = (self.r(reg::STATUS) & !status::LEC) | lec;
+        self.w(reg::STATUS, s);
+        self.status_event(0, ctrl::SIE);
+        self.set_errors(tec, self.rec);
+        TxAttempt::Failed
+    }
+
+    /// Whether the chip is on the bus with an object that wants to send.
+    pub fn tx_pending(&self) -> bool {
+        if self.absent || self.in_init() || self.bus_off() {
+            return false;
+        }
+        (1..=14u8).any(|n| {
+            let (c0, c1) = (self.c0(n), self.c1(n));
+            set(c0, bits::MSGVAL)
+                && set(c1, bits::TXRQST)
+                && !(self.is_tx(n) && set(c1, bits::CPUUPD))
+        })
+    }
+
+    /// The transmit error counter.
+    pub fn tec(&self) -> u16 {
+        self.tec
     }
 
     /// Off the bus: INIT set (by the host, or by the chip at bus-off).
@@ -329,7 +407,7 @@ impl I82527Model {
         if self.absent || f.can_id & CAN_ERR_FLAG != 0 {
             return false;
         }
-        if self.in_init() {
+        if self.in_init() || self.bus_off() {
             self.not_taken += 1;
             return false;
         }
@@ -382,7 +460,7 @@ impl I82527Model {
     /// transmission already acknowledged (the caller offers it to the
     /// other nodes). Transmit objects under CPU update wait.
     pub fn transmit(&mut self) -> Option<CanFrame> {
-        if self.absent || self.in_init() {
+        if self.absent || self.in_init() || self.bus_off() {
             return None;
         }
         for n in 1..=14u8 {

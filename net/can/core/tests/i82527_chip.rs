@@ -10,7 +10,7 @@
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
 use rcan_core::frame::CanFrame;
 use rcan_core::i82527::*;
-use rcan_core::i82527_model::I82527Model;
+use rcan_core::i82527_model::{Fault, I82527Model, TxAttempt};
 use rcan_core::rxtable::{CanFilterKind, Filter};
 use rcan_core::sja1000::Wanted;
 
@@ -414,7 +414,7 @@ fn events_come_in_priority_order() {
 }
 
 #[test]
-fn warning_and_bus_off_with_recovery() {
+fn warning_and_bus_off_with_restart() {
     let mut a = chip(&Masks::OPEN);
     let mut b = chip(&Masks::OPEN);
     a.regs.set_errors(100, 0);
@@ -430,26 +430,124 @@ fn warning_and_bus_off_with_recovery() {
         vec![Event::State(State::BusOff), Event::TxAborted]
     );
     assert_eq!(a.state(), State::BusOff);
-    // The driver cleared INIT: the chip waits for bus idle, sending
-    // nothing.
+    // The driver leaves the chip off the bus (mainline can_bus_off):
+    // INIT stays, the idle bus changes nothing.
+    assert!(a.regs.in_init());
+    a.regs.bus_idle();
+    assert!(a.regs.bus_off());
+    assert!(irq(&mut a).is_empty());
+    // The restart (restart-ms or `ip ... restart`): INIT cleared, the
+    // chip waits for bus idle, sending nothing, then rejoins with no
+    // second state event.
+    a.restart(&Masks::OPEN);
+    assert_eq!(a.state(), State::Active);
     assert!(!a.regs.in_init());
     assert!(a.regs.bus_off());
-    assert!(run_bus(&mut [&mut a, &mut b]).is_empty());
-    a.regs.bus_idle();
+    a.xmit(&frame(0x43, &[2])).unwrap();
     assert_eq!(
-        irq(&mut a),
-        vec![Event::State(State::Active), Event::Restarted]
+        a.regs.attempt(Fault::None),
+        TxAttempt::Idle,
+        "a recovering chip sends nothing"
     );
+    a.regs.bus_idle();
+    assert!(!a.regs.bus_off());
+    assert!(irq(&mut a).is_empty());
     assert_eq!(a.restarts, 1);
     assert_eq!(a.setup().restarts, 1);
     // Back on the bus.
-    a.xmit(&frame(0x43, &[2])).unwrap();
     assert_eq!(run_bus(&mut [&mut a, &mut b]), vec![frame(0x43, &[2])]);
     assert_eq!(irq(&mut a), vec![Event::TxDone]);
     let e = error_frame(&Event::State(State::BusOff)).unwrap();
     assert_eq!(
         e.can_id & rcan_core::candev::err::BUSOFF,
         rcan_core::candev::err::BUSOFF
+    );
+}
+
+/// Attempts on a faulty bus until the chip stops trying; the events of
+/// each interrupt.
+fn attempts(c: &mut C, fault: Fault, max: usize) -> Vec<Vec<Event>> {
+    let mut out = Vec::new();
+    for _ in 0..max {
+        if c.regs.attempt(fault) != TxAttempt::Failed {
+            break;
+        }
+        out.push(irq(c));
+    }
+    out
+}
+
+#[test]
+fn bit_errors_to_bus_off_with_berr_reporting() {
+    use rcan_core::candev::err;
+    let mut a = chip(&Masks::OPEN);
+    a.berr_reporting = true;
+    a.start();
+    a.xmit(&frame(0x10, &[1])).unwrap();
+    let evs = attempts(&mut a, Fault::BitErr, 100);
+    assert_eq!(evs.len(), 32, "bus-off after 32 bit errors");
+    let be = Event::BusError { lec: 5 };
+    for (i, e) in evs.iter().enumerate() {
+        let want = match i {
+            11 => vec![be, Event::State(State::Warning)],
+            31 => vec![be, Event::State(State::BusOff), Event::TxAborted],
+            _ => vec![be],
+        };
+        assert_eq!(e, &want, "attempt {i}");
+    }
+    assert!(a.regs.in_init());
+    let f = error_frame(&be).unwrap();
+    assert_eq!(
+        f.can_id,
+        rcan_core::arb::CAN_ERR_FLAG | err::PROT | err::BUSERROR
+    );
+    assert_eq!(f.data[2], err::PROT_BIT0);
+    // Restart on a good bus: the frame sent next goes out.
+    a.restart(&Masks::OPEN);
+    a.regs.bus_idle();
+    assert!(irq(&mut a).is_empty());
+    let mut b = chip(&Masks::OPEN);
+    a.xmit(&frame(0x11, &[2])).unwrap();
+    assert_eq!(run_bus(&mut [&mut a, &mut b]), vec![frame(0x11, &[2])]);
+}
+
+#[test]
+fn missing_ack_stops_at_error_passive() {
+    use rcan_core::candev::err;
+    let mut a = chip(&Masks::OPEN);
+    a.berr_reporting = true;
+    a.start();
+    a.xmit(&frame(0x20, &[])).unwrap();
+    let evs = attempts(&mut a, Fault::NoAck, 40);
+    assert_eq!(evs.len(), 40, "a missing ACK never ends in bus-off");
+    assert_eq!(a.regs.tec(), 128);
+    assert_eq!(a.state(), State::Warning);
+    assert!(evs[11].contains(&Event::State(State::Warning)));
+    assert!(evs.iter().all(|e| e[0] == Event::BusError { lec: 3 }));
+    let f = error_frame(&Event::BusError { lec: 3 }).unwrap();
+    assert_eq!(
+        f.can_id,
+        rcan_core::arb::CAN_ERR_FLAG | err::ACK | err::BUSERROR
+    );
+    // Acknowledged at last: it goes out.
+    assert!(matches!(a.regs.attempt(Fault::None), TxAttempt::Sent(_)));
+    assert_eq!(irq(&mut a), vec![Event::TxDone]);
+}
+
+#[test]
+fn without_berr_reporting_only_state_changes() {
+    let mut a = chip(&Masks::OPEN);
+    a.xmit(&frame(0x30, &[])).unwrap();
+    let evs = attempts(&mut a, Fault::BitErr, 100);
+    assert_eq!(evs.len(), 32);
+    let seen: Vec<Event> = evs.into_iter().flatten().collect();
+    assert_eq!(
+        seen,
+        vec![
+            Event::State(State::Warning),
+            Event::State(State::BusOff),
+            Event::TxAborted
+        ]
     );
 }
 

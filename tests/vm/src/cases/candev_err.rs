@@ -96,7 +96,11 @@ pub(super) fn err_socket(ifindex: u32) -> Result<CanSocket, String> {
 
 /// Reads error frames from `s` until one whose class has any of `class`
 /// bits arrives (at most `limit` frames); returns it and those before.
-fn until(s: &CanSocket, class: u32, limit: usize) -> Result<(CanFrame, Vec<CanFrame>), String> {
+pub(super) fn until(
+    s: &CanSocket,
+    class: u32,
+    limit: usize,
+) -> Result<(CanFrame, Vec<CanFrame>), String> {
     let mut before = Vec::new();
     for _ in 0..limit {
         let f = canraw::recv(s).map_err(|e| {
@@ -117,11 +121,11 @@ fn until(s: &CanSocket, class: u32, limit: usize) -> Result<(CanFrame, Vec<CanFr
     ))
 }
 
-fn shows(v: &[CanFrame]) -> String {
+pub(super) fn shows(v: &[CanFrame]) -> String {
     v.iter().map(canraw::show).collect::<Vec<_>>().join(", ")
 }
 
-fn check_same(got: &CanFrame, want: &CanFrame, what: &str) -> TestResult {
+pub(super) fn check_same(got: &CanFrame, want: &CanFrame, what: &str) -> TestResult {
     ensure!(
         canraw::same(got, want),
         "{what}: expected {}, got {}",
@@ -132,7 +136,7 @@ fn check_same(got: &CanFrame, want: &CanFrame, what: &str) -> TestResult {
 }
 
 /// `ip -s -d link show DEV` must contain every one of `want`.
-fn details_have(dev: &str, want: &[&str]) -> TestResult {
+pub(super) fn details_have(dev: &str, want: &[&str]) -> TestResult {
     let t = ip_ok(&["-s", "-d", "link", "show", dev])?;
     for w in want {
         ensure!(
@@ -145,7 +149,7 @@ fn details_have(dev: &str, want: &[&str]) -> TestResult {
 
 /// The CAN device statistics `ip -s -d link show DEV` prints: re-started,
 /// bus-errors, arbit-lost, error-warn, error-pass, bus-off.
-fn can_stats(dev: &str) -> Result<[u64; 6], String> {
+pub(super) fn can_stats(dev: &str) -> Result<[u64; 6], String> {
     let t = ip_ok(&["-s", "-d", "link", "show", dev])?;
     let line = t
         .lines()
@@ -163,7 +167,7 @@ fn can_stats(dev: &str) -> Result<[u64; 6], String> {
 
 /// Checks the CAN device statistics of `dev` (re-started, bus-errors,
 /// arbit-lost, error-warn, error-pass, bus-off).
-fn stats_are(dev: &str, want: [u64; 6]) -> TestResult {
+pub(super) fn stats_are(dev: &str, want: [u64; 6]) -> TestResult {
     let got = can_stats(dev)?;
     ensure!(
         got == want,
@@ -173,7 +177,7 @@ fn stats_are(dev: &str, want: [u64; 6]) -> TestResult {
 }
 
 /// Sends one data frame from a CAN_RAW socket on `ifindex`.
-fn send_one(ifindex: u32, f: &CanFrame) -> TestResult {
+pub(super) fn send_one(ifindex: u32, f: &CanFrame) -> TestResult {
     let s = canraw::open(ifindex)?;
     canraw::send(&s, f)
 }

@@ -13,6 +13,7 @@ mod fd;
 mod filter;
 mod gateway;
 mod i82527;
+mod i82527_dev;
 mod install;
 mod leak;
 mod lifecycle;
@@ -95,6 +96,12 @@ pub(crate) use portable_table;
 /// debug kernel): what they check does not depend on the kernel variant;
 /// the DSOR engine's paths run on the debug kernel in the dsor tests.
 ///
+/// Two of the simulated-82527 device-layer tests (98 and 27 s on the
+/// loaded debug kernel, mostly `ip` starts): the debug kernel keeps
+/// `i82527_sim_bus_off_restarts` (43 s), which reaches the changelink
+/// hooks, the error frames, the restart timer and the manual restart
+/// under lockdep and KASAN.
+///
 /// `canutils_fd_python_can` starts python3 (some 100 s under TCG on the
 /// debug kernel); the FD paths of CAN_RAW it reaches run there in the
 /// other `fd.rs` tests.
@@ -117,6 +124,8 @@ pub const RELEASE_ONLY: &[&str] = &[
     "leak_dsor_bodies",
     "leak_rtime_frame",
     "dsor_loss_accounting",
+    "i82527_sim_ip_bittiming",
+    "i82527_sim_bus_errors_candump",
 ];
 
 /// Every test, in running order.
@@ -155,6 +164,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         daemons::DSOR_TESTS,
         i82527::TESTS,
         candev_err::TESTS,
+        i82527_dev::TESTS,
         leak::OURS,
         rxcontext::TESTS,
         install::TESTS,
