@@ -19,6 +19,8 @@
 use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK};
 use super::bittiming::{Bittiming, BittimingConst};
 use super::candev::CanState;
+use core::num::NonZeroU32;
+
 use super::frame::{
     can_fd_dlc2len, can_fd_len2dlc, AnyFrame, CanFdFrame, CanFrame, CANFD_BRS, CANFD_ESI,
     CANFD_FDF, CANFD_MAX_DLEN,
@@ -645,22 +647,28 @@ pub const fn counters(rec_tec: u32) -> (u16, u16) {
 pub struct TxRing {
     head: u32,
     tail: u32,
-    n: u32,
+    /// Non-zero, so that `%` has no division-by-zero panic path (which
+    /// objtool would also flag in the kernel build).
+    n: NonZeroU32,
 }
 
 impl TxRing {
     /// A ring of `n` buffers (1..=8), all free.
     pub const fn new(n: usize) -> TxRing {
+        let n = match NonZeroU32::new(n as u32) {
+            Some(n) => n,
+            None => NonZeroU32::MIN,
+        };
         TxRing {
             head: 0,
             tail: 0,
-            n: n as u32,
+            n,
         }
     }
 
     /// Buffers in the ring.
     pub const fn buffers(&self) -> usize {
-        self.n as usize
+        self.n.get() as usize
     }
 
     /// Frames queued and not yet completed.
@@ -670,11 +678,11 @@ impl TxRing {
 
     /// Whether every buffer holds a frame (stop the queue).
     pub const fn is_full(&self) -> bool {
-        self.in_flight() >= self.n as usize
+        self.in_flight() >= self.n.get() as usize
     }
 
     /// The buffer the next frame goes to, if one is free.
-    pub const fn next(&self) -> Option<usize> {
+    pub fn next(&self) -> Option<usize> {
         if self.is_full() {
             None
         } else {
@@ -689,7 +697,7 @@ impl TxRing {
     }
 
     /// The oldest frame's buffer, if any.
-    pub const fn oldest(&self) -> Option<usize> {
+    pub fn oldest(&self) -> Option<usize> {
         if self.in_flight() == 0 {
             None
         } else {
@@ -704,13 +712,12 @@ impl TxRing {
     }
 
     /// The TX_PRIORITY word for the current oldest buffer.
-    pub const fn priority(&self) -> u32 {
+    pub fn priority(&self) -> u32 {
+        let n = self.n.get();
         let mut w = 0;
-        let mut k = 0;
-        while k < self.n {
-            let buf = (self.tail + k) % self.n;
-            w |= (self.n - k) << (4 * buf);
-            k += 1;
+        for k in 0..n {
+            let buf = self.tail.wrapping_add(k) % self.n;
+            w |= (n - k) << (4 * buf);
         }
         w
     }
@@ -1280,7 +1287,7 @@ mod tests {
         let mut w = TxRing {
             head: u32::MAX,
             tail: u32::MAX - 1,
-            n: 4,
+            n: NonZeroU32::new(4).unwrap(),
         };
         assert_eq!(w.in_flight(), 1);
         w.push();
