@@ -5,6 +5,7 @@ mod bcm;
 mod candev;
 mod candev_err;
 mod canutils;
+mod ctucanfd;
 mod capture;
 mod daemons;
 mod dsor;
@@ -149,6 +150,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         timesvc::TESTS,
         dsor::TESTS,
         sja1000::TESTS,
+        ctucanfd::TESTS,
         candev::TESTS,
         capture::SJA1000_TESTS,
         daemons::SJA1000_TESTS,
