@@ -40,16 +40,19 @@ use crate::glue::netdev::{Dev, Driver, NetDev, Stat, Xmit};
 use crate::glue::skb::Skb;
 use crate::rcan_core::bittiming::{self, Bittiming};
 use crate::rcan_core::candev::{CanState, Settings};
-use crate::rcan_core::ctucanfd::{Chip, Config, Event, Regs, MAX_TXT_BUFFERS, NOMINAL_CONST};
+use crate::rcan_core::ctucanfd::{
+    reg, Chip, Config, Event, Regs, CORE_SPAN, MAX_TXT_BUFFERS, NOMINAL_CONST,
+};
 use crate::rcan_core::frame::{AnyFrame, CANFD_MTU};
 use core::marker::PhantomData;
 use kernel::prelude::*;
 
-/// Register access through one mapped PCI BAR: the core's window starts
-/// at `base`.
+/// Register access through one mapped PCI BAR holding `cores` cores
+/// `CORE_SPAN` bytes apart: this core's window starts at `base`.
 pub(crate) struct IoRegs {
     pub(crate) io: crate::glue::pci::IoMem,
     pub(crate) base: usize,
+    pub(crate) cores: usize,
 }
 
 impl Regs for IoRegs {
@@ -58,6 +61,22 @@ impl Regs for IoRegs {
     }
     fn write32(&mut self, off: usize, val: u32) {
         self.io.write32(self.base + off, val);
+    }
+    /// Re-raises the card's shared line for every core with an enabled
+    /// cause pending (see [`Regs::irq_sync`]): writing 0 to a core's
+    /// INT_STAT clears nothing, and makes QEMU's model drive the line
+    /// from that core's state; only pending cores are written, so the
+    /// line ends high if any core wants service. On the real card the
+    /// writes change nothing. Another core's registers are read and
+    /// written without its lock: INT_STAT and INT_ENA reads have no side
+    /// effect and a 0 write to INT_STAT none either.
+    fn irq_sync(&mut self) {
+        for c in 0..self.cores {
+            let b = c * CORE_SPAN;
+            if self.io.read32(b + reg::INT_STAT) & self.io.read32(b + reg::INT_ENA_SET) != 0 {
+                self.io.write32(b + reg::INT_STAT, 0);
+            }
+        }
     }
 }
 

@@ -77,6 +77,7 @@ impl pci::Driver for CtuCanFdPci {
             let regs = IoRegs {
                 io: dev.iomap(1, n * CORE_SPAN)?,
                 base: i * CORE_SPAN,
+                cores: n,
             };
             let Some(c) = add_core(
                 regs,

@@ -736,6 +736,15 @@ pub trait Regs {
     fn read32(&mut self, off: usize) -> u32;
     /// Writes the word at `off`.
     fn write32(&mut self, off: usize, val: u32);
+    /// Called by [`Chip`] after each operation (start, stop, xmit,
+    /// interrupt): a board whose cores share one interrupt line in a way
+    /// that lets one core's register access drop another core's request
+    /// re-raises it here. QEMU's `ctucan_pci` is such a board: every core
+    /// drives the card's line directly, so a core with nothing pending
+    /// lowers it at each of its register writes even while the other
+    /// core has a cause pending, and that cause is lost (until its core
+    /// is touched again). Default: nothing to do.
+    fn irq_sync(&mut self) {}
 }
 
 /// Why an operation failed.
@@ -921,6 +930,7 @@ impl<R: Regs> Chip<R> {
         self.regs.write32(reg::TX_PRIORITY, self.ring.priority());
         self.regs.write32(reg::MODE, mode_word(cfg, true));
         self.state = CanState::ErrorActive;
+        self.regs.irq_sync();
     }
 
     /// Takes the core off the bus: disabled, interrupts off, every TX
@@ -931,6 +941,7 @@ impl<R: Regs> Chip<R> {
         self.regs.write32(reg::MODE, mode_word(&self.cfg, false));
         self.reset();
         self.state = CanState::Stopped;
+        self.regs.irq_sync();
     }
 
     /// Writes `frame` into the next free TX buffer and marks it ready.
@@ -949,6 +960,7 @@ impl<R: Regs> Chip<R> {
         self.ring.push();
         self.regs
             .write32(reg::TX_COMMAND, txcmd::TXCR | txcmd::txb(buf));
+        self.regs.irq_sync();
         Ok((buf, self.ring.is_full()))
     }
 
@@ -988,6 +1000,7 @@ impl<R: Regs> Chip<R> {
         }
         // RBNEI is a level: clearing it while frames remain re-raises it.
         self.regs.write32(reg::INT_STAT, stat & int::RBNEI);
+        self.regs.irq_sync();
         true
     }
 

@@ -60,7 +60,7 @@ fn pump(a: &mut Chip<CtuModel>, b: &mut Chip<CtuModel>) -> Vec<BusFrame> {
     sent
 }
 
-fn events(c: &mut Chip<CtuModel>) -> Vec<Event> {
+fn events<R: Regs>(c: &mut Chip<R>) -> Vec<Event> {
     let mut v = Vec::new();
     c.irq(|e| v.push(e));
     v
@@ -330,5 +330,116 @@ proptest! {
             b.irq(|e| if let Event::Rx(f) = e { got.push(f) });
         }
         prop_assert_eq!(got, frames);
+    }
+}
+
+/// Two modelled cores on one interrupt line driven as QEMU's ctucan_pci
+/// drives it: after each register write (but a TX buffer word), and
+/// after a core receives a frame, the line is set from that one core's
+/// state, so a core with nothing pending lowers it for both.
+mod shared_line {
+    use super::*;
+    use std::cell::RefCell;
+    use std::rc::Rc;
+
+    struct Card {
+        cores: [CtuModel; 2],
+        line: bool,
+    }
+
+    struct CoreRegs {
+        card: Rc<RefCell<Card>>,
+        idx: usize,
+        sync: bool,
+    }
+
+    impl Regs for CoreRegs {
+        fn read32(&mut self, off: usize) -> u32 {
+            self.card.borrow_mut().cores[self.idx].read32(off)
+        }
+        fn write32(&mut self, off: usize, val: u32) {
+            let mut c = self.card.borrow_mut();
+            let c = &mut *c;
+            c.cores[self.idx].write32(off, val);
+            if off >= reg::TXTB1 {
+                return;
+            }
+            // QEMU sends within the TX_COMMAND write: the receiver
+            // drives the line, then the sender.
+            let other = 1 - self.idx;
+            while let Some(f) = c.cores[self.idx].transmit() {
+                c.cores[other].deliver(&f);
+                c.line = c.cores[other].irq_line();
+            }
+            c.line = c.cores[self.idx].irq_line();
+        }
+        fn irq_sync(&mut self) {
+            if !self.sync {
+                return;
+            }
+            // What the PCI front-end does: a 0 write to INT_STAT of each
+            // core with a cause pending.
+            for i in 0..2 {
+                let pending = {
+                    let mut c = self.card.borrow_mut();
+                    let core = &mut c.cores[i];
+                    core.read32(reg::INT_STAT) & core.read32(reg::INT_ENA_SET) != 0
+                };
+                if pending {
+                    let mut c = self.card.borrow_mut();
+                    c.cores[i].write32(reg::INT_STAT, 0);
+                    c.line = c.cores[i].irq_line();
+                }
+            }
+        }
+    }
+
+    fn card(sync: bool) -> (Rc<RefCell<Card>>, Chip<CoreRegs>, Chip<CoreRegs>) {
+        let card = Rc::new(RefCell::new(Card {
+            cores: [CtuModel::new(), CtuModel::new()],
+            line: false,
+        }));
+        let mk = |idx| {
+            let mut c = Chip::new(CoreRegs {
+                card: card.clone(),
+                idx,
+                sync,
+            });
+            c.probe().unwrap();
+            c.start(&cfg());
+            c
+        };
+        let (a, b) = (mk(0), mk(1));
+        (card, a, b)
+    }
+
+    /// Core 1 sends f1 (core 0 receives it); core 0's handler takes it;
+    /// core 1 sends f2 before its own handler ran (another CPU); core 1's
+    /// handler then acknowledges its two completions. Returns whether the
+    /// line is up while core 0 holds f2.
+    fn scenario(sync: bool) -> bool {
+        let (card, mut a, mut b) = card(sync);
+        b.xmit(&classic(1, &[1])).unwrap();
+        assert!(card.borrow().line);
+        assert_eq!(events(&mut a), vec![Event::Rx(classic(1, &[1]))]);
+        b.xmit(&classic(2, &[2])).unwrap();
+        let done = events(&mut b);
+        assert_eq!(done.len(), 2);
+        assert_eq!(card.borrow().cores[0].rx_frames(), 1, "f2 waits in core 0");
+        let line = card.borrow().line;
+        line
+    }
+
+    #[test]
+    fn a_core_lowers_the_line_under_the_other_without_irq_sync() {
+        assert!(
+            !scenario(false),
+            "QEMU's line semantics lose core 0's request"
+        );
+    }
+
+    #[test]
+    fn irq_sync_keeps_the_line_up_while_a_core_has_a_cause() {
+        assert!(scenario(true));
     }
 }
