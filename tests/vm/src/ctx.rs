@@ -717,7 +717,8 @@ mod tests {
                 "rcan_tscan1",
                 "rcan_i82527_sim",
                 "rcan_i82527_isa",
-                "rcan_sja1000_sim"
+                "rcan_sja1000_sim",
+                "rcan_ctucanfd_pci"
             ]
         );
         assert_eq!(
