@@ -99,6 +99,12 @@ pub(crate) use portable_table;
 /// `canutils_fd_python_can` starts python3 (some 100 s under TCG on the
 /// debug kernel); the FD paths of CAN_RAW it reaches run there in the
 /// other `fd.rs` tests.
+///
+/// Two of the CTU CAN FD tests (13-22 s each on the debug kernel, mostly
+/// the interface setup): `ctucanfd_fd_both_ways` and
+/// `ctucanfd_rmmod_during_traffic` reach the same driver paths (transmit,
+/// the TX ring wrapping round, echo, receive, the shared interrupt,
+/// teardown) under lockdep and KASAN.
 pub const RELEASE_ONLY: &[&str] = &[
     "install_autoload",
     "sja1000_sim_bus_off_manual_restart",
@@ -118,6 +124,8 @@ pub const RELEASE_ONLY: &[&str] = &[
     "leak_dsor_bodies",
     "leak_rtime_frame",
     "dsor_loss_accounting",
+    "ctucanfd_classic_both_ways",
+    "ctucanfd_burst",
 ];
 
 /// Every test, in running order.
