@@ -443,3 +443,43 @@ mod shared_line {
         assert!(scenario(true));
     }
 }
+
+/// Register accesses the driver core makes per frame, classic 8 bytes
+/// and FD 64 bytes, sender and receiver, in steady state (one frame at a
+/// time, one interrupt each); without the PCI front-end's `irq_sync`,
+/// which adds two reads per core and operation. Bounds, so that a change
+/// that adds accesses to the hot path shows up here.
+#[test]
+fn register_accesses_per_frame() {
+    let cfg = cfg();
+    let mut a = running(&cfg);
+    let mut b = running(&cfg);
+    let mut count = |f: &AnyFrame| {
+        let (ra, wa) = a.regs.accesses;
+        let (rb, wb) = b.regs.accesses;
+        a.xmit(f).unwrap();
+        pump(&mut a, &mut b);
+        events(&mut a);
+        events(&mut b);
+        let tx = (a.regs.accesses.0 - ra, a.regs.accesses.1 - wa);
+        let rx = (b.regs.accesses.0 - rb, b.regs.accesses.1 - wb);
+        (tx, rx)
+    };
+    let classic8 = count(&classic(0x123, &[1; 8]));
+    let fd64 = count(&fd(0x123, CANFD_BRS, &[2; 64]));
+    println!(
+        "classic 8 bytes: tx (reads, writes) {:?}, rx {:?}",
+        classic8.0, classic8.1
+    );
+    println!(
+        "fd 64 bytes: tx (reads, writes) {:?}, rx {:?}",
+        fd64.0, fd64.1
+    );
+    // TX: 6 buffer words, TX_COMMAND; interrupt: INT_STAT and TX_STATUS
+    // read, two INT_STAT acknowledgements, the TXCE command, TX_PRIORITY.
+    assert_eq!(classic8.0, (2, 11));
+    // RX: INT_STAT, RX_STATUS x2, RX_DATA x 6, two acknowledgements.
+    assert_eq!(classic8.1, (9, 2));
+    assert_eq!(fd64.0, (2, 25));
+    assert_eq!(fd64.1, (23, 2));
+}
