@@ -18,12 +18,14 @@ use super::test_table;
 use crate::canraw::{self, ext, rtr_ext, rtr_std, std as sff};
 use crate::check::{ensure, OrFail, TestResult};
 use crate::ctx::{dev, sized, Ctx, Module};
+use crate::tools::{self, TOOL_LIMIT};
 use crate::Test;
 
 pub const TESTS: &[Test] = test_table![
     ctucanfd_classic_both_ways,
     ctucanfd_fd_both_ways,
     ctucanfd_burst,
+    ctucanfd_cansend_candump,
     ctucanfd_rmmod_during_traffic,
 ];
 
@@ -218,6 +220,46 @@ fn ctucanfd_burst(ctx: &mut Ctx) -> TestResult {
         let over = ctx.stat(d, "rx_over_errors")?;
         ensure!(over == 0, "{d}: {over} RX buffer overruns");
     }
+    Ok(())
+}
+
+/// can-utils across the bus: `candump -L can1` sees what `cansend can0`
+/// sends, a 64-byte FD frame with BRS (`123##1...`) and a classic
+/// extended frame (`1ABCDEF0#1122`), as `candump -L` prints them.
+fn ctucanfd_cansend_candump(ctx: &mut Ctx) -> TestResult {
+    ctucan2(ctx)?;
+    let hex: String = (0..64u8)
+        .map(|i| format!("{:02X}", i.wrapping_mul(7)))
+        .collect();
+    let fd_arg = format!("123##1{hex}");
+    let mut dump = tools::spawn("candump", &["-L", "-n", "2", "can1"], None)?;
+    dump.wait_listening()?;
+    tools::run_ok("cansend", &["can0", &fd_arg])?;
+    tools::run_ok("cansend", &["can0", "1ABCDEF0#1122"])?;
+    let out = dump.finish(TOOL_LIMIT)?;
+    ensure!(out.status.success(), "candump: {}", out.stderr.trim());
+    let frames: Vec<&str> = out
+        .stdout
+        .lines()
+        .filter_map(|l| l.split_whitespace().nth(2))
+        .collect();
+    ensure!(frames.len() == 2, "candump -L printed {:?}", out.stdout);
+    // "123##<flags><hex>": the flags nibble is BRS, plus FDF on newer
+    // can-utils.
+    let (id, fd) = frames[0]
+        .split_once("##")
+        .ok_or_else(|| format!("candump -L shows no FD frame: {:?}", frames[0]))?;
+    let flags = u8::from_str_radix(&fd[..1], 16).map_err(|_| format!("flags in {fd:?}"))?;
+    ensure!(
+        id == "123" && flags & (CANFD_BRS | CANFD_ESI) == CANFD_BRS && fd[1..] == hex,
+        "candump -L printed {:?}, expected 123##1{hex}",
+        frames[0]
+    );
+    ensure!(
+        frames[1] == "1ABCDEF0#1122",
+        "candump -L printed {:?}, expected 1ABCDEF0#1122",
+        frames[1]
+    );
     Ok(())
 }
 

@@ -100,8 +100,8 @@ pub(crate) use portable_table;
 /// debug kernel); the FD paths of CAN_RAW it reaches run there in the
 /// other `fd.rs` tests.
 ///
-/// Two of the CTU CAN FD tests (13-22 s each on the debug kernel, mostly
-/// the interface setup): `ctucanfd_fd_both_ways` and
+/// Three of the CTU CAN FD tests (13-22 s each on the debug kernel, mostly
+/// the interface setup and the tools' starts): `ctucanfd_fd_both_ways` and
 /// `ctucanfd_rmmod_during_traffic` reach the same driver paths (transmit,
 /// the TX ring wrapping round, echo, receive, the shared interrupt,
 /// teardown) under lockdep and KASAN.
@@ -126,6 +126,7 @@ pub const RELEASE_ONLY: &[&str] = &[
     "dsor_loss_accounting",
     "ctucanfd_classic_both_ways",
     "ctucanfd_burst",
+    "ctucanfd_cansend_candump",
 ];
 
 /// Every test, in running order.
