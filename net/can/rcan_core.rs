@@ -20,6 +20,8 @@ pub(crate) mod bittiming;
 pub(crate) mod candev;
 #[path = "core/src/canloop.rs"]
 pub(crate) mod canloop;
+#[path = "core/src/ctucanfd.rs"]
+pub(crate) mod ctucanfd;
 #[path = "core/src/dsor_addr.rs"]
 pub(crate) mod dsor_addr;
 #[path = "core/src/dsor_rx.rs"]

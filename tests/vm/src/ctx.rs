@@ -85,11 +85,13 @@ pub enum Module {
     I82527Isa,
     /// Simulated SJA1000 cards on a simulated bus, with fault injection.
     Sja1000Sim,
+    /// CTU CAN FD driver for the CTU CAN FD PCI card (QEMU `ctucan_pci`).
+    CtuCanFdPci,
 }
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 17] = [
+    pub const ALL: [Module; 18] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
@@ -107,6 +109,7 @@ impl Module {
         Module::I82527Sim,
         Module::I82527Isa,
         Module::Sja1000Sim,
+        Module::CtuCanFdPci,
     ];
 
     /// Name as shown by `/proc/modules` and taken by `rmmod`.
@@ -129,6 +132,7 @@ impl Module {
             Module::I82527Sim => "rcan_i82527_sim",
             Module::I82527Isa => "rcan_i82527_isa",
             Module::Sja1000Sim => "rcan_sja1000_sim",
+            Module::CtuCanFdPci => "rcan_ctucanfd_pci",
         }
     }
 
@@ -152,6 +156,7 @@ impl Module {
             Module::I82527Sim => "drivers/net/can/i82527/rcan_i82527_sim.ko",
             Module::I82527Isa => "drivers/net/can/i82527/rcan_i82527_isa.ko",
             Module::Sja1000Sim => "drivers/net/can/sja1000/rcan_sja1000_sim.ko",
+            Module::CtuCanFdPci => "drivers/net/can/ctucanfd/rcan_ctucanfd_pci.ko",
         }
     }
 }
@@ -280,6 +285,7 @@ impl Ctx {
             Module::Sja1000Sim,
             Module::I82527Sim,
             Module::I82527Isa,
+            Module::CtuCanFdPci,
         ];
         if sja1000.contains(&m) && !self.is_loaded(Module::Dev) {
             self.insmod(Module::Dev, &[])?;
@@ -713,7 +719,8 @@ mod tests {
                 "rcan_tscan1",
                 "rcan_i82527_sim",
                 "rcan_i82527_isa",
-                "rcan_sja1000_sim"
+                "rcan_sja1000_sim",
+                "rcan_ctucanfd_pci"
             ]
         );
         assert_eq!(

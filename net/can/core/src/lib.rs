@@ -16,6 +16,8 @@ pub mod bcm_tx;
 pub mod bittiming;
 pub mod candev;
 pub mod canloop;
+pub mod ctucanfd;
+pub mod ctucanfd_model;
 pub mod dsor_addr;
 pub mod dsor_rx;
 pub mod dsor_tx;

@@ -6,6 +6,7 @@ mod candev;
 mod candev_err;
 mod canutils;
 mod capture;
+mod ctucanfd;
 mod daemons;
 mod dsor;
 mod errors;
@@ -105,6 +106,12 @@ pub(crate) use portable_table;
 /// `canutils_fd_python_can` starts python3 (some 100 s under TCG on the
 /// debug kernel); the FD paths of CAN_RAW it reaches run there in the
 /// other `fd.rs` tests.
+///
+/// Three of the CTU CAN FD tests (13-22 s each on the debug kernel, mostly
+/// the interface setup and the tools' starts): `ctucanfd_fd_both_ways` and
+/// `ctucanfd_rmmod_during_traffic` reach the same driver paths (transmit,
+/// the TX ring wrapping round, echo, receive, the shared interrupt,
+/// teardown) under lockdep and KASAN.
 pub const RELEASE_ONLY: &[&str] = &[
     "install_autoload",
     "sja1000_sim_bus_off_manual_restart",
@@ -126,6 +133,9 @@ pub const RELEASE_ONLY: &[&str] = &[
     "dsor_loss_accounting",
     "i82527_sim_ip_bittiming",
     "i82527_sim_bus_errors_candump",
+    "ctucanfd_classic_both_ways",
+    "ctucanfd_burst",
+    "ctucanfd_cansend_candump",
 ];
 
 /// Every test, in running order.
@@ -158,6 +168,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         timesvc::TESTS,
         dsor::TESTS,
         sja1000::TESTS,
+        ctucanfd::TESTS,
         candev::TESTS,
         capture::SJA1000_TESTS,
         daemons::SJA1000_TESTS,

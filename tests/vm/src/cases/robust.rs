@@ -256,7 +256,7 @@ fn modules_load_unload_cycles(ctx: &mut Ctx) -> TestResult {
     let before = kmemleak_reports(false)?;
     // (module, parameters, modules it needs, loads: false if it must fail)
     let stack = [Module::Pf, Module::Can, Module::Raw, Module::Loop];
-    let plan: [(Module, &[&str], &[Module], bool); 17] = [
+    let plan: [(Module, &[&str], &[Module], bool); 18] = [
         (Module::Pf, &[], &[], true),
         (Module::Can, &[], &[Module::Pf], true),
         (Module::Raw, &[], &[Module::Pf], true),
@@ -299,6 +299,7 @@ fn modules_load_unload_cycles(ctx: &mut Ctx) -> TestResult {
             &[Module::Pf],
             false,
         ),
+        (Module::CtuCanFdPci, &[], &[Module::Pf, Module::Dev], true),
     ];
     // A module added to Module::ALL without a line here would go
     // untested: fail instead.

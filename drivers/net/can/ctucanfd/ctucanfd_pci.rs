@@ -1,0 +1,130 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! rcan_ctucanfd_pci: PCI front-end of the CTU CAN FD driver for the
+//! CTU CAN FD PCIe card (PCI 1760:ff00) as QEMU's `ctucan_pci` device
+//! emulates it: BAR 0 holds the card's identification word (0xC000_0000
+//! plus the number of cores) and, at 0x4000, the Cyclone IV PCIe bridge
+//! registers whose A2P interrupt enable gates the cores' interrupt on the
+//! real card; BAR 1 holds the cores, 0x4000 bytes apart. All cores share
+//! the card's interrupt line. Only register access and probing live
+//! here; the driver is `ctucanfd.rs`.
+//!
+//! Contexts: probe/remove in process context (PCI core); register access
+//! from every context the driver uses, serialised by each core's lock.
+#![forbid(unsafe_code)]
+
+use kernel::prelude::*;
+
+use crate::{ctucanfd, glue, rcan_core};
+
+use ctucanfd::{add_core, Core, IoRegs};
+use glue::pci::{self, IoMem};
+use kernel::c_str;
+use rcan_core::ctucanfd::CORE_SPAN;
+
+/// Offset of the card identification word in BAR 0.
+const BAR0_CARD_ID: usize = 0x0000;
+/// Offset of the PCIe bridge's A2P interrupt enable register in BAR 0.
+const BAR0_CRA_A2P_IE: usize = 0x4000 + 0x50;
+/// Bytes of BAR 0 the driver maps.
+const BAR0_LEN: usize = 0x4000 + 0x54;
+/// Most cores a card has (the identification word's 4-bit count).
+const MAX_CORES: usize = 15;
+/// The core clock on the card (mainline `ctucanfd_pci`: 100 MHz).
+const CLOCK_HZ: u32 = 100_000_000;
+
+/// Number of cores from the identification word: its low four bits when
+/// the top bits carry the card's 0xC000_0000 signature, else two (what
+/// mainline assumes for older card firmware).
+fn cores(id: u32) -> usize {
+    if id & 0xF000_0000 == 0xC000_0000 {
+        (id & 0xF) as usize
+    } else {
+        2
+    }
+}
+
+/// A bound card.
+struct Card {
+    cores: KVec<Core<IoRegs>>,
+    bar0: IoMem,
+    _enabled: pci::Enabled,
+}
+
+impl Card {
+    fn irq_enable(&self, on: bool) {
+        self.bar0
+            .write32(BAR0_CRA_A2P_IE, if on { 0xFFFF_FFFF } else { 0 });
+    }
+}
+
+struct CtuCanFdPci;
+
+impl pci::Driver for CtuCanFdPci {
+    type Data = Card;
+
+    fn probe(dev: &pci::Device) -> Result<KBox<Card>> {
+        let enabled = dev.enable()?;
+        let bar0 = dev.iomap(0, BAR0_LEN)?;
+        let n = cores(bar0.read32(BAR0_CARD_ID)).min(MAX_CORES);
+        let mut card = Card {
+            cores: KVec::new(),
+            bar0,
+            _enabled: enabled,
+        };
+        card.irq_enable(false);
+        for i in 0..n {
+            let regs = IoRegs {
+                io: dev.iomap(1, n * CORE_SPAN)?,
+                base: i * CORE_SPAN,
+                cores: n,
+            };
+            let Some(c) = add_core(
+                regs,
+                dev.irq(),
+                CLOCK_HZ,
+                format_args!("core {i} of a CTU CAN FD PCI card"),
+            )?
+            else {
+                pr_warn!("ctucanfd_pci: no core {} answers\n", i);
+                continue;
+            };
+            card.cores.push(c, GFP_KERNEL)?;
+        }
+        if card.cores.is_empty() {
+            pr_err!("ctucanfd_pci: no CTU CAN FD core found\n");
+            return Err(ENODEV);
+        }
+        card.irq_enable(true);
+        Ok(KBox::new(card, GFP_KERNEL)?)
+    }
+
+    fn remove(card: KBox<Card>) {
+        card.irq_enable(false);
+        drop(card);
+    }
+}
+
+/// The PCI ids the driver matches; the module root exports a copy under
+/// the symbol modpost reads, for the module's `pci:v...` aliases.
+pub(crate) const PCI_IDS: [glue::bindings::pci_device_id; 2] =
+    [pci::id(0x1760, 0xff00), pci::ID_END];
+
+static IDS: [glue::bindings::pci_device_id; 2] = PCI_IDS;
+
+static DRIVER: pci::Registration<CtuCanFdPci> = pci::Registration::new();
+
+pub(crate) struct CtuCanFdPciModule;
+
+impl kernel::Module for CtuCanFdPciModule {
+    fn init(_module: &'static ThisModule) -> Result<Self> {
+        DRIVER.register(c_str!("rcan_ctucanfd_pci"), &IDS)?;
+        Ok(CtuCanFdPciModule)
+    }
+}
+
+impl Drop for CtuCanFdPciModule {
+    fn drop(&mut self) {
+        DRIVER.unregister();
+    }
+}
