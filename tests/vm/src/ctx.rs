@@ -272,11 +272,11 @@ impl Ctx {
         self.root.join(m.rel_path())
     }
 
-    /// `insmod` module `m` with `params`. An SJA1000 or 82527 front-end
-    /// needs `rcan_dev` (the "can" link kind its devices use): it is loaded
-    /// first if it is not, as modprobe would.
+    /// `insmod` module `m` with `params`. A hardware driver (SJA1000,
+    /// 82527, CTU CAN FD) needs `rcan_dev` (the "can" link kind its
+    /// devices use): it is loaded first if it is not, as modprobe would.
     pub fn insmod(&mut self, m: Module, params: &[&str]) -> Result<(), String> {
-        let sja1000 = [
+        let needs_dev = [
             Module::Kvaser,
             Module::Advantech,
             Module::Isa,
@@ -287,7 +287,7 @@ impl Ctx {
             Module::I82527Isa,
             Module::CtuCanFdPci,
         ];
-        if sja1000.contains(&m) && !self.is_loaded(Module::Dev) {
+        if needs_dev.contains(&m) && !self.is_loaded(Module::Dev) {
             self.insmod(Module::Dev, &[])?;
         }
         let ko = self.ko(m);
