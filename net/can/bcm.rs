@@ -94,8 +94,6 @@ const CAN_BCM: i32 = 2;
 /// Bytes of `struct sockaddr_can` BCM requires and returns
 /// (`BCM_MIN_NAMELEN`: family, padding, ifindex).
 const BCM_MIN_NAMELEN: usize = 8;
-/// Headroom for mainline's `struct can_skb_priv`.
-const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 /// The CAN FD flags mainline leaves in a frame it hands to user space
 /// (`BCM_CAN_FLAGS_MASK`).
 const CAN_FLAGS_MASK: u8 = 0x07;
@@ -231,20 +229,10 @@ impl Pending {
     }
 }
 
-/// An skb carrying one frame (`bytes`) for `dev`, owned by `sk`. Any
-/// context (GFP_ATOMIC).
+/// An skb carrying one frame image (`bytes`, `cfsiz` long) for `dev`,
+/// owned by `sk`. Any context (GFP_ATOMIC).
 fn frame_skb(sk: &S, dev: &NetDev, bytes: &[u8]) -> Option<Skb> {
-    let mut skb = Skb::alloc(SKB_PRIV_LEN + bytes.len() as u32, glue::GFP_ATOMIC)?;
-    skb.reserve(SKB_PRIV_LEN);
-    // struct can_skb_priv { int ifindex; int skbcnt; }
-    let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-    if !skb.write_headroom(&prv) || !skb.put_data(bytes) {
-        return None;
-    }
-    skb.set_owner(sk);
-    skb.set_sock_params(sk);
-    Some(skb)
+    glue::can::skb::alloc_image_for(sk, dev, bytes, glue::GFP_ATOMIC)
 }
 
 /// Queues a message (`head` and the frame bytes in `frames`) for `sk`'s
@@ -1058,15 +1046,8 @@ fn tx_send(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
     // its length (EINVAL) and the device's MTU (EMSGSIZE on a classic
     // device), as mainline's can_send.
     let cfsiz = req.head.cfsiz();
-    let mut skb = Skb::alloc(SKB_PRIV_LEN + cfsiz as u32, glue::GFP_KERNEL).ok_or(ENOMEM)?;
-    skb.reserve(SKB_PRIV_LEN);
-    let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-    if !skb.write_headroom(&prv) || !skb.put_data(&req.payload[..cfsiz]) {
-        return Err(neterr::ENOBUFS());
-    }
-    skb.set_owner(sk);
-    skb.set_sock_params(sk);
+    let skb = glue::can::skb::alloc_image_for(sk, &dev, &req.payload[..cfsiz], glue::GFP_KERNEL)
+        .ok_or(ENOMEM)?;
     rcan_api::send(skb, &dev, true)?;
     Ok(ret)
 }

@@ -38,7 +38,7 @@ use rcan_api::{
     CANPROTO_CAN, RX_FILTER_ARB, SOCK_RAW,
 };
 use rcan_core::arb::{Arb, MAX_DLC};
-use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use rcan_core::frame::{AnyFrame, CanFrame, CAN_FRAME_LEN};
 use rcan_core::sockaddr::{self, SockaddrArb, AF_UNSPEC, SOCKADDR_CANARB_LEN};
 
 /// A CANPROTO_CAN socket's state, protected by its socket lock.
@@ -56,10 +56,6 @@ struct CanProtoOps;
 static MODULE: ProtoModule<CanProtoOps> = ProtoModule::new();
 
 type S = Sock<CanProtoOps>;
-
-/// Headroom for mainline's `struct can_skb_priv`, so mainline CAN drivers
-/// accept our skbs too.
-const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
 impl CanProtocol for CanProtoOps {
     const PROTOCOL: i32 = CANPROTO_CAN;
@@ -309,14 +305,9 @@ fn send_one(sk: &S, dev: &DevRef, frame: &CanFrame, nonblock: bool) -> Result {
     if !dev.is_up() {
         return Err(neterr::ENETDOWN());
     }
-    let mut skb = sk.alloc_send_skb(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, nonblock)?;
-    skb.reserve(SKB_PRIV_LEN);
-    // struct can_skb_priv { int ifindex; int skbcnt; }
-    let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-    if !skb.write_headroom(&prv) || !skb.put_data(&frame.to_bytes()) {
-        return Err(neterr::ENOBUFS());
-    }
+    // With mainline's `struct can_skb_priv` in front, so mainline CAN
+    // drivers accept our skbs too.
+    let skb = glue::can::skb::alloc_tx_frame(sk, dev, &AnyFrame::Classic(*frame), nonblock)?;
     // Thesis sockets always loop their frames back to local receivers.
     rcan_api::send(skb, dev, true)
 }
