@@ -62,7 +62,6 @@ use core::fmt::Write;
 use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use kernel::prelude::*;
 
-use glue::bindings;
 use glue::hrtimer::ktime_get_mono_ns;
 use glue::jobtimer::{JobCallback, JobRef, JobTimers, OnceBox};
 use glue::lock::{new_bh_spinlock, BhLock};
@@ -332,10 +331,10 @@ impl RxOut for RxEffects<'_, '_> {
                 f.pad &= CAN_FLAGS_MASK;
                 let mut flags = 0;
                 if traffic & TRAFFIC_LOCAL != 0 {
-                    flags |= bindings::MSG_DONTROUTE;
+                    flags |= glue::msg::DONTROUTE;
                 }
                 if traffic & TRAFFIC_OWN != 0 {
-                    flags |= bindings::MSG_CONFIRM;
+                    flags |= glue::msg::CONFIRM;
                 }
                 // RX_CHANGED: the timestamp of the last frame received
                 // (mainline's bcm_rx_changed: has_timestamp).
@@ -843,7 +842,7 @@ impl CanProtocol for BcmProto {
                 let hit = s.bound && s.ifindex == ifindex;
                 drop(s);
                 if hit {
-                    sk.report_error(bindings::ENETDOWN as i32);
+                    sk.report_error(-neterr::ENETDOWN().to_errno());
                 }
                 return;
             }
@@ -888,7 +887,7 @@ impl CanProtocol for BcmProto {
             // readers (they take the socket lock, not RTNL).
             drop(proc);
             if enodev {
-                sk.report_error(bindings::ENODEV as i32);
+                sk.report_error(-ENODEV.to_errno());
             }
         });
     }
@@ -1110,7 +1109,7 @@ impl glue::sock::Proto for BcmProto {
         let mut ifindex = i32::from_ne_bytes([addr[4], addr[5], addr[6], addr[7]]);
         let mut s = sk.lock();
         if s.bound {
-            return Err(glue::errno(bindings::EISCONN as i32));
+            return Err(neterr::EISCONN());
         }
         if ifindex != 0 {
             let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
@@ -1172,7 +1171,7 @@ impl glue::sock::Proto for BcmProto {
         if ifindex == 0 {
             if let Some(name) = msg.name() {
                 if name.len() < BCM_MIN_NAMELEN
-                    || u16::from_ne_bytes([name[0], name[1]]) != bindings::AF_CAN as u16
+                    || u16::from_ne_bytes([name[0], name[1]]) != rcan_core::sockaddr::AF_CAN
                 {
                     return Err(EINVAL);
                 }

@@ -27,7 +27,6 @@
 use crate::{glue, rcan_api, rcan_core};
 use kernel::prelude::*;
 
-use glue::bindings;
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::sock::{Msg, Sock};
@@ -205,7 +204,7 @@ impl glue::sock::Proto for CanProtoOps {
 
     fn sendmsg(sk: &S, msg: &mut Msg, len: usize) -> Result<usize> {
         let flags = msg_flags(msg);
-        if flags & bindings::MSG_OOB != 0 {
+        if flags & glue::msg::OOB != 0 {
             return Err(neterr::EOPNOTSUPP());
         }
         let (arb, ifindex) = match msg.name() {
@@ -224,7 +223,7 @@ impl glue::sock::Proto for CanProtoOps {
         }
         let frame =
             CanFrame::from_arb(arb, len, &data[..len]).map_err(|e| glue::errno(e.errno()))?;
-        let nonblock = flags & bindings::MSG_DONTWAIT != 0;
+        let nonblock = flags & glue::msg::DONTWAIT != 0;
         if ifindex != 0 {
             let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
             send_one(sk, &dev, &frame, nonblock)?;
@@ -250,7 +249,7 @@ impl glue::sock::Proto for CanProtoOps {
     }
 
     fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
-        if flags as u32 & (bindings::MSG_OOB | bindings::MSG_ERRQUEUE) != 0 {
+        if flags as u32 & (glue::msg::OOB | glue::msg::ERRQUEUE) != 0 {
             return Err(neterr::EOPNOTSUPP());
         }
         let skb = sk.recv_datagram(flags)?;
@@ -269,7 +268,7 @@ impl glue::sock::Proto for CanProtoOps {
             msg.copy_from_skb(&skb, 8, n)?;
         }
         if n < dlc {
-            msg.add_flags(bindings::MSG_TRUNC);
+            msg.add_flags(glue::msg::TRUNC);
         }
         msg.recv_cmsgs(sk, &skb);
         if let Some(arb) = frame.arb() {
@@ -282,7 +281,7 @@ impl glue::sock::Proto for CanProtoOps {
             msg.set_name(&a.encode());
         }
         sk.free_datagram(skb);
-        Ok(if flags as u32 & bindings::MSG_TRUNC != 0 {
+        Ok(if flags as u32 & glue::msg::TRUNC != 0 {
             dlc
         } else {
             n
