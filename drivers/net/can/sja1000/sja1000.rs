@@ -300,11 +300,11 @@ fn wanted_filter(dev: &NetDev) -> HwFilter {
 }
 
 /// Frames read from the receive FIFO while the chip lock is held, handed
-/// to the stack once it is released ([`RxBatch::hand_up`]): outside
-/// hardirq, `netif_rx` must not run with interrupts disabled (its
-/// `local_bh_enable` warns and may run softirqs with interrupts off), and
-/// the receive path must not run under a lock its senders' `start_xmit`
-/// takes. On the stack: 32 frames of 16 bytes.
+/// to the stack once it is released ([`RxBatch::hand_up`]). In process
+/// context `netif_rx` must not run with interrupts disabled: its
+/// `local_bh_enable` warns there, and may run the NET_RX softirq on the
+/// spot, whose receivers may send on this device, and `start_xmit` takes
+/// the chip lock this CPU holds. On the stack: 32 frames of 16 bytes.
 struct RxBatch {
     frames: [CanFrame; RX_BATCH],
     n: usize,
