@@ -108,8 +108,8 @@ pub(crate) fn alloc_frame(dev: &NetDev, frame: &AnyFrame, gfp: bindings::gfp_t) 
 /// protocol that keeps frames as images and sends them unchanged
 /// (mainline `bcm_can_tx`: `skb_put_data(skb, cf, op->cfsiz)`); whether
 /// the frame suits the device is pf_can's check at send time. Any context
-/// with `GFP_ATOMIC`; `None` without memory or if `image` is neither
-/// size.
+/// with `GFP_ATOMIC`, process context with `GFP_KERNEL`; `None` without
+/// memory or if `image` is neither size.
 pub(crate) fn alloc_image(dev: &NetDev, image: &[u8], gfp: bindings::gfp_t) -> Option<Skb> {
     if !is_frame_size(image) {
         return None;
@@ -123,8 +123,8 @@ pub(crate) fn alloc_image(dev: &NetDev, image: &[u8], gfp: bindings::gfp_t) -> O
 /// `sk` becomes the skb's owner the way mainline's `can_skb_set_owner`
 /// makes it (a counted reference, no send-buffer accounting), so that
 /// receivers of the echo see who sent it, and the skb takes the socket's
-/// priority and mark. Any context with `GFP_ATOMIC`; `None` as
-/// [`alloc_image`].
+/// priority and mark. Any context with `GFP_ATOMIC`, process context with
+/// `GFP_KERNEL`; `None` as [`alloc_image`].
 pub(crate) fn alloc_image_for<T: Proto>(
     sk: &Sock<T>,
     dev: &NetDev,
