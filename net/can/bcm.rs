@@ -62,7 +62,6 @@ use core::fmt::Write;
 use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use kernel::prelude::*;
 
-use glue::bindings;
 use glue::hrtimer::ktime_get_mono_ns;
 use glue::jobtimer::{JobCallback, JobRef, JobTimers, OnceBox};
 use glue::lock::{new_bh_spinlock, BhLock};
@@ -94,8 +93,6 @@ const CAN_BCM: i32 = 2;
 /// Bytes of `struct sockaddr_can` BCM requires and returns
 /// (`BCM_MIN_NAMELEN`: family, padding, ifindex).
 const BCM_MIN_NAMELEN: usize = 8;
-/// Headroom for mainline's `struct can_skb_priv`.
-const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 /// The CAN FD flags mainline leaves in a frame it hands to user space
 /// (`BCM_CAN_FLAGS_MASK`).
 const CAN_FLAGS_MASK: u8 = 0x07;
@@ -231,20 +228,10 @@ impl Pending {
     }
 }
 
-/// An skb carrying one frame (`bytes`) for `dev`, owned by `sk`. Any
-/// context (GFP_ATOMIC).
+/// An skb carrying one frame image (`bytes`, `cfsiz` long) for `dev`,
+/// owned by `sk`. Any context (GFP_ATOMIC).
 fn frame_skb(sk: &S, dev: &NetDev, bytes: &[u8]) -> Option<Skb> {
-    let mut skb = Skb::alloc(SKB_PRIV_LEN + bytes.len() as u32, glue::GFP_ATOMIC)?;
-    skb.reserve(SKB_PRIV_LEN);
-    // struct can_skb_priv { int ifindex; int skbcnt; }
-    let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-    if !skb.write_headroom(&prv) || !skb.put_data(bytes) {
-        return None;
-    }
-    skb.set_owner(sk);
-    skb.set_sock_params(sk);
-    Some(skb)
+    glue::can::skb::alloc_image_for(sk, dev, bytes, glue::GFP_ATOMIC)
 }
 
 /// Queues a message (`head` and the frame bytes in `frames`) for `sk`'s
@@ -344,10 +331,10 @@ impl RxOut for RxEffects<'_, '_> {
                 f.pad &= CAN_FLAGS_MASK;
                 let mut flags = 0;
                 if traffic & TRAFFIC_LOCAL != 0 {
-                    flags |= bindings::MSG_DONTROUTE;
+                    flags |= glue::msg::DONTROUTE;
                 }
                 if traffic & TRAFFIC_OWN != 0 {
-                    flags |= bindings::MSG_CONFIRM;
+                    flags |= glue::msg::CONFIRM;
                 }
                 // RX_CHANGED: the timestamp of the last frame received
                 // (mainline's bcm_rx_changed: has_timestamp).
@@ -855,7 +842,7 @@ impl CanProtocol for BcmProto {
                 let hit = s.bound && s.ifindex == ifindex;
                 drop(s);
                 if hit {
-                    sk.report_error(bindings::ENETDOWN as i32);
+                    sk.report_error(-neterr::ENETDOWN().to_errno());
                 }
                 return;
             }
@@ -900,7 +887,7 @@ impl CanProtocol for BcmProto {
             // readers (they take the socket lock, not RTNL).
             drop(proc);
             if enodev {
-                sk.report_error(bindings::ENODEV as i32);
+                sk.report_error(-ENODEV.to_errno());
             }
         });
     }
@@ -1058,15 +1045,8 @@ fn tx_send(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
     // its length (EINVAL) and the device's MTU (EMSGSIZE on a classic
     // device), as mainline's can_send.
     let cfsiz = req.head.cfsiz();
-    let mut skb = Skb::alloc(SKB_PRIV_LEN + cfsiz as u32, glue::GFP_KERNEL).ok_or(ENOMEM)?;
-    skb.reserve(SKB_PRIV_LEN);
-    let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-    if !skb.write_headroom(&prv) || !skb.put_data(&req.payload[..cfsiz]) {
-        return Err(neterr::ENOBUFS());
-    }
-    skb.set_owner(sk);
-    skb.set_sock_params(sk);
+    let skb = glue::can::skb::alloc_image_for(sk, &dev, &req.payload[..cfsiz], glue::GFP_KERNEL)
+        .ok_or(ENOMEM)?;
     rcan_api::send(skb, &dev, true)?;
     Ok(ret)
 }
@@ -1129,7 +1109,7 @@ impl glue::sock::Proto for BcmProto {
         let mut ifindex = i32::from_ne_bytes([addr[4], addr[5], addr[6], addr[7]]);
         let mut s = sk.lock();
         if s.bound {
-            return Err(glue::errno(bindings::EISCONN as i32));
+            return Err(neterr::EISCONN());
         }
         if ifindex != 0 {
             let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
@@ -1191,7 +1171,7 @@ impl glue::sock::Proto for BcmProto {
         if ifindex == 0 {
             if let Some(name) = msg.name() {
                 if name.len() < BCM_MIN_NAMELEN
-                    || u16::from_ne_bytes([name[0], name[1]]) != bindings::AF_CAN as u16
+                    || u16::from_ne_bytes([name[0], name[1]]) != rcan_core::sockaddr::AF_CAN
                 {
                     return Err(EINVAL);
                 }

@@ -27,7 +27,6 @@
 use crate::{glue, rcan_api, rcan_core};
 use kernel::prelude::*;
 
-use glue::bindings;
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::sock::{Msg, Sock};
@@ -38,7 +37,7 @@ use rcan_api::{
     CANPROTO_CAN, RX_FILTER_ARB, SOCK_RAW,
 };
 use rcan_core::arb::{Arb, MAX_DLC};
-use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use rcan_core::frame::{AnyFrame, CanFrame, CAN_FRAME_LEN};
 use rcan_core::sockaddr::{self, SockaddrArb, AF_UNSPEC, SOCKADDR_CANARB_LEN};
 
 /// A CANPROTO_CAN socket's state, protected by its socket lock.
@@ -56,10 +55,6 @@ struct CanProtoOps;
 static MODULE: ProtoModule<CanProtoOps> = ProtoModule::new();
 
 type S = Sock<CanProtoOps>;
-
-/// Headroom for mainline's `struct can_skb_priv`, so mainline CAN drivers
-/// accept our skbs too.
-const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
 impl CanProtocol for CanProtoOps {
     const PROTOCOL: i32 = CANPROTO_CAN;
@@ -209,7 +204,7 @@ impl glue::sock::Proto for CanProtoOps {
 
     fn sendmsg(sk: &S, msg: &mut Msg, len: usize) -> Result<usize> {
         let flags = msg_flags(msg);
-        if flags & bindings::MSG_OOB != 0 {
+        if flags & glue::msg::OOB != 0 {
             return Err(neterr::EOPNOTSUPP());
         }
         let (arb, ifindex) = match msg.name() {
@@ -228,7 +223,7 @@ impl glue::sock::Proto for CanProtoOps {
         }
         let frame =
             CanFrame::from_arb(arb, len, &data[..len]).map_err(|e| glue::errno(e.errno()))?;
-        let nonblock = flags & bindings::MSG_DONTWAIT != 0;
+        let nonblock = flags & glue::msg::DONTWAIT != 0;
         if ifindex != 0 {
             let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
             send_one(sk, &dev, &frame, nonblock)?;
@@ -254,7 +249,7 @@ impl glue::sock::Proto for CanProtoOps {
     }
 
     fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
-        if flags as u32 & (bindings::MSG_OOB | bindings::MSG_ERRQUEUE) != 0 {
+        if flags as u32 & (glue::msg::OOB | glue::msg::ERRQUEUE) != 0 {
             return Err(neterr::EOPNOTSUPP());
         }
         let skb = sk.recv_datagram(flags)?;
@@ -273,7 +268,7 @@ impl glue::sock::Proto for CanProtoOps {
             msg.copy_from_skb(&skb, 8, n)?;
         }
         if n < dlc {
-            msg.add_flags(bindings::MSG_TRUNC);
+            msg.add_flags(glue::msg::TRUNC);
         }
         msg.recv_cmsgs(sk, &skb);
         if let Some(arb) = frame.arb() {
@@ -286,7 +281,7 @@ impl glue::sock::Proto for CanProtoOps {
             msg.set_name(&a.encode());
         }
         sk.free_datagram(skb);
-        Ok(if flags as u32 & bindings::MSG_TRUNC != 0 {
+        Ok(if flags as u32 & glue::msg::TRUNC != 0 {
             dlc
         } else {
             n
@@ -309,14 +304,9 @@ fn send_one(sk: &S, dev: &DevRef, frame: &CanFrame, nonblock: bool) -> Result {
     if !dev.is_up() {
         return Err(neterr::ENETDOWN());
     }
-    let mut skb = sk.alloc_send_skb(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, nonblock)?;
-    skb.reserve(SKB_PRIV_LEN);
-    // struct can_skb_priv { int ifindex; int skbcnt; }
-    let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-    if !skb.write_headroom(&prv) || !skb.put_data(&frame.to_bytes()) {
-        return Err(neterr::ENOBUFS());
-    }
+    // With mainline's `struct can_skb_priv` in front, so mainline CAN
+    // drivers accept our skbs too.
+    let skb = glue::can::skb::alloc_tx_frame(sk, dev, &AnyFrame::Classic(*frame), nonblock)?;
     // Thesis sockets always loop their frames back to local receivers.
     rcan_api::send(skb, dev, true)
 }

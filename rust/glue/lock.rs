@@ -9,11 +9,15 @@
 //!   `new_spinlock!` does with `static_lock_class!`), so lockdep tells
 //!   the bus lock of the simulated 82527 from a chip lock of the SJA1000
 //!   driver and reports an inversion between them.
-//! * [`IrqSpinLock`] (made with [`new_irq_spinlock!`]): data shared with
-//!   a hardirq handler, in a value that may move (per-device driver data).
-//! * [`StaticIrqSpinLock`]: the same for a `static` (the simulated bus).
-//! * [`BhSpinLock`]: data in a `static` shared between process context
-//!   and softirqs (`spin_lock_bh`).
+//! * [`SpinLock<T, B>`](SpinLock) (made with [`new_spinlock!`]): data
+//!   under a spinlock in a value that may move (per-device, per-socket,
+//!   per-job data); [`StaticSpinLock<T, B>`](StaticSpinLock): the same in
+//!   a `static`. One implementation; the [`Backend`] `B` says how the lock
+//!   is taken, as upstream's `Lock<T, B: Backend>`:
+//!   * [`Irq`] (`spin_lock_irqsave`): data shared with a hardirq handler
+//!     ([`IrqSpinLock`], [`new_irq_spinlock!`], [`StaticIrqSpinLock`]);
+//!   * [`Bh`] (`spin_lock_bh`): data shared between process context and
+//!     softirqs ([`BhLock`], [`new_bh_spinlock!`], [`BhSpinLock`]).
 //! * [`WaitQueue`]: a `wait_queue_head` in a `static`.
 //!
 //! The statics are initialised in place on first use ([`Once`]): 6.12's
@@ -154,13 +158,87 @@ impl StaticRawLock {
 }
 
 // ---------------------------------------------------------------------------
-// IrqSpinLock: in a value that moves
+// Backends: how a spinlock is taken
 
-/// Data protected by a spinlock taken with interrupts disabled
-/// (`spin_lock_irqsave`): for state shared with a hardirq handler. Usable
-/// in every context; never sleep while holding it. Made with
-/// [`new_irq_spinlock!`], which gives each definition site its own lockdep
-/// class.
+/// How a [`SpinLock`] or [`StaticSpinLock`] takes and releases its
+/// `spinlock_t` (upstream's `sync::lock::Backend`, for the two flavours
+/// rcan needs): [`Irq`] or [`Bh`]. Only this file implements it.
+///
+/// # Safety
+///
+/// [`Backend::lock`] takes the spinlock it is given, exclusively, until
+/// [`Backend::unlock`] is called on the same CPU with the state it
+/// returned.
+pub(crate) unsafe trait Backend {
+    /// What taking the lock saved, for releasing it (the interrupt
+    /// flags of [`Irq`]).
+    type State: Copy;
+
+    /// Takes the lock.
+    ///
+    /// # Safety
+    ///
+    /// `lock` is an initialised spinlock that lives until the matching
+    /// [`Backend::unlock`]; the caller's context allows this flavour.
+    unsafe fn lock(lock: *mut bindings::spinlock_t) -> Self::State;
+
+    /// Releases the lock.
+    ///
+    /// # Safety
+    ///
+    /// `lock` was taken by [`Backend::lock`] on this CPU, which returned
+    /// `state`, and is still held.
+    unsafe fn unlock(lock: *mut bindings::spinlock_t, state: Self::State);
+}
+
+/// `spin_lock_irqsave`: for data shared with a hardirq handler. Usable in
+/// every context.
+pub(crate) struct Irq;
+
+// SAFETY: spin_lock_irqsave takes the lock until spin_unlock_irqrestore
+// with the flags it saved.
+unsafe impl Backend for Irq {
+    type State = ffi::c_ulong;
+
+    unsafe fn lock(lock: *mut bindings::spinlock_t) -> ffi::c_ulong {
+        // SAFETY: an initialised spinlock (the function's contract).
+        unsafe { bindings::rcan_spin_lock_irqsave(lock) }
+    }
+
+    unsafe fn unlock(lock: *mut bindings::spinlock_t, flags: ffi::c_ulong) {
+        // SAFETY: taken with these flags on this CPU (the contract).
+        unsafe { bindings::rcan_spin_unlock_irqrestore(lock, flags) };
+    }
+}
+
+/// `spin_lock_bh`: for data shared between process context and softirqs
+/// (NET_RX, HRTIMER_SOFTIRQ), never with a hardirq handler. Usable in
+/// process and softirq context and in a transmit path (BH already off);
+/// not in hardirq or with interrupts disabled.
+pub(crate) struct Bh;
+
+// SAFETY: spin_lock_bh takes the lock until spin_unlock_bh.
+unsafe impl Backend for Bh {
+    type State = ();
+
+    unsafe fn lock(lock: *mut bindings::spinlock_t) {
+        // SAFETY: an initialised spinlock (the function's contract).
+        unsafe { bindings::rcan_spin_lock_bh(lock) };
+    }
+
+    unsafe fn unlock(lock: *mut bindings::spinlock_t, _: ()) {
+        // SAFETY: taken with spin_lock_bh on this CPU (the contract).
+        unsafe { bindings::rcan_spin_unlock_bh(lock) };
+    }
+}
+
+// ---------------------------------------------------------------------------
+// SpinLock: in a value that moves
+
+/// Data protected by a spinlock taken the [`Backend`] `B` way, in a
+/// value that may move before it is shared (per-device driver data, a
+/// per-socket or per-job lock), of the lockdep class of its
+/// [`new_spinlock!`] site. Never sleep while holding it.
 ///
 /// The `spinlock_t` lives in its own small allocation, so the value can
 /// be moved freely before it is shared.
@@ -169,34 +247,65 @@ impl StaticRawLock {
 ///
 /// `lock` is an initialised spinlock allocated by `rcan_spinlock_alloc`,
 /// freed in Drop.
-pub(crate) struct IrqSpinLock<T> {
+pub(crate) struct SpinLock<T, B: Backend> {
     lock: core::ptr::NonNull<bindings::spinlock_t>,
     data: UnsafeCell<T>,
+    _backend: PhantomData<B>,
 }
 
-// SAFETY: `data` is only reached through a guard holding the lock.
-unsafe impl<T: Send> Sync for IrqSpinLock<T> {}
-// SAFETY: the lock allocation may be freed from any thread.
-unsafe impl<T: Send> Send for IrqSpinLock<T> {}
+/// A [`SpinLock`] taken with interrupts disabled (`spin_lock_irqsave`):
+/// state shared with a hardirq handler. Made with [`new_irq_spinlock!`].
+pub(crate) type IrqSpinLock<T> = SpinLock<T, Irq>;
 
-/// `IrqSpinLock::new(data, name)` with a lockdep class of this call site
-/// (shared by every lock made here, e.g. every device's chip lock).
+/// A [`SpinLock`] taken with bottom halves disabled (`spin_lock_bh`):
+/// state shared between process context and softirqs. Made with
+/// [`new_bh_spinlock!`]. Holding it, one may queue skbs on a socket and
+/// wake its readers (`sock_queue_rcv_skb`), as softirqs do.
+pub(crate) type BhLock<T> = SpinLock<T, Bh>;
+
+// SAFETY: `data` is only reached through a guard holding the lock.
+unsafe impl<T: Send, B: Backend> Sync for SpinLock<T, B> {}
+// SAFETY: the lock allocation may be freed from any thread.
+unsafe impl<T: Send, B: Backend> Send for SpinLock<T, B> {}
+
+/// `SpinLock::<_, B>::new(data, name)` with a lockdep class of this call
+/// site (shared by every lock made here, e.g. every device's chip lock).
 /// Process context (allocates with GFP_KERNEL); `Result`.
+#[allow(unused_macros)]
+macro_rules! new_spinlock {
+    ($data:expr, $name:literal, $backend:ty $(,)?) => {{
+        static CLASS: $crate::glue::lock::LockClassKey = $crate::glue::lock::LockClassKey::new();
+        $crate::glue::lock::SpinLock::<_, $backend>::new($data, ::kernel::c_str!($name), &CLASS)
+    }};
+}
+#[allow(unused_imports)]
+pub(crate) use new_spinlock;
+
+/// An [`IrqSpinLock`] with a lockdep class of this call site.
 // Not every module that compiles the glue has a driver.
 #[allow(unused_macros)]
 macro_rules! new_irq_spinlock {
-    ($data:expr, $name:literal $(,)?) => {{
-        static CLASS: $crate::glue::lock::LockClassKey = $crate::glue::lock::LockClassKey::new();
-        $crate::glue::lock::IrqSpinLock::new($data, ::kernel::c_str!($name), &CLASS)
-    }};
+    ($data:expr, $name:literal $(,)?) => {
+        $crate::glue::lock::new_spinlock!($data, $name, $crate::glue::lock::Irq)
+    };
 }
 #[allow(unused_imports)]
 pub(crate) use new_irq_spinlock;
 
-impl<T> IrqSpinLock<T> {
+/// A [`BhLock`] with a lockdep class of this call site.
+#[allow(unused_macros)]
+macro_rules! new_bh_spinlock {
+    ($data:expr, $name:literal $(,)?) => {
+        $crate::glue::lock::new_spinlock!($data, $name, $crate::glue::lock::Bh)
+    };
+}
+#[allow(unused_imports)]
+pub(crate) use new_bh_spinlock;
+
+impl<T, B: Backend> SpinLock<T, B> {
     /// A new unlocked lock of class `key`, named `name` in lockdep
     /// reports. Process context (allocates with GFP_KERNEL). Use
-    /// [`new_irq_spinlock!`], which makes the key.
+    /// [`new_spinlock!`] (or its two flavours), which makes the key.
     pub(crate) fn new(
         data: T,
         name: &'static CStr,
@@ -207,26 +316,32 @@ impl<T> IrqSpinLock<T> {
         let lock = unsafe { bindings::rcan_spinlock_alloc(name.as_char_ptr(), key.as_ptr()) };
         let lock = core::ptr::NonNull::new(lock).ok_or(kernel::error::code::ENOMEM)?;
         // INVARIANT: just allocated and initialised.
-        Ok(IrqSpinLock {
+        Ok(SpinLock {
             lock,
             data: UnsafeCell::new(data),
+            _backend: PhantomData,
         })
     }
 
-    /// Takes the lock, disabling local interrupts. Any context.
-    pub(crate) fn lock(&self) -> IrqSpinGuard<'_, T> {
-        // SAFETY: an initialised spinlock (invariant).
-        let flags = unsafe { bindings::rcan_spin_lock_irqsave(self.lock.as_ptr()) };
-        IrqSpinGuard {
+    /// Takes the lock. Any context the backend allows ([`Irq`]: every
+    /// context; [`Bh`]: process or softirq, not hardirq, not with
+    /// interrupts disabled).
+    #[inline]
+    pub(crate) fn lock(&self) -> Guard<'_, T, B> {
+        // SAFETY: an initialised spinlock (invariant) that outlives the
+        // guard (borrowed by it).
+        let state = unsafe { B::lock(self.lock.as_ptr()) };
+        // INVARIANT: taken above with `state`.
+        Guard {
             lock: self.lock,
             data: &self.data,
-            flags,
+            state,
             _not_send: PhantomData,
         }
     }
 }
 
-impl<T> Drop for IrqSpinLock<T> {
+impl<T, B: Backend> Drop for SpinLock<T, B> {
     fn drop(&mut self) {
         // SAFETY: nobody can hold the lock (we have `&mut self`); allocated
         // by rcan_spinlock_alloc (invariant).
@@ -234,21 +349,79 @@ impl<T> Drop for IrqSpinLock<T> {
     }
 }
 
-/// A held [`IrqSpinLock`] or [`StaticIrqSpinLock`]: `&mut` access to the
-/// data.
+// ---------------------------------------------------------------------------
+// StaticSpinLock: in a static
+
+/// Data in a `static`, protected by a spinlock taken the [`Backend`] `B`
+/// way, of its own lockdep class (one per static). Never sleep while
+/// holding it.
+pub(crate) struct StaticSpinLock<T, B: Backend> {
+    raw: StaticRawLock,
+    data: UnsafeCell<T>,
+    _backend: PhantomData<B>,
+}
+
+/// A [`StaticSpinLock`] taken with interrupts disabled: any context.
+pub(crate) type StaticIrqSpinLock<T> = StaticSpinLock<T, Irq>;
+
+/// A [`StaticSpinLock`] taken with bottom halves disabled: process and
+/// softirq context, and a transmit path (BH already disabled).
+pub(crate) type BhSpinLock<T> = StaticSpinLock<T, Bh>;
+
+// SAFETY: `data` is only reached through a guard holding the lock.
+unsafe impl<T: Send, B: Backend> Sync for StaticSpinLock<T, B> {}
+
+impl<T, B: Backend> StaticSpinLock<T, B> {
+    /// For a `static`; `name` appears in lockdep reports.
+    pub(crate) const fn new(data: T, name: &'static CStr) -> Self {
+        StaticSpinLock {
+            raw: StaticRawLock::new(name),
+            data: UnsafeCell::new(data),
+            _backend: PhantomData,
+        }
+    }
+
+    /// Takes the lock. Any context the backend allows (see
+    /// [`SpinLock::lock`]).
+    pub(crate) fn lock(&'static self) -> Guard<'static, T, B> {
+        let lock = self.raw.get();
+        // SAFETY: initialised by `get`, static.
+        let state = unsafe { B::lock(lock) };
+        // INVARIANT: taken above with `state`.
+        Guard {
+            // SAFETY: the address of a static is not NULL.
+            lock: unsafe { core::ptr::NonNull::new_unchecked(lock) },
+            data: &self.data,
+            state,
+            _not_send: PhantomData,
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Guard
+
+/// A held [`SpinLock`] or [`StaticSpinLock`]: `&mut` access to the data.
 ///
 /// # Invariants
 ///
-/// `lock` is held, taken with `spin_lock_irqsave` on this CPU with
-/// `flags`; it protects `data`.
-pub(crate) struct IrqSpinGuard<'a, T> {
+/// `lock` is held, taken by `B::lock` on this CPU, which returned
+/// `state`; it protects `data`.
+pub(crate) struct Guard<'a, T, B: Backend> {
     lock: core::ptr::NonNull<bindings::spinlock_t>,
     data: &'a UnsafeCell<T>,
-    flags: ffi::c_ulong,
+    state: B::State,
     _not_send: PhantomData<*mut ()>,
 }
 
-impl<T> Deref for IrqSpinGuard<'_, T> {
+/// A held [`IrqSpinLock`] or [`StaticIrqSpinLock`].
+pub(crate) type IrqSpinGuard<'a, T> = Guard<'a, T, Irq>;
+/// A held [`BhLock`].
+pub(crate) type BhGuard<'a, T> = Guard<'a, T, Bh>;
+/// A held [`BhSpinLock`].
+pub(crate) type BhSpinGuard<T> = Guard<'static, T, Bh>;
+
+impl<T, B: Backend> Deref for Guard<'_, T, B> {
     type Target = T;
     fn deref(&self) -> &T {
         // SAFETY: the lock is held while the guard lives (invariant).
@@ -256,130 +429,19 @@ impl<T> Deref for IrqSpinGuard<'_, T> {
     }
 }
 
-impl<T> DerefMut for IrqSpinGuard<'_, T> {
+impl<T, B: Backend> DerefMut for Guard<'_, T, B> {
     fn deref_mut(&mut self) -> &mut T {
         // SAFETY: the lock is held while the guard lives, exclusively.
         unsafe { &mut *self.data.get() }
     }
 }
 
-impl<T> Drop for IrqSpinGuard<'_, T> {
+impl<T, B: Backend> Drop for Guard<'_, T, B> {
+    #[inline]
     fn drop(&mut self) {
-        // SAFETY: locked with these flags on this CPU (invariant; the
-        // guard is not Send).
-        unsafe { bindings::rcan_spin_unlock_irqrestore(self.lock.as_ptr(), self.flags) };
-    }
-}
-
-// ---------------------------------------------------------------------------
-// StaticIrqSpinLock: in a static
-
-/// Data in a `static`, protected by a spinlock taken with interrupts
-/// disabled (`spin_lock_irqsave`), of its own lockdep class. Any context;
-/// never sleep while holding it.
-pub(crate) struct StaticIrqSpinLock<T> {
-    raw: StaticRawLock,
-    data: UnsafeCell<T>,
-}
-
-// SAFETY: `data` is only reached through a guard holding the lock.
-unsafe impl<T: Send> Sync for StaticIrqSpinLock<T> {}
-
-impl<T> StaticIrqSpinLock<T> {
-    /// For a `static`; `name` appears in lockdep reports.
-    pub(crate) const fn new(data: T, name: &'static CStr) -> Self {
-        StaticIrqSpinLock {
-            raw: StaticRawLock::new(name),
-            data: UnsafeCell::new(data),
-        }
-    }
-
-    /// Takes the lock, disabling local interrupts. Any context.
-    pub(crate) fn lock(&'static self) -> IrqSpinGuard<'static, T> {
-        let lock = self.raw.get();
-        // SAFETY: initialised by `get`, static.
-        let flags = unsafe { bindings::rcan_spin_lock_irqsave(lock) };
-        // INVARIANT: taken above with `flags`.
-        IrqSpinGuard {
-            // SAFETY: the address of a static is not NULL.
-            lock: unsafe { core::ptr::NonNull::new_unchecked(lock) },
-            data: &self.data,
-            flags,
-            _not_send: PhantomData,
-        }
-    }
-}
-
-// ---------------------------------------------------------------------------
-// BhSpinLock: in a static, shared with softirqs
-
-/// Data in a `static`, protected by a spinlock taken with bottom halves
-/// disabled (`spin_lock_bh`), of its own lockdep class: for state shared
-/// between process context and softirqs (receive path, soft hrtimers),
-/// never with a hardirq handler. Usable in process and softirq context,
-/// and in a transmit path (BH already disabled); never sleep while
-/// holding it.
-pub(crate) struct BhSpinLock<T> {
-    raw: StaticRawLock,
-    data: UnsafeCell<T>,
-}
-
-// SAFETY: `data` is only reached through a guard holding the lock.
-unsafe impl<T: Send> Sync for BhSpinLock<T> {}
-
-impl<T> BhSpinLock<T> {
-    /// For a `static`; `name` appears in lockdep reports.
-    pub(crate) const fn new(data: T, name: &'static CStr) -> Self {
-        BhSpinLock {
-            raw: StaticRawLock::new(name),
-            data: UnsafeCell::new(data),
-        }
-    }
-
-    /// Takes the lock with bottom halves disabled.
-    pub(crate) fn lock(&'static self) -> BhSpinGuard<T> {
-        let lock = self.raw.get();
-        // SAFETY: initialised by `get`, static.
-        unsafe { bindings::rcan_spin_lock_bh(lock) };
-        BhSpinGuard {
-            l: self,
-            lock,
-            _not_send: PhantomData,
-        }
-    }
-}
-
-/// A held [`BhSpinLock`].
-///
-/// # Invariants
-///
-/// `lock` (`l`'s) is held, taken with `spin_lock_bh` on this CPU.
-pub(crate) struct BhSpinGuard<T: 'static> {
-    l: &'static BhSpinLock<T>,
-    lock: *mut bindings::spinlock_t,
-    _not_send: PhantomData<*mut ()>,
-}
-
-impl<T> Deref for BhSpinGuard<T> {
-    type Target = T;
-    fn deref(&self) -> &T {
-        // SAFETY: the lock is held while the guard lives.
-        unsafe { &*self.l.data.get() }
-    }
-}
-
-impl<T> DerefMut for BhSpinGuard<T> {
-    fn deref_mut(&mut self) -> &mut T {
-        // SAFETY: the lock is held while the guard lives, exclusively.
-        unsafe { &mut *self.l.data.get() }
-    }
-}
-
-impl<T> Drop for BhSpinGuard<T> {
-    fn drop(&mut self) {
-        // SAFETY: locked in BhSpinLock::lock on this CPU (invariant; not
-        // Send).
-        unsafe { bindings::rcan_spin_unlock_bh(self.lock) };
+        // SAFETY: taken by B::lock with `state` on this CPU (invariant;
+        // the guard is not Send).
+        unsafe { B::unlock(self.lock.as_ptr(), self.state) };
     }
 }
 
@@ -484,120 +546,5 @@ impl WaitQueue {
     pub(crate) fn wake_all(&'static self) {
         // SAFETY: an initialised static wait queue.
         unsafe { bindings::rcan_wake_up_all(self.get()) };
-    }
-}
-
-// ---------------------------------------------------------------------------
-// BhLock: in a value that moves, shared with softirqs
-
-/// Data protected by a spinlock taken with bottom halves disabled
-/// (`spin_lock_bh`), in a value that may move before it is shared (a
-/// per-socket or per-job lock), of the lockdep class of its
-/// [`new_bh_spinlock!`] site: for state shared between process context
-/// and softirqs (NET_RX, HRTIMER_SOFTIRQ), never with a hardirq handler.
-/// Usable in process and softirq context; never sleep while holding it.
-/// Holding it, one may queue skbs on a socket and wake its readers
-/// (`sock_queue_rcv_skb`), as softirqs do.
-///
-/// # Invariants
-///
-/// `lock` is an initialised spinlock allocated by `rcan_spinlock_alloc`,
-/// freed in Drop.
-pub(crate) struct BhLock<T> {
-    lock: core::ptr::NonNull<bindings::spinlock_t>,
-    data: UnsafeCell<T>,
-}
-
-// SAFETY: `data` is only reached through a guard holding the lock.
-unsafe impl<T: Send> Sync for BhLock<T> {}
-// SAFETY: the lock allocation may be freed from any thread.
-unsafe impl<T: Send> Send for BhLock<T> {}
-
-/// `BhLock::new(data, name)` with a lockdep class of this call site.
-/// Process context (allocates with GFP_KERNEL); `Result`.
-#[allow(unused_macros)]
-macro_rules! new_bh_spinlock {
-    ($data:expr, $name:literal $(,)?) => {{
-        static CLASS: $crate::glue::lock::LockClassKey = $crate::glue::lock::LockClassKey::new();
-        $crate::glue::lock::BhLock::new($data, ::kernel::c_str!($name), &CLASS)
-    }};
-}
-#[allow(unused_imports)]
-pub(crate) use new_bh_spinlock;
-
-impl<T> BhLock<T> {
-    /// A new unlocked lock of class `key`, named `name` in lockdep
-    /// reports. Process context (allocates with GFP_KERNEL). Use
-    /// [`new_bh_spinlock!`], which makes the key.
-    pub(crate) fn new(
-        data: T,
-        name: &'static CStr,
-        key: &'static LockClassKey,
-    ) -> kernel::error::Result<Self> {
-        // SAFETY: allocates and initialises a spinlock, or returns NULL;
-        // `name` and `key` are 'static, as lockdep keeps them.
-        let lock = unsafe { bindings::rcan_spinlock_alloc(name.as_char_ptr(), key.as_ptr()) };
-        let lock = core::ptr::NonNull::new(lock).ok_or(kernel::error::code::ENOMEM)?;
-        // INVARIANT: just allocated and initialised.
-        Ok(BhLock {
-            lock,
-            data: UnsafeCell::new(data),
-        })
-    }
-
-    /// Takes the lock with bottom halves disabled. Process or softirq
-    /// context (not hardirq, not with interrupts disabled).
-    pub(crate) fn lock(&self) -> BhGuard<'_, T> {
-        // SAFETY: an initialised spinlock (invariant).
-        unsafe { bindings::rcan_spin_lock_bh(self.lock.as_ptr()) };
-        // INVARIANT: taken above.
-        BhGuard {
-            lock: self.lock,
-            data: &self.data,
-            _not_send: PhantomData,
-        }
-    }
-}
-
-impl<T> Drop for BhLock<T> {
-    fn drop(&mut self) {
-        // SAFETY: nobody can hold the lock (we have `&mut self`); allocated
-        // by rcan_spinlock_alloc (invariant).
-        unsafe { bindings::rcan_spinlock_free(self.lock.as_ptr()) };
-    }
-}
-
-/// A held [`BhLock`]: `&mut` access to the data.
-///
-/// # Invariants
-///
-/// `lock` is held, taken with `spin_lock_bh` on this CPU; it protects
-/// `data`.
-pub(crate) struct BhGuard<'a, T> {
-    lock: core::ptr::NonNull<bindings::spinlock_t>,
-    data: &'a UnsafeCell<T>,
-    _not_send: PhantomData<*mut ()>,
-}
-
-impl<T> Deref for BhGuard<'_, T> {
-    type Target = T;
-    fn deref(&self) -> &T {
-        // SAFETY: the lock is held while the guard lives (invariant).
-        unsafe { &*self.data.get() }
-    }
-}
-
-impl<T> DerefMut for BhGuard<'_, T> {
-    fn deref_mut(&mut self) -> &mut T {
-        // SAFETY: the lock is held while the guard lives, exclusively.
-        unsafe { &mut *self.data.get() }
-    }
-}
-
-impl<T> Drop for BhGuard<'_, T> {
-    fn drop(&mut self) {
-        // SAFETY: locked with spin_lock_bh on this CPU (invariant; the
-        // guard is not Send).
-        unsafe { bindings::rcan_spin_unlock_bh(self.lock.as_ptr()) };
     }
 }

@@ -132,6 +132,7 @@ pub(crate) mod neterr {
         ECONNREFUSED,
         EAFNOSUPPORT,
         EDESTADDRREQ,
+        EISCONN,
         EMSGSIZE,
         ENETDOWN,
         ENOBUFS,
@@ -189,4 +190,24 @@ pub(crate) fn kvec_remove_all<T: Copy + PartialEq>(v: &mut kernel::alloc::KVec<T
     // SAFETY: `len <= v.len()`; the elements past it are `Copy` (no drop
     // needed) and are simply forgotten.
     unsafe { v.set_len(len) };
+}
+
+/// The `msg_flags` bits of sendmsg and recvmsg (`<linux/socket.h>`) that
+/// protocols test and set, named so that protocol code needs no
+/// `bindings`.
+pub(crate) mod msg {
+    use super::bindings;
+
+    /// Out-of-band data (refused by every CAN protocol).
+    pub(crate) const OOB: u32 = bindings::MSG_OOB;
+    /// Received: the frame came from this host (CAN_RAW, CAN_BCM).
+    pub(crate) const DONTROUTE: u32 = bindings::MSG_DONTROUTE;
+    /// Received: truncated; asked for in recvmsg: return the full length.
+    pub(crate) const TRUNC: u32 = bindings::MSG_TRUNC;
+    /// Do not block.
+    pub(crate) const DONTWAIT: u32 = bindings::MSG_DONTWAIT;
+    /// Received: the frame came from the reading socket itself.
+    pub(crate) const CONFIRM: u32 = bindings::MSG_CONFIRM;
+    /// Read the error queue.
+    pub(crate) const ERRQUEUE: u32 = bindings::MSG_ERRQUEUE;
 }

@@ -49,21 +49,18 @@ use kernel::prelude::*;
 use kernel::str::CStr;
 
 use crate::glue::bindings;
+use crate::glue::can::skb::alloc_frame;
 use crate::glue::hrtimer::{
     ktime_get_mono_ns, ktime_get_real_ns, ClockId, HrTimer, HrTimerCallback, HrTimerMode,
 };
 use crate::glue::net::Net;
 use crate::glue::netdev::DevRef;
-use crate::glue::skb::Skb;
 use crate::rcan_api;
-use crate::rcan_core::frame::CAN_FRAME_LEN;
+use crate::rcan_core::frame::AnyFrame;
 use crate::rcan_core::timesvc::{
     self, Decision, Takeover, TimeFrame, DEFAULT_TIMEOUT_MS, DEFAULT_VEHICLE, IFNAME_MAX,
     SOURCE_RTIME, SOURCE_TIME,
 };
-
-/// Headroom for mainline's `struct can_skb_priv`.
-const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
 /// Parameter numbers shared with the C file (`ticker_params.c`).
 const PARAM_VEHICLE: u32 = 0;
@@ -306,15 +303,8 @@ fn send_frame(p: &Params, source: u8, second: i64) -> core::result::Result<(), D
         return Err(DevState::Down);
     }
     let enomem = DevState::Failed(ENOMEM.to_errno());
-    let mut skb =
-        Skb::alloc(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, crate::glue::GFP_ATOMIC).ok_or(enomem)?;
-    skb.reserve(SKB_PRIV_LEN);
-    // struct can_skb_priv { int ifindex; int skbcnt; ... }
-    let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-    if !skb.write_headroom(&prv) || !skb.put_data(&frame.to_bytes()) {
-        return Err(enomem);
-    }
+    let skb =
+        alloc_frame(&dev, &AnyFrame::Classic(frame), crate::glue::GFP_ATOMIC).ok_or(enomem)?;
     // Before sending: the echo may come back on another CPU before
     // rcan_send returns.
     let own = u64::from_ne_bytes(frame.data);

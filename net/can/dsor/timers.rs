@@ -15,16 +15,15 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use kernel::prelude::*;
 
 use crate::engine::{now_ms, ENGINE, WAITQ};
+use crate::glue;
 use crate::glue::hrtimer::{ktime_get_mono_ns, HrTimer, HrTimerCallback};
 use crate::glue::net::Net;
 use crate::glue::netdev::DevRef;
 use crate::glue::neterr;
-use crate::glue::skb::Skb;
-use crate::glue::{self, bindings};
 use crate::rcan_api;
 use crate::rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK};
 use crate::rcan_core::dsor_wire::Frame;
-use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use crate::rcan_core::frame::{AnyFrame, CanFrame};
 
 /// Frames sent per batch (taken from the queue under the lock).
 const BATCH: usize = 16;
@@ -34,8 +33,6 @@ const BATCH: usize = 16;
 /// time) does not hold the softirq for its whole length. About the 2 ms
 /// the kernel gives one softirq pass at ~2 us per frame (~8 ms under TCG).
 const FRAMES_PER_RUN: usize = 1024;
-/// Headroom for mainline's `struct can_skb_priv`.
-const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
 /// Set by module exit: the timer neither sends nor re-arms.
 pub(crate) static STOPPING: AtomicBool = AtomicBool::new(false);
@@ -178,14 +175,8 @@ fn send_frame(dev: &DevRef, f: &Frame) -> Result {
     };
     let n = usize::from(f.len.min(8));
     cf.data[..n].copy_from_slice(&f.data[..n]);
-    let mut skb = Skb::alloc(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, glue::GFP_ATOMIC)
+    let skb = glue::can::skb::alloc_frame(dev, &AnyFrame::Classic(cf), glue::GFP_ATOMIC)
         .ok_or(neterr::ENOBUFS())?;
-    skb.reserve(SKB_PRIV_LEN);
-    let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-    if !skb.write_headroom(&prv) || !skb.put_data(&cf.to_bytes()) {
-        return Err(neterr::ENOBUFS());
-    }
     // Looped back, so that a node can talk to itself over canloop and
     // local CAN_RAW sockets see DSOR traffic.
     rcan_api::send(skb, dev, true)

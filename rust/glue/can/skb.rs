@@ -8,14 +8,27 @@
 //! when the skb is marked for sending ([`Skb::set_can_tx`], by pf_can) or
 //! as received ([`Skb::set_can_rx`]), as mainline's `can_send` decides it.
 //!
-//! Protocols' send paths use [`alloc_tx`] (charged to the socket) or
-//! [`alloc_frame`]; drivers use [`alloc_rx`] for frames from the bus.
+//! Every CAN skb of rcan is made here:
+//!
+//! * a socket's send path: [`alloc_tx`] (charged to the socket's send
+//!   buffer, the caller appends the user's bytes: CAN_RAW) or
+//!   [`alloc_tx_frame`] (with a frame built in the kernel: CANPROTO_CAN);
+//! * senders without a send buffer to charge (timers, receive callbacks):
+//!   [`alloc_frame`] (a typed frame: the DSOR engine and time service) or
+//!   [`alloc_image`] (a frame image kept as the user wrote it, copied
+//!   verbatim as mainline's `bcm_can_tx` copies it), and
+//!   [`alloc_image_for`] for such a frame a socket sends (CAN_BCM);
+//! * drivers, for frames from the bus: [`alloc_rx`] (the 82527 driver
+//!   does not use it yet).
+//!
+//! Echoes are not built: an echoing driver hands the sent skb back
+//! ([`Skb::can_echo_done`], canloop's reflection), as mainline does.
 
 use crate::glue::bindings;
 use crate::glue::netdev::NetDev;
 use crate::glue::skb::Skb;
 use crate::glue::sock::{Proto, Sock};
-use crate::rcan_core::frame::AnyFrame;
+use crate::rcan_core::frame::{AnyFrame, CANFD_MTU, CAN_MTU};
 use kernel::prelude::*;
 
 /// Headroom for mainline's `struct can_skb_priv { int ifindex; int
@@ -39,6 +52,13 @@ fn put_frame(skb: &mut Skb, frame: &AnyFrame) -> bool {
     }
 }
 
+/// Whether `image` has the size of a classic (`CAN_MTU`) or CAN FD
+/// (`CANFD_MTU`) frame: the only buffers [`alloc_image`] takes, as
+/// pf_can sends nothing else.
+fn is_frame_size(image: &[u8]) -> bool {
+    image.len() == CAN_MTU || image.len() == CANFD_MTU
+}
+
 /// An skb for `len` bytes a socket sends by `dev`, charged to the
 /// socket's send buffer (mainline `raw_sendmsg`: `sock_alloc_send_skb`,
 /// `can_skb_reserve`, `can_skb_prv(skb)->ifindex`); the caller appends
@@ -58,12 +78,63 @@ pub(crate) fn alloc_tx<T: Proto>(
     Ok(skb)
 }
 
+/// [`alloc_tx`] with `frame` appended: a frame the kernel built for a
+/// socket (CANPROTO_CAN's thesis API, 5.2.3). Process context; blocks
+/// while the send buffer is full unless `nonblock` (EAGAIN).
+pub(crate) fn alloc_tx_frame<T: Proto>(
+    sk: &Sock<T>,
+    dev: &NetDev,
+    frame: &AnyFrame,
+    nonblock: bool,
+) -> Result<Skb> {
+    let mut skb = alloc_tx(sk, dev, frame.mtu(), nonblock)?;
+    if !put_frame(&mut skb, frame) {
+        return Err(crate::glue::neterr::ENOBUFS());
+    }
+    Ok(skb)
+}
+
 /// An skb holding `frame`, to be sent by `dev` by a sender without a
 /// socket buffer to charge (timers, kernel receivers). Any context with
 /// `GFP_ATOMIC`; `None` without memory.
 pub(crate) fn alloc_frame(dev: &NetDev, frame: &AnyFrame, gfp: bindings::gfp_t) -> Option<Skb> {
     let mut skb = Skb::alloc(SKB_PRIV_LEN + frame.mtu() as u32, gfp)?;
     (put_priv(&mut skb, dev.ifindex()) && put_frame(&mut skb, frame)).then_some(skb)
+}
+
+/// An skb holding the frame image `image` (a `struct can_frame` or
+/// `struct canfd_frame` as user space wrote it: 16 or 72 bytes, copied
+/// byte for byte, reserved fields included), to be sent by `dev`. For a
+/// protocol that keeps frames as images and sends them unchanged
+/// (mainline `bcm_can_tx`: `skb_put_data(skb, cf, op->cfsiz)`); whether
+/// the frame suits the device is pf_can's check at send time. Any context
+/// with `GFP_ATOMIC`, process context with `GFP_KERNEL`; `None` without
+/// memory or if `image` is neither size.
+pub(crate) fn alloc_image(dev: &NetDev, image: &[u8], gfp: bindings::gfp_t) -> Option<Skb> {
+    if !is_frame_size(image) {
+        return None;
+    }
+    let mut skb = Skb::alloc(SKB_PRIV_LEN + image.len() as u32, gfp)?;
+    (put_priv(&mut skb, dev.ifindex()) && skb.put_data(image)).then_some(skb)
+}
+
+/// [`alloc_image`] for a frame that `sk` sends outside a system call's
+/// send buffer (mainline BCM's timers and replies, and its TX_SEND):
+/// `sk` becomes the skb's owner the way mainline's `can_skb_set_owner`
+/// makes it (a counted reference, no send-buffer accounting), so that
+/// receivers of the echo see who sent it, and the skb takes the socket's
+/// priority and mark. Any context with `GFP_ATOMIC`, process context with
+/// `GFP_KERNEL`; `None` as [`alloc_image`].
+pub(crate) fn alloc_image_for<T: Proto>(
+    sk: &Sock<T>,
+    dev: &NetDev,
+    image: &[u8],
+    gfp: bindings::gfp_t,
+) -> Option<Skb> {
+    let mut skb = alloc_image(dev, image, gfp)?;
+    skb.set_owner(sk);
+    skb.set_sock_params(sk);
+    Some(skb)
 }
 
 /// An skb holding `frame` as received on `dev` (mainline `alloc_can_skb`

@@ -68,6 +68,7 @@
 
 use crate::glue::bindings;
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
+use crate::glue::can::skb::alloc_rx;
 use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::params::Param;
@@ -75,7 +76,7 @@ use crate::glue::skb::Skb;
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::bittiming::{self, SJA1000_BITTIMING_CONST};
 use crate::rcan_core::candev::{self, CanState, Settings};
-use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::sja1000::{
     bitrate, hw_filter, restarted_frame, Chip, Config, Event, HwFilter, Regs, Setup, CDR_PELICAN,
     SETUP_LEN,
@@ -183,9 +184,6 @@ const MAX_IRQ_ROUNDS: usize = 20;
 /// a fast sender blocks in sendmsg (thesis 5.2.3) instead of getting
 /// ENOBUFS from a full queue, as it would with mainline's 10.
 const TX_QUEUE_LEN: u32 = 1000;
-
-/// Headroom for mainline's `struct can_skb_priv` in received skbs.
-const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
 /// The chip and what goes with it, under the device's lock.
 pub(crate) struct ChipState<R: Regs> {
@@ -301,24 +299,88 @@ fn wanted_filter(dev: &NetDev) -> HwFilter {
     rcan_api::wanted(dev, |w| hw_filter(w, false)).unwrap_or(HwFilter::OPEN)
 }
 
-/// Reprograms the hardware filter if it changed. Any context; takes the
-/// chip lock. Frames already accepted are handed up first; while a frame
-/// waits in the TX buffer (a reset would abort it) the change is left to
-/// the transmit-completion interrupt.
-fn refilter<R: Regs + Send + 'static>(dev: &NetDev, p: &Sja1000Priv<R>) {
-    let f = wanted_filter(dev);
-    let mut st = p.chip.lock();
-    if st.filter == f && !st.filter_pending {
-        return;
-    }
-    st.filter = f;
-    st.filter_pending = true;
-    apply_pending_filter(dev, &mut st);
+/// Frames read from the receive FIFO while the chip lock is held, handed
+/// to the stack once it is released ([`RxBatch::hand_up`]). In process
+/// context `netif_rx` must not run with interrupts disabled: its
+/// `local_bh_enable` warns there, and may run the NET_RX softirq on the
+/// spot, whose receivers may send on this device, and `start_xmit` takes
+/// the chip lock this CPU holds. On the stack: 32 frames of 16 bytes.
+struct RxBatch {
+    frames: [CanFrame; RX_BATCH],
+    n: usize,
+    /// Frames that did not fit (none: the chip's FIFO holds at most 21,
+    /// and `Chip::set_filter` reads at most 32); counted as dropped.
+    lost: u32,
+    /// The filter could not be programmed (logged with the frames).
+    failed: bool,
 }
 
-/// Programs `st.filter` if a change is pending and the TX buffer is free.
-/// Chip lock held (any context).
-fn apply_pending_filter<R: Regs>(dev: &NetDev, st: &mut ChipState<R>) {
+/// Frames one [`RxBatch`] holds: the most `Chip::set_filter` drains.
+const RX_BATCH: usize = 32;
+
+impl RxBatch {
+    fn new() -> Self {
+        RxBatch {
+            frames: [CanFrame::default(); RX_BATCH],
+            n: 0,
+            lost: 0,
+            failed: false,
+        }
+    }
+
+    /// Keeps `f` for later. Any context (chip lock held).
+    fn push(&mut self, f: CanFrame) {
+        match self.frames.get_mut(self.n) {
+            Some(slot) => {
+                *slot = f;
+                self.n += 1;
+            }
+            None => self.lost += 1,
+        }
+    }
+
+    /// Hands the frames up in the order they were read, and logs a
+    /// failed reprogramming. Any context without the chip lock.
+    fn hand_up(self, dev: &NetDev) {
+        for f in &self.frames[..self.n] {
+            rx_frame(dev, f);
+        }
+        for _ in 0..self.lost {
+            dev.stats_rx_dropped();
+        }
+        if self.failed {
+            pr_warn!("{}: cannot reprogram the acceptance filter\n", dev.name());
+        }
+    }
+}
+
+/// Reprograms the hardware filter if it changed. Process context (the
+/// filter listener, [`FilterListener::filters_changed`]) or with BH
+/// disabled (`set_rx_mode`, under the device's address lock); takes the
+/// chip lock. Frames already accepted are read out first and handed up
+/// after the lock is released; while a frame waits in the TX buffer (a
+/// reset would abort it) the change is left to the transmit-completion
+/// interrupt.
+fn refilter<R: Regs + Send + 'static>(dev: &NetDev, p: &Sja1000Priv<R>) {
+    let f = wanted_filter(dev);
+    let mut rx = RxBatch::new();
+    {
+        let mut st = p.chip.lock();
+        if st.filter == f && !st.filter_pending {
+            return;
+        }
+        st.filter = f;
+        st.filter_pending = true;
+        apply_pending_filter(&mut st, &mut rx);
+    }
+    rx.hand_up(dev);
+}
+
+/// Programs `st.filter` if a change is pending and the TX buffer is free;
+/// the frames the chip had accepted before the reset go to `rx`, for the
+/// caller to hand up once it has released the chip lock. Chip lock held:
+/// process context, BH-disabled, or the interrupt handler (hardirq).
+fn apply_pending_filter<R: Regs>(st: &mut ChipState<R>, rx: &mut RxBatch) {
     if !st.filter_pending || st.echo.is_some() {
         return;
     }
@@ -336,30 +398,24 @@ fn apply_pending_filter<R: Regs>(dev: &NetDev, st: &mut ChipState<R>) {
         .chip
         .set_filter(&f, true, |ev| {
             if let Event::Rx(fr) = ev {
-                rx_frame(dev, &fr);
+                rx.push(fr);
             }
         })
         .is_err()
     {
-        pr_warn!("{}: cannot reprogram the acceptance filter\n", dev.name());
+        rx.failed = true;
     }
 }
 
-/// Hands a frame to the network stack. Any context.
+/// Hands a frame to the network stack (`netif_rx`). Hardirq (the
+/// interrupt handler, chip lock held) or process/softirq context without
+/// the chip lock: `netif_rx` must not run with interrupts disabled
+/// outside hardirq.
 fn rx_frame(dev: &NetDev, frame: &CanFrame) {
-    let Some(mut skb) = Skb::alloc(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, crate::glue::GFP_ATOMIC)
-    else {
+    let Some(skb) = alloc_rx(dev, &AnyFrame::Classic(*frame)) else {
         dev.stats_rx_dropped();
         return;
     };
-    skb.reserve(SKB_PRIV_LEN);
-    let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-    if !skb.write_headroom(&prv) || !skb.put_data(&frame.to_bytes()) {
-        dev.stats_rx_dropped();
-        return;
-    }
-    skb.set_can_rx(dev);
     if frame.can_id & crate::rcan_core::arb::CAN_ERR_FLAG == 0 {
         dev.stats_rx(frame.dlc() as u32);
     }
@@ -379,6 +435,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     const HAS_SET_RX_MODE: bool = true;
     const HAS_PRIVATE_IOCTL: bool = true;
 
+    /// `sja1000config`'s ioctls. Process context (RTNL held); takes the
+    /// chip lock, copies to and from user space outside it.
     fn private_ioctl(dev: &Dev<Self>, p: &Self::Priv, cmd: u32, data: &UserBuf) -> Result {
         match cmd {
             SIOCRCANSJA1000GET => {
@@ -462,6 +520,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         Some(link_setup::<Self>())
     }
 
+    /// `ip link set canX up`. Process context, RTNL; requests the
+    /// interrupt line before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         let set = p.can.open_check(dev.name())?;
         let (btr0, btr1) = bittiming::to_btr(
@@ -498,6 +558,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         Ok(())
     }
 
+    /// `ip link set canX down`. Process context, RTNL; the echo skb is
+    /// freed and the interrupt line released after the chip lock.
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         dev.stop_queue();
         // First, so that no restart starts the chip again.
@@ -514,6 +576,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         Ok(())
     }
 
+    /// The transmit path: BH disabled, the device's TX lock held
+    /// (softirq, or process context with BH off); takes the chip lock.
     fn start_xmit(skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
         let Some((skb, frame)) = skb.can_xmit_start(dev) else {
             return Xmit::Ok;
@@ -543,13 +607,21 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         Xmit::Ok
     }
 
+    /// Promiscuous mode changed. BH disabled, the device's address lock
+    /// held (process context); see [`refilter`].
     fn set_rx_mode(dev: &Dev<Self>, p: &Self::Priv) {
         refilter(dev, p);
     }
 
+    /// Hardirq context (the line may be shared with the other channels
+    /// of the card and with other devices), or HRTIMER_SOFTIRQ softirq
+    /// for the simulated card, whose bus timer calls it
+    /// ([`Channel::irq`]) with interrupts enabled. Takes the chip lock
+    /// (interrupts off); frames from the bus and echoes go up under it,
+    /// as mainline's handler hands them up from hardirq: `netif_rx` only
+    /// queues them on the backlog there (in hardirq or softirq it neither
+    /// disables nor re-enables bottom halves).
     fn irq(dev: &Dev<Self>, p: &Self::Priv) -> bool {
-        // Hardirq context; the line may be shared with the other channels
-        // of the card and with other devices.
         let mut st = p.chip.lock();
         let ChipState {
             chip,
@@ -614,13 +686,18 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         // The board's acknowledgement (PITA on PCAN-PCI) comes after the
         // chip's causes are cleared, or the line would fire again at once.
         let board = chip.regs.irq_done();
-        // A filter change that waited for the TX buffer.
-        apply_pending_filter(dev, &mut st);
+        // A filter change that waited for the TX buffer; the frames it
+        // reads out go up after the chip lock, like refilter's.
+        let mut rx = RxBatch::new();
+        apply_pending_filter(&mut st, &mut rx);
+        drop(st);
+        rx.hand_up(dev);
         handled || board
     }
 }
 
 impl<R: Regs + Send + 'static> FilterListener for Sja1000<R> {
+    /// Process context, pf_can's writers' mutex held; see [`refilter`].
     fn filters_changed(dev: &Dev<Self>, p: &Self::Priv) {
         refilter(dev, p);
     }
@@ -648,6 +725,8 @@ impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
         p.xtal_hz / 2
     }
 
+    /// For `ip -d link` and `changelink` (rtnetlink). Process context,
+    /// RTNL; takes the chip lock.
     fn state(_dev: &Dev<Self>, p: &Self::Priv) -> CanState {
         let st = p.chip.lock();
         if !st.running {
@@ -656,6 +735,8 @@ impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
         st.chip.can_state()
     }
 
+    /// The chip's error counters for `ip -d link`. Process context,
+    /// RTNL; takes the chip lock.
     fn berr_counter(_dev: &Dev<Self>, p: &Self::Priv) -> (u16, u16) {
         let mut st = p.chip.lock();
         let tx = st.chip.regs.read(crate::rcan_core::sja1000::reg::TXERR);
