@@ -179,8 +179,11 @@ impl NetDev {
 
     /// Hands a received frame to the network stack (`netif_rx`): it is
     /// queued on this CPU's backlog and reaches the protocol handlers
-    /// (pf_can's `can_rcv`, packet sockets, tc) in NET_RX softirq. Any
-    /// context.
+    /// (pf_can's `can_rcv`, packet sockets, tc) in NET_RX softirq.
+    /// Hardirq, softirq, or process context with interrupts enabled:
+    /// never in process context with interrupts off (under an irqsave
+    /// lock), where `netif_rx`'s `local_bh_enable` warns and may run
+    /// NET_RX, and with it receivers that transmit, on the spot.
     pub(crate) fn rx(&self, skb: Skb) {
         let _ = self;
         // SAFETY: netif_rx consumes the skb reference in every case.
