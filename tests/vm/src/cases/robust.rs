@@ -349,7 +349,10 @@ fn modules_load_unload_cycles(ctx: &mut Ctx) -> TestResult {
         total += took;
     }
     ctx.unload_all()?;
-    ctx.note(format!("{n} cycles of 16 modules in {total:.1} s"));
+    ctx.note(format!(
+        "{n} cycles of {} modules in {total:.1} s",
+        plan.len()
+    ));
     if let Some(before) = before {
         let t0 = Instant::now();
         let after = kmemleak_reports(true)?.unwrap_or_default();
