@@ -18,8 +18,8 @@
 //!   [`alloc_image`] (a frame image kept as the user wrote it, copied
 //!   verbatim as mainline's `bcm_can_tx` copies it), and
 //!   [`alloc_image_for`] for such a frame a socket sends (CAN_BCM);
-//! * drivers, for frames from the bus: [`alloc_rx`] (the 82527 driver
-//!   does not use it yet).
+//! * drivers, for frames from the bus: [`alloc_rx`] (the SJA1000 and
+//!   82527 drivers).
 //!
 //! Echoes are not built: an echoing driver hands the sent skb back
 //! ([`Skb::can_echo_done`], canloop's reflection), as mainline does.

@@ -61,13 +61,14 @@
 
 use crate::glue::bindings;
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
+use crate::glue::can::skb::alloc_rx;
 use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::skb::Skb;
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::bittiming::{self, I82527_BITTIMING_CONST};
 use crate::rcan_core::candev::{self, CanState, Settings};
-use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_FRAME_LEN};
 use crate::rcan_core::i82527::{
     bitrate, error_frame, masks_for, sys_clock, AnswerReq, Chip, Config, Event, I82527Error, Masks,
     Regs, State, ANSWER_LEN, CTRLMODE_SUPPORTED,
@@ -82,9 +83,6 @@ const MAX_IRQ_ROUNDS: usize = 32;
 /// Transmit queue length (see the SJA1000 driver: a fast sender blocks in
 /// sendmsg rather than getting ENOBUFS).
 const TX_QUEUE_LEN: u32 = 1000;
-
-/// Headroom for mainline's `struct can_skb_priv` in received skbs.
-const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv>() as u32;
 
 /// Frames the receive queue holds between two polls. The chip has 15
 /// message objects and one interrupt handles at most `MAX_IRQ_ROUNDS`
@@ -272,22 +270,14 @@ fn enqueue(dev: &NetDev, rxq: &mut RxQueue, skb: Skb) {
     }
 }
 
-/// Builds the skb of a frame from the bus (or an error frame) and queues
-/// it for the NAPI poll. Chip lock held (interrupt handler).
+/// Builds the skb of a frame from the bus (or an error frame) with the
+/// one CAN skb builder ([`alloc_rx`]) and queues it for the NAPI poll.
+/// Chip lock held (interrupt handler).
 fn rx_frame(dev: &NetDev, rxq: &mut RxQueue, frame: &CanFrame) {
-    let Some(mut skb) = Skb::alloc(SKB_PRIV_LEN + CAN_FRAME_LEN as u32, crate::glue::GFP_ATOMIC)
-    else {
+    let Some(skb) = alloc_rx(dev, &AnyFrame::Classic(*frame)) else {
         dev.stats_rx_dropped();
         return;
     };
-    skb.reserve(SKB_PRIV_LEN);
-    let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&dev.ifindex().to_ne_bytes());
-    if !skb.write_headroom(&prv) || !skb.put_data(&frame.to_bytes()) {
-        dev.stats_rx_dropped();
-        return;
-    }
-    skb.set_can_rx(dev);
     if frame.can_id & crate::rcan_core::arb::CAN_ERR_FLAG == 0 {
         dev.stats_rx(frame.dlc() as u32);
     }
