@@ -18,7 +18,9 @@
 //! [`isa`] (claimed memory/port windows, interrupt autoprobe), [`percpu`]
 //! (per-CPU counters), [`params`] (module parameters of the C shims),
 //! [`kmod`] (loading modules on demand), [`net`] (network namespaces),
-//! [`can`] (the CAN framework: the receive table).
+//! [`can`] (the CAN framework: the receive table), [`simcard`]
+//! (simulated CAN cards on a simulated bus, for the drivers' simulated
+//! front-ends).
 #![allow(dead_code)]
 
 #[allow(
@@ -56,6 +58,7 @@ pub(crate) mod pci;
 pub(crate) mod percpu;
 pub(crate) mod procfs;
 pub(crate) mod skb;
+pub(crate) mod simcard;
 pub(crate) mod sock;
 pub(crate) mod sync;
 
