@@ -49,7 +49,7 @@ use kernel::prelude::*;
 
 use crate::{glue, rcan_core};
 
-use glue::bindings;
+use glue::can::ctrl;
 use glue::lock::{new_irq_spinlock, IrqSpinLock};
 use glue::netdev::{Dev, Driver, Napi, Registration, Setup, Xmit};
 use glue::params::Param;
@@ -139,14 +139,10 @@ impl Driver for LoopDriver {
 
     fn setup() -> Setup {
         Setup {
-            type_: bindings::ARPHRD_CAN as u16,
-            flags: bindings::net_device_flags_IFF_NOARP | bindings::net_device_flags_IFF_ECHO,
-            mtu: CAN_MTU as u32,
-            hard_header_len: 0,
-            tx_queue_len: 0,
             // start_xmit never stops the queue: a qdisc would only add
             // work per frame.
             no_queue: true,
+            ..ctrl::setup(CAN_MTU, 0)
         }
     }
 

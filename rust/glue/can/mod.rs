@@ -11,11 +11,14 @@
 //! * [`dev`]: the CAN device layer, drivers' side (`CanDevice`), and the
 //!   C ABI to `rcan_dev`, which registers the "can" link kind (its
 //!   rtnetlink callbacks are `link.rs`, compiled into `rcan_dev` only).
+//! * [`ctrl`]: what the controller drivers share around their chips
+//!   (device setup, open/stop, received frames, echoes, statistics).
 //!
 //! `family.rs` (the PF_CAN family and the C entry points `rcan_pf`
 //! exports) is compiled into `rcan_pf` only, by `pf_can_mod.rs`.
 
 pub(crate) mod abi;
+pub(crate) mod ctrl;
 pub(crate) mod dev;
 pub(crate) mod proto;
 pub(crate) mod rx;

@@ -59,16 +59,15 @@
 //! occurrences of 11 recessive bits.
 #![forbid(unsafe_code)]
 
-use crate::glue::bindings;
+use crate::glue::can::ctrl::{self, SIOCDEVPRIVATE};
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
-use crate::glue::can::skb::alloc_rx;
 use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::skb::Skb;
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::bittiming::{self, I82527_BITTIMING_CONST};
 use crate::rcan_core::candev::{self, CanState, Settings};
-use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_FRAME_LEN};
+use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_MTU};
 use crate::rcan_core::i82527::{
     bitrate, error_frame, masks_for, sys_clock, AnswerReq, Chip, Config, Event, I82527Error, Masks,
     Regs, State, ANSWER_LEN, CTRLMODE_SUPPORTED,
@@ -271,21 +270,14 @@ fn enqueue(dev: &NetDev, rxq: &mut RxQueue, skb: Skb) {
 }
 
 /// Builds the skb of a frame from the bus (or an error frame) with the
-/// one CAN skb builder ([`alloc_rx`]) and queues it for the NAPI poll.
+/// one CAN skb builder ([`ctrl::rx_skb`]) and queues it for the NAPI poll.
 /// Chip lock held (interrupt handler).
 fn rx_frame(dev: &NetDev, rxq: &mut RxQueue, frame: &CanFrame) {
-    let Some(skb) = alloc_rx(dev, &AnyFrame::Classic(*frame)) else {
-        dev.stats_rx_dropped();
-        return;
-    };
-    if frame.can_id & crate::rcan_core::arb::CAN_ERR_FLAG == 0 {
-        dev.stats_rx(frame.dlc() as u32);
+    if let Some(skb) = ctrl::rx_skb(dev, &AnyFrame::Classic(*frame)) {
+        enqueue(dev, rxq, skb);
     }
-    enqueue(dev, rxq, skb);
 }
 
-/// `SIOCDEVPRIVATE`: the first device-private ioctl number.
-const SIOCDEVPRIVATE: u32 = 0x89F0;
 /// Reads `struct rcan_i82527_setup` (`<linux/can/rcan_i82527.h>`).
 const SIOCRCANI82527GET: u32 = SIOCDEVPRIVATE;
 /// Publishes or withdraws a remote-frame answer (`struct
@@ -338,34 +330,22 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     }
 
     fn setup() -> crate::glue::netdev::Setup {
-        crate::glue::netdev::Setup {
-            type_: bindings::ARPHRD_CAN as u16,
-            flags: bindings::net_device_flags_IFF_NOARP | bindings::net_device_flags_IFF_ECHO,
-            mtu: CAN_FRAME_LEN as u32,
-            hard_header_len: 0,
-            tx_queue_len: TX_QUEUE_LEN,
-            no_queue: false,
-        }
+        ctrl::setup(CAN_MTU, TX_QUEUE_LEN)
     }
 
     fn link() -> Option<LinkSetup> {
         Some(link_setup::<Self>())
     }
 
+    /// `ip link set canX up`. Process context, RTNL; requests the
+    /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        let set = p.can.open_check(dev.name())?;
+        let (set, opening) = ctrl::open(dev, p, p.irq)?;
         let (bt0, bt1) = bittiming::to_btr(
             &set.bittiming,
             set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
         );
         let m = wanted_masks(dev);
-        p.can.arm_restart(dev)?;
-        if p.irq != 0 {
-            if let Err(e) = dev.request_irq(p.irq) {
-                p.can.disarm_restart();
-                return Err(e);
-            }
-        }
         {
             let mut st = p.chip.lock();
             st.chip.cfg.bt0 = bt0;
@@ -375,18 +355,16 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
             st.chip.start();
             st.running = true;
         }
-        dev.set_carrier(true);
-        dev.start_queue();
+        opening.up();
         Ok(())
     }
 
+    /// `ip link set canX down`. Process context, RTNL. The glue has
+    /// disabled NAPI: no poll runs or starts until the next open, so what
+    /// is left in the queue is freed here, with the echo, outside the
+    /// chip lock ([`ctrl::stop`]).
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        dev.stop_queue();
-        // First, so that no restart starts the chip again.
-        p.can.disarm_restart();
-        // The glue has disabled NAPI: no poll runs or starts until the
-        // next open, so what is left in the queue is freed here.
-        let (echo, rxq) = {
+        ctrl::stop(dev, p, || {
             let mut st = p.chip.lock();
             st.running = false;
             st.chip.stop();
@@ -394,11 +372,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                 st.echo.take(),
                 core::mem::replace(&mut st.rxq, RxQueue::new()),
             )
-        };
-        drop(echo);
-        drop(rxq);
-        dev.free_irq();
-        dev.set_carrier(false);
+        });
         Ok(())
     }
 
@@ -413,8 +387,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
             // Down, or off the bus until the restart (which wakes the
             // queue): nothing to send it with.
             drop(st);
-            dev.stats_tx_dropped();
-            drop(skb);
+            ctrl::tx_drop(dev, skb);
             return Xmit::Ok;
         }
         match st.chip.xmit(&frame) {
@@ -423,8 +396,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                 // Error frames cannot be sent; a busy object cannot happen
                 // with the queue stopped. Drop it and go on.
                 drop(st);
-                dev.stats_tx_dropped();
-                drop(skb);
+                ctrl::tx_drop(dev, skb);
                 dev.wake_queue();
             }
         }
@@ -452,7 +424,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                 match ev {
                     Event::Rx(f) => rx_frame(dev, rxq, &f),
                     Event::TxDone => {
-                        if let Some(skb) = echo.take().and_then(|s| s.can_echo_done(dev)) {
+                        if let Some(skb) = ctrl::echo_done(dev, echo) {
                             enqueue(dev, rxq, skb);
                         }
                         dev.wake_queue();
@@ -462,10 +434,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                         // can_flush_echo_skb counts it as a TX error).
                         // Interrupts are off: the free is deferred. The
                         // queue stays stopped until the restart.
-                        if let Some(s) = echo.take() {
-                            s.drop_any();
-                            dev.stats_err(Stat::TxErrors);
-                        }
+                        ctrl::echo_lost(dev, echo, Stat::TxErrors);
                     }
                     Event::Overrun { .. } => dev.stats_err(Stat::RxOverErrors),
                     Event::BusError { .. } => {
@@ -569,7 +538,7 @@ impl<R: Regs + Send + 'static> CanDevice for I82527<R> {
     fn restart(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         let m = wanted_masks(dev);
         let _bh = p.restart.lock();
-        let echo = {
+        let mut echo = {
             let mut st = p.chip.lock();
             if !st.running {
                 return Err(EINVAL);
@@ -583,11 +552,8 @@ impl<R: Regs + Send + 'static> CanDevice for I82527<R> {
             chip.restart(&m);
             echo.take()
         };
-        if let Some(s) = echo {
-            // Not expected (dropped at bus-off); freed outside the lock.
-            dev.stats_err(Stat::TxErrors);
-            drop(s);
-        }
+        // Not expected (dropped at bus-off); freed outside the lock.
+        ctrl::echo_lost(dev, &mut echo, Stat::TxErrors);
         // Outside the chip lock (the poll takes it); the poll runs when
         // `_bh` lets bottom halves run again.
         dev.napi_schedule();

@@ -66,9 +66,8 @@
 //! a TX error), berr-reporting (IER.BEI).
 #![forbid(unsafe_code)]
 
-use crate::glue::bindings;
+use crate::glue::can::ctrl::{self, SIOCDEVPRIVATE};
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
-use crate::glue::can::skb::alloc_rx;
 use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::params::Param;
@@ -76,7 +75,7 @@ use crate::glue::skb::Skb;
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_core::bittiming::{self, SJA1000_BITTIMING_CONST};
 use crate::rcan_core::candev::{self, CanState, Settings};
-use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_FRAME_LEN};
+use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_MTU};
 use crate::rcan_core::sja1000::{
     bitrate, hw_filter, restarted_frame, Chip, Config, Event, HwFilter, Regs, Setup, CDR_PELICAN,
     SETUP_LEN,
@@ -412,18 +411,11 @@ fn apply_pending_filter<R: Regs>(st: &mut ChipState<R>, rx: &mut RxBatch) {
 /// the chip lock: `netif_rx` must not run with interrupts disabled
 /// outside hardirq.
 fn rx_frame(dev: &NetDev, frame: &CanFrame) {
-    let Some(skb) = alloc_rx(dev, &AnyFrame::Classic(*frame)) else {
-        dev.stats_rx_dropped();
-        return;
-    };
-    if frame.can_id & crate::rcan_core::arb::CAN_ERR_FLAG == 0 {
-        dev.stats_rx(frame.dlc() as u32);
+    if let Some(skb) = ctrl::rx_skb(dev, &AnyFrame::Classic(*frame)) {
+        dev.rx(skb);
     }
-    dev.rx(skb);
 }
 
-/// `SIOCDEVPRIVATE`: the first device-private ioctl number.
-const SIOCDEVPRIVATE: u32 = 0x89F0;
 /// Reads `struct rcan_sja1000_setup` (`<linux/can/rcan_sja1000.h>`).
 const SIOCRCANSJA1000GET: u32 = SIOCDEVPRIVATE;
 /// Writes the bit timing and output control of a stopped device
@@ -506,14 +498,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     }
 
     fn setup() -> crate::glue::netdev::Setup {
-        crate::glue::netdev::Setup {
-            type_: bindings::ARPHRD_CAN as u16,
-            flags: bindings::net_device_flags_IFF_NOARP | bindings::net_device_flags_IFF_ECHO,
-            mtu: CAN_FRAME_LEN as u32,
-            hard_header_len: 0,
-            tx_queue_len: TX_QUEUE_LEN,
-            no_queue: false,
-        }
+        ctrl::setup(CAN_MTU, TX_QUEUE_LEN)
     }
 
     fn link() -> Option<LinkSetup> {
@@ -521,21 +506,14 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     }
 
     /// `ip link set canX up`. Process context, RTNL; requests the
-    /// interrupt line before it takes the chip lock.
+    /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        let set = p.can.open_check(dev.name())?;
+        let (set, opening) = ctrl::open(dev, p, p.irq)?;
         let (btr0, btr1) = bittiming::to_btr(
             &set.bittiming,
             set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
         );
         let f = wanted_filter(dev);
-        p.can.arm_restart(dev)?;
-        if p.irq != 0 {
-            if let Err(e) = dev.request_irq(p.irq) {
-                p.can.disarm_restart();
-                return Err(e);
-            }
-        }
         let started = {
             let mut st = p.chip.lock();
             st.chip.cfg.btr0 = btr0;
@@ -548,31 +526,24 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             ok
         };
         if !started {
-            dev.free_irq();
-            p.can.disarm_restart();
+            // Frees the line and disarms the restart timer.
+            drop(opening);
             pr_err!("{}: SJA1000 does not leave reset mode\n", dev.name());
             return Err(EIO);
         }
-        dev.set_carrier(true);
-        dev.start_queue();
+        opening.up();
         Ok(())
     }
 
     /// `ip link set canX down`. Process context, RTNL; the echo skb is
     /// freed and the interrupt line released after the chip lock.
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        dev.stop_queue();
-        // First, so that no restart starts the chip again.
-        p.can.disarm_restart();
-        let echo = {
+        ctrl::stop(dev, p, || {
             let mut st = p.chip.lock();
             st.running = false;
             let _ = st.chip.stop();
             st.echo.take()
-        };
-        drop(echo);
-        dev.free_irq();
-        dev.set_carrier(false);
+        });
         Ok(())
     }
 
@@ -587,8 +558,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             // Mainline can_dev_dropped_skb: a listen-only controller
             // sends nothing.
             drop(st);
-            dev.stats_tx_dropped();
-            drop(skb);
+            ctrl::tx_drop(dev, skb);
             return Xmit::Ok;
         }
         // One TX buffer: no next frame until this one is done.
@@ -599,8 +569,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
                 // Error frames cannot be sent; a busy buffer cannot happen
                 // with the queue stopped. Drop it and go on.
                 drop(st);
-                dev.stats_tx_dropped();
-                drop(skb);
+                ctrl::tx_drop(dev, skb);
                 dev.wake_queue();
             }
         }
@@ -639,7 +608,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| match ev {
             Event::Rx(f) => rx_frame(dev, &f),
             Event::TxDone => {
-                if let Some(skb) = echo.take().and_then(|s| s.can_echo_done(dev)) {
+                if let Some(skb) = ctrl::echo_done(dev, echo) {
                     dev.rx(skb);
                 }
                 dev.wake_queue();
@@ -752,17 +721,14 @@ impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
     /// context (`ip link ... restart`) or softirq (the `restart-ms`
     /// timer); takes the chip lock.
     fn restart(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        let echo = {
+        let mut echo = {
             let mut st = p.chip.lock();
             if !st.running {
                 return Err(EINVAL);
             }
             st.echo.take()
         };
-        if let Some(s) = echo {
-            s.drop_any();
-            dev.stats_err(Stat::TxErrors);
-        }
+        ctrl::echo_lost(dev, &mut echo, Stat::TxErrors);
         // Handed up without the chip lock: from process context, netif_rx
         // must not run with interrupts off.
         rx_frame(dev, &restarted_frame());

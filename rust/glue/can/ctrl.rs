@@ -1,0 +1,170 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! What the CAN controller drivers share around their chips (issue 19):
+//! the `net_device` a CAN interface is, bringing it up and down around
+//! the chip (the bit-timing check, the `restart-ms` timer, the interrupt
+//! line, carrier and queue), and the bookkeeping of received frames and
+//! echoes with the statistics mainline keeps for them (mainline's
+//! `alloc_can_skb` + `netif_rx` pattern, `can_put_echo_skb` /
+//! `can_get_echo_skb`, `can_free_echo_skb`, `can_dropped_invalid_skb`).
+//!
+//! A driver of a chip with one transmit buffer keeps the skb of the frame
+//! in it ("the echo", an `Option<Skb>` under its chip lock) and calls:
+//!
+//! * [`setup`] from `Driver::setup`;
+//! * [`open`] first in `Driver::open`, then programs the chip with the
+//!   [`Settings`] it returns and calls [`Opening::up`]; dropping the
+//!   [`Opening`] instead (an error) undoes what [`open`] did;
+//! * [`stop`] as `Driver::stop`, with a closure that stops the chip and
+//!   hands back what it held (the echo), freed once the chip lock is
+//!   released;
+//! * [`rx_skb`] for each frame from the bus (or error frame), then hands
+//!   the skb up (`NetDev::rx`, or its NAPI queue);
+//! * [`echo_done`] when the chip says the frame went out (the skb comes
+//!   back, to be handed up as the echo), [`echo_lost`] when it is lost
+//!   (an abort, bus-off, restart), [`tx_drop`] for a frame the driver
+//!   cannot send.
+//!
+//! Used by the SJA1000 and 82527 drivers; canloop uses [`setup`].
+
+use crate::glue::can::dev::{CanDev, CanDevice};
+use crate::glue::can::skb::alloc_rx;
+use crate::glue::netdev::{Dev, NetDev, Setup, Stat};
+use crate::glue::skb::Skb;
+use crate::rcan_core::arb::CAN_ERR_FLAG;
+use crate::rcan_core::candev::Settings;
+use crate::rcan_core::frame::AnyFrame;
+use kernel::prelude::*;
+
+/// `SIOCDEVPRIVATE`: the first device-private ioctl number (a driver's
+/// configuration tool's ioctls count from it).
+pub(crate) const SIOCDEVPRIVATE: u32 = crate::glue::bindings::SIOCDEVPRIVATE;
+
+/// The device parameters of a CAN interface (mainline `can_setup`):
+/// `ARPHRD_CAN`, no ARP, `IFF_ECHO` (the driver echoes sent frames),
+/// MTU `mtu` (`CAN_MTU` or `CANFD_MTU`), no link-layer header, a qdisc
+/// with `tx_queue_len` frames. A driver whose queue never stops sets
+/// `no_queue` on the result.
+pub(crate) fn setup(mtu: usize, tx_queue_len: u32) -> Setup {
+    Setup {
+        type_: crate::glue::bindings::ARPHRD_CAN as u16,
+        flags: crate::glue::bindings::net_device_flags_IFF_NOARP
+            | crate::glue::bindings::net_device_flags_IFF_ECHO,
+        mtu: mtu as u32,
+        hard_header_len: 0,
+        tx_queue_len,
+        no_queue: false,
+    }
+}
+
+/// A device being brought up by [`open`]: its `restart-ms` timer is
+/// armed and its interrupt line requested. [`Opening::up`] completes the
+/// open; dropping it undoes it (the line freed, the timer disarmed).
+pub(crate) struct Opening<'a, T: CanDevice> {
+    dev: &'a Dev<T>,
+    can: &'a CanDev,
+}
+
+impl<T: CanDevice> Opening<'_, T> {
+    /// The chip runs: carrier on, the transmit queue started. Process
+    /// context (`Driver::open`), no chip lock held.
+    pub(crate) fn up(self) {
+        self.dev.set_carrier(true);
+        self.dev.start_queue();
+        core::mem::forget(self);
+    }
+}
+
+impl<T: CanDevice> Drop for Opening<'_, T> {
+    fn drop(&mut self) {
+        self.dev.free_irq();
+        self.can.disarm_restart();
+    }
+}
+
+/// The first half of `Driver::open` (`ip link set canX up`, mainline
+/// `open_candev` and `request_irq`): refuses a device without a bit
+/// timing (`EINVAL`, logged as mainline), arms the device's `restart-ms`
+/// timer and requests interrupt line `irq` (0: none, a front-end that
+/// calls the handler itself). Returns the device's settings, for the
+/// driver to program the chip with, and the [`Opening`]. Process context,
+/// RTNL; no chip lock held.
+pub(crate) fn open<'a, T: CanDevice>(
+    dev: &'a Dev<T>,
+    p: &'a T::Priv,
+    irq: u32,
+) -> Result<(Settings, Opening<'a, T>)> {
+    let can = T::can_dev(p);
+    let set = can.open_check(dev.name())?;
+    can.arm_restart(dev)?;
+    let opening = Opening { dev, can };
+    if irq != 0 {
+        // On failure the Opening's drop disarms the timer again.
+        dev.request_irq(irq)?;
+    }
+    Ok((set, opening))
+}
+
+/// `Driver::stop` (`ip link set canX down`, mainline `close_candev`):
+/// the queue stopped, the `restart-ms` timer disarmed first (so that no
+/// restart starts the chip again), then `halt`, which stops the chip
+/// under the driver's chip lock and returns what the chip held (the echo
+/// skb, frames not yet handed up); that is freed after `halt` returns,
+/// outside the lock. Then the interrupt line is freed and the carrier
+/// turned off. Process context, RTNL.
+pub(crate) fn stop<T: CanDevice, H>(dev: &Dev<T>, p: &T::Priv, halt: impl FnOnce() -> H) {
+    dev.stop_queue();
+    T::can_dev(p).disarm_restart();
+    drop(halt());
+    dev.free_irq();
+    dev.set_carrier(false);
+}
+
+/// The skb of `frame`, received on `dev` (or an error frame the driver
+/// made), built by the one CAN skb builder and counted in the device's
+/// statistics: `rx_packets`/`rx_bytes` for a data or remote frame, not
+/// for an error frame (as mainline's drivers since 6.2), `rx_dropped`
+/// without memory (then `None`). The caller hands it up. Any context
+/// (allocates with `GFP_ATOMIC`).
+pub(crate) fn rx_skb(dev: &NetDev, frame: &AnyFrame) -> Option<Skb> {
+    let Some(skb) = alloc_rx(dev, frame) else {
+        dev.stats_rx_dropped();
+        return None;
+    };
+    if frame.can_id() & CAN_ERR_FLAG == 0 {
+        dev.stats_rx(frame.len() as u32);
+    }
+    Some(skb)
+}
+
+/// The frame in the transmit buffer went out: its skb, taken from
+/// `echo`, comes back as the echo to hand up (`None` if there was none,
+/// or if the sender asked for no echo; see [`Skb::can_echo_done`], which
+/// counts the sent frame). Any context.
+pub(crate) fn echo_done(dev: &NetDev, echo: &mut Option<Skb>) -> Option<Skb> {
+    echo.take().and_then(|s| s.can_echo_done(dev))
+}
+
+/// The frame in the transmit buffer is lost (aborted, bus-off, a
+/// restart): its skb, taken from `echo`, is freed (deferred: any context,
+/// interrupts off included) and counted as `stat`. Whether there was
+/// one. Any context.
+pub(crate) fn echo_lost(dev: &NetDev, echo: &mut Option<Skb>, stat: Stat) -> bool {
+    match echo.take() {
+        Some(s) => {
+            s.drop_any();
+            dev.stats_err(stat);
+            true
+        }
+        None => false,
+    }
+}
+
+/// A frame the driver does not send (listen-only, down, off the bus, a
+/// frame the chip cannot send): counted in `tx_dropped` and freed
+/// (mainline `can_dev_dropped_skb`). The transmit path, no chip lock
+/// held.
+pub(crate) fn tx_drop(dev: &NetDev, skb: Skb) {
+    dev.stats_tx_dropped();
+    drop(skb);
+}
