@@ -38,7 +38,6 @@ use crate::{glue, rcan_api, rcan_core};
 use core::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use kernel::prelude::*;
 
-use glue::bindings;
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::sock::{Msg, OptIn, OptOut, Sock};
@@ -50,6 +49,7 @@ use rcan_api::{
 };
 use rcan_core::frame::{AnyFrame, CANFD_MTU};
 use rcan_core::rxtable::CAN_ERR_MASK;
+use rcan_core::sockaddr::AF_CAN;
 
 /// `SOL_CAN_RAW` (`SOL_CAN_BASE + CAN_RAW`).
 const SOL_CAN_RAW: i32 = 101;
@@ -204,10 +204,10 @@ impl CanProtocol for RawProto {
         }
         let mut flags = 0u32;
         if !origin.is_null() {
-            flags |= bindings::MSG_DONTROUTE;
+            flags |= glue::msg::DONTROUTE;
         }
         if own {
-            flags |= bindings::MSG_CONFIRM;
+            flags |= glue::msg::CONFIRM;
         }
         let Some(mut skb) = skb.into_owned() else {
             return;
@@ -231,7 +231,7 @@ impl CanProtocol for RawProto {
             if !s.bound || s.ifindex != ifindex {
                 return;
             }
-            let errno = if event == NetdevEvent::Unregister {
+            let err = if event == NetdevEvent::Unregister {
                 unregister(sk);
                 s.bound = false;
                 s.ifindex = 0;
@@ -239,12 +239,12 @@ impl CanProtocol for RawProto {
                 // Mainline forgets the filters too: a new bind receives
                 // nothing until CAN_RAW_FILTER is set again.
                 s.filters = RawFilters::Many(KVec::new());
-                bindings::ENODEV
+                ENODEV
             } else {
-                bindings::ENETDOWN
+                neterr::ENETDOWN()
             };
             drop(s);
-            sk.report_error(errno as i32);
+            sk.report_error(-err.to_errno());
         });
     }
 }
@@ -276,7 +276,7 @@ fn parse_addr(addr: &[u8]) -> Result<i32> {
     if addr.len() < RAW_MIN_NAMELEN {
         return Err(EINVAL);
     }
-    if u16::from_ne_bytes([addr[0], addr[1]]) != bindings::AF_CAN as u16 {
+    if u16::from_ne_bytes([addr[0], addr[1]]) != AF_CAN {
         return Err(EINVAL);
     }
     Ok(i32::from_ne_bytes([addr[4], addr[5], addr[6], addr[7]]))
@@ -393,7 +393,7 @@ impl glue::sock::Proto for RawProto {
             sk.shared().ifindex.store(ifindex, Ordering::Relaxed);
         }
         if enetdown {
-            sk.report_error(bindings::ENETDOWN as i32);
+            sk.report_error(-neterr::ENETDOWN().to_errno());
         }
         Ok(())
     }
@@ -408,7 +408,7 @@ impl glue::sock::Proto for RawProto {
         }
         let ifindex = sk.lock().ifindex;
         out[..RAW_MIN_NAMELEN].fill(0);
-        out[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
+        out[..2].copy_from_slice(&AF_CAN.to_ne_bytes());
         out[4..RAW_MIN_NAMELEN].copy_from_slice(&ifindex.to_ne_bytes());
         Ok(RAW_MIN_NAMELEN)
     }
@@ -429,7 +429,7 @@ impl glue::sock::Proto for RawProto {
             None => bound_ifindex,
         };
         let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENXIO)?;
-        let nonblock = msg.flags() & bindings::MSG_DONTWAIT != 0;
+        let nonblock = msg.flags() & glue::msg::DONTWAIT != 0;
         let mut skb = glue::can::skb::alloc_tx(sk, &dev, len, nonblock)?;
         skb.put_from_msg(msg, len)?;
         // Mainline raw_check_txframe: a classic frame anywhere; a CAN FD
@@ -453,7 +453,7 @@ impl glue::sock::Proto for RawProto {
     }
 
     fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
-        if flags as u32 & bindings::MSG_ERRQUEUE != 0 {
+        if flags as u32 & glue::msg::ERRQUEUE != 0 {
             return sk.recv_errqueue(msg, len, SOL_CAN_RAW, SCM_CAN_RAW_ERRQUEUE);
         }
         glue::can::skb::recvmsg_queued(sk, msg, len, flags)
@@ -562,7 +562,7 @@ impl glue::sock::Proto for RawProto {
                 }
                 if len < fsize {
                     opt.set_len(fsize)?;
-                    return Err(glue::errno(bindings::ERANGE as i32));
+                    return Err(ERANGE);
                 }
                 let mut buf = KVec::with_capacity(fsize as usize, GFP_KERNEL)?;
                 for f in fs {

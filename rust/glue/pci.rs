@@ -23,6 +23,11 @@ use kernel::error::{code, Result};
 use kernel::ffi;
 use kernel::prelude::*;
 
+/// An entry of a PCI driver's id table (`struct pci_device_id`), for the
+/// tables drivers declare (made with [`id`], ended by [`ID_END`]) and the
+/// `MODULE_DEVICE_TABLE` alias in their module root.
+pub(crate) type DeviceId = bindings::pci_device_id;
+
 /// A PCI device id table entry (vendor, device; any subsystem).
 pub(crate) const fn id(vendor: u16, device: u16) -> bindings::pci_device_id {
     bindings::pci_device_id {

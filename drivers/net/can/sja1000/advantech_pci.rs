@@ -87,13 +87,13 @@ impl pci::Driver for AdvantechPci {
 /// copy). The module root exports another copy under the symbol name
 /// modpost reads (`MODULE_DEVICE_TABLE(pci, ...)`), which makes these the
 /// module's `pci:v...` aliases: one list for matching and autoloading.
-pub(crate) const PCI_IDS: [glue::bindings::pci_device_id; 3] = [
+pub(crate) const PCI_IDS: [glue::pci::DeviceId; 3] = [
     pci::id(0x13fe, 0xc002),
     pci::id(0x13fe, 0xc302),
     pci::ID_END,
 ];
 
-static IDS: [glue::bindings::pci_device_id; 3] = PCI_IDS;
+static IDS: [glue::pci::DeviceId; 3] = PCI_IDS;
 
 static DRIVER: pci::Registration<AdvantechPci> = pci::Registration::new();
 

@@ -30,7 +30,7 @@ use advantech_pci::AdvantechPciModule;
 #[no_mangle]
 #[used]
 #[allow(non_upper_case_globals)]
-static __mod_pci__rcan_advantech_pci_device_table: [glue::bindings::pci_device_id;
+static __mod_pci__rcan_advantech_pci_device_table: [glue::pci::DeviceId;
     advantech_pci::PCI_IDS.len()] = advantech_pci::PCI_IDS;
 
 module! {

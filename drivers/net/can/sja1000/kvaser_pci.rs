@@ -115,10 +115,9 @@ impl pci::Driver for KvaserPci {
 /// copy). The module root exports another copy under the symbol name
 /// modpost reads (`MODULE_DEVICE_TABLE(pci, ...)`), which makes these the
 /// module's `pci:v...` aliases: one list for matching and autoloading.
-pub(crate) const PCI_IDS: [glue::bindings::pci_device_id; 2] =
-    [pci::id(0x10e8, 0x8406), pci::ID_END];
+pub(crate) const PCI_IDS: [glue::pci::DeviceId; 2] = [pci::id(0x10e8, 0x8406), pci::ID_END];
 
-static IDS: [glue::bindings::pci_device_id; 2] = PCI_IDS;
+static IDS: [glue::pci::DeviceId; 2] = PCI_IDS;
 
 static DRIVER: pci::Registration<KvaserPci> = pci::Registration::new();
 

@@ -30,8 +30,8 @@ use kvaser_pci::KvaserPciModule;
 #[no_mangle]
 #[used]
 #[allow(non_upper_case_globals)]
-static __mod_pci__rcan_kvaser_pci_device_table: [glue::bindings::pci_device_id;
-    kvaser_pci::PCI_IDS.len()] = kvaser_pci::PCI_IDS;
+static __mod_pci__rcan_kvaser_pci_device_table: [glue::pci::DeviceId; kvaser_pci::PCI_IDS.len()] =
+    kvaser_pci::PCI_IDS;
 
 module! {
     type: KvaserPciModule,

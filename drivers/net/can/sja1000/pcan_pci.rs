@@ -157,10 +157,9 @@ impl pci::Driver for PcanPci {
 /// copy). The module root exports another copy under the symbol name
 /// modpost reads (`MODULE_DEVICE_TABLE(pci, ...)`), which makes these the
 /// module's `pci:v...` aliases: one list for matching and autoloading.
-pub(crate) const PCI_IDS: [glue::bindings::pci_device_id; 2] =
-    [pci::id(0x001c, 0x0001), pci::ID_END];
+pub(crate) const PCI_IDS: [glue::pci::DeviceId; 2] = [pci::id(0x001c, 0x0001), pci::ID_END];
 
-static IDS: [glue::bindings::pci_device_id; 2] = PCI_IDS;
+static IDS: [glue::pci::DeviceId; 2] = PCI_IDS;
 
 static DRIVER: pci::Registration<PcanPci> = pci::Registration::new();
 

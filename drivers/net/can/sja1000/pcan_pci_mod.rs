@@ -30,8 +30,8 @@ use pcan_pci::PcanPciModule;
 #[no_mangle]
 #[used]
 #[allow(non_upper_case_globals)]
-static __mod_pci__rcan_pcan_pci_device_table: [glue::bindings::pci_device_id;
-    pcan_pci::PCI_IDS.len()] = pcan_pci::PCI_IDS;
+static __mod_pci__rcan_pcan_pci_device_table: [glue::pci::DeviceId; pcan_pci::PCI_IDS.len()] =
+    pcan_pci::PCI_IDS;
 
 module! {
     type: PcanPciModule,
