@@ -600,11 +600,11 @@ impl ProcShow for ProcView {
         let sk = self.sk.sock();
         let s = sk.lock();
         let _ = m.write_str(">>> socket ");
-        m.write_kptr(sk.socket_addr());
+        m.write_kaddr(sk.socket_kaddr());
         let _ = m.write_str(" / sk ");
-        m.write_kptr(sk.as_ptr() as usize);
+        m.write_kaddr(sk.kaddr());
         let _ = m.write_str(" / bo ");
-        m.write_kptr(sk.as_ptr() as usize);
+        m.write_kaddr(sk.kaddr());
         let _ = writeln!(
             m,
             " / dropped {} / bound {} <<<",

@@ -20,7 +20,8 @@
 //! [`kmod`] (loading modules on demand), [`net`] (network namespaces),
 //! [`can`] (the CAN framework: the receive table), [`simcard`]
 //! (simulated CAN cards on a simulated bus, for the drivers' simulated
-//! front-ends).
+//! front-ends), [`kaddr`] (a kernel object's address as an opaque
+//! identity, printed as `%pK`).
 #![allow(dead_code)]
 
 #[allow(
@@ -49,6 +50,7 @@ pub(crate) mod hrtimer;
 pub(crate) mod iomap;
 pub(crate) mod isa;
 pub(crate) mod jobtimer;
+pub(crate) mod kaddr;
 pub(crate) mod kmod;
 pub(crate) mod lock;
 pub(crate) mod net;
@@ -57,8 +59,8 @@ pub(crate) mod params;
 pub(crate) mod pci;
 pub(crate) mod percpu;
 pub(crate) mod procfs;
-pub(crate) mod skb;
 pub(crate) mod simcard;
+pub(crate) mod skb;
 pub(crate) mod sock;
 pub(crate) mod sync;
 
