@@ -8,8 +8,10 @@
 //! tests use) and the unchanged driver runs on top of it.
 //!
 //! A front-end describes its bus with [`SimBus`] (the models of its
-//! cards, one attempt to send, the interrupt outputs, the register file)
-//! and keeps one [`SimCards`] in a `static`; this file does the rest:
+//! cards, one attempt to send, the interrupt outputs, the register file,
+//! the driver's probe of a card), keeps one [`SimCards`] in a `static`
+//! and names [`SimModule<Bus>`](SimModule) as its module type; this file
+//! does the rest:
 //!
 //! * The bus: every card's model lives in one value under one spinlock
 //!   (`SimCards::bus`, a [`StaticIrqSpinLock`] with a lockdep class of
@@ -86,6 +88,13 @@ pub(crate) trait SimBus: Sized + Send + 'static {
 
     /// The front-end's `static` [`SimCards`] of this bus.
     fn sim() -> &'static SimCards<Self>;
+    /// How many cards the module parameter asks for (checked by
+    /// [`SimCards::start`]). Process context.
+    fn cards_param() -> usize;
+    /// Registers a device for card `i` (the driver's probe over the
+    /// card's registers): `None` if its model does not answer. Process
+    /// context (module init), no lock held.
+    fn add_card(i: usize) -> Result<Option<Self::Card>>;
     /// A bus of `cards` fresh models (1..=[`MAX_CARDS`]). Process context.
     fn new(cards: usize) -> Self;
     /// How many cards are on the bus.
@@ -299,10 +308,34 @@ impl<B: SimBus> SimCards<B> {
     }
 }
 
+/// The size of a simulated-card module's `fault` parameter buffer
+/// (`RCAN_SIMCARD_FAULT_LEN` in `rust/helpers/rcan_simcard.h`).
+pub(crate) const FAULT_LEN: usize = 16;
+
 /// The name a string module parameter (a fault's) holds now, without
 /// surrounding blanks or the newline `echo` leaves: `buf` holds it.
-/// Any context (the C shims keep such parameters in fixed buffers).
-pub(crate) fn param_word<'a>(p: &ParamStr, buf: &'a mut [u8; 16]) -> &'a [u8] {
+/// Any context (the C shims keep such parameters in fixed buffers,
+/// `rcan_simcard.h`).
+pub(crate) fn param_word<'a>(p: &ParamStr, buf: &'a mut [u8; FAULT_LEN]) -> &'a [u8] {
     let n = p.read(buf).min(buf.len() - 1);
     buf[..n].trim_ascii()
+}
+
+/// The module of a simulated-card front-end (its `module!` type, through
+/// a type alias): init puts the bus in place and registers the cards
+/// ([`SimCards::start`] with [`SimBus::cards_param`] and
+/// [`SimBus::add_card`]); exit tears it down ([`SimCards::stop`]).
+pub(crate) struct SimModule<B: SimBus>(PhantomData<fn() -> B>);
+
+impl<B: SimBus> kernel::Module for SimModule<B> {
+    fn init(_module: &'static ThisModule) -> Result<Self> {
+        B::sim().start(B::cards_param(), B::add_card)?;
+        Ok(SimModule(PhantomData))
+    }
+}
+
+impl<B: SimBus> Drop for SimModule<B> {
+    fn drop(&mut self) {
+        B::sim().stop();
+    }
 }

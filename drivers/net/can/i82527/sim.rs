@@ -51,7 +51,7 @@ use kernel::prelude::*;
 use crate::{glue, i82527, rcan_core};
 
 use glue::params::{Param, ParamStr};
-use glue::simcard::{param_word, Round, SimBus, SimCards, MAX_CARDS};
+use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN, MAX_CARDS};
 use i82527::{add_channel, Channel};
 use kernel::c_str;
 use rcan_core::i82527::{bits, reg, Config, Regs};
@@ -65,7 +65,7 @@ const CARDS: Param<u32> = Param::new(0);
 const FAULT: ParamStr = ParamStr::new(1);
 
 /// The simulated bus: every card's chip.
-struct Bus {
+pub(crate) struct Bus {
     models: [I82527Model; MAX_CARDS],
     n: usize,
     /// The card that sends first in the next round (fairness).
@@ -87,6 +87,20 @@ impl SimBus for Bus {
         &SIM
     }
 
+    fn cards_param() -> usize {
+        CARDS.get() as usize
+    }
+
+    fn add_card(i: usize) -> Result<Option<Channel<SimRegs>>> {
+        add_channel(
+            SimRegs { idx: i },
+            Config::DEFAULT,
+            0,
+            XTAL_HZ,
+            format_args!("simulated card {i}"),
+        )
+    }
+
     fn new(n: usize) -> Self {
         Bus {
             models: core::array::from_fn(|_| I82527Model::new()),
@@ -102,7 +116,7 @@ impl SimBus for Bus {
     /// The bus fault the parameter names now. Any context (a fixed
     /// buffer in sim_c.c, no lock).
     fn fault() -> Fault {
-        match param_word(&FAULT, &mut [0u8; 16]) {
+        match param_word(&FAULT, &mut [0u8; FAULT_LEN]) {
             b"noack" => Fault::NoAck,
             b"biterr" => Fault::BitErr,
             _ => Fault::None,
@@ -172,7 +186,7 @@ impl SimBus for Bus {
 }
 
 /// Register access of card `idx`: its model on the bus.
-struct SimRegs {
+pub(crate) struct SimRegs {
     idx: usize,
 }
 
@@ -186,26 +200,5 @@ impl Regs for SimRegs {
     }
 }
 
-/// The module: its state is in [`SIM`], torn down in Drop.
-pub(crate) struct SimModule;
-
-impl kernel::Module for SimModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
-        SIM.start(CARDS.get() as usize, |i| {
-            add_channel(
-                SimRegs { idx: i },
-                Config::DEFAULT,
-                0,
-                XTAL_HZ,
-                format_args!("simulated card {i}"),
-            )
-        })?;
-        Ok(SimModule)
-    }
-}
-
-impl Drop for SimModule {
-    fn drop(&mut self) {
-        SIM.stop();
-    }
-}
+/// The module: its state is in [`SIM`], set up and torn down by the glue.
+pub(crate) type SimModule = simcard::SimModule<Bus>;

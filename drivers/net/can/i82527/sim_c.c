@@ -10,6 +10,7 @@
 
 #include "../../../../rust/helpers/rcan_helpers.c"
 #include "../../../../rust/helpers/rcan_params.h"
+#include "../../../../rust/helpers/rcan_simcard.h"
 
 static unsigned int cards = 2;
 module_param(cards, uint, 0444);
@@ -17,11 +18,10 @@ MODULE_PARM_DESC(cards, "Number of simulated 82527 cards on the bus (1..8, defau
 
 /*
  * Fault injection, writable at run time through
- * /sys/module/rcan_i82527_sim/parameters/ (see i82527.rst). A fixed
- * buffer, as rcan_sja1000_sim's: the bus reads it in softirq context
- * without the parameter lock; a torn name reads as unknown (no fault).
+ * /sys/module/rcan_i82527_sim/parameters/ (see i82527.rst); a fixed
+ * buffer, see rcan_simcard.h.
  */
-static char fault[16] = "none";
+static char fault[RCAN_SIMCARD_FAULT_LEN] = "none";
 module_param_string(fault, fault, sizeof(fault), 0644);
 MODULE_PARM_DESC(fault, "Bus fault: none, noack, biterr (default none)");
 
@@ -31,21 +31,8 @@ u64 rcan_module_param(unsigned int which, unsigned int idx)
 	return which == 0 ? READ_ONCE(cards) : 0;
 }
 
-/*
- * String parameter 1: fault. Any context (a fixed buffer, no lock).
- * Copies at most len - 1 bytes, NUL-padded; returns the full length.
- */
+/* String parameter 1: fault. Any context. */
 size_t rcan_module_param_str(unsigned int which, char *buf, size_t len)
 {
-	char copy[sizeof(fault)];
-
-	if (len)
-		memset(buf, 0, len);
-	if (which != 1)
-		return 0;
-	memcpy(copy, fault, sizeof(copy));
-	copy[sizeof(copy) - 1] = 0;
-	if (len)
-		strscpy(buf, copy, len);
-	return strlen(copy);
+	return rcan_simcard_fault_str(fault, which == 1, buf, len);
 }

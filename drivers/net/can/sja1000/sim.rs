@@ -52,7 +52,7 @@ use kernel::prelude::*;
 use crate::{glue, rcan_core, sja1000};
 
 use glue::params::{Param, ParamStr};
-use glue::simcard::{param_word, Round, SimBus, SimCards, MAX_CARDS};
+use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN, MAX_CARDS};
 use kernel::c_str;
 use rcan_core::sja1000::{cmd, reg, Regs, CDR_CBP, CDR_CLK_OFF};
 use rcan_core::sja1000_model::{ecc, Fault, Sja1000Model, TxAttempt};
@@ -76,7 +76,7 @@ const FAULT_BIT: Param<u32> = Param::new(4);
 const FAULT: ParamStr = ParamStr::new(5);
 
 /// The simulated bus: every card's chip.
-struct Bus {
+pub(crate) struct Bus {
     models: [Sja1000Model; MAX_CARDS],
     n: usize,
     /// The card that sends first in the next round (fairness).
@@ -99,6 +99,20 @@ impl SimBus for Bus {
         &SIM
     }
 
+    fn cards_param() -> usize {
+        CARDS.get() as usize
+    }
+
+    fn add_card(i: usize) -> Result<Option<Channel<SimRegs>>> {
+        add_channel(
+            SimRegs { idx: i },
+            module_config(OCR, CDR_CBP | CDR_CLK_OFF),
+            0,
+            XTAL_HZ,
+            format_args!("simulated card {i}"),
+        )
+    }
+
     fn new(n: usize) -> Self {
         Bus {
             models: core::array::from_fn(|_| Sja1000Model::new()),
@@ -113,7 +127,7 @@ impl SimBus for Bus {
 
     /// The bus condition the parameters name now. Any context.
     fn fault() -> (Fault, bool) {
-        match param_word(&FAULT, &mut [0u8; 16]) {
+        match param_word(&FAULT, &mut [0u8; FAULT_LEN]) {
             b"noack" => (Fault::NoAck, false),
             b"biterr" => {
                 let e = FAULT_ECC.get();
@@ -202,7 +216,7 @@ impl SimBus for Bus {
 }
 
 /// Register access of card `idx`: its model on the bus.
-struct SimRegs {
+pub(crate) struct SimRegs {
     idx: usize,
 }
 
@@ -216,26 +230,5 @@ impl Regs for SimRegs {
     }
 }
 
-/// The module: its state is in [`SIM`], torn down in Drop.
-pub(crate) struct SimModule;
-
-impl kernel::Module for SimModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
-        SIM.start(CARDS.get() as usize, |i| {
-            add_channel(
-                SimRegs { idx: i },
-                module_config(OCR, CDR_CBP | CDR_CLK_OFF),
-                0,
-                XTAL_HZ,
-                format_args!("simulated card {i}"),
-            )
-        })?;
-        Ok(SimModule)
-    }
-}
-
-impl Drop for SimModule {
-    fn drop(&mut self) {
-        SIM.stop();
-    }
-}
+/// The module: its state is in [`SIM`], set up and torn down by the glue.
+pub(crate) type SimModule = simcard::SimModule<Bus>;

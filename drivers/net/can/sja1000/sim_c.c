@@ -10,6 +10,7 @@
 
 #include "../../../../rust/helpers/rcan_helpers.c"
 #include "../../../../rust/helpers/rcan_params.h"
+#include "../../../../rust/helpers/rcan_simcard.h"
 
 #include "btr_params.h"
 
@@ -19,13 +20,10 @@ MODULE_PARM_DESC(cards, "Number of simulated SJA1000 cards on the bus (1..8, def
 
 /*
  * Fault injection, writable at run time through
- * /sys/module/rcan_sja1000_sim/parameters/ (see sja1000.rst). A fixed
- * buffer (module_param_string), not a charp: the bus reads it in softirq
- * context without the parameter lock, and a buffer that is being
- * rewritten can at worst give a torn name (read as unknown: no fault),
- * never freed memory.
+ * /sys/module/rcan_sja1000_sim/parameters/ (see sja1000.rst); a fixed
+ * buffer, see rcan_simcard.h.
  */
-static char fault[16] = "none";
+static char fault[RCAN_SIMCARD_FAULT_LEN] = "none";
 module_param_string(fault, fault, sizeof(fault), 0644);
 MODULE_PARM_DESC(fault, "Bus fault: none, noack, biterr, arblost, overrun (default none)");
 
@@ -52,21 +50,8 @@ u64 rcan_module_param(unsigned int which, unsigned int idx)
 	}
 }
 
-/*
- * String parameter 5: fault. Any context here (a fixed buffer, no lock).
- * Copies at most len - 1 bytes, NUL-padded; returns the full length.
- */
+/* String parameter 5: fault. Any context. */
 size_t rcan_module_param_str(unsigned int which, char *buf, size_t len)
 {
-	char copy[sizeof(fault)];
-
-	if (len)
-		memset(buf, 0, len);
-	if (which != 5)
-		return 0;
-	memcpy(copy, fault, sizeof(copy));
-	copy[sizeof(copy) - 1] = 0;
-	if (len)
-		strscpy(buf, copy, len);
-	return strlen(copy);
+	return rcan_simcard_fault_str(fault, which == 5, buf, len);
 }
