@@ -11,7 +11,8 @@
 //! A driver of a chip with one transmit buffer keeps the skb of the frame
 //! in it ("the echo", an `Option<Skb>` under its chip lock) and calls:
 //!
-//! * [`setup`] from `Driver::setup`;
+//! * [`setup`] from `Driver::setup`; [`btr`] for chips whose bit timing
+//!   is an SJA1000-style BTR0/BTR1 pair;
 //! * [`open`] first in `Driver::open`, then programs the chip with the
 //!   [`Settings`] it returns and calls [`Opening::up`]; dropping the
 //!   [`Opening`] instead (an error) undoes what [`open`] did;
@@ -32,7 +33,8 @@ use crate::glue::can::skb::alloc_rx;
 use crate::glue::netdev::{Dev, NetDev, Setup, Stat};
 use crate::glue::skb::Skb;
 use crate::rcan_core::arb::CAN_ERR_FLAG;
-use crate::rcan_core::candev::Settings;
+use crate::rcan_core::bittiming;
+use crate::rcan_core::candev::{ctrlmode, Settings};
 use crate::rcan_core::frame::AnyFrame;
 use kernel::prelude::*;
 
@@ -55,6 +57,18 @@ pub(crate) fn setup(mtu: usize, tx_queue_len: u32) -> Setup {
         tx_queue_len,
         no_queue: false,
     }
+}
+
+/// The BTR0/BTR1 register pair of an SJA1000-style bit-timing register
+/// (the SJA1000's, the 82527's BT0/BT1) for the device's settings: the
+/// bit timing with triple sampling if the control mode asks for it; 0/0
+/// while no bit timing is set (what the configuration tools' GET ioctls
+/// report then). Any context.
+pub(crate) fn btr(set: &Settings) -> (u8, u8) {
+    if set.bittiming.bitrate == 0 {
+        return (0, 0);
+    }
+    bittiming::to_btr(&set.bittiming, set.ctrlmode & ctrlmode::THREE_SAMPLES != 0)
 }
 
 /// A device being brought up by [`open`]: its `restart-ms` timer is

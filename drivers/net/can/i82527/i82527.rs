@@ -296,14 +296,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                 // BT0/BT1 from the device's bit timing (what `ip link`
                 // set), 0/0 while none is set.
                 let set = p.can.settings();
-                let (bt0, bt1) = if set.bittiming.bitrate != 0 {
-                    bittiming::to_btr(
-                        &set.bittiming,
-                        set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
-                    )
-                } else {
-                    (0, 0)
-                };
+                let (bt0, bt1) = ctrl::btr(&set);
                 let mut s = p.chip.lock().chip.setup();
                 s.bt0 = bt0;
                 s.bt1 = bt1;
@@ -341,10 +334,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         let (set, opening) = ctrl::open(dev, p, p.irq)?;
-        let (bt0, bt1) = bittiming::to_btr(
-            &set.bittiming,
-            set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
-        );
+        let (bt0, bt1) = ctrl::btr(&set);
         let m = wanted_masks(dev);
         {
             let mut st = p.chip.lock();

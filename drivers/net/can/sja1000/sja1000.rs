@@ -433,14 +433,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         match cmd {
             SIOCRCANSJA1000GET => {
                 let set = p.can.settings();
-                let (btr0, btr1) = if set.bittiming.bitrate != 0 {
-                    bittiming::to_btr(
-                        &set.bittiming,
-                        set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
-                    )
-                } else {
-                    (0, 0)
-                };
+                let (btr0, btr1) = ctrl::btr(&set);
                 let s = {
                     let mut st = p.chip.lock();
                     let cfg = st.chip.cfg;
@@ -509,10 +502,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         let (set, opening) = ctrl::open(dev, p, p.irq)?;
-        let (btr0, btr1) = bittiming::to_btr(
-            &set.bittiming,
-            set.ctrlmode & candev::ctrlmode::THREE_SAMPLES != 0,
-        );
+        let (btr0, btr1) = ctrl::btr(&set);
         let f = wanted_filter(dev);
         let started = {
             let mut st = p.chip.lock();
