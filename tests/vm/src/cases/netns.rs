@@ -44,7 +44,11 @@ pub const TESTS: &[crate::Test] = portable_table![
     candev_netns_returns,
 ];
 
-pub const OURS: &[crate::Test] = test_table![netns_thesis_api, netns_canloop_returns];
+pub const OURS: &[crate::Test] = test_table![
+    netns_thesis_api,
+    netns_canloop_returns,
+    i82527_netns_move,
+];
 
 type Job = Box<dyn FnOnce() + Send>;
 
@@ -521,6 +525,75 @@ fn netns_canloop_returns(ctx: &mut Ctx) -> TestResult {
         "can1 survived rmmod in its namespace"
     );
     Ok(())
+}
+
+/// An Intel 82527 controller (the simulated card, link kind "can")
+/// moved into a namespace:
+///
+/// * its message objects follow the sockets of the namespace it is in
+///   now (DESIGN decision 7): with only a filtered socket of the
+///   namespace bound to it, and none of the initial namespace, the frame
+///   that filter wants still gets in;
+/// * frames never cross: an initial-namespace socket bound to every
+///   interface sees a frame once (can0's reception), not can1's echo;
+/// * when the namespace goes, the controller comes back (`netns_refund`)
+///   and works in the initial namespace;
+/// * moved again, with a socket bound to it there, `rmmod` of the driver
+///   unregisters it in that namespace: the socket gets ENODEV.
+fn i82527_netns_move(ctx: &mut Ctx) -> TestResult {
+    let (i0, _) = super::i82527::sim2(ctx)?;
+    let tx0 = canraw::open(i0)?;
+    let ns = Ns::new()?;
+    let j = ns.take_up("can1")?;
+    ensure!(!in_init("can1"), "can1 still in the initial namespace");
+    let rx = ns.run(move || -> Result<CanSocket, String> {
+        let s = canraw::open(j)?;
+        s.set_filters(&[CanFilter::new(0x123, 0x7ff)])
+            .or_fail("CAN_RAW_FILTER")?;
+        Ok(s)
+    })?;
+    let want = sff(0x123, &[1, 2, 3]);
+    canraw::send(&tx0, &sff(0x456, &[4]))?;
+    canraw::send(&tx0, &want)?;
+    canraw::expect(&rx, &want, "filtered socket of the namespace on can1")?;
+
+    let init_all = canraw::open(0)?;
+    let ntx = ns.raw(j)?;
+    let back = sff(0x124, &[5]);
+    canraw::send(&ntx, &back)?;
+    canraw::expect(&tx0, &back, "can0, from can1 in the namespace")?;
+    canraw::expect(&init_all, &back, "initial namespace, every interface")?;
+    canraw::expect_quiet(&[
+        ("initial namespace, every interface", &init_all),
+        ("filtered socket of the namespace", &rx),
+    ])?;
+
+    drop((rx, ntx));
+    drop(ns);
+    let t0 = Instant::now();
+    while !in_init("can1") {
+        ensure!(
+            t0.elapsed() < Duration::from_secs(20),
+            "can1 did not come back from its namespace"
+        );
+        thread::sleep(Duration::from_millis(50));
+    }
+    ctx.link_up("can1")?;
+    let rx1 = canraw::open(ctx.ifindex("can1")?)?;
+    let f = sff(0x125, &[6]);
+    canraw::send(&tx0, &f)?;
+    canraw::expect(&rx1, &f, "can1 back in the initial namespace")?;
+    drop(rx1);
+
+    let ns = Ns::new()?;
+    let j = ns.take_up("can1")?;
+    let held = ns.raw(j)?;
+    ctx.rmmod(Module::I82527Sim)?;
+    ensure!(
+        ns.ifindex("can1").is_err(),
+        "can1 survived rmmod in its namespace"
+    );
+    expect_error(&held, libc::ENODEV, "socket bound to can1 in the namespace")
 }
 
 /// SO_RCVTIMEO of [`canraw::RAW_RX_TIMEOUT`] on a thesis socket.
