@@ -20,6 +20,8 @@
 //! comes back to the initial namespace.
 
 use std::io;
+use std::os::fd::AsRawFd;
+use std::os::unix::fs::MetadataExt;
 use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
@@ -44,11 +46,8 @@ pub const TESTS: &[crate::Test] = portable_table![
     candev_netns_returns,
 ];
 
-pub const OURS: &[crate::Test] = test_table![
-    netns_thesis_api,
-    netns_canloop_returns,
-    i82527_netns_move,
-];
+pub const OURS: &[crate::Test] =
+    test_table![netns_thesis_api, netns_canloop_returns, i82527_netns_move,];
 
 type Job = Box<dyn FnOnce() + Send>;
 
@@ -377,14 +376,16 @@ fn raw_netns_delete_with_sockets(ctx: &mut Ctx) -> TestResult {
 }
 
 /// CAN_BCM in a namespace: `connect` names an interface of the socket's
-/// namespace (another's index is ENODEV), and TX_SEND sends there only.
+/// namespace (another's index is ENODEV), TX_SEND sends there only, and
+/// the socket's `/proc/net/can-bcm/<inode>` file is in its namespace's
+/// `/proc/net`, not the initial namespace's.
 fn bcm_netns_send(ctx: &mut Ctx) -> TestResult {
     ctx.bcm_ifaces(2)?;
     let ns = Ns::new()?;
     let j = ns.take_up("can1")?;
     let init_all = canraw::open(0)?;
     let i0 = ctx.ifindex("can0")?;
-    let (rx, res) = ns.run(move || -> Result<_, String> {
+    let (rx, res, ino) = ns.run(move || -> Result<_, String> {
         let rx = canraw::open(0)?;
         let b = raw::socket(libc::PF_CAN, libc::SOCK_DGRAM, 2).or_fail("socket(CAN_BCM)")?;
         let other = raw::connect(&b, &canraw::addr_bytes(libc::AF_CAN as u16, i0)).err();
@@ -400,8 +401,24 @@ fn bcm_netns_send(ctx: &mut Ctx) -> TestResult {
         f[8] = 0x5a;
         m.extend_from_slice(&f);
         raw::write(&b, &m).or_fail("TX_SEND")?;
-        Ok((rx, other))
+        // The socket's file is in its namespace's /proc/net/can-bcm
+        // (this thread's /proc/net), named by its inode.
+        let ino = std::fs::metadata(format!("/proc/self/fd/{}", b.as_raw_fd()))
+            .or_fail("stat of the BCM socket")?
+            .ino();
+        let mine = format!("/proc/thread-self/net/can-bcm/{ino}");
+        let text = std::fs::read_to_string(&mine).or_fail(&mine)?;
+        ensure!(
+            text.starts_with(">>> socket "),
+            "{mine}: unexpected text {text:?}"
+        );
+        Ok((rx, other, ino))
     })?;
+    let init_file = format!("/proc/net/can-bcm/{ino}");
+    ensure!(
+        !std::path::Path::new(&init_file).exists(),
+        "the namespace's BCM socket has a file in the initial namespace: {init_file}"
+    );
     canraw::expect(&rx, &sff(0x77, &[0x5a]), "namespace, every interface")?;
     canraw::expect_quiet(&[("initial namespace, every interface", &init_all)])?;
     if ns.ifindex("can0").is_err() {
