@@ -28,6 +28,7 @@ use std::sync::{mpsc, Arc};
 use std::thread;
 use std::time::{Duration, Instant};
 
+use rcan_uapi::dsor::{dsor_port, DsorAddr, DsorSocket};
 use rcan_uapi::raw;
 use rcan_uapi::ArbSocket;
 use socketcan::{CanFilter, CanSocket, Socket, SocketOptions};
@@ -456,10 +457,11 @@ fn candev_netns_returns(ctx: &mut Ctx) -> TestResult {
 /// The thesis API (CANPROTO_CAN) in two namespaces: a socket bound to
 /// every interface receives what is sent in its namespace only; sending to
 /// ifindex 0 ("every CAN interface", thesis 5.2.2) sends on the
-/// namespace's interfaces only. DSOR stays in the initial namespace:
+/// namespace's interfaces only. DSOR stays in the initial namespace
+/// (netns.rst): its traffic there never reaches a namespace's sockets,
 /// socket() elsewhere is EAFNOSUPPORT, and `canip0` cannot be moved.
 fn netns_thesis_api(ctx: &mut Ctx) -> TestResult {
-    ctx.load_stack(&["count=2"])?;
+    ctx.load_stack(&["count=3"])?;
     let (a, b) = (Ns::new()?, Ns::new()?);
     a.take_up("can0")?;
     b.take_up("can1")?;
@@ -495,7 +497,36 @@ fn netns_thesis_api(ctx: &mut Ctx) -> TestResult {
             "{who}: a frame from another namespace: {r:?}"
         );
     }
+    // DSOR runs in the initial namespace, on can2: a port message to
+    // this node goes out on can2 (an initial-namespace socket on can2
+    // sees its frames) and arrives, and namespace A's socket bound to
+    // every interface of A sees none of it.
     ctx.insmod(Module::Dsor, &["ifname=can2"])?;
+    let watch = canraw::open(ctx.ifindex("can2")?)?;
+    let a_all = a.raw(0)?;
+    let port = DsorAddr::Port {
+        prio: 0,
+        port: dsor_port(0, 7),
+    };
+    let (p, q) = (DsorSocket::new(), DsorSocket::new());
+    let (p, q) = (
+        p.or_fail("socket(CANPROTO_DSOR)")?,
+        q.or_fail("socket(CANPROTO_DSOR)")?,
+    );
+    p.set_rcvtimeo(canraw::RAW_RX_TIMEOUT)
+        .or_fail("SO_RCVTIMEO")?;
+    p.bind(&port).or_fail("DSOR bind 0:7")?;
+    let msg: Vec<u8> = (0..40u8).collect();
+    q.send_to(&msg, &port).or_fail("DSOR send to 0:7")?;
+    let mut got = vec![0u8; 256];
+    let (n, _) = p.recv_from(&mut got).or_fail("DSOR recvfrom")?;
+    ensure!(
+        got[..n] == msg[..],
+        "DSOR message corrupted: {:x?}",
+        &got[..n]
+    );
+    canraw::recv(&watch).map_err(|e| format!("no DSOR frame on can2: {e}"))?;
+    canraw::expect_quiet(&[("namespace A, every interface, during DSOR", &a_all)])?;
     let e = a
         .run(|| raw::socket(libc::PF_CAN, libc::SOCK_DGRAM, 17).err())
         .and_then(|e| e.raw_os_error());
@@ -547,6 +578,8 @@ fn netns_canloop_returns(ctx: &mut Ctx) -> TestResult {
 /// An Intel 82527 controller (the simulated card, link kind "can")
 /// moved into a namespace:
 ///
+/// * a socket of the initial namespace bound to it loses it (ENODEV), as
+///   on unregistration;
 /// * its message objects follow the sockets of the namespace it is in
 ///   now (DESIGN decision 7): with only a filtered socket of the
 ///   namespace bound to it, and none of the initial namespace, the frame
@@ -558,11 +591,18 @@ fn netns_canloop_returns(ctx: &mut Ctx) -> TestResult {
 /// * moved again, with a socket bound to it there, `rmmod` of the driver
 ///   unregisters it in that namespace: the socket gets ENODEV.
 fn i82527_netns_move(ctx: &mut Ctx) -> TestResult {
-    let (i0, _) = super::i82527::sim2(ctx)?;
+    let (i0, i1) = super::i82527::sim2(ctx)?;
     let tx0 = canraw::open(i0)?;
+    let lost = canraw::open(i1)?;
     let ns = Ns::new()?;
     let j = ns.take_up("can1")?;
     ensure!(!in_init("can1"), "can1 still in the initial namespace");
+    expect_error(
+        &lost,
+        libc::ENODEV,
+        "initial-namespace socket bound to can1",
+    )?;
+    drop(lost);
     let rx = ns.run(move || -> Result<CanSocket, String> {
         let s = canraw::open(j)?;
         s.set_filters(&[CanFilter::new(0x123, 0x7ff)])
