@@ -68,7 +68,7 @@ use glue::lock::{new_bh_spinlock, BhLock};
 use glue::net::Net;
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
-use glue::procfs::{ProcDir, ProcDirReg, ProcEntry, ProcShow, SeqFile};
+use glue::procfs::{NetProcDir, NetProcDirReg, ProcEntry, ProcShow, SeqFile};
 use glue::skb::Skb;
 use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
 use glue::sync::Rtnl;
@@ -555,9 +555,10 @@ struct BcmProto;
 /// This module's registrations (proto, CAN protocol, notifier).
 static MODULE: ProtoModule<BcmProto> = ProtoModule::new();
 
-/// `/proc/net/can-bcm`: one file per connected socket, named by its inode
-/// number (mainline's `bcm_proc_show` format).
-static PROC: ProcDir = ProcDir::new(c_str!("can-bcm"));
+/// `/proc/net/can-bcm` in every network namespace: one file per connected
+/// socket of that namespace, named by its inode number (mainline's
+/// `bcm_proc_show` format).
+static PROC: NetProcDir = NetProcDir::new(c_str!("can-bcm"));
 
 /// What `/proc/net/can-bcm/<inode>` shows: its socket (a counted
 /// reference, dropped with the file).
@@ -1125,15 +1126,13 @@ impl glue::sock::Proto for BcmProto {
         s.bound = true;
         s.ifindex = ifindex;
         sk.shared().bound.store(true, Ordering::Relaxed);
-        // /proc/net/can-bcm/<inode>; as in mainline, a socket without it
-        // (no directory, no memory) still works. The directory is the
-        // initial namespace's only (bcm.rst): a socket elsewhere gets no
-        // file, so that init_net's /proc never lists another namespace's.
-        if !sk.net().is_init() {
-            return Ok(());
-        }
+        // /proc/net/can-bcm/<inode> in the socket's namespace; as in
+        // mainline, a socket without it (no directory, no memory) still
+        // works.
         if let Ok(name) = CString::try_from_fmt(format_args!("{}", sk.ino())) {
-            s.proc = ProcEntry::new(&PROC, &name, ProcView { sk: sk.to_ref() }).ok();
+            s.proc = PROC
+                .entry(sk.net(), &name, ProcView { sk: sk.to_ref() })
+                .ok();
         }
         Ok(())
     }
@@ -1243,13 +1242,13 @@ impl glue::sock::Proto for BcmProto {
 pub(crate) struct BcmModule {
     _reg: ProtoRegistration<BcmProto>,
     /// Dropped after `_reg`: no socket, so no file, is left then.
-    _proc: Option<ProcDirReg>,
+    _proc: Option<NetProcDirReg>,
 }
 
 impl kernel::Module for BcmModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
         // Before the protocol: a socket may connect at once.
-        let proc = match PROC.create() {
+        let proc = match PROC.register() {
             Ok(p) => Some(p),
             Err(e) => {
                 pr_warn!("no /proc/net/can-bcm ({:?})\n", e);

@@ -1,13 +1,12 @@
 // SPDX-License-Identifier: GPL-2.0
 
-//! Files in `/proc/net`: a protocol's directory ([`ProcDir`], in a
-//! `static`) and one read-only file per object in it ([`ProcEntry`]),
-//! whose text a [`ProcShow`] callback writes when the file is read
+//! Files in `/proc/net`: a protocol's directory in every network
+//! namespace ([`NetProcDir`], in a `static`; mainline makes its
+//! protocols' directories per namespace, `net->can.bcmproc_dir`) and one
+//! read-only file per object in it ([`ProcEntry`]), whose text a
+//! [`ProcShow`] callback writes when the file is read
 //! (`proc_create_single_data`, `seq_file` with `single_open`). For
 //! mainline-compatible views such as `/proc/net/can-bcm/<inode>`.
-//!
-//! The directory is in the initial network namespace (mainline makes one
-//! per namespace).
 //!
 //! Lifetimes, without trust in the caller:
 //!
@@ -16,130 +15,206 @@
 //!   every read that is running its `show` (procfs' `proc_entry_rundown`)
 //!   and makes later reads of an already open file fail with EIO; only
 //!   then is the data freed. So `show` never sees freed data.
-//! * The directory counts its entries. [`ProcDir::remove`] removes it only
-//!   when no entry exists and none can be made any more (the count and a
-//!   "gone" mark are one atomic word); with entries left it leaves the
-//!   directory and returns false. So no entry outlives its parent.
+//! * A namespace's directory is shared (`Arc`) by the namespace's data
+//!   (a [`Pernet`], dropped at the namespace's exit or when the module
+//!   unregisters) and by every entry in it; the last one to go removes
+//!   it. So no entry outlives its directory.
+//! * An entry also holds a reference on its namespace (`maybe_get_net`):
+//!   the namespace's own `/proc/net`, the directory's parent, cannot go
+//!   (at the namespace's exit) while a file in it exists.
 
 use super::bindings;
+use super::net::{Net, Pernet, PernetData, PernetReg};
+use super::sync::RcuReadGuard;
 use core::fmt;
 use core::marker::PhantomData;
 use core::ptr::NonNull;
-use core::sync::atomic::{AtomicPtr, AtomicUsize, Ordering};
+use core::sync::atomic::{AtomicPtr, Ordering};
 use kernel::alloc::{flags::GFP_KERNEL, KBox};
 use kernel::error::{code, Result};
 use kernel::ffi;
 use kernel::str::CStr;
+use kernel::sync::Arc;
 
-/// In [`ProcDir::users`]: the directory does not exist (not created yet,
-/// or removed); entries cannot be made.
-const GONE: usize = 1 << (usize::BITS - 1);
-
-/// A directory `/proc/net/<name>` in a `static`.
-pub(crate) struct ProcDir {
+/// A directory `/proc/net/<name>` in every network namespace: a `static`
+/// of the module, at most one per module (the namespaces' data behind it
+/// is one [`Pernet`] of this file). [`NetProcDir::register`] makes it in
+/// every namespace that exists and in each one created later;
+/// [`NetProcDir::entry`] makes a file in one namespace's.
+pub(crate) struct NetProcDir {
     name: &'static CStr,
-    /// The directory while it exists (set before `users` leaves GONE).
-    pde: AtomicPtr<bindings::proc_dir_entry>,
-    /// Entries in it, or GONE.
-    users: AtomicUsize,
 }
 
-/// Removes the directory when dropped (module exit): see
-/// [`ProcDir::remove`].
-pub(crate) struct ProcDirReg(&'static ProcDir);
+/// Registered [`NetProcDir`]: dropping it (module exit) removes the
+/// directory from every namespace, or, where files are still left in one,
+/// when the last of them goes. Process context; sleeps.
+pub(crate) struct NetProcDirReg {
+    pernet: Option<PernetReg<NetDir>>,
+}
 
-impl Drop for ProcDirReg {
+impl Drop for NetProcDirReg {
     fn drop(&mut self) {
-        if !self.0.remove() {
-            kernel::pr_warn!(
-                "/proc/net/{} left in place: it still has files\n",
-                self.0.name
-            );
-        }
+        // Unregisters: every namespace's data is dropped (after
+        // pre_exit and a grace period, see `NetProcDir::entry`).
+        drop(self.pernet.take());
+        DIR_NAME.store(core::ptr::null_mut(), Ordering::Release);
     }
 }
 
-impl ProcDir {
-    pub(crate) const fn new(name: &'static CStr) -> Self {
-        ProcDir {
-            name,
-            pde: AtomicPtr::new(core::ptr::null_mut()),
-            users: AtomicUsize::new(GONE),
-        }
+/// The registered directory's name (null while none is): what each
+/// namespace's `init` makes.
+static DIR_NAME: AtomicPtr<ffi::c_char> = AtomicPtr::new(core::ptr::null_mut());
+
+/// Every namespace's directory.
+static NET_DIRS: Pernet<NetDir> = Pernet::new();
+
+/// One namespace's directory: `None` if procfs refused it (sockets work
+/// without their files, as in mainline, whose `proc_net_mkdir` failure is
+/// not an error either).
+struct NetDir {
+    dir: Option<Arc<DirInner>>,
+}
+
+/// A directory made by `proc_net_mkdir`, removed when the last holder
+/// drops it (see the module documentation).
+///
+/// # Invariants
+///
+/// `pde` is a directory in a namespace's `/proc/net` that nobody else
+/// removes; that `/proc/net` exists while this value does.
+struct DirInner {
+    pde: NonNull<bindings::proc_dir_entry>,
+}
+
+// SAFETY: the directory is only passed to procfs, which locks for itself.
+unsafe impl Send for DirInner {}
+// SAFETY: shared access reaches nothing but the pointer's value.
+unsafe impl Sync for DirInner {}
+
+impl Drop for DirInner {
+    /// Process context.
+    fn drop(&mut self) {
+        // SAFETY: our directory (invariant); no file is left in it, since
+        // every file holds this value.
+        unsafe { bindings::rcan_proc_remove(self.pde.as_ptr()) };
+    }
+}
+
+impl PernetData for NetDir {
+    fn pernet() -> &'static Pernet<Self> {
+        &NET_DIRS
     }
 
-    /// Creates `/proc/net/<name>`. Process context (module init). ENOMEM
-    /// if procfs refuses it (for instance, the name exists), EBUSY if this
-    /// directory exists already.
-    pub(crate) fn create(&'static self) -> Result<ProcDirReg> {
-        if !self.pde.load(Ordering::Acquire).is_null() {
-            return Err(code::EBUSY);
+    /// Process context (namespace creation, or registration).
+    fn init(net: &Net) -> Result<Self> {
+        let name = DIR_NAME.load(Ordering::Acquire);
+        if name.is_null() {
+            return Ok(NetDir { dir: None });
         }
-        // SAFETY: a NUL-terminated 'static name; procfs copies it.
-        let p = unsafe { bindings::rcan_proc_net_mkdir(self.name.as_char_ptr()) };
-        if p.is_null() {
-            return Err(code::ENOMEM);
-        }
-        if self
-            .pde
+        // SAFETY: `net` is being set up or alive (the pernet core calls
+        // init with a valid namespace); `name` is a registered 'static
+        // NUL-terminated name, which procfs copies.
+        let pde = unsafe { bindings::rcan_proc_net_mkdir(net.as_ptr(), name) };
+        // INVARIANT: a new directory in `net`'s /proc/net, which lives
+        // until `net`'s exit; this value is dropped before that (the
+        // namespace's data) or holds `net` (inside an entry's NetHold).
+        // An Arc that cannot be allocated drops the value: the directory
+        // is removed at once.
+        let dir = NonNull::new(pde).and_then(|pde| Arc::new(DirInner { pde }, GFP_KERNEL).ok());
+        Ok(NetDir { dir })
+    }
+}
+
+impl NetProcDir {
+    pub(crate) const fn new(name: &'static CStr) -> Self {
+        NetProcDir { name }
+    }
+
+    /// Makes `/proc/net/<name>` in every namespace, now and in those
+    /// created later. Process context (module init). EBUSY if this
+    /// module has registered one already.
+    pub(crate) fn register(&'static self) -> Result<NetProcDirReg> {
+        let name = self.name.as_char_ptr().cast_mut();
+        DIR_NAME
             .compare_exchange(
                 core::ptr::null_mut(),
-                p,
+                name,
                 Ordering::AcqRel,
                 Ordering::Acquire,
             )
-            .is_err()
-        {
-            // A concurrent create won (two module inits of one static
-            // cannot happen, but stay sound): undo ours.
-            // SAFETY: `p` is the directory just made, known to nobody.
-            unsafe { bindings::rcan_proc_remove(p) };
-            return Err(code::EBUSY);
-        }
-        self.users.store(0, Ordering::Release);
-        Ok(ProcDirReg(self))
-    }
-
-    /// Removes the directory if it has no entries; marks it gone first,
-    /// so that none can be added. False (and the directory stays) while
-    /// entries exist. Process context.
-    fn remove(&'static self) -> bool {
-        if self
-            .users
-            .compare_exchange(0, GONE, Ordering::AcqRel, Ordering::Acquire)
-            .is_err()
-        {
-            return false;
-        }
-        let p = self.pde.swap(core::ptr::null_mut(), Ordering::AcqRel);
-        if !p.is_null() {
-            // SAFETY: the directory made by `create`; no entry is in it and
-            // none can be made (GONE), so nothing else refers to it.
-            unsafe { bindings::rcan_proc_remove(p) };
-        }
-        true
-    }
-
-    /// Counts a new entry; its directory. None when the directory is gone.
-    fn get(&'static self) -> Option<NonNull<bindings::proc_dir_entry>> {
-        self.users
-            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |u| {
-                (u & GONE == 0).then_some(u + 1)
-            })
-            .ok()?;
-        // Non-null while `users` is not GONE (stored before `users` left
-        // GONE, cleared only after it returned to GONE).
-        match NonNull::new(self.pde.load(Ordering::Acquire)) {
-            Some(p) => Some(p),
-            None => {
-                self.put();
-                None
+            .map_err(|_| code::EBUSY)?;
+        // SAFETY: `Pernet::get` of NET_DIRS runs only in `entry`, inside
+        // an RCU read-side section. Dropping the registration clears the
+        // flag `get` checks first, then unregisters, and the pernet core
+        // lets a grace period pass between `pre_exit` and `exit` (which
+        // drops the data): a `get` that saw the flag set ends before any
+        // data is dropped; one that starts later sees it clear.
+        match unsafe { NET_DIRS.register() } {
+            Ok(r) => Ok(NetProcDirReg { pernet: Some(r) }),
+            Err(e) => {
+                DIR_NAME.store(core::ptr::null_mut(), Ordering::Release);
+                Err(e)
             }
         }
     }
 
-    fn put(&'static self) {
-        self.users.fetch_sub(1, Ordering::AcqRel);
+    /// Makes the file `name` (mode 0644, as mainline's can-bcm files) in
+    /// `net`'s directory, showing `data`. Process context. ENOENT if
+    /// `net` has no directory (not registered, procfs refused it, or the
+    /// namespace is going away); ENOMEM.
+    pub(crate) fn entry<T: ProcShow>(
+        &'static self,
+        net: &Net,
+        name: &CStr,
+        data: T,
+    ) -> Result<ProcEntry<T>> {
+        let dir = {
+            let _rcu = RcuReadGuard::new();
+            NET_DIRS.get(net).and_then(|d| d.dir.clone())
+        }
+        .ok_or(code::ENOENT)?;
+        // SAFETY: `net` is alive while borrowed; maybe_get_net fails
+        // (false) if its count already reached zero (it is being
+        // dismantled).
+        if !unsafe { bindings::rcan_maybe_get_net(net.as_ptr()) } {
+            return Err(code::ENOENT);
+        }
+        // INVARIANT: the reference just taken.
+        let hold = NetHold {
+            dir: Some(dir),
+            // SAFETY: a `&Net` is never null.
+            net: unsafe { NonNull::new_unchecked(net.as_ptr()) },
+        };
+        ProcEntry::new(hold, name, data)
+    }
+}
+
+/// What a file holds of its place: its directory and a reference on the
+/// directory's namespace, dropped in that order.
+///
+/// # Invariants
+///
+/// `net` is a namespace this value holds a reference on; `dir` (`Some`
+/// until dropped) is a directory in `net`'s /proc/net.
+struct NetHold {
+    dir: Option<Arc<DirInner>>,
+    net: NonNull<bindings::net>,
+}
+
+// SAFETY: a counted namespace reference and an Arc; both may be dropped
+// from any thread (process context).
+unsafe impl Send for NetHold {}
+// SAFETY: shared access reaches nothing.
+unsafe impl Sync for NetHold {}
+
+impl Drop for NetHold {
+    /// Process context.
+    fn drop(&mut self) {
+        // The directory first (possibly its removal), while its parent is
+        // held alive by the reference dropped next.
+        drop(self.dir.take());
+        // SAFETY: the reference taken in `NetProcDir::entry` (invariant).
+        unsafe { bindings::rcan_put_net(self.net.as_ptr()) };
     }
 }
 
@@ -177,17 +252,19 @@ impl fmt::Write for SeqFile<'_> {
     }
 }
 
-/// A file `/proc/net/<dir>/<name>` showing a `T`.
+/// A file `/proc/net/<dir>/<name>` showing a `T`, made by
+/// [`NetProcDir::entry`].
 ///
 /// # Invariants
 ///
 /// `pde` is the file made by `proc_create_single_data` with
 /// `show_trampoline::<T>` and `data` (from `KBox::into_raw`, owned here)
-/// as its private data; `dir` counted this entry ([`ProcDir::get`]).
+/// as its private data, in the directory `hold` holds.
 pub(crate) struct ProcEntry<T: ProcShow> {
-    dir: &'static ProcDir,
     pde: NonNull<bindings::proc_dir_entry>,
     data: NonNull<T>,
+    /// Dropped after the file is removed (Drop's body runs first).
+    hold: NetHold,
 }
 
 // SAFETY: the data is Send + Sync; the entry is removed through procfs,
@@ -197,16 +274,15 @@ unsafe impl<T: ProcShow> Send for ProcEntry<T> {}
 unsafe impl<T: ProcShow> Sync for ProcEntry<T> {}
 
 impl<T: ProcShow> ProcEntry<T> {
-    /// Makes the file `name` (mode 0644, as mainline's can-bcm files) in
-    /// `dir`, showing `data`. Process context. ENOENT if the directory
-    /// does not exist; ENOMEM.
-    pub(crate) fn new(dir: &'static ProcDir, name: &CStr, data: T) -> Result<Self> {
+    /// Makes the file `name` in `hold`'s directory. Process context.
+    /// ENOENT without a directory; ENOMEM.
+    fn new(hold: NetHold, name: &CStr, data: T) -> Result<Self> {
+        let parent = hold.dir.as_ref().ok_or(code::ENOENT)?.pde;
         let data = KBox::new(data, GFP_KERNEL)?;
-        let parent = dir.get().ok_or(code::ENOENT)?;
         let d = KBox::into_raw(data);
-        // SAFETY: `parent` is alive (counted above, see the module
-        // documentation); procfs copies `name`; `d` stays valid until the
-        // file is removed (Drop).
+        // SAFETY: `parent` is alive while `hold` is (DirInner invariant);
+        // procfs copies `name`; `d` stays valid until the file is removed
+        // (Drop).
         let pde = unsafe {
             bindings::rcan_proc_create_single(
                 name.as_char_ptr(),
@@ -218,15 +294,14 @@ impl<T: ProcShow> ProcEntry<T> {
         let Some(pde) = NonNull::new(pde) else {
             // SAFETY: from into_raw above; procfs never saw it.
             drop(unsafe { KBox::from_raw(d) });
-            dir.put();
             return Err(code::ENOMEM);
         };
-        // INVARIANT: made above; `dir` counted it.
+        // INVARIANT: made above, in `hold`'s directory.
         Ok(ProcEntry {
-            dir,
             pde,
             // SAFETY: KBox::into_raw never returns NULL.
             data: unsafe { NonNull::new_unchecked(d) },
+            hold,
         })
     }
 }
@@ -239,7 +314,8 @@ impl<T: ProcShow> Drop for ProcEntry<T> {
         unsafe { bindings::rcan_proc_remove(self.pde.as_ptr()) };
         // SAFETY: from KBox::into_raw (invariant); no reader is left.
         drop(unsafe { KBox::from_raw(self.data.as_ptr()) });
-        self.dir.put();
+        // `hold` is dropped after this body: the directory and the
+        // namespace go after the file.
     }
 }
 

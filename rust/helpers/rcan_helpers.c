@@ -742,14 +742,25 @@ void rcan_skb_set_tstamp(struct sk_buff *skb, s64 ns)
 	skb->tstamp = ns_to_ktime(ns);
 }
 
-/* procfs: a directory in /proc/net of the initial namespace, single_open files. */
+/* procfs: a directory in a namespace's /proc/net, single_open files. */
 #include <linux/proc_fs.h>
 #include <linux/seq_file.h>
 #include <net/net_namespace.h>
 
-struct proc_dir_entry *rcan_proc_net_mkdir(const char *name)
+struct proc_dir_entry *rcan_proc_net_mkdir(struct net *net, const char *name)
 {
-	return proc_net_mkdir(&init_net, name, init_net.proc_net);
+	return proc_net_mkdir(net, name, net->proc_net);
+}
+
+/* A reference on a namespace unless it is already being dismantled. */
+bool rcan_maybe_get_net(struct net *net)
+{
+	return maybe_get_net(net) != NULL;
+}
+
+void rcan_put_net(struct net *net)
+{
+	put_net(net);
 }
 
 struct proc_dir_entry *rcan_proc_create_single(const char *name,

@@ -203,7 +203,9 @@ int rcan_netif_receive_skb(struct sk_buff *skb);
 /* procfs (rust/glue/procfs.rs) */
 struct proc_dir_entry;
 struct seq_file;
-struct proc_dir_entry *rcan_proc_net_mkdir(const char *name);
+struct proc_dir_entry *rcan_proc_net_mkdir(struct net *net, const char *name);
+bool rcan_maybe_get_net(struct net *net);
+void rcan_put_net(struct net *net);
 struct proc_dir_entry *rcan_proc_create_single(const char *name,
 					       struct proc_dir_entry *parent,
 					       int (*show)(struct seq_file *, void *),

@@ -87,11 +87,6 @@ pub(crate) use portable_table;
 /// they use (CAN_BCM jobs, CANPROTO_DSOR receive, CAN_RAW filters) run
 /// on the debug kernel in the bcm, dsor and raw tests.
 ///
-/// Of the namespace tests, only the two that exercise teardown
-/// (`raw_netns_move_under_traffic`, `raw_netns_delete_with_sockets`) run
-/// on the debug kernel: creating and tearing down namespaces there costs
-/// tens of seconds per test under TCG.
-///
 /// The info-leak checks of DSOR bodies and the rtime frame, and the DSOR
 /// loss accounting at 30 and 50 % drop rate (1-5 min each on the loaded
 /// debug kernel): what they check does not depend on the kernel variant;
@@ -122,11 +117,6 @@ pub const RELEASE_ONLY: &[&str] = &[
     "powerd_shuts_down_on_its_frame_only",
     "powerd_dry_run_and_sigterm_change_nothing",
     "logd_logs_dsor_messages_from_peer",
-    "raw_netns_isolation",
-    "bcm_netns_send",
-    "candev_netns_returns",
-    "netns_thesis_api",
-    "netns_canloop_returns",
     "canutils_fd_python_can",
     "leak_dsor_bodies",
     "leak_rtime_frame",

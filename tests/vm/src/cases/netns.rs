@@ -20,12 +20,15 @@
 //! comes back to the initial namespace.
 
 use std::io;
+use std::os::fd::AsRawFd;
+use std::os::unix::fs::MetadataExt;
 use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::thread;
 use std::time::{Duration, Instant};
 
+use rcan_uapi::dsor::{dsor_port, DsorAddr, DsorSocket};
 use rcan_uapi::raw;
 use rcan_uapi::ArbSocket;
 use socketcan::{CanFilter, CanSocket, Socket, SocketOptions};
@@ -44,7 +47,8 @@ pub const TESTS: &[crate::Test] = portable_table![
     candev_netns_returns,
 ];
 
-pub const OURS: &[crate::Test] = test_table![netns_thesis_api, netns_canloop_returns];
+pub const OURS: &[crate::Test] =
+    test_table![netns_thesis_api, netns_canloop_returns, i82527_netns_move,];
 
 type Job = Box<dyn FnOnce() + Send>;
 
@@ -373,14 +377,16 @@ fn raw_netns_delete_with_sockets(ctx: &mut Ctx) -> TestResult {
 }
 
 /// CAN_BCM in a namespace: `connect` names an interface of the socket's
-/// namespace (another's index is ENODEV), and TX_SEND sends there only.
+/// namespace (another's index is ENODEV), TX_SEND sends there only, and
+/// the socket's `/proc/net/can-bcm/<inode>` file is in its namespace's
+/// `/proc/net`, not the initial namespace's.
 fn bcm_netns_send(ctx: &mut Ctx) -> TestResult {
     ctx.bcm_ifaces(2)?;
     let ns = Ns::new()?;
     let j = ns.take_up("can1")?;
     let init_all = canraw::open(0)?;
     let i0 = ctx.ifindex("can0")?;
-    let (rx, res) = ns.run(move || -> Result<_, String> {
+    let (rx, res, ino) = ns.run(move || -> Result<_, String> {
         let rx = canraw::open(0)?;
         let b = raw::socket(libc::PF_CAN, libc::SOCK_DGRAM, 2).or_fail("socket(CAN_BCM)")?;
         let other = raw::connect(&b, &canraw::addr_bytes(libc::AF_CAN as u16, i0)).err();
@@ -396,8 +402,24 @@ fn bcm_netns_send(ctx: &mut Ctx) -> TestResult {
         f[8] = 0x5a;
         m.extend_from_slice(&f);
         raw::write(&b, &m).or_fail("TX_SEND")?;
-        Ok((rx, other))
+        // The socket's file is in its namespace's /proc/net/can-bcm
+        // (this thread's /proc/net), named by its inode.
+        let ino = std::fs::metadata(format!("/proc/self/fd/{}", b.as_raw_fd()))
+            .or_fail("stat of the BCM socket")?
+            .ino();
+        let mine = format!("/proc/thread-self/net/can-bcm/{ino}");
+        let text = std::fs::read_to_string(&mine).or_fail(&mine)?;
+        ensure!(
+            text.starts_with(">>> socket "),
+            "{mine}: unexpected text {text:?}"
+        );
+        Ok((rx, other, ino))
     })?;
+    let init_file = format!("/proc/net/can-bcm/{ino}");
+    ensure!(
+        !std::path::Path::new(&init_file).exists(),
+        "the namespace's BCM socket has a file in the initial namespace: {init_file}"
+    );
     canraw::expect(&rx, &sff(0x77, &[0x5a]), "namespace, every interface")?;
     canraw::expect_quiet(&[("initial namespace, every interface", &init_all)])?;
     if ns.ifindex("can0").is_err() {
@@ -435,10 +457,11 @@ fn candev_netns_returns(ctx: &mut Ctx) -> TestResult {
 /// The thesis API (CANPROTO_CAN) in two namespaces: a socket bound to
 /// every interface receives what is sent in its namespace only; sending to
 /// ifindex 0 ("every CAN interface", thesis 5.2.2) sends on the
-/// namespace's interfaces only. DSOR stays in the initial namespace:
+/// namespace's interfaces only. DSOR stays in the initial namespace
+/// (netns.rst): its traffic there never reaches a namespace's sockets,
 /// socket() elsewhere is EAFNOSUPPORT, and `canip0` cannot be moved.
 fn netns_thesis_api(ctx: &mut Ctx) -> TestResult {
-    ctx.load_stack(&["count=2"])?;
+    ctx.load_stack(&["count=3"])?;
     let (a, b) = (Ns::new()?, Ns::new()?);
     a.take_up("can0")?;
     b.take_up("can1")?;
@@ -474,7 +497,36 @@ fn netns_thesis_api(ctx: &mut Ctx) -> TestResult {
             "{who}: a frame from another namespace: {r:?}"
         );
     }
+    // DSOR runs in the initial namespace, on can2: a port message to
+    // this node goes out on can2 (an initial-namespace socket on can2
+    // sees its frames) and arrives, and namespace A's socket bound to
+    // every interface of A sees none of it.
     ctx.insmod(Module::Dsor, &["ifname=can2"])?;
+    let watch = canraw::open(ctx.ifindex("can2")?)?;
+    let a_all = a.raw(0)?;
+    let port = DsorAddr::Port {
+        prio: 0,
+        port: dsor_port(0, 7),
+    };
+    let (p, q) = (DsorSocket::new(), DsorSocket::new());
+    let (p, q) = (
+        p.or_fail("socket(CANPROTO_DSOR)")?,
+        q.or_fail("socket(CANPROTO_DSOR)")?,
+    );
+    p.set_rcvtimeo(canraw::RAW_RX_TIMEOUT)
+        .or_fail("SO_RCVTIMEO")?;
+    p.bind(&port).or_fail("DSOR bind 0:7")?;
+    let msg: Vec<u8> = (0..40u8).collect();
+    q.send_to(&msg, &port).or_fail("DSOR send to 0:7")?;
+    let mut got = vec![0u8; 256];
+    let (n, _) = p.recv_from(&mut got).or_fail("DSOR recvfrom")?;
+    ensure!(
+        got[..n] == msg[..],
+        "DSOR message corrupted: {:x?}",
+        &got[..n]
+    );
+    canraw::recv(&watch).map_err(|e| format!("no DSOR frame on can2: {e}"))?;
+    canraw::expect_quiet(&[("namespace A, every interface, during DSOR", &a_all)])?;
     let e = a
         .run(|| raw::socket(libc::PF_CAN, libc::SOCK_DGRAM, 17).err())
         .and_then(|e| e.raw_os_error());
@@ -521,6 +573,84 @@ fn netns_canloop_returns(ctx: &mut Ctx) -> TestResult {
         "can1 survived rmmod in its namespace"
     );
     Ok(())
+}
+
+/// An Intel 82527 controller (the simulated card, link kind "can")
+/// moved into a namespace:
+///
+/// * a socket of the initial namespace bound to it loses it (ENODEV), as
+///   on unregistration;
+/// * its message objects follow the sockets of the namespace it is in
+///   now (DESIGN decision 7): with only a filtered socket of the
+///   namespace bound to it, and none of the initial namespace, the frame
+///   that filter wants still gets in;
+/// * frames never cross: an initial-namespace socket bound to every
+///   interface sees a frame once (can0's reception), not can1's echo;
+/// * when the namespace goes, the controller comes back (`netns_refund`)
+///   and works in the initial namespace;
+/// * moved again, with a socket bound to it there, `rmmod` of the driver
+///   unregisters it in that namespace: the socket gets ENODEV.
+fn i82527_netns_move(ctx: &mut Ctx) -> TestResult {
+    let (i0, i1) = super::i82527::sim2(ctx)?;
+    let tx0 = canraw::open(i0)?;
+    let lost = canraw::open(i1)?;
+    let ns = Ns::new()?;
+    let j = ns.take_up("can1")?;
+    ensure!(!in_init("can1"), "can1 still in the initial namespace");
+    expect_error(
+        &lost,
+        libc::ENODEV,
+        "initial-namespace socket bound to can1",
+    )?;
+    drop(lost);
+    let rx = ns.run(move || -> Result<CanSocket, String> {
+        let s = canraw::open(j)?;
+        s.set_filters(&[CanFilter::new(0x123, 0x7ff)])
+            .or_fail("CAN_RAW_FILTER")?;
+        Ok(s)
+    })?;
+    let want = sff(0x123, &[1, 2, 3]);
+    canraw::send(&tx0, &sff(0x456, &[4]))?;
+    canraw::send(&tx0, &want)?;
+    canraw::expect(&rx, &want, "filtered socket of the namespace on can1")?;
+
+    let init_all = canraw::open(0)?;
+    let ntx = ns.raw(j)?;
+    let back = sff(0x124, &[5]);
+    canraw::send(&ntx, &back)?;
+    canraw::expect(&tx0, &back, "can0, from can1 in the namespace")?;
+    canraw::expect(&init_all, &back, "initial namespace, every interface")?;
+    canraw::expect_quiet(&[
+        ("initial namespace, every interface", &init_all),
+        ("filtered socket of the namespace", &rx),
+    ])?;
+
+    drop((rx, ntx));
+    drop(ns);
+    let t0 = Instant::now();
+    while !in_init("can1") {
+        ensure!(
+            t0.elapsed() < Duration::from_secs(20),
+            "can1 did not come back from its namespace"
+        );
+        thread::sleep(Duration::from_millis(50));
+    }
+    ctx.link_up("can1")?;
+    let rx1 = canraw::open(ctx.ifindex("can1")?)?;
+    let f = sff(0x125, &[6]);
+    canraw::send(&tx0, &f)?;
+    canraw::expect(&rx1, &f, "can1 back in the initial namespace")?;
+    drop(rx1);
+
+    let ns = Ns::new()?;
+    let j = ns.take_up("can1")?;
+    let held = ns.raw(j)?;
+    ctx.rmmod(Module::I82527Sim)?;
+    ensure!(
+        ns.ifindex("can1").is_err(),
+        "can1 survived rmmod in its namespace"
+    );
+    expect_error(&held, libc::ENODEV, "socket bound to can1 in the namespace")
 }
 
 /// SO_RCVTIMEO of [`canraw::RAW_RX_TIMEOUT`] on a thesis socket.
