@@ -54,6 +54,17 @@ impl NetDev {
         self.0.get()
     }
 
+    /// A counted reference to this device (`dev_hold`), e.g. to send on
+    /// the device a frame was received on without looking it up again.
+    /// Any context.
+    pub(crate) fn hold(&self) -> DevRef {
+        // SAFETY: a valid device for as long as `self` is borrowed; the
+        // reference taken here keeps it valid after.
+        unsafe { bindings::rcan_dev_hold(self.as_ptr()) };
+        // INVARIANT: one reference, just taken.
+        DevRef(NonNull::from(self).cast())
+    }
+
     pub(crate) fn ifindex(&self) -> i32 {
         // SAFETY: valid device (type invariant); ifindex is fixed while
         // registered in one namespace (a move may change it, under RTNL).

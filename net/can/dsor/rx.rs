@@ -216,8 +216,9 @@ impl KernelRx for DsorRx {
         }
         if queued {
             // Becomes the drainer unless one runs (which then takes these
-            // frames too).
-            drain(false);
+            // frames too); sends on the device the frame came in on (the
+            // DSOR interface, checked above) without a lookup by name.
+            drain(false, Some(dev.hold()));
         }
     }
 }

@@ -55,7 +55,7 @@ impl HrTimerCallback for Tick {
     /// unless another drainer (a receive callback on another CPU) is at
     /// it; that one re-arms the timer when it is done.
     fn run(_timer: &'static HrTimer<Self>, _state: &mut ()) {
-        drain(true);
+        drain(true, None);
     }
 }
 
@@ -68,11 +68,12 @@ impl HrTimerCallback for Tick {
 /// when the queue is empty, clears `draining` and re-arms the timer for
 /// the next deadline in the same critical section, so that a frame queued
 /// concurrently (also under ENGINE) is never left unsent. After
-/// [`FRAMES_PER_RUN`] frames it re-arms for "now" instead.
-pub(crate) fn drain(timers: bool) {
+/// [`FRAMES_PER_RUN`] frames it re-arms for "now" instead. `dev`, if
+/// given, is used as the DSOR interface if its name is still the
+/// configured one (else the device is looked up by name, as without).
+pub(crate) fn drain(timers: bool, mut dev: Option<DevRef>) {
     let mut first = true;
     let mut wake = false;
-    let mut dev: Option<DevRef> = None;
     let mut sent = 0;
     loop {
         if wake {
@@ -125,6 +126,12 @@ pub(crate) fn drain(timers: bool) {
                 }
             }
             ifname = e.cfg.ifname;
+            if dev
+                .as_ref()
+                .is_some_and(|d| d.name().as_bytes() != ifname.bytes())
+            {
+                dev = None;
+            }
             if n == 0 {
                 e.draining = false;
                 if let Some(d) = e.next_deadline() {

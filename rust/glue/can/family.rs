@@ -38,6 +38,7 @@ use crate::glue::netdev::NetDev;
 use crate::glue::skb::Skb;
 use crate::glue::sync::{synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard, StaticMutex};
 use core::ptr::NonNull;
+use core::sync::atomic::{fence, AtomicUsize, Ordering};
 use kernel::error::{code, Error, Result};
 use kernel::ffi;
 use kernel::prelude::*;
@@ -208,14 +209,34 @@ static WRITERS: CMutex<Registry> = CMutex::new(
     },
 );
 
+/// The number of listeners: written under `WRITERS` (in
+/// `rcan_rx_listen`), read without it by [`notify_listeners`] (see the
+/// fence argument there).
+static NLISTENERS: AtomicUsize = AtomicUsize::new(0);
+
 /// The protocol table (RCU readers, `WRITERS` for writers).
 static PROTOS: [RcuPtr<CanProto>; CANPROTO_MAX] = [const { RcuPtr::null() }; CANPROTO_MAX];
 
 /// Tells the drivers of the interfaces in `ifindexes` (0: all of them)
 /// that their wanted filters changed. Process context; takes `WRITERS` (so
-/// a listener being removed is not called after its removal returns).
+/// a listener being removed is not called after its removal returns),
+/// unless no driver listens.
 pub(crate) fn notify_listeners(ifindexes: &[Option<i32>]) {
     if ifindexes.iter().all(|i| i.is_none()) {
+        return;
+    }
+    // Fast path: no listener, no `WRITERS` (a mutex per bind and close).
+    // Store-buffering argument: our table change (made and published
+    // before this call) is ordered before the load of the count by this
+    // full fence; `rcan_rx_listen` raises the count and then runs the
+    // paired full fence before its caller reads the table
+    // (`rcan_rx_filters`). Of the two loads (our count, its table) at
+    // least one sees the other side's store: either we see the new
+    // listener and call it below, or it reads a table that has our change.
+    // A listener being removed needs no call (skipping one is what its
+    // removal asks for).
+    fence(Ordering::SeqCst);
+    if NLISTENERS.load(Ordering::Relaxed) == 0 {
         return;
     }
     let reg = WRITERS.lock();
@@ -372,6 +393,10 @@ extern "C" fn rcan_rx_listen(
             return Error::from(e).to_errno();
         }
     }
+    NLISTENERS.store(reg.listeners.len(), Ordering::Relaxed);
+    // Pairs with the fence in notify_listeners: the new count is visible
+    // before the caller (a new listener) reads the table after we return.
+    fence(Ordering::SeqCst);
     0
 }
 
@@ -789,4 +814,5 @@ pub(crate) fn net_table_make(net: &Net) -> Result<&RxTable<Target>> {
 /// dropped. Process context.
 pub(crate) fn shutdown() {
     WRITERS.lock().listeners = KVec::new();
+    NLISTENERS.store(0, Ordering::Relaxed);
 }
