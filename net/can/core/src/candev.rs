@@ -194,7 +194,8 @@ pub struct Changed {
 ///    ([`Device::dbtc`], no CAN FD) `EOPNOTSUPP`; else [`bittiming::get`]
 ///    with the data limits and its errors (the same computation and
 ///    default sample points as the nominal timing, mainline
-///    `can_get_bittiming` with `data_bittiming_const`);
+///    `can_get_bittiming` with `data_bittiming_const`); TDC parameters
+///    with it `EOPNOTSUPP` (no TDC limits), the TDC modes off;
 /// 6. termination: `EOPNOTSUPP` (no switchable termination).
 pub fn changelink(
     dev: &Device,
@@ -267,6 +268,12 @@ pub fn changelink(
         }
         let dbtc = dev.dbtc.ok_or(Error::bare(EOPNOTSUPP))?;
         let c = bittiming::get(dbtc, dev.clock_hz, user)?;
+        if req.tdc {
+            // Mainline's can_tdc_changelink on a device without TDC
+            // limits: the TDC modes are switched off, EOPNOTSUPP.
+            settings.ctrlmode &= !ctrlmode::TDC_MASK;
+            return Err(Error::bare(EOPNOTSUPP));
+        }
         settings.data_bittiming = c.bt;
         out.data_bittiming = Some(c);
     }
