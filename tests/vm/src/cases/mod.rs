@@ -169,6 +169,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         dsor::TESTS,
         sja1000::TESTS,
         ctucanfd::TESTS,
+        ctucanfd::PORTABLE_TESTS,
         candev::TESTS,
         capture::SJA1000_TESTS,
         daemons::SJA1000_TESTS,
