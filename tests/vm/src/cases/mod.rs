@@ -111,7 +111,10 @@ pub(crate) use portable_table;
 /// the interface setup and the tools' starts): `ctucanfd_fd_both_ways` and
 /// `ctucanfd_rmmod_during_traffic` reach the same driver paths (transmit,
 /// the TX ring wrapping round, echo, receive, the shared interrupt,
-/// teardown) under lockdep and KASAN.
+/// teardown) under lockdep and KASAN. Likewise `ctucanfd_ip_fd_on_off`
+/// (some 15 `ip` starts, 90 s on the loaded debug kernel) and
+/// `ctucanfd_fd_esi_both_ways`: `ctucanfd_ip_fd_refusals` reaches the
+/// same changelink, MTU and open paths of the device layer there.
 pub const RELEASE_ONLY: &[&str] = &[
     "install_autoload",
     "sja1000_sim_bus_off_manual_restart",
@@ -136,6 +139,8 @@ pub const RELEASE_ONLY: &[&str] = &[
     "ctucanfd_classic_both_ways",
     "ctucanfd_burst",
     "ctucanfd_cansend_candump",
+    "ctucanfd_ip_fd_on_off",
+    "ctucanfd_fd_esi_both_ways",
 ];
 
 /// Every test, in running order.
