@@ -30,6 +30,7 @@ use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{Dev, Driver, NetDev};
 use crate::rcan_core::bittiming::{Bittiming, BittimingConst, Msg, BITTIMING_LEN};
 use crate::rcan_core::candev::{self, CanState, Settings};
+use crate::rcan_core::frame::{CANFD_MTU, CAN_MTU};
 use core::marker::PhantomData;
 use core::sync::atomic::{AtomicU32, Ordering};
 use kernel::ffi;
@@ -147,6 +148,13 @@ pub(crate) struct LinkInfo {
     /// `struct can_bittiming_const`: name (NUL-padded) and limits.
     pub(crate) btc_name: [u8; 16],
     pub(crate) btc: [u32; 8],
+    /// The data bit timing (CAN FD; `bitrate` 0: none set, not reported).
+    pub(crate) data_bittiming: [u8; BITTIMING_LEN],
+    /// Whether the device has data bit-timing limits (CAN FD): then
+    /// `dbtc_name`/`dbtc` are reported as `IFLA_CAN_DATA_BITTIMING_CONST`.
+    pub(crate) has_dbtc: bool,
+    pub(crate) dbtc_name: [u8; 16],
+    pub(crate) dbtc: [u32; 8],
     pub(crate) clock_hz: u32,
     /// `enum can_state`.
     pub(crate) state: u32,
@@ -330,6 +338,16 @@ impl CanDev {
         *self.settings.lock()
     }
 
+    /// `ip link set canX mtu N` for a driver with FD (its
+    /// `Driver::change_mtu`, process context, RTNL held): mainline
+    /// `can_change_mtu` ([`candev::change_mtu`]): 72 turns CAN FD on, 16
+    /// off; while up `EBUSY`. The glue stores the MTU on success.
+    pub(crate) fn change_mtu<T: CanDevice>(&self, dev: &Dev<T>, new_mtu: u32) -> Result {
+        let mut s = self.settings.lock();
+        candev::change_mtu(&Adapter::<T>::device(), &mut s, dev.is_up(), new_mtu)
+            .map_err(|e| crate::glue::errno(e.errno))
+    }
+
     /// Replaces the bit timing and sets or clears triple sampling (the
     /// thesis' `sja1000config`, which writes the registers): the device
     /// must be down. Any context.
@@ -344,12 +362,14 @@ impl CanDev {
     }
 
     /// The settings the device may come up with (mainline
-    /// `open_candev`): without a bit timing `EINVAL`, and the kernel log
-    /// says "bit-timing not yet defined" for `dev`. Process context.
+    /// `open_candev`): without a bit timing, or with CAN FD on and no
+    /// data bit timing (or a slower one), `EINVAL`, and the kernel log
+    /// says why for `dev` ("bit-timing not yet defined", "incorrect/missing
+    /// data bit-timing"). Process context.
     pub(crate) fn open_check(&self, dev_name: &str) -> Result<Settings> {
         let s = self.settings();
-        if candev::open(&s).is_err() {
-            pr_err!("{}: {}\n", dev_name, candev::OPEN_NO_BITTIMING);
+        if let Err(why) = candev::open(&s) {
+            pr_err!("{}: {}\n", dev_name, why);
             return Err(EINVAL);
         }
         Ok(s)
@@ -390,6 +410,13 @@ impl CanDev {
 pub(crate) trait CanDevice: Driver {
     /// The controller's bit-timing limits (`IFLA_CAN_BITTIMING_CONST`).
     const BITTIMING_CONST: &'static BittimingConst;
+    /// The data-phase limits of a CAN FD controller
+    /// (`IFLA_CAN_DATA_BITTIMING_CONST`); `None` (the default): no CAN
+    /// FD, `dbitrate` is refused with `EOPNOTSUPP`. A driver with FD
+    /// also announces [`candev::ctrlmode::FD`], implements
+    /// `Driver::change_mtu` with [`CanDev::change_mtu`], and starts with
+    /// MTU 16 (FD off, as mainline).
+    const DATA_BITTIMING_CONST: Option<&'static BittimingConst> = None;
     /// Control modes the driver implements (`ctrlmode_supported`).
     const CTRLMODE_SUPPORTED: u32;
     /// Whether the driver can restart the controller after bus-off
@@ -437,6 +464,7 @@ impl<T: CanDevice> Adapter<T> {
     fn device() -> candev::Device {
         candev::Device {
             btc: Some(T::BITTIMING_CONST),
+            dbtc: T::DATA_BITTIMING_CONST,
             clock_hz: 0,
             ctrlmode_supported: T::CTRLMODE_SUPPORTED,
             ctrlmode_static: 0,
@@ -467,9 +495,31 @@ impl<T: CanDevice> Adapter<T> {
         let r = candev::changelink(&device, &mut s, d.is_up(), state, &req.to_request());
         // Changes made before a refusal stay, as in mainline.
         *cd.settings.lock() = s;
+        if req.has_ctrlmode {
+            // Mainline's can_changelink sets the MTU from the FD mode
+            // whenever control modes are set (also when a later attribute
+            // is refused); a refused control mode left FD, and so the
+            // MTU, as it was.
+            let mtu = if s.ctrlmode & candev::ctrlmode::FD != 0 {
+                CANFD_MTU
+            } else {
+                CAN_MTU
+            } as u32;
+            if d.mtu() != mtu {
+                // Readers (the transmit paths) read the MTU without RTNL;
+                // this is mainline's plain store under RTNL.
+                // SAFETY: a registered device (contract); RTNL, the MTU's
+                // writers' lock, is held.
+                unsafe { core::ptr::write_volatile(&raw mut (*dev).mtu, mtu) };
+            }
+        }
         match r {
             Ok(ch) => {
+                // The last warning wins, as with mainline's extack.
                 if let Some(w) = ch.bittiming.and_then(|c| c.warning) {
+                    msg.set(&w);
+                }
+                if let Some(w) = ch.data_bittiming.and_then(|c| c.warning) {
                     msg.set(&w);
                 }
                 if ch.restart_now {
@@ -496,25 +546,38 @@ impl<T: CanDevice> Adapter<T> {
         let (d, p) = unsafe { crate::glue::netdev::from_cookie::<T>(dev.cast_mut()) };
         let cd = T::can_dev(p);
         let s = cd.settings();
-        let btc = T::BITTIMING_CONST;
-        let mut name = [0u8; 16];
-        for (n, b) in name.iter_mut().zip(btc.name.bytes().take(15)) {
-            *n = b;
-        }
+        let limits = |btc: &BittimingConst| {
+            let mut name = [0u8; 16];
+            for (n, b) in name.iter_mut().zip(btc.name.bytes().take(15)) {
+                *n = b;
+            }
+            (
+                name,
+                [
+                    btc.tseg1_min,
+                    btc.tseg1_max,
+                    btc.tseg2_min,
+                    btc.tseg2_max,
+                    btc.sjw_max,
+                    btc.brp_min,
+                    btc.brp_max,
+                    btc.brp_inc,
+                ],
+            )
+        };
+        let (btc_name, btc) = limits(T::BITTIMING_CONST);
+        let (dbtc_name, dbtc) = T::DATA_BITTIMING_CONST
+            .map(limits)
+            .unwrap_or(([0; 16], [0; 8]));
         let (txerr, rxerr) = T::berr_counter(d, p);
         let info = LinkInfo {
             bittiming: s.bittiming.to_ne_bytes(),
-            btc_name: name,
-            btc: [
-                btc.tseg1_min,
-                btc.tseg1_max,
-                btc.tseg2_min,
-                btc.tseg2_max,
-                btc.sjw_max,
-                btc.brp_min,
-                btc.brp_max,
-                btc.brp_inc,
-            ],
+            btc_name,
+            btc,
+            data_bittiming: s.data_bittiming.to_ne_bytes(),
+            has_dbtc: T::DATA_BITTIMING_CONST.is_some(),
+            dbtc_name,
+            dbtc,
             clock_hz: T::clock_hz(p),
             state: T::state(d, p) as u32,
             ctrlmode: s.ctrlmode,

@@ -33,6 +33,7 @@ const IFLA_CAN_RESTART_MS: usize = 6;
 const IFLA_CAN_RESTART: usize = 7;
 const IFLA_CAN_BERR_COUNTER: i32 = 8;
 const IFLA_CAN_DATA_BITTIMING: usize = 9;
+const IFLA_CAN_DATA_BITTIMING_CONST: i32 = 10;
 const IFLA_CAN_TERMINATION: usize = 11;
 const IFLA_CAN_BITRATE_MAX: i32 = 15;
 const IFLA_CAN_TDC: usize = 16;
@@ -241,12 +242,14 @@ unsafe extern "C" fn rcan_can_get_size(_dev: *const bindings::net_device) -> usi
     let sizes = [
         BITTIMING_LEN, // IFLA_CAN_BITTIMING
         BITTIMING_CONST_LEN,
-        4, // IFLA_CAN_CLOCK
-        4, // IFLA_CAN_STATE
-        8, // IFLA_CAN_CTRLMODE
-        4, // IFLA_CAN_RESTART_MS
-        4, // IFLA_CAN_BERR_COUNTER
-        4, // IFLA_CAN_BITRATE_MAX
+        4,                   // IFLA_CAN_CLOCK
+        4,                   // IFLA_CAN_STATE
+        8,                   // IFLA_CAN_CTRLMODE
+        4,                   // IFLA_CAN_RESTART_MS
+        4,                   // IFLA_CAN_BERR_COUNTER
+        BITTIMING_LEN,       // IFLA_CAN_DATA_BITTIMING
+        BITTIMING_CONST_LEN, // IFLA_CAN_DATA_BITTIMING_CONST
+        4,                   // IFLA_CAN_BITRATE_MAX
     ];
     let mut n = 0;
     for s in sizes {
@@ -269,8 +272,19 @@ unsafe fn put(skb: *mut bindings::sk_buff, type_: i32, data: &[u8]) -> Result {
     crate::glue::to_result(ret).map(|_| ())
 }
 
+/// `struct can_bittiming_const` from a name and the eight limits.
+fn limits(name: &[u8; 16], v: &[u32; 8]) -> [u8; BITTIMING_CONST_LEN] {
+    let mut btc = [0u8; BITTIMING_CONST_LEN];
+    btc[..16].copy_from_slice(name);
+    for (k, v) in v.iter().enumerate() {
+        btc[16 + 4 * k..20 + 4 * k].copy_from_slice(&v.to_ne_bytes());
+    }
+    btc
+}
+
 /// `rtnl_link_ops.fill_info`: what `ip -details link show` prints (in
-/// mainline's order; `bitrate-max` 0 as mainline's SJA1000 reports).
+/// mainline's order; `bitrate-max` 0 as mainline's SJA1000 reports; the
+/// data bit timing once set and the data limits of an FD controller).
 #[no_mangle]
 unsafe extern "C" fn rcan_can_fill_info(
     skb: *mut bindings::sk_buff,
@@ -284,12 +298,7 @@ unsafe extern "C" fn rcan_can_fill_info(
             if Bittiming::from_ne_bytes(&i.bittiming).bitrate != 0 {
                 put(skb, IFLA_CAN_BITTIMING as i32, &i.bittiming)?;
             }
-            let mut btc = [0u8; BITTIMING_CONST_LEN];
-            btc[..16].copy_from_slice(&i.btc_name);
-            for (k, v) in i.btc.iter().enumerate() {
-                btc[16 + 4 * k..20 + 4 * k].copy_from_slice(&v.to_ne_bytes());
-            }
-            put(skb, IFLA_CAN_BITTIMING_CONST, &btc)?;
+            put(skb, IFLA_CAN_BITTIMING_CONST, &limits(&i.btc_name, &i.btc))?;
             put(skb, IFLA_CAN_CLOCK, &i.clock_hz.to_ne_bytes())?;
             put(skb, IFLA_CAN_STATE, &i.state.to_ne_bytes())?;
             // struct can_ctrlmode: mask 0, the flags on.
@@ -301,6 +310,16 @@ unsafe extern "C" fn rcan_can_fill_info(
             bec[..2].copy_from_slice(&i.txerr.to_ne_bytes());
             bec[2..].copy_from_slice(&i.rxerr.to_ne_bytes());
             put(skb, IFLA_CAN_BERR_COUNTER, &bec)?;
+            if Bittiming::from_ne_bytes(&i.data_bittiming).bitrate != 0 {
+                put(skb, IFLA_CAN_DATA_BITTIMING as i32, &i.data_bittiming)?;
+            }
+            if i.has_dbtc {
+                put(
+                    skb,
+                    IFLA_CAN_DATA_BITTIMING_CONST,
+                    &limits(&i.dbtc_name, &i.dbtc),
+                )?;
+            }
             put(skb, IFLA_CAN_BITRATE_MAX, &0u32.to_ne_bytes())?;
             crate::glue::to_result(rcan_nla_put_nested_u32(
                 skb,

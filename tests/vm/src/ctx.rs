@@ -182,6 +182,11 @@ pub enum Mainline {
     /// Kvaser PCIcan front-end (`drivers/net/can/sja1000/kvaser_pci.ko`),
     /// likewise.
     KvaserPci,
+    /// CTU CAN FD core (`drivers/net/can/ctucanfd/ctucanfd.ko`): not in
+    /// [`Mainline::ALL`], loaded only by [`Ctx::ctucan_cards`].
+    CtuCanFd,
+    /// Its PCI front-end (`ctucanfd_pci.ko`), likewise.
+    CtuCanFdPci,
 }
 
 impl Mainline {
@@ -198,6 +203,8 @@ impl Mainline {
             Mainline::Bcm => "can_bcm",
             Mainline::Sja1000 => "sja1000",
             Mainline::KvaserPci => "kvaser_pci",
+            Mainline::CtuCanFd => "ctucanfd",
+            Mainline::CtuCanFdPci => "ctucanfd_pci",
         }
     }
 
@@ -211,6 +218,8 @@ impl Mainline {
             Mainline::Bcm => "net/can/can-bcm.ko",
             Mainline::Sja1000 => "drivers/net/can/sja1000/sja1000.ko",
             Mainline::KvaserPci => "drivers/net/can/sja1000/kvaser_pci.ko",
+            Mainline::CtuCanFd => "drivers/net/can/ctucanfd/ctucanfd.ko",
+            Mainline::CtuCanFdPci => "drivers/net/can/ctucanfd/ctucanfd_pci.ko",
         }
     }
 }
@@ -407,6 +416,45 @@ impl Ctx {
         Ok(())
     }
 
+    /// Loads the stack under test with CAN_RAW and its CTU CAN FD driver
+    /// for QEMU's two `ctucan_pci` cores (can0, can1: the VM runs with
+    /// `RCAN_QEMU_CAN`), no bit timing set, the interfaces down and
+    /// classic (MTU 16). Ours: rcan_pf, rcan_can, rcan_raw,
+    /// rcan_ctucanfd_pci. Mainline: can, can-raw, can-dev, ctucanfd,
+    /// ctucanfd_pci.
+    pub fn ctucan_cards(&mut self) -> Result<(), String> {
+        match self.stack {
+            Stack::Ours => {
+                self.insmod(Module::Pf, &[])?;
+                self.insmod(Module::Can, &[])?;
+                self.insmod(Module::Raw, &[])?;
+                self.insmod(Module::CtuCanFdPci, &[])?;
+            }
+            Stack::Mainline => {
+                for m in [
+                    Mainline::Can,
+                    Mainline::Raw,
+                    Mainline::Dev,
+                    Mainline::CtuCanFd,
+                    Mainline::CtuCanFdPci,
+                ] {
+                    let ko = self
+                        .mainline_ko(m)
+                        .ok_or("no kernel build directory (RCAN_KBUILD or --kbuild)")?;
+                    sys::finit_module(&ko, &[])
+                        .map_err(|e| format!("insmod {}: {e}", ko.display()))?;
+                }
+            }
+        }
+        if !Path::new("/sys/class/net/can1").exists() {
+            return Err(
+                "fewer than two CTU CAN FD cores (is the VM booted with QEMU's ctucan_pci, RCAN_QEMU_CAN?)"
+                    .into(),
+            );
+        }
+        Ok(())
+    }
+
     /// [`Ctx::can_ifaces`] plus the CAN_BCM protocol. Mainline: can-bcm.ko.
     /// Ours: rcan_bcm.
     pub fn bcm_ifaces(&mut self, n: usize) -> Result<Vec<u32>, String> {
@@ -459,9 +507,15 @@ impl Ctx {
                 }
             }
         }
-        for m in [Mainline::Bcm, Mainline::KvaserPci, Mainline::Sja1000]
-            .into_iter()
-            .chain(Mainline::ALL.into_iter().rev())
+        for m in [
+            Mainline::Bcm,
+            Mainline::KvaserPci,
+            Mainline::Sja1000,
+            Mainline::CtuCanFdPci,
+            Mainline::CtuCanFd,
+        ]
+        .into_iter()
+        .chain(Mainline::ALL.into_iter().rev())
         {
             if let Err(e) = rmmod_retrying(m.name()) {
                 errors.push(e);

@@ -17,19 +17,23 @@
 //!   woken when the oldest completes; frames leave in queueing order (the
 //!   ring rotates TX_PRIORITY, as mainline's driver does).
 //!
-//! Frames: classic and CAN FD both ways (the device is FD capable from
-//! the start, MTU 72, as mainline `ctucanfd`); BRS and ESI as the frame
-//! says. Echo as in the SJA1000 driver: the sent skb is kept until its
-//! buffer completes and then handed up (IFF_ECHO).
+//! Frames: classic CAN, and CAN FD (BRS and ESI as the frame says) once
+//! user space turns FD on. As mainline `ctucanfd`, the device starts
+//! classic (MTU 16, the core's FDE bit clear) and becomes FD with `ip link
+//! set canX type can bitrate N dbitrate M fd on` (or `mtu 72`, which
+//! still needs a data bit timing before `up`); `fd off` (or `mtu 16`)
+//! goes back. Echo as in the SJA1000 driver: the sent skb is kept until
+//! its buffer completes and then handed up (IFF_ECHO).
 //!
-//! The CAN device layer: nominal bit timing over netlink (`ip link set
-//! canX type can bitrate N`), limits and clock as mainline's driver
-//! (`ctu_can_fd`, 100 MHz on the PCI card). Not yet: a data bit timing of
-//! its own (`dbitrate`; the data phase runs at the nominal rate, which
-//! QEMU, having no bit timing, cannot tell), control modes, the error
-//! counters and states beyond what FAULT_STATE reports (QEMU reads 0
-//! there, so the state stays error active), restart after bus-off.
-//! See Documentation/networking/rcan/ctucanfd.rst.
+//! The CAN device layer: nominal and data bit timing over netlink
+//! (`bitrate`, `dbitrate`, written to BTR and BTR_FD at `up`), limits and
+//! clock as mainline's driver (`ctu_can_fd`, 100 MHz on the PCI card),
+//! control modes `fd` and `fd-non-iso` (NISOFD). Not yet: the other
+//! control modes mainline announces (loopback, listen-only, presume-ack,
+//! one-shot, berr-reporting), error frames and the error states beyond
+//! what FAULT_STATE reports (QEMU reads 0 there, so the state stays error
+//! active), restart after bus-off. See
+//! Documentation/networking/rcan/ctucanfd.rst.
 #![forbid(unsafe_code)]
 
 use crate::glue::bindings;
@@ -38,12 +42,12 @@ use crate::glue::can::skb::alloc_rx;
 use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{Dev, Driver, NetDev, Stat, Xmit};
 use crate::glue::skb::Skb;
-use crate::rcan_core::bittiming::{self, Bittiming};
-use crate::rcan_core::candev::{CanState, Settings};
+use crate::rcan_core::bittiming;
+use crate::rcan_core::candev::{ctrlmode, CanState, Settings, CTUCANFD_CTRLMODE_SUPPORTED};
 use crate::rcan_core::ctucanfd::{
-    reg, Chip, Config, Event, Regs, CORE_SPAN, MAX_TXT_BUFFERS, NOMINAL_CONST,
+    reg, Chip, Config, Event, Regs, CORE_SPAN, DATA_CONST, MAX_TXT_BUFFERS, NOMINAL_CONST,
 };
-use crate::rcan_core::frame::{AnyFrame, CANFD_MTU};
+use crate::rcan_core::frame::{AnyFrame, CAN_MTU};
 use core::marker::PhantomData;
 use kernel::prelude::*;
 
@@ -169,13 +173,21 @@ fn rx_frame(dev: &NetDev, frame: &AnyFrame) {
     dev.rx(skb);
 }
 
-/// The data bit timing: the nominal one (no `dbitrate` yet, see the
-/// module docs).
-fn config(nominal: Bittiming) -> Config {
+/// What [`Chip::start`] programs for the device layer's settings: BTR
+/// from the bit timing, BTR_FD from the data bit timing (the nominal one
+/// while none is set: classic CAN has no data phase), FDE with `fd on`,
+/// NISOFD with `fd-non-iso on`.
+fn config(s: &Settings) -> Config {
+    let fd = s.ctrlmode & ctrlmode::FD != 0;
     Config {
-        nominal,
-        data: nominal,
-        fd: true,
+        nominal: s.bittiming,
+        data: if s.data_bittiming.bitrate != 0 {
+            s.data_bittiming
+        } else {
+            s.bittiming
+        },
+        fd,
+        fd_non_iso: fd && s.ctrlmode & ctrlmode::FD_NON_ISO != 0,
         ..Config::default()
     }
 }
@@ -187,7 +199,8 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
         crate::glue::netdev::Setup {
             type_: bindings::ARPHRD_CAN as u16,
             flags: bindings::net_device_flags_IFF_NOARP | bindings::net_device_flags_IFF_ECHO,
-            mtu: CANFD_MTU as u32,
+            // Classic until `fd on` (mainline's alloc_candev: CAN_MTU).
+            mtu: CAN_MTU as u32,
             hard_header_len: 0,
             tx_queue_len: TX_QUEUE_LEN,
             no_queue: false,
@@ -198,6 +211,14 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
         Some(link_setup::<Self>())
     }
 
+    const HAS_CHANGE_MTU: bool = true;
+
+    /// `ip link set canX mtu 72|16`: FD on or off (mainline
+    /// `can_change_mtu`). Process context, RTNL.
+    fn change_mtu(dev: &Dev<Self>, p: &Self::Priv, new_mtu: u32) -> Result {
+        p.can.change_mtu(dev, new_mtu)
+    }
+
     /// Process context, RTNL: refuses a device without a bit timing,
     /// requests the (shared) interrupt, starts the core.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
@@ -205,7 +226,7 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
         dev.request_irq(p.irq)?;
         {
             let mut st = p.st.lock();
-            st.chip.start(&config(set.bittiming));
+            st.chip.start(&config(&set));
             st.running = true;
         }
         dev.set_carrier(true);
@@ -299,11 +320,12 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
 }
 
 /// The CTU CAN FD as the CAN device layer sees it: mainline
-/// `ctucanfd`'s nominal bit-timing limits, no control modes yet, no
-/// restart.
+/// `ctucanfd`'s nominal and data bit-timing limits, CAN FD (ISO or not),
+/// no restart.
 impl<R: Regs + Send + 'static> CanDevice for CtuCanFd<R> {
     const BITTIMING_CONST: &'static bittiming::BittimingConst = &NOMINAL_CONST;
-    const CTRLMODE_SUPPORTED: u32 = 0;
+    const DATA_BITTIMING_CONST: Option<&'static bittiming::BittimingConst> = Some(&DATA_CONST);
+    const CTRLMODE_SUPPORTED: u32 = CTUCANFD_CTRLMODE_SUPPORTED;
     const CAN_RESTART: bool = false;
 
     fn can_dev(p: &Self::Priv) -> &CanDev {

@@ -24,10 +24,9 @@ size_t rcan_can_get_xstats_size(const struct net_device *dev);
 int rcan_can_fill_xstats(struct sk_buff *skb, const struct net_device *dev);
 
 /*
- * The attributes a classic CAN controller is configured with and their
- * sizes (<linux/can/netlink.h>). The CAN FD ones are parsed too, so that
- * a request for them is refused by the device layer's rules (EOPNOTSUPP)
- * rather than by the parser.
+ * The attributes a CAN controller is configured with and their sizes
+ * (<linux/can/netlink.h>), CAN FD's included: the data bit timing, and
+ * TDC, which the device layer refuses (no controller of ours has it).
  */
 static const struct nla_policy rcan_can_policy[IFLA_CAN_MAX + 1] = {
 	[IFLA_CAN_STATE] = { .type = NLA_U32 },

@@ -19,7 +19,7 @@
 use super::arb::CAN_ERR_FLAG;
 use super::bittiming::{self, Bittiming, BittimingConst, Computed, Error, Msg};
 use super::bittiming::{EBUSY, EINVAL, EOPNOTSUPP};
-use super::frame::CanFrame;
+use super::frame::{CanFrame, CANFD_MTU, CAN_MTU};
 
 /// Control modes (`CAN_CTRLMODE_*` of `<linux/can/netlink.h>`, the
 /// `IFLA_CAN_CTRLMODE` flags).
@@ -72,6 +72,9 @@ pub const I82527_CTRLMODE_SUPPORTED: u32 = ctrlmode::THREE_SAMPLES;
 pub struct Device {
     /// Bit-timing limits; `None`: the device takes no bit timing.
     pub btc: Option<&'static BittimingConst>,
+    /// Data-phase bit-timing limits (CAN FD, `IFLA_CAN_DATA_BITTIMING_CONST`);
+    /// `None`: the device takes no data bit timing.
+    pub dbtc: Option<&'static BittimingConst>,
     /// The clock the bit timing counts, in Hz (`IFLA_CAN_CLOCK`).
     pub clock_hz: u32,
     /// Control modes that may be switched on (`ctrlmode_supported`).
@@ -92,6 +95,9 @@ pub struct Settings {
     pub ctrlmode: u32,
     /// The bit timing; `bitrate` zero: none set yet.
     pub bittiming: Bittiming,
+    /// The data-phase bit timing (CAN FD); `bitrate` zero: none set (and
+    /// cleared whenever control modes are set without FD, as mainline).
+    pub data_bittiming: Bittiming,
     /// Automatic restart delay after bus-off in ms; 0: manual restart.
     pub restart_ms: u32,
 }
@@ -156,17 +162,25 @@ pub struct Changed {
     /// Restart the chip now (a manual `restart` of a bus-off device):
     /// mainline's `can_restart`.
     pub restart_now: bool,
+    /// A new data bit timing was set (mainline `do_set_data_bittiming`),
+    /// with its warning, if any.
+    pub data_bittiming: Option<Computed>,
+    /// Control modes were set: the device's MTU is now this
+    /// ([`CANFD_MTU`] with FD on, else [`CAN_MTU`]), as mainline's
+    /// `can_changelink` sets `dev->mtu`.
+    pub mtu: Option<u32>,
 }
 
 /// Applies a validated request to `settings` of device `dev` that is up
 /// (`IFF_UP`) or not and in error state `state` (mainline
-/// `can_changelink`, for a classic CAN controller). Attributes are taken
+/// `can_changelink`, for controllers without TDC or termination). Attributes are taken
 /// in mainline's order and each change is kept as soon as it is made, so
 /// a later refusal leaves the earlier changes in place, as in mainline:
 ///
 /// 1. control modes: while up `EBUSY`; modes outside supported + static,
 ///    or a static mode missing: `EOPNOTSUPP`; else the masked flags are
-///    set (without FD, the TDC modes are cleared);
+///    set, and the MTU becomes 72 with FD on, else 16 ([`Changed::mtu`]);
+///    without FD the data bit timing and the TDC modes are cleared;
 /// 2. bit timing: while up `EBUSY`; a device without limits
 ///    `EOPNOTSUPP`; else [`bittiming::get`] and its errors;
 /// 3. `restart-ms`: non-zero on a device that cannot restart
@@ -176,7 +190,12 @@ pub struct Changed {
 ///    message); while down `EINVAL`; with automatic restart on
 ///    (`restart-ms` not 0) `EINVAL`; not bus-off `EBUSY`; else
 ///    [`Changed::restart_now`];
-/// 5. data bit timing: while up `EBUSY`; else `EOPNOTSUPP` (no CAN FD);
+/// 5. data bit timing: while up `EBUSY`; a device without data limits
+///    ([`Device::dbtc`], no CAN FD) `EOPNOTSUPP`; else [`bittiming::get`]
+///    with the data limits and its errors (the same computation and
+///    default sample points as the nominal timing, mainline
+///    `can_get_bittiming` with `data_bittiming_const`); TDC parameters
+///    with it `EOPNOTSUPP` (no TDC limits), the TDC modes off;
 /// 6. termination: `EOPNOTSUPP` (no switchable termination).
 pub fn changelink(
     dev: &Device,
@@ -202,7 +221,11 @@ pub fn changelink(
             return Err(Error::bare(EOPNOTSUPP));
         }
         settings.ctrlmode = (settings.ctrlmode & !mask) | masked;
-        if settings.ctrlmode & ctrlmode::FD == 0 {
+        if settings.ctrlmode & ctrlmode::FD != 0 {
+            out.mtu = Some(CANFD_MTU as u32);
+        } else {
+            out.mtu = Some(CAN_MTU as u32);
+            settings.data_bittiming = Bittiming::default();
             settings.ctrlmode &= !ctrlmode::TDC_MASK;
         }
         if mask & ctrlmode::TDC_MASK != 0 {
@@ -239,11 +262,20 @@ pub fn changelink(
         }
         out.restart_now = true;
     }
-    if req.data_bittiming.is_some() {
+    if let Some(user) = &req.data_bittiming {
         if up {
             return Err(Error::bare(EBUSY));
         }
-        return Err(Error::bare(EOPNOTSUPP));
+        let dbtc = dev.dbtc.ok_or(Error::bare(EOPNOTSUPP))?;
+        let c = bittiming::get(dbtc, dev.clock_hz, user)?;
+        if req.tdc {
+            // Mainline's can_tdc_changelink on a device without TDC
+            // limits: the TDC modes are switched off, EOPNOTSUPP.
+            settings.ctrlmode &= !ctrlmode::TDC_MASK;
+            return Err(Error::bare(EOPNOTSUPP));
+        }
+        settings.data_bittiming = c.bt;
+        out.data_bittiming = Some(c);
     }
     if req.termination.is_some() {
         return Err(Error::bare(EOPNOTSUPP));
@@ -255,15 +287,66 @@ pub fn changelink(
 /// `netdev_err`).
 pub const OPEN_NO_BITTIMING: &str = "bit-timing not yet defined";
 
-/// Whether the device may come up (mainline `open_candev`, classic CAN):
-/// without a bit timing `EINVAL` (and [`OPEN_NO_BITTIMING`] in the kernel
-/// log; `ip` gets no extended ack).
-pub fn open(settings: &Settings) -> Result<(), Error> {
+/// The kernel log line of an `open` refused for FD without a usable data
+/// bit timing (mainline `open_candev`).
+pub const OPEN_BAD_DATA_BITTIMING: &str = "incorrect/missing data bit-timing";
+
+/// Whether the device may come up (mainline `open_candev`): without a bit
+/// timing `EINVAL` (and [`OPEN_NO_BITTIMING`] in the kernel log; `ip`
+/// gets no extended ack); with FD on and no data bit timing, or one
+/// slower than the nominal one, `EINVAL` ([`OPEN_BAD_DATA_BITTIMING`]).
+/// The error is the kernel log line; the errno is always `EINVAL`.
+pub fn open(settings: &Settings) -> Result<(), &'static str> {
     if settings.bittiming.bitrate == 0 {
-        return Err(Error::bare(EINVAL));
+        return Err(OPEN_NO_BITTIMING);
+    }
+    if settings.ctrlmode & ctrlmode::FD != 0
+        && (settings.data_bittiming.bitrate == 0
+            || settings.data_bittiming.bitrate < settings.bittiming.bitrate)
+    {
+        return Err(OPEN_BAD_DATA_BITTIMING);
     }
     Ok(())
 }
+
+/// `ip link set canX mtu N` on a device whose driver has mainline's
+/// `can_change_mtu`: while up `EBUSY`; 16 turns FD off (`EINVAL` on an
+/// FD-only device, FD static); 72 turns FD on (`EINVAL` on a device
+/// without FD); any other value `EINVAL`. The data bit timing is kept
+/// (mainline clears it only when control modes are set). The kernel has
+/// already answered a request for the current MTU (success, no call).
+pub fn change_mtu(
+    dev: &Device,
+    settings: &mut Settings,
+    up: bool,
+    new_mtu: u32,
+) -> Result<(), Error> {
+    if up {
+        return Err(Error::bare(EBUSY));
+    }
+    let fixed = dev.ctrlmode_static;
+    match new_mtu as usize {
+        CAN_MTU => {
+            if fixed & ctrlmode::FD != 0 {
+                return Err(Error::bare(EINVAL));
+            }
+            settings.ctrlmode &= !ctrlmode::FD;
+        }
+        CANFD_MTU => {
+            if (dev.ctrlmode_supported | fixed) & ctrlmode::FD == 0 {
+                return Err(Error::bare(EINVAL));
+            }
+            settings.ctrlmode |= ctrlmode::FD;
+        }
+        _ => return Err(Error::bare(EINVAL)),
+    }
+    Ok(())
+}
+
+/// What the CTU CAN FD can do, as mainline's `ctucanfd` announces it,
+/// without the modes our driver does not implement yet: CAN FD, ISO or
+/// not (the MODE register's FDE and NISOFD bits).
+pub const CTUCANFD_CTRLMODE_SUPPORTED: u32 = ctrlmode::FD | ctrlmode::FD_NON_ISO;
 
 /// Controller states (`enum can_state` of `<linux/can/netlink.h>`, the
 /// `IFLA_CAN_STATE` values), ordered by severity up to bus-off.

@@ -20,6 +20,7 @@ use rcan_core::sja1000::{irq, status};
 
 const SJA: Device = Device {
     btc: Some(&SJA1000_BITTIMING_CONST),
+    dbtc: None,
     clock_hz: 8_000_000,
     ctrlmode_supported: SJA1000_CTRLMODE_SUPPORTED,
     ctrlmode_static: 0,
@@ -28,6 +29,7 @@ const SJA: Device = Device {
 
 const I82527: Device = Device {
     btc: Some(&I82527_BITTIMING_CONST),
+    dbtc: None,
     clock_hz: 8_000_000,
     ctrlmode_supported: I82527_CTRLMODE_SUPPORTED,
     ctrlmode_static: 0,
@@ -184,7 +186,7 @@ fn restart_rules() {
 
 #[test]
 fn up_needs_a_bit_timing() {
-    assert_eq!(errno(open(&Settings::default())), EINVAL);
+    assert_eq!(open(&Settings::default()), Err(OPEN_NO_BITTIMING));
     assert_eq!(OPEN_NO_BITTIMING, "bit-timing not yet defined");
 }
 

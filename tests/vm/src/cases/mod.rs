@@ -106,7 +106,10 @@ pub(crate) use portable_table;
 /// the interface setup and the tools' starts): `ctucanfd_fd_both_ways` and
 /// `ctucanfd_rmmod_during_traffic` reach the same driver paths (transmit,
 /// the TX ring wrapping round, echo, receive, the shared interrupt,
-/// teardown) under lockdep and KASAN.
+/// teardown) under lockdep and KASAN. Likewise `ctucanfd_ip_fd_on_off`
+/// (some 15 `ip` starts, 90 s on the loaded debug kernel) and
+/// `ctucanfd_fd_esi_both_ways`: `ctucanfd_ip_fd_refusals` reaches the
+/// same changelink, MTU and open paths of the device layer there.
 pub const RELEASE_ONLY: &[&str] = &[
     "install_autoload",
     "sja1000_sim_bus_off_manual_restart",
@@ -126,6 +129,8 @@ pub const RELEASE_ONLY: &[&str] = &[
     "ctucanfd_classic_both_ways",
     "ctucanfd_burst",
     "ctucanfd_cansend_candump",
+    "ctucanfd_ip_fd_on_off",
+    "ctucanfd_fd_esi_both_ways",
 ];
 
 /// Every test, in running order.
@@ -159,6 +164,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         dsor::TESTS,
         sja1000::TESTS,
         ctucanfd::TESTS,
+        ctucanfd::PORTABLE_TESTS,
         candev::TESTS,
         capture::SJA1000_TESTS,
         daemons::SJA1000_TESTS,
