@@ -34,12 +34,12 @@ pub const TESTS: &[Test] = test_table![
 
 /// The tests that also run against mainline's ctucanfd_pci.
 pub const PORTABLE_TESTS: &[Test] = portable_table![
-    ctucanfd_classic_both_ways,
-    ctucanfd_fd_both_ways,
-    ctucanfd_cansend_candump,
-    ctucanfd_ip_fd_on_off,
-    ctucanfd_ip_fd_refusals,
-    ctucanfd_classic_refuses_fd_frames,
+    candev_ctucanfd_classic_both_ways,
+    candev_ctucanfd_fd_both_ways,
+    candev_ctucanfd_cansend_candump,
+    candev_ctucanfd_ip_fd_on_off,
+    candev_ctucanfd_ip_fd_refusals,
+    candev_ctucanfd_classic_refuses_fd_frames,
 ];
 
 /// `CANFD_BRS`, `CANFD_ESI`, `CANFD_FDF` (`<linux/can.h>`).
@@ -81,7 +81,7 @@ fn classic_kinds() -> Vec<socketcan::CanFrame> {
 
 /// Classic frames of every kind, can0 -> can1 and back, through CAN_RAW
 /// sockets.
-fn ctucanfd_classic_both_ways(ctx: &mut Ctx) -> TestResult {
+fn candev_ctucanfd_classic_both_ways(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = ctucan2(ctx, CLASSIC)?;
     let (s0, s1) = (canraw::open(i0)?, canraw::open(i1)?);
     let frames = classic_kinds();
@@ -148,11 +148,11 @@ fn fd_pass(
 
 /// CAN FD frames of every FD length (0..64 bytes) with and without BRS,
 /// can0 -> can1 and back, with `fd on`.
-fn ctucanfd_fd_both_ways(ctx: &mut Ctx) -> TestResult {
+fn candev_ctucanfd_fd_both_ways(ctx: &mut Ctx) -> TestResult {
     fd_both_ways(ctx, &[0, CANFD_BRS])
 }
 
-/// As [`ctucanfd_fd_both_ways`], with ESI too: our driver writes the
+/// As [`candev_ctucanfd_fd_both_ways`], with ESI too: our driver writes the
 /// frame's ESI into the TX buffer and QEMU's model carries it across.
 /// Not portable: mainline's `ctucanfd` does not transmit ESI (on the real
 /// chip the bit is reserved in the TX buffer and ESI on the bus follows
@@ -254,7 +254,7 @@ fn ctucanfd_burst(ctx: &mut Ctx) -> TestResult {
 /// can-utils across the bus: `candump -L can1` sees what `cansend can0`
 /// sends, a 64-byte FD frame with BRS (`123##1...`) and a classic
 /// extended frame (`1ABCDEF0#1122`), as `candump -L` prints them.
-fn ctucanfd_cansend_candump(ctx: &mut Ctx) -> TestResult {
+fn candev_ctucanfd_cansend_candump(ctx: &mut Ctx) -> TestResult {
     ctucan2(ctx, FD_ON)?;
     let hex: String = (0..64u8)
         .map(|i| format!("{:02X}", i.wrapping_mul(7)))
@@ -344,7 +344,7 @@ const DBTC: &str = r#""data_bittiming_const":{"name":"ctu_can_fd","tseg1":{"min"
 /// `ip -d`'s text); up and down again it keeps them; `fd off` makes it
 /// classic again (MTU 16, data timing gone); `dsample-point 0.8` and
 /// `fd-non-iso on` are taken.
-fn ctucanfd_ip_fd_on_off(ctx: &mut Ctx) -> TestResult {
+fn candev_ctucanfd_ip_fd_on_off(ctx: &mut Ctx) -> TestResult {
     ctx.ctucan_cards()?;
     json_has(
         "can0",
@@ -422,7 +422,7 @@ fn ctucanfd_ip_fd_on_off(ctx: &mut Ctx) -> TestResult {
 /// but `up` then fails (EINVAL, "incorrect/missing data bit-timing" in
 /// the kernel log) until a data timing is set; `mtu 64` (EINVAL); while
 /// up, `fd on`/`dbitrate` and `mtu 16` (EBUSY).
-fn ctucanfd_ip_fd_refusals(ctx: &mut Ctx) -> TestResult {
+fn candev_ctucanfd_ip_fd_refusals(ctx: &mut Ctx) -> TestResult {
     ctx.ctucan_cards()?;
     let nosup = "Operation not supported";
     ip_fails(
@@ -488,7 +488,7 @@ fn ctucanfd_ip_fd_refusals(ctx: &mut Ctx) -> TestResult {
 /// A classic device (no `fd on`) takes no FD frame: a CAN_RAW socket with
 /// CAN_RAW_FD_FRAMES gets EINVAL for one (the MTU check of mainline's
 /// raw_sendmsg), while classic frames on the same socket go through.
-fn ctucanfd_classic_refuses_fd_frames(ctx: &mut Ctx) -> TestResult {
+fn candev_ctucanfd_classic_refuses_fd_frames(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = ctucan2(ctx, CLASSIC)?;
     let (s0, s1) = (fd_open(i0)?, fd_open(i1)?);
     let eid = ExtendedId::new(0x0123_4567).ok_or("bad id")?;

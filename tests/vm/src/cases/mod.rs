@@ -103,12 +103,12 @@ pub(crate) use portable_table;
 /// other `fd.rs` tests.
 ///
 /// Three of the CTU CAN FD tests (13-22 s each on the debug kernel, mostly
-/// the interface setup and the tools' starts): `ctucanfd_fd_both_ways` and
+/// the interface setup and the tools' starts): `candev_ctucanfd_fd_both_ways` and
 /// `ctucanfd_rmmod_during_traffic` reach the same driver paths (transmit,
 /// the TX ring wrapping round, echo, receive, the shared interrupt,
-/// teardown) under lockdep and KASAN. Likewise `ctucanfd_ip_fd_on_off`
+/// teardown) under lockdep and KASAN. Likewise `candev_ctucanfd_ip_fd_on_off`
 /// (some 15 `ip` starts, 90 s on the loaded debug kernel) and
-/// `ctucanfd_fd_esi_both_ways`: `ctucanfd_ip_fd_refusals` reaches the
+/// `ctucanfd_fd_esi_both_ways`: `candev_ctucanfd_ip_fd_refusals` reaches the
 /// same changelink, MTU and open paths of the device layer there.
 pub const RELEASE_ONLY: &[&str] = &[
     "install_autoload",
@@ -126,10 +126,10 @@ pub const RELEASE_ONLY: &[&str] = &[
     "dsor_loss_accounting",
     "i82527_sim_ip_bittiming",
     "i82527_sim_bus_errors_candump",
-    "ctucanfd_classic_both_ways",
+    "candev_ctucanfd_classic_both_ways",
     "ctucanfd_burst",
-    "ctucanfd_cansend_candump",
-    "ctucanfd_ip_fd_on_off",
+    "candev_ctucanfd_cansend_candump",
+    "candev_ctucanfd_ip_fd_on_off",
     "ctucanfd_fd_esi_both_ways",
 ];
 
