@@ -143,13 +143,16 @@ impl NetProcDir {
                 Ordering::Acquire,
             )
             .map_err(|_| code::EBUSY)?;
-        // SAFETY: `Pernet::get` of NET_DIRS runs only in `entry`, inside
-        // an RCU read-side section. Dropping the registration clears the
-        // flag `get` checks first, then unregisters, and the pernet core
-        // lets a grace period pass between `pre_exit` and `exit` (which
-        // drops the data): a `get` that saw the flag set ends before any
-        // data is dropped; one that starts later sees it clear.
-        match unsafe { NET_DIRS.register() } {
+        // Why no `get` can run into dropped data: `Pernet::get` of
+        // NET_DIRS runs only in `entry`, inside an RCU read-side section.
+        // Dropping the registration clears the flag `get` checks first,
+        // then unregisters, and the pernet core lets a grace period pass
+        // between `pre_exit` and `exit` (which drops the data): a `get`
+        // that saw the flag set ends before any data is dropped; one that
+        // starts later sees it clear.
+        // SAFETY: `register`'s contract holds by the argument above.
+        let reg = unsafe { NET_DIRS.register() };
+        match reg {
             Ok(r) => Ok(NetProcDirReg { pernet: Some(r) }),
             Err(e) => {
                 DIR_NAME.store(core::ptr::null_mut(), Ordering::Release);
