@@ -343,10 +343,17 @@ pub fn change_mtu(
     Ok(())
 }
 
-/// What the CTU CAN FD can do, as mainline's `ctucanfd` announces it,
-/// without the modes our driver does not implement yet: CAN FD, ISO or
-/// not (the MODE register's FDE and NISOFD bits).
-pub const CTUCANFD_CTRLMODE_SUPPORTED: u32 = ctrlmode::FD | ctrlmode::FD_NON_ISO;
+/// What the CTU CAN FD can do, as mainline's `ctucanfd` announces it:
+/// loopback (MODE.ILBP), listen-only (MODE.BMM), CAN FD (FDE), presume-ack
+/// (STM), bus-error reporting (the BEI and ALI interrupts), non-ISO CAN
+/// FD (NISOFD), one-shot (RTRLE with a retransmit limit of 0).
+pub const CTUCANFD_CTRLMODE_SUPPORTED: u32 = ctrlmode::LOOPBACK
+    | ctrlmode::LISTENONLY
+    | ctrlmode::FD
+    | ctrlmode::PRESUME_ACK
+    | ctrlmode::BERR_REPORTING
+    | ctrlmode::FD_NON_ISO
+    | ctrlmode::ONE_SHOT;
 
 /// Controller states (`enum can_state` of `<linux/can/netlink.h>`, the
 /// `IFLA_CAN_STATE` values), ordered by severity up to bus-off.

@@ -18,7 +18,7 @@
 
 use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK};
 use super::bittiming::{Bittiming, BittimingConst};
-use super::candev::CanState;
+use super::candev::{err, error_frame, CanState, CanStats, NetErrStats};
 use core::num::NonZeroU32;
 
 use super::frame::{
@@ -632,6 +632,160 @@ pub const fn counters(rec_tec: u32) -> (u16, u16) {
     ((rec_tec & 0x1FF) as u16, ((rec_tec >> 16) & 0x1FF) as u16)
 }
 
+/// ERR_CAPT fields (the error capture register, with the arbitration
+/// lost capture in its upper half). Mainline's `ctucanfd` only logs them:
+/// its error frames say "unspecified" for the bus error's type and
+/// location and for the bit arbitration was lost at.
+pub mod err_capt {
+    /// ERR_POS: where in the frame the last bus error happened.
+    pub const ERR_POS_MASK: u32 = 0x1F;
+    /// ERR_TYPE: the kind of the last bus error (bits 7..5).
+    pub const ERR_TYPE_SHIFT: u32 = 5;
+    /// ALC_BIT: the bit arbitration was lost at (bits 20..16).
+    pub const ALC_BIT_SHIFT: u32 = 16;
+    /// ALC_ID_FIELD: the field arbitration was lost in (bits 23..21).
+    pub const ALC_ID_FIELD_SHIFT: u32 = 21;
+}
+
+/// The registers an error interrupt round is decoded from.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub struct ErrRegs {
+    /// INT_STAT as read: EWLI, FCSI, ALI, BEI are looked at.
+    pub isr: u32,
+    /// The EWL word (limits and FAULT_STATE).
+    pub ewl: u32,
+    /// The REC/TEC word.
+    pub rec_tec: u32,
+    /// ERR_CAPT (error and arbitration-lost capture).
+    pub err_capt: u32,
+}
+
+/// One error interrupt round (or data overrun), decoded.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct ErrReport {
+    /// The error frame for sockets with `CAN_RAW_ERR_FILTER`.
+    pub frame: CanFrame,
+    /// The core went bus-off: the driver turns the carrier off and
+    /// restarts it after `restart-ms` or on request (mainline
+    /// `can_bus_off`).
+    pub bus_off: bool,
+    /// The CAN device statistics this round counted.
+    pub stats: CanStats,
+    /// The interface error statistics this round counted.
+    pub net: NetErrStats,
+    /// The state before and after the round, if FCSI or EWLI reported
+    /// one (mainline logs "state changes from .. to ..").
+    pub state: Option<(CanState, CanState)>,
+    /// ERR_CAPT as read (for the log).
+    pub err_capt: u32,
+}
+
+/// Decodes an error interrupt round as mainline's `ctucan_err_interrupt`
+/// does, and moves `state` to the core's fault confinement state. Pure;
+/// hardirq context in the driver.
+///
+/// * EWLI or FCSI: the state from FAULT_STATE and the counters
+///   ([`fault_state`]; if FAULT_STATE reads 0, as on QEMU's model, the
+///   state is kept and this part adds nothing). Bus-off: one `bus_off`
+///   and [`err::BUSOFF`]. Error passive: one `error_passive`,
+///   [`err::CRTL`] | [`err::CNT`], data[1] RX passive if REC > 127 else
+///   TX passive. Error warning: one `error_warning`, CRTL | CNT, data[1]
+///   TX warning if TEC > REC else RX warning. Error active: CRTL | CNT,
+///   data[1] [`err::CRTL_ACTIVE`]. CNT puts TEC and REC in data[6] and
+///   data[7]. Counted even when the state is the one it was (mainline
+///   counts each report; it logs a missed interrupt then).
+/// * ALI: one `arbitration_lost`, [`err::LOSTARB`], data[0]
+///   [`err::LOSTARB_UNSPEC`].
+/// * BEI: one `bus_error` and one interface RX error, [`err::PROT`] |
+///   [`err::BUSERROR`], data[2] and data[3] unspecified (0).
+pub fn error_report(state: &mut CanState, r: &ErrRegs) -> ErrReport {
+    let mut rep = ErrReport {
+        frame: error_frame(),
+        bus_off: false,
+        stats: CanStats::default(),
+        net: NetErrStats::default(),
+        state: None,
+        err_capt: r.err_capt,
+    };
+    let cf = &mut rep.frame;
+    let (rec, tec) = counters(r.rec_tec);
+    if r.isr & (int::EWLI | int::FCSI) != 0 {
+        if let Some(new) = fault_state(r.ewl, r.rec_tec) {
+            rep.state = Some((*state, new));
+            *state = new;
+            let cnt = |cf: &mut CanFrame| {
+                cf.can_id |= err::CRTL | err::CNT;
+                cf.data[6] = tec.min(255) as u8;
+                cf.data[7] = rec.min(255) as u8;
+            };
+            match new {
+                CanState::BusOff => {
+                    rep.stats.bus_off += 1;
+                    rep.bus_off = true;
+                    cf.can_id |= err::BUSOFF;
+                }
+                CanState::ErrorPassive => {
+                    rep.stats.error_passive += 1;
+                    cnt(cf);
+                    cf.data[1] = if rec > 127 {
+                        err::CRTL_RX_PASSIVE
+                    } else {
+                        err::CRTL_TX_PASSIVE
+                    };
+                }
+                CanState::ErrorWarning => {
+                    rep.stats.error_warning += 1;
+                    cnt(cf);
+                    cf.data[1] |= if tec > rec {
+                        err::CRTL_TX_WARNING
+                    } else {
+                        err::CRTL_RX_WARNING
+                    };
+                }
+                _ => {
+                    cnt(cf);
+                    cf.data[1] = err::CRTL_ACTIVE;
+                }
+            }
+        }
+    }
+    if r.isr & int::ALI != 0 {
+        rep.stats.arbitration_lost += 1;
+        cf.can_id |= err::LOSTARB;
+        cf.data[0] = err::LOSTARB_UNSPEC;
+    }
+    if r.isr & int::BEI != 0 {
+        rep.stats.bus_error += 1;
+        rep.net.rx_errors += 1;
+        cf.can_id |= err::PROT | err::BUSERROR;
+        cf.data[2] = 0;
+        cf.data[3] = 0;
+    }
+    rep
+}
+
+/// A data overrun (frames lost for want of RX buffer space), as
+/// mainline's `ctucan_rx_poll` reports it: one RX overrun and RX error,
+/// an error frame with [`err::CRTL`] and data[1]
+/// [`err::CRTL_RX_OVERFLOW`]; the state does not change.
+pub fn overrun_report() -> ErrReport {
+    let mut frame = error_frame();
+    frame.can_id |= err::CRTL;
+    frame.data[1] |= err::CRTL_RX_OVERFLOW;
+    ErrReport {
+        frame,
+        bus_off: false,
+        stats: CanStats::default(),
+        net: NetErrStats {
+            rx_errors: 1,
+            rx_over_errors: 1,
+            tx_errors: 0,
+        },
+        state: None,
+        err_capt: 0,
+    }
+}
+
 // ---------------------------------------------------------------------
 // TX buffer ring.
 // ---------------------------------------------------------------------
@@ -773,10 +927,10 @@ pub enum Event {
         /// Whether it was sent.
         ok: bool,
     },
-    /// Frames were lost for want of RX buffer space.
-    Overrun,
-    /// The fault confinement state changed to this.
-    State(CanState),
+    /// An error interrupt round (fault confinement state, arbitration
+    /// lost, bus error) or a data overrun, decoded as mainline's
+    /// `ctucanfd` reports it ([`error_report`], [`overrun_report`]).
+    Error(ErrReport),
 }
 
 /// Configuration [`Chip::start`] applies.
@@ -933,6 +1087,15 @@ impl<R: Regs> Chip<R> {
         self.regs.irq_sync();
     }
 
+    /// Restarts the core after bus-off with the configuration of the
+    /// last [`Chip::start`] (mainline `ctucan_do_set_mode(CAN_MODE_START)`:
+    /// reset, then start): error active again, the TX buffers and the
+    /// ring empty (the frames in them are the caller's to drop).
+    pub fn restart(&mut self) {
+        let cfg = self.cfg;
+        self.start(&cfg);
+    }
+
     /// Takes the core off the bus: disabled, interrupts off, every TX
     /// buffer aborted. Frames still in the ring are the caller's to drop
     /// (their echo slots).
@@ -980,16 +1143,20 @@ impl<R: Regs> Chip<R> {
         }
         if stat & int::DOI != 0 {
             self.regs.write32(reg::COMMAND, command::CDO);
-            ev(Event::Overrun);
+            ev(Event::Error(overrun_report()));
         }
-        if stat & (int::EWLI | int::FCSI) != 0 {
-            let ewl = self.regs.read32(reg::EWL);
-            let rec_tec = self.regs.read32(reg::REC);
-            if let Some(s) = fault_state(ewl, rec_tec) {
-                if s != self.state {
-                    self.state = s;
-                    ev(Event::State(s));
-                }
+        if stat & (int::EWLI | int::FCSI | int::ALI | int::BEI) != 0 {
+            let r = ErrRegs {
+                isr: stat,
+                ewl: self.regs.read32(reg::EWL),
+                rec_tec: self.regs.read32(reg::REC),
+                err_capt: self.regs.read32(reg::ERR_CAPT),
+            };
+            let rep = error_report(&mut self.state, &r);
+            // A round that says nothing (FCSI while FAULT_STATE reads
+            // 0, as on QEMU's core) makes no error frame.
+            if rep.frame.can_id != CAN_ERR_FLAG {
+                ev(Event::Error(rep));
             }
         }
         // Acknowledge before looking at the TX buffers: a buffer that

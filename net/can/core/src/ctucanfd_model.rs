@@ -72,6 +72,14 @@ const TXI: u32 = 1 << 1;
 const DOI: u32 = 1 << 3;
 const RXFI: u32 = 1 << 8;
 const RBNEI: u32 = 1 << 10;
+const EWLI: u32 = 1 << 2;
+const FCSI: u32 = 1 << 4;
+const ALI: u32 = 1 << 5;
+const BEI: u32 = 1 << 6;
+
+/// FAULT_STATE bits of the EWL word.
+const FAULT_ERA: u32 = 1 << 16;
+const FAULT_MASK: u32 = 0x7 << 16;
 const TXBHCI: u32 = 1 << 11;
 
 const ST_RXNE: u32 = 1;
@@ -108,6 +116,12 @@ pub struct CtuModel {
     rxfrc: u32,
     rx_fr_ctr: u32,
     tx_fr_ctr: u32,
+    /// Injected EWL word (limits, FAULT_STATE); 0 as on QEMU.
+    ewl: u32,
+    /// Injected REC/TEC word.
+    rec_tec: u32,
+    /// Injected ERR_CAPT.
+    err_capt: u32,
     /// Register accesses since creation (reads, writes).
     pub accesses: (u64, u64),
 }
@@ -139,6 +153,9 @@ impl CtuModel {
             rxfrc: 0,
             rx_fr_ctr: 0,
             tx_fr_ctr: 0,
+            ewl: 0,
+            rec_tec: 0,
+            err_capt: 0,
             accesses: (0, 0),
         };
         m.hw_reset();
@@ -161,6 +178,27 @@ impl CtuModel {
         self.int_mask = 0;
         self.rx_fr_ctr = 0;
         self.tx_fr_ctr = 0;
+        self.rec_tec = 0;
+        if self.ewl & FAULT_MASK != 0 {
+            self.ewl = (self.ewl & !FAULT_MASK) | FAULT_ERA;
+        }
+    }
+
+    /// Fault injection: the EWL word (`ewl_word`: warning limit in bits
+    /// 7..0, FAULT_STATE bits 18..16) and the error counters the core
+    /// reports from now on. Raises nothing: see [`CtuModel::raise_error`].
+    pub fn set_fault(&mut self, ewl_word: u32, rec: u16, tec: u16) {
+        self.ewl = ewl_word;
+        self.rec_tec = u32::from(rec & 0x1FF) | u32::from(tec & 0x1FF) << 16;
+    }
+
+    /// Fault injection: latches the error interrupt causes `ints` (of
+    /// EWLI, FCSI, ALI, BEI; masked ones are not latched) and sets
+    /// ERR_CAPT to `err_capt`, as the core does on such an event.
+    pub fn raise_error(&mut self, ints: u32, err_capt: u32) {
+        self.err_capt = err_capt;
+        self.raise(ints & (EWLI | FCSI | ALI | BEI));
+        self.update_irq();
     }
 
     /// Whether the core is enabled (on the bus).
@@ -230,6 +268,9 @@ impl CtuModel {
             reg::RX_FR_CTR => self.rx_fr_ctr,
             reg::TX_FR_CTR => self.tx_fr_ctr,
             reg::YOLO => YOLO_VALUE,
+            reg::EWL => self.ewl,
+            reg::REC => self.rec_tec,
+            reg::ERR_CAPT => self.err_capt,
             _ => 0,
         }
     }

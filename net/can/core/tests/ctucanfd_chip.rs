@@ -7,9 +7,10 @@
 //! datasheet, so a round trip checks the driver's encoding against it.
 
 use proptest::prelude::*;
+use rcan_core::arb::CAN_ERR_FLAG;
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_RTR_FLAG};
 use rcan_core::bittiming::{self, Bittiming};
-use rcan_core::candev::CanState;
+use rcan_core::candev::{err, CanState};
 use rcan_core::ctucanfd::*;
 use rcan_core::ctucanfd_model::{BusFrame, CtuModel};
 use rcan_core::frame::{
@@ -259,7 +260,14 @@ fn overrun_reported_and_buffer_kept() {
                 assert_eq!((f.len, f.flags), (64, CANFD_FDF | CANFD_BRS));
                 rx += 1
             }
-            Event::Overrun => overruns += 1,
+            Event::Error(r) => {
+                // Mainline ctucan_rx_poll: CAN_ERR_CRTL, RX overflow.
+                assert_eq!(r.frame.can_id, CAN_ERR_FLAG | err::CRTL);
+                assert_eq!(r.frame.data, [0, err::CRTL_RX_OVERFLOW, 0, 0, 0, 0, 0, 0]);
+                assert_eq!((r.net.rx_over_errors, r.net.rx_errors), (1, 1));
+                assert!(!r.bus_off && r.state.is_none());
+                overruns += 1
+            }
             other => panic!("{other:?}"),
         });
     }
@@ -482,4 +490,186 @@ fn register_accesses_per_frame() {
     assert_eq!(classic8.1, (9, 2));
     assert_eq!(fd64.0, (2, 25));
     assert_eq!(fd64.1, (23, 2));
+}
+
+// ---------------------------------------------------------------------
+// Error states and error frames (fault injection in the model; QEMU's
+// core has no fault confinement, so these are host-tested only).
+// ---------------------------------------------------------------------
+
+/// EWL word: warning limit 96, error-passive limit 128, FAULT_STATE `fs`.
+fn ewl(fs: u32) -> u32 {
+    96 | 128 << 8 | fs
+}
+
+/// Injects a fault state and counters, raises `ints`, and returns the
+/// error reports of one interrupt round.
+fn inject(c: &mut Chip<CtuModel>, fs: u32, rec: u16, tec: u16, ints: u32) -> Vec<ErrReport> {
+    c.regs.set_fault(ewl(fs), rec, tec);
+    c.regs.raise_error(ints, 0x0023_0011);
+    events(c)
+        .into_iter()
+        .map(|e| match e {
+            Event::Error(r) => r,
+            other => panic!("unexpected {other:?}"),
+        })
+        .collect()
+}
+
+#[test]
+fn error_warning_passive_busoff_active_as_mainline() {
+    let mut c = running(&cfg());
+    assert_eq!(c.state(), CanState::ErrorActive);
+    // Warning: TEC above the limit, TEC > REC: TX warning.
+    let r = inject(&mut c, fault::ERA, 3, 100, int::EWLI);
+    assert_eq!(r.len(), 1);
+    let r = r[0];
+    assert_eq!(c.state(), CanState::ErrorWarning);
+    assert_eq!(
+        r.state,
+        Some((CanState::ErrorActive, CanState::ErrorWarning))
+    );
+    assert_eq!(r.frame.can_id, CAN_ERR_FLAG | err::CRTL | err::CNT);
+    assert_eq!(r.frame.data, [0, err::CRTL_TX_WARNING, 0, 0, 0, 0, 100, 3]);
+    assert_eq!((r.stats.error_warning, r.stats.error_passive), (1, 0));
+    assert!(!r.bus_off);
+    // Warning with REC the larger: RX warning.
+    let r = inject(&mut c, fault::ERA, 110, 20, int::EWLI)[0];
+    assert_eq!(r.frame.data[1], err::CRTL_RX_WARNING);
+    // Passive from the RX side (REC > 127), then from the TX side.
+    let r = inject(&mut c, fault::ERP, 130, 20, int::FCSI)[0];
+    assert_eq!(c.state(), CanState::ErrorPassive);
+    assert_eq!(r.frame.can_id, CAN_ERR_FLAG | err::CRTL | err::CNT);
+    assert_eq!(r.frame.data, [0, err::CRTL_RX_PASSIVE, 0, 0, 0, 0, 20, 130]);
+    assert_eq!(r.stats.error_passive, 1);
+    let r = inject(&mut c, fault::ERP, 0, 200, int::FCSI)[0];
+    assert_eq!(r.frame.data[1], err::CRTL_TX_PASSIVE);
+    // Bus-off: CAN_ERR_BUSOFF alone, no counters.
+    let r = inject(&mut c, fault::BOF, 0, 256, int::FCSI)[0];
+    assert_eq!(c.state(), CanState::BusOff);
+    assert!(r.bus_off);
+    assert_eq!(r.frame.can_id, CAN_ERR_FLAG | err::BUSOFF);
+    assert_eq!(r.frame.data, [0; 8]);
+    assert_eq!(r.stats.bus_off, 1);
+    // Restart: reset and start again, error active, counters cleared.
+    c.restart();
+    assert_eq!(c.state(), CanState::ErrorActive);
+    assert_eq!(c.berr_counter(), (0, 0));
+    assert!(c.regs.enabled());
+    // Back to active by FCSI: CRTL_ACTIVE with the counters.
+    let r = inject(&mut c, fault::ERA, 1, 2, int::FCSI)[0];
+    assert_eq!(c.state(), CanState::ErrorActive);
+    assert_eq!(r.frame.can_id, CAN_ERR_FLAG | err::CRTL | err::CNT);
+    assert_eq!(r.frame.data, [0, err::CRTL_ACTIVE, 0, 0, 0, 0, 2, 1]);
+    assert_eq!(r.stats, Default::default());
+    assert!(!c.regs.irq_line(), "every cause acknowledged");
+}
+
+#[test]
+fn state_kept_when_fault_state_reads_zero() {
+    // QEMU's core: FAULT_STATE 0. An FCSI then changes nothing and
+    // makes no error frame.
+    let mut c = running(&cfg());
+    let r = inject(&mut c, 0, 0, 0, int::FCSI);
+    assert!(r.is_empty(), "no empty error frame: {r:?}");
+    assert_eq!(c.state(), CanState::ErrorActive);
+    assert!(!c.regs.irq_line());
+}
+
+#[test]
+fn bus_errors_and_arbitration_lost_only_with_berr_reporting() {
+    // Without berr-reporting BEI and ALI are masked: never latched.
+    let mut c = running(&cfg());
+    assert!(inject(&mut c, fault::ERA, 0, 0, int::BEI | int::ALI).is_empty());
+    assert!(!c.regs.irq_line());
+    let mut c = running(&Config {
+        berr_reporting: true,
+        ..cfg()
+    });
+    let r = inject(&mut c, fault::ERA, 0, 8, int::BEI)[0];
+    assert_eq!(r.frame.can_id, CAN_ERR_FLAG | err::PROT | err::BUSERROR);
+    // Mainline: type and location unspecified.
+    assert_eq!(r.frame.data, [0; 8]);
+    assert_eq!((r.stats.bus_error, r.net.rx_errors), (1, 1));
+    assert_eq!(r.err_capt, 0x0023_0011, "ERR_CAPT read for the log");
+    let r = inject(&mut c, fault::ERA, 0, 8, int::ALI)[0];
+    assert_eq!(r.frame.can_id, CAN_ERR_FLAG | err::LOSTARB);
+    assert_eq!(r.frame.data[0], err::LOSTARB_UNSPEC);
+    assert_eq!(r.stats.arbitration_lost, 1);
+    // All at once: one frame with every class.
+    let r = inject(&mut c, fault::ERP, 0, 130, int::BEI | int::ALI | int::FCSI)[0];
+    assert_eq!(
+        r.frame.can_id,
+        CAN_ERR_FLAG | err::PROT | err::BUSERROR | err::LOSTARB | err::CRTL | err::CNT
+    );
+    assert_eq!(r.frame.data[1], err::CRTL_TX_PASSIVE);
+    assert_eq!(
+        (
+            r.stats.bus_error,
+            r.stats.arbitration_lost,
+            r.stats.error_passive
+        ),
+        (1, 1, 1)
+    );
+    assert!(!c.regs.irq_line());
+}
+
+#[test]
+fn control_modes_in_the_mode_register() {
+    // Mainline ctucan_set_mode: ILBP, BMM, STM, RTRLE (RTRTH 0), FDE,
+    // NISOFD; ENA set last by start.
+    let cases: [(Config, u32); 6] = [
+        (
+            Config {
+                loopback: true,
+                ..cfg()
+            },
+            mode::ILBP,
+        ),
+        (
+            Config {
+                listen_only: true,
+                ..cfg()
+            },
+            mode::BMM,
+        ),
+        (
+            Config {
+                presume_ack: true,
+                ..cfg()
+            },
+            mode::STM,
+        ),
+        (
+            Config {
+                one_shot: true,
+                ..cfg()
+            },
+            mode::RTRLE,
+        ),
+        (
+            Config {
+                fd_non_iso: true,
+                ..cfg()
+            },
+            mode::NISOFD,
+        ),
+        (cfg(), 0),
+    ];
+    let others = mode::ILBP | mode::BMM | mode::STM | mode::RTRLE | mode::NISOFD;
+    for (c, bit) in cases {
+        let chip = running(&c);
+        let mut regs = chip.regs;
+        let m = regs.read32(reg::MODE);
+        assert_eq!(m & others, bit, "{c:?}");
+        assert_eq!(m & (mode::ENA | mode::FDE), mode::ENA | mode::FDE);
+        assert_eq!(m & (0xF << mode::RTRTH_SHIFT), 0, "retransmit limit 0");
+    }
+    // Interrupts: BEI and ALI with berr-reporting only.
+    let e = int_enable(&Config {
+        berr_reporting: true,
+        ..cfg()
+    });
+    assert_eq!(e & (int::BEI | int::ALI), int::BEI | int::ALI);
+    assert_eq!(int_enable(&cfg()) & (int::BEI | int::ALI), 0);
 }
