@@ -26,7 +26,12 @@
 //!   (an abort, bus-off, restart), [`tx_drop`] for a frame the driver
 //!   cannot send.
 //!
-//! Used by the SJA1000 and 82527 drivers; canloop uses [`setup`].
+//! A driver of a chip with several transmit buffers keeps one such echo
+//! per buffer; [`echo_done_any`] and [`echo_dropped`] serve drivers that
+//! send CAN FD frames too and count as mainline's `ctucanfd`.
+//!
+//! Used by the SJA1000, 82527 and CTU CAN FD drivers; canloop uses
+//! [`setup`].
 
 use crate::glue::can::dev::{CanDev, CanDevice};
 use crate::glue::can::skb::alloc_rx;
@@ -168,6 +173,34 @@ pub(crate) fn echo_lost(dev: &NetDev, echo: &mut Option<Skb>, stat: Stat) -> boo
         Some(s) => {
             s.drop_any();
             dev.stats_err(stat);
+            true
+        }
+        None => false,
+    }
+}
+
+/// [`echo_done`] for a driver of CAN FD frames too: the echo of a
+/// sent CAN FD frame counts its payload in `tx_bytes` and one
+/// `tx_packets` (a classic one is counted by [`Skb::can_echo_done`]).
+/// Any context.
+pub(crate) fn echo_done_any(dev: &NetDev, echo: &mut Option<Skb>) -> Option<Skb> {
+    let skb = echo.take()?;
+    if let Some(f @ AnyFrame::Fd(_)) = AnyFrame::parse(skb.data()) {
+        dev.stats_tx(f.len() as u32);
+    }
+    skb.can_echo_done(dev)
+}
+
+/// The frame in the transmit buffer was not sent and will not be (the
+/// chip gave up on it, or a restart or bus-off flushed it): its skb,
+/// taken from `echo`, is freed (deferred: any context) and counted in
+/// `tx_dropped` (mainline `can_free_echo_skb` with `tx_dropped++`, and
+/// `can_flush_echo_skb`). Whether there was one. Any context.
+pub(crate) fn echo_dropped(dev: &NetDev, echo: &mut Option<Skb>) -> bool {
+    match echo.take() {
+        Some(s) => {
+            s.drop_any();
+            dev.stats_tx_dropped();
             true
         }
         None => false,

@@ -28,24 +28,42 @@
 //! The CAN device layer: nominal and data bit timing over netlink
 //! (`bitrate`, `dbitrate`, written to BTR and BTR_FD at `up`), limits and
 //! clock as mainline's driver (`ctu_can_fd`, 100 MHz on the PCI card),
-//! control modes `fd` and `fd-non-iso` (NISOFD). Not yet: the other
-//! control modes mainline announces (loopback, listen-only, presume-ack,
-//! one-shot, berr-reporting), error frames and the error states beyond
-//! what FAULT_STATE reports (QEMU reads 0 there, so the state stays error
-//! active), restart after bus-off. See
-//! Documentation/networking/rcan/ctucanfd.rst.
+//! and the control modes mainline's `ctucanfd` announces, programmed in
+//! MODE/SETTINGS at `up` (changing them while up is refused with EBUSY
+//! by the device layer): `fd` (FDE), `fd-non-iso` (NISOFD), `loopback`
+//! (ILBP), `listen-only` (BMM; frames to send are dropped and counted in
+//! `tx_dropped`, as mainline's `can_dev_dropped_skb`), `presume-ack`
+//! (STM), `one-shot` (RTRLE, retransmit limit 0), `berr-reporting` (the
+//! BEI and ALI interrupts).
+//!
+//! Errors as mainline's `ctucan_err_interrupt` reports them, decoded by
+//! the pure core ([`Event::Error`]): the state from the core's
+//! FAULT_STATE and REC/TEC on EWLI/FCSI (error warning, passive,
+//! bus-off, active again), arbitration lost and bus errors (with
+//! `berr-reporting`), data overrun; one error frame per round for
+//! CAN_RAW sockets with `CAN_RAW_ERR_FILTER`, the CAN device statistics
+//! (`ip -s -d`), the interface's error counters, `berr-counter` from
+//! REC/TEC. Bus-off turns the carrier off and, with `restart-ms`, arms
+//! the restart; the restart (timer or `ip link set canX type can
+//! restart`) drops the frames in the TX buffers (`tx_dropped`), sends
+//! `CAN_ERR_RESTARTED` and starts the core again. QEMU's model has no
+//! fault confinement (FAULT_STATE and the counters read 0, no error
+//! interrupt but the data overrun): the state stays error active there.
+//! See Documentation/networking/rcan/ctucanfd.rst.
 #![forbid(unsafe_code)]
 
-use crate::glue::bindings;
-use crate::glue::can::dev::{link_setup, CanDev, CanDevice, LinkSetup};
-use crate::glue::can::skb::alloc_rx;
+use crate::glue::can::ctrl;
+use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
 use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{Dev, Driver, NetDev, Stat, Xmit};
 use crate::glue::skb::Skb;
 use crate::rcan_core::bittiming;
-use crate::rcan_core::candev::{ctrlmode, CanState, Settings, CTUCANFD_CTRLMODE_SUPPORTED};
+use crate::rcan_core::candev::{
+    ctrlmode, err, error_frame, CanState, Settings, CTUCANFD_CTRLMODE_SUPPORTED,
+};
 use crate::rcan_core::ctucanfd::{
-    reg, Chip, Config, Event, Regs, CORE_SPAN, DATA_CONST, MAX_TXT_BUFFERS, NOMINAL_CONST,
+    reg, Chip, Config, ErrReport, Event, Regs, CORE_SPAN, DATA_CONST, MAX_TXT_BUFFERS,
+    NOMINAL_CONST,
 };
 use crate::rcan_core::frame::{AnyFrame, CAN_MTU};
 use core::marker::PhantomData;
@@ -89,18 +107,11 @@ impl Regs for IoRegs {
 /// sendmsg instead of getting ENOBUFS.
 const TX_QUEUE_LEN: u32 = 1000;
 
-/// One echo slot: the skb of the frame in a TX buffer, and its payload
-/// length if it is an FD frame (the glue counts classic frames' bytes
-/// itself when the echo completes).
-struct EchoSlot {
-    skb: Skb,
-    fd_len: Option<u32>,
-}
-
 /// The chip and what goes with it, under the device's lock.
 pub(crate) struct ChipState<R: Regs> {
     chip: Chip<R>,
-    echo: [Option<EchoSlot>; MAX_TXT_BUFFERS],
+    /// The skb of the frame in each TX buffer (its echo).
+    echo: [Option<Skb>; MAX_TXT_BUFFERS],
     running: bool,
 }
 
@@ -163,22 +174,66 @@ pub(crate) fn add_core<R: Regs + Send + 'static>(
 /// The CTU CAN FD driver for register access `R`.
 pub(crate) struct CtuCanFd<R>(PhantomData<R>);
 
-/// Hands a frame to the network stack. Any context.
+/// Hands a frame (from the bus, or an error frame) to the network
+/// stack, counted as [`ctrl::rx_skb`] counts it. Any context.
 fn rx_frame(dev: &NetDev, frame: &AnyFrame) {
-    let Some(skb) = alloc_rx(dev, frame) else {
-        dev.stats_rx_dropped();
-        return;
-    };
-    dev.stats_rx(frame.len() as u32);
-    dev.rx(skb);
+    if let Some(skb) = ctrl::rx_skb(dev, frame) {
+        dev.rx(skb);
+    }
+}
+
+/// Mainline's names of the states (`ctucan_state_to_str`), for the log.
+fn state_name(s: CanState) -> &'static str {
+    match s {
+        CanState::ErrorActive => "CAN_STATE_ERROR_ACTIVE",
+        CanState::ErrorWarning => "CAN_STATE_ERROR_WARNING",
+        CanState::ErrorPassive => "CAN_STATE_ERROR_PASSIVE",
+        CanState::BusOff => "CAN_STATE_BUS_OFF",
+        CanState::Stopped => "CAN_STATE_STOPPED",
+        CanState::Sleeping => "CAN_STATE_SLEEPING",
+    }
+}
+
+/// Counts what an error round reported (the CAN device statistics and
+/// the interface's error counters), logs a state change as mainline
+/// does, and hands the error frame up. Hardirq context (the chip lock
+/// held).
+fn report_error<R: Regs>(dev: &NetDev, p: &CtuPriv<R>, r: &ErrReport) {
+    p.can.add(CanStat::BusError, r.stats.bus_error);
+    p.can.add(CanStat::ErrorWarning, r.stats.error_warning);
+    p.can.add(CanStat::ErrorPassive, r.stats.error_passive);
+    p.can.add(CanStat::BusOff, r.stats.bus_off);
+    p.can
+        .add(CanStat::ArbitrationLost, r.stats.arbitration_lost);
+    // RxOverErrors counts an rx error too.
+    for _ in 0..r.net.rx_over_errors {
+        dev.stats_err(Stat::RxOverErrors);
+    }
+    for _ in 0..r.net.rx_errors.saturating_sub(r.net.rx_over_errors) {
+        dev.stats_err(Stat::RxErrors);
+    }
+    for _ in 0..r.net.tx_errors {
+        dev.stats_err(Stat::TxErrors);
+    }
+    if let Some((from, to)) = r.state {
+        pr_info!(
+            "{}: state changes from {} to {}\n",
+            dev.name(),
+            state_name(from),
+            state_name(to)
+        );
+    }
+    rx_frame(dev, &AnyFrame::Classic(r.frame));
 }
 
 /// What [`Chip::start`] programs for the device layer's settings: BTR
 /// from the bit timing, BTR_FD from the data bit timing (the nominal one
-/// while none is set: classic CAN has no data phase), FDE with `fd on`,
-/// NISOFD with `fd-non-iso on`.
+/// while none is set: classic CAN has no data phase), and the control
+/// modes (FDE with `fd on`, NISOFD with `fd-non-iso on`, ILBP, BMM, STM,
+/// RTRLE, the BEI/ALI interrupts).
 fn config(s: &Settings) -> Config {
-    let fd = s.ctrlmode & ctrlmode::FD != 0;
+    let on = |m: u32| s.ctrlmode & m != 0;
+    let fd = on(ctrlmode::FD);
     Config {
         nominal: s.bittiming,
         data: if s.data_bittiming.bitrate != 0 {
@@ -187,24 +242,21 @@ fn config(s: &Settings) -> Config {
             s.bittiming
         },
         fd,
-        fd_non_iso: fd && s.ctrlmode & ctrlmode::FD_NON_ISO != 0,
-        ..Config::default()
+        fd_non_iso: fd && on(ctrlmode::FD_NON_ISO),
+        listen_only: on(ctrlmode::LISTENONLY),
+        loopback: on(ctrlmode::LOOPBACK),
+        presume_ack: on(ctrlmode::PRESUME_ACK),
+        one_shot: on(ctrlmode::ONE_SHOT),
+        berr_reporting: on(ctrlmode::BERR_REPORTING),
     }
 }
 
 impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
     type Priv = CtuPriv<R>;
 
+    /// Classic until `fd on` (mainline's alloc_candev: CAN_MTU).
     fn setup() -> crate::glue::netdev::Setup {
-        crate::glue::netdev::Setup {
-            type_: bindings::ARPHRD_CAN as u16,
-            flags: bindings::net_device_flags_IFF_NOARP | bindings::net_device_flags_IFF_ECHO,
-            // Classic until `fd on` (mainline's alloc_candev: CAN_MTU).
-            mtu: CAN_MTU as u32,
-            hard_header_len: 0,
-            tx_queue_len: TX_QUEUE_LEN,
-            no_queue: false,
-        }
+        ctrl::setup(CAN_MTU, TX_QUEUE_LEN)
     }
 
     fn link() -> Option<LinkSetup> {
@@ -219,58 +271,60 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
         p.can.change_mtu(dev, new_mtu)
     }
 
-    /// Process context, RTNL: refuses a device without a bit timing,
-    /// requests the (shared) interrupt, starts the core.
+    /// `ip link set canX up`. Process context, RTNL: refuses a device
+    /// without a bit timing, arms the restart timer and requests the
+    /// (shared) interrupt line ([`ctrl::open`]), then starts the core
+    /// under the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        let set = p.can.open_check(dev.name())?;
-        dev.request_irq(p.irq)?;
+        let (set, opening) = ctrl::open(dev, p, p.irq)?;
         {
             let mut st = p.st.lock();
             st.chip.start(&config(&set));
             st.running = true;
         }
-        dev.set_carrier(true);
-        dev.start_queue();
+        opening.up();
         Ok(())
     }
 
-    /// Process context, RTNL: stops the core and drops the frames still
-    /// in its TX buffers.
+    /// `ip link set canX down`. Process context, RTNL: stops the core;
+    /// the frames still in its TX buffers are freed after the chip lock
+    /// ([`ctrl::stop`]).
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        dev.stop_queue();
-        let mut lost: [Option<EchoSlot>; MAX_TXT_BUFFERS] = Default::default();
-        {
+        ctrl::stop(dev, p, || {
             let mut st = p.st.lock();
             st.running = false;
             st.chip.stop();
-            core::mem::swap(&mut lost, &mut st.echo);
-        }
-        drop(lost);
-        dev.free_irq();
-        dev.set_carrier(false);
+            core::mem::take(&mut st.echo)
+        });
         Ok(())
     }
 
-    /// Transmit path (softirq or process context, BH off).
+    /// Transmit path (softirq or process context, BH off); takes the
+    /// chip lock.
     fn start_xmit(skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
         let Some((skb, frame)) = skb.can_xmit_start_any(dev) else {
             return Xmit::Ok;
         };
         let mut st = p.st.lock();
+        if st.chip.cfg.listen_only {
+            // Mainline can_dev_dropped_skb: a listen-only controller
+            // sends nothing.
+            drop(st);
+            ctrl::tx_drop(dev, skb);
+            return Xmit::Ok;
+        }
         match st.chip.xmit(&frame) {
             Ok((buf, full)) => {
                 if full {
                     dev.stop_queue();
                 }
-                let fd_len = frame.is_fd().then_some(frame.len() as u32);
-                st.echo[buf] = Some(EchoSlot { skb, fd_len });
+                st.echo[buf] = Some(skb);
             }
             Err(_) => {
                 // Error frames cannot be sent; with the queue stopped
                 // while the ring is full, a busy ring cannot happen.
                 drop(st);
-                dev.stats_tx_dropped();
-                drop(skb);
+                ctrl::tx_drop(dev, skb);
             }
         }
         Xmit::Ok
@@ -288,30 +342,34 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
             return false;
         }
         let mut woke = false;
+        let mut bus_off = false;
         let handled = chip.irq(|ev| match ev {
             Event::Rx(f) => rx_frame(dev, &f),
             Event::TxDone { buf, ok } => {
-                if let Some(slot) = echo.get_mut(buf).and_then(|e| e.take()) {
+                if let Some(e) = echo.get_mut(buf) {
                     if ok {
-                        if let Some(n) = slot.fd_len {
-                            dev.stats_tx(n);
-                        }
-                        if let Some(skb) = slot.skb.can_echo_done(dev) {
+                        if let Some(skb) = ctrl::echo_done_any(dev, e) {
                             dev.rx(skb);
                         }
                     } else {
-                        // Interrupts are off: the free is deferred.
-                        slot.skb.drop_any();
-                        dev.stats_err(Stat::TxErrors);
+                        // Mainline: a frame the core gave up on (one-shot,
+                        // abort) is dropped, not echoed.
+                        ctrl::echo_dropped(dev, e);
                     }
                 }
                 woke = true;
             }
-            Event::Overrun => {
-                dev.stats_err(Stat::RxOverErrors);
+            Event::Error(r) => {
+                report_error(dev, p, &r);
+                bus_off |= r.bus_off;
             }
-            Event::State(_) => {}
         });
+        if bus_off {
+            // Mainline can_bus_off: carrier off, restart timer armed with
+            // restart-ms; the frames in the TX buffers wait for the
+            // restart.
+            p.can.bus_off(dev);
+        }
         if woke {
             dev.wake_queue();
         }
@@ -320,13 +378,13 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
 }
 
 /// The CTU CAN FD as the CAN device layer sees it: mainline
-/// `ctucanfd`'s nominal and data bit-timing limits, CAN FD (ISO or not),
-/// no restart.
+/// `ctucanfd`'s nominal and data bit-timing limits and control modes,
+/// restart after bus-off.
 impl<R: Regs + Send + 'static> CanDevice for CtuCanFd<R> {
     const BITTIMING_CONST: &'static bittiming::BittimingConst = &NOMINAL_CONST;
     const DATA_BITTIMING_CONST: Option<&'static bittiming::BittimingConst> = Some(&DATA_CONST);
     const CTRLMODE_SUPPORTED: u32 = CTUCANFD_CTRLMODE_SUPPORTED;
-    const CAN_RESTART: bool = false;
+    const CAN_RESTART: bool = true;
 
     fn can_dev(p: &Self::Priv) -> &CanDev {
         &p.can
@@ -336,6 +394,8 @@ impl<R: Regs + Send + 'static> CanDevice for CtuCanFd<R> {
         p.clock_hz
     }
 
+    /// For `ip -d link` and `changelink` (rtnetlink). Process context,
+    /// RTNL; takes the chip lock.
     fn state(_dev: &Dev<Self>, p: &Self::Priv) -> CanState {
         let st = p.st.lock();
         if !st.running {
@@ -344,11 +404,41 @@ impl<R: Regs + Send + 'static> CanDevice for CtuCanFd<R> {
         st.chip.state()
     }
 
+    /// REC/TEC for `ip -d link`'s berr-counter. Process context, RTNL;
+    /// takes the chip lock.
     fn berr_counter(_dev: &Dev<Self>, p: &Self::Priv) -> (u16, u16) {
         p.st.lock().chip.berr_counter()
     }
 
-    fn restart(_dev: &Dev<Self>, _p: &Self::Priv) -> Result {
-        Err(crate::glue::neterr::EOPNOTSUPP())
+    /// Restarts the core after bus-off (mainline `can_restart`, with
+    /// `can_flush_echo_skb`, and `ctucan_do_set_mode(CAN_MODE_START)`):
+    /// the frames in the TX buffers are dropped (`tx_dropped`),
+    /// the core is reset and started, `CAN_ERR_RESTARTED` goes up, the
+    /// carrier comes back, the restart is counted and the queue wakes.
+    /// Process context (`ip link ... restart`) or softirq (the
+    /// `restart-ms` timer); takes the chip lock.
+    fn restart(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        // The echoes taken and the core restarted under one lock hold, so
+        // that no frame queued in between is forgotten by the reset.
+        let mut lost = {
+            let mut st = p.st.lock();
+            if !st.running {
+                return Err(EINVAL);
+            }
+            st.chip.restart();
+            core::mem::take(&mut st.echo)
+        };
+        for e in lost.iter_mut() {
+            ctrl::echo_dropped(dev, e);
+        }
+        // Handed up without the chip lock: from process context, netif_rx
+        // must not run with interrupts off.
+        let mut cf = error_frame();
+        cf.can_id |= err::RESTARTED;
+        rx_frame(dev, &AnyFrame::Classic(cf));
+        dev.set_carrier(true);
+        p.can.count(CanStat::Restarts);
+        dev.wake_queue();
+        Ok(())
     }
 }

@@ -107,10 +107,9 @@ impl pci::Driver for CtuCanFdPci {
 
 /// The PCI ids the driver matches; the module root exports a copy under
 /// the symbol modpost reads, for the module's `pci:v...` aliases.
-pub(crate) const PCI_IDS: [glue::bindings::pci_device_id; 2] =
-    [pci::id(0x1760, 0xff00), pci::ID_END];
+pub(crate) const PCI_IDS: [glue::pci::DeviceId; 2] = [pci::id(0x1760, 0xff00), pci::ID_END];
 
-static IDS: [glue::bindings::pci_device_id; 2] = PCI_IDS;
+static IDS: [glue::pci::DeviceId; 2] = PCI_IDS;
 
 static DRIVER: pci::Registration<CtuCanFdPci> = pci::Registration::new();
 

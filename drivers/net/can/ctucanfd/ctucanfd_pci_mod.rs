@@ -30,7 +30,7 @@ use ctucanfd_pci::CtuCanFdPciModule;
 #[no_mangle]
 #[used]
 #[allow(non_upper_case_globals)]
-static __mod_pci__rcan_ctucanfd_pci_device_table: [glue::bindings::pci_device_id;
+static __mod_pci__rcan_ctucanfd_pci_device_table: [glue::pci::DeviceId;
     ctucanfd_pci::PCI_IDS.len()] = ctucanfd_pci::PCI_IDS;
 
 module! {

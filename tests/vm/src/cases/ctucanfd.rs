@@ -11,14 +11,21 @@
 //! they run against mainline's can-dev + ctucanfd + ctucanfd_pci on the
 //! same cards ([`Ctx::ctucan_cards`]).
 //!
-//! QEMU ignores bit timing and has no error frames or fault confinement:
-//! those are covered by the host tests of the chip logic
-//! (net/can/core/tests/ctucanfd_chip.rs).
+//! QEMU ignores bit timing and the MODE bits but ENA (listen-only,
+//! loopback, presume-ack, one-shot change nothing on its bus), and has no
+//! fault confinement (FAULT_STATE, REC/TEC and ERR_CAPT read 0, no error
+//! interrupt): error states, error frames and bus-off are covered by the
+//! host tests of the chip logic against the register model with fault
+//! injection (net/can/core/tests/ctucanfd_chip.rs). What QEMU shows is
+//! tested here: the control modes as `ip` sets and shows them, listen-only
+//! (the driver drops what it would send), counters 0, restart refused
+//! while not bus-off.
 
 use socketcan::id::FdFlags;
 use socketcan::{CanAnyFrame, CanFdFrame, CanFdSocket, EmbeddedFrame, ExtendedId, Socket};
 
 use super::candev::{details_json, ip, ip_ok};
+use super::candev_err::stats_are;
 use super::{portable_table, test_table};
 use crate::canraw::{self, ext, rtr_ext, rtr_std, std as sff};
 use crate::check::{ensure, OrFail, TestResult};
@@ -30,6 +37,7 @@ pub const TESTS: &[Test] = test_table![
     ctucanfd_fd_esi_both_ways,
     ctucanfd_burst,
     ctucanfd_rmmod_during_traffic,
+    ctucanfd_error_active_when_up,
 ];
 
 /// The tests that also run against mainline's ctucanfd_pci.
@@ -40,6 +48,7 @@ pub const PORTABLE_TESTS: &[Test] = portable_table![
     candev_ctucanfd_ip_fd_on_off,
     candev_ctucanfd_ip_fd_refusals,
     candev_ctucanfd_classic_refuses_fd_frames,
+    candev_ctucanfd_ctrlmodes,
 ];
 
 /// `CANFD_BRS`, `CANFD_ESI`, `CANFD_FDF` (`<linux/can.h>`).
@@ -509,5 +518,135 @@ fn candev_ctucanfd_classic_refuses_fd_frames(ctx: &mut Ctx) -> TestResult {
         matches!(&got, CanAnyFrame::Normal(g) if g.data() == [1, 2, 3]),
         "can1 got {got:?}, expected the classic frame"
     );
+    Ok(())
+}
+
+/// The control modes mainline's ctucanfd announces, as users set them
+/// with `ip` (one two-card setup, several checks):
+///
+/// * `listen-only on` on can0: it receives what can1 sends, and sends
+///   nothing (the frame is dropped, `tx_dropped` counts it; can1 gets
+///   nothing); `listen-only off` while up: EBUSY;
+/// * `loopback on presume-ack on one-shot on berr-reporting on` are
+///   taken and listed by `ip -d link show` (`<LOOPBACK,ONE-SHOT,...>`);
+///   up with them, a frame sent on can0 reaches another socket on can0
+///   (the echo) and can1 (QEMU's core ignores internal loopback, so it
+///   goes out on the bus as well);
+/// * `triple-sampling on` and `cc-len8-dlc on`: EOPNOTSUPP (not
+///   announced);
+/// * `restart` while not bus-off: EBUSY; `restart-ms 100` is taken (the
+///   driver restarts after bus-off), and then `restart`: EINVAL;
+///   `berr-counter tx 0 rx 0` and the CAN device statistics all 0
+///   (QEMU's core counts no errors).
+fn candev_ctucanfd_ctrlmodes(ctx: &mut Ctx) -> TestResult {
+    ctx.ctucan_cards()?;
+    let set = |d: &str, a: &[&str]| -> Result<String, String> {
+        let mut v = vec!["link", "set", d, "type", "can"];
+        v.extend_from_slice(a);
+        ip_ok(&v)
+    };
+    let busy = "Device or resource busy";
+    let nosup = "Operation not supported";
+    // Listen-only.
+    set("can0", &["bitrate", "500000", "listen-only", "on"])?;
+    set("can1", CLASSIC)?;
+    json_has("can0", &[r#""ctrlmode":["LISTEN-ONLY"]"#], &[])?;
+    ctx.link_up("can0")?;
+    ctx.link_up("can1")?;
+    let (i0, i1) = (ctx.ifindex("can0")?, ctx.ifindex("can1")?);
+    let (s0, s1) = (canraw::open(i0)?, canraw::open(i1)?);
+    let f = sff(0x321, &[1, 2, 3]);
+    canraw::send(&s1, &f)?;
+    canraw::expect(&s0, &f, "listen-only can0")?;
+    let dropped = ctx.stat("can0", "tx_dropped")?;
+    canraw::send(&s0, &sff(0x322, &[4]))?;
+    canraw::expect_quiet(&[("can1", &s1)])?;
+    let now = ctx.stat("can0", "tx_dropped")?;
+    ensure!(
+        now == dropped + 1,
+        "listen-only can0: tx_dropped {dropped} -> {now}, expected one more"
+    );
+    ip_fails(
+        &["link", "set", "can0", "type", "can", "listen-only", "off"],
+        busy,
+    )?;
+    // A manual restart (restart-ms 0) of a device that is not bus-off.
+    ip_fails(&["link", "set", "can0", "type", "can", "restart"], busy)?;
+    ctx.link_down("can0")?;
+    // The other modes.
+    for m in ["triple-sampling", "cc-len8-dlc"] {
+        ip_fails(&["link", "set", "can0", "type", "can", m, "on"], nosup)?;
+    }
+    set(
+        "can0",
+        &[
+            "listen-only",
+            "off",
+            "loopback",
+            "on",
+            "presume-ack",
+            "on",
+            "one-shot",
+            "on",
+            "berr-reporting",
+            "on",
+            "restart-ms",
+            "100",
+        ],
+    )?;
+    json_has(
+        "can0",
+        &[
+            r#""LOOPBACK""#,
+            r#""ONE-SHOT""#,
+            r#""BERR-REPORTING""#,
+            r#""PRESUME-ACK""#,
+            r#""restart_ms":100"#,
+        ],
+        &[r#""LISTEN-ONLY""#],
+    )?;
+    let text = ip_ok(&["-d", "link", "show", "can0"])?;
+    ensure!(
+        text.contains("<LOOPBACK,ONE-SHOT,BERR-REPORTING,PRESUME-ACK>"),
+        "ip -d link show can0: modes not listed as mainline's ip prints them: {text}"
+    );
+    ctx.link_up("can0")?;
+    let s0b = canraw::open(i0)?;
+    let g = sff(0x323, &[5, 6]);
+    canraw::send(&s0, &g)?;
+    canraw::expect(&s0b, &g, "can0, another socket")?;
+    canraw::expect(&s1, &g, "can1")?;
+    // With automatic restart on, a manual one is refused; the counters.
+    ip_fails(
+        &["link", "set", "can0", "type", "can", "restart"],
+        "Invalid argument",
+    )?;
+    json_has("can0", &[r#""berr_counter":{"tx":0,"rx":0}"#], &[])?;
+    stats_are("can0", [0; 6])?;
+    Ok(())
+}
+
+/// Once up, the device is error active with both error counters 0 (QEMU's
+/// core has no fault confinement, so it stays so). Not portable: mainline
+/// `ctucanfd` starts in STOPPED and waits for the core's first fault
+/// confinement interrupt (FCSI) to become error active, which QEMU's model
+/// never raises, so there `ip -d link` says STOPPED while the device is up.
+fn ctucanfd_error_active_when_up(ctx: &mut Ctx) -> TestResult {
+    ctucan2(ctx, CLASSIC)?;
+    json_has(
+        "can0",
+        &[
+            r#""state":"ERROR-ACTIVE""#,
+            r#""berr_counter":{"tx":0,"rx":0}"#,
+        ],
+        &[],
+    )?;
+    let text = ip_ok(&["-d", "link", "show", "can1"])?;
+    ensure!(
+        text.contains("can state ERROR-ACTIVE (berr-counter tx 0 rx 0)"),
+        "ip -d link show can1: {text}"
+    );
+    ip_ok(&["link", "set", "can0", "down"])?;
+    json_has("can0", &[r#""state":"STOPPED""#], &[])?;
     Ok(())
 }
