@@ -330,6 +330,15 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
         Some(link_setup::<Self>())
     }
 
+    const HAS_CHANGE_MTU: bool = true;
+
+    /// `ip link set canX mtu N` (mainline `can_change_mtu`): `EBUSY` while
+    /// up, `EINVAL` for 72 (no CAN FD) or any other size. Process
+    /// context, RTNL.
+    fn change_mtu(dev: &Dev<Self>, p: &Self::Priv, new_mtu: u32) -> Result {
+        p.can.change_mtu(dev, new_mtu)
+    }
+
     /// `ip link set canX up`. Process context, RTNL; requests the
     /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
