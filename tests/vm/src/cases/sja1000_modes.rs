@@ -2,7 +2,7 @@
 //! The SJA1000 control modes that need the chip's self reception and its
 //! DLC field, as users meet them: `loopback on` (mainline `sja1000`:
 //! MOD.STM and the self reception request CMR.SRR) and `cc-len8-dlc on`
-//! (DLC 9..15 in `can_frame.len8_dlc`, can-utils' `_X` suffix), on the
+//! (DLC 9..15 in `can_frame.len8_dlc`), on the
 //! simulated SJA1000 cards (`rcan_sja1000_sim`: the real driver on the
 //! register-level model).
 //!
@@ -10,6 +10,10 @@
 //! on CMR.TR only, so mainline's driver in loopback mode, which asks for
 //! SRR, sends nothing there; and it clamps a DLC above 8 to 8 on the way
 //! to the bus, so no DLC 9..15 ever reaches a receiver.
+//!
+//! The DLC 9..15 frames go through CAN_RAW sockets: the test VM's
+//! can-utils (Debian's 2020.11) predate the `_X` DLC suffix of
+//! `cansend`/`candump -8`.
 
 use super::candev::ip_ok;
 use super::candev_err::{details_have, sim2};
@@ -60,11 +64,11 @@ fn expect_wire(s: &socketcan::CanSocket, want: &[u8; 16], echo: bool, who: &str)
 /// cc-len8-dlc on`, can1 `cc-len8-dlc on`):
 ///
 /// * `ip -d` shows the modes;
-/// * can0 alone on the bus (can1 down): `cansend can0
-///   123#1122334455667788_C` and `candump -L can0` sees the frame twice,
-///   `_C` kept: the echo and the frame the chip received itself; no
-///   acknowledgement was needed (TX error counter 0, ERROR-ACTIVE); a
-///   socket sees the echo (`MSG_DONTROUTE`) first, then the chip's frame;
+/// * can0 alone on the bus (can1 down): `cansend can0 123#11223344` and
+///   `candump -L can0` sees the frame twice: the echo and the frame the
+///   chip received itself; no acknowledgement was needed (TX error
+///   counter 0, ERROR-ACTIVE); a socket sees a DLC 9 frame's echo
+///   (`MSG_DONTROUTE`) first, then the chip's frame, `len8_dlc` kept;
 /// * can1 up: DLC 9..15 cross the bus both ways (`len8_dlc` kept), the
 ///   loopback frame reaches can1 too;
 /// * can1 with `cc-len8-dlc off`: it receives such a frame as DLC 8
@@ -82,7 +86,7 @@ fn sja1000_sim_loopback_cc_len8_dlc(ctx: &mut Ctx) -> TestResult {
     ip_ok(&["link", "set", "can1", "down"])?;
     let mut dump = tools::spawn("candump", &["-L", "-n", "2", "can0"], None)?;
     dump.wait_listening()?;
-    tools::run_ok("cansend", &["can0", "123#1122334455667788_C"])?;
+    tools::run_ok("cansend", &["can0", "123#11223344"])?;
     let out = dump.finish(TOOL_LIMIT)?;
     ensure!(out.status.success(), "candump: {}", out.stderr.trim());
     let frames: Vec<&str> = out
@@ -91,8 +95,8 @@ fn sja1000_sim_loopback_cc_len8_dlc(ctx: &mut Ctx) -> TestResult {
         .filter_map(|l| l.split_whitespace().nth(2))
         .collect();
     ensure!(
-        frames == ["123#1122334455667788_C"; 2],
-        "candump -L can0 printed {:?}, expected the echo and the self-received frame, 123#1122334455667788_C twice",
+        frames == ["123#11223344"; 2],
+        "candump -L can0 printed {:?}, expected the echo and the self-received frame, 123#11223344 twice",
         out.stdout
     );
     details_have("can0", &["ERROR-ACTIVE (berr-counter tx 0 rx 0)"])?;
