@@ -71,8 +71,9 @@ fn expect_wire(s: &socketcan::CanSocket, want: &[u8; 16], echo: bool, who: &str)
 ///   (`MSG_DONTROUTE`) first, then the chip's frame, `len8_dlc` kept;
 /// * can1 up: DLC 9..15 cross the bus both ways (`len8_dlc` kept), the
 ///   loopback frame reaches can1 too;
-/// * can1 with `cc-len8-dlc off`: it receives such a frame as DLC 8
-///   (`len8_dlc` 0) and sends one with `len8_dlc` as DLC 8.
+/// * can1 with `cc-len8-dlc off` (release kernel only): it receives such
+///   a frame as DLC 8 (`len8_dlc` 0) and sends one with `len8_dlc` as
+///   DLC 8.
 fn sja1000_sim_loopback_cc_len8_dlc(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = sim2(
         ctx,
@@ -132,6 +133,11 @@ fn sja1000_sim_loopback_cc_len8_dlc(ctx: &mut Ctx) -> TestResult {
         }
     }
 
+    if crate::ctx::debug_kernel() {
+        // The rest is the receive-side rule with the mode off (pure
+        // logic, host-tested) and three more `ip` starts: release only.
+        return Ok(());
+    }
     // can1 without cc-len8-dlc: DLC 8 both ways (the echo keeps what the
     // sender wrote).
     ip_ok(&["link", "set", "can1", "down"])?;
