@@ -83,28 +83,41 @@ const MAX_IRQ_ROUNDS: usize = 32;
 /// sendmsg rather than getting ENOBUFS).
 const TX_QUEUE_LEN: u32 = 1000;
 
-/// Frames the receive queue holds between two polls. The chip has 15
-/// message objects and one interrupt handles at most `MAX_IRQ_ROUNDS`
-/// causes; a full queue drops (counted in `rx_dropped`).
-const RXQ_LEN: usize = 128;
+/// Frames the receive queue holds between two polls (a full queue drops,
+/// counted in `rx_dropped`): as many as mainline's `can_rx_offload`
+/// queues for NAPI weight 64 (`skb_queue_len_max`, (2 << fls(64)) * 4),
+/// about the per-CPU backlog a `netif_rx` driver fills (1000). The
+/// interrupt handler may run on one CPU while the device's NAPI poll is
+/// owned by another that does not get to run (a busy host descheduling
+/// a VM's vCPU, real-time load): 128 overflowed after some 50-100 ms of
+/// that at the simulated bus's rate (`i82527_burst` under load, 54 and
+/// 86 frames dropped). Allocated at probe (8 KiB per device), not on the
+/// stack.
+const RXQ_LEN: usize = 1024;
 
 /// NAPI weight: frames handed up per poll.
 const NAPI_WEIGHT: u32 = 64;
 
-/// The frames taken from the chip, waiting for the NAPI poll (FIFO).
+/// The frames taken from the chip, waiting for the NAPI poll (FIFO):
+/// `slots[(head + i) % RXQ_LEN]` for i < len.
 pub(crate) struct RxQueue {
-    slots: [Option<Skb>; RXQ_LEN],
+    slots: KVec<Option<Skb>>,
     head: usize,
     len: usize,
 }
 
 impl RxQueue {
-    const fn new() -> Self {
-        RxQueue {
-            slots: [const { None }; RXQ_LEN],
+    /// An empty queue. Process context (probe).
+    fn new() -> Result<Self> {
+        let mut slots = KVec::with_capacity(RXQ_LEN, GFP_KERNEL)?;
+        for _ in 0..RXQ_LEN {
+            slots.push(None, GFP_KERNEL)?;
+        }
+        Ok(RxQueue {
+            slots,
             head: 0,
             len: 0,
-        }
+        })
     }
 
     /// Appends `skb`; gives it back if the queue is full.
@@ -210,7 +223,7 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
             ChipState {
                 chip,
                 echo: None,
-                rxq: RxQueue::new(),
+                rxq: RxQueue::new()?,
                 running: false,
             },
             "I82527Priv::chip"
@@ -330,6 +343,15 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
         Some(link_setup::<Self>())
     }
 
+    const HAS_CHANGE_MTU: bool = true;
+
+    /// `ip link set canX mtu N` (mainline `can_change_mtu`): `EBUSY` while
+    /// up, `EINVAL` for 72 (no CAN FD) or any other size. Process
+    /// context, RTNL.
+    fn change_mtu(dev: &Dev<Self>, p: &Self::Priv, new_mtu: u32) -> Result {
+        p.can.change_mtu(dev, new_mtu)
+    }
+
     /// `ip link set canX up`. Process context, RTNL; requests the
     /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
@@ -350,19 +372,23 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     }
 
     /// `ip link set canX down`. Process context, RTNL. The glue has
-    /// disabled NAPI: no poll runs or starts until the next open, so what
-    /// is left in the queue is freed here, with the echo, outside the
-    /// chip lock ([`ctrl::stop`]).
+    /// disabled NAPI: no poll runs or starts until the next open, and the
+    /// handler queues nothing once `running` is off, so what is left in
+    /// the queue is freed here, one frame per lock hold, after the echo
+    /// ([`ctrl::stop`]), outside the chip lock.
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         ctrl::stop(dev, p, || {
             let mut st = p.chip.lock();
             st.running = false;
             st.chip.stop();
-            (
-                st.echo.take(),
-                core::mem::replace(&mut st.rxq, RxQueue::new()),
-            )
+            st.echo.take()
         });
+        loop {
+            let Some(skb) = p.chip.lock().rxq.pop() else {
+                break;
+            };
+            drop(skb);
+        }
         Ok(())
     }
 

@@ -58,12 +58,17 @@
 //! the frame that was in the TX buffer, sends `CAN_ERR_RESTARTED`, counts
 //! the restart and starts the chip again (mainline `can_restart`).
 //!
-//! Control modes (mainline `sja1000`'s, but loopback, which needs the
-//! chip's self reception that QEMU's model lacks, and cc-len8-dlc):
-//! triple sampling (BTR1.SAM), listen-only (MOD.LOM; frames to send are
-//! dropped, as mainline's `can_dev_dropped_skb`), presume-ack (MOD.STM),
+//! Control modes (mainline `sja1000`'s, all of them): triple sampling
+//! (BTR1.SAM), listen-only (MOD.LOM; frames to send are dropped, as
+//! mainline's `can_dev_dropped_skb`), presume-ack (MOD.STM), loopback
+//! (MOD.STM and the self reception request CMR.SRR: the chip sends the
+//! frame, needs no acknowledgement and receives it itself, so local
+//! sockets see the echo and then the frame from the chip; QEMU's model
+//! ignores SRR and sends nothing, as it would for mainline's driver),
 //! one-shot (CMR.AT: a failed transmission is not retried and counts as
-//! a TX error), berr-reporting (IER.BEI).
+//! a TX error), berr-reporting (IER.BEI), cc-len8-dlc (a frame of 8
+//! bytes with `len8_dlc` 9..15 is sent with that DLC; a received DLC
+//! above 8 is kept in `len8_dlc`).
 #![forbid(unsafe_code)]
 
 use crate::glue::can::ctrl::{self, SIOCDEVPRIVATE};
@@ -498,6 +503,15 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         Some(link_setup::<Self>())
     }
 
+    const HAS_CHANGE_MTU: bool = true;
+
+    /// `ip link set canX mtu N` (mainline `can_change_mtu`): `EBUSY` while
+    /// up, `EINVAL` for 72 (no CAN FD) or any other size. Process
+    /// context, RTNL.
+    fn change_mtu(dev: &Dev<Self>, p: &Self::Priv, new_mtu: u32) -> Result {
+        p.can.change_mtu(dev, new_mtu)
+    }
+
     /// `ip link set canX up`. Process context, RTNL; requests the
     /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
@@ -663,16 +677,12 @@ impl<R: Regs + Send + 'static> FilterListener for Sja1000<R> {
 }
 
 /// The SJA1000 as the CAN device layer sees it: mainline `sja1000`'s
-/// bit-timing limits; of its control modes triple sampling, listen-only,
-/// one-shot, berr-reporting and presume-ack (loopback and cc-len8-dlc are
-/// refused with `EOPNOTSUPP`); restart after bus-off.
+/// bit-timing limits and control modes (loopback, listen-only, triple
+/// sampling, one-shot, berr-reporting, presume-ack, cc-len8-dlc);
+/// restart after bus-off.
 impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
     const BITTIMING_CONST: &'static bittiming::BittimingConst = &SJA1000_BITTIMING_CONST;
-    const CTRLMODE_SUPPORTED: u32 = candev::ctrlmode::THREE_SAMPLES
-        | candev::ctrlmode::LISTENONLY
-        | candev::ctrlmode::ONE_SHOT
-        | candev::ctrlmode::BERR_REPORTING
-        | candev::ctrlmode::PRESUME_ACK;
+    const CTRLMODE_SUPPORTED: u32 = candev::SJA1000_CTRLMODE_SUPPORTED;
     const CAN_RESTART: bool = true;
 
     fn can_dev(p: &Self::Priv) -> &CanDev {

@@ -529,6 +529,40 @@ pub mod err {
     pub const PROT_LOC_ACK: u8 = 0x19;
 }
 
+/// Largest raw data length code of a classic frame on the wire (mainline
+/// `CAN_MAX_RAW_DLC`): DLC 9..15 carry 8 data bytes.
+pub const CAN_MAX_RAW_DLC: u8 = 15;
+
+/// The data length code a driver puts in the controller's DLC field for
+/// `frame` (mainline `can_get_cc_dlc`): with `cc-len8-dlc` on, a frame of
+/// 8 bytes whose `len8_dlc` is 9..15 is sent with that DLC; otherwise
+/// (mode off, `len` below 8, `len8_dlc` 0..8 or above 15) its `len`.
+/// Any context.
+pub fn cc_dlc(frame: &CanFrame, ctrlmode: u32) -> u8 {
+    let len = frame.dlc() as u8;
+    if ctrlmode & ctrlmode::CC_LEN8_DLC != 0
+        && usize::from(frame.len) == super::arb::MAX_DLC
+        && frame.len8_dlc > 8
+        && frame.len8_dlc <= CAN_MAX_RAW_DLC
+    {
+        frame.len8_dlc
+    } else {
+        len
+    }
+}
+
+/// Sets the length of a received classic frame from the controller's raw
+/// DLC `dlc` (mainline `can_frame_set_cc_len`): `len` is `dlc` clamped to
+/// 8; with `cc-len8-dlc` on, a DLC of 9..15 is kept in `len8_dlc` too
+/// (else `len8_dlc` is left 0). Any context.
+pub fn set_cc_len(frame: &mut CanFrame, dlc: u8, ctrlmode: u32) {
+    let dlc = dlc & 0x0F;
+    frame.len = dlc.min(super::arb::MAX_DLC as u8);
+    if ctrlmode & ctrlmode::CC_LEN8_DLC != 0 && dlc > 8 {
+        frame.len8_dlc = dlc;
+    }
+}
+
 /// An empty error frame (mainline `alloc_can_err_skb`'s frame):
 /// `CAN_ERR_FLAG`, DLC 8, all data zero.
 pub fn error_frame() -> CanFrame {

@@ -172,13 +172,20 @@ pub trait Regs {
 /// data); returns the image and the number of bytes used. Error frames
 /// cannot be sent (`None`).
 pub fn encode(frame: &CanFrame) -> Option<([u8; 13], usize)> {
+    encode_dlc(frame, frame.dlc() as u8)
+}
+
+/// [`encode`] with `code` (0..15) in FI's DLC field in place of the
+/// frame's length, for a DLC of 9..15 ([`candev::cc_dlc`]): the data
+/// bytes are still the frame's `len` (8 for such a frame).
+pub fn encode_dlc(frame: &CanFrame, code: u8) -> Option<([u8; 13], usize)> {
     if frame.can_id & CAN_ERR_FLAG != 0 {
         return None;
     }
     let dlc = frame.dlc();
     let rtr = frame.can_id & CAN_RTR_FLAG != 0;
     let mut b = [0u8; 13];
-    b[0] = dlc as u8 | if rtr { FI_RTR } else { 0 };
+    b[0] = (code & 0x0F) | if rtr { FI_RTR } else { 0 };
     let data_at = if frame.can_id & CAN_EFF_FLAG != 0 {
         b[0] |= FI_FF;
         let id = (frame.can_id & CAN_EFF_MASK) << 3;
@@ -198,6 +205,13 @@ pub fn encode(frame: &CanFrame) -> Option<([u8; 13], usize)> {
 /// Decodes a 13-byte RX buffer image. A DLC above 8 (legal on the bus)
 /// gives 8 data bytes, as mainline does.
 pub fn decode(b: &[u8; 13]) -> CanFrame {
+    decode_cc(b, 0)
+}
+
+/// [`decode`] under the control modes `ctrlmode`: with `cc-len8-dlc` a
+/// DLC of 9..15 is kept in `len8_dlc` (mainline `sja1000_rx` with
+/// `can_frame_set_cc_len`).
+pub fn decode_cc(b: &[u8; 13], ctrlmode: u32) -> CanFrame {
     let fi = b[0];
     let dlc = usize::from(fi & 0x0F).min(MAX_DLC);
     let rtr = fi & FI_RTR != 0;
@@ -208,10 +222,8 @@ pub fn decode(b: &[u8; 13]) -> CanFrame {
         let id = u32::from(u16::from_be_bytes([b[1], b[2]]) >> 5);
         (id, 3)
     };
-    let mut f = CanFrame {
-        len: dlc as u8,
-        ..CanFrame::default()
-    };
+    let mut f = CanFrame::default();
+    candev::set_cc_len(&mut f, fi, ctrlmode);
     if rtr {
         can_id |= CAN_RTR_FLAG;
     } else {
@@ -309,10 +321,13 @@ pub struct Chip<R: Regs> {
     /// Configuration applied by [`Chip::init`].
     pub cfg: Config,
     /// Control modes (`CAN_CTRLMODE_*` of [`candev::ctrlmode`]) applied by
-    /// [`Chip::start`] and [`Chip::xmit`]: listen-only (MOD.LOM),
-    /// presume-ack (MOD.STM, self-test: no acknowledgement needed),
-    /// berr-reporting (IER.BEI), one-shot (CMR.AT with TR). Triple
-    /// sampling is in BTR1 ([`Config::btr1`]).
+    /// [`Chip::start`], [`Chip::xmit`] and the receive path, as
+    /// mainline's `sja1000`: listen-only (MOD.LOM), presume-ack (MOD.STM,
+    /// self-test: no acknowledgement needed), loopback (MOD.STM and
+    /// CMR.SRR in place of TR: the chip sends the frame, acknowledges and
+    /// receives it itself), berr-reporting (IER.BEI), one-shot (CMR.AT
+    /// with TR or SRR), cc-len8-dlc (DLC 9..15 both ways through
+    /// `len8_dlc`). Triple sampling is in BTR1 ([`Config::btr1`]).
     pub ctrlmode: u32,
     state: CanState,
 }
@@ -440,7 +455,7 @@ impl<R: Regs> Chip<R> {
         if self.ctrlmode & ctrlmode::LISTENONLY != 0 {
             afm |= mode::LOM;
         }
-        if self.ctrlmode & ctrlmode::PRESUME_ACK != 0 {
+        if self.ctrlmode & (ctrlmode::PRESUME_ACK | ctrlmode::LOOPBACK) != 0 {
             afm |= mode::STM;
         }
         if afm & (mode::LOM | mode::STM) != 0 {
@@ -484,7 +499,8 @@ impl<R: Regs> Chip<R> {
     /// caller keeps its queue stopped until [`Event::TxDone`] or
     /// [`Event::TxAborted`]: the chip has one TX buffer.
     pub fn xmit(&mut self, frame: &CanFrame) -> Result<(), Sja1000Error> {
-        let (img, n) = encode(frame).ok_or(Sja1000Error::BadFrame)?;
+        let code = candev::cc_dlc(frame, self.ctrlmode);
+        let (img, n) = encode_dlc(frame, code).ok_or(Sja1000Error::BadFrame)?;
         if self.regs.read(reg::SR) & status::TBS == 0 {
             return Err(Sja1000Error::Busy);
         }
@@ -494,7 +510,14 @@ impl<R: Regs> Chip<R> {
         } else {
             0
         };
-        self.regs.write(reg::CMR, cmd::TR | at);
+        // Loopback (mainline): self reception request in place of the
+        // transmission request.
+        let go = if self.ctrlmode & ctrlmode::LOOPBACK != 0 {
+            cmd::SRR
+        } else {
+            cmd::TR
+        };
+        self.regs.write(reg::CMR, go | at);
         Ok(())
     }
 
@@ -589,7 +612,7 @@ impl<R: Regs> Chip<R> {
             let mut img = [0u8; 13];
             self.regs.readn(reg::FI, &mut img);
             self.regs.write(reg::CMR, cmd::RRB);
-            ev(Event::Rx(decode(&img)));
+            ev(Event::Rx(decode_cc(&img, self.ctrlmode)));
         }
     }
 }

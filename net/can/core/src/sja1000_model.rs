@@ -8,7 +8,9 @@
 //! It follows the datasheet for what the driver touches: reset and
 //! operating mode (listen-only LOM, self-test STM), the acceptance
 //! registers that exist only in reset mode, the TX buffer and the TR,
-//! AT (single shot) and SRR commands, the 64-byte receive FIFO with RRB
+//! AT (single shot) and SRR (self reception: the frame goes on the bus
+//! and into the chip's own receive FIFO) commands, data length codes
+//! 9..15 (8 data bytes; the code itself travels on the bus), the 64-byte receive FIFO with RRB
 //! and data overrun, the interrupt register (reading it clears all but
 //! RI, which follows the FIFO), the status register, the error counters
 //! with the CAN fault-confinement rules (a transmit error +8, a
@@ -31,8 +33,9 @@
 //! mode and clears the counters, as mainline's does), sleep beyond the
 //! wake-up interrupt, the RX message counter and the basic-CAN mode.
 
+use super::candev::{cc_dlc, ctrlmode::CC_LEN8_DLC};
 use super::frame::CanFrame;
-use super::sja1000::{cmd, decode, encode, irq, mode, reg, status, HwFilter, Regs};
+use super::sja1000::{cmd, decode_cc, encode_dlc, irq, mode, reg, status, HwFilter, Regs};
 
 /// Receive FIFO size in bytes (datasheet: 64-byte RX FIFO).
 pub const FIFO_BYTES: usize = 64;
@@ -207,6 +210,9 @@ pub struct Sja1000Model {
     pub tx_pending: bool,
     /// The pending transmission is single shot (CMR.AT with TR).
     tx_single: bool,
+    /// The pending transmission was requested with SRR: the chip
+    /// receives its own frame when it goes out.
+    tx_self: bool,
     /// The pending frame has already lost arbitration once
     /// ([`Fault::ArbitrationLost`]).
     tx_lost_once: bool,
@@ -221,7 +227,8 @@ pub struct Sja1000Model {
     pub fifo: Fifo,
     /// Frames the chip put on the bus.
     pub sent: u64,
-    /// The last frame it put on the bus.
+    /// The last frame it put on the bus (a DLC of 9..15 in `len8_dlc`,
+    /// as frames on the bus are given to [`Self::deliver`]).
     pub last_sent: Option<CanFrame>,
     /// Transmission attempts that failed (errors and lost arbitration).
     pub tx_failed: u64,
@@ -266,19 +273,26 @@ impl Sja1000Model {
         }
     }
 
-    /// A frame from the bus. Returns whether it reached the FIFO. A frame
-    /// received without error decrements the receive error counter (a
-    /// counter above 127 drops back to 119), whether or not the
-    /// acceptance filter takes it.
+    /// A frame from the bus (a data length code of 9..15 in `len8_dlc`
+    /// with `len` 8, as [`TxAttempt::Sent`] gives it). Returns whether it
+    /// reached the FIFO. A frame received without error decrements the
+    /// receive error counter (a counter above 127 drops back to 119),
+    /// whether or not the acceptance filter takes it.
     pub fn deliver(&mut self, f: &CanFrame) -> bool {
         if self.absent || self.in_reset() {
             return false;
         }
         self.rx_ok();
+        self.store(f)
+    }
+
+    /// Puts `f` into the receive FIFO if the acceptance filter takes it
+    /// and it fits (else data overrun); RI.
+    fn store(&mut self, f: &CanFrame) -> bool {
         if !self.filter().accepts(f) {
             return false;
         }
-        let Some((img, _)) = encode(f) else {
+        let Some((img, _)) = encode_dlc(f, cc_dlc(f, CC_LEN8_DLC)) else {
             return false;
         };
         if !self.fifo.push_back(img) {
@@ -429,13 +443,18 @@ impl Sja1000Model {
             self.tx_fail_end();
             return TxAttempt::Failed;
         }
-        let f = decode(&self.tx);
+        let f = decode_cc(&self.tx, CC_LEN8_DLC);
         self.sent += 1;
         self.last_sent = Some(f);
         self.tx_pending = false;
         self.tcs = true;
         self.counters(|m| m.txerr = m.txerr.saturating_sub(1));
         self.raise(irq::TI);
+        if self.tx_self {
+            // Self reception (SRR): the chip's own frame, through its
+            // acceptance filter, into its FIFO.
+            self.store(&f);
+        }
         TxAttempt::Sent(f)
     }
 
@@ -574,18 +593,11 @@ impl Regs for Sja1000Model {
                     self.tcs = false;
                     self.tx_single = v & cmd::AT != 0;
                     self.tx_lost_once = false;
-                    if v & cmd::SRR != 0 {
-                        // Self reception: the chip receives its own frame
-                        // and acknowledges it itself.
-                        let f = decode(&self.tx);
-                        self.sent += 1;
-                        self.last_sent = Some(f);
-                        self.tcs = true;
-                        self.raise(irq::TI);
-                        self.deliver(&f);
-                    } else {
-                        self.tx_pending = true;
-                    }
+                    // Self reception request: sent like TR (needing an
+                    // acknowledgement unless in self-test mode, STM),
+                    // and received by the chip itself.
+                    self.tx_self = v & cmd::SRR != 0;
+                    self.tx_pending = true;
                 }
             }
             reg::IER => self.ier = v,

@@ -474,3 +474,42 @@ fn i82527_last_error_codes() {
     // Only bits 2..0 are the code (TXOK, RXOK, WARN, BOFF above it).
     assert_eq!(frame(0x80 | 3), (0x20, 0, 0));
 }
+
+/// Mainline `can_get_cc_dlc` and `can_frame_set_cc_len` (include/linux/
+/// can/dev.h, length.h): the DLC a driver sends, and the length of a
+/// received classic frame, with and without `cc-len8-dlc`.
+#[test]
+fn cc_len8_dlc_rules() {
+    use rcan_core::frame::CanFrame;
+    let f = |len: u8, l8: u8| CanFrame {
+        len,
+        len8_dlc: l8,
+        ..CanFrame::default()
+    };
+    let on = ctrlmode::CC_LEN8_DLC;
+    for (len, l8, mode, want) in [
+        (8, 9, on, 9),
+        (8, 15, on, 15),
+        (8, 16, on, 8),
+        (8, 8, on, 8),
+        (8, 0, on, 8),
+        (7, 12, on, 7),
+        (8, 12, 0, 8),
+        (0, 0, on, 0),
+    ] {
+        assert_eq!(
+            cc_dlc(&f(len, l8), mode),
+            want,
+            "len {len} len8_dlc {l8} mode {mode:#x}"
+        );
+    }
+    for dlc in 0..=15u8 {
+        for mode in [0, on] {
+            let mut g = CanFrame::default();
+            set_cc_len(&mut g, dlc, mode);
+            assert_eq!(g.len, dlc.min(8));
+            let l8 = if mode != 0 && dlc > 8 { dlc } else { 0 };
+            assert_eq!(g.len8_dlc, l8, "dlc {dlc} mode {mode:#x}");
+        }
+    }
+}

@@ -371,3 +371,134 @@ fn listen_only_and_presume_ack_set_the_mode_register() {
     assert_eq!(c.regs.transmit(Fault::None, false), TxAttempt::Failed);
     assert_eq!(c.regs.txerr, 8);
 }
+
+/// Loopback (mainline `sja1000`: MOD.STM, CMR.SRR in place of TR): alone
+/// on the bus, no acknowledgement needed; the frame goes on the bus and
+/// the chip receives it itself, after the transmit interrupt (the echo
+/// first, then the frame from the FIFO, as mainline's handler reads IR).
+#[test]
+fn loopback_self_test_receives_its_own_frame() {
+    let mut c = running(ctrlmode::LOOPBACK);
+    assert_eq!(c.regs.mode & (mode::RM | mode::STM), mode::STM);
+    let mut s = Seen::default();
+    let f = frame(0x7A5, &[1, 2, 3]);
+    c.xmit(&f).unwrap();
+    assert!(c.regs.tx_pending, "SRR transmits like TR");
+    assert_eq!(c.regs.transmit(Fault::None, false), TxAttempt::Sent(f));
+    irq(&mut c, &mut s);
+    assert_eq!((s.tx_done, s.tx_aborted), (1, 0));
+    assert_eq!(s.rx, vec![f], "self reception");
+    assert_eq!(c.regs.txerr, 0);
+    // Extended and remote frames too.
+    let e = frame(CAN_EFF_FLAG | 0x1234_5678, &[9; 8]);
+    c.xmit(&e).unwrap();
+    assert_eq!(attempt(&mut c, &mut s, Fault::None), TxAttempt::Sent(e));
+    assert_eq!(s.rx, vec![f, e]);
+    // A frame from another node is received as usual.
+    assert!(c.regs.deliver(&frame(0x1, &[])));
+    irq(&mut c, &mut s);
+    assert_eq!(s.rx.len(), 3);
+    // Without loopback, TR: no self reception.
+    let mut c = running(0);
+    let mut s = Seen::default();
+    c.xmit(&f).unwrap();
+    assert_eq!(attempt(&mut c, &mut s, Fault::None), TxAttempt::Sent(f));
+    assert!(s.rx.is_empty() && s.tx_done == 1);
+}
+
+/// Loopback with one-shot: SRR with AT, and a failed attempt (a bit
+/// error: self-test needs no ACK, but the bus can still fail) is not
+/// retried and nothing is received.
+#[test]
+fn loopback_one_shot_failure_is_not_received() {
+    let mut c = running(ctrlmode::LOOPBACK | ctrlmode::ONE_SHOT);
+    let mut s = Seen::default();
+    c.xmit(&frame(0x10, &[1])).unwrap();
+    let a = attempt(
+        &mut c,
+        &mut s,
+        Fault::BusError {
+            ecc: ecc::TX_BIT_DATA,
+        },
+    );
+    assert_eq!(a, TxAttempt::Failed);
+    assert_eq!((s.tx_done, s.tx_aborted), (0, 1));
+    assert!(s.rx.is_empty());
+    assert!(!c.regs.tx_pending);
+}
+
+/// A classic frame with `len` 8 and `len8_dlc` `l8`.
+fn len8(can_id: u32, l8: u8) -> CanFrame {
+    let mut f = frame(can_id, &[0x11, 0x22, 0x33, 0x44, 0x55, 0x66, 0x77, 0x88]);
+    f.len8_dlc = l8;
+    f
+}
+
+/// cc-len8-dlc on transmission (mainline `can_get_cc_dlc`): with the mode
+/// on, `len` 8 and `len8_dlc` 9..15 go into FI's DLC field, with 8 data
+/// bytes; anything else sends `len`.
+#[test]
+fn cc_len8_dlc_transmit() {
+    for (modes, l8, want) in [
+        (ctrlmode::CC_LEN8_DLC, 9, 9),
+        (ctrlmode::CC_LEN8_DLC, 15, 15),
+        (ctrlmode::CC_LEN8_DLC, 8, 8),
+        (ctrlmode::CC_LEN8_DLC, 16, 8),
+        (ctrlmode::CC_LEN8_DLC, 0, 8),
+        (0, 12, 8),
+    ] {
+        let mut c = running(modes);
+        c.xmit(&len8(0x123, l8)).unwrap();
+        assert_eq!(c.regs.tx[0] & 0x0F, want, "mode {modes:#x} len8_dlc {l8}");
+        assert_eq!(
+            &c.regs.tx[3..11],
+            &[0x11, 0x22, 0x33, 0x44, 0x55, 0x66, 0x77, 0x88]
+        );
+    }
+    // len below 8: len8_dlc is ignored.
+    let mut c = running(ctrlmode::CC_LEN8_DLC);
+    let mut f = frame(0x5, &[1, 2]);
+    f.len8_dlc = 12;
+    c.xmit(&f).unwrap();
+    assert_eq!(c.regs.tx[0] & 0x0F, 2);
+    // Remote frames too (mainline: the same rule, no data bytes).
+    let mut c = running(ctrlmode::CC_LEN8_DLC);
+    let mut r = len8(0x6 | rcan_core::arb::CAN_RTR_FLAG, 13);
+    r.data = [0; 8];
+    c.xmit(&r).unwrap();
+    assert_eq!(c.regs.tx[0], 0x40 | 13);
+}
+
+/// DLC 9..15 across the bus between two chips, and on reception
+/// (mainline `can_frame_set_cc_len`): with the mode on, `len` 8 and
+/// `len8_dlc` the DLC; with it off, `len` 8 and `len8_dlc` 0.
+#[test]
+fn cc_len8_dlc_both_ways() {
+    for l8 in 9..=15u8 {
+        let mut tx = running(ctrlmode::CC_LEN8_DLC);
+        let mut s = Seen::default();
+        let f = len8(CAN_EFF_FLAG | 0x1ABC_DEF0, l8);
+        tx.xmit(&f).unwrap();
+        let TxAttempt::Sent(on_bus) = attempt(&mut tx, &mut s, Fault::None) else {
+            panic!("not sent");
+        };
+        assert_eq!(on_bus, f, "the DLC travels on the bus");
+        for (modes, want) in [(ctrlmode::CC_LEN8_DLC, l8), (0, 0)] {
+            let mut rx = running(modes);
+            let mut r = Seen::default();
+            assert!(rx.regs.deliver(&on_bus));
+            irq(&mut rx, &mut r);
+            assert_eq!(r.rx.len(), 1);
+            let g = r.rx[0];
+            assert_eq!((g.len, g.len8_dlc), (8, want), "mode {modes:#x}");
+            assert_eq!(g.data, f.data);
+            assert_eq!(g.can_id, f.can_id);
+        }
+    }
+    // A DLC of 8 or less never sets len8_dlc.
+    let mut rx = running(ctrlmode::CC_LEN8_DLC);
+    let mut r = Seen::default();
+    assert!(rx.regs.deliver(&frame(0x1, &[1; 8])));
+    irq(&mut rx, &mut r);
+    assert_eq!(r.rx[0].len8_dlc, 0);
+}

@@ -54,6 +54,18 @@ fn set_can(dev: &str, args: &[&str]) -> TestResult {
 
 /// `ip link set DEV type can ARGS...`, which must fail with `want` in
 /// its error output.
+/// `ip link set DEV mtu 72` must fail with `want` in its error output.
+fn mtu_fails(dev: &str, want: &str) -> TestResult {
+    let out = ip(&["link", "set", dev, "mtu", "72"])?;
+    ensure!(
+        !out.status.success() && out.stderr.contains(want),
+        "ip link set {dev} mtu 72: expected {want:?}, got {} {:?}",
+        out.status,
+        out.stderr.trim()
+    );
+    Ok(())
+}
+
 fn set_can_fails(dev: &str, args: &[&str], want: &str) -> TestResult {
     let mut a = vec!["link", "set", dev, "type", "can"];
     a.extend_from_slice(args);
@@ -97,8 +109,9 @@ fn up2(ctx: &mut Ctx, can0_args: &[&str]) -> Result<(u32, u32), String> {
 /// with the 82527's limits and its 8 MHz system clock; `bitrate 125000`
 /// and a direct timing (tq/prop-seg/phase-seg1/phase-seg2/sjw) taken and
 /// shown by `i82527config` as by `ip`; modes the chip lacks refused with
-/// EOPNOTSUPP, changes while up with EBUSY; frames go both ways at the
-/// new rate.
+/// EOPNOTSUPP, changes while up with EBUSY; `mtu 72` refused with EINVAL
+/// while down and EBUSY while up (mainline `can_change_mtu`); frames go
+/// both ways at the new rate.
 fn i82527_sim_ip_bittiming(ctx: &mut Ctx) -> TestResult {
     load(ctx)?;
     let j = details_json("can0")?;
@@ -157,9 +170,11 @@ fn i82527_sim_ip_bittiming(ctx: &mut Ctx) -> TestResult {
     }
     set_can("can0", &["triple-sampling", "on"])?;
     set_can("can0", &["triple-sampling", "off", "berr-reporting", "on"])?;
+    mtu_fails("can0", "Invalid argument")?;
     let (i0, i1) = up2(ctx, &[])?;
     details_have("can0", &["state ERROR-ACTIVE", "bitrate 500000"])?;
     set_can_fails("can0", &["bitrate", "250000"], "Device or resource busy")?;
+    mtu_fails("can0", "Device or resource busy")?;
     let (s0, s1) = (canraw::open(i0)?, canraw::open(i1)?);
     let a = canraw::std(0x321, &[1, 2, 3]);
     canraw::send(&s0, &a)?;

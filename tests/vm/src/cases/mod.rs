@@ -34,6 +34,7 @@ mod remote;
 mod robust;
 mod rxcontext;
 mod sja1000;
+mod sja1000_modes;
 mod socket;
 mod teardown;
 mod timesvc;
@@ -174,6 +175,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         daemons::DSOR_TESTS,
         i82527::TESTS,
         candev_err::TESTS,
+        sja1000_modes::TESTS,
         i82527_dev::TESTS,
         leak::OURS,
         rxcontext::TESTS,
