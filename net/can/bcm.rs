@@ -785,12 +785,11 @@ impl CanProtocol for BcmProto {
         let frame = CanFrame::from_bytes(bytes);
         let ifindex = s.ifindex();
         let tstamp = s.tstamp();
-        let origin = s.sk_ptr();
         let mut traffic = 0;
-        if !origin.is_null() {
+        if s.is_local() {
             traffic |= TRAFFIC_LOCAL;
         }
-        if origin == sk.as_ptr() {
+        if s.sent_by(sk) {
             traffic |= TRAFFIC_OWN;
         }
         skb.done();
@@ -1078,7 +1077,7 @@ impl glue::sock::Proto for BcmProto {
     fn release(sk: &S) {
         {
             let mut rtnl = Rtnl::lock();
-            MODULE.sockets.get(&mut rtnl).remove(sk.as_ptr() as usize);
+            MODULE.sockets.get(&mut rtnl).remove(sk);
         }
         rcan_api::rx_remove(sk);
         let mut s = sk.lock();

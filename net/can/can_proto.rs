@@ -147,8 +147,7 @@ impl glue::sock::Proto for CanProtoOps {
 
     fn release(sk: &S) {
         let mut rtnl = Rtnl::lock();
-        let me = sk.as_ptr() as usize;
-        MODULE.sockets.get(&mut rtnl).remove(me);
+        MODULE.sockets.get(&mut rtnl).remove(sk);
         let mut s = sk.lock();
         if s.bound.take().is_some() {
             let _ = set_receivers(sk, None);

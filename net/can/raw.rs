@@ -192,8 +192,8 @@ impl CanProtocol for RawProto {
     /// frames), MSG_DONTROUTE for frames sent from this host, MSG_CONFIRM
     /// for frames sent by this socket.
     fn rx(sk: &S, skb: RxSkb<'_>, cookie: u32) {
-        let origin = skb.skb().sk_ptr();
-        let own = origin == sk.as_ptr();
+        let local = skb.skb().is_local();
+        let own = skb.skb().sent_by(sk);
         if own && cookie & COOKIE_RECV_OWN == 0 {
             skb.done();
             return;
@@ -203,7 +203,7 @@ impl CanProtocol for RawProto {
             return;
         }
         let mut flags = 0u32;
-        if !origin.is_null() {
+        if local {
             flags |= glue::msg::DONTROUTE;
         }
         if own {
@@ -356,7 +356,7 @@ impl glue::sock::Proto for RawProto {
 
     fn release(sk: &S) {
         let mut rtnl = Rtnl::lock();
-        MODULE.sockets.get(&mut rtnl).remove(sk.as_ptr() as usize);
+        MODULE.sockets.get(&mut rtnl).remove(sk);
         let mut s = sk.lock();
         // Bound or not: the receiver made at socket() (RESERVE_RX) goes too.
         unregister(sk);

@@ -269,6 +269,28 @@ impl Drop for DevRef {
     }
 }
 
+/// Link-layer types (`ARPHRD_*`) for [`Setup::type_`].
+pub(crate) mod arphrd {
+    use super::bindings;
+
+    /// A CAN controller or virtual CAN device.
+    pub(crate) const CAN: u16 = bindings::ARPHRD_CAN as u16;
+    /// No link-layer header and no hardware address (DSOR's UDP/IP device).
+    pub(crate) const VOID: u16 = bindings::ARPHRD_VOID as u16;
+}
+
+/// Interface flags (`IFF_*`) for [`Setup::flags`].
+pub(crate) mod iff {
+    use super::bindings;
+
+    /// No ARP.
+    pub(crate) const NOARP: u32 = bindings::net_device_flags_IFF_NOARP;
+    /// Point-to-point link.
+    pub(crate) const POINTOPOINT: u32 = bindings::net_device_flags_IFF_POINTOPOINT;
+    /// The driver loops sent frames back itself (CAN).
+    pub(crate) const ECHO: u32 = bindings::net_device_flags_IFF_ECHO;
+}
+
 /// Device parameters a driver sets before registration.
 pub(crate) struct Setup {
     /// ARPHRD_* type.

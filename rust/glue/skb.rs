@@ -294,9 +294,22 @@ impl Skb {
 
     /// The socket that sent the skb (`skb->sk`), for identity comparisons
     /// only; NULL for frames from the bus.
-    pub(crate) fn sk_ptr(&self) -> *mut bindings::sock {
+    fn sk_ptr(&self) -> *mut bindings::sock {
         // SAFETY: valid skb; reading a pointer field.
         unsafe { (*self.as_ptr()).sk }
+    }
+
+    /// Whether the frame was sent from this host (`skb->sk` set: an echo
+    /// of a local socket's frame); false for frames from the bus. Any
+    /// context.
+    pub(crate) fn is_local(&self) -> bool {
+        !self.sk_ptr().is_null()
+    }
+
+    /// Whether socket `sk` sent this frame (`skb->sk == sk`), by identity;
+    /// the socket is not dereferenced. Any context.
+    pub(crate) fn sent_by<T: super::sock::Proto>(&self, sk: &super::sock::Sock<T>) -> bool {
+        core::ptr::eq(self.sk_ptr(), sk.as_ptr())
     }
 
     /// `skb->dev` (NULL if none), read in place: every frame asks.

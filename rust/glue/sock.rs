@@ -144,8 +144,16 @@ impl<T: Proto> Sock<T> {
         }
     }
 
-    pub(crate) fn as_ptr(&self) -> *mut bindings::sock {
+    /// The raw sock, for the glue's own C calls: nothing above the glue
+    /// sees it.
+    pub(in crate::glue) fn as_ptr(&self) -> *mut bindings::sock {
         self.sk
+    }
+
+    /// Whether `self` and `other` are the same socket (identity, not
+    /// contents). Any context.
+    pub(crate) fn same(&self, other: &Sock<T>) -> bool {
+        core::ptr::eq(self.sk, other.sk)
     }
 
     /// The socket's network namespace (`sock_net`), fixed for its life.

@@ -57,7 +57,7 @@ impl KernelRx for TimeRx {
             return;
         }
         let ours = TimeFrame::decode(&frame, p.vehicle).is_some_and(|t| t.source == SOURCE_RTIME);
-        if ours && skb.sk_ptr().is_null() && ticker::take_own_echo(&frame.data) {
+        if ours && !skb.is_local() && ticker::take_own_echo(&frame.data) {
             return;
         }
         ticker::saw_foreign(glue::hrtimer::ktime_get_mono_ns());

@@ -15,13 +15,13 @@ use kernel::alloc::{flags::GFP_KERNEL, KVec};
 use kernel::prelude::*;
 
 use crate::engine::{now_ms, restart_over_ms, Bind, Owner, TxEntry, ENGINE, NODE, WAITQ};
+use crate::glue;
 use crate::glue::lock::Waited;
 use crate::glue::net::Net;
 use crate::glue::netdev::{DevRef, NetDev};
 use crate::glue::neterr;
 use crate::glue::sock::{Msg, Sock};
 use crate::glue::sync::Rtnl;
-use crate::glue::{self, bindings};
 use crate::rcan_api::{CanProtocol, NetdevEvent, ProtoModule, Sockets, SOCK_DGRAM};
 use crate::rcan_core::dsor_addr::{self, DsorAddr, DSOR_EPHEMERAL_MIN};
 use crate::rcan_core::dsor_wire::{self, Header, MsgKind};
@@ -100,13 +100,12 @@ fn add_bind(sk: &S, addr: DsorAddr) -> Result {
 }
 
 fn remove_bind(sk: &S) {
-    let me = sk.as_ptr() as usize;
     let mut g = ENGINE.lock();
     if let Some(e) = g.as_mut() {
         let mut i = 0;
         let mut removed = false;
         while i < e.binds.len() {
-            if e.binds[i].sk.sock().as_ptr() as usize == me {
+            if e.binds[i].sk.sock().same(sk) {
                 glue::kvec_swap_remove(&mut e.binds, i);
                 removed = true;
             } else {
@@ -153,7 +152,7 @@ impl glue::sock::Proto for DsorProto {
     fn release(sk: &S) {
         {
             let mut rtnl = Rtnl::lock();
-            MODULE.sockets.get(&mut rtnl).remove(sk.as_ptr() as usize);
+            MODULE.sockets.get(&mut rtnl).remove(sk);
         }
         let mut s = sk.lock();
         remove_bind(sk);
@@ -203,7 +202,7 @@ impl glue::sock::Proto for DsorProto {
 
     fn sendmsg(sk: &S, msg: &mut Msg, len: usize) -> Result<usize> {
         let flags = msg.flags();
-        if flags & bindings::MSG_OOB != 0 {
+        if flags & glue::msg::OOB != 0 {
             return Err(neterr::EOPNOTSUPP());
         }
         let dest = match msg.name() {
@@ -242,7 +241,7 @@ impl glue::sock::Proto for DsorProto {
         };
         let mut data = KVec::from_elem(0u8, len, GFP_KERNEL).map_err(|_| ENOMEM)?;
         msg.copy_from_user(&mut data)?;
-        let nonblock = flags & bindings::MSG_DONTWAIT != 0;
+        let nonblock = flags & glue::msg::DONTWAIT != 0;
         let timeo = sk.sndtimeo(nonblock);
         let header = Header {
             len: len as u16,
@@ -321,7 +320,7 @@ impl glue::sock::Proto for DsorProto {
     }
 
     fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
-        if flags as u32 & (bindings::MSG_OOB | bindings::MSG_ERRQUEUE) != 0 {
+        if flags as u32 & (glue::msg::OOB | glue::msg::ERRQUEUE) != 0 {
             return Err(neterr::EOPNOTSUPP());
         }
         let skb = sk.recv_datagram(flags)?;
@@ -332,7 +331,7 @@ impl glue::sock::Proto for DsorProto {
             return Err(e);
         }
         if n < total {
-            msg.add_flags(bindings::MSG_TRUNC);
+            msg.add_flags(glue::msg::TRUNC);
         }
         msg.recv_cmsgs(sk, &skb);
         let mut cb = [0u8; 12];
@@ -353,7 +352,7 @@ impl glue::sock::Proto for DsorProto {
         let (b, an) = addr.encode();
         msg.set_name(&b[..an]);
         sk.free_datagram(skb);
-        Ok(if flags as u32 & bindings::MSG_TRUNC != 0 {
+        Ok(if flags as u32 & glue::msg::TRUNC != 0 {
             total
         } else {
             n

@@ -48,7 +48,6 @@ use core::sync::atomic::{AtomicBool, AtomicI64, AtomicU32, AtomicU64, Ordering};
 use kernel::prelude::*;
 use kernel::str::CStr;
 
-use crate::glue::bindings;
 use crate::glue::can::skb::alloc_frame;
 use crate::glue::hrtimer::{
     ktime_get_mono_ns, ktime_get_real_ns, ClockId, HrTimer, HrTimerCallback, HrTimerMode,
@@ -312,7 +311,7 @@ fn send_frame(p: &Params, source: u8, second: i64) -> core::result::Result<(), D
     rcan_api::send(skb, &dev, true).map_err(|e| {
         // Not sent: no echo will come.
         let _ = OWN_ECHO.compare_exchange(own, 0, Ordering::AcqRel, Ordering::Relaxed);
-        if e.to_errno() == -(bindings::ENETDOWN as i32) {
+        if e == crate::glue::neterr::ENETDOWN() {
             DevState::Down
         } else {
             DevState::Failed(e.to_errno())

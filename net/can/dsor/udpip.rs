@@ -25,7 +25,6 @@ use kernel::alloc::KVec;
 use kernel::prelude::*;
 
 use crate::engine::{now_ms, restart_over_ms, Owner, ENGINE};
-use crate::glue::bindings;
 use crate::glue::net::Net;
 use crate::glue::netdev::{Dev, DevRef, Driver, NetDev, Registration, Setup, Xmit};
 use crate::glue::skb::Skb;
@@ -129,9 +128,8 @@ impl Driver for CanipDriver {
 
     fn setup() -> Setup {
         Setup {
-            type_: bindings::ARPHRD_VOID as u16,
-            flags: bindings::net_device_flags_IFF_POINTOPOINT
-                | bindings::net_device_flags_IFF_NOARP,
+            type_: crate::glue::netdev::arphrd::VOID,
+            flags: crate::glue::netdev::iff::POINTOPOINT | crate::glue::netdev::iff::NOARP,
             // No IP fragments: a datagram of any length the protocol
             // carries fits. The transmit path refuses longer ones.
             mtu: 65535,

@@ -195,9 +195,10 @@ impl<T: CanProtocol> SockSet<T> {
         Ok(())
     }
 
-    /// Removes socket `p` (its `struct sock` address) if present. The
-    /// protocol's `release` calls this under RTNL.
-    pub(crate) fn remove(&mut self, p: usize) {
+    /// Removes socket `sk` if present. The protocol's `release` calls this
+    /// under RTNL.
+    pub(crate) fn remove(&mut self, sk: &Sock<T>) {
+        let p = sk.as_ptr() as usize;
         if let Some(b) = self.buckets.get_mut(Self::bucket(p)) {
             crate::glue::kvec_remove_all(b, p);
         }

@@ -17,7 +17,7 @@ gzip members; `zcat FILE` gives candump -l lines, `# ` lines are canzlogd's note
 frames, start, stop), which canplayer and log2asc skip.\n\nFlush policy: received lines are \
 kept in memory for at most --flush-ms milliseconds, then written as one complete gzip member \
 and fdatasync'ed: a SIGKILL, crash or power loss loses at most the last --flush-ms of traffic.\n\n\
-SIGTERM and SIGINT flush, close the file and exit with status 0."
+SIGTERM and SIGINT log the frames already queued, flush, close the file and exit with status 0."
 )]
 pub struct ZlogCli {
     /// CAN interfaces to log (one CAN_RAW socket each).

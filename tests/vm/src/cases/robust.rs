@@ -17,7 +17,6 @@
 
 use std::collections::HashMap;
 use std::fs;
-use std::path::Path;
 use std::thread;
 use std::time::{Duration, Instant};
 
@@ -207,30 +206,6 @@ fn dsor_loss_accounting(ctx: &mut Ctx) -> TestResult {
     res.and(reset)
 }
 
-/// `unreferenced object` reports kmemleak holds now, or None without
-/// kmemleak (release kernel).
-fn kmemleak_reports(scan: bool) -> Result<Option<Vec<String>>, String> {
-    let p = Path::new("/sys/kernel/debug/kmemleak");
-    if !p.exists() {
-        return Ok(None);
-    }
-    if scan {
-        // An object is reported only when older than 5 s and unchanged
-        // between two scans (as the VM's init does at the end).
-        thread::sleep(Duration::from_secs(5));
-        for _ in 0..2 {
-            fs::write(p, "scan").or_fail("kmemleak scan")?;
-        }
-    }
-    let text = fs::read_to_string(p).or_fail("read kmemleak")?;
-    Ok(Some(
-        text.split("unreferenced object")
-            .skip(1)
-            .map(|s| format!("unreferenced object{}", s.trim_end()))
-            .collect(),
-    ))
-}
-
 fn rmmod_retrying(ctx: &mut Ctx, m: Module) -> TestResult {
     let start = Instant::now();
     loop {
@@ -248,12 +223,12 @@ fn rmmod_retrying(ctx: &mut Ctx, m: Module) -> TestResult {
 /// loaded host), the watchdog restarted after each module, with the modules
 /// it needs loaded around it; the three whose hardware QEMU does not
 /// have (ISA SJA1000, TS-CAN1, ISA 82527) fail their probe as many times
-/// (EINVAL or ENODEV) and must not stay listed. Then, with kmemleak
-/// (debug kernel), a scan must find no unreferenced object that was not
-/// there before.
+/// (EINVAL or ENODEV) and must not stay listed. A leak is found by the
+/// kmemleak scan that ends every debug-kernel run (tools/testing/rcan/vm/init,
+/// any report fails the stage); a scan of its own here cost about 30 s of
+/// the debug stage and found nothing that one does not.
 fn modules_load_unload_cycles(ctx: &mut Ctx) -> TestResult {
     let n = sized("RCAN_MODULE_CYCLES", 100, 1);
-    let before = kmemleak_reports(false)?;
     // (module, parameters, modules it needs, loads: false if it must fail)
     let stack = [Module::Pf, Module::Can, Module::Raw, Module::Loop];
     let plan: [(Module, &[&str], &[Module], bool); 18] = [
@@ -353,26 +328,6 @@ fn modules_load_unload_cycles(ctx: &mut Ctx) -> TestResult {
         "{n} cycles of {} modules in {total:.1} s",
         plan.len()
     ));
-    if let Some(before) = before {
-        let t0 = Instant::now();
-        let after = kmemleak_reports(true)?.unwrap_or_default();
-        let new: Vec<&String> = after.iter().filter(|r| !before.contains(r)).collect();
-        ctx.note(format!(
-            "kmemleak scan: {} report(s) before, {} after ({:.1} s)",
-            before.len(),
-            after.len(),
-            t0.elapsed().as_secs_f64()
-        ));
-        ensure!(
-            new.is_empty(),
-            "kmemleak after the cycles: {} new unreferenced object(s):\n{}",
-            new.len(),
-            new.iter()
-                .map(|s| s.as_str())
-                .collect::<Vec<_>>()
-                .join("\n")
-        );
-    }
     Ok(())
 }
 

@@ -22,6 +22,9 @@ use rcan_daemons::zlog::{Config, ZLog};
 
 /// Frames read from one socket before the others get their turn.
 const BATCH: usize = 256;
+/// Frames read from one socket when a signal stops the daemon: far more
+/// than a receive buffer holds, a bound on a bus that never goes quiet.
+const DRAIN_MAX: usize = 65_536;
 
 /// A `# ` note line, which candump -l readers skip.
 fn note(z: &mut ZLog, text: &str) {
@@ -113,29 +116,17 @@ fn run(cli: ZlogCli) -> Result<(), String> {
         for (r, f) in ready.iter_mut().zip(&fds[1..]) {
             *r = f.any().unwrap_or(false);
         }
+        // On a signal every socket is drained first: a frame the kernel
+        // queued before the signal is logged, not lost with the socket.
         if stop {
-            let sig = sfd
-                .read_signal()
-                .ok()
-                .flatten()
-                .map(|s| s.ssi_signo)
-                .unwrap_or(0);
-            note(
-                &mut z,
-                &format!("stopping on signal {sig}, {frames} frames logged"),
-            );
-            z.close().map_err(|e| fail(e, &z))?;
-            eprintln!(
-                "canzlogd: signal {sig}: {frames} frames logged, {} bytes written",
-                z.bytes_written
-            );
-            return Ok(());
+            ready.iter_mut().for_each(|r| *r = true);
         }
+        let batch = if stop { DRAIN_MAX } else { BATCH };
         for (i, p) in ports.iter().enumerate() {
             if !ready[i] {
                 continue;
             }
-            for _ in 0..BATCH {
+            for _ in 0..batch {
                 match p.recv(true) {
                     Ok(Some(r)) => {
                         if r.dropped != last_drop[i] {
@@ -168,6 +159,24 @@ fn run(cli: ZlogCli) -> Result<(), String> {
                     }
                 }
             }
+        }
+        if stop {
+            let sig = sfd
+                .read_signal()
+                .ok()
+                .flatten()
+                .map(|s| s.ssi_signo)
+                .unwrap_or(0);
+            note(
+                &mut z,
+                &format!("stopping on signal {sig}, {frames} frames logged"),
+            );
+            z.close().map_err(|e| fail(e, &z))?;
+            eprintln!(
+                "canzlogd: signal {sig}: {frames} frames logged, {} bytes written",
+                z.bytes_written
+            );
+            return Ok(());
         }
         if Instant::now() >= next_flush {
             z.flush().map_err(|e| fail(e, &z))?;
