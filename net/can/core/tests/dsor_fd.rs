@@ -1,0 +1,308 @@
+// SPDX-License-Identifier: GPL-2.0
+//! Tests of the DSOR CAN FD bodies extension (`rcan_core::dsor_fd`,
+//! `Documentation/networking/rcan/dsor-wire.rst`, "Message transfer with
+//! CAN FD bodies (extension)"):
+//!
+//! * the worked example of the document, frame by frame;
+//! * segmentation into bodies of every size and reassembly is the
+//!   identity for every length 0..=2000 and random lengths up to 65535,
+//!   every body has a valid CAN FD length, padding is zero and ignored;
+//! * body size 8 gives exactly the classic sender's frames
+//!   (`Transfer::frame`);
+//! * the FD header and its ack: round trips and malformed forms.
+
+use proptest::prelude::*;
+use rcan_core::dsor_fd::*;
+use rcan_core::dsor_tx::Transfer;
+use rcan_core::dsor_wire::{AckStatus, DsorId, Frame, FrameType, Header, MsgKind, Timers};
+
+fn msg_of(len: usize, seed: u8) -> Vec<u8> {
+    (0..len)
+        .map(|i| (i as u8).wrapping_mul(31).wrapping_add(seed) ^ (i >> 8) as u8)
+        .collect()
+}
+
+fn id(q: bool) -> DsorId {
+    DsorId {
+        prio: 0x40,
+        dst: 0,
+        src: 5,
+        ftype: FrameType::Body,
+        seq: q,
+        chan: 0,
+    }
+}
+
+/// Segment `msg` with body size `b` and reassemble it through
+/// `store_body`, checking every frame on the way; returns the result.
+fn round_trip(msg: &[u8], b: BodySize) -> Vec<u8> {
+    let len = msg.len() as u16;
+    let n = body_count(len, b);
+    assert_eq!(n as usize, msg.len().div_ceil(b.get() as usize));
+    let mut buf = vec![0xeeu8; msg.len()];
+    let mut stored = 0;
+    for k in 1..=n {
+        let f = body_frame(&id(k & 1 == 1), msg, len, b, k);
+        assert_eq!(f.fdf, b.is_fd());
+        assert!(is_fd_len(f.len as usize), "length {}", f.len);
+        assert!(b.is_fd() || f.len <= 8);
+        let r = body_payload(len, b, k);
+        if k < n {
+            assert_eq!((r, f.len), (b.get() as usize, b.get()));
+        } else {
+            assert!(r >= 1 && r <= b.get() as usize);
+            assert_eq!(Some(f.len), fd_len_round_up(r));
+        }
+        // Zero padding, and nothing past the length.
+        assert!(f.data[r..].iter().all(|&x| x == 0));
+        // A body of any other length is refused and stores nothing.
+        for wrong in [0usize, 1, 8, 12, 16, 20, 24, 32, 48, 64] {
+            if wrong != f.len as usize {
+                let mut data = [0u8; 64];
+                data[..wrong].copy_from_slice(&f.data[..wrong]);
+                assert_eq!(store_body(&mut buf, len, b, k, &data[..wrong]), None);
+            }
+        }
+        // Padding values are ignored by the receiver.
+        let mut data = f.data;
+        for x in &mut data[r..f.len as usize] {
+            *x = 0xa5;
+        }
+        assert_eq!(
+            store_body(&mut buf, len, b, k, &data[..f.len as usize]),
+            Some(r)
+        );
+        stored += r;
+    }
+    assert_eq!(stored, msg.len());
+    assert_eq!(body_frame(&id(false), msg, len, b, n + 1).len, 0);
+    assert_eq!(store_body(&mut buf, len, b, n + 1, &[]), None);
+    buf
+}
+
+#[test]
+fn every_length_every_body_size() {
+    for len in 0..=2000usize {
+        let msg = msg_of(len, len as u8);
+        for b in BodySize::ALL {
+            assert_eq!(round_trip(&msg, b), msg, "len {len} B {}", b.get());
+        }
+    }
+}
+
+#[test]
+fn longest_message() {
+    let msg = msg_of(65535, 7);
+    for b in BodySize::ALL {
+        assert_eq!(round_trip(&msg, b), msg);
+    }
+    assert_eq!(body_count(65535, BodySize::MAX), 1024);
+}
+
+/// Body size 8 must give the classic sender's bodies, bit for bit.
+fn assert_classic_unchanged(msg: &[u8], q: bool) {
+    let len = msg.len() as u16;
+    let h = Header {
+        len,
+        kind: MsgKind::Segm { id: 0x1234_5678 },
+    };
+    let t = Transfer::new(5, 0, 0, 0x40, h, q, &Timers::default());
+    for k in 1..=rcan_core::dsor_wire::body_count(len) {
+        let classic = t.frame(msg, k);
+        let f = body_frame(&id(q ^ (k & 1 == 1)), msg, len, BodySize::CLASSIC, k);
+        assert!(!f.fdf);
+        assert_eq!(f.classic(), Some(classic));
+        assert_eq!(FdFrame::from(classic), f);
+    }
+}
+
+#[test]
+fn classic_body_size_is_classic() {
+    for len in 0..=600usize {
+        assert_classic_unchanged(&msg_of(len, 3), len % 2 == 0);
+    }
+}
+
+#[test]
+fn fd_doc_example() {
+    let msg: Vec<u8> = (0..90u8).collect();
+    let h = FdHeader::new(
+        Header {
+            len: 90,
+            kind: MsgKind::Segm { id: 0x1234_5678 },
+        },
+        BodySize::MAX,
+    )
+    .unwrap();
+    let hid = DsorId {
+        ftype: FrameType::Header,
+        ..id(false)
+    };
+    let hf = h.frame(&hid);
+    assert_eq!((hf.id, hf.len, hf.fdf), (0x0800_0280, 12, true));
+    assert_eq!(
+        hf.payload(),
+        &[0x00, 0x5a, 0x12, 0x34, 0x56, 0x78, 0, 0, 6, 0x40, 0, 0]
+    );
+    assert_eq!(FdHeader::decode(hf.payload()), Some(h));
+
+    let ack = FdAck {
+        status: AckStatus::Ok,
+        body: BodySize::MAX,
+    };
+    let af = ack.frame(&hid.ack_id());
+    assert_eq!((af.id, af.payload()), (0x0801_4040, &[0u8, 0, 0, 0x40][..]));
+    let got = FdAck::decode(af.payload(), h.max_body).unwrap();
+    assert_eq!(got, ack);
+    let b = got.body;
+
+    let b1 = body_frame(&id(true), &msg, 90, b, 1);
+    assert_eq!((b1.id, b1.len, b1.fdf), (0x0800_02B0, 64, true));
+    assert_eq!(b1.payload(), &msg[..64]);
+    let b2 = body_frame(&id(false), &msg, 90, b, 2);
+    assert_eq!((b2.id, b2.len, b2.fdf), (0x0800_02A0, 32, true));
+    assert_eq!(&b2.payload()[..26], &msg[64..]);
+    assert_eq!(&b2.payload()[26..], &[0u8; 6]);
+
+    let mut buf = [0u8; 90];
+    assert_eq!(store_body(&mut buf, 90, b, 1, b1.payload()), Some(64));
+    assert_eq!(store_body(&mut buf, 90, b, 2, b2.payload()), Some(26));
+    assert_eq!(&buf[..], &msg[..]);
+
+    // The fallback of the example: the classic header of the same message.
+    let classic = Frame::header(&hid, &h.header);
+    assert_eq!(
+        (classic.id, classic.payload()),
+        (0x0800_0280, &[0x00u8, 0x5a, 0x12, 0x34, 0x56, 0x78][..])
+    );
+    assert_eq!(rcan_core::dsor_wire::body_count(90), 12);
+}
+
+#[test]
+fn fd_header_and_ack_malformed() {
+    let hdr = |len| Header {
+        len,
+        kind: MsgKind::Port { dport: 1, sport: 2 },
+    };
+    // No FD header for L <= 8, nor with a classic B_max.
+    assert_eq!(FdHeader::new(hdr(8), BodySize::MAX), None);
+    assert_eq!(FdHeader::new(hdr(9), BodySize::CLASSIC), None);
+    let h = FdHeader::new(hdr(9), BodySize::new(16).unwrap()).unwrap();
+    let mut d = [0u8; 64];
+    assert_eq!(h.encode(&mut d), 12);
+    assert_eq!(&d[..12], &[0, 9, 1, 2, 0, 0, 0, 0, 4, 16, 0, 0]);
+    assert_eq!(FdHeader::decode(&d[..12]), Some(h));
+    // Reserved bytes are ignored.
+    let mut r = d;
+    r[10] = 0xff;
+    r[11] = 0x01;
+    assert_eq!(FdHeader::decode(&r[..12]), Some(h));
+    // Wrong length, type byte, body size or L <= 8: malformed.
+    for l in [0, 4, 6, 8, 11, 16, 64] {
+        assert_eq!(FdHeader::decode(&d[..l]), None);
+    }
+    for t in [0u8, 3, 5, 7, 9, 12] {
+        let mut x = d;
+        x[8] = t;
+        assert_eq!(FdHeader::decode(&x[..12]), None);
+    }
+    for bm in [0u8, 8, 9, 13, 63, 65, 255] {
+        let mut x = d;
+        x[9] = bm;
+        assert_eq!(FdHeader::decode(&x[..12]), None);
+    }
+    let mut x = d;
+    x[1] = 8;
+    assert_eq!(FdHeader::decode(&x[..12]), None);
+    // Every type round-trips.
+    for kind in [
+        MsgKind::Segm { id: 0xdead_beef },
+        MsgKind::Port { dport: 7, sport: 9 },
+        MsgKind::Udp {
+            dport: 5000,
+            daddr: 0xc0a8_0114,
+        },
+    ] {
+        for b in &BodySize::ALL[1..] {
+            let h = FdHeader::new(Header { len: 65535, kind }, *b).unwrap();
+            let mut d = [0u8; 64];
+            let l = h.encode(&mut d) as usize;
+            assert_eq!(FdHeader::decode(&d[..l]), Some(h));
+            assert_eq!(d[8], kind.dlc());
+            assert!(d[l..].iter().all(|&x| x == 0));
+        }
+    }
+
+    // Acks: index 0 only, body size a valid one not above the offer.
+    let off = BodySize::new(32).unwrap();
+    assert_eq!(
+        FdAck::decode(&[0, 0, 0, 32], off),
+        Some(FdAck {
+            status: AckStatus::Ok,
+            body: off
+        })
+    );
+    assert_eq!(
+        FdAck::decode(&[0, 0, 0, 8], off).map(|a| a.body),
+        Some(BodySize::CLASSIC)
+    );
+    for bad in [
+        &[0u8, 0, 0, 48][..],
+        &[0, 0, 0, 9],
+        &[0, 0, 0, 0],
+        &[0, 1, 0, 32],
+        &[0, 0, 4, 32],
+        &[0, 0, 0],
+        &[0, 0],
+        &[0, 0, 0, 32, 0],
+    ] {
+        assert_eq!(FdAck::decode(bad, off), None, "{bad:?}");
+    }
+    let refused = FdAck {
+        status: AckStatus::Refused,
+        body: BodySize::CLASSIC,
+    };
+    let mut a = [0u8; 8];
+    assert_eq!(refused.encode(&mut a), 4);
+    assert_eq!(&a[..4], &[0, 0, 1, 8]);
+    assert_eq!(FdAck::decode(&a[..4], off), Some(refused));
+    // A classic ack of index 0 is not the ack of an FD header.
+    assert_eq!(FdAck::decode(&[0, 0], off), None);
+    assert_eq!(FdAck::decode(&[0, 0, 1], off), None);
+}
+
+fn body_size() -> impl Strategy<Value = BodySize> {
+    prop::sample::select(BodySize::ALL.to_vec())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// FD segmentation followed by reassembly is the identity.
+    #[test]
+    fn fd_segmentation_is_identity(len in 0usize..=65535, seed: u8, b in body_size()) {
+        let msg = msg_of(len, seed);
+        prop_assert_eq!(round_trip(&msg, b), msg);
+    }
+
+    /// Body size 8 is the classic format, bit for bit.
+    #[test]
+    fn classic_mode_unchanged(len in 0usize..=65535, seed: u8, q: bool) {
+        assert_classic_unchanged(&msg_of(len, seed), q);
+    }
+
+    /// Arbitrary bodies never panic and store nothing unless their length
+    /// is right.
+    #[test]
+    fn arbitrary_bodies(len: u16, b in body_size(), k: u16,
+                        data in prop::collection::vec(any::<u8>(), 0..=64)) {
+        let mut buf = vec![0u8; len as usize];
+        let res = store_body(&mut buf, len, b, k, &data);
+        prop_assert_eq!(res.is_some(), body_len_ok(len, b, k, data.len()));
+        if res.is_none() {
+            prop_assert!(buf.iter().all(|&x| x == 0));
+        }
+        let _ = FdHeader::decode(&data);
+        let _ = FdAck::decode(&data, b);
+    }
+}
