@@ -14,7 +14,10 @@
 //! Pure, `no_std`, allocation-free: called in any context (process or
 //! softirq) with the caller's locking; nothing here is shared.
 
-use super::dsor_wire::{AckStatus, DsorId, Frame, FrameType, Header, MsgKind, MAX_NODE};
+use super::dsor_tx::TxError;
+use super::dsor_wire::{
+    Ack, AckStatus, DsorId, Frame, FrameType, Header, MsgKind, Timers, CHANNELS, MAX_NODE,
+};
 
 /// Largest CAN FD payload.
 pub const FD_MAX_LEN: usize = 64;
@@ -426,6 +429,270 @@ impl FdPeers {
     /// Forget everything (for example when the interface goes down).
     pub fn forget_all(&mut self) {
         *self = FdPeers::new();
+    }
+}
+
+/// What the caller of [`FdTransfer`] must do after an event.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum FdStep {
+    /// Nothing (event not for this transfer, or not yet due).
+    Nothing,
+    /// Send this frame (an FD frame if `fdf`); the deadline was re-armed.
+    Send(FdFrame),
+    /// The ack of the last frame arrived: the message was delivered.
+    Done,
+    /// The message failed (see `TxStep::Failed`).
+    Failed(TxError),
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum FdState {
+    New,
+    Waiting,
+    Done,
+    Failed,
+}
+
+/// The sender of one message on one stream, with the FD header, the
+/// fallback to the classic header and bodies of the body size the
+/// receiver chose (dsor-wire.rst, "Message transfer with CAN FD bodies",
+/// "Sender"). Without an offer it behaves, frame for frame, as
+/// `dsor_tx::Transfer`. Like `Transfer` it holds no message buffer; the
+/// caller's lock protects it.
+#[derive(Clone, Debug)]
+pub struct FdTransfer {
+    src: u8,
+    dst: u8,
+    chan: u8,
+    prio: u8,
+    header: Header,
+    first_q: bool,
+    /// B_max while the FD header is the header in flight; `None` for a
+    /// classic header (no offer, or after the fallback).
+    offer: Option<BodySize>,
+    fell_back: bool,
+    /// The body size in use: the receiver's choice once the FD header was
+    /// acked, else 8.
+    body: BodySize,
+    index: u16,
+    retx: u32,
+    deadline: Option<u64>,
+    state: FdState,
+    ack_timeout_ms: u32,
+    max_retx: u32,
+}
+
+impl FdTransfer {
+    /// A transfer like `Transfer::new`, offering body sizes up to `offer`
+    /// with an FD header if `offer` is an FD size and the message is longer
+    /// than 8 bytes ([`FdPeers::use_fd_header`] decides whether to offer);
+    /// otherwise a classic transfer.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        src: u8,
+        dst: u8,
+        chan: u8,
+        prio: u8,
+        header: Header,
+        first_q: bool,
+        timers: &Timers,
+        offer: Option<BodySize>,
+    ) -> Self {
+        let offer = match offer {
+            Some(b) if FdHeader::new(header, b).is_some() => Some(b),
+            _ => None,
+        };
+        FdTransfer {
+            src: src & MAX_NODE,
+            dst: dst & MAX_NODE,
+            chan: chan & (CHANNELS - 1),
+            prio,
+            header,
+            first_q,
+            offer,
+            fell_back: false,
+            body: BodySize::CLASSIC,
+            index: 0,
+            retx: 0,
+            deadline: None,
+            state: FdState::New,
+            ack_timeout_ms: timers.ack_timeout_ms,
+            max_retx: timers.max_retx,
+        }
+    }
+
+    fn q_of(&self, index: u16) -> bool {
+        self.first_q ^ (index & 1 == 1)
+    }
+
+    fn id(&self, ftype: FrameType, index: u16) -> DsorId {
+        DsorId {
+            prio: self.prio,
+            dst: self.dst,
+            src: self.src,
+            ftype,
+            seq: self.q_of(index),
+            chan: self.chan,
+        }
+    }
+
+    fn last_index(&self) -> u16 {
+        body_count(self.header.len, self.body)
+    }
+
+    /// Frame `index`: the header in flight (FD or classic) for 0, body
+    /// `index` with the current body size otherwise.
+    pub fn frame(&self, msg: &[u8], index: u16) -> FdFrame {
+        if index == 0 {
+            let id = self.id(FrameType::Header, 0);
+            return match self.offer {
+                Some(b) => FdHeader {
+                    header: self.header,
+                    max_body: b,
+                }
+                .frame(&id),
+                None => Frame::header(&id, &self.header).into(),
+            };
+        }
+        body_frame(
+            &self.id(FrameType::Body, index),
+            msg,
+            self.header.len,
+            self.body,
+            index,
+        )
+    }
+
+    /// The header frame; arms the deadline. Calling it again restarts the
+    /// transfer from the header (the one in flight) with a fresh budget.
+    pub fn start(&mut self, msg: &[u8], now_ms: u64) -> FdFrame {
+        self.index = 0;
+        self.retx = 0;
+        self.body = BodySize::CLASSIC;
+        self.state = FdState::Waiting;
+        self.deadline = Some(now_ms + self.ack_timeout_ms as u64);
+        self.frame(msg, 0)
+    }
+
+    /// An ack frame from the node's receive path (see `Transfer::on_ack`).
+    /// The ack of index 0 must be the 4-byte FD ack while the FD header is
+    /// in flight and a classic ack (DLC 2 or 3) otherwise.
+    pub fn on_ack(&mut self, id: &DsorId, data: &[u8], msg: &[u8], now_ms: u64) -> FdStep {
+        if self.state != FdState::Waiting
+            || id.ftype != FrameType::Ack
+            || id.src != self.dst
+            || id.dst != self.src
+            || id.chan != self.chan
+            || id.seq != self.q_of(self.index)
+        {
+            return FdStep::Nothing;
+        }
+        let status = match self.offer {
+            Some(offer) if self.index == 0 => match FdAck::decode(data, offer) {
+                Some(a) => {
+                    if a.status == AckStatus::Ok {
+                        self.body = a.body;
+                    }
+                    a.status
+                }
+                None => return FdStep::Nothing,
+            },
+            _ => match Ack::decode(data) {
+                Some(a) if a.index == self.index => a.status,
+                _ => return FdStep::Nothing,
+            },
+        };
+        let err = match status {
+            AckStatus::Ok => None,
+            AckStatus::Refused => Some(TxError::Refused),
+            AckStatus::NoMemory => Some(TxError::NoMemory),
+            AckStatus::TooLong => Some(TxError::TooLong),
+        };
+        if let Some(e) = err {
+            self.state = FdState::Failed;
+            self.deadline = None;
+            return FdStep::Failed(e);
+        }
+        if self.index == self.last_index() {
+            self.state = FdState::Done;
+            self.deadline = None;
+            return FdStep::Done;
+        }
+        self.index += 1;
+        self.retx = 0;
+        self.deadline = Some(now_ms + self.ack_timeout_ms as u64);
+        FdStep::Send(self.frame(msg, self.index))
+    }
+
+    /// The deadline passed (see `Transfer::on_timer`). The first
+    /// retransmission of an unanswered FD header is the fallback: the
+    /// classic header of the message, same Q.
+    pub fn on_timer(&mut self, msg: &[u8], now_ms: u64) -> FdStep {
+        match self.deadline {
+            Some(d) if self.state == FdState::Waiting && now_ms >= d => {}
+            _ => return FdStep::Nothing,
+        }
+        if self.retx >= self.max_retx {
+            self.state = FdState::Failed;
+            self.deadline = None;
+            return FdStep::Failed(TxError::TimedOut);
+        }
+        self.retx += 1;
+        if self.index == 0 && self.offer.is_some() {
+            self.offer = None;
+            self.fell_back = true;
+        }
+        self.deadline = Some(now_ms + self.ack_timeout_ms as u64);
+        FdStep::Send(self.frame(msg, self.index))
+    }
+
+    /// When [`FdTransfer::on_timer`] must be called next.
+    pub fn deadline(&self) -> Option<u64> {
+        self.deadline
+    }
+
+    /// The Q for the next message's header on this stream.
+    pub fn next_q(&self) -> bool {
+        if self.state == FdState::New {
+            self.first_q
+        } else {
+            !self.q_of(self.index)
+        }
+    }
+
+    /// Whether the last frame was sent at least once (an unknown outcome
+    /// on [`TxError::TimedOut`]).
+    pub fn last_frame_sent(&self) -> bool {
+        self.state != FdState::New
+            && self.index == self.last_index()
+            && (self.index > 0 || self.offer.is_none())
+    }
+
+    /// Whether the transfer ended.
+    pub fn finished(&self) -> bool {
+        matches!(self.state, FdState::Done | FdState::Failed)
+    }
+
+    /// Whether the sender fell back from the FD to the classic header
+    /// (for [`FdPeers::on_fallback`]).
+    pub fn fell_back(&self) -> bool {
+        self.fell_back
+    }
+
+    /// Whether the receiver acked the FD header (for
+    /// [`FdPeers::on_fd_ack`]).
+    pub fn fd_acked(&self) -> bool {
+        self.offer.is_some() && self.index > 0
+    }
+
+    /// The body size in use (8 until an FD header was acked).
+    pub fn body_size(&self) -> BodySize {
+        self.body
+    }
+
+    /// The message's header.
+    pub fn header(&self) -> &Header {
+        &self.header
     }
 }
 

@@ -306,3 +306,225 @@ proptest! {
         let _ = FdAck::decode(&data, b);
     }
 }
+
+// ---------------------------------------------------------------------------
+// The sender, FdTransfer
+// ---------------------------------------------------------------------------
+
+fn ack_id(q: bool) -> DsorId {
+    DsorId {
+        prio: 0x40,
+        dst: 5,
+        src: 0,
+        ftype: FrameType::Ack,
+        seq: q,
+        chan: 0,
+    }
+}
+
+fn segm(len: u16) -> Header {
+    Header {
+        len,
+        kind: MsgKind::Segm { id: 0x1234_5678 },
+    }
+}
+
+#[test]
+fn fd_transfer_doc_example() {
+    let msg: Vec<u8> = (0..90u8).collect();
+    let t0 = Timers::default();
+    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
+    let h = t.start(&msg, 0);
+    assert_eq!((h.id, h.len, h.fdf), (0x0800_0280, 12, true));
+    assert_eq!(
+        h.payload(),
+        &[0x00, 0x5a, 0x12, 0x34, 0x56, 0x78, 0, 0, 6, 0x40, 0, 0]
+    );
+    // A classic ack of index 0 does not answer an FD header.
+    assert_eq!(t.on_ack(&ack_id(false), &[0, 0], &msg, 1), FdStep::Nothing);
+    let FdStep::Send(b1) = t.on_ack(&ack_id(false), &[0, 0, 0, 0x40], &msg, 1) else {
+        panic!()
+    };
+    assert!(t.fd_acked());
+    assert_eq!((b1.id, b1.len, b1.fdf), (0x0800_02B0, 64, true));
+    let FdStep::Send(b2) = t.on_ack(&ack_id(true), &[0, 1], &msg, 2) else {
+        panic!()
+    };
+    assert_eq!((b2.id, b2.len), (0x0800_02A0, 32));
+    assert!(t.last_frame_sent());
+    assert_eq!(t.on_ack(&ack_id(false), &[0, 2], &msg, 3), FdStep::Done);
+    assert!(t.next_q());
+}
+
+#[test]
+fn fd_transfer_fallback() {
+    let msg = msg_of(90, 1);
+    let t0 = Timers::default();
+    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
+    let fd = t.start(&msg, 0);
+    assert!(fd.fdf);
+    assert_eq!(t.on_timer(&msg, 99), FdStep::Nothing);
+    // The first retransmission is the classic header, same identifier.
+    let FdStep::Send(c) = t.on_timer(&msg, 100) else {
+        panic!()
+    };
+    assert!(t.fell_back() && !t.fd_acked());
+    assert_eq!(
+        c.classic(),
+        Some(Frame::header(
+            &DsorId {
+                ftype: FrameType::Header,
+                ..id(false)
+            },
+            &segm(90)
+        ))
+    );
+    // A late ack of the FD header is ignored now; the classic one counts.
+    assert_eq!(
+        t.on_ack(&ack_id(false), &[0, 0, 0, 0x40], &msg, 150),
+        FdStep::Nothing
+    );
+    let FdStep::Send(b1) = t.on_ack(&ack_id(false), &[0, 0], &msg, 150) else {
+        panic!()
+    };
+    assert_eq!((b1.len, b1.fdf), (8, false));
+    assert_eq!(t.body_size(), BodySize::CLASSIC);
+
+    // The fallback counts against N_retx: 11 header transmissions in all.
+    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
+    t.start(&msg, 0);
+    for i in 1..=10u64 {
+        let FdStep::Send(f) = t.on_timer(&msg, 100 * i) else {
+            panic!()
+        };
+        assert!(!f.fdf && f.len == 6);
+    }
+    assert_eq!(
+        t.on_timer(&msg, 1100),
+        FdStep::Failed(rcan_core::dsor_tx::TxError::TimedOut)
+    );
+    assert!(!t.last_frame_sent());
+
+    // Refusal of the FD header.
+    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), true, &t0, Some(BodySize::MAX));
+    t.start(&msg, 0);
+    assert_eq!(
+        t.on_ack(&ack_id(true), &[0, 0, 2, 8], &msg, 1),
+        FdStep::Failed(rcan_core::dsor_tx::TxError::NoMemory)
+    );
+    assert!(!t.next_q());
+}
+
+/// An event for the classic-equivalence run: an ack of the frame in
+/// flight (with a status), a stale ack, or the timer.
+#[derive(Clone, Copy, Debug)]
+enum Ev {
+    Ack(u8),
+    Stale,
+    Timer,
+}
+
+fn ev() -> impl Strategy<Value = Ev> {
+    prop_oneof![
+        6 => Just(Ev::Ack(0)),
+        1 => (1u8..=3).prop_map(Ev::Ack),
+        1 => Just(Ev::Stale),
+        2 => Just(Ev::Timer),
+    ]
+}
+
+/// Mostly timers, so that retransmission budgets run out.
+fn ev_timers() -> impl Strategy<Value = Ev> {
+    prop_oneof![
+        1 => Just(Ev::Ack(0)),
+        12 => Just(Ev::Timer),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Without an offer (or for L <= 8 with one) FdTransfer sends exactly
+    /// what the classic Transfer sends, event for event.
+    #[test]
+    fn fd_transfer_without_offer_is_classic(len in 0u16..200, q: bool, offer: bool,
+                                            evs in prop_oneof![prop::collection::vec(ev(), 0..80),
+                                                           prop::collection::vec(ev_timers(), 0..80)]) {
+        let len = if offer { len % 9 } else { len };
+        let msg = msg_of(len as usize, 9);
+        let t0 = Timers::default();
+        let mut c = Transfer::new(5, 0, 0, 0x40, segm(len), q, &t0);
+        let mut f = FdTransfer::new(5, 0, 0, 0x40, segm(len), q, &t0,
+                                    offer.then_some(BodySize::MAX));
+        prop_assert_eq!(FdFrame::from(c.start(&msg, 0)), f.start(&msg, 0));
+        let mut now = 0u64;
+        let mut index = 0u16;
+        for e in evs {
+            now += 100;
+            let (a, b) = match e {
+                Ev::Timer => (c.on_timer(&msg, now), f.on_timer(&msg, now)),
+                Ev::Ack(_) | Ev::Stale => {
+                    let stale = matches!(e, Ev::Stale);
+                    let i = if stale { index.wrapping_sub(1) } else { index };
+                    let qq = q ^ (i & 1 == 1);
+                    let [x, y] = i.to_be_bytes();
+                    let d = [x, y, if let Ev::Ack(s) = e { s } else { 0 }];
+                    let d = if d[2] == 0 { &d[..2] } else { &d[..] };
+                    (c.on_ack(&ack_id(qq), d, &msg, now), f.on_ack(&ack_id(qq), d, &msg, now))
+                }
+            };
+            let b2 = match a {
+                rcan_core::dsor_tx::TxStep::Nothing => FdStep::Nothing,
+                rcan_core::dsor_tx::TxStep::Send(fr) => FdStep::Send(fr.into()),
+                rcan_core::dsor_tx::TxStep::Done => FdStep::Done,
+                rcan_core::dsor_tx::TxStep::Failed(e) => FdStep::Failed(e),
+            };
+            prop_assert_eq!(b2, b);
+            if matches!(e, Ev::Ack(0)) && matches!(b, FdStep::Send(_)) {
+                index += 1;
+            }
+            prop_assert_eq!(c.next_q(), f.next_q());
+            prop_assert_eq!(c.last_frame_sent(), f.last_frame_sent());
+            prop_assert_eq!(c.finished(), f.finished());
+            prop_assert_eq!(c.deadline(), f.deadline());
+        }
+        prop_assert!(!f.fell_back());
+    }
+
+    /// FdTransfer against an ideal receiver that picks any body size up to
+    /// the offer, over a lossless channel: the receiver reassembles the
+    /// message from the FD bodies and the sender reports success.
+    #[test]
+    fn fd_transfer_end_to_end(len in 9u16..=5000, seed: u8, q: bool,
+                              offer in body_size().prop_filter("FD", |b| b.is_fd()),
+                              pick in 0usize..8) {
+        let msg = msg_of(len as usize, seed);
+        let choices: Vec<BodySize> =
+            BodySize::ALL.iter().copied().filter(|b| *b <= offer).collect();
+        let chosen = choices[pick % choices.len()];
+        let t0 = Timers::default();
+        let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(len), q, &t0, Some(offer));
+        let h = t.start(&msg, 0);
+        let fh = FdHeader::decode(h.payload()).unwrap();
+        prop_assert_eq!((fh.header, fh.max_body), (segm(len), offer));
+        let mut a = [0u8; 8];
+        let n = FdAck { status: AckStatus::Ok, body: chosen }.encode(&mut a) as usize;
+        let mut step = t.on_ack(&ack_id(q), &a[..n], &msg, 1);
+        let mut buf = vec![0u8; len as usize];
+        let mut k = 0u16;
+        while let FdStep::Send(f) = step {
+            k += 1;
+            let did = DsorId::from_can_id(f.id).unwrap();
+            prop_assert_eq!(did.ftype, FrameType::Body);
+            prop_assert_eq!(did.seq, q ^ (k & 1 == 1));
+            prop_assert_eq!(f.fdf, chosen.is_fd());
+            prop_assert!(store_body(&mut buf, len, chosen, k, f.payload()).is_some());
+            let [x, y] = k.to_be_bytes();
+            step = t.on_ack(&ack_id(did.seq), &[x, y], &msg, 2);
+        }
+        prop_assert_eq!(step, FdStep::Done);
+        prop_assert_eq!(k, body_count(len, chosen));
+        prop_assert_eq!(buf, msg);
+        prop_assert!(t.fd_acked() && !t.fell_back());
+    }
+}
