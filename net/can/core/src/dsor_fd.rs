@@ -205,6 +205,9 @@ pub struct FdHeader {
 }
 
 impl FdHeader {
+    /// Length of an FD header frame ([`FD_HEADER_LEN`]).
+    pub const LEN: usize = FD_HEADER_LEN as usize;
+
     /// An FD header for `header` offering `max_body`; `None` if the
     /// message is too short for one (L <= 8) or `max_body` is not an FD
     /// size.
