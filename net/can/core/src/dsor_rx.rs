@@ -13,8 +13,10 @@
 //! status `deliver` refused with (dsor-wire.rst, "Delivery rule"), so a
 //! sender's success always means the application has the message.
 
-use super::dsor_fd::{body_count, body_frame_len, store_body, BodySize, FdAck, FdHeader};
-use super::dsor_wire::{Ack, AckStatus, DsorId, Frame, FrameType, Header, Timers, MAX_LEN};
+use super::dsor_wire::{
+    fd_body_count, fd_body_frame_len, fd_store_body, Ack, AckStatus, BodySize, DsorId, FdAck,
+    FdHeader, Frame, FrameType, Header, Timers, MAX_LEN,
+};
 
 /// How a transfer's bodies are framed (dsor-wire.rst, "Message transfer
 /// with CAN FD bodies"): `offer` is the B_max of its FD header (`None`
@@ -222,7 +224,7 @@ fn previous_body_again<B>(
     deadline: u64,
     slot_deadline: &mut u64,
 ) -> RxOutput<B> {
-    if next < 2 || data.len() != body_frame_len(len, b, next - 1) as usize {
+    if next < 2 || data.len() != fd_body_frame_len(len, b, next - 1) as usize {
         return RxOutput::NONE;
     }
     *slot_deadline = deadline;
@@ -603,7 +605,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             } => {
                 if *last_index == 0
                     || id.seq != *last_q
-                    || data.len() != body_frame_len(header.len, fd.body, *last_index) as usize
+                    || data.len() != fd_body_frame_len(header.len, fd.body, *last_index) as usize
                 {
                     return RxOutput::NONE;
                 }
@@ -622,7 +624,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                 // that a sender that missed that ack moves on; the first
                 // new frame (body `next`) gets the refusal.
                 let k = *next;
-                if data.len() != body_frame_len(header.len, fd.body, k) as usize {
+                if data.len() != fd_body_frame_len(header.len, fd.body, k) as usize {
                     return RxOutput::NONE;
                 }
                 let status = *status;
@@ -648,11 +650,11 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                 let k = *next;
                 // Checks the length (malformed: nothing stored); the
                 // buffer has header.len bytes, so it always fits.
-                if store_body(buf.as_mut(), header.len, fd.body, k, data).is_none() {
+                if fd_store_body(buf.as_mut(), header.len, fd.body, k, data).is_none() {
                     return RxOutput::NONE;
                 }
                 slot.deadline = deadline;
-                if k < body_count(header.len, fd.body) {
+                if k < fd_body_count(header.len, fd.body) {
                     *next = k + 1;
                     return RxOutput::ack(ack_frame(id, k, AckStatus::Ok));
                 }
