@@ -14,8 +14,25 @@
 //! sender's success always means the application has the message.
 
 use super::dsor_wire::{
-    body_count, body_dlc, Ack, AckStatus, DsorId, Frame, FrameType, Header, Timers, MAX_LEN,
+    fd_body_count, fd_body_frame_len, fd_store_body, Ack, AckStatus, BodySize, DsorId, FdAck,
+    FdHeader, Frame, FrameType, Header, Timers, MAX_LEN,
 };
+
+/// How a transfer's bodies are framed (dsor-wire.rst, "Message transfer
+/// with CAN FD bodies"): `offer` is the B_max of its FD header (`None`
+/// for a classic header), `body` the body size chosen (8 for classic).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+struct Fd {
+    offer: Option<BodySize>,
+    body: BodySize,
+}
+
+impl Fd {
+    const CLASSIC: Fd = Fd {
+        offer: None,
+        body: BodySize::CLASSIC,
+    };
+}
 
 /// Receiver limits (dsor-wire.rst, "Timers and limits").
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -103,6 +120,7 @@ enum St<B> {
     Free,
     Receiving {
         header: Header,
+        fd: Fd,
         hq: bool,
         prio: u8,
         /// Next expected body index, 1..=n.
@@ -115,6 +133,7 @@ enum St<B> {
     /// before are re-acked OK as in Receiving.
     Refusing {
         header: Header,
+        fd: Fd,
         hq: bool,
         next: u16,
         status: AckStatus,
@@ -123,6 +142,7 @@ enum St<B> {
     /// `status`: OK, or the refusal of the header (index 0) or of a body.
     Done {
         header: Header,
+        fd: Fd,
         hq: bool,
         last_q: bool,
         last_index: u16,
@@ -160,12 +180,28 @@ impl<B> Slot<B> {
 pub struct Reassembler<B: AsMut<[u8]>, const N: usize> {
     local: u8,
     limits: Limits,
+    /// Largest body size accepted from FD headers; `None`: FD headers are
+    /// ignored (a classic receiver).
+    fd_max: Option<BodySize>,
     reasm_ms: u64,
     slots: [Slot<B>; N],
 }
 
 fn ack_frame(id: &DsorId, index: u16, status: AckStatus) -> Option<Frame> {
     Some(Frame::ack(&id.ack_id(), &Ack { index, status }))
+}
+
+/// The ack of a header: classic (DLC 2 or 3), or for an FD header the
+/// 4-byte ack with the chosen body size (8 with a refusal).
+fn header_ack(id: &DsorId, status: AckStatus, fd: &Fd) -> Option<Frame> {
+    if fd.offer.is_none() {
+        return ack_frame(id, 0, status);
+    }
+    let body = match status {
+        AckStatus::Ok => fd.body,
+        _ => BodySize::CLASSIC,
+    };
+    Some(FdAck { status, body }.frame(&id.ack_id()))
 }
 
 /// The Q bit body `next` of a message whose header had Q `hq` carries:
@@ -183,11 +219,12 @@ fn previous_body_again<B>(
     id: &DsorId,
     data: &[u8],
     len: u16,
+    b: BodySize,
     next: u16,
     deadline: u64,
     slot_deadline: &mut u64,
 ) -> RxOutput<B> {
-    if next < 2 || data.len() != body_dlc(len, next - 1) as usize {
+    if next < 2 || data.len() != fd_body_frame_len(len, b, next - 1) as usize {
         return RxOutput::NONE;
     }
     *slot_deadline = deadline;
@@ -208,6 +245,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
         Reassembler {
             local,
             limits,
+            fd_max: None,
             reasm_ms: timers.reasm_timeout_ms as u64,
             slots: [Slot::FREE; N],
         }
@@ -216,6 +254,21 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
     /// The node this table receives for.
     pub fn local(&self) -> u8 {
         self.local
+    }
+
+    /// The largest body size taken from FD headers; `None`: FD headers are
+    /// ignored.
+    pub fn fd_body_size(&self) -> Option<BodySize> {
+        self.fd_max
+    }
+
+    /// Take FD headers (dsor-wire.rst, "Message transfer with CAN FD
+    /// bodies"), choosing body sizes up to `max` (8: answer FD headers but
+    /// ask for classic bodies); `None` (the default) ignores FD headers as
+    /// a classic receiver does. Only for a node on a CAN FD interface.
+    /// Transfers already started keep their body size.
+    pub fn set_fd_body_size(&mut self, max: Option<BodySize>) {
+        self.fd_max = max;
     }
 
     /// The limits in force.
@@ -310,9 +363,10 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
         let status = refusal(status);
         let mut n = 0;
         for s in self.slots.iter_mut() {
-            let (header, hq, next) = match &s.st {
+            let (header, fd, hq, next) = match &s.st {
                 St::Receiving {
                     header,
+                    fd,
                     hq,
                     prio,
                     next,
@@ -326,12 +380,13 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                     if keep(&inc) {
                         continue;
                     }
-                    (*header, *hq, *next)
+                    (*header, *fd, *hq, *next)
                 }
                 _ => continue,
             };
             s.st = St::Refusing {
                 header,
+                fd,
                 hq,
                 next,
                 status,
@@ -353,33 +408,62 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
         F: FnMut(&Incoming<'_>) -> Result<B, AckStatus>,
         D: FnOnce(Delivered<B>) -> Result<(), AckStatus>,
     {
-        let Some(h) = Header::decode(data) else {
-            return RxOutput::NONE;
+        let (h, fd) = if data.len() == FdHeader::LEN {
+            match (self.fd_max, FdHeader::decode(data)) {
+                (Some(max), Some(f)) => (
+                    f.header,
+                    Fd {
+                        offer: Some(f.max_body),
+                        body: f.max_body.min(max),
+                    },
+                ),
+                _ => return RxOutput::NONE,
+            }
+        } else {
+            match Header::decode(data) {
+                Some(h) => (h, Fd::CLASSIC),
+                None => return RxOutput::NONE,
+            }
         };
         let deadline = now_ms + self.reasm_ms;
         let existing = self.find(id.src, id.chan);
         if let Some(i) = existing {
             let slot = &mut self.slots[i];
+            // An FD header and a classic one are never duplicates of each
+            // other; a duplicate gets the body size chosen before.
             let dup = match slot.st {
                 St::Receiving {
-                    header, hq, next, ..
-                } if next == 1 && hq == id.seq && header == h => Some(AckStatus::Ok),
+                    header,
+                    fd: f,
+                    hq,
+                    next,
+                    ..
+                } if next == 1 && hq == id.seq && header == h && f.offer == fd.offer => {
+                    Some((AckStatus::Ok, f))
+                }
                 St::Done {
                     header,
+                    fd: f,
                     hq,
                     last_index: 0,
                     status,
                     ..
-                } if hq == id.seq && header == h => Some(status),
+                } if hq == id.seq && header == h && f.offer == fd.offer => Some((status, f)),
                 // Acked OK before; the refusal goes with body 1.
                 St::Refusing {
-                    header, hq, next, ..
-                } if next == 1 && hq == id.seq && header == h => Some(AckStatus::Ok),
+                    header,
+                    fd: f,
+                    hq,
+                    next,
+                    ..
+                } if next == 1 && hq == id.seq && header == h && f.offer == fd.offer => {
+                    Some((AckStatus::Ok, f))
+                }
                 _ => None,
             };
-            if let Some(status) = dup {
+            if let Some((status, f)) = dup {
                 slot.deadline = deadline;
-                return RxOutput::ack(ack_frame(id, 0, status));
+                return RxOutput::ack(header_ack(id, status, &f));
             }
             // A new message on this stream: drop whatever was there.
             slot.st = St::Free;
@@ -440,7 +524,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             }
         }
         let out = RxOutput {
-            ack: ack_frame(id, 0, status),
+            ack: header_ack(id, status, &fd),
             delivered: None,
             header_refused,
         };
@@ -460,6 +544,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
         slot.st = match got {
             Some(buf) => St::Receiving {
                 header: h,
+                fd,
                 hq: id.seq,
                 prio: id.prio,
                 next: 1,
@@ -467,6 +552,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             },
             None => St::Done {
                 header: h,
+                fd,
                 hq: id.seq,
                 last_q: id.seq,
                 last_index: 0,
@@ -488,21 +574,30 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
         // While refusing or receiving, a body with the other Q than the
         // next one's is the previous body again (or nothing).
         if let St::Refusing {
-            header, hq, next, ..
+            header,
+            fd,
+            hq,
+            next,
+            ..
         }
         | St::Receiving {
-            header, hq, next, ..
+            header,
+            fd,
+            hq,
+            next,
+            ..
         } = &slot.st
         {
             if id.seq != expected_q(*hq, *next) {
-                let (len, next) = (header.len, *next);
-                return previous_body_again(id, data, len, next, deadline, &mut slot.deadline);
+                let (len, b, next) = (header.len, fd.body, *next);
+                return previous_body_again(id, data, len, b, next, deadline, &mut slot.deadline);
             }
         }
         match &mut slot.st {
             St::Free => RxOutput::NONE,
             St::Done {
                 header,
+                fd,
                 last_q,
                 last_index,
                 status,
@@ -510,7 +605,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             } => {
                 if *last_index == 0
                     || id.seq != *last_q
-                    || data.len() != body_dlc(header.len, *last_index) as usize
+                    || data.len() != fd_body_frame_len(header.len, fd.body, *last_index) as usize
                 {
                     return RxOutput::NONE;
                 }
@@ -520,6 +615,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             }
             St::Refusing {
                 header,
+                fd,
                 hq,
                 next,
                 status,
@@ -528,12 +624,13 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                 // that a sender that missed that ack moves on; the first
                 // new frame (body `next`) gets the refusal.
                 let k = *next;
-                if data.len() != body_dlc(header.len, k) as usize {
+                if data.len() != fd_body_frame_len(header.len, fd.body, k) as usize {
                     return RxOutput::NONE;
                 }
                 let status = *status;
                 slot.st = St::Done {
                     header: *header,
+                    fd: *fd,
                     hq: *hq,
                     last_q: id.seq,
                     last_index: k,
@@ -544,24 +641,20 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
             }
             St::Receiving {
                 header,
+                fd,
                 hq,
                 next,
                 buf,
                 ..
             } => {
-                let dlc = body_dlc(header.len, *next) as usize;
-                if data.len() != dlc {
+                let k = *next;
+                // Checks the length (malformed: nothing stored); the
+                // buffer has header.len bytes, so it always fits.
+                if fd_store_body(buf.as_mut(), header.len, fd.body, k, data).is_none() {
                     return RxOutput::NONE;
                 }
-                let off = 8 * (*next as usize - 1);
-                let k = *next;
-                match buf.as_mut().get_mut(off..off + dlc) {
-                    Some(dst) => dst.copy_from_slice(data),
-                    // Cannot happen: the buffer has header.len bytes.
-                    None => return RxOutput::NONE,
-                }
                 slot.deadline = deadline;
-                if k < body_count(header.len) {
+                if k < fd_body_count(header.len, fd.body) {
                     *next = k + 1;
                     return RxOutput::ack(ack_frame(id, k, AckStatus::Ok));
                 }
@@ -569,6 +662,7 @@ impl<B: AsMut<[u8]>, const N: usize> Reassembler<B, N> {
                 let hq = *hq;
                 let placeholder = St::Done {
                     header: h,
+                    fd: *fd,
                     hq,
                     last_q: id.seq,
                     last_index: k,

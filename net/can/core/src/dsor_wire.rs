@@ -391,6 +391,364 @@ impl Default for Timers {
     }
 }
 
+// ---------------------------------------------------------------------------
+// CAN FD bodies (dsor-wire.rst, "Message transfer with CAN FD bodies
+// (extension)"). Here rather than in `dsor_fd` because the receiver
+// (`dsor_rx`) needs them; `dsor_fd` re-exports them without the `fd_`
+// prefix and adds the sender.
+// ---------------------------------------------------------------------------
+
+/// Largest CAN FD payload.
+pub const FD_MAX_LEN: usize = 64;
+/// The CAN FD lengths above 8 (DLC 9-15), ISO 11898-1:2015.
+pub const FD_LENS: [u8; 7] = [12, 16, 20, 24, 32, 48, 64];
+/// Length of an FD header frame (DLC 9).
+pub const FD_HEADER_LEN: u8 = 12;
+/// DLC of the ack of an FD header.
+pub const FD_ACK_LEN: u8 = 4;
+
+/// The smallest valid CAN FD length >= `r` (0-8 are themselves); `None`
+/// for `r` > 64.
+pub const fn fd_len_round_up(r: usize) -> Option<u8> {
+    if r <= 8 {
+        return Some(r as u8);
+    }
+    let mut i = 0;
+    while i < FD_LENS.len() {
+        if FD_LENS[i] as usize >= r {
+            return Some(FD_LENS[i]);
+        }
+        i += 1;
+    }
+    None
+}
+
+/// Whether `len` is a valid CAN FD frame length (0-8, 12, 16, 20, 24, 32,
+/// 48, 64).
+pub const fn is_fd_len(len: usize) -> bool {
+    matches!(fd_len_round_up(len), Some(l) if l as usize == len)
+}
+
+/// The DLC (0-15) of a valid CAN FD length; `None` otherwise.
+pub const fn fd_len_to_dlc(len: usize) -> Option<u8> {
+    if len <= 8 {
+        return Some(len as u8);
+    }
+    let mut i = 0;
+    while i < FD_LENS.len() {
+        if FD_LENS[i] as usize == len {
+            return Some(9 + i as u8);
+        }
+        i += 1;
+    }
+    None
+}
+
+/// The length of a CAN FD DLC (0-15; higher bits ignored).
+pub const fn fd_dlc_to_len(dlc: u8) -> u8 {
+    let d = dlc & 0xf;
+    if d <= 8 {
+        d
+    } else {
+        FD_LENS[(d - 9) as usize]
+    }
+}
+
+/// The body size B of a message: 8 (classic bodies) or a CAN FD length
+/// 12-64.
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Debug)]
+pub struct BodySize(u8);
+
+impl BodySize {
+    /// 8: classic bodies.
+    pub const CLASSIC: BodySize = BodySize(8);
+    /// 64: the largest.
+    pub const MAX: BodySize = BodySize(64);
+    /// Every body size, smallest first.
+    pub const ALL: [BodySize; 8] = [
+        BodySize(8),
+        BodySize(12),
+        BodySize(16),
+        BodySize(20),
+        BodySize(24),
+        BodySize(32),
+        BodySize(48),
+        BodySize(64),
+    ];
+
+    /// The body size `b`, if it is 8 or one of the FD lengths 12-64.
+    pub const fn new(b: u8) -> Option<Self> {
+        if b == 8 || (b > 8 && is_fd_len(b as usize)) {
+            Some(BodySize(b))
+        } else {
+            None
+        }
+    }
+
+    /// The size in bytes.
+    pub const fn get(self) -> u8 {
+        self.0
+    }
+
+    /// Whether bodies of this size are CAN FD frames (B > 8).
+    pub const fn is_fd(self) -> bool {
+        self.0 > 8
+    }
+}
+
+/// Number of bodies of an `len`-byte message with body size `b`:
+/// ceil(len / B).
+pub const fn fd_body_count(len: u16, b: BodySize) -> u16 {
+    (len as u32).div_ceil(b.0 as u32) as u16
+}
+
+/// Payload bytes of body `k` (1-based): min(B, len - B(k-1)); 0 if there
+/// is no such body.
+pub const fn fd_body_payload(len: u16, b: BodySize, k: u16) -> usize {
+    if k == 0 || k > fd_body_count(len, b) {
+        return 0;
+    }
+    let rest = len as usize - b.0 as usize * (k as usize - 1);
+    if rest > b.0 as usize {
+        b.0 as usize
+    } else {
+        rest
+    }
+}
+
+/// On-wire length of body `k`: its payload rounded up to a CAN FD length
+/// (only the last body can need padding); 0 if there is no such body. For
+/// [`BodySize::CLASSIC`] this is `dsor_wire::body_dlc`.
+pub const fn fd_body_frame_len(len: u16, b: BodySize, k: u16) -> u8 {
+    match fd_len_round_up(fd_body_payload(len, b, k)) {
+        Some(l) => l,
+        None => 0,
+    }
+}
+
+/// A DSOR frame that may be a CAN FD frame.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
+pub struct FdFrame {
+    /// 29-bit identifier (no `CAN_EFF_FLAG`).
+    pub id: u32,
+    /// Length in bytes: 0-8 or a CAN FD length (12-64 only with `fdf`).
+    pub len: u8,
+    /// Whether this is a CAN FD frame (FDF 1).
+    pub fdf: bool,
+    /// Data; bytes from `len` on, and padding, are zero.
+    pub data: [u8; FD_MAX_LEN],
+}
+
+impl FdFrame {
+    /// The data bytes (`data[..len]`), padding included.
+    pub fn payload(&self) -> &[u8] {
+        &self.data[..(self.len as usize).min(FD_MAX_LEN)]
+    }
+
+    /// The classic frame, if this is one (not FD).
+    pub fn classic(&self) -> Option<Frame> {
+        if self.fdf || self.len > 8 {
+            return None;
+        }
+        let mut data = [0; 8];
+        data.copy_from_slice(&self.data[..8]);
+        Some(Frame {
+            id: self.id,
+            len: self.len,
+            data,
+        })
+    }
+}
+
+impl From<Frame> for FdFrame {
+    fn from(f: Frame) -> Self {
+        let mut data = [0; FD_MAX_LEN];
+        data[..8].copy_from_slice(&f.data);
+        FdFrame {
+            id: f.id,
+            len: f.len,
+            fdf: false,
+            data,
+        }
+    }
+}
+
+/// Contents of an FD header frame: the classic header plus the largest
+/// body size the sender offers (12-64).
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
+pub struct FdHeader {
+    /// Length and addressing, as in a classic header.
+    pub header: Header,
+    /// B_max: the largest body size offered; an FD size (12-64).
+    pub max_body: BodySize,
+}
+
+impl FdHeader {
+    /// Length of an FD header frame ([`FD_HEADER_LEN`]).
+    pub const LEN: usize = FD_HEADER_LEN as usize;
+
+    /// An FD header for `header` offering `max_body`; `None` if the
+    /// message is too short for one (L <= 8) or `max_body` is not an FD
+    /// size.
+    pub const fn new(header: Header, max_body: BodySize) -> Option<Self> {
+        if header.len <= 8 || !max_body.is_fd() {
+            return None;
+        }
+        Some(FdHeader { header, max_body })
+    }
+
+    /// Write the 12 data bytes into `out` (the rest zeroed); returns
+    /// [`FD_HEADER_LEN`].
+    pub fn encode(&self, out: &mut [u8; FD_MAX_LEN]) -> u8 {
+        *out = [0; FD_MAX_LEN];
+        let mut classic = [0; 8];
+        let dlc = self.header.encode(&mut classic);
+        out[..8].copy_from_slice(&classic);
+        out[8] = dlc;
+        out[9] = self.max_body.get();
+        FD_HEADER_LEN
+    }
+
+    /// Parse an FD header frame's data (its length is the frame's): `None`
+    /// unless it is 12 bytes with a type byte of 4, 6 or 8, an FD size in
+    /// byte 9 and L > 8. Bytes 10-11 and the bytes past the classic
+    /// header's length are ignored.
+    pub fn decode(data: &[u8]) -> Option<Self> {
+        if data.len() != FD_HEADER_LEN as usize {
+            return None;
+        }
+        let dlc = data[8] as usize;
+        if !matches!(dlc, 4 | 6 | 8) {
+            return None;
+        }
+        let header = Header::decode(&data[..dlc])?;
+        let max_body = BodySize::new(data[9])?;
+        FdHeader::new(header, max_body)
+    }
+
+    /// The FD header frame with identifier `id` (its type is set to
+    /// header).
+    pub fn frame(&self, id: &DsorId) -> FdFrame {
+        let mut data = [0; FD_MAX_LEN];
+        let len = self.encode(&mut data);
+        FdFrame {
+            id: DsorId {
+                ftype: FrameType::Header,
+                ..*id
+            }
+            .to_can_id(),
+            len,
+            fdf: true,
+            data,
+        }
+    }
+
+    /// The message type (as for the classic header).
+    pub fn kind(&self) -> MsgKind {
+        self.header.kind
+    }
+}
+
+/// Contents of the ack of an FD header (index 0, DLC 4).
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
+pub struct FdAck {
+    /// Status, as for classic acks.
+    pub status: AckStatus,
+    /// The body size the receiver chose (8 with a non-OK status).
+    pub body: BodySize,
+}
+
+impl FdAck {
+    /// Write the ack's data into `out` (unused bytes zeroed); returns
+    /// [`FD_ACK_LEN`].
+    pub fn encode(&self, out: &mut [u8; 8]) -> u8 {
+        *out = [0; 8];
+        out[2] = self.status.code();
+        out[3] = self.body.get();
+        FD_ACK_LEN
+    }
+
+    /// Parse an ack frame's data as the ack of an FD header that offered
+    /// `offered`: `None` unless it is 4 bytes, index 0, a known status
+    /// and (for status OK) a body size not above `offered`.
+    pub fn decode(data: &[u8], offered: BodySize) -> Option<Self> {
+        let [0, 0, s, b] = *data else {
+            return None;
+        };
+        let status = AckStatus::from_code(s)?;
+        let body = match status {
+            AckStatus::Ok => match BodySize::new(b) {
+                Some(b) if b <= offered => b,
+                _ => return None,
+            },
+            _ => BodySize::CLASSIC,
+        };
+        Some(FdAck { status, body })
+    }
+
+    /// The ack frame with identifier `id` (a classic frame).
+    pub fn frame(&self, id: &DsorId) -> Frame {
+        let mut data = [0; 8];
+        let len = self.encode(&mut data);
+        Frame {
+            id: id.to_can_id(),
+            len,
+            data,
+        }
+    }
+}
+
+/// Body `k` (1 ..= n) of the `len`-byte message `msg` with body size `b`,
+/// identifier `id` (type set to body; the caller sets Q). The payload is
+/// `msg[B(k-1) ..]` (missing bytes are sent as zero, as in
+/// `Transfer::frame`), padded with zeros to [`fd_body_frame_len`]. An FD
+/// frame for B > 8, a classic one (identical to the classic body) for
+/// B = 8. Length 0 if there is no body `k`.
+pub fn fd_body_frame(id: &DsorId, msg: &[u8], len: u16, b: BodySize, k: u16) -> FdFrame {
+    let r = fd_body_payload(len, b, k);
+    let off = if k == 0 {
+        0
+    } else {
+        b.get() as usize * (k as usize - 1)
+    };
+    let mut data = [0; FD_MAX_LEN];
+    for (i, d) in data.iter_mut().enumerate().take(r) {
+        *d = msg.get(off + i).copied().unwrap_or(0);
+    }
+    FdFrame {
+        id: DsorId {
+            ftype: FrameType::Body,
+            ..*id
+        }
+        .to_can_id(),
+        len: fd_body_frame_len(len, b, k),
+        fdf: b.is_fd(),
+        data,
+    }
+}
+
+/// Whether `frame_len` is the right length of body `k` of an `len`-byte
+/// message with body size `b`.
+pub const fn fd_body_len_ok(len: u16, b: BodySize, k: u16, frame_len: usize) -> bool {
+    let want = fd_body_frame_len(len, b, k);
+    want != 0 && frame_len == want as usize
+}
+
+/// Store received body `k` (its frame's data bytes, padding included) of
+/// an `len`-byte message with body size `b` into `buf`, the message
+/// buffer (at least `len` bytes). Returns the payload bytes stored, or
+/// `None` (nothing stored) if the body's length is wrong (malformed) or
+/// `buf` is too short. Padding values are ignored.
+pub fn fd_store_body(buf: &mut [u8], len: u16, b: BodySize, k: u16, data: &[u8]) -> Option<usize> {
+    if !fd_body_len_ok(len, b, k, data.len()) {
+        return None;
+    }
+    let r = fd_body_payload(len, b, k);
+    let off = b.get() as usize * (k as usize - 1);
+    buf.get_mut(off..off + r)?.copy_from_slice(&data[..r]);
+    Some(r)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

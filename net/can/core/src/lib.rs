@@ -19,6 +19,7 @@ pub mod canloop;
 pub mod ctucanfd;
 pub mod ctucanfd_model;
 pub mod dsor_addr;
+pub mod dsor_fd;
 pub mod dsor_rx;
 pub mod dsor_tx;
 pub mod dsor_udp;
