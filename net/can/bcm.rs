@@ -398,14 +398,16 @@ impl RxOut for RxEffects<'_, '_> {
 /// the timer is armed only after the frame of `TX_ANNOUNCE`/`STARTTIMER`
 /// went out, so the first cyclic frame cannot overtake it (the callback
 /// may run on another CPU as soon as the timer is armed; mainline sends
-/// the announced frame before it starts the timer). Inside the callback,
-/// arming at once is safe: a timer re-armed by its running callback stays
-/// on that CPU and cannot expire before the callback returns.
+/// the announced frame before it starts the timer); returns `None`.
+/// Inside the callback the expiry to re-arm at is returned, and the
+/// callback hands it to the timer core (`HRTIMER_RESTART`, as mainline's
+/// `bcm_tx_timeout_handler`): one timer-base lock round per cyclic frame
+/// less than a second `hrtimer_start`.
 fn with_tx(
     job: JobRef<'_, BcmOp>,
     in_callback: bool,
     f: impl FnOnce(&mut TxOp, &mut TxEffects<'_, '_>),
-) {
+) -> Option<u64> {
     let d = job.data();
     let sk = d.sk.sock();
     let mut pending = Pending::new();
@@ -426,18 +428,22 @@ fn with_tx(
                 cfsiz: *cfsiz,
                 frames,
                 pending: &mut pending,
-                arm_later: if in_callback { None } else { Some(&mut later) },
+                arm_later: Some(&mut later),
             };
             f(op, &mut out);
         }
     }
     let sent = pending.flush();
     d.frames_abs.fetch_add(sent, Ordering::Relaxed);
+    if in_callback {
+        return later;
+    }
     // A callback that runs meanwhile finds the recorded expiry in the
-    // future and does nothing.
+    // future and does nothing (and re-arms nothing).
     if let Some(at) = later {
         job.start(TX_TIMER, at);
     }
+    None
 }
 
 /// Runs `f` on a receive operation's state machine with its effects and
@@ -480,18 +486,26 @@ fn with_rx(
 impl JobCallback for BcmOp {
     type Data = OpData;
 
-    /// HRTIMER_SOFTIRQ softirq. A stale expiry (the operation's record
-    /// says the timer was cancelled or moved later) does nothing.
+    /// Not called: the timer core calls [`BcmOp::expired_restart`].
     fn expired(job: JobRef<'_, Self>, which: usize) {
+        if let Some(at) = Self::expired_restart(job, which) {
+            job.start(which, at);
+        }
+    }
+
+    /// HRTIMER_SOFTIRQ softirq. A stale expiry (the operation's record
+    /// says the timer was cancelled or moved later) does nothing. A
+    /// transmit operation's timer re-arms by its return value
+    /// (`HRTIMER_RESTART`); receive timers are started explicitly.
+    fn expired_restart(job: JobRef<'_, Self>, which: usize) -> Option<u64> {
         let now = ktime_get_mono_ns() as u64;
         let due = |at: Option<u64>| at.is_some_and(|t| t <= now);
         if job.data().tx {
-            with_tx(job, true, |op, out| {
+            return with_tx(job, true, |op, out| {
                 if which == TX_TIMER && due(op.expires) {
                     op.timer_expired(now, out);
                 }
             });
-            return;
         }
         let mut pending = Pending::new();
         with_rx(job, &mut pending, None, |op, _filters, last, out| {
@@ -502,6 +516,7 @@ impl JobCallback for BcmOp {
             }
         });
         pending.flush();
+        None
     }
 }
 
