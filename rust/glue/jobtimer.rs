@@ -277,11 +277,11 @@ unsafe extern "C" fn expired_trampoline<H: JobCallback>(
     if inner.dying.load(Ordering::SeqCst) {
         return bindings::hrtimer_restart_HRTIMER_NORESTART;
     }
-    // SAFETY: `t` is this running callback's timer (contract above). Under
-    // `rearm` no `start` queues it, and nothing else does (module
-    // documentation), so if it is not queued now its expiry is ours to
-    // write until we return, as hrtimer_set_expires in a callback does;
-    // `state` is read as hrtimer_is_queued reads it.
+    // `t` is this running callback's timer (contract above). Under `rearm`
+    // no `start` queues it, and nothing else does (module documentation),
+    // so if it is not queued now its expiry is ours to write until we
+    // return, as hrtimer_set_expires in a callback does.
+    // SAFETY: as just said; `state` is read as hrtimer_is_queued reads it.
     unsafe {
         let queued = core::ptr::read_volatile(core::ptr::addr_of!((*t).state)) as u32
             & bindings::HRTIMER_STATE_ENQUEUED
