@@ -1537,7 +1537,7 @@ fn recv_bytes(fd: impl AsFd, t: Duration) -> Result<Option<Vec<u8>>, String> {
 fn split(b: &[u8], cfsiz: usize) -> Result<(Head, Vec<Vec<u8>>), String> {
     let m = parse(&b[..MHSIZ.min(b.len())])?;
     need(
-        (b.len() - MHSIZ) % cfsiz == 0,
+        (b.len() - MHSIZ).is_multiple_of(cfsiz),
         format!(
             "message of {} bytes is not head + {cfsiz}-byte frames",
             b.len()
