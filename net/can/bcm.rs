@@ -86,7 +86,7 @@ use rcan_core::bcm::{
 };
 use rcan_core::bcm_rx::{RxOp, RxOut, RxSlot, TRAFFIC_LOCAL, TRAFFIC_OWN};
 use rcan_core::bcm_tx::{TxOp, TxOut};
-use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use rcan_core::frame::{AnyFrame, CanFdFrame};
 
 /// `CAN_BCM` in `<linux/can.h>`.
 const CAN_BCM: i32 = 2;
@@ -180,8 +180,9 @@ struct RxState {
     /// The filter frames as set (RX_STATUS returns them), with room for
     /// the first setup's number.
     raw: KVec<u8>,
-    /// The same frames as classic frames, for the comparison.
-    filters: KVec<CanFrame>,
+    /// The same frames in the CAN FD layout (a classic frame is the first
+    /// 16 bytes of one), for the comparison.
+    filters: KVec<CanFdFrame>,
     /// Last frame received per filter entry (at least one slot).
     last: KVec<RxSlot>,
     /// `skb->tstamp` (ns) of the last frame received for this operation:
@@ -324,11 +325,11 @@ struct RxEffects<'a, 'p> {
 }
 
 impl RxOut for RxEffects<'_, '_> {
-    fn to_user(&mut self, head: &MsgHead, frame: Option<(&CanFrame, u8)>, rx_ifindex: i32) {
+    fn to_user(&mut self, head: &MsgHead, frame: Option<(&CanFdFrame, u8)>, rx_ifindex: i32) {
         match frame {
             Some((f, traffic)) => {
                 let mut f = *f;
-                f.pad &= CAN_FLAGS_MASK;
+                f.flags &= CAN_FLAGS_MASK;
                 let mut flags = 0;
                 if traffic & TRAFFIC_LOCAL != 0 {
                     flags |= glue::msg::DONTROUTE;
@@ -342,10 +343,13 @@ impl RxOut for RxEffects<'_, '_> {
                     .data()
                     .frames_filtered
                     .fetch_add(1, Ordering::Relaxed);
+                // The frame as received: 16 bytes, or 72 for CAN FD.
+                let image = f.to_bytes();
+                let n = self.cfsiz.min(image.len());
                 to_user(
                     self.sk,
                     head,
-                    &[&f.to_bytes()],
+                    &[&image[..n]],
                     rx_ifindex,
                     flags,
                     self.rx_stamp,
@@ -359,11 +363,13 @@ impl RxOut for RxEffects<'_, '_> {
         }
     }
 
-    fn send_reply(&mut self, reply: &CanFrame, ifindex: i32) {
+    fn send_reply(&mut self, reply: &CanFdFrame, ifindex: i32) {
         let Some(dev) = DevRef::by_index(self.sk.net(), ifindex) else {
             return;
         };
-        if let Some(skb) = frame_skb(self.sk, &dev, &reply.to_bytes()) {
+        let image = reply.to_bytes();
+        let n = self.cfsiz.min(image.len());
+        if let Some(skb) = frame_skb(self.sk, &dev, &image[..n]) {
             self.pending.push(skb, dev);
         }
     }
@@ -392,14 +398,16 @@ impl RxOut for RxEffects<'_, '_> {
 /// the timer is armed only after the frame of `TX_ANNOUNCE`/`STARTTIMER`
 /// went out, so the first cyclic frame cannot overtake it (the callback
 /// may run on another CPU as soon as the timer is armed; mainline sends
-/// the announced frame before it starts the timer). Inside the callback,
-/// arming at once is safe: a timer re-armed by its running callback stays
-/// on that CPU and cannot expire before the callback returns.
+/// the announced frame before it starts the timer); returns `None`.
+/// Inside the callback the expiry to re-arm at is returned, and the
+/// callback hands it to the timer core (`HRTIMER_RESTART`, as mainline's
+/// `bcm_tx_timeout_handler`): one timer-base lock round per cyclic frame
+/// less than a second `hrtimer_start`.
 fn with_tx(
     job: JobRef<'_, BcmOp>,
     in_callback: bool,
     f: impl FnOnce(&mut TxOp, &mut TxEffects<'_, '_>),
-) {
+) -> Option<u64> {
     let d = job.data();
     let sk = d.sk.sock();
     let mut pending = Pending::new();
@@ -420,18 +428,22 @@ fn with_tx(
                 cfsiz: *cfsiz,
                 frames,
                 pending: &mut pending,
-                arm_later: if in_callback { None } else { Some(&mut later) },
+                arm_later: Some(&mut later),
             };
             f(op, &mut out);
         }
     }
     let sent = pending.flush();
     d.frames_abs.fetch_add(sent, Ordering::Relaxed);
+    if in_callback {
+        return later;
+    }
     // A callback that runs meanwhile finds the recorded expiry in the
-    // future and does nothing.
+    // future and does nothing (and re-arms nothing).
     if let Some(at) = later {
         job.start(TX_TIMER, at);
     }
+    None
 }
 
 /// Runs `f` on a receive operation's state machine with its effects and
@@ -442,7 +454,7 @@ fn with_rx(
     job: JobRef<'_, BcmOp>,
     pending: &mut Pending,
     rx_stamp: Option<i64>,
-    f: impl FnOnce(&mut RxOp, &[CanFrame], &mut [RxSlot], &mut RxEffects<'_, '_>),
+    f: impl FnOnce(&mut RxOp, &[CanFdFrame], &mut [RxSlot], &mut RxEffects<'_, '_>),
 ) {
     let d = job.data();
     let sk = d.sk.sock();
@@ -474,18 +486,26 @@ fn with_rx(
 impl JobCallback for BcmOp {
     type Data = OpData;
 
-    /// HRTIMER_SOFTIRQ softirq. A stale expiry (the operation's record
-    /// says the timer was cancelled or moved later) does nothing.
+    /// Not called: the timer core calls [`BcmOp::expired_restart`].
     fn expired(job: JobRef<'_, Self>, which: usize) {
+        if let Some(at) = Self::expired_restart(job, which) {
+            job.start(which, at);
+        }
+    }
+
+    /// HRTIMER_SOFTIRQ softirq. A stale expiry (the operation's record
+    /// says the timer was cancelled or moved later) does nothing. A
+    /// transmit operation's timer re-arms by its return value
+    /// (`HRTIMER_RESTART`); receive timers are started explicitly.
+    fn expired_restart(job: JobRef<'_, Self>, which: usize) -> Option<u64> {
         let now = ktime_get_mono_ns() as u64;
         let due = |at: Option<u64>| at.is_some_and(|t| t <= now);
         if job.data().tx {
-            with_tx(job, true, |op, out| {
+            return with_tx(job, true, |op, out| {
                 if which == TX_TIMER && due(op.expires) {
                     op.timer_expired(now, out);
                 }
             });
-            return;
         }
         let mut pending = Pending::new();
         with_rx(job, &mut pending, None, |op, _filters, last, out| {
@@ -496,6 +516,7 @@ impl JobCallback for BcmOp {
             }
         });
         pending.flush();
+        None
     }
 }
 
@@ -778,11 +799,14 @@ impl CanProtocol for BcmProto {
     /// operation of the socket the frame is for).
     fn rx(sk: &S, skb: RxSkb<'_>, _cookie: u32) {
         let s = skb.skb();
-        let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(s.data()) else {
+        // A classic or a CAN FD frame (mainline: can_is_can_skb,
+        // can_is_canfd_skb); each operation takes its own kind.
+        let Some(frame) = AnyFrame::parse(s.data()) else {
             skb.done();
             return;
         };
-        let frame = CanFrame::from_bytes(bytes);
+        let fd = frame.is_fd();
+        let can_id = frame.can_id();
         let ifindex = s.ifindex();
         let tstamp = s.tstamp();
         let mut traffic = 0;
@@ -802,7 +826,8 @@ impl CanProtocol for BcmProto {
             let l = list.lock();
             for j in l.ops.iter() {
                 let d = j.data();
-                if d.key.can_id != frame.can_id
+                if d.key.can_id != can_id
+                    || d.key.fd != fd
                     || (d.key.ifindex != 0 && d.key.ifindex != ifindex)
                     || !d.active.load(Ordering::Relaxed)
                 {
@@ -967,15 +992,18 @@ fn rx_setup(sk: &S, req: &Request<'_>, ifindex: i32) -> Result<usize> {
     let mut raw = KVec::from_elem(0u8, n * cfsiz, GFP_KERNEL)?;
     raw.copy_from_slice(&req.payload[..n * cfsiz]);
     let mut filters = KVec::with_capacity(n, GFP_KERNEL)?;
-    for f in raw.chunks_exact(cfsiz) {
-        let mut b = [0u8; CAN_FRAME_LEN];
-        b.copy_from_slice(&f[..CAN_FRAME_LEN]);
-        filters.push(CanFrame::from_bytes(&b), GFP_KERNEL)?;
+    for i in 0..n {
+        if let Some(f) = wire::frame_at(&raw, cfsiz, i) {
+            filters.push(f, GFP_KERNEL)?;
+        }
     }
     if h.flags & RX_RTR_FRAME != 0 {
-        if let Some(f) = filters.first_mut() {
+        if let (Some(f), Some(dst)) = (filters.first_mut(), raw.get_mut(..cfsiz)) {
             *f = wire::rtr_reply_frame(&h, *f);
-            raw[..CAN_FRAME_LEN].copy_from_slice(&f.to_bytes());
+            let image = f.to_bytes();
+            if let Some(src) = image.get(..cfsiz) {
+                dst.copy_from_slice(src);
+            }
         }
     }
     let now = ktime_get_mono_ns() as u64;

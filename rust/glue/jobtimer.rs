@@ -12,8 +12,23 @@
 //! `HRTIMER_SOFTIRQ` softirq (bottom halves disabled, must not sleep; may
 //! send frames and queue skbs), as mainline's `can-bcm` timers do. A
 //! callback gets a [`JobRef`]: the data and the right to re-arm or cancel
-//! the job's timers (it returns `HRTIMER_NORESTART`; a timer re-armed from
-//! its own callback stays queued).
+//! the job's timers, and re-arms its own timer cheapest by returning the
+//! next expiry (the trampoline sets it and returns `HRTIMER_RESTART`, as
+//! mainline's `bcm_tx_timeout_handler` does, instead of a second
+//! `hrtimer_start` with the timer base lock taken again).
+//!
+//! Restart against a concurrent [`JobRef::start`]: the expiry of a queued
+//! timer must never be written without the timer base lock. A job has one
+//! `rearm` lock (irqsave, lockdep class `jobtimer_rearm`): `start` holds it
+//! around `hrtimer_start_range_ns`; the trampoline takes it after the
+//! callback and writes the new expiry only if the timer is not queued
+//! (nobody started it meanwhile) and the job is not dying, else it
+//! returns `HRTIMER_NORESTART` (the `start` wins). Once the trampoline has
+//! released the lock, a `start` finds the timer unqueued with its callback
+//! running, sets its own expiry under the base lock and queues it; the
+//! hrtimer core then sees it queued and does not queue it again. Only
+//! `start` and the core's restart queue a job timer, so under `rearm`
+//! "not queued" stays true until the trampoline returns.
 //!
 //! Teardown: dropping the `JobTimers` (process context, never from one of
 //! its own callbacks) marks the job dying, so that [`JobRef::start`] arms
@@ -32,6 +47,8 @@ use kernel::alloc::{flags::GFP_KERNEL, KBox};
 use kernel::error::{code, Result};
 use kernel::types::Opaque;
 
+use super::lock::{new_irq_spinlock, IrqSpinLock};
+
 /// Timers per job.
 pub(crate) const JOB_TIMERS: usize = 2;
 
@@ -45,6 +62,16 @@ pub(crate) trait JobCallback: Sized + 'static {
     /// softirq context; must not sleep. Callbacks of one timer never
     /// overlap; those of two timers of a job may.
     fn expired(job: JobRef<'_, Self>, which: usize);
+
+    /// What the timer core calls: [`JobCallback::expired`], unless a job
+    /// overrides this to re-arm the timer by its return value, the expiry
+    /// (CLOCK_MONOTONIC ns) to run again at, or `None`. A `start` of this
+    /// timer made meanwhile (also by the callback itself) wins over the
+    /// returned expiry (module documentation). Context as `expired`.
+    fn expired_restart(job: JobRef<'_, Self>, which: usize) -> Option<u64> {
+        Self::expired(job, which);
+        None
+    }
 }
 
 /// One timer of a job and the way back to the job.
@@ -62,6 +89,9 @@ struct Inner<H: JobCallback> {
     slots: [Slot<H>; JOB_TIMERS],
     /// Set by Drop before the final cancellation: `start` arms nothing.
     dying: AtomicBool,
+    /// Serialises `start` against the trampoline's restart (irqsave:
+    /// `start` may run in any context; lockdep class `jobtimer_rearm`).
+    rearm: IrqSpinLock<()>,
     data: H::Data,
 }
 
@@ -110,6 +140,7 @@ impl<H: JobCallback> JobTimers<H> {
                     }
                 }; JOB_TIMERS],
                 dying: AtomicBool::new(false),
+                rearm: new_irq_spinlock!((), "jobtimer_rearm")?,
                 data,
             },
             GFP_KERNEL,
@@ -173,6 +204,9 @@ impl<'a, H: JobCallback> JobRef<'a, H> {
             return;
         }
         let at = at.min(i64::MAX as u64) as i64;
+        // Held across the start: the trampoline's restart sees it (module
+        // documentation).
+        let _rearm = self.inner.rearm.lock();
         // SAFETY: an initialised timer (JobTimers invariant) of a live job
         // (`'a`); the mode matches hrtimer_init's, as the soft bit must.
         unsafe {
@@ -235,8 +269,30 @@ unsafe extern "C" fn expired_trampoline<H: JobCallback>(
     let (job, which) = unsafe { ((*slot).job, (*slot).which) };
     // SAFETY: as above; shared access only.
     let inner = unsafe { &*job };
-    H::expired(JobRef { inner }, which);
-    bindings::hrtimer_restart_HRTIMER_NORESTART
+    let Some(at) = H::expired_restart(JobRef { inner }, which) else {
+        return bindings::hrtimer_restart_HRTIMER_NORESTART;
+    };
+    let at = at.min(i64::MAX as u64) as i64;
+    let _rearm = inner.rearm.lock();
+    if inner.dying.load(Ordering::SeqCst) {
+        return bindings::hrtimer_restart_HRTIMER_NORESTART;
+    }
+    // `t` is this running callback's timer (contract above). Under `rearm`
+    // no `start` queues it, and nothing else does (module documentation),
+    // so if it is not queued now its expiry is ours to write until we
+    // return, as hrtimer_set_expires in a callback does.
+    // SAFETY: as just said; `state` is read as hrtimer_is_queued reads it.
+    unsafe {
+        let queued = core::ptr::read_volatile(core::ptr::addr_of!((*t).state)) as u32
+            & bindings::HRTIMER_STATE_ENQUEUED
+            != 0;
+        if queued {
+            return bindings::hrtimer_restart_HRTIMER_NORESTART;
+        }
+        (*t).node.expires = at;
+        (*t)._softexpires = at;
+    }
+    bindings::hrtimer_restart_HRTIMER_RESTART
 }
 
 /// A value set at most once, then read-only until dropped: for state a

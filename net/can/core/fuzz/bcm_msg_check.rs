@@ -5,13 +5,15 @@
 //! the "any" interface, as a new operation and as an update, without a
 //! panic and with only mainline's errno; a message that passes its
 //! setup checks then drives a transmit or receive operation for a while
-//! of virtual time, fed with the message's own frames.
+//! of virtual time, fed with the message's own frames (classic or, with
+//! `CAN_FD_FRAME`, CAN FD; every third one as the other kind, which the
+//! operation must ignore).
 
 use rcan_core::arb::EINVAL;
 use rcan_core::bcm::{self, MsgHead};
 use rcan_core::bcm_rx::{RxOp, RxOut, RxSlot};
 use rcan_core::bcm_tx::{TxOp, TxOut};
-use rcan_core::frame::CanFrame;
+use rcan_core::frame::{AnyFrame, CanFdFrame, CanFrame};
 
 /// Counts effects and checks the timers only move forward.
 #[derive(Default)]
@@ -39,10 +41,10 @@ impl TxOut for Sink {
 }
 
 impl RxOut for Sink {
-    fn to_user(&mut self, _head: &MsgHead, _frame: Option<(&CanFrame, u8)>, _ifindex: i32) {
+    fn to_user(&mut self, _head: &MsgHead, _frame: Option<(&CanFdFrame, u8)>, _ifindex: i32) {
         self.msgs += 1;
     }
-    fn send_reply(&mut self, _reply: &CanFrame, _ifindex: i32) {}
+    fn send_reply(&mut self, _reply: &CanFdFrame, _ifindex: i32) {}
     fn arm_timeout(&mut self, at: u64) {
         assert!(at >= self.now);
         self.timer = Some(at);
@@ -67,8 +69,8 @@ pub fn check(input: &[u8]) {
         Ok(r) => r,
         Err(e) => return assert_eq!(e, EINVAL),
     };
-    let frames: Vec<CanFrame> = (0..)
-        .map_while(|i| bcm::classic_frame(req.payload, i))
+    let frames: Vec<CanFdFrame> = (0..)
+        .map_while(|i| bcm::frame_at(req.payload, req.head.cfsiz(), i))
         .take(300)
         .collect();
     for existing in [None, Some(1), Some(256)] {
@@ -85,8 +87,8 @@ pub fn check(input: &[u8]) {
         assert!(ERRNOS.contains(&e));
     }
     let h = req.head;
-    let classic = h.flags & bcm::CAN_FD_FRAME == 0;
-    if classic && bcm::check_tx_setup(&req, 1, None).is_ok() {
+    let fd = h.flags & bcm::CAN_FD_FRAME != 0;
+    if bcm::check_tx_setup(&req, 1, None).is_ok() {
         let mut op = TxOp::new(&h);
         let mut s = Sink::default();
         op.setup(&h, 0, &mut s);
@@ -97,7 +99,7 @@ pub fn check(input: &[u8]) {
             assert!(op.currframe < op.nframes);
         }
     }
-    if classic && bcm::check_rx_setup(&req, None).is_ok() {
+    if bcm::check_rx_setup(&req, None).is_ok() {
         let h = bcm::rx_setup_head(&h);
         let filters = &frames[..h.nframes as usize];
         let mut last = vec![RxSlot::default(); filters.len().max(1)];
@@ -125,12 +127,27 @@ pub fn check(input: &[u8]) {
                 }
             }
             s.now = t;
-            let rx = CanFrame {
-                can_id: h.can_id,
-                len: f.len.min(8),
-                ..*f
+            let as_fd = fd != (k % 3 == 2);
+            let rx = if as_fd {
+                AnyFrame::Fd(CanFdFrame {
+                    can_id: h.can_id,
+                    len: f.len.min(64),
+                    ..*f
+                })
+            } else {
+                let b: [u8; 16] = f.to_bytes()[..16].try_into().unwrap();
+                let c = CanFrame::from_bytes(&b);
+                AnyFrame::Classic(CanFrame {
+                    can_id: h.can_id,
+                    len: c.len.min(8),
+                    ..c
+                })
             };
+            let msgs = s.msgs;
             op.frame_received(&rx, 1 + (k as i32 & 1), 0, t, filters, &mut last, &mut s);
+            if as_fd != fd {
+                assert_eq!(s.msgs, msgs, "a frame of the other kind was reported");
+            }
         }
     }
 }

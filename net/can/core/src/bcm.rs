@@ -16,7 +16,7 @@
 //! hands in the bytes it copied from user space.
 
 use super::arb::EINVAL;
-use super::frame::{CanFrame, CAN_FRAME_LEN};
+use super::frame::{CanFdFrame, CanFrame, CANFD_MTU, CAN_FRAME_LEN};
 
 /// Linux `E2BIG`: an update brings more frames than the operation holds.
 pub const E2BIG: i32 = 7;
@@ -242,6 +242,38 @@ pub fn classic_frame(payload: &[u8], i: usize) -> Option<CanFrame> {
     b.try_into().ok().map(CanFrame::from_bytes)
 }
 
+/// A classic frame in the CAN FD layout: `struct can_frame` is the first
+/// 16 bytes of `struct canfd_frame` (`pad` is `flags`, `len8_dlc` is
+/// `res1`), the data bytes past 8 are zero. The BCM core keeps every frame
+/// so, as mainline's `bcm.c` keeps both kinds in `struct canfd_frame`
+/// pointers and uses the first `cfsiz` bytes.
+pub fn widen(f: &CanFrame) -> CanFdFrame {
+    let mut b = [0u8; CANFD_MTU];
+    b[..CAN_FRAME_LEN].copy_from_slice(&f.to_bytes());
+    CanFdFrame::from_bytes(&b)
+}
+
+/// Frame `i` of a payload of `cfsiz`-byte frames (16 or 72), in the CAN
+/// FD layout ([`widen`]); `None` past its end.
+pub fn frame_at(payload: &[u8], cfsiz: usize, i: usize) -> Option<CanFdFrame> {
+    let cfsiz = cfsiz.min(CANFD_MTU);
+    let src = payload.get(i * cfsiz..(i + 1) * cfsiz)?;
+    let mut b = [0u8; CANFD_MTU];
+    b[..cfsiz].copy_from_slice(src);
+    Some(CanFdFrame::from_bytes(&b))
+}
+
+/// The 8-byte word `w` (0..8) of a frame's data in native byte order, as
+/// mainline's `get_u64(frame, 8 * w)` reads it; the unit of every
+/// mask comparison.
+pub fn data_word(f: &CanFdFrame, w: usize) -> u64 {
+    let mut b = [0u8; 8];
+    if let Some(s) = f.data.get(8 * w..8 * w + 8) {
+        b.copy_from_slice(s);
+    }
+    u64::from_ne_bytes(b)
+}
+
 /// The `len` byte of frame `i` (offset 4 in both frame layouts).
 fn frame_len(payload: &[u8], cfsiz: usize, i: usize) -> Option<u8> {
     payload.get(i * cfsiz + 4).copied()
@@ -342,7 +374,7 @@ pub fn check_rx_setup(req: &Request<'_>, existing: Option<u32>) -> Result<usize,
 /// it: with [`TX_CP_CAN_ID`], or when the frame carries the operation's
 /// identifier, the identifier is the operation's without `CAN_RTR_FLAG`
 /// (so the reply is a data frame and cannot trigger itself).
-pub fn rtr_reply_frame(head: &MsgHead, mut frame: CanFrame) -> CanFrame {
+pub fn rtr_reply_frame(head: &MsgHead, mut frame: CanFdFrame) -> CanFdFrame {
     if head.flags & TX_CP_CAN_ID != 0 || frame.can_id == head.can_id {
         frame.can_id = head.can_id & !super::arb::CAN_RTR_FLAG;
     }
@@ -401,6 +433,20 @@ pub fn serialize(head: &MsgHead, frames: &[CanFrame], out: &mut [u8]) -> Option<
     for (i, f) in frames.iter().enumerate() {
         let o = MHSIZ + i * CAN_FRAME_LEN;
         out[o..o + CAN_FRAME_LEN].copy_from_slice(&f.to_bytes());
+    }
+    Some(n)
+}
+
+/// [`serialize`] for any frame kind: each frame as its first `head.cfsiz()`
+/// bytes (72 with [`CAN_FD_FRAME`], else 16).
+pub fn serialize_any(head: &MsgHead, frames: &[CanFdFrame], out: &mut [u8]) -> Option<usize> {
+    let cfsiz = head.cfsiz();
+    let n = MHSIZ + frames.len() * cfsiz;
+    let out = out.get_mut(..n)?;
+    out[..MHSIZ].copy_from_slice(&head.to_bytes());
+    for (i, f) in frames.iter().enumerate() {
+        let o = MHSIZ + i * cfsiz;
+        out[o..o + cfsiz].copy_from_slice(&f.to_bytes()[..cfsiz]);
     }
     Some(n)
 }

@@ -16,17 +16,26 @@
 //! `frame_received` in NET_RX softirq (the receive callback) and the
 //! timer expiries in hrtimer softirq context.
 //!
-//! Change detection compares the 8 data bytes under the entry's mask
-//! (all 8 bytes, also those beyond the received length, as mainline's
-//! 64-bit compare does) when the received frame has a nonzero length; with
-//! [`RX_CHECK_DLC`] a changed length counts too; the first frame after the
-//! setup (or after a timeout with [`RX_ANNOUNCE_RESUME`]) always counts.
+//! Frames of both kinds are kept in the CAN FD layout ([`CanFdFrame`]: a
+//! classic frame is its first 16 bytes, see [`super::bcm::widen`]); an
+//! operation with [`CAN_FD_FRAME`] matches CAN FD frames only, one without
+//! it classic frames only (mainline: `can_is_canfd_skb` /
+//! `can_is_can_skb`).
+//!
+//! Change detection compares the data in 8-byte words under the entry's
+//! mask, word by word for as many words as the received length starts
+//! (`len` 1..=8: one word, 12: two, 64: eight; all 8 bytes of a word, also
+//! those beyond the received length, as mainline's 64-bit compare does),
+//! nothing for length 0; with [`RX_CHECK_DLC`] a changed length counts
+//! too; the first frame after the setup (or after a timeout with
+//! [`RX_ANNOUNCE_RESUME`]) always counts. The mux selector is the first
+//! word only (also for CAN FD, as mainline).
 
 use super::bcm::{
-    BcmTimeval, MsgHead, CAN_FD_FRAME, RX_ANNOUNCE_RESUME, RX_CHANGED, RX_CHECK_DLC, RX_FILTER_ID,
-    RX_NO_AUTOTIMER, RX_RTR_FRAME, RX_STATUS, RX_TIMEOUT, SETTIMER, STARTTIMER,
+    data_word, BcmTimeval, MsgHead, CAN_FD_FRAME, RX_ANNOUNCE_RESUME, RX_CHANGED, RX_CHECK_DLC,
+    RX_FILTER_ID, RX_NO_AUTOTIMER, RX_RTR_FRAME, RX_STATUS, RX_TIMEOUT, SETTIMER, STARTTIMER,
 };
-use super::frame::CanFrame;
+use super::frame::{AnyFrame, CanFdFrame};
 
 /// The frame came from a socket on this host (`MSG_DONTROUTE` on the
 /// `RX_CHANGED` message).
@@ -37,8 +46,8 @@ pub const TRAFFIC_OWN: u8 = 0x20;
 /// The last frame received for one filter entry.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RxSlot {
-    /// The frame.
-    pub frame: CanFrame,
+    /// The frame (a classic one in the CAN FD layout).
+    pub frame: CanFdFrame,
     /// Something was received since the setup (or the last timeout with
     /// [`RX_ANNOUNCE_RESUME`]).
     pub recv: bool,
@@ -54,11 +63,13 @@ pub trait RxOut {
     /// traffic flags), or `RX_TIMEOUT`/`RX_STATUS`; `rx_ifindex` is the
     /// interface `recvfrom` reports. For `RX_STATUS` the caller appends
     /// the operation's `head.nframes` filter frames itself (`frame` None).
-    fn to_user(&mut self, head: &MsgHead, frame: Option<(&CanFrame, u8)>, rx_ifindex: i32);
+    /// The frame is in the CAN FD layout; the message carries its first
+    /// 16 bytes, or all 72 with [`CAN_FD_FRAME`].
+    fn to_user(&mut self, head: &MsgHead, frame: Option<(&CanFdFrame, u8)>, rx_ifindex: i32);
     /// Transmit the reply of an [`RX_RTR_FRAME`] operation (filter frame 0)
     /// on `ifindex` (never 0: an operation on "any" interface does not
     /// reply).
-    fn send_reply(&mut self, reply: &CanFrame, ifindex: i32);
+    fn send_reply(&mut self, reply: &CanFdFrame, ifindex: i32);
     /// Arm the timeout timer at `at` (ns).
     fn arm_timeout(&mut self, at: u64);
     /// Cancel the timeout timer.
@@ -154,22 +165,28 @@ impl RxOp {
         }
     }
 
-    /// A classic frame with this operation's identifier arrived at `now`
-    /// on `rx_ifindex` (`traffic`: [`TRAFFIC_LOCAL`]/[`TRAFFIC_OWN`]).
+    /// A frame arrived at `now` on `rx_ifindex` (`traffic`:
+    /// [`TRAFFIC_LOCAL`]/[`TRAFFIC_OWN`]); ignored unless it has this
+    /// operation's identifier and kind (CAN FD with [`CAN_FD_FRAME`], else
+    /// classic).
     #[allow(clippy::too_many_arguments)]
     pub fn frame_received(
         &mut self,
-        rx: &CanFrame,
+        rx: &AnyFrame,
         rx_ifindex: i32,
         traffic: u8,
         now: u64,
-        filters: &[CanFrame],
+        filters: &[CanFdFrame],
         last: &mut [RxSlot],
         out: &mut impl RxOut,
     ) {
-        if rx.can_id != self.can_id || self.flags & CAN_FD_FRAME != 0 {
+        if rx.can_id() != self.can_id || rx.is_fd() != (self.flags & CAN_FD_FRAME != 0) {
             return;
         }
+        let rx = &match rx {
+            AnyFrame::Classic(f) => super::bcm::widen(f),
+            AnyFrame::Fd(f) => *f,
+        };
         let timed = self.ival1.to_ns() != 0 || self.ival2.to_ns() != 0;
         if self.ifindex == 0 && self.flags & RX_RTR_FRAME == 0 && timed {
             if self.if_detected == 0 {
@@ -194,12 +211,10 @@ impl RxOp {
         } else if self.nframes == 1 {
             self.compare(0, rx, traffic, now, filters, last, out);
         } else if self.nframes > 1 {
-            let mux = u64::from_ne_bytes(filters[0].data);
-            let got = u64::from_ne_bytes(rx.data);
+            let mux = filters.first().map_or(0, |f| data_word(f, 0));
+            let got = data_word(rx, 0);
             let n = (self.nframes as usize).min(filters.len());
-            if let Some(i) =
-                (1..n).find(|&i| mux & got == mux & u64::from_ne_bytes(filters[i].data))
-            {
+            if let Some(i) = (1..n).find(|&i| mux & got == mux & data_word(&filters[i], 0)) {
                 self.compare(i, rx, traffic, now, filters, last, out);
             }
         }
@@ -257,20 +272,23 @@ impl RxOp {
     fn compare(
         &mut self,
         i: usize,
-        rx: &CanFrame,
+        rx: &CanFdFrame,
         traffic: u8,
         now: u64,
-        filters: &[CanFrame],
+        filters: &[CanFdFrame],
         last: &mut [RxSlot],
         out: &mut impl RxOut,
     ) {
         let Some(slot) = last.get(i) else { return };
-        let mask = filters.get(i).map_or(0, |f| u64::from_ne_bytes(f.data));
-        let changed = !slot.recv
-            || (rx.len > 0
-                && mask & u64::from_ne_bytes(rx.data)
-                    != mask & u64::from_ne_bytes(slot.frame.data))
-            || (self.flags & RX_CHECK_DLC != 0 && rx.len != slot.frame.len);
+        let filter = filters.get(i);
+        // Mainline: for (i = 0; i < len; i += 8) compare word i / 8.
+        let words = usize::from(rx.len).min(rx.data.len()).div_ceil(8);
+        let differs = (0..words).any(|w| {
+            let mask = filter.map_or(0, |f| data_word(f, w));
+            mask & data_word(rx, w) != mask & data_word(&slot.frame, w)
+        });
+        let changed =
+            !slot.recv || differs || (self.flags & RX_CHECK_DLC != 0 && rx.len != slot.frame.len);
         if changed {
             self.update_and_send(i, rx, traffic, now, last, out);
         }
@@ -279,7 +297,7 @@ impl RxOp {
     fn update_and_send(
         &mut self,
         i: usize,
-        rx: &CanFrame,
+        rx: &CanFdFrame,
         traffic: u8,
         now: u64,
         last: &mut [RxSlot],

@@ -9,7 +9,7 @@
 mod bcm_msg_check;
 
 use proptest::prelude::*;
-use rcan_core::bcm::{BcmTimeval, MsgHead, MHSIZ};
+use rcan_core::bcm::{BcmTimeval, MsgHead, CAN_FD_FRAME, MHSIZ};
 
 fn well_formed() -> impl Strategy<Value = Vec<u8>> {
     (
@@ -32,9 +32,17 @@ fn well_formed() -> impl Strategy<Value = Vec<u8>> {
                 nframes,
             };
             let mut m = head.to_bytes().to_vec();
+            let fd = flags & CAN_FD_FRAME != 0;
             for mut f in frames {
-                f[4] %= 10;
-                m.extend_from_slice(&f);
+                if fd {
+                    // A 72-byte frame: the 16 bytes and 56 more, len 0..=65.
+                    f[4] %= 66;
+                    m.extend_from_slice(&f);
+                    m.extend((0..56u8).map(|i| f[usize::from(i) % 16] ^ i));
+                } else {
+                    f[4] %= 10;
+                    m.extend_from_slice(&f);
+                }
             }
             m
         })

@@ -10,7 +10,7 @@ use rcan_core::arb::{CAN_RTR_FLAG, EINVAL};
 use rcan_core::bcm::*;
 use rcan_core::bcm_rx::{RxOp, RxOut, RxSlot};
 use rcan_core::bcm_tx::{TxOp, TxOut};
-use rcan_core::frame::CanFrame;
+use rcan_core::frame::{AnyFrame, CanFdFrame, CanFrame};
 
 const US: u64 = 1_000;
 
@@ -20,6 +20,20 @@ fn frame(id: u32, len: u8, data: [u8; 8]) -> CanFrame {
         len,
         data,
         ..CanFrame::default()
+    }
+}
+
+/// The classic frame in the first 16 bytes of a CAN FD layout frame.
+fn narrow(f: &CanFdFrame) -> CanFrame {
+    CanFrame::from_bytes(f.to_bytes()[..16].try_into().unwrap())
+}
+
+fn fd_frame(id: u32, len: u8, data: [u8; 64]) -> CanFdFrame {
+    CanFdFrame {
+        can_id: id,
+        len,
+        data,
+        ..CanFdFrame::default()
     }
 }
 
@@ -174,22 +188,28 @@ fn tx_read_reports_state() {
 #[derive(Default)]
 struct RxRec {
     changed: Vec<(u64, CanFrame)>,
+    /// The same reports in the CAN FD layout (all 64 data bytes).
+    changed_fd: Vec<(u64, CanFdFrame)>,
     timeouts: Vec<u64>,
-    replies: Vec<CanFrame>,
+    replies: Vec<CanFdFrame>,
     timeout_at: Option<u64>,
     throttle_at: Option<u64>,
     now: u64,
 }
 
 impl RxOut for RxRec {
-    fn to_user(&mut self, head: &MsgHead, frame: Option<(&CanFrame, u8)>, _ifindex: i32) {
+    fn to_user(&mut self, head: &MsgHead, frame: Option<(&CanFdFrame, u8)>, _ifindex: i32) {
         match head.opcode {
-            RX_CHANGED => self.changed.push((self.now, *frame.unwrap().0)),
+            RX_CHANGED => {
+                let f = frame.unwrap().0;
+                self.changed.push((self.now, narrow(f)));
+                self.changed_fd.push((self.now, *f));
+            }
             RX_TIMEOUT => self.timeouts.push(self.now),
             _ => {}
         }
     }
-    fn send_reply(&mut self, reply: &CanFrame, _ifindex: i32) {
+    fn send_reply(&mut self, reply: &CanFdFrame, _ifindex: i32) {
         self.replies.push(*reply);
     }
     fn arm_timeout(&mut self, at: u64) {
@@ -209,13 +229,24 @@ impl RxOut for RxRec {
 
 struct Rx {
     op: RxOp,
-    filters: Vec<CanFrame>,
+    filters: Vec<CanFdFrame>,
     last: Vec<RxSlot>,
     rec: RxRec,
 }
 
 impl Rx {
     fn new(flags: u32, ival1_us: u64, ival2_us: u64, filters: Vec<CanFrame>) -> Rx {
+        Rx::new_any(
+            flags,
+            ival1_us,
+            ival2_us,
+            filters.iter().map(widen).collect(),
+        )
+    }
+
+    /// An operation whose filters are given in the CAN FD layout (with
+    /// `CAN_FD_FRAME` in `flags` the message carries 72-byte frames).
+    fn new_any(flags: u32, ival1_us: u64, ival2_us: u64, filters: Vec<CanFdFrame>) -> Rx {
         let raw = MsgHead {
             opcode: RX_SETUP,
             flags,
@@ -225,7 +256,8 @@ impl Rx {
             can_id: 0x42,
             nframes: filters.len() as u32,
         };
-        let msg = message(&raw, &filters);
+        let mut msg = vec![0u8; MHSIZ + filters.len() * raw.cfsiz()];
+        assert_eq!(serialize_any(&raw, &filters, &mut msg), Some(msg.len()));
         let req = parse(&msg).unwrap();
         check_rx_setup(&req, None).unwrap();
         let h = rx_setup_head(&raw);
@@ -241,6 +273,10 @@ impl Rx {
 
     /// Runs the timers due up to `t`, then delivers `f` at `t`.
     fn recv_at(&mut self, t: u64, f: &CanFrame) {
+        self.recv_any_at(t, &AnyFrame::Classic(*f));
+    }
+
+    fn recv_any_at(&mut self, t: u64, f: &AnyFrame) {
         self.run_until(t);
         self.rec.now = t;
         self.op
@@ -430,7 +466,11 @@ fn rx_rtr_reply() {
     };
     let reply = rtr_reply_frame(
         &raw,
-        frame(0x42 | CAN_RTR_FLAG, 2, [0xab, 0xcd, 0, 0, 0, 0, 0, 0]),
+        widen(&frame(
+            0x42 | CAN_RTR_FLAG,
+            2,
+            [0xab, 0xcd, 0, 0, 0, 0, 0, 0],
+        )),
     );
     assert_eq!(reply.can_id, 0x42);
     let mut op = RxOp::new(&raw, 1);
@@ -438,7 +478,7 @@ fn rx_rtr_reply() {
     let mut last = [RxSlot::default()];
     op.setup(&raw, 0, &mut last, &mut rec);
     op.frame_received(
-        &frame(0x42 | CAN_RTR_FLAG, 0, [0; 8]),
+        &AnyFrame::Classic(frame(0x42 | CAN_RTR_FLAG, 0, [0; 8])),
         1,
         0,
         0,
@@ -447,7 +487,7 @@ fn rx_rtr_reply() {
         &mut rec,
     );
     op.frame_received(
-        &frame(0x42, 0, [0; 8]),
+        &AnyFrame::Classic(frame(0x42, 0, [0; 8])),
         1,
         0,
         0,
@@ -461,7 +501,7 @@ fn rx_rtr_reply() {
     let mut any = RxOp::new(&raw, 0);
     any.setup(&raw, 0, &mut last, &mut rec);
     any.frame_received(
-        &frame(0x42 | CAN_RTR_FLAG, 0, [0; 8]),
+        &AnyFrame::Classic(frame(0x42 | CAN_RTR_FLAG, 0, [0; 8])),
         1,
         0,
         0,
@@ -668,4 +708,161 @@ fn errno_of_bad_messages() {
     let mut m = fd.to_bytes().to_vec();
     m.extend([0u8; 72]);
     assert_eq!(check_tx_setup(&parse(&m).unwrap(), 1, None), Ok(MHSIZ + 72));
+}
+
+// ---- CAN FD (CAN_FD_FRAME) ----------------------------------------------------
+
+/// The CAN FD payload lengths (ISO 11898-1:2015).
+const FD_LENS: [u8; 16] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64];
+
+fn small_fd_frame() -> impl Strategy<Value = CanFdFrame> {
+    (
+        prop::sample::select(&FD_LENS[..]),
+        prop::collection::vec(0u8..3, 64),
+    )
+        .prop_map(|(len, d)| fd_frame(0x42, len, d.try_into().unwrap()))
+}
+
+proptest! {
+    /// CAN FD change detection, stated byte by byte: after the first
+    /// frame, RX_CHANGED iff some byte in the 8-byte words the received
+    /// length reaches into (bytes 0 .. len rounded up to 8) differs from
+    /// the last reported frame under the mask, or with RX_CHECK_DLC the
+    /// length changed. The report carries all 64 bytes of the frame.
+    #[test]
+    fn rx_fd_changed_iff_masked_change(mask in prop::collection::vec(prop_oneof![Just(0u8), Just(0xffu8), any::<u8>()], 64),
+                                       check_dlc in any::<bool>(),
+                                       frames in prop::collection::vec(small_fd_frame(), 1..40)) {
+        let flags = CAN_FD_FRAME | if check_dlc { RX_CHECK_DLC } else { 0 };
+        let mask: [u8; 64] = mask.try_into().unwrap();
+        let mut rx = Rx::new_any(flags, 0, 0, vec![fd_frame(0x42, 64, mask)]);
+        let mut prev: Option<CanFdFrame> = None;
+        let mut want = Vec::new();
+        for (k, f) in frames.iter().enumerate() {
+            let t = k as u64 * 10 * US;
+            let reach = usize::from(f.len).div_ceil(8) * 8;
+            let changed = match prev {
+                None => true,
+                Some(p) => (0..reach).any(|i| mask[i] & (f.data[i] ^ p.data[i]) != 0)
+                    || (check_dlc && f.len != p.len),
+            };
+            if changed {
+                want.push((t, *f));
+                prev = Some(*f);
+            }
+            rx.recv_any_at(t, &AnyFrame::Fd(*f));
+        }
+        prop_assert_eq!(rx.rec.changed_fd, want);
+    }
+
+    /// An operation with CAN_FD_FRAME sees CAN FD frames only, one without
+    /// it classic frames only, whatever their identifier and content.
+    #[test]
+    fn rx_kind_must_match(fd_op in any::<bool>(), filter_id in any::<bool>(),
+                          frames in prop::collection::vec((any::<bool>(), small_fd_frame()), 1..30)) {
+        let flags = if fd_op { CAN_FD_FRAME } else { 0 } | if filter_id { RX_FILTER_ID } else { 0 };
+        let mut rx = Rx::new_any(flags, 0, 0, vec![fd_frame(0x42, 64, [0xff; 64])]);
+        let mut want = 0;
+        for (k, (is_fd, f)) in frames.iter().enumerate() {
+            let any = if *is_fd {
+                AnyFrame::Fd(*f)
+            } else {
+                let mut c = narrow(f);
+                c.len = c.len.min(8);
+                AnyFrame::Classic(c)
+            };
+            let before = rx.rec.changed_fd.len();
+            rx.recv_any_at(k as u64 * US, &any);
+            let got = rx.rec.changed_fd.len() - before;
+            if *is_fd != fd_op {
+                prop_assert_eq!(got, 0, "{:?} reported to an op with fd={}", any, fd_op);
+            }
+            want += got;
+        }
+        prop_assert_eq!(rx.rec.changed_fd.len(), want);
+    }
+
+    /// 72-byte frames round-trip through the message format and the
+    /// frame accessor; a classic frame read as CAN FD has zero bytes past 8.
+    #[test]
+    fn fd_message_round_trip(h in any_head(), frames in prop::collection::vec(small_fd_frame(), 0..5)) {
+        let mut h = h;
+        h.flags |= CAN_FD_FRAME;
+        h.opcode = TX_SETUP + h.opcode % 7;
+        let mut m = vec![0u8; MHSIZ + frames.len() * 72];
+        prop_assert_eq!(serialize_any(&h, &frames, &mut m), Some(m.len()));
+        let req = parse(&m).unwrap();
+        prop_assert_eq!(req.head, h);
+        for (i, f) in frames.iter().enumerate() {
+            prop_assert_eq!(frame_at(req.payload, 72, i), Some(*f));
+            let c = frame_at(&req.payload[i * 72..i * 72 + 16], 16, 0).unwrap();
+            prop_assert_eq!(&c.data[..8], &f.data[..8]);
+            prop_assert!(c.data[8..].iter().all(|&b| b == 0));
+        }
+        prop_assert_eq!(frame_at(req.payload, 72, frames.len()), None);
+    }
+}
+
+#[test]
+fn fd_errno_of_bad_messages() {
+    let fd = MsgHead {
+        opcode: TX_SETUP,
+        flags: SETTIMER | CAN_FD_FRAME,
+        ival2: BcmTimeval::from_us(100),
+        can_id: 0x123,
+        nframes: 1,
+        ..MsgHead::default()
+    };
+    let msg = |h: &MsgHead, len: u8| {
+        let mut m = vec![0u8; MHSIZ + 72];
+        serialize_any(h, &[fd_frame(h.can_id, len, [0; 64])], &mut m).unwrap();
+        m
+    };
+    // len 64 is fine, 65 is EINVAL (TX_SETUP; and the RTR reply of RX_SETUP).
+    assert_eq!(
+        check_tx_setup(&parse(&msg(&fd, 64)).unwrap(), 1, None),
+        Ok(MHSIZ + 72)
+    );
+    assert_eq!(
+        check_tx_setup(&parse(&msg(&fd, 65)).unwrap(), 1, None),
+        Err(EINVAL)
+    );
+    let rtr = MsgHead {
+        opcode: RX_SETUP,
+        flags: RX_RTR_FRAME | CAN_FD_FRAME,
+        can_id: 0x123 | CAN_RTR_FLAG,
+        ..fd
+    };
+    assert_eq!(
+        check_rx_setup(&parse(&msg(&rtr, 64)).unwrap(), None),
+        Ok(MHSIZ + 72)
+    );
+    assert_eq!(
+        check_rx_setup(&parse(&msg(&rtr, 65)).unwrap(), None),
+        Err(EINVAL)
+    );
+    // The size must be a whole number of 72-byte frames: a classic frame
+    // (16 bytes) after an FD head is EINVAL, and so is an FD frame after
+    // a classic head (72 is not a multiple of 16).
+    let mut m = fd.to_bytes().to_vec();
+    m.extend([0u8; 16]);
+    assert_eq!(parse(&m).map(|_| ()), Err(EINVAL));
+    let classic = MsgHead {
+        flags: SETTIMER,
+        ..fd
+    };
+    let mut m = classic.to_bytes().to_vec();
+    m.extend([0u8; 72]);
+    assert_eq!(parse(&m).map(|_| ()), Err(EINVAL));
+    // TX_SEND of one FD frame.
+    let send = MsgHead {
+        opcode: TX_SEND,
+        ..fd
+    };
+    assert_eq!(
+        check_tx_send(&parse(&msg(&send, 64)).unwrap(), 1),
+        Ok(MHSIZ + 72)
+    );
+    // An operation's name includes CAN_FD_FRAME.
+    assert_ne!(OpKey::of(&fd, 1), OpKey::of(&classic, 1));
 }
