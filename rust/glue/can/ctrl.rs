@@ -33,13 +33,13 @@
 //! Used by the SJA1000, 82527 and CTU CAN FD drivers; canloop uses
 //! [`setup`].
 
-use crate::glue::can::dev::{CanDev, CanDevice};
+use crate::glue::can::dev::{CanDev, CanDevice, CanStat};
 use crate::glue::can::skb::alloc_rx;
 use crate::glue::netdev::{Dev, NetDev, Setup, Stat};
 use crate::glue::skb::Skb;
 use crate::rcan_core::arb::CAN_ERR_FLAG;
 use crate::rcan_core::bittiming;
-use crate::rcan_core::candev::{ctrlmode, Settings};
+use crate::rcan_core::candev::{ctrlmode, CanStats, NetErrStats, Settings};
 use crate::rcan_core::frame::AnyFrame;
 use kernel::prelude::*;
 
@@ -204,6 +204,28 @@ pub(crate) fn echo_dropped(dev: &NetDev, echo: &mut Option<Skb>) -> bool {
             true
         }
         None => false,
+    }
+}
+
+/// Adds one error round's counts, as a controller core decoded them, to
+/// the CAN device statistics (`ip -s -d`: bus errors, error warning,
+/// error passive, bus off, arbitration lost) and the interface's error
+/// statistics (an RX overrun counts as an RX error too, as in mainline).
+/// Any context.
+pub(crate) fn count_errors(dev: &NetDev, can: &CanDev, stats: &CanStats, net: &NetErrStats) {
+    can.add(CanStat::BusError, stats.bus_error);
+    can.add(CanStat::ErrorWarning, stats.error_warning);
+    can.add(CanStat::ErrorPassive, stats.error_passive);
+    can.add(CanStat::BusOff, stats.bus_off);
+    can.add(CanStat::ArbitrationLost, stats.arbitration_lost);
+    for _ in 0..net.rx_over_errors {
+        dev.stats_err(Stat::RxOverErrors);
+    }
+    for _ in 0..net.rx_errors.saturating_sub(net.rx_over_errors) {
+        dev.stats_err(Stat::RxErrors);
+    }
+    for _ in 0..net.tx_errors {
+        dev.stats_err(Stat::TxErrors);
     }
 }
 

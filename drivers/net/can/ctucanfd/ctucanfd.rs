@@ -55,7 +55,7 @@
 use crate::glue::can::ctrl;
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
 use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
-use crate::glue::netdev::{Dev, Driver, NetDev, Stat, Xmit};
+use crate::glue::netdev::{Dev, Driver, NetDev, Xmit};
 use crate::glue::skb::Skb;
 use crate::rcan_core::bittiming;
 use crate::rcan_core::candev::{
@@ -199,22 +199,7 @@ fn state_name(s: CanState) -> &'static str {
 /// does, and hands the error frame up. Hardirq context (the chip lock
 /// held).
 fn report_error<R: Regs>(dev: &NetDev, p: &CtuPriv<R>, r: &ErrReport) {
-    p.can.add(CanStat::BusError, r.stats.bus_error);
-    p.can.add(CanStat::ErrorWarning, r.stats.error_warning);
-    p.can.add(CanStat::ErrorPassive, r.stats.error_passive);
-    p.can.add(CanStat::BusOff, r.stats.bus_off);
-    p.can
-        .add(CanStat::ArbitrationLost, r.stats.arbitration_lost);
-    // RxOverErrors counts an rx error too.
-    for _ in 0..r.net.rx_over_errors {
-        dev.stats_err(Stat::RxOverErrors);
-    }
-    for _ in 0..r.net.rx_errors.saturating_sub(r.net.rx_over_errors) {
-        dev.stats_err(Stat::RxErrors);
-    }
-    for _ in 0..r.net.tx_errors {
-        dev.stats_err(Stat::TxErrors);
-    }
+    ctrl::count_errors(dev, &p.can, &r.stats, &r.net);
     if let Some((from, to)) = r.state {
         pr_info!(
             "{}: state changes from {} to {}\n",

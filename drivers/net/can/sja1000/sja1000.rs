@@ -631,22 +631,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
                 dev.wake_queue();
             }
             Event::Error(r) => {
-                p.can.add(CanStat::BusError, r.stats.bus_error);
-                p.can.add(CanStat::ErrorWarning, r.stats.error_warning);
-                p.can.add(CanStat::ErrorPassive, r.stats.error_passive);
-                p.can.add(CanStat::BusOff, r.stats.bus_off);
-                p.can
-                    .add(CanStat::ArbitrationLost, r.stats.arbitration_lost);
-                // RxOverErrors counts an rx error too.
-                for _ in 0..r.net.rx_over_errors {
-                    dev.stats_err(Stat::RxOverErrors);
-                }
-                for _ in 0..r.net.rx_errors.saturating_sub(r.net.rx_over_errors) {
-                    dev.stats_err(Stat::RxErrors);
-                }
-                for _ in 0..r.net.tx_errors {
-                    dev.stats_err(Stat::TxErrors);
-                }
+                ctrl::count_errors(dev, &p.can, &r.stats, &r.net);
                 rx_frame(dev, &r.frame);
                 bus_off |= r.bus_off;
             }
