@@ -40,6 +40,8 @@ pub(crate) mod frame;
 pub(crate) mod i82527;
 #[path = "core/src/i82527_model.rs"]
 pub(crate) mod i82527_model;
+#[path = "core/src/ring.rs"]
+pub(crate) mod ring;
 #[path = "core/src/rxtable.rs"]
 pub(crate) mod rxtable;
 #[path = "core/src/sja1000.rs"]

@@ -28,6 +28,7 @@ pub mod filter;
 pub mod frame;
 pub mod i82527;
 pub mod i82527_model;
+pub mod ring;
 pub mod rxtable;
 pub mod sja1000;
 pub mod sja1000_boards;
