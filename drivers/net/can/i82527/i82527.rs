@@ -6,7 +6,7 @@
 //!
 //! This file is compiled into each front-end module (`#[path]`), like the
 //! SJA1000 driver; the chip logic (message-object allocation, masks,
-//! interrupt handling) is the pure, host-tested `rcan_core::i82527`.
+//! interrupt handling) is the pure, host-tested `crate::rcan_chips::i82527`.
 //!
 //! Per device ([`I82527Priv`]): the chip, the echo skb of the frame in
 //! the transmit object, the receive queue, the programmed masks and the
@@ -66,13 +66,13 @@ use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf,
 use crate::glue::ring::Ring;
 use crate::glue::skb::Skb;
 use crate::rcan_api::{self, FilterListener};
-use crate::rcan_core::bittiming::{self, I82527_BITTIMING_CONST};
-use crate::rcan_core::candev::{self, CanState, Settings};
-use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_MTU};
-use crate::rcan_core::i82527::{
+use crate::rcan_chips::i82527::{
     bitrate, error_frame, masks_for, sys_clock, AnswerReq, Chip, Config, Event, I82527Error, Masks,
     Regs, State, ANSWER_LEN, CTRLMODE_SUPPORTED,
 };
+use crate::rcan_core::bittiming::{self, I82527_BITTIMING_CONST};
+use crate::rcan_core::candev::{self, CanState, Settings};
+use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_MTU};
 use core::marker::PhantomData;
 use kernel::prelude::*;
 
