@@ -242,7 +242,7 @@ fn meminfo() -> io::Result<Mem> {
 
 /// Kernel CPU time of all CPUs so far (`/proc/stat` system + irq +
 /// softirq), in seconds.
-fn kernel_cpu_s() -> io::Result<f64> {
+pub fn kernel_cpu_s() -> io::Result<f64> {
     let stat = std::fs::read_to_string("/proc/stat")?;
     let cpu: Vec<u64> = stat
         .lines()
