@@ -211,8 +211,7 @@ pub fn throughput_shaped(
                 match recv_patient(rx, &mut c) {
                     Ok(Some(f)) => {
                         let seq = u64::from(f.seq());
-                        if f.tag() != tag || f.id != TP_ID || f.shape() != shape || seq < expected
-                        {
+                        if f.tag() != tag || f.id != TP_ID || f.shape() != shape || seq < expected {
                             // Stale, foreign, or late (out of order).
                             c.odd += 1;
                         } else {
