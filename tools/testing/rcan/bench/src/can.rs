@@ -579,6 +579,22 @@ pub fn clk_tck() -> u64 {
     }
 }
 
+/// Kernel CPU time of all CPUs so far (`/proc/stat` system + irq +
+/// softirq), in seconds.
+pub fn kernel_cpu_s() -> io::Result<f64> {
+    let stat = std::fs::read_to_string("/proc/stat")?;
+    let cpu: Vec<u64> = stat
+        .lines()
+        .find(|l| l.starts_with("cpu "))
+        .ok_or_else(|| io::Error::other("/proc/stat: no cpu line"))?
+        .split_whitespace()
+        .skip(1)
+        .map(|v| v.parse().unwrap_or(0))
+        .collect();
+    let f = |i: usize| cpu.get(i).copied().unwrap_or(0);
+    Ok((f(2) + f(5) + f(6)) as f64 / clk_tck() as f64)
+}
+
 /// Sends `frame`, retrying for up to a second while the device queue
 /// pushes back (`ENOBUFS`/`EAGAIN`). Returns how many retries it took.
 pub fn send_retrying(sock: &RawSocket, frame: &Frame) -> io::Result<u64> {

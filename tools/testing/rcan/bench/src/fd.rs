@@ -18,10 +18,10 @@
 
 use std::time::Instant;
 
+use crate::can::kernel_cpu_s;
 use crate::can::{self, Shape};
 use crate::report::ratio_range;
 use crate::stack::{self, Paths, Stack};
-use crate::table::kernel_cpu_s;
 use crate::workload::{self, median};
 
 /// Settings (from the raw part's options).
