@@ -160,8 +160,18 @@ pub fn phase(frames: u32, shape: Shape, id: u32) -> Result<f64, String> {
         while got < frames {
             let f = rx.recv(false).map_err(|e| format!("after {got}: {e}"))?;
             if f.seq() != got || f.shape() != shape {
+                // Evidence: the sequence numbers of what comes next.
+                let mut next = vec![f.seq()];
+                rx.set_rcvtimeo(Duration::from_secs(1))
+                    .map_err(|e| e.to_string())?;
+                while next.len() < 16 {
+                    match rx.recv(false) {
+                        Ok(g) => next.push(g.seq()),
+                        Err(_) => break,
+                    }
+                }
                 return Err(format!(
-                    "frame {got}: seq {}, shape {:?}",
+                    "frame {got}: seq {}, shape {:?}; seqs received from there: {next:?}",
                     f.seq(),
                     f.shape()
                 ));
