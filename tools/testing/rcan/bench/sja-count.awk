@@ -10,7 +10,9 @@
 # starts with <region> inside it counts. Prints one line per phase
 # (accesses, per frame, frames/s) and per stack and shape (accesses per
 # frame, median of the phases' frames/s and kernel CPU per frame: the
-# host's load makes single phases slow at random).
+# host's load makes single phases slow at random). With -v regs=1 also
+# accesses per frame by stack, direction and address (region name and
+# address as in the trace), for telling where two drivers differ.
 BEGIN {
 	if (tag == "") tag = "SJA"
 	if (region == "") region = "kvaser_pci-"
@@ -33,6 +35,11 @@ FNR == NR {
 inph && index($0, "name '" region) {
 	n[ph]++
 	if ($1 == "memory_region_ops_read") r[ph]++
+	if (regs) {
+		for (i = 1; i <= NF; i++) if ($i == "addr") ad = $(i + 1)
+		nm = substr($0, index($0, "name '") + 6); sub(/'.*/, "", nm)
+		acc[ph, ($1 == "memory_region_ops_read" ? "R" : "W") " " nm " " ad]++
+	}
 }
 END {
 	printf "%-6s %-18s %6s %9s %10s %8s %10s\n", "phase", "stack", "frames", "accesses", "per frame", "reads", "frames/s"
@@ -57,10 +64,24 @@ END {
 		m = k; sub(/^ours/, "mainline", m)
 		if (!(m in tf)) continue
 		sh = k; sub(/^ours ?/, "", sh)
-		printf "ours/mainline%s: accesses per frame %.3f, throughput (medians) %.3f", sh != "" ? " (" sh ")" : "",
-			(ta[k] / tf[k]) / (ta[m] / tf[m]), med[k] / med[m]
+		printf "ours/mainline%s: accesses per frame %s, throughput (medians) %.3f", sh != "" ? " (" sh ")" : "",
+			ta[m] ? sprintf("%.3f", (ta[k] / tf[k]) / (ta[m] / tf[m])) : "-", med[k] / med[m]
 		if (nc[k] && nc[m] && mc[m] > 0) printf ", kernel CPU per frame (medians) %.3f", mc[k] / mc[m]
 		printf "\n"
+	}
+	if (regs) {
+		print ""
+		printf "%-18s %-3s %-24s %-12s %9s\n", "stack", "r/w", "region", "address", "per frame"
+		for (x in acc) {
+			split(x, q, SUBSEP)
+			if (frames[q[1]] == 0) continue
+			split(q[2], w, " ")
+			per[key[q[1]] SUBSEP w[1] SUBSEP w[2] SUBSEP w[3]] += acc[x]
+		}
+		for (x in per) {
+			split(x, w, SUBSEP)
+			printf "%-18s %-3s %-24s %-12s %9.2f\n", w[1], w[2], w[3], w[4], per[x] / tf[w[1]]
+		}
 	}
 }
 
