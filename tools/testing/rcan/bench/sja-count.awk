@@ -25,6 +25,7 @@ FNR == NR {
 		cpu[$2] = $8
 		if ($2 + 1 > nph) nph = $2 + 1
 	}
+	if ($1 == tag "-FAILED") { k = $3 " " $5; sub(/:$/, "", k); failed[k]++ }
 	next
 }
 /name .pci-conf-idx./ && /memory_region_ops_write/ {
@@ -58,6 +59,8 @@ END {
 		mc[k] = nc[k] ? median(cpuv, k, nc[k]) : 0
 		printf "%-18s %8d %10.2f %16.0f %14s\n", k, tf[k], ta[k] / tf[k], med[k], nc[k] ? sprintf("%.0f", mc[k]) : "-"
 	}
+	for (k in failed)
+		printf "%s: %d phase(s) failed (frames lost, out of order or not sent; not counted above)\n", k, failed[k]
 	# Ratios ours/mainline, for each shape both stacks have.
 	for (k in tf) {
 		if (k !~ /^ours/) continue

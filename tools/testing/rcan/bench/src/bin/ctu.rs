@@ -20,8 +20,11 @@
 //!
 //! bracketed by trace markers as in `card.rs`; sja-count.awk (with `-v
 //! tag=CTU -v region=ctucan`) counts each driver's register accesses per
-//! frame. A phase that fails (a frame missing for 10 s) prints
-//! `CTU-FAILED`; the others go on, the exit status is then 1.
+//! frame. A phase in which a frame goes missing (10 s), comes out of
+//! order or cannot be sent (the driver's queue stopped for a second)
+//! prints `CTU-FAILED` and counts in the summary: a finding about that
+//! driver, not an error of the benchmark; the others go on. The exit
+//! status is non-zero only if a stack cannot be set up.
 //!
 //! Interrupts of the card and this process are on CPU 0, as in the
 //! SJA1000 section: QEMU's bus has no bit timing, so the receiving core's
@@ -117,10 +120,13 @@ fn main() -> std::process::ExitCode {
     // Usage errors exit 2 (clap) before anything is loaded or pinned.
     let cli = <Cli as clap::Parser>::parse();
     match real_main(cli.frames, cli.rounds as usize) {
-        Ok(0) => std::process::ExitCode::SUCCESS,
         Ok(failed) => {
-            eprintln!("rcan-bench-ctu: {failed} phase(s) failed");
-            std::process::ExitCode::FAILURE
+            if failed > 0 {
+                println!(
+                    "rcan-bench-ctu: {failed} phase(s) lost frames or stalled (CTU-FAILED lines)"
+                );
+            }
+            std::process::ExitCode::SUCCESS
         }
         Err(e) => {
             eprintln!("rcan-bench-ctu: {e}");
