@@ -135,6 +135,24 @@ fn main() -> std::process::ExitCode {
     }
 }
 
+/// The interface counters that tell where a missing frame went: sent
+/// by can0 or not, received by can1 or dropped or overrun there.
+fn link_stats() -> String {
+    let stat = |d: &str, f: &str| {
+        std::fs::read_to_string(format!("/sys/class/net/{d}/statistics/{f}"))
+            .map_or_else(|_| "?".into(), |v| v.trim().to_string())
+    };
+    format!(
+        "can0 tx_packets {} tx_dropped {} tx_errors {}, can1 rx_packets {} rx_dropped {} rx_over_errors {}",
+        stat("can0", "tx_packets"),
+        stat("can0", "tx_dropped"),
+        stat("can0", "tx_errors"),
+        stat("can1", "rx_packets"),
+        stat("can1", "rx_dropped"),
+        stat("can1", "rx_over_errors")
+    )
+}
+
 /// Kernel CPU time over `f`, in seconds, with `f`'s result.
 fn kernel_cpu<T>(f: impl FnOnce() -> T) -> Result<(T, f64), String> {
     let k0 = can::kernel_cpu_s().map_err(|e| e.to_string())?;
@@ -174,7 +192,10 @@ fn real_main(frames: u32, rounds: usize) -> Result<usize, String> {
                         cpu_s * 1e9 / f64::from(frames)
                     ),
                     Err(e) => {
-                        println!("CTU-FAILED {n} {name} {round} {label}: {e}");
+                        println!(
+                            "CTU-FAILED {n} {name} {round} {label}: {e}; since loading: {}",
+                            link_stats()
+                        );
                         failed += 1;
                     }
                 }
