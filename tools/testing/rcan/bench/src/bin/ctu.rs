@@ -58,6 +58,9 @@ const OURS: [&str; 5] = [
 /// The shapes measured in each phase pair, with their labels.
 const SHAPES: [(Shape, &str); 2] = [(Shape::FD64_BRS, "fd64"), (Shape::CLASSIC8, "classic8")];
 
+/// Frames sent after pinning the interrupt, before the phases.
+const WARMUP: u32 = 16;
+
 /// Extended identifier of every frame.
 const ID: u32 = 0x1234_5678 | 1 << 31;
 
@@ -182,6 +185,14 @@ fn real_main(frames: u32, rounds: usize) -> Result<usize, String> {
             load(s, &root, &kb)?;
             pin_irq("can0")?;
             pin_irq("can1")?;
+            // The new affinity takes effect at the line's next interrupt:
+            // a few frames first, so that the phases start on CPU 0 (a
+            // driver that hands frames to netif_rx in its hard interrupt
+            // can otherwise deliver the first frames out of order, as the
+            // backlogs of the old and the new CPU drain independently).
+            if let Err(e) = phase(WARMUP, Shape::CLASSIC8, ID) {
+                println!("CTU-WARMUP {name} {round}: {e}");
+            }
             for (shape, label) in SHAPES {
                 marker(&config, MARK_START)?;
                 let (secs, cpu_s) = kernel_cpu(|| phase(frames, shape, ID))?;
