@@ -12,11 +12,15 @@
 # (rcan_dsor over rcan_loop) against mainline ISO-TP (can-isotp over
 # vcan): goodput and CPU time per KiB; on request (--part bcm) CAN_BCM:
 # kernel CPU per cyclic frame, 1,000 jobs at 10 ms, rcan_bcm against
-# can-bcm.ko. Never fails on a missed target.
+# can-bcm.ko; on request (--part fd) CAN FD: 64-byte FD frames with BRS
+# and classic frames on rcan_loop vs vcan at MTU 72, then a second boot
+# with QEMU's CTU CAN FD card (the CTU CAN FD section below). Never fails
+# on a missed target.
 # See Documentation/networking/rcan/benchmarks.rst.
 #
 #   bench.sh [rcan-bench options]     e.g. --stack mainline, --quick,
-#                                     --part table, --part dsor, --part bcm
+#                                     --part table, --part dsor, --part bcm,
+#                                     --part fd
 #                                     (make bench BENCH_ARGS=...)
 #
 # Expects the modules and target/release/rcan-bench to be built (make bench
@@ -38,6 +42,18 @@ export RCAN_KBUILD
 out=${RCAN_BENCH_OUT:-$(mktemp -d "${TMPDIR:-/tmp}/rcan-bench.XXXXXX")}
 mkdir -p "$out"
 
+# The parts asked for (rcan-bench's --part; the last one given counts).
+parts=raw,table,dsor
+prev=
+for a in "$@"; do
+	case $a in
+	--part=*) parts=${a#--part=} ;;
+	*) [ "$prev" = --part ] && parts=$a ;;
+	esac
+	prev=$a
+done
+has_part() { case ",${parts// /}," in *",$1,"*) return 0 ;; esac; return 1; }
+
 rc=0
 # Both stacks take a few minutes under TCG; the timeout only guards
 # against a hang.
@@ -54,7 +70,8 @@ fi
 # rcan-bench-sja runs mainline sja1000+kvaser_pci and rcan_kvaser_pci in
 # alternating rounds, and sja-count.awk counts each driver's register
 # accesses in the trace (the same emulator code counts both).
-if [ "${RCAN_BENCH_SJA:-1}" != 0 ]; then
+# Not when only the CAN FD part is asked for.
+if [ "${RCAN_BENCH_SJA:-1}" != 0 ] && [ "${parts// /}" != fd ]; then
 	[ -x target/release/rcan-bench-sja ] || die "target/release/rcan-bench-sja missing; run make bench (or make userspace)"
 	sja="$out/sja1000"
 	mkdir -p "$sja"
@@ -75,5 +92,35 @@ if [ "${RCAN_BENCH_SJA:-1}" != 0 ]; then
 		log "SJA1000 section produced no phases (see $sja/console.log)"
 	fi
 	[ "$src" = 0 ] || rc=$src
+fi
+
+# CTU CAN FD section (with --part fd; RCAN_BENCH_CTU=0 skips it): a boot
+# with QEMU's ctucan_pci card (two cores on one bus, as RCAN_QEMU_CAN has
+# it for the VM tests) and the memory-region trace on; rcan-bench-ctu runs
+# mainline ctucanfd+ctucanfd_pci and rcan_ctucanfd_pci in alternating
+# rounds, FD 64-byte and classic 8-byte phases, and sja-count.awk counts
+# each driver's register accesses per frame in the trace.
+if has_part fd && [ "${RCAN_BENCH_CTU:-1}" != 0 ]; then
+	[ -x target/release/rcan-bench-ctu ] || die "target/release/rcan-bench-ctu missing; run make bench (or make userspace)"
+	ctu="$out/ctucanfd"
+	mkdir -p "$ctu"
+	log "CTU CAN FD section: ours vs mainline ctucanfd on QEMU's ctucan_pci card"
+	crc=0
+	# shellcheck disable=SC2086
+	bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 1800 --out "$ctu" \
+		--qemu-extra "-object can-bus,id=bus1 -device ctucan_pci,canbus0=bus1,canbus1=bus1 -trace memory_region_ops_read -trace memory_region_ops_write -D $ctu/trace.log" \
+		-- target/release/rcan-bench-ctu ${RCAN_BENCH_CTU_ARGS:---frames 2000 --rounds 3} |
+		tee "$ctu/phases.txt" || crc=$?
+	if grep -q '^CTU-PHASE' "$ctu/phases.txt" 2>/dev/null; then
+		awk -v tag=CTU -v region=ctucan -f "$RCAN_ROOT/tools/testing/rcan/bench/sja-count.awk" \
+			"$ctu/phases.txt" "$ctu/trace.log" | tee "$ctu/summary.txt"
+		log "CTU CAN FD summary saved in $ctu/summary.txt"
+		# The trace is large (tens of MB per thousand frames);
+		# RCAN_BENCH_KEEP_TRACE=1 keeps it.
+		[ "${RCAN_BENCH_KEEP_TRACE:-0}" = 1 ] || rm -f "$ctu/trace.log"
+	else
+		log "CTU CAN FD section produced no phases (see $ctu/console.log)"
+	fi
+	[ "$crc" = 0 ] || rc=$crc
 fi
 exit "$rc"

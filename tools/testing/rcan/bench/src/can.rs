@@ -52,25 +52,86 @@ struct CanFilter {
     can_mask: u32,
 }
 
-/// A classic CAN data frame (`struct can_frame` minus the padding).
+/// `CAN_RAW_FD_FRAMES`: the socket reads and writes `struct canfd_frame`.
+const CAN_RAW_FD_FRAMES: c_int = 5;
+/// `sizeof(struct canfd_frame)`: what a CAN_RAW socket with
+/// `CAN_RAW_FD_FRAMES` reads for an FD frame (classic frames stay 16).
+pub const CANFD_MTU: usize = 72;
+/// Payload bytes of an FD frame at most.
+pub const CANFD_MAX_DLEN: usize = 64;
+/// `CANFD_BRS`: bit rate switch (the data phase at the data bit rate).
+pub const CANFD_BRS: u8 = 0x01;
+/// `CANFD_ESI`: error state indicator.
+pub const CANFD_ESI: u8 = 0x02;
+
+/// What a benchmark frame looks like on the wire: its payload length and,
+/// for an FD frame, its flags (`CANFD_BRS`, `CANFD_ESI`; the kernel's
+/// `CANFD_FDF` is not part of the shape).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shape {
+    /// Payload bytes: 8 for classic frames (the two words), 8..=64 and a
+    /// valid FD length for FD frames.
+    pub len: u8,
+    /// `None`: a classic frame (`struct can_frame`); `Some(flags)`: an FD
+    /// frame (`struct canfd_frame`) with these flags.
+    pub fd: Option<u8>,
+}
+
+impl Shape {
+    /// The classic 8-byte data frame every part sends.
+    pub const CLASSIC8: Shape = Shape { len: 8, fd: None };
+    /// A 64-byte FD frame with bit rate switch.
+    pub const FD64_BRS: Shape = Shape {
+        len: 64,
+        fd: Some(CANFD_BRS),
+    };
+}
+
+/// A CAN data frame: `struct can_frame` or `struct canfd_frame` minus the
+/// padding.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Frame {
     /// `can_id` including the EFF/RTR/ERR flags.
     pub id: u32,
-    /// Data length, 0..=8.
+    /// Data length: 0..=8, or 0..=64 for an FD frame.
     pub len: u8,
+    /// `None` for a classic frame, else the FD flags as received or to
+    /// send (`CANFD_BRS`, `CANFD_ESI`, the kernel's `CANFD_FDF`).
+    pub fd: Option<u8>,
     /// Payload; bytes past `len` are zero.
-    pub data: [u8; 8],
+    pub data: [u8; CANFD_MAX_DLEN],
 }
 
 impl Frame {
-    /// An 8-byte data frame with `id` carrying two 32-bit words (little
-    /// endian): the benchmark's sequence number and run tag.
+    /// An 8-byte classic data frame with `id` carrying two 32-bit words
+    /// (little endian): the benchmark's sequence number and run tag.
     pub fn with_words(id: u32, seq: u32, tag: u32) -> Self {
-        let mut data = [0u8; 8];
+        Self::shaped(id, seq, tag, Shape::CLASSIC8)
+    }
+
+    /// A frame of `shape` whose first 8 bytes are the two words of
+    /// [`Frame::with_words`] and the rest a fixed pattern (byte i = i).
+    pub fn shaped(id: u32, seq: u32, tag: u32, shape: Shape) -> Self {
+        let mut data = [0u8; CANFD_MAX_DLEN];
+        for (i, b) in data.iter_mut().enumerate().take(shape.len.into()) {
+            *b = i as u8;
+        }
         data[..4].copy_from_slice(&seq.to_le_bytes());
-        data[4..].copy_from_slice(&tag.to_le_bytes());
-        Frame { id, len: 8, data }
+        data[4..8].copy_from_slice(&tag.to_le_bytes());
+        Frame {
+            id,
+            len: shape.len,
+            fd: shape.fd,
+            data,
+        }
+    }
+
+    /// The frame's [`Shape`] (FD flags other than BRS and ESI ignored).
+    pub fn shape(&self) -> Shape {
+        Shape {
+            len: self.len,
+            fd: self.fd.map(|f| f & (CANFD_BRS | CANFD_ESI)),
+        }
     }
 
     /// The first data word (the sequence number).
@@ -83,22 +144,49 @@ impl Frame {
         u32::from_le_bytes([self.data[4], self.data[5], self.data[6], self.data[7]])
     }
 
-    fn encode(&self) -> [u8; CAN_MTU] {
-        let mut buf = [0u8; CAN_MTU];
+    /// Encodes into `buf` as `struct can_frame` (16 bytes) or `struct
+    /// canfd_frame` (72); returns the size.
+    fn encode(&self, buf: &mut [u8; CANFD_MTU]) -> usize {
+        *buf = [0u8; CANFD_MTU];
         buf[..4].copy_from_slice(&self.id.to_ne_bytes());
         buf[4] = self.len;
-        buf[8..].copy_from_slice(&self.data);
-        buf
+        match self.fd {
+            None => {
+                buf[8..CAN_MTU].copy_from_slice(&self.data[..8]);
+                CAN_MTU
+            }
+            Some(flags) => {
+                buf[5] = flags;
+                buf[8..].copy_from_slice(&self.data);
+                CANFD_MTU
+            }
+        }
     }
 
-    fn decode(buf: &[u8; CAN_MTU]) -> Self {
-        let mut data = [0u8; 8];
-        data.copy_from_slice(&buf[8..]);
-        Frame {
+    /// Decodes the `n` bytes a socket read: 16 (classic) or 72 (FD).
+    fn decode(buf: &[u8; CANFD_MTU], n: usize) -> io::Result<Self> {
+        let mut data = [0u8; CANFD_MAX_DLEN];
+        let fd = match n {
+            CAN_MTU => {
+                data[..8].copy_from_slice(&buf[8..CAN_MTU]);
+                None
+            }
+            CANFD_MTU => {
+                data.copy_from_slice(&buf[8..]);
+                Some(buf[5])
+            }
+            _ => {
+                return Err(io::Error::other(format!(
+                    "received {n} bytes, want {CAN_MTU} or {CANFD_MTU}"
+                )))
+            }
+        };
+        Ok(Frame {
             id: u32::from_ne_bytes([buf[0], buf[1], buf[2], buf[3]]),
             len: buf[4],
+            fd,
             data,
-        }
+        })
     }
 }
 
@@ -275,12 +363,20 @@ impl RawSocket {
         self.setsockopt(libc::SOL_SOCKET, libc::SO_RCVTIMEO, &tv)
     }
 
-    /// Sends one frame with `send(2)` on the bound interface.
+    /// `CAN_RAW_FD_FRAMES` (mainline default: off): FD frames are
+    /// delivered to and may be sent from this socket.
+    pub fn set_fd_frames(&self, on: bool) -> io::Result<()> {
+        self.setsockopt(SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &c_int::from(on))
+    }
+
+    /// Sends one frame with `send(2)` on the bound interface (an FD frame
+    /// needs [`RawSocket::set_fd_frames`]).
     pub fn send(&self, frame: &Frame) -> io::Result<()> {
-        let buf = frame.encode();
-        // SAFETY: `buf` is readable for its full length during the call.
-        let n = cvt(unsafe { libc::send(self.fd.as_raw_fd(), buf.as_ptr().cast(), buf.len(), 0) })?;
-        if n != CAN_MTU {
+        let mut buf = [0u8; CANFD_MTU];
+        let len = frame.encode(&mut buf);
+        // SAFETY: `buf` is readable for `len` <= its size bytes during the call.
+        let n = cvt(unsafe { libc::send(self.fd.as_raw_fd(), buf.as_ptr().cast(), len, 0) })?;
+        if n != len {
             return Err(io::Error::other(format!("short send: {n} bytes")));
         }
         Ok(())
@@ -289,7 +385,7 @@ impl RawSocket {
     /// Receives one frame; blocking (subject to `SO_RCVTIMEO`) unless
     /// `dontwait`. No frame: `ErrorKind::WouldBlock`.
     pub fn recv(&self, dontwait: bool) -> io::Result<Frame> {
-        let mut buf = [0u8; CAN_MTU];
+        let mut buf = [0u8; CANFD_MTU];
         let flags = if dontwait { libc::MSG_DONTWAIT } else { 0 };
         // SAFETY: `buf` is writable for its full length during the call.
         let n = cvt(unsafe {
@@ -300,12 +396,7 @@ impl RawSocket {
                 flags,
             )
         })?;
-        if n != CAN_MTU {
-            return Err(io::Error::other(format!(
-                "received {n} bytes, want {CAN_MTU}"
-            )));
-        }
-        Ok(Frame::decode(&buf))
+        Frame::decode(&buf, n)
     }
 
     /// Reads and discards whatever is queued; returns how many frames.
@@ -488,6 +579,22 @@ pub fn clk_tck() -> u64 {
     }
 }
 
+/// Kernel CPU time of all CPUs so far (`/proc/stat` system + irq +
+/// softirq), in seconds.
+pub fn kernel_cpu_s() -> io::Result<f64> {
+    let stat = std::fs::read_to_string("/proc/stat")?;
+    let cpu: Vec<u64> = stat
+        .lines()
+        .find(|l| l.starts_with("cpu "))
+        .ok_or_else(|| io::Error::other("/proc/stat: no cpu line"))?
+        .split_whitespace()
+        .skip(1)
+        .map(|v| v.parse().unwrap_or(0))
+        .collect();
+    let f = |i: usize| cpu.get(i).copied().unwrap_or(0);
+    Ok((f(2) + f(5) + f(6)) as f64 / clk_tck() as f64)
+}
+
 /// Sends `frame`, retrying for up to a second while the device queue
 /// pushes back (`ENOBUFS`/`EAGAIN`). Returns how many retries it took.
 pub fn send_retrying(sock: &RawSocket, frame: &Frame) -> io::Result<u64> {
@@ -524,9 +631,30 @@ mod tests {
     #[test]
     fn frame_round_trip() {
         let f = Frame::with_words(0x123, 77, 0xdead_beef);
-        let g = Frame::decode(&f.encode());
+        let mut buf = [0u8; CANFD_MTU];
+        let n = f.encode(&mut buf);
+        assert_eq!(n, CAN_MTU);
+        let g = Frame::decode(&buf, n).unwrap();
         assert_eq!(f, g);
         assert_eq!(g.seq(), 77);
         assert_eq!(g.tag(), 0xdead_beef);
+        assert_eq!(g.shape(), Shape::CLASSIC8);
+    }
+
+    #[test]
+    fn fd_frame_round_trip() {
+        let f = Frame::shaped(0x123, 5, 9, Shape::FD64_BRS);
+        let mut buf = [0u8; CANFD_MTU];
+        assert_eq!(f.encode(&mut buf), CANFD_MTU);
+        // struct canfd_frame: can_id, len, flags, 2 reserved, data[64].
+        assert_eq!(buf[4], 64);
+        assert_eq!(buf[5], CANFD_BRS);
+        assert_eq!(buf[8 + 63], 63);
+        // The kernel adds CANFD_FDF (0x04) on receive: same shape.
+        buf[5] |= 0x04;
+        let g = Frame::decode(&buf, CANFD_MTU).unwrap();
+        assert_eq!((g.seq(), g.tag(), g.data), (5, 9, f.data));
+        assert_eq!(g.shape(), Shape::FD64_BRS);
+        assert!(Frame::decode(&buf, 40).is_err());
     }
 }

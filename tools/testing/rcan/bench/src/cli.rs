@@ -17,7 +17,7 @@ use crate::{table, workload};
 /// Benchmark rcan against mainline SocketCAN inside the test VM (run as
 /// root; `make bench` or tools/testing/rcan/bench.sh): the CAN_RAW receive
 /// path (raw), many sockets (table), DSOR against ISO-TP (dsor) and, on
-/// request, CAN_BCM cyclic jobs (bcm). See
+/// request, CAN_BCM cyclic jobs (bcm) and CAN FD frames (fd). See
 /// Documentation/networking/rcan/benchmarks.rst.
 #[derive(Parser, Debug)]
 #[command(name = "rcan-bench", version, long_about = None, args_override_self = true)]
@@ -25,9 +25,9 @@ use crate::{table, workload};
     after_help = "Environment: RCAN_KBUILD (test kernel build directory: mainline modules),\nRCAN_ROOT (project tree with our modules; default the current directory),\nRCAN_OUT (directory for the summary)."
 )]
 pub struct Cli {
-    /// Parts to run, comma-separated: raw (CAN_RAW, mainline vs ours), table (many sockets, mainline vs ours), dsor (DSOR vs mainline ISO-TP), bcm (CAN_BCM cyclic jobs, mainline vs ours; not in the default) (default raw,table,dsor)
+    /// Parts to run, comma-separated: raw (CAN_RAW, mainline vs ours), table (many sockets, mainline vs ours), dsor (DSOR vs mainline ISO-TP), bcm (CAN_BCM cyclic jobs, mainline vs ours; not in the default), fd (CAN FD frames at MTU 72, mainline vcan vs rcan_loop; not in the default) (default raw,table,dsor)
     #[arg(long, value_name = "LIST", allow_hyphen_values = true, value_parser = parts)]
-    part: Option<[bool; 4]>,
+    part: Option<[bool; 5]>,
     /// Raw and table parts: mainline, ours or both (default both)
     #[arg(long, value_name = "S", allow_hyphen_values = true, value_parser = stacks)]
     stack: Option<List<Stack>>,
@@ -167,15 +167,16 @@ fn set<T: PartialEq>(v: &str, item: impl Fn(&str) -> Result<T, String>) -> Resul
     Ok(List(out))
 }
 
-/// `--part`: which of raw, table, dsor, bcm.
-fn parts(v: &str) -> Result<[bool; 4], String> {
-    let mut on = [false; 4];
+/// `--part`: which of raw, table, dsor, bcm, fd.
+fn parts(v: &str) -> Result<[bool; 5], String> {
+    let mut on = [false; 5];
     for w in items(v, |w| Ok(w.to_string()))? {
         match w.as_str() {
             "raw" => on[0] = true,
             "table" => on[1] = true,
             "dsor" => on[2] = true,
             "bcm" => on[3] = true,
+            "fd" => on[4] = true,
             other => return Err(format!("unknown part '{other}'")),
         }
     }
@@ -355,6 +356,7 @@ pub struct Config {
     pub run_table: bool,
     pub run_dsor: bool,
     pub run_bcm: bool,
+    pub run_fd: bool,
     pub bcm_jobs: u32,
     pub bcm_ival_ms: u64,
     pub bcm_secs: f64,
@@ -394,6 +396,7 @@ impl Config {
             run_table: true,
             run_dsor: true,
             run_bcm: false,
+            run_fd: false,
             bcm_jobs: 1000,
             bcm_ival_ms: 10,
             bcm_secs: 3.0,
@@ -449,7 +452,7 @@ impl Config {
             }
         }
         if let Some(p) = cli.part {
-            [c.run_raw, c.run_table, c.run_dsor, c.run_bcm] = p;
+            [c.run_raw, c.run_table, c.run_dsor, c.run_bcm, c.run_fd] = p;
         }
         set(&mut c.stacks, cli.stack.map(|l| l.0));
         if let Some(w) = cli.only {
@@ -598,6 +601,7 @@ mod tests {
             run_table: true,
             run_dsor: true,
             run_bcm: false,
+            run_fd: false,
             bcm_jobs: 1000,
             bcm_ival_ms: 10,
             bcm_secs: 3.0,
@@ -693,6 +697,12 @@ mod tests {
         parts(&mut e, false, false, true, false);
         e.rounds = 3;
         assert_eq!(parse(&["--part", "dsor", "--rounds", "3"]), Ok(e));
+
+        // The CAN FD part, as benchmarks.rst runs it.
+        let mut e = defaults();
+        parts(&mut e, false, false, false, false);
+        (e.run_fd, e.rounds) = (true, 3);
+        assert_eq!(parse(&["--part", "fd", "--rounds", "3"]), Ok(e));
 
         let mut e = defaults();
         parts(&mut e, true, false, false, false);

@@ -33,11 +33,17 @@
 //! A fourth part, only on request (`--part bcm`, see `bcm.rs`), measures
 //! kernel CPU time per cyclic frame of CAN_BCM (1,000 jobs at 10 ms):
 //! rcan_bcm against mainline's can-bcm.ko.
+//!
+//! A fifth part, only on request (`--part fd`, see `fd.rs`), measures CAN
+//! FD frames: workload (a) with 64-byte FD frames (BRS) and with classic
+//! frames on rcan_loop and vcan at MTU 72, frames/s and kernel CPU per
+//! frame.
 
 mod bcm;
 mod can;
 mod cli;
 mod dsor;
+mod fd;
 mod report;
 mod stack;
 mod table;
@@ -564,6 +570,37 @@ fn main() -> ExitCode {
             }
         }
         failed |= !errors.is_empty();
+    }
+    if c.run_fd {
+        let fc = fd::Config {
+            stacks: c.stacks.clone(),
+            rounds: c.rounds,
+            reps: c.reps,
+            warmup: c.warmup,
+            frames: c.tp_frames,
+            window: c.window,
+            rx_cpu: c.rx_cpu,
+            iface: c.iface.clone(),
+            load: c.load,
+        };
+        // Appended to what the other parts wrote.
+        let before = c
+            .summary
+            .as_ref()
+            .map(|p| std::fs::read_to_string(p).unwrap_or_default())
+            .unwrap_or_default();
+        let write = |s: &fd::Samples| {
+            if let Some(p) = &c.summary {
+                let text = before.clone() + &fd::summary(&fc, &s.runs, &s.errors, &hdr1);
+                if let Err(e) = std::fs::write(p, text) {
+                    eprintln!("rcan-bench: {}: {e}", p.display());
+                }
+            }
+        };
+        let fs = fd::bench(&fc, &c.paths, &write);
+        println!();
+        print!("{}", fd::summary(&fc, &fs.runs, &fs.errors, &hdr1));
+        failed |= !fs.errors.is_empty();
     }
     println!("rcan-bench: done in {:.0} s", t0.elapsed().as_secs_f64());
     if let Some(p) = &c.summary {

@@ -96,7 +96,7 @@ fn ratio(ours: Option<f64>, mainline: Option<f64>) -> String {
 }
 
 /// "lo-hi x" of per-round ratios; "-" with fewer than two rounds.
-fn ratio_range(v: &[f64]) -> String {
+pub fn ratio_range(v: &[f64]) -> String {
     let lo = v.iter().copied().reduce(f64::min);
     let hi = v.iter().copied().reduce(f64::max);
     match (lo, hi) {

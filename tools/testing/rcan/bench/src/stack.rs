@@ -209,6 +209,13 @@ pub fn load_devices(stack: Stack, paths: &Paths, ifaces: &[&str]) -> Result<(), 
     Ok(())
 }
 
+/// `ip link set IFACE ARGS...` (the FD part: `mtu 72`, `down`, `up`).
+pub fn set_link(iface: &str, args: &[&str]) -> Result<(), String> {
+    let mut a = vec!["link", "set", iface];
+    a.extend_from_slice(args);
+    run("ip", &a)
+}
+
 /// Deletes the vcan device `iface`, if vcan is loaded (rcan_loop's
 /// devices go with the module).
 pub fn del_link(iface: &str) {

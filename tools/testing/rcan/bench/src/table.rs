@@ -240,21 +240,9 @@ fn meminfo() -> io::Result<Mem> {
     })
 }
 
-/// Kernel CPU time of all CPUs so far (`/proc/stat` system + irq +
-/// softirq), in seconds.
-fn kernel_cpu_s() -> io::Result<f64> {
-    let stat = std::fs::read_to_string("/proc/stat")?;
-    let cpu: Vec<u64> = stat
-        .lines()
-        .find(|l| l.starts_with("cpu "))
-        .ok_or_else(|| io::Error::other("/proc/stat: no cpu line"))?
-        .split_whitespace()
-        .skip(1)
-        .map(|v| v.parse().unwrap_or(0))
-        .collect();
-    let f = |i: usize| cpu.get(i).copied().unwrap_or(0);
-    Ok((f(2) + f(5) + f(6)) as f64 / can::clk_tck() as f64)
-}
+/// Kernel CPU time of all CPUs so far (in can.rs: the card sections use
+/// it too).
+use crate::can::kernel_cpu_s;
 
 /// One run of workload (e).
 #[derive(Clone, Copy, Debug)]

@@ -14,7 +14,7 @@ use std::sync::{Condvar, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
 
-use crate::can::{pin_current_thread, send_retrying, Frame, RawSocket, EXACT_SFF_MASK};
+use crate::can::{pin_current_thread, send_retrying, Frame, RawSocket, Shape, EXACT_SFF_MASK};
 
 /// Identifier used by the throughput workload.
 pub const TP_ID: u32 = 0x123;
@@ -161,6 +161,20 @@ pub fn throughput(
     window: u64,
     rx_cpu: Option<usize>,
 ) -> io::Result<ThroughputRun> {
+    throughput_shaped(tx, rx, frames, window, rx_cpu, Shape::CLASSIC8)
+}
+
+/// Workload (a) with frames of `shape` (the FD part: 64-byte FD frames;
+/// both sockets need `CAN_RAW_FD_FRAMES` for those). A frame received in
+/// another shape counts as odd.
+pub fn throughput_shaped(
+    tx: &RawSocket,
+    rx: &RawSocket,
+    frames: u64,
+    window: u64,
+    rx_cpu: Option<usize>,
+    shape: Shape,
+) -> io::Result<ThroughputRun> {
     let stale = rx.drain();
     let tag = next_tag();
     let w = Window {
@@ -197,7 +211,7 @@ pub fn throughput(
                 match recv_patient(rx, &mut c) {
                     Ok(Some(f)) => {
                         let seq = u64::from(f.seq());
-                        if f.tag() != tag || f.id != TP_ID || seq < expected {
+                        if f.tag() != tag || f.id != TP_ID || f.shape() != shape || seq < expected {
                             // Stale, foreign, or late (out of order).
                             c.odd += 1;
                         } else {
@@ -249,7 +263,7 @@ pub fn throughput(
                         return Ok((seq, retries));
                     }
                 }
-                retries += send_retrying(tx, &Frame::with_words(TP_ID, seq as u32, tag))?;
+                retries += send_retrying(tx, &Frame::shaped(TP_ID, seq as u32, tag, shape))?;
             }
             Ok((frames, retries))
         };

@@ -45,3 +45,21 @@ fn sja_help_version_and_usage_errors() {
         ],
     );
 }
+
+/// `rcan-bench-ctu` (the CTU CAN FD section of `bench.sh --part fd`)
+/// likewise.
+#[test]
+fn ctu_help_version_and_usage_errors() {
+    let bin = env!("CARGO_BIN_EXE_rcan-bench-ctu");
+    rcan_cli_check::check(
+        bin,
+        "rcan-bench-ctu",
+        env!("CARGO_PKG_VERSION"),
+        &[
+            &["can0"],
+            &["--frames"],
+            &["--frames", "0"],
+            &["--rounds", "0"],
+        ],
+    );
+}
