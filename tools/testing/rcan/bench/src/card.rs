@@ -41,6 +41,64 @@ pub fn insmod(p: PathBuf) -> Result<(), String> {
     run("insmod", &[&p.to_string_lossy()])
 }
 
+/// The stack a card section measures.
+#[derive(Clone, Copy, PartialEq)]
+pub enum Stack {
+    /// Mainline's CAN core, CAN_RAW, can-dev and the card's driver.
+    Mainline,
+    /// Ours.
+    Ours,
+}
+
+/// Loads a stack for a card: the CAN core, CAN_RAW and the device layer
+/// (mainline's from the kernel build `kb`, ours from our tree `root`),
+/// then the card's driver modules (`mainline` or `ours`, paths relative to
+/// the same place); sets `ip link set canX type can <timing>` on can0 and
+/// can1, the same for both stacks, as users set it, and brings them up.
+pub fn load(
+    s: Stack,
+    root: &Path,
+    kb: &Path,
+    mainline: &[&str],
+    ours: &[&str],
+    timing: &[&str],
+) -> Result<(), String> {
+    let (base, core, drivers): (&Path, [&str; 4], &[&str]) = match s {
+        Stack::Mainline => (
+            kb,
+            [
+                "net/can/can.ko",
+                "net/can/can-raw.ko",
+                "drivers/net/can/dev/can-dev.ko",
+                "",
+            ],
+            mainline,
+        ),
+        Stack::Ours => (
+            root,
+            [
+                "net/can/rcan_pf.ko",
+                "net/can/rcan_can.ko",
+                "net/can/rcan_raw.ko",
+                "drivers/net/can/dev/rcan_dev.ko",
+            ],
+            ours,
+        ),
+    };
+    for m in core.iter().filter(|m| !m.is_empty()).chain(drivers) {
+        insmod(base.join(m))?;
+    }
+    for d in ["can0", "can1"] {
+        let mut args = vec!["link", "set", d, "type", "can"];
+        args.extend_from_slice(timing);
+        run("ip", &args)?;
+    }
+    for d in ["can0", "can1"] {
+        run("ip", &["link", "set", d, "up"])?;
+    }
+    Ok(())
+}
+
 fn loaded(name: &str) -> bool {
     std::fs::read_to_string("/proc/modules")
         .unwrap_or_default()

@@ -37,14 +37,8 @@ mod can;
 mod card;
 
 use can::Shape;
-use card::{insmod, marker, phase, pin_irq, run, MARK_END, MARK_START};
+use card::{marker, phase, pin_irq, Stack, MARK_END, MARK_START};
 use std::path::{Path, PathBuf};
-
-#[derive(Clone, Copy, PartialEq)]
-enum Stack {
-    Mainline,
-    Ours,
-}
 
 const MAINLINE: [&str; 5] = ["ctucanfd_pci", "ctucanfd", "can_dev", "can_raw", "can"];
 const OURS: [&str; 5] = [
@@ -70,36 +64,17 @@ fn unload() -> Result<(), String> {
 }
 
 fn load(s: Stack, root: &Path, kb: &Path) -> Result<(), String> {
-    match s {
-        Stack::Mainline => {
-            insmod(kb.join("net/can/can.ko"))?;
-            insmod(kb.join("net/can/can-raw.ko"))?;
-            insmod(kb.join("drivers/net/can/dev/can-dev.ko"))?;
-            insmod(kb.join("drivers/net/can/ctucanfd/ctucanfd.ko"))?;
-            insmod(kb.join("drivers/net/can/ctucanfd/ctucanfd_pci.ko"))?;
-        }
-        Stack::Ours => {
-            insmod(root.join("net/can/rcan_pf.ko"))?;
-            insmod(root.join("net/can/rcan_can.ko"))?;
-            insmod(root.join("net/can/rcan_raw.ko"))?;
-            insmod(root.join("drivers/net/can/dev/rcan_dev.ko"))?;
-            insmod(root.join("drivers/net/can/ctucanfd/rcan_ctucanfd_pci.ko"))?;
-        }
-    }
-    // The same bit timing for both, set as users set it.
-    for d in ["can0", "can1"] {
-        run(
-            "ip",
-            &[
-                "link", "set", d, "type", "can", "bitrate", "500000", "dbitrate", "2000000", "fd",
-                "on",
-            ],
-        )?;
-    }
-    for d in ["can0", "can1"] {
-        run("ip", &["link", "set", d, "up"])?;
-    }
-    Ok(())
+    card::load(
+        s,
+        root,
+        kb,
+        &[
+            "drivers/net/can/ctucanfd/ctucanfd.ko",
+            "drivers/net/can/ctucanfd/ctucanfd_pci.ko",
+        ],
+        &["drivers/net/can/ctucanfd/rcan_ctucanfd_pci.ko"],
+        &["bitrate", "500000", "dbitrate", "2000000", "fd", "on"],
+    )
 }
 
 /// The command line (`bench.sh` passes `--frames 4000 --rounds 3`).
