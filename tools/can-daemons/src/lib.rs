@@ -23,5 +23,6 @@ pub mod cli;
 pub mod frame;
 pub mod logd;
 pub mod powerd;
+pub mod signals;
 pub mod socketcand;
 pub mod zlog;

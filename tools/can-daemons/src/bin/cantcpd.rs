@@ -25,12 +25,11 @@ use std::time::{Duration, Instant};
 
 use clap::Parser;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
-use nix::sys::signal::{SigSet, Signal};
-use nix::sys::signalfd::{SfdFlags, SignalFd};
 use rcan_daemons::bcm::{self, BcmSocket};
 use rcan_daemons::canrx::CanPort;
 use rcan_daemons::cli::TcpCli;
 use rcan_daemons::frame::Frame;
+use rcan_daemons::signals;
 use rcan_daemons::socketcand::{bcm_frame_msg, frame_msg, parse, Command, Splitter};
 
 /// How often blocked threads look at the stop flags.
@@ -507,15 +506,9 @@ fn client(srv: Arc<Server>, stream: TcpStream) {
 }
 
 fn run(cli: TcpCli) -> Result<(), String> {
-    let mut mask = SigSet::empty();
-    mask.add(Signal::SIGTERM);
-    mask.add(Signal::SIGINT);
     // Blocked before any thread starts, so every thread inherits the mask
     // and only the signalfd sees the signals.
-    mask.thread_block()
-        .map_err(|e| format!("sigprocmask: {e}"))?;
-    let sfd = SignalFd::with_flags(&mask, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC)
-        .map_err(|e| format!("signalfd: {e}"))?;
+    let sfd = signals::stop_signals()?;
     let listener = TcpListener::bind(cli.listen).map_err(|e| format!("{}: {e}", cli.listen))?;
     listener
         .set_nonblocking(true)
@@ -541,12 +534,7 @@ fn run(cli: TcpCli) -> Result<(), String> {
             Err(e) => return Err(format!("poll: {e}")),
         }
         if fds[0].any().unwrap_or(false) {
-            let sig = sfd
-                .read_signal()
-                .ok()
-                .flatten()
-                .map(|s| s.ssi_signo)
-                .unwrap_or(0);
+            let sig = signals::signo(&sfd);
             srv.stop.store(true, Ordering::SeqCst);
             let t0 = Instant::now();
             while srv.active.load(Ordering::SeqCst) > 0 && t0.elapsed() < Duration::from_secs(3) {

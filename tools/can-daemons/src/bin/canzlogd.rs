@@ -13,11 +13,10 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use clap::Parser;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
-use nix::sys::signal::{SigSet, Signal};
-use nix::sys::signalfd::{SfdFlags, SignalFd};
 use rcan_daemons::canrx::CanPort;
 use rcan_daemons::cli::ZlogCli;
 use rcan_daemons::frame::candump_line;
+use rcan_daemons::signals;
 use rcan_daemons::zlog::{Config, ZLog};
 
 /// Frames read from one socket before the others get their turn.
@@ -41,13 +40,7 @@ fn note(z: &mut ZLog, text: &str) {
 }
 
 fn run(cli: ZlogCli) -> Result<(), String> {
-    let mut mask = SigSet::empty();
-    mask.add(Signal::SIGTERM);
-    mask.add(Signal::SIGINT);
-    mask.thread_block()
-        .map_err(|e| format!("sigprocmask: {e}"))?;
-    let sfd = SignalFd::with_flags(&mask, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC)
-        .map_err(|e| format!("signalfd: {e}"))?;
+    let sfd = signals::stop_signals()?;
 
     let mut ports = Vec::new();
     for i in &cli.ifaces {
@@ -161,12 +154,7 @@ fn run(cli: ZlogCli) -> Result<(), String> {
             }
         }
         if stop {
-            let sig = sfd
-                .read_signal()
-                .ok()
-                .flatten()
-                .map(|s| s.ssi_signo)
-                .unwrap_or(0);
+            let sig = signals::signo(&sfd);
             note(
                 &mut z,
                 &format!("stopping on signal {sig}, {frames} frames logged"),

@@ -13,10 +13,9 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use clap::Parser;
 use nix::errno::Errno;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
-use nix::sys::signal::{SigSet, Signal};
-use nix::sys::signalfd::{SfdFlags, SignalFd};
 use rcan_daemons::cli::LogdCli;
 use rcan_daemons::logd::{line, ID_ANY, NODE_ANY};
+use rcan_daemons::signals;
 use rcan_uapi::dsor::{DsorAddr, DsorSocket};
 
 /// `MSG_TRUNC`: recvfrom returns the message's full length.
@@ -58,13 +57,7 @@ fn show(node: u8, id: u32) -> String {
 }
 
 fn run(cli: LogdCli) -> Result<(), String> {
-    let mut mask = SigSet::empty();
-    mask.add(Signal::SIGTERM);
-    mask.add(Signal::SIGINT);
-    mask.thread_block()
-        .map_err(|e| format!("sigprocmask: {e}"))?;
-    let sfd = SignalFd::with_flags(&mask, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC)
-        .map_err(|e| format!("signalfd: {e}"))?;
+    let sfd = signals::stop_signals()?;
     let mut socks = Vec::new();
     for &(node, id) in &cli.sources {
         let what = show(node, id);
@@ -124,12 +117,7 @@ fn run(cli: LogdCli) -> Result<(), String> {
             Err(e) => return Err(format!("poll: {e}")),
         }
         if fds[0].any().unwrap_or(false) {
-            let sig = sfd
-                .read_signal()
-                .ok()
-                .flatten()
-                .map(|s| s.ssi_signo)
-                .unwrap_or(0);
+            let sig = signals::signo(&sfd);
             note(
                 &mut f,
                 &format!("stopping on signal {sig}, {count} messages logged"),

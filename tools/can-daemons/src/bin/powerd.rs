@@ -15,12 +15,12 @@ use nix::errno::Errno;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::spawn::{posix_spawn, PosixSpawnAttr, PosixSpawnFileActions, PosixSpawnFlags};
 use nix::sys::signal::{kill, SigSet, Signal};
-use nix::sys::signalfd::{SfdFlags, SignalFd};
 use nix::sys::wait::{waitpid, WaitStatus};
 use nix::unistd::Pid;
 use rcan_daemons::canrx::CanPort;
 use rcan_daemons::cli::PowerCli;
 use rcan_daemons::powerd::Pattern;
+use rcan_daemons::signals;
 
 /// How often the waits look again.
 const POLL: Duration = Duration::from_millis(50);
@@ -195,13 +195,7 @@ fn run(cli: &PowerCli) -> Result<bool, String> {
         cli.data.0.clone(),
         cli.mask.as_ref().map(|m| m.0.clone()),
     )?;
-    let mut mask = SigSet::empty();
-    mask.add(Signal::SIGTERM);
-    mask.add(Signal::SIGINT);
-    mask.thread_block()
-        .map_err(|e| format!("sigprocmask: {e}"))?;
-    let sfd = SignalFd::with_flags(&mask, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC)
-        .map_err(|e| format!("signalfd: {e}"))?;
+    let sfd = signals::stop_signals()?;
     let port = CanPort::open(&cli.iface, false).map_err(|e| format!("{}: {e}", cli.iface))?;
     let (fid, fmask) = pat.raw_filter();
     port.set_filter(fid, fmask)
@@ -221,12 +215,7 @@ fn run(cli: &PowerCli) -> Result<bool, String> {
             Err(e) => return Err(format!("poll: {e}")),
         }
         if fds[0].any().unwrap_or(false) {
-            let sig = sfd
-                .read_signal()
-                .ok()
-                .flatten()
-                .map(|s| s.ssi_signo)
-                .unwrap_or(0);
+            let sig = signals::signo(&sfd);
             eprintln!("powerd: signal {sig}: stopped, no shutdown frame seen");
             return Ok(true);
         }
