@@ -13,27 +13,12 @@
 //! <linux/can/error.h>, not from our code.
 
 use rcan_core::arb::CAN_ERR_FLAG;
-use rcan_core::bittiming::I82527_BITTIMING_CONST;
-use rcan_core::bittiming::{Bittiming, Msg, EBUSY, EINVAL, EOPNOTSUPP, SJA1000_BITTIMING_CONST};
+use rcan_core::bittiming::{Bittiming, Msg, EBUSY, EINVAL, EOPNOTSUPP};
 use rcan_core::candev::*;
 
-const SJA: Device = Device {
-    btc: Some(&SJA1000_BITTIMING_CONST),
-    dbtc: None,
-    clock_hz: 8_000_000,
-    ctrlmode_supported: SJA1000_CTRLMODE_SUPPORTED,
-    ctrlmode_static: 0,
-    can_restart: true,
-};
-
-const I82527: Device = Device {
-    btc: Some(&I82527_BITTIMING_CONST),
-    dbtc: None,
-    clock_hz: 8_000_000,
-    ctrlmode_supported: I82527_CTRLMODE_SUPPORTED,
-    ctrlmode_static: 0,
-    can_restart: true,
-};
+#[path = "common/devices.rs"]
+mod devices;
+use devices::{I82527, SJA};
 
 fn rate(bitrate: u32) -> Option<Bittiming> {
     Some(Bittiming {

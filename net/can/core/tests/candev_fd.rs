@@ -11,29 +11,12 @@
 //! the VM test `ctucanfd_ip_fd_matches_mainline` checks the same
 //! `ip -details` lines against mainline's ctucanfd_pci.
 
-use rcan_core::bittiming::{
-    Bittiming, CTUCANFD_DATA_CONST as DATA_CONST, CTUCANFD_NOMINAL_CONST as NOMINAL_CONST, EBUSY,
-    EINVAL, EOPNOTSUPP, SJA1000_BITTIMING_CONST,
-};
+use rcan_core::bittiming::{Bittiming, EBUSY, EINVAL, EOPNOTSUPP};
 use rcan_core::candev::*;
 
-const CTU: Device = Device {
-    btc: Some(&NOMINAL_CONST),
-    dbtc: Some(&DATA_CONST),
-    clock_hz: 100_000_000,
-    ctrlmode_supported: CTUCANFD_CTRLMODE_SUPPORTED,
-    ctrlmode_static: 0,
-    can_restart: false,
-};
-
-const SJA: Device = Device {
-    btc: Some(&SJA1000_BITTIMING_CONST),
-    dbtc: None,
-    clock_hz: 8_000_000,
-    ctrlmode_supported: SJA1000_CTRLMODE_SUPPORTED,
-    ctrlmode_static: 0,
-    can_restart: true,
-};
+#[path = "common/devices.rs"]
+mod devices;
+use devices::{CTU, SJA};
 
 fn rate(bitrate: u32, sample_point: u32) -> Option<Bittiming> {
     Some(Bittiming {
