@@ -593,10 +593,13 @@ unsafe extern "C" fn free_reg<R: Receiver>(head: *mut bindings::callback_head) {
 }
 
 /// `call_rcu` callback: frees a receiver whose inline first registration
-/// was its last (with that registration). Softirq context.
+/// was its last (with that registration), or a reserved receiver removed
+/// for good after its registrations were retired (`keep`). Softirq
+/// context.
 unsafe extern "C" fn free_rcv<R: Receiver>(head: *mut bindings::callback_head) {
-    // Its live registration (the inline one) was unlinked and the
-    // receiver taken off the map a grace period ago.
+    // Its last registration was unlinked and the receiver taken off the
+    // map a grace period ago; a boxed registration retired earlier does
+    // not refer to it when freed (free_reg with `last` false).
     // SAFETY: `head` is the first field of an `Rcv<R>` leaked from a KBox
     // by `set` or `reserve`, and nothing refers to it any more (above).
     drop(unsafe { KBox::from_raw(head.cast::<Rcv<R>>()) });
