@@ -25,7 +25,9 @@
 //! * `TABLE`: the receive table (`glue::can::rx::RxTable`), read without
 //!   locks in NET_RX softirq (`can_rcv`) and changed incrementally, one
 //!   receiver at a time, under its own mutex (`rcan_rx_mutex`) by
-//!   `rcan_rx_set` (process context). Removed registrations are freed by
+//!   `rcan_rx_set`, `rcan_rx_reserve` and `rcan_rx_set_reserved` (process
+//!   context; the last names a reserved receiver by the handle the
+//!   reservation returned, so it walks no map). Removed registrations are freed by
 //!   `call_rcu` callbacks, so neither writers nor `close()` wait for a grace
 //!   period; each socket receiver holds a reference on its socket until
 //!   then. `TABLE` serves the initial namespace; every other network

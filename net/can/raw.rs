@@ -19,7 +19,9 @@
 //! * System calls run in process context. Those that change what the
 //!   socket receives (bind, CAN_RAW_FILTER, CAN_RAW_ERR_FILTER,
 //!   CAN_RAW_RECV_OWN_MSGS, CAN_RAW_JOIN_FILTERS) take RTNL, then the
-//!   socket lock, then (inside `rcan_rx_set`) pf_can's writers' mutex —
+//!   socket lock, then (inside `rcan_rx_set_reserved`, reached through
+//!   the glue's `rx_set_locked`, which takes the socket lock's guard)
+//!   pf_can's writers' mutex —
 //!   the order of mainline raw.c; RTNL keeps the device from vanishing
 //!   between the check and the registration, and serialises with the
 //!   netdevice notifier.
