@@ -25,7 +25,9 @@
 //! * `TABLE`: the receive table (`glue::can::rx::RxTable`), read without
 //!   locks in NET_RX softirq (`can_rcv`) and changed incrementally, one
 //!   receiver at a time, under its own mutex (`rcan_rx_mutex`) by
-//!   `rcan_rx_set` (process context). Removed registrations are freed by
+//!   `rcan_rx_set`, `rcan_rx_reserve` and `rcan_rx_set_reserved` (process
+//!   context; the last names a reserved receiver by the handle the
+//!   reservation returned, so it walks no map). Removed registrations are freed by
 //!   `call_rcu` callbacks, so neither writers nor `close()` wait for a grace
 //!   period; each socket receiver holds a reference on its socket until
 //!   then. `TABLE` serves the initial namespace; every other network
@@ -48,7 +50,7 @@ use crate::{family, glue, rcan_api, rcan_core};
 use kernel::prelude::*;
 
 use family::{Family, RxRequest, Target};
-use glue::can::rx::{Filters, RxTable, Spec};
+use glue::can::rx::{Filters, RcvHandle, RxTable, Spec};
 use glue::net::Net;
 use glue::netdev::NetDev;
 use glue::skb::Skb;
@@ -105,23 +107,26 @@ fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<Filters> {
     Ok(v)
 }
 
+/// The table's spec for a receiver's request (filters converted, error
+/// mask cut to the classes that exist). EINVAL (bad filter), ENOMEM.
+fn spec_of(req: &RxRequest<'_>) -> Result<Spec> {
+    let mut err_mask = req.err_mask & rxtable::CAN_ERR_MASK;
+    let filters = filters_of(req.filters, &mut err_mask)?;
+    Ok(Spec {
+        ifindex: req.ifindex,
+        filters,
+        join: req.join,
+        err_mask,
+        cookie: req.cookie,
+    })
+}
+
 impl Family for PfCan {
     /// See [`rcan_api::rx_set`]. Process context; sleeps (allocates, takes
     /// the table's mutex, then `rcan_pf_mutex` to tell the drivers).
     fn rx_set(net: &Net, id: usize, new: Option<(RxRequest<'_>, Target)>) -> Result {
         let changed = match new {
-            Some((req, t)) => {
-                let mut err_mask = req.err_mask & rxtable::CAN_ERR_MASK;
-                let filters = filters_of(req.filters, &mut err_mask)?;
-                let s = Spec {
-                    ifindex: req.ifindex,
-                    filters,
-                    join: req.join,
-                    err_mask,
-                    cookie: req.cookie,
-                };
-                table_make(net)?.set(id, Some((s, t)))?
-            }
+            Some((req, t)) => table_make(net)?.set(id, Some((spec_of(&req)?, t)))?,
             // A namespace without a table has no receiver to remove.
             None => match table(net) {
                 Some(t) => t.set(id, None)?,
@@ -134,8 +139,31 @@ impl Family for PfCan {
 
     /// See [`rcan_api::rx_reserve`]. Process context; sleeps (allocates,
     /// takes the table's mutex).
-    fn rx_reserve(net: &Net, id: usize, t: Target) -> Result {
+    fn rx_reserve(net: &Net, id: usize, t: Target) -> Result<RcvHandle> {
         table_make(net)?.reserve(id, t)
+    }
+
+    /// See [`rcan_api::rx_set_reserved`]. Process context; sleeps (may
+    /// allocate, takes the table's mutex, then `rcan_pf_mutex` if a driver
+    /// listens).
+    fn rx_set_reserved(
+        net: &Net,
+        rcv: RcvHandle,
+        new: Option<RxRequest<'_>>,
+        keep: bool,
+    ) -> Result {
+        // The receiver was reserved in this namespace's table, so it has
+        // one (kept until the namespace exits, after its sockets).
+        let Some(table) = table(net) else {
+            return Err(EINVAL);
+        };
+        let spec = match new {
+            Some(req) => Some(spec_of(&req)?),
+            None => None,
+        };
+        let changed = table.set_reserved(rcv, spec, keep)?;
+        family::notify_listeners(&changed.ifindex);
+        Ok(())
     }
 
     fn rx_filters(dev: &NetDev, out: &mut [Filter]) -> Option<usize> {

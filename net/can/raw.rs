@@ -19,7 +19,9 @@
 //! * System calls run in process context. Those that change what the
 //!   socket receives (bind, CAN_RAW_FILTER, CAN_RAW_ERR_FILTER,
 //!   CAN_RAW_RECV_OWN_MSGS, CAN_RAW_JOIN_FILTERS) take RTNL, then the
-//!   socket lock, then (inside `rcan_rx_set`) pf_can's writers' mutex —
+//!   socket lock, then (inside `rcan_rx_set_reserved`, reached through
+//!   the glue's `rx_set_locked`, which takes the socket lock's guard)
+//!   pf_can's writers' mutex —
 //!   the order of mainline raw.c; RTNL keeps the device from vanishing
 //!   between the check and the registration, and serialises with the
 //!   netdevice notifier.
@@ -40,12 +42,12 @@ use kernel::prelude::*;
 
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
-use glue::sock::{Msg, OptIn, OptOut, Sock};
+use glue::sock::{Msg, OptIn, OptOut, Sock, SockGuard};
 use glue::sync::Rtnl;
 use kernel::c_str;
 use rcan_api::{
-    CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets, CAN_RAW,
-    RX_FILTER_CAN_ID, SOCK_RAW,
+    CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, RxSlot, Sockets,
+    CAN_RAW, RX_FILTER_CAN_ID, SOCK_RAW,
 };
 use rcan_core::frame::{AnyFrame, CANFD_MTU};
 use rcan_core::rxtable::CAN_ERR_MASK;
@@ -144,6 +146,10 @@ struct RawShared {
     /// CAN_RAW_FD_FRAMES is on (read by sendmsg and by the receive
     /// callback, as mainline reads `ro->fd_frames`).
     fd_frames: AtomicBool,
+    /// The receiver pf_can made for the socket at `socket()`
+    /// ([`CanProtocol::rx_slot`]; the glue reads and clears it under the
+    /// socket lock).
+    rx: RxSlot,
 }
 
 impl RawSock {
@@ -177,13 +183,16 @@ impl CanProtocol for RawProto {
     /// All state is in the socket; devices are looked up in the
     /// socket's namespace.
     const ALL_NAMESPACES: bool = true;
-    /// The receiver is made at `socket()` (mainline allocates its
-    /// per-socket receive state there too), so bind allocates nothing;
-    /// `release` always removes it.
-    const RESERVE_RX: bool = true;
 
     fn module() -> &'static ProtoModule<Self> {
         &MODULE
+    }
+
+    /// The receiver is made at `socket()` (mainline allocates its
+    /// per-socket receive state there too), so bind allocates nothing and
+    /// finds it without a lookup; `release` always removes it.
+    fn rx_slot(shared: &RawShared) -> Option<&RxSlot> {
+        Some(&shared.rx)
     }
 
     /// NET_RX softirq, RCU read side. Mainline `raw_rcv`: own frames only
@@ -232,7 +241,7 @@ impl CanProtocol for RawProto {
                 return;
             }
             let err = if event == NetdevEvent::Unregister {
-                unregister(sk);
+                rcan_api::rx_unset_locked(&s);
                 s.bound = false;
                 s.ifindex = 0;
                 sk.shared().ifindex.store(0, Ordering::Relaxed);
@@ -249,26 +258,22 @@ impl CanProtocol for RawProto {
     }
 }
 
-/// (Re)registers the socket's receiver from its current state, or removes
-/// it when the socket is not bound. Process context; caller holds RTNL and
-/// the socket lock (passes the locked state in `s`).
-fn register(sk: &S, s: &RawSock) -> Result {
+/// (Re)registers the socket's receiver from its current state, or retires
+/// its registration when the socket is not bound. Process context; caller
+/// holds RTNL and the socket lock (passes its guard in `s`).
+fn register(s: &SockGuard<'_, RawProto>) -> Result {
     if !s.bound {
-        rcan_api::rx_remove(sk);
+        rcan_api::rx_unset_locked(s);
         return Ok(());
     }
-    rcan_api::rx_set(
-        sk,
+    rcan_api::rx_set_locked(
+        s,
         s.cookie(),
         s.ifindex,
         s.filters(),
         s.join_filters != 0,
         s.err_mask,
     )
-}
-
-fn unregister(sk: &S) {
-    rcan_api::rx_remove(sk);
 }
 
 /// Parses the `can_family`/`can_ifindex` part of a `struct sockaddr_can`.
@@ -315,7 +320,7 @@ fn update(sk: &S, change: Change) -> Result {
         Change::Join(v) => s.join_filters = v,
     }
     if s.bound {
-        if let Err(e) = register(sk, &s) {
+        if let Err(e) = register(&s) {
             s.err_mask = err_mask;
             s.recv_own_msgs = recv_own;
             s.join_filters = join;
@@ -337,6 +342,7 @@ impl glue::sock::Proto for RawProto {
             ifindex: AtomicI32::new(0),
             loopback: AtomicBool::new(true),
             fd_frames: AtomicBool::new(false),
+            rx: RxSlot::new(),
         }
     }
 
@@ -358,8 +364,8 @@ impl glue::sock::Proto for RawProto {
         let mut rtnl = Rtnl::lock();
         MODULE.sockets.get(&mut rtnl).remove(sk);
         let mut s = sk.lock();
-        // Bound or not: the receiver made at socket() (RESERVE_RX) goes too.
-        unregister(sk);
+        // Bound or not: the receiver made at socket() (rx_slot) goes too.
+        rcan_api::rx_release(&s);
         s.bound = false;
         s.ifindex = 0;
         s.filters = RawFilters::Default;
@@ -386,7 +392,7 @@ impl glue::sock::Proto for RawProto {
             let old = (s.bound, s.ifindex);
             s.bound = true;
             s.ifindex = ifindex;
-            if let Err(e) = register(sk, &s) {
+            if let Err(e) = register(&s) {
                 (s.bound, s.ifindex) = old;
                 return Err(e);
             }

@@ -325,6 +325,13 @@ pub(crate) struct SockGuard<'a, T: Proto> {
     _not_send: PhantomData<*mut ()>,
 }
 
+impl<'a, T: Proto> SockGuard<'a, T> {
+    /// The locked socket: holding the guard proves its lock is held.
+    pub(crate) fn sock(&self) -> &'a Sock<T> {
+        self.sock
+    }
+}
+
 impl<T: Proto> core::ops::Deref for SockGuard<'_, T> {
     type Target = T::Data;
     fn deref(&self) -> &T::Data {

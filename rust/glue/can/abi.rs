@@ -142,14 +142,31 @@ extern "C" {
         spec: *const RxSpec,
     ) -> ffi::c_int;
     /// Makes the receiver of (`func`, `sk`) ahead of its first
-    /// [`rcan_rx_set`] (at `socket()`), so that one allocates nothing. It
-    /// holds a reference on `sk` as a registration does, receives nothing
-    /// until set, and stays until removed (`rcan_rx_set` with NULL spec,
-    /// or a spec that wants nothing): the caller must remove it before
-    /// the socket can be freed (in `release`). Process context; may sleep.
-    /// ENOMEM (then nothing is reserved: the first `rcan_rx_set`
-    /// allocates as without reservation).
-    pub(crate) fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> ffi::c_int;
+    /// registration (at `socket()`), so that one allocates nothing, and
+    /// returns it, for [`rcan_rx_set_reserved`]. It holds a reference on
+    /// `sk` as a registration does, receives nothing until set, and stays
+    /// until removed for good (`rcan_rx_set_reserved` with NULL spec and
+    /// `keep` false; `rcan_rx_set` with NULL spec only retires its
+    /// registration): the caller must remove it before the socket can be
+    /// freed (in `release`). Process
+    /// context; may sleep. NULL on ENOMEM (then nothing is reserved: the
+    /// first `rcan_rx_set` allocates as without reservation).
+    pub(crate) fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> *mut ffi::c_void;
+    /// [`rcan_rx_set`] for the receiver `rcv` that [`rcan_rx_reserve`]
+    /// returned for `sk`, found without a lookup: `spec` (with `cookie`)
+    /// replaces its registration; NULL, or a spec that wants nothing,
+    /// retires it, and then the receiver stays reserved if `keep`, else it
+    /// is removed for good (after which `rcv` must not be used again).
+    /// The caller serialises its calls for one `sk` (the socket lock) and
+    /// passes a `rcv` not yet removed for good. Process context; may
+    /// sleep. ENOMEM, EINVAL as `rcan_rx_set`; removal never fails.
+    pub(crate) fn rcan_rx_set_reserved(
+        rcv: *mut ffi::c_void,
+        sk: *mut bindings::sock,
+        cookie: u32,
+        spec: *const RxSpec,
+        keep: bool,
+    ) -> ffi::c_int;
     /// Like [`rcan_rx_set`], for a receiver inside the kernel that has no
     /// socket: `data` is passed to `func` as its `owner`. No reference is
     /// taken; instead every call returns only after every running callback

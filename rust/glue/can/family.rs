@@ -32,7 +32,7 @@
 
 use crate::glue::bindings;
 use crate::glue::can::abi::{CanProto, ListenFn, RxFilter, RxFn, RxSpec, CANPROTO_MAX};
-use crate::glue::can::rx::{Receiver, RxTable};
+use crate::glue::can::rx::{RcvHandle, Receiver, RxTable};
 use crate::glue::net::{Net, Pernet, PernetData, PernetReg};
 use crate::glue::netdev::NetDev;
 use crate::glue::skb::Skb;
@@ -56,10 +56,19 @@ pub(crate) trait Family: 'static {
     /// (bad filter); on error the previous registration stays.
     fn rx_set(net: &Net, id: usize, new: Option<(RxRequest<'_>, Target)>) -> Result;
     /// Makes receiver `id` (`t`) of namespace `net` ahead of its first
-    /// registration, which then allocates nothing; it receives nothing
-    /// until set, and stays until removed (`rx_set(net, id, None)`).
-    /// Process context; may sleep. ENOMEM.
-    fn rx_reserve(net: &Net, id: usize, t: Target) -> Result;
+    /// registration, which then allocates nothing, and returns its handle
+    /// for [`Family::rx_set_reserved`]; it receives nothing until set, and
+    /// stays until removed for good (`rx_set_reserved` with `keep` false;
+    /// `rx_set(net, id, None)` only retires its registration). Process
+    /// context; may sleep. ENOMEM.
+    fn rx_reserve(net: &Net, id: usize, t: Target) -> Result<RcvHandle>;
+    /// Like [`Family::rx_set`] for the reserved receiver `rcv` of namespace
+    /// `net` (no lookup, no new receiver data): `None` retires its
+    /// registration, and the receiver stays reserved with `keep`, else it
+    /// is removed for good (consuming `rcv`). Process context; may sleep.
+    /// ENOMEM, EINVAL; on error the previous registration stays.
+    fn rx_set_reserved(net: &Net, rcv: RcvHandle, new: Option<RxRequest<'_>>, keep: bool)
+        -> Result;
     /// Copies the filters that apply to frames received on `dev` into
     /// `out`; `None` if there are more than fit. Any context.
     fn rx_filters(dev: &NetDev, out: &mut [crate::rcan_core::rxtable::Filter]) -> Option<usize>;
@@ -316,9 +325,9 @@ extern "C" fn rcan_rx_set(
 
 /// See [`crate::glue::can::abi::rcan_rx_reserve`].
 #[no_mangle]
-extern "C" fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> ffi::c_int {
+extern "C" fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> *mut ffi::c_void {
     let Some(owner) = NonNull::new(sk.cast::<ffi::c_void>()) else {
-        return code::EINVAL.to_errno();
+        return core::ptr::null_mut();
     };
     // SAFETY: the caller's `sk` is a live sock (abi contract); the Target
     // keeps this reference until it is dropped.
@@ -332,6 +341,32 @@ extern "C" fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> ffi::c_int
     // SAFETY: as in rcan_rx_set.
     let net = unsafe { Net::from_raw(bindings::rcan_sock_net(sk)) };
     match Impl::rx_reserve(net, owner.as_ptr() as usize, t) {
+        Ok(h) => h.into_raw(),
+        Err(_) => core::ptr::null_mut(),
+    }
+}
+
+/// See [`crate::glue::can::abi::rcan_rx_set_reserved`].
+#[no_mangle]
+extern "C" fn rcan_rx_set_reserved(
+    rcv: *mut ffi::c_void,
+    sk: *mut bindings::sock,
+    cookie: u32,
+    spec: *const RxSpec,
+    keep: bool,
+) -> ffi::c_int {
+    let Some(rcv) = NonNull::new(rcv) else {
+        return code::EINVAL.to_errno();
+    };
+    // SAFETY: as in rcan_rx_set.
+    let net = unsafe { Net::from_raw(bindings::rcan_sock_net(sk)) };
+    // SAFETY: `rcv` is what rcan_rx_reserve returned for `sk`, whose
+    // receiver is in the table of `sk`'s namespace (fixed for the sock's
+    // life) and not removed for good yet (abi contract).
+    let rcv = unsafe { RcvHandle::from_raw(rcv) };
+    // SAFETY: as in rcan_rx_set.
+    let new = unsafe { spec.as_ref() }.map(|spec| unsafe { request(spec, cookie) });
+    match Impl::rx_set_reserved(net, rcv, new, keep) {
         Ok(()) => 0,
         Err(e) => e.to_errno(),
     }

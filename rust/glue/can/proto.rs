@@ -15,7 +15,9 @@
 //!   registers it in module init; the returned [`ProtoRegistration`]
 //!   unregisters everything when dropped (module exit);
 //! * subscribes a socket to frames with [`rx_set`] and unsubscribes it with
-//!   [`rx_remove`] (at the latest in `release`).
+//!   [`rx_remove`] (at the latest in `release`), or, with a
+//!   [`CanProtocol::rx_slot`], with [`rx_set_locked`] / [`rx_unset_locked`]
+//!   and [`rx_release`] in `release`.
 //!
 //! The C entry points are generic trampolines here, one source for every
 //! protocol: [`create_trampoline`] (`socket()`), [`notifier_trampoline`]
@@ -35,10 +37,11 @@ use crate::glue::bindings;
 use crate::glue::net::Net;
 use crate::glue::netdev::{self as gnetdev, DevRef, NetDev};
 use crate::glue::skb::Skb;
-use crate::glue::sock::{Proto, ProtoReg, Sock};
+use crate::glue::sock::{Proto, ProtoReg, Sock, SockGuard};
 use crate::glue::sync::{CCell, RcuReadGuard, Rtnl, RtnlLocked};
 use core::marker::PhantomData;
 use core::mem::ManuallyDrop;
+use core::sync::atomic::{AtomicPtr, Ordering};
 use kernel::error::{code, Result};
 use kernel::ffi;
 
@@ -90,6 +93,21 @@ impl RxSkb<'_> {
     }
 }
 
+/// A socket's reserved receiver ([`CanProtocol::rx_slot`]): pf_can's
+/// handle for it, stored at `socket()` (before the socket is reachable)
+/// and then read and cleared only under the socket lock (the functions
+/// that use it take the lock's guard), so a handle is never used after
+/// [`rx_release`] removed its receiver. NULL: no receiver reserved
+/// (ENOMEM at `socket()`, or released).
+pub(crate) struct RxSlot(AtomicPtr<ffi::c_void>);
+
+impl RxSlot {
+    /// An empty slot, for the protocol's `new_shared`.
+    pub(crate) const fn new() -> Self {
+        RxSlot(AtomicPtr::new(core::ptr::null_mut()))
+    }
+}
+
 /// A netdevice event a protocol reacts to.
 #[derive(Clone, Copy, PartialEq, Eq)]
 pub(crate) enum NetdevEvent {
@@ -109,12 +127,18 @@ pub(crate) trait CanProtocol: Proto {
     /// type gets EPROTOTYPE.
     const SOCK_TYPE: i32;
 
-    /// Make every new socket's receiver at `socket()` time (as mainline
-    /// keeps its per-socket receive state in the socket), so that its
-    /// first [`rx_set`] (the bind) allocates nothing. A protocol that sets
-    /// this must call [`rx_remove`] in every `release`, bound or not (the
-    /// reserved receiver holds a reference on the sock). Default: no.
-    const RESERVE_RX: bool = false;
+    /// Where a socket keeps its receiver made at `socket()` time (as
+    /// mainline keeps its per-socket receive state in the socket): a
+    /// protocol that returns a slot (in its `Shared` state) gets its
+    /// receiver reserved at `socket()`, so the first registration (the
+    /// bind) allocates nothing, and subscribes with [`rx_set_locked`] /
+    /// [`rx_unset_locked`], which find the receiver through the slot
+    /// without a lookup. It must call [`rx_release`] in every `release`,
+    /// bound or not (the reserved receiver holds a reference on the sock).
+    /// Default: none (receivers are made by the first [`rx_set`]).
+    fn rx_slot(_shared: &Self::Shared) -> Option<&RxSlot> {
+        None
+    }
 
     /// Sockets may be created in every network namespace: the protocol
     /// keeps its state in its sockets and finds devices in the socket's
@@ -310,7 +334,7 @@ impl<T: CanProtocol> ProtoModule<T> {
     }
 
     /// `CanProto.create`: allocates the sock and lists it in `sockets`;
-    /// with [`CanProtocol::RESERVE_RX`], makes its receiver too. Process
+    /// with a [`CanProtocol::rx_slot`], makes its receiver too. Process
     /// context.
     ///
     /// # Safety
@@ -342,14 +366,18 @@ impl<T: CanProtocol> ProtoModule<T> {
             return code::ENOMEM.to_errno();
         }
         drop(rtnl);
-        if T::RESERVE_RX {
-            // Best effort: without a reservation (ENOMEM) the first rx_set
-            // allocates the receiver itself. The protocol's release
-            // removes it (RESERVE_RX contract), which drops the reference
-            // it holds.
+        // SAFETY: our live new sock of `T`, for this call.
+        let sock = unsafe { Sock::<T>::from_raw(sk as *mut bindings::sock) };
+        if let Some(slot) = T::rx_slot(sock.shared()) {
+            // Best effort: without a reservation (ENOMEM: NULL) the first
+            // rx_set_locked allocates the receiver itself. The protocol's
+            // release removes it (rx_slot contract), which drops the
+            // reference it holds.
             // SAFETY: `sk` is our live new sock of `T`; rx_trampoline::<T>
             // expects exactly such an owner.
-            let _ = unsafe { abi::rcan_rx_reserve(rx_trampoline::<T>, sk as *mut bindings::sock) };
+            let h = unsafe { abi::rcan_rx_reserve(rx_trampoline::<T>, sock.as_ptr()) };
+            // Nobody else can reach the socket before create returns.
+            slot.0.store(h, Ordering::Relaxed);
         }
         0
     }
@@ -496,6 +524,80 @@ pub(crate) fn rx_remove<T: CanProtocol>(sk: &Sock<T>) {
     // SAFETY: removal of a subscription; `sk` is a live sock (Sock
     // invariant).
     unsafe { abi::rcan_rx_set(rx_trampoline::<T>, sk.as_ptr(), 0, core::ptr::null()) };
+}
+
+/// [`rx_set`] for a socket of a protocol with an [`RxSlot`], socket lock
+/// held (`s`): its reserved receiver is set without a lookup (or, without
+/// one, as `rx_set` does). A subscription that wants nothing retires the
+/// registration and keeps the receiver. Process context; may sleep.
+/// ENOMEM, EINVAL (bad filter); on error the previous subscription stays.
+pub(crate) fn rx_set_locked<T: CanProtocol>(
+    s: &SockGuard<'_, T>,
+    cookie: u32,
+    ifindex: i32,
+    filters: &[RxFilter],
+    join: bool,
+    err_mask: u32,
+) -> Result {
+    let sk = s.sock();
+    let Some(rcv) = reserved(sk) else {
+        return rx_set(sk, cookie, ifindex, filters, join, err_mask);
+    };
+    let spec = RxSpec {
+        ifindex,
+        join,
+        err_mask,
+        filters: filters.as_ptr(),
+        nfilters: filters.len(),
+    };
+    // SAFETY: `spec` and its filters live for the call; `rcv` is the
+    // receiver reserved for `sk`, not removed for good (only rx_release
+    // does that, clearing the slot under the socket lock that `s` holds);
+    // `sk` is a live sock of `T`.
+    let ret = unsafe { abi::rcan_rx_set_reserved(rcv, sk.as_ptr(), cookie, &spec, true) };
+    crate::glue::to_result(ret).map(|_| ())
+}
+
+/// [`rx_remove`] for a socket of a protocol with an [`RxSlot`], socket
+/// lock held (`s`): the registration goes, the reserved receiver stays for
+/// a later [`rx_set_locked`]. `T::rx` may still run for the old
+/// registration until a grace period has passed. Never fails. Process
+/// context; may sleep.
+pub(crate) fn rx_unset_locked<T: CanProtocol>(s: &SockGuard<'_, T>) {
+    let sk = s.sock();
+    match reserved(sk) {
+        // SAFETY: as in rx_set_locked; a NULL spec retires.
+        Some(rcv) => unsafe {
+            abi::rcan_rx_set_reserved(rcv, sk.as_ptr(), 0, core::ptr::null(), true);
+        },
+        None => rx_remove(sk),
+    }
+}
+
+/// Removes the socket's receiver for good (reserved or not), from its
+/// protocol's `release`, socket lock held (`s`). Never fails. Process
+/// context; may sleep.
+pub(crate) fn rx_release<T: CanProtocol>(s: &SockGuard<'_, T>) {
+    let sk = s.sock();
+    match reserved(sk) {
+        Some(rcv) => {
+            if let Some(slot) = T::rx_slot(sk.shared()) {
+                slot.0.store(core::ptr::null_mut(), Ordering::Relaxed);
+            }
+            // SAFETY: as in rx_set_locked; the slot is cleared above (socket
+            // lock held), so `rcv` is never used again.
+            unsafe { abi::rcan_rx_set_reserved(rcv, sk.as_ptr(), 0, core::ptr::null(), false) };
+        }
+        None => rx_remove(sk),
+    }
+}
+
+/// The socket's reserved receiver, if its protocol has a slot and it
+/// holds one. Socket lock held by the caller (the slot changes only
+/// under it, after `socket()`).
+fn reserved<T: CanProtocol>(sk: &Sock<T>) -> Option<*mut ffi::c_void> {
+    let p = T::rx_slot(sk.shared())?.0.load(Ordering::Relaxed);
+    (!p.is_null()).then_some(p)
 }
 
 /// Sends the CAN frame in `skb` on `dev` (mainline `can_send`; sets

@@ -22,7 +22,10 @@
 //!   interface, for drivers computing their hardware filter.
 //! * `rcvs` (writer side only): the receivers, hashed by id and chained
 //!   through the receivers themselves, so a new receiver is added without
-//!   an allocation and a socket's registration is found without a scan.
+//!   an allocation and a socket's registration is found without a scan;
+//!   a reserved receiver's owner names it by its [`RcvHandle`] instead,
+//!   and then the map is not walked at all (only linked to and unlinked
+//!   from, at reservation and final removal).
 //!
 //! Each registration belongs to a *receiver* ([`Receiver::id`]); a
 //! receiver has at most one live registration, and replacing it links the
@@ -151,6 +154,38 @@ pub(crate) struct Changed {
     pub(crate) ifindex: [Option<i32>; 2],
     /// A receiver was removed entirely (its last registration retired).
     pub(crate) removed: bool,
+}
+
+/// A receiver made by [`RxTable::reserve`], named without a lookup: its
+/// owner keeps it from the reservation until it removes the receiver for
+/// good ([`RxTable::set_reserved`] with `keep` false), and hands it to
+/// every [`RxTable::set_reserved`] in between, which then walks no
+/// receiver map. Opaque above the glue; crosses the module boundary as a
+/// raw pointer ([`RcvHandle::into_raw`], [`RcvHandle::from_raw`]).
+///
+/// # Invariants
+///
+/// Points at a receiver of one table, leaked from its KBox and on that
+/// table's receiver map (not removed for good).
+pub(crate) struct RcvHandle(NonNull<core::ffi::c_void>);
+
+impl RcvHandle {
+    /// The receiver's address, for the C interface.
+    pub(crate) fn into_raw(self) -> *mut core::ffi::c_void {
+        self.0.as_ptr()
+    }
+
+    /// The handle `into_raw` gave.
+    ///
+    /// # Safety
+    ///
+    /// `p` came from [`RcvHandle::into_raw`] of a handle of the table the
+    /// caller will use it with, and its receiver has not been removed for
+    /// good since (no `set_reserved` with `keep` false on it).
+    pub(crate) unsafe fn from_raw(p: NonNull<core::ffi::c_void>) -> Self {
+        // INVARIANT: the caller's contract.
+        RcvHandle(p)
+    }
 }
 
 /// Which list a node is on.
@@ -335,8 +370,14 @@ struct Rcv<R: Receiver> {
     /// the receiver is on from its reservation or first registration
     /// until its removal.
     chain: Link<Rcv<R>>,
+    /// Writer side only: made by [`RxTable::reserve`], whose caller holds
+    /// an [`RcvHandle`] to it: then only [`RxTable::set_reserved`] with
+    /// `keep` false removes it for good, and `set(id, None)` only retires
+    /// its registration (so the handle stays valid).
+    reserved: Cell<bool>,
     /// Writer side only: the live registration (NULL: a reserved
-    /// receiver that has had none yet).
+    /// receiver that has had none yet, or whose registration was retired
+    /// with `keep`, [`RxTable::set_reserved`]).
     reg: Cell<*const Reg<R>>,
     /// The first registration: filled once, under the writer mutex, before
     /// any of its nodes is linked, and never changed afterwards (then only
@@ -353,6 +394,7 @@ impl<R: Receiver> Rcv<R> {
             data,
             seen: CpuMarks::new()?,
             chain: Link::new(),
+            reserved: Cell::new(false),
             reg: Cell::new(ptr::null()),
             first: UnsafeCell::new(None),
         })
@@ -530,6 +572,12 @@ fn id_bucket(id: usize) -> usize {
     ((id as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> (64 - ID_BUCKETS.trailing_zeros())) as usize
 }
 
+/// Whether `s` wants anything (frames or error frames); a spec that does
+/// not removes its receiver's registration.
+fn wants(s: &Spec) -> bool {
+    !s.filters.is_empty() || s.err_mask != 0
+}
+
 /// `call_rcu` callback: frees a retired registration, its nodes and, if it
 /// was the last one, its receiver. Softirq context.
 unsafe extern "C" fn free_reg<R: Receiver>(head: *mut bindings::callback_head) {
@@ -545,10 +593,13 @@ unsafe extern "C" fn free_reg<R: Receiver>(head: *mut bindings::callback_head) {
 }
 
 /// `call_rcu` callback: frees a receiver whose inline first registration
-/// was its last (with that registration). Softirq context.
+/// was its last (with that registration), or a reserved receiver removed
+/// for good after its registrations were retired (`keep`). Softirq
+/// context.
 unsafe extern "C" fn free_rcv<R: Receiver>(head: *mut bindings::callback_head) {
-    // Its live registration (the inline one) was unlinked and the
-    // receiver taken off the map a grace period ago.
+    // Its last registration was unlinked and the receiver taken off the
+    // map a grace period ago; a boxed registration retired earlier does
+    // not refer to it when freed (free_reg with `last` false).
     // SAFETY: `head` is the first field of an `Rcv<R>` leaked from a KBox
     // by `set` or `reserve`, and nothing refers to it any more (above).
     drop(unsafe { KBox::from_raw(head.cast::<Rcv<R>>()) });
@@ -742,33 +793,41 @@ impl<R: Receiver> RxTable<R> {
     }
 
     /// Makes receiver `id` (with `data`) ahead of its first registration,
-    /// so that registration ([`RxTable::set`]) allocates nothing; if the
-    /// receiver exists already, `data` is dropped. A reserved receiver
-    /// receives nothing until it is set, and stays until removed
-    /// (`set(id, None)`, or a spec that wants nothing). Process context;
+    /// so that registration allocates nothing, and returns its handle, with
+    /// which [`RxTable::set_reserved`] finds it without a lookup; if the
+    /// receiver exists already, `data` is dropped and the handle names the
+    /// existing one. A reserved receiver receives nothing until set, and
+    /// stays until removed for good by `set_reserved` with `keep` false
+    /// (`set(id, None)` only retires its registration). Process context;
     /// sleeps. ENOMEM.
-    pub(crate) fn reserve(&self, id: usize, data: R) -> Result {
+    pub(crate) fn reserve(&self, id: usize, data: R) -> Result<RcvHandle> {
         // Allocated before locking; freed again if the receiver exists.
         let s = KBox::new(Rcv::new(data)?, GFP_KERNEL)?;
         let _w = self.writer.lock();
         let chain = &self.rcvs[id_bucket(id)];
         // SAFETY: writer mutex held (`_w`) while the chain is walked.
-        if unsafe { chain.iter_locked() }.any(|r| r.data.id() == id) {
-            return Ok(());
+        if let Some(r) = unsafe { chain.iter_locked() }.find(|r| r.data.id() == id) {
+            r.reserved.set(true);
+            // INVARIANT: on the map, leaked (as below, earlier); removed
+            // for good only by `set_reserved` now (`reserved`).
+            return Ok(RcvHandle(NonNull::from(r).cast()));
         }
         let s: &Rcv<R> = KBox::leak(s);
-        // `set` removes it later, freeing it at once if it never had a
-        // registration, else through its last one's RCU callback.
+        s.reserved.set(true);
+        // Removed later by `set_reserved` or `set`, freed at once if it
+        // never had a registration, else after a grace period.
         // SAFETY: writer mutex held; a new receiver, not on the map, at a
-        // stable address until `set` removes it.
+        // stable address until removed.
         unsafe { chain.push(s) };
-        Ok(())
+        // INVARIANT: leaked above and on the map.
+        Ok(RcvHandle(NonNull::from(s).cast()))
     }
 
     /// Sets the registration of receiver `id`: `new` is the spec and the
     /// receiver's data (used only if the receiver does not exist yet;
-    /// else dropped here), `None` removes the receiver. A spec that wants
-    /// nothing (no filters, no error mask) removes it too. On error (ENOMEM)
+    /// else dropped here), `None` removes the receiver (a reserved one
+    /// only loses its registration: its handle's holder removes it). A
+    /// spec that wants nothing (no filters, no error mask) removes it too. On error (ENOMEM)
     /// the previous registration stays; removal never fails. Process
     /// context; sleeps.
     ///
@@ -779,11 +838,11 @@ impl<R: Receiver> RxTable<R> {
     /// key the table lacks and a group snapshot when a group is new. A
     /// removal allocates nothing.
     pub(crate) fn set(&self, id: usize, new: Option<(Spec, R)>) -> Result<Changed> {
-        let new = new.filter(|(s, _)| !s.filters.is_empty() || s.err_mask != 0);
+        let new = new.filter(|(s, _)| wants(s));
         // The registration is built before locking (unplaced); where it
         // goes (inside its receiver, or boxed) is decided under the lock.
         let prepared = match new {
-            Some((spec, data)) => Some((Self::make_reg(spec)?, data)),
+            Some((spec, data)) => Some((Self::make_reg(spec)?, Some(data))),
             None => None,
         };
         let mut w = self.writer.lock();
@@ -791,29 +850,102 @@ impl<R: Receiver> RxTable<R> {
         // SAFETY: writer mutex held (`w`) for as long as `old` is used: the
         // map's receivers are unlinked and freed only under it.
         let old: Option<&Rcv<R>> = unsafe { chain.iter_locked() }.find(|r| r.data.id() == id);
+        // A reserved receiver's owner holds its handle: only that removes
+        // it for good.
+        let keep = old.is_some_and(|r| r.reserved.get());
+        self.apply(&mut w, id, old, prepared, keep)
+    }
+
+    /// Like [`RxTable::set`] for the reserved receiver `rcv`, found without
+    /// a lookup and without new receiver data (it has its own): `new` is
+    /// its new registration; `None` (or a spec that wants nothing) retires
+    /// its registration, and with `keep` the receiver stays reserved (and
+    /// `rcv` valid) for a later registration, else it is removed for good
+    /// (which consumes `rcv`; pass `keep` false exactly once). Process
+    /// context; sleeps. ENOMEM, as `set`.
+    pub(crate) fn set_reserved(
+        &self,
+        rcv: RcvHandle,
+        new: Option<Spec>,
+        keep: bool,
+    ) -> Result<Changed> {
+        let prepared = match new.filter(wants) {
+            Some(spec) => Some((Self::make_reg(spec)?, None)),
+            None => None,
+        };
+        let mut w = self.writer.lock();
+        // SAFETY: a receiver of this table, on its map (RcvHandle
+        // invariant), so freed only by a removal under the writer mutex,
+        // which we hold (`w`) while `r` is used.
+        let r: &Rcv<R> = unsafe { rcv.0.cast::<Rcv<R>>().as_ref() };
+        self.apply(&mut w, r.data.id(), Some(r), prepared, keep)
+    }
+
+    /// The body of [`RxTable::set`] and [`RxTable::set_reserved`], under
+    /// the writer mutex (`w` is its data): `old` is receiver `id` if it
+    /// exists, `prepared` the new registration (unplaced) and, for a
+    /// receiver to be made, its data; `None` retires the receiver's
+    /// registration and, unless `keep`, the receiver.
+    fn apply(
+        &self,
+        w: &mut Writer,
+        id: usize,
+        old: Option<&Rcv<R>>,
+        prepared: Option<(Reg<R>, Option<R>)>,
+        keep: bool,
+    ) -> Result<Changed> {
+        let chain = &self.rcvs[id_bucket(id)];
         let mut changed = Changed::default();
         let Some((reg, data)) = prepared else {
             // Removal.
             let Some(rcv) = old else {
                 return Ok(changed);
             };
+            let live = rcv.reg.get();
+            if keep {
+                // The registration goes, the receiver stays reserved.
+                // SAFETY: NULL or the receiver's live registration.
+                if let Some(o) = unsafe { live.as_ref() } {
+                    changed.ifindex[0] = (!o.filters.is_empty()).then_some(o.ifindex);
+                    self.unlink_reg(w, o);
+                    self.shrink_groups(w);
+                    rcv.reg.set(ptr::null());
+                    if !rcv.is_first(o) {
+                        // SAFETY: unlinked and no longer the receiver's
+                        // live registration; the receiver stays (`last`
+                        // false); free_reg frees it.
+                        unsafe { defer(live.cast_mut().cast(), free_reg::<R>) };
+                    }
+                }
+                return Ok(changed);
+            }
             // SAFETY: writer mutex held; `rcv` is on the map.
             unsafe { List::unlink(rcv) };
-            let live = rcv.reg.get();
             if live.is_null() {
-                // Readers reach receivers only through registrations.
-                // SAFETY: a reserved receiver that never had a registration:
-                // leaked from a KBox by `reserve`, now off the map, never
-                // reachable by readers, so it is freed at once.
-                drop(unsafe { KBox::from_raw((rcv as *const Rcv<R>).cast_mut()) });
+                if rcv.first().is_none() {
+                    // Readers reach receivers only through registrations.
+                    // SAFETY: a reserved receiver that never had a
+                    // registration: leaked from a KBox by `reserve`, now
+                    // off the map, never reachable by readers, so it is
+                    // freed at once.
+                    drop(unsafe { KBox::from_raw((rcv as *const Rcv<R>).cast_mut()) });
+                } else {
+                    // Its registrations were retired earlier (`keep`):
+                    // readers may still hold the last one until a grace
+                    // period has passed.
+                    // SAFETY: off the map, every registration unlinked:
+                    // unreachable for new readers and writers; free_rcv
+                    // frees it (with its inline registration).
+                    unsafe { defer((rcv as *const Rcv<R>).cast_mut().cast(), free_rcv::<R>) };
+                }
                 return Ok(changed);
             }
             // SAFETY: a non-NULL `reg` is the receiver's live registration.
             let o = unsafe { &*live };
             changed.ifindex[0] = (!o.filters.is_empty()).then_some(o.ifindex);
             changed.removed = true;
-            self.unlink_reg(&mut w, o);
-            self.shrink_groups(&mut w);
+            self.unlink_reg(w, o);
+            self.shrink_groups(w);
             if rcv.is_first(o) {
                 // SAFETY: the receiver's only registration ever (inline) is
                 // unlinked and the receiver is off the map: unreachable
@@ -840,11 +972,15 @@ impl<R: Receiver> RxTable<R> {
                     None => Home::Slot(r, reg),
                 }
             }
-            None => Home::New(KBox::new(Rcv::new(data)?, GFP_KERNEL)?, reg),
+            None => {
+                // `set` always brings data; `set_reserved` always has `old`.
+                let data = data.ok_or(kernel::error::code::EINVAL)?;
+                Home::New(KBox::new(Rcv::new(data)?, GFP_KERNEL)?, reg)
+            }
         };
         // Everything that can fail comes before anything is linked.
-        let fresh = self.new_keys(&w, home.reg())?;
-        self.grow_groups(&mut w, home.reg())?;
+        let fresh = self.new_keys(w, home.reg())?;
+        self.grow_groups(w, home.reg())?;
         let (rcv, reg): (&Rcv<R>, &Reg<R>) = match home {
             Home::Boxed(r, mut b) => {
                 b.place(NonNull::from(r));
@@ -865,7 +1001,7 @@ impl<R: Receiver> RxTable<R> {
                 (s, unsafe { s.fill_first(reg) })
             }
         };
-        self.link_reg(&w, reg, fresh);
+        self.link_reg(w, reg, fresh);
         changed.ifindex[0] = (!reg.filters.is_empty()).then_some(reg.ifindex);
         let prev = rcv.reg.replace(reg as *const Reg<R>);
         // SAFETY: NULL, or the receiver's previous live registration,
@@ -874,7 +1010,7 @@ impl<R: Receiver> RxTable<R> {
             if !o.filters.is_empty() && Some(o.ifindex) != changed.ifindex[0] {
                 changed.ifindex[1] = Some(o.ifindex);
             }
-            self.unlink_reg(&mut w, o);
+            self.unlink_reg(w, o);
             if !rcv.is_first(o) {
                 // SAFETY: unlinked and no longer the receiver's live
                 // registration; the receiver lives on in the new one
@@ -884,7 +1020,7 @@ impl<R: Receiver> RxTable<R> {
             // An inline first registration stays in its receiver, unused,
             // until the receiver is freed.
         }
-        self.shrink_groups(&mut w);
+        self.shrink_groups(w);
         Ok(changed)
     }
 

@@ -12,7 +12,7 @@ use crate::canraw::{
     MIN_NAMELEN,
 };
 use crate::check::{ensure, expect_errno, OrFail, TestResult};
-use crate::ctx::{dev, Ctx};
+use crate::ctx::{dev, Ctx, Module, Stack};
 use crate::sys::{self, FILL, SOCKADDR_CAN_LEN};
 use crate::Test;
 use rcan_uapi::raw;
@@ -24,6 +24,7 @@ pub const TESTS: &[Test] = portable_table![
     raw_bind_errors,
     raw_bind_interface_down,
     raw_bind_interface_removed,
+    raw_bind_after_interface_removed,
     raw_socket_calls,
     raw_close_in_every_state,
 ];
@@ -283,6 +284,67 @@ fn raw_bind_interface_removed(ctx: &mut Ctx) -> TestResult {
         "write after the interface was unregistered",
     )?;
     expect_quiet(&[("socket bound to all interfaces", &all)])
+}
+
+/// Brings can0 back (up, classic MTU) after [`Ctx::remove_can_ifaces`],
+/// the rest of the stack still loaded; returns its ifindex.
+fn readd_iface(ctx: &mut Ctx) -> Result<u32, String> {
+    match ctx.stack() {
+        Stack::Ours => {
+            ctx.insmod(Module::Loop, &["count=1"])?;
+            ctx.links_up()?;
+        }
+        Stack::Mainline => {
+            for args in [
+                &["link", "add", "dev", "can0", "type", "vcan"][..],
+                &["link", "set", "can0", "mtu", "16"],
+                &["link", "set", "can0", "up"],
+            ] {
+                crate::tools::run_ok("ip", args)?;
+            }
+        }
+    }
+    ctx.ifindex(&dev(0))
+}
+
+/// A socket unbound by its interface going away binds again and receives
+/// as a fresh one: bound to a new interface with a filter it gets each
+/// matching frame once; its filters emptied, nothing; set again (two of
+/// them, both matching one frame), that frame once. Then it closes and
+/// the stack unloads.
+fn raw_bind_after_interface_removed(ctx: &mut Ctx) -> TestResult {
+    let idx = raw1(ctx)?;
+    let s = canraw::unbound()?;
+    s.set_filters(&[(0x10, 0x7FF)]).or_fail("set a filter")?;
+    bind(&s, idx)?;
+    ctx.remove_can_ifaces()?;
+    expect_errno(
+        s.read_frame(),
+        libc::ENODEV,
+        "read after the interface was unregistered",
+    )?;
+    let idx = readd_iface(ctx)?;
+    let tx = canraw::open(idx)?;
+    s.set_filters(&[(0x20, 0x7FF)])
+        .or_fail("set a filter, unbound")?;
+    bind(&s, idx)?;
+    let f = std(0x20, &[1]);
+    canraw::send(&tx, &std(0x10, &[0]))?;
+    canraw::send(&tx, &f)?;
+    expect(&s, &f, "rebound socket")?;
+    expect_quiet(&[("rebound socket, after its frame", &s)])?;
+    s.set_filter_drop_all().or_fail("set zero filters")?;
+    canraw::send(&tx, &f)?;
+    expect_quiet(&[("rebound socket without filters", &s)])?;
+    s.set_filters(&[(0x20, 0x7FF), (0x20, 0x7F0)])
+        .or_fail("set two filters")?;
+    let g = std(0x20, &[2]);
+    canraw::send(&tx, &g)?;
+    expect(&s, &g, "rebound socket with two filters")?;
+    expect_quiet(&[("rebound socket with two filters, after its frame", &s)])?;
+    drop((s, tx));
+    ctx.unload_all()
+        .map_err(|e| format!("unloading after the socket was closed: {e}"))
 }
 
 /// Closing sockets in every state leaves nothing behind: never bound; a
