@@ -24,6 +24,8 @@ pub(crate) mod canloop;
 pub(crate) mod ctucanfd;
 #[path = "core/src/dsor_addr.rs"]
 pub(crate) mod dsor_addr;
+#[path = "core/src/dsor_fd.rs"]
+pub(crate) mod dsor_fd;
 #[path = "core/src/dsor_rx.rs"]
 pub(crate) mod dsor_rx;
 #[path = "core/src/dsor_tx.rs"]
