@@ -19,6 +19,9 @@
 use super::dsor_tx::{Transfer, TxStep};
 use super::dsor_wire::MAX_NODE;
 
+// Re-exports for users of this module's API (rcan-core's tests and
+// tools); the kernel's rcan_core.rs compiles the file too and uses few.
+#[allow(unused_imports)]
 pub use super::dsor_wire::{
     fd_body_count as body_count, fd_body_frame as body_frame, fd_body_frame_len as body_frame_len,
     fd_body_len_ok as body_len_ok, fd_body_payload as body_payload, fd_dlc_to_len, fd_len_round_up,
