@@ -2210,7 +2210,8 @@ fn check_fd_frames(frames: &[Seen], msg: &[u8]) -> TestResult {
 /// same stays classic; and a classic node (a plain CAN_RAW socket acting
 /// as node 0x20, which never sees FD frames) gets a message after the
 /// fallback to the classic header, and the next one with the classic
-/// header at once (the sender remembers it).
+/// header at once (the sender remembers it); a classic message from that
+/// node is answered with classic acks and delivered.
 fn dsor_fd_bodies_mtu72(ctx: &mut Ctx) -> TestResult {
     // T_ack 500 ms: no retransmission on a slow (debug) kernel; a short
     // reassembly timeout, since a 0-byte message waits for it after load.
@@ -2352,5 +2353,46 @@ fn dsor_fd_bodies_mtu72(ctx: &mut Ctx) -> TestResult {
             frames.iter().filter(|f| f.fd).count()
         );
     }
+
+    // The classic node 0x20 sends a 12-byte message to node 0 (on the FD
+    // interface): classic header and bodies, answered with classic acks
+    // (DLC 2 or 3, never the FD header's 4-byte ack), delivered.
+    let msg = pattern(12, 9, 5);
+    let mut frames = vec![(0u32, vec![0u8, 12])];
+    frames[0].1.extend_from_slice(&id.to_be_bytes());
+    frames.push((1, msg[..8].to_vec()));
+    frames.push((0, msg[8..].to_vec()));
+    for (k, (q, data)) in frames.iter().enumerate() {
+        let ftype = u32::from(k > 0);
+        raw_frame(&classic, dsor_id(0x40, 0, 0x20, ftype, *q, 0), data)?;
+        let ack = loop {
+            let f = canraw::recv(&classic)?;
+            let c: &libc::can_frame = f.as_ref();
+            let cid = c.can_id & libc::CAN_EFF_MASK;
+            if c.can_id & libc::CAN_EFF_FLAG != 0
+                && (cid >> 5) & 3 == 2
+                && (cid >> 14) & 0x7f == 0x20
+                && (cid >> 7) & 0x7f == 0
+            {
+                break c.data[..usize::from(c.can_dlc)].to_vec();
+            }
+        };
+        ensure!(
+            (ack.len() == 2 || (ack.len() == 3 && ack[2] == 0))
+                && ack[..2] == (k as u16).to_be_bytes(),
+            "node 0 acked frame {k} of a classic node's message with {ack:02x?}"
+        );
+    }
+    let (got, from) = recv_msg(&rx)?;
+    ensure!(
+        got == msg
+            && from
+                == Some(DsorAddr::Segm {
+                    prio: 0x40,
+                    node: 0x20,
+                    id
+                }),
+        "from the classic node: {got:02x?} from {from:?}"
+    );
     Ok(())
 }
