@@ -4,9 +4,10 @@
 //! [`Engine`], one while the module is loaded, under one lock,
 //! [`ENGINE`]. It runs the pure machines of `rcan_core::dsor_tx` (a
 //! [`FdTransfer`] per outgoing message, channels and sequence bits in
-//! [`TxStreams`], the FD-or-classic memory of the peers in [`FdPeers`]) and `rcan_core::dsor_rx` (the [`Reassembler`]), feeds
-//! them frames (from `rx.rs`) and time (from `timers.rs`), and queues the
-//! frames they produce on a ring that `timers.rs` sends.
+//! [`TxStreams`], the FD-or-classic memory of the peers in [`FdPeers`])
+//! and `rcan_core::dsor_rx` (the [`Reassembler`]), feeds them frames
+//! (from `rx.rs`) and time (from `timers.rs`), and queues the frames they
+//! produce on a ring that `timers.rs` sends.
 //!
 //! CAN FD bodies (dsor-wire.rst, "Message transfer with CAN FD bodies"):
 //! used only while the DSOR interface is in CAN FD mode (MTU 72,
@@ -106,8 +107,9 @@ pub(crate) struct Engine {
     pub(crate) canip: Option<DevRef>,
     pub(crate) stats: Stats,
     /// Whether the DSOR interface was in CAN FD mode (MTU 72) when last
-    /// seen: by a `sendmsg` (which passes it to [`Engine::start`]), by a
-    /// received frame, by the sender of frames; false after it went down.
+    /// seen: by a `sendmsg` (set right before [`Engine::start`]) or by a
+    /// received frame; false after it went down. canip0's transmit path
+    /// uses it as it is.
     pub(crate) fd_iface: bool,
     /// What the sender knows of each node: FD (acked an FD header),
     /// classic (a fallback), unknown. Forgotten when the DSOR interface
