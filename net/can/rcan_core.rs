@@ -22,6 +22,8 @@ pub(crate) mod candev;
 pub(crate) mod canloop;
 #[path = "core/src/dsor_addr.rs"]
 pub(crate) mod dsor_addr;
+#[path = "core/src/dsor_fd.rs"]
+pub(crate) mod dsor_fd;
 #[path = "core/src/dsor_rx.rs"]
 pub(crate) mod dsor_rx;
 #[path = "core/src/dsor_tx.rs"]

@@ -3,10 +3,17 @@
 //! The DSOR protocol engine: all protocol state of `rcan_dsor` in one
 //! [`Engine`], one while the module is loaded, under one lock,
 //! [`ENGINE`]. It runs the pure machines of `rcan_core::dsor_tx` (a
-//! [`Transfer`] per outgoing message, channels and sequence bits in
-//! [`TxStreams`]) and `rcan_core::dsor_rx` (the [`Reassembler`]), feeds
-//! them frames (from `rx.rs`) and time (from `timers.rs`), and queues the
-//! frames they produce on a ring that `timers.rs` sends.
+//! [`FdTransfer`] per outgoing message, channels and sequence bits in
+//! [`TxStreams`], the FD-or-classic memory of the peers in [`FdPeers`])
+//! and `rcan_core::dsor_rx` (the [`Reassembler`]), feeds them frames
+//! (from `rx.rs`) and time (from `timers.rs`), and queues the frames they
+//! produce on a ring that `timers.rs` sends.
+//!
+//! CAN FD bodies (dsor-wire.rst, "Message transfer with CAN FD bodies"):
+//! used only while the DSOR interface is in CAN FD mode (MTU 72,
+//! `Engine::fd_iface`); then the receiver answers FD headers choosing
+//! 64-byte bodies, and a message longer than 8 bytes goes out with an FD
+//! header offering 64 unless [`FdPeers`] knows its destination as classic.
 //!
 //! Locks: [`ENGINE`] (BH spinlock) protects every field of the engine and
 //! is taken in process context, NET_RX softirq, HRTIMER_SOFTIRQ and
@@ -28,9 +35,10 @@ use crate::glue::neterr;
 use crate::glue::sock::SockRef;
 use crate::params::{Config, PARAM_REASM_TIMEOUT_MS};
 use crate::rcan_core::dsor_addr::DsorAddr;
+use crate::rcan_core::dsor_fd::{BodySize, FdPeers, FdStep, FdTransfer};
 use crate::rcan_core::dsor_rx::{Incoming, Limits, Reassembler};
-use crate::rcan_core::dsor_tx::{Transfer, TxError, TxStep, TxStreams};
-use crate::rcan_core::dsor_wire::{AckStatus, DsorId, Frame, FrameType, Header};
+use crate::rcan_core::dsor_tx::{TxError, TxStreams};
+use crate::rcan_core::dsor_wire::{AckStatus, DsorId, FdFrame, FrameType, Header, FD_MAX_LEN};
 use crate::rx::{accept, deliver, wanted, RxBuf};
 use crate::socket::DsorProto;
 use crate::stats::Stats;
@@ -56,7 +64,7 @@ pub(crate) enum Owner {
 
 /// A running outgoing message.
 pub(crate) struct TxRun {
-    t: Transfer,
+    t: FdTransfer,
     msg: KVec<u8>,
     dst: u8,
     chan: u8,
@@ -90,7 +98,7 @@ pub(crate) struct Engine {
     pub(crate) tx: KVec<TxEntry>,
     next_gen: u32,
     /// Ring of frames to send: `out[(out_head + i) % OUT_LEN]`, i < out_len.
-    out: KVec<Frame>,
+    out: KVec<FdFrame>,
     out_head: usize,
     out_len: usize,
     pub(crate) binds: KVec<Bind>,
@@ -98,6 +106,15 @@ pub(crate) struct Engine {
     /// `udpip::Canip::register`, taken back before it unregisters).
     pub(crate) canip: Option<DevRef>,
     pub(crate) stats: Stats,
+    /// Whether the DSOR interface was in CAN FD mode (MTU 72) when last
+    /// seen: by a `sendmsg` (set right before [`Engine::start`]) or by a
+    /// received frame; false after it went down. canip0's transmit path
+    /// uses it as it is.
+    pub(crate) fd_iface: bool,
+    /// What the sender knows of each node: FD (acked an FD header),
+    /// classic (a fallback), unknown. Forgotten when the DSOR interface
+    /// goes down or away ([`Engine::fail_all`]).
+    peers: FdPeers,
     /// A drainer ([`drain`](crate::timers::drain), from
     /// [`Tick`](crate::timers::Tick) or from the receive callback) is
     /// running and will take every frame queued before it finds the queue
@@ -133,7 +150,7 @@ impl Engine {
         }
     }
 
-    fn push_out(&mut self, f: Frame) {
+    fn push_out(&mut self, f: FdFrame) {
         if self.out_len == OUT_LEN {
             // The protocol recovers by retransmission.
             self.stats.out_overflow += 1;
@@ -144,7 +161,7 @@ impl Engine {
         self.out_len += 1;
     }
 
-    pub(crate) fn pop_out(&mut self) -> Option<Frame> {
+    pub(crate) fn pop_out(&mut self) -> Option<FdFrame> {
         if self.out_len == 0 {
             return None;
         }
@@ -189,18 +206,28 @@ impl Engine {
         }
     }
 
-    fn apply_step(&mut self, i: usize, step: TxStep) -> bool {
+    /// Applies `step` of the transfer in slot `i`, first noting in
+    /// [`FdPeers`] what the transfer learnt of its destination (an FD
+    /// header acked, or a fallback to the classic header).
+    fn apply_step(&mut self, i: usize, step: FdStep) -> bool {
+        if let TxEntry::Running(r) = &self.tx[i] {
+            if r.t.fell_back() {
+                self.peers.on_fallback(r.dst);
+            } else if r.t.fd_acked() {
+                self.peers.on_fd_ack(r.dst);
+            }
+        }
         match step {
-            TxStep::Nothing => false,
-            TxStep::Send(f) => {
+            FdStep::Nothing => false,
+            FdStep::Send(f) => {
                 self.push_out(f);
                 true
             }
-            TxStep::Done => {
+            FdStep::Done => {
                 self.finish(i, 0);
                 true
             }
-            TxStep::Failed(e) => {
+            FdStep::Failed(e) => {
                 self.finish(i, tx_errno(e));
                 true
             }
@@ -208,7 +235,10 @@ impl Engine {
     }
 
     /// Starts a message to `dst`; returns the slot and its generation, or
-    /// `None` when no slot or no channel to `dst` is free.
+    /// `None` when no slot or no channel to `dst` is free. With the DSOR
+    /// interface in FD mode ([`Engine::fd_iface`]) a message longer than 8
+    /// bytes to a node not known as classic starts with an FD header
+    /// offering 64-byte bodies; otherwise it is a classic transfer.
     pub(crate) fn start(
         &mut self,
         dst: u8,
@@ -223,7 +253,9 @@ impl Engine {
         let Some((chan, first_q)) = self.streams.alloc(dst) else {
             return Err((msg, owner));
         };
-        let mut t = Transfer::new(
+        let offer =
+            (self.fd_iface && self.peers.use_fd_header(dst, header.len)).then_some(BodySize::MAX);
+        let mut t = FdTransfer::new_fd(
             self.cfg.node,
             dst,
             chan,
@@ -231,6 +263,7 @@ impl Engine {
             header,
             first_q,
             &self.cfg.timers,
+            offer,
         );
         let f = t.start(&msg, now_ms());
         self.push_out(f);
@@ -265,16 +298,27 @@ impl Engine {
         }
     }
 
-    /// Fails every running transfer (the interface went away).
+    /// Fails every running transfer (the interface went down or away);
+    /// forgets the interface's FD mode and what is known of the peers.
     pub(crate) fn fail_all(&mut self, errno: i32) {
+        self.fd_iface = false;
+        self.peers.forget_all();
         for i in 0..self.tx.len() {
             self.finish(i, errno);
         }
         self.stats.rx_flushed += self.rx.clear() as u64;
     }
 
-    /// Handles one DSOR frame addressed to this node.
-    pub(crate) fn on_frame(&mut self, id: &DsorId, data: &[u8], now: u64) -> bool {
+    /// Handles one DSOR frame addressed to this node (its data: the
+    /// payload, padding included, of a classic or FD frame), received on
+    /// the DSOR interface, which is in FD mode if `fd_iface`: then FD
+    /// headers are answered, choosing 64-byte bodies; else they are
+    /// ignored as by a classic node.
+    pub(crate) fn on_frame(&mut self, id: &DsorId, data: &[u8], fd_iface: bool, now: u64) -> bool {
+        self.fd_iface = fd_iface;
+        if self.rx.fd_body_size().is_some() != fd_iface {
+            self.rx.set_fd_body_size(fd_iface.then_some(BodySize::MAX));
+        }
         if matches!(id.ftype, FrameType::Ack) {
             let mut kick = false;
             for i in 0..self.tx.len() {
@@ -313,7 +357,7 @@ impl Engine {
         }
         match out.ack {
             Some(ack) => {
-                self.push_out(ack);
+                self.push_out(ack.into());
                 true
             }
             None => false,
@@ -391,10 +435,11 @@ pub(crate) fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
     for _ in 0..TX_SLOTS {
         tx.push(TxEntry::Free, GFP_KERNEL)?;
     }
-    let blank = Frame {
+    let blank = FdFrame {
         id: 0,
         len: 0,
-        data: [0; 8],
+        fdf: false,
+        data: [0; FD_MAX_LEN],
     };
     let out = KVec::from_elem(blank, OUT_LEN, GFP_KERNEL)?;
     Ok(KBox::new(
@@ -410,6 +455,8 @@ pub(crate) fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
             binds: KVec::new(),
             canip: None,
             stats: Stats::default(),
+            fd_iface: false,
+            peers: FdPeers::new(),
             draining: false,
         },
         GFP_KERNEL,

@@ -22,7 +22,7 @@ use crate::rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FL
 use crate::rcan_core::dsor_addr::{self, DsorAddr};
 use crate::rcan_core::dsor_rx::{Delivered, Incoming};
 use crate::rcan_core::dsor_wire::{AckStatus, DsorId, MsgKind};
-use crate::rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
+use crate::rcan_core::frame::{AnyFrame, CANFD_MTU};
 use crate::stats::Stats;
 use crate::timers::drain;
 use crate::udpip;
@@ -177,7 +177,8 @@ pub(crate) fn accept(
     Ok(RxBuf(skb))
 }
 
-/// The receiver of every DSOR frame addressed to this node.
+/// The receiver of every DSOR frame addressed to this node, classic or
+/// CAN FD (pf_can hands kernel receivers both).
 pub(crate) struct DsorRx;
 
 impl KernelRx for DsorRx {
@@ -187,20 +188,26 @@ impl KernelRx for DsorRx {
     /// callback runs in NET_RX softirq with no device lock held, so it may
     /// transmit.
     fn rx(&self, skb: &Skb, dev: &NetDev) {
-        let Ok(bytes) = <&[u8; CAN_FRAME_LEN]>::try_from(skb.data()) else {
+        let Some(frame) = AnyFrame::parse(skb.data()) else {
             return;
         };
-        let cf = CanFrame::from_bytes(bytes);
-        if cf.can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_ERR_FLAG) != CAN_EFF_FLAG {
+        let can_id = frame.can_id();
+        if can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_ERR_FLAG) != CAN_EFF_FLAG {
             return;
         }
-        let Some(id) = DsorId::from_can_id(cf.can_id & CAN_EFF_MASK) else {
+        let Some(id) = DsorId::from_can_id(can_id & CAN_EFF_MASK) else {
             return;
         };
         if u32::from(id.dst) != NODE.load(Ordering::Relaxed) {
             return;
         }
-        let len = usize::from(cf.len.min(8));
+        let data = match &frame {
+            AnyFrame::Classic(cf) => cf.payload(),
+            AnyFrame::Fd(ff) => ff.payload(),
+        };
+        // The interface's mode now decides whether FD headers are
+        // answered (a CAN FD frame arrives only on an FD interface).
+        let fd_iface = dev.mtu() as usize == CANFD_MTU;
         let now = now_ms();
         let mut g = ENGINE.lock();
         let Some(e) = g.as_mut() else { return };
@@ -208,7 +215,7 @@ impl KernelRx for DsorRx {
             return;
         }
         let finished_before = e.stats.tx_ok + e.stats.tx_failed;
-        let queued = e.on_frame(&id, &cf.data[..len], now);
+        let queued = e.on_frame(&id, data, fd_iface, now);
         let finished = e.stats.tx_ok + e.stats.tx_failed != finished_before;
         drop(g);
         if finished {

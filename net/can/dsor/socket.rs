@@ -25,6 +25,7 @@ use crate::glue::sync::Rtnl;
 use crate::rcan_api::{CanProtocol, NetdevEvent, ProtoModule, Sockets, SOCK_DGRAM};
 use crate::rcan_core::dsor_addr::{self, DsorAddr, DSOR_EPHEMERAL_MIN};
 use crate::rcan_core::dsor_wire::{self, Header, MsgKind};
+use crate::rcan_core::frame::CANFD_MTU;
 
 /// `CANPROTO_DSOR` in `<linux/can/rcan.h>`.
 pub(crate) const CANPROTO_DSOR: i32 = 17;
@@ -247,7 +248,7 @@ impl glue::sock::Proto for DsorProto {
             len: len as u16,
             kind,
         };
-        check_device()?;
+        let fd_iface = check_device()?;
         if len == 0 {
             restart_hold(timeo)?;
         }
@@ -265,6 +266,7 @@ impl glue::sock::Proto for DsorProto {
             {
                 let mut g = ENGINE.lock();
                 let e = g.as_mut().ok_or(ENODEV)?;
+                e.fd_iface = fd_iface;
                 match e.start(dst, prio, header.clone(), data, owner) {
                     Ok(slot) => {
                         e.kick();
@@ -418,8 +420,10 @@ fn finished(slot: usize, gen: u32) -> bool {
     }
 }
 
-/// ENODEV if the DSOR interface does not exist, ENETDOWN if it is down.
-fn check_device() -> Result {
+/// ENODEV if the DSOR interface does not exist, ENETDOWN if it is down;
+/// else whether it is in CAN FD mode (MTU 72), which decides whether the
+/// message may use FD bodies.
+fn check_device() -> Result<bool> {
     let ifname = {
         let g = ENGINE.lock();
         g.as_ref().ok_or(ENODEV)?.cfg.ifname
@@ -431,5 +435,5 @@ fn check_device() -> Result {
     if !dev.is_up() {
         return Err(neterr::ENETDOWN());
     }
-    Ok(())
+    Ok(dev.mtu() as usize == CANFD_MTU)
 }

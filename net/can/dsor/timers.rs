@@ -22,8 +22,8 @@ use crate::glue::netdev::DevRef;
 use crate::glue::neterr;
 use crate::rcan_api;
 use crate::rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK};
-use crate::rcan_core::dsor_wire::Frame;
-use crate::rcan_core::frame::{AnyFrame, CanFrame};
+use crate::rcan_core::dsor_wire::FdFrame;
+use crate::rcan_core::frame::{AnyFrame, CanFdFrame, CanFrame, CANFD_FDF};
 
 /// Frames sent per batch (taken from the queue under the lock).
 const BATCH: usize = 16;
@@ -80,7 +80,7 @@ pub(crate) fn drain(timers: bool, mut dev: Option<DevRef>) {
             WAITQ.wake_all();
             wake = false;
         }
-        let mut batch: [Option<Frame>; BATCH] = Default::default();
+        let mut batch: [Option<FdFrame>; BATCH] = Default::default();
         let mut n = 0;
         let ifname;
         {
@@ -161,7 +161,7 @@ pub(crate) fn drain(timers: bool, mut dev: Option<DevRef>) {
 }
 
 /// Sends frames on the DSOR interface; returns how many failed. Softirq.
-fn send_batch(dev: &DevRef, frames: &[Option<Frame>]) -> u64 {
+fn send_batch(dev: &DevRef, frames: &[Option<FdFrame>]) -> u64 {
     let mut errors = 0;
     for f in frames.iter().flatten() {
         if send_frame(dev, f).is_err() {
@@ -171,19 +171,36 @@ fn send_batch(dev: &DevRef, frames: &[Option<Frame>]) -> u64 {
     errors
 }
 
-fn send_frame(dev: &DevRef, f: &Frame) -> Result {
+/// Sends `f` as a classic frame, or as a CAN FD frame (FDF set, BRS and
+/// ESI clear) if it is one (an FD header or FD body); on an interface no
+/// longer in FD mode pf_can refuses the latter (a send error, the
+/// protocol retransmits until the transfer fails).
+fn send_frame(dev: &DevRef, f: &FdFrame) -> Result {
     if !dev.is_can() || !dev.is_up() {
         return Err(neterr::ENETDOWN());
     }
-    let mut cf = CanFrame {
-        can_id: (f.id & CAN_EFF_MASK) | CAN_EFF_FLAG,
-        len: f.len,
-        ..CanFrame::default()
+    let can_id = (f.id & CAN_EFF_MASK) | CAN_EFF_FLAG;
+    let frame = if f.fdf {
+        let mut ff = CanFdFrame {
+            can_id,
+            len: f.len,
+            flags: CANFD_FDF,
+            ..CanFdFrame::default()
+        };
+        let n = usize::from(f.len).min(ff.data.len());
+        ff.data[..n].copy_from_slice(&f.data[..n]);
+        AnyFrame::Fd(ff)
+    } else {
+        let mut cf = CanFrame {
+            can_id,
+            len: f.len,
+            ..CanFrame::default()
+        };
+        let n = usize::from(f.len.min(8));
+        cf.data[..n].copy_from_slice(&f.data[..n]);
+        AnyFrame::Classic(cf)
     };
-    let n = usize::from(f.len.min(8));
-    cf.data[..n].copy_from_slice(&f.data[..n]);
-    let skb = glue::can::skb::alloc_frame(dev, &AnyFrame::Classic(cf), glue::GFP_ATOMIC)
-        .ok_or(neterr::ENOBUFS())?;
+    let skb = glue::can::skb::alloc_frame(dev, &frame, glue::GFP_ATOMIC).ok_or(neterr::ENOBUFS())?;
     // Looped back, so that a node can talk to itself over canloop and
     // local CAN_RAW sockets see DSOR traffic.
     rcan_api::send(skb, dev, true)

@@ -5,13 +5,18 @@
 //! per-destination channel allocator that remembers each stream's
 //! sequence bit.
 //!
+//! The same [`Transfer`] sends with CAN FD bodies (`dsor_fd`, the
+//! extension of dsor-wire.rst) when it is made with an offer.
+//!
 //! [`Transfer`] holds no message buffer: the caller passes the message
 //! bytes to every call that may have to build a frame, so the same state
 //! machine runs over a kernel `skb`-like buffer or a host `Vec`.
 
+use core::marker::PhantomData;
+
 use super::dsor_wire::{
-    body_count, body_dlc, Ack, AckStatus, DsorId, Frame, FrameType, Header, Timers, CHANNELS,
-    MAX_NODE,
+    fd_body_count, fd_body_frame, Ack, AckStatus, BodySize, DsorId, FdAck, FdFrame, FdHeader,
+    Frame, FrameType, Header, Timers, CHANNELS, MAX_NODE,
 };
 
 /// Why a message failed.
@@ -39,14 +44,42 @@ impl TxError {
     }
 }
 
+/// A frame type a [`Transfer`] sends: [`Frame`] for a classic-only
+/// transfer ([`Transfer::new`]), [`FdFrame`] for one that may offer CAN FD
+/// bodies ([`Transfer::new_fd`], `dsor_fd`).
+pub trait TxFrame: Copy {
+    /// The frame to send for `f`, which the transfer built. A classic-only
+    /// transfer never builds an FD frame (it has no offer, so its body
+    /// size stays 8), so for [`Frame`] this takes the classic part.
+    fn from_fd(f: FdFrame) -> Self;
+}
+
+impl TxFrame for FdFrame {
+    fn from_fd(f: FdFrame) -> Self {
+        f
+    }
+}
+
+impl TxFrame for Frame {
+    fn from_fd(f: FdFrame) -> Self {
+        let mut data = [0; 8];
+        data.copy_from_slice(&f.data[..8]);
+        Frame {
+            id: f.id,
+            len: f.len.min(8),
+            data,
+        }
+    }
+}
+
 /// What the caller must do after an event.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub enum TxStep {
+pub enum TxStep<F = Frame> {
     /// Nothing (event not for this transfer, or not yet due).
     Nothing,
-    /// Send this frame (the next frame, or a retransmission); the deadline
-    /// was re-armed.
-    Send(Frame),
+    /// Send this frame (the next frame, or a retransmission; an FD frame
+    /// if `F` is [`FdFrame`] with `fdf`); the deadline was re-armed.
+    Send(F),
     /// The ack of the last frame arrived: the message was delivered.
     Done,
     /// The message failed. With [`TxError::TimedOut`] and
@@ -63,15 +96,31 @@ enum State {
     Failed,
 }
 
-/// One message in flight on the stream (src, dst, chan).
+/// One message in flight on the stream (src, dst, chan): the one sender
+/// of DSOR, classic and with CAN FD bodies.
+///
+/// With no offer (always for `Transfer<Frame>`, from [`Transfer::new`])
+/// it is the classic sender of dsor-wire.rst, "Sender": classic header,
+/// classic bodies. With an offer ([`Transfer::new_fd`]) it sends the FD
+/// header, falls back to the classic header at the first T_ack without
+/// an answer, and sends bodies of the body size the receiver chose
+/// (dsor-wire.rst, "Message transfer with CAN FD bodies", "Sender").
+/// Holds no message buffer; the caller's lock protects it.
 #[derive(Clone, Debug)]
-pub struct Transfer {
+pub struct Transfer<F: TxFrame = Frame> {
     src: u8,
     dst: u8,
     chan: u8,
     prio: u8,
     header: Header,
     first_q: bool,
+    /// B_max while the FD header is the header in flight; `None` for a
+    /// classic header (no offer, or after the fallback).
+    offer: Option<BodySize>,
+    fell_back: bool,
+    /// The body size in use: the receiver's choice once the FD header was
+    /// acked, else 8.
+    body: BodySize,
     /// Index of the frame sent last and waited for (0 = header).
     index: u16,
     /// Retransmissions of frame `index` so far.
@@ -80,12 +129,14 @@ pub struct Transfer {
     state: State,
     ack_timeout_ms: u32,
     max_retx: u32,
+    _frame: PhantomData<F>,
 }
 
-impl Transfer {
-    /// A transfer of the message described by `header` from node `src` to
-    /// node `dst` on channel `chan` with priority `prio`; `first_q` is the
-    /// header's Q (from [`TxStreams::alloc`]). Nothing is sent yet.
+impl Transfer<Frame> {
+    /// A classic transfer of the message described by `header` from node
+    /// `src` to node `dst` on channel `chan` with priority `prio`;
+    /// `first_q` is the header's Q (from [`TxStreams::alloc`]). Nothing is
+    /// sent yet.
     pub fn new(
         src: u8,
         dst: u8,
@@ -95,6 +146,46 @@ impl Transfer {
         first_q: bool,
         timers: &Timers,
     ) -> Self {
+        Self::build(src, dst, chan, prio, header, first_q, timers, None)
+    }
+}
+
+impl Transfer<FdFrame> {
+    /// A transfer like [`Transfer::new`] that sends [`FdFrame`]s, offering
+    /// body sizes up to `offer` with an FD header if `offer` is an FD size
+    /// and the message is longer than 8 bytes (`FdPeers::use_fd_header`
+    /// decides whether to offer); otherwise a classic transfer.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new_fd(
+        src: u8,
+        dst: u8,
+        chan: u8,
+        prio: u8,
+        header: Header,
+        first_q: bool,
+        timers: &Timers,
+        offer: Option<BodySize>,
+    ) -> Self {
+        let offer = match offer {
+            Some(b) if FdHeader::new(header, b).is_some() => Some(b),
+            _ => None,
+        };
+        Self::build(src, dst, chan, prio, header, first_q, timers, offer)
+    }
+}
+
+impl<F: TxFrame> Transfer<F> {
+    #[allow(clippy::too_many_arguments)]
+    fn build(
+        src: u8,
+        dst: u8,
+        chan: u8,
+        prio: u8,
+        header: Header,
+        first_q: bool,
+        timers: &Timers,
+        offer: Option<BodySize>,
+    ) -> Self {
         Transfer {
             src: src & MAX_NODE,
             dst: dst & MAX_NODE,
@@ -102,12 +193,16 @@ impl Transfer {
             prio,
             header,
             first_q,
+            offer,
+            fell_back: false,
+            body: BodySize::CLASSIC,
             index: 0,
             retx: 0,
             deadline: None,
             state: State::New,
             ack_timeout_ms: timers.ack_timeout_ms,
             max_retx: timers.max_retx,
+            _frame: PhantomData,
         }
     }
 
@@ -142,35 +237,42 @@ impl Transfer {
         }
     }
 
-    /// Frame `index` of the message: the header for 0, body `index`
-    /// otherwise. `msg` should hold `header.len` bytes; missing bytes are
-    /// sent as zero, extra bytes are not sent.
-    pub fn frame(&self, msg: &[u8], index: u16) -> Frame {
+    /// Frame `index` of the message: the header in flight (FD or classic)
+    /// for 0, body `index` with the current body size otherwise. `msg`
+    /// should hold `header.len` bytes; missing bytes are sent as zero,
+    /// extra bytes are not sent.
+    pub fn frame(&self, msg: &[u8], index: u16) -> F {
         if index == 0 {
-            return Frame::header(&self.id(FrameType::Header, 0), &self.header);
+            let id = self.id(FrameType::Header, 0);
+            return F::from_fd(match self.offer {
+                Some(b) => FdHeader {
+                    header: self.header,
+                    max_body: b,
+                }
+                .frame(&id),
+                None => Frame::header(&id, &self.header).into(),
+            });
         }
-        let dlc = body_dlc(self.header.len, index);
-        let off = 8 * (index as usize - 1);
-        let mut data = [0; 8];
-        for (i, d) in data.iter_mut().enumerate().take(dlc as usize) {
-            *d = msg.get(off + i).copied().unwrap_or(0);
-        }
-        Frame {
-            id: self.id(FrameType::Body, index).to_can_id(),
-            len: dlc,
-            data,
-        }
+        F::from_fd(fd_body_frame(
+            &self.id(FrameType::Body, index),
+            msg,
+            self.header.len,
+            self.body,
+            index,
+        ))
     }
 
     fn last_index(&self) -> u16 {
-        body_count(self.header.len)
+        fd_body_count(self.header.len, self.body)
     }
 
     /// The header frame; arms the deadline (now + T_ack). Calling it again
-    /// restarts the transfer from the header with a fresh retry budget.
-    pub fn start(&mut self, msg: &[u8], now_ms: u64) -> Frame {
+    /// restarts the transfer from the header (the one in flight) with a
+    /// fresh retry budget.
+    pub fn start(&mut self, msg: &[u8], now_ms: u64) -> F {
         self.index = 0;
         self.retx = 0;
+        self.body = BodySize::CLASSIC;
         self.state = State::Waiting;
         self.deadline = Some(now_ms + self.ack_timeout_ms as u64);
         self.frame(msg, 0)
@@ -179,8 +281,10 @@ impl Transfer {
     /// An ack frame from the node's receive path. Frames that are not the
     /// expected ack of this transfer (other stream, other type, wrong Q or
     /// index, malformed data, transfer not waiting) give
-    /// [`TxStep::Nothing`].
-    pub fn on_ack(&mut self, id: &DsorId, data: &[u8], msg: &[u8], now_ms: u64) -> TxStep {
+    /// [`TxStep::Nothing`]. The ack of index 0 must be the 4-byte FD ack
+    /// while the FD header is in flight and a classic ack (DLC 2 or 3)
+    /// otherwise.
+    pub fn on_ack(&mut self, id: &DsorId, data: &[u8], msg: &[u8], now_ms: u64) -> TxStep<F> {
         if self.state != State::Waiting
             || id.ftype != FrameType::Ack
             || id.src != self.dst
@@ -190,11 +294,22 @@ impl Transfer {
         {
             return TxStep::Nothing;
         }
-        let ack = match Ack::decode(data) {
-            Some(a) if a.index == self.index => a,
-            _ => return TxStep::Nothing,
+        let status = match self.offer {
+            Some(offer) if self.index == 0 => match FdAck::decode(data, offer) {
+                Some(a) => {
+                    if a.status == AckStatus::Ok {
+                        self.body = a.body;
+                    }
+                    a.status
+                }
+                None => return TxStep::Nothing,
+            },
+            _ => match Ack::decode(data) {
+                Some(a) if a.index == self.index => a.status,
+                _ => return TxStep::Nothing,
+            },
         };
-        let err = match ack.status {
+        let err = match status {
             AckStatus::Ok => None,
             AckStatus::Refused => Some(TxError::Refused),
             AckStatus::NoMemory => Some(TxError::NoMemory),
@@ -218,8 +333,10 @@ impl Transfer {
 
     /// The deadline passed (or maybe not: [`TxStep::Nothing`] if `now_ms`
     /// is before it). Retransmits the frame waited for, or fails with
-    /// [`TxError::TimedOut`] after N_retx retransmissions.
-    pub fn on_timer(&mut self, msg: &[u8], now_ms: u64) -> TxStep {
+    /// [`TxError::TimedOut`] after N_retx retransmissions. The first
+    /// retransmission of an unanswered FD header is the fallback: the
+    /// classic header of the message, same Q.
+    pub fn on_timer(&mut self, msg: &[u8], now_ms: u64) -> TxStep<F> {
         match self.deadline {
             Some(d) if self.state == State::Waiting && now_ms >= d => {}
             _ => return TxStep::Nothing,
@@ -230,6 +347,10 @@ impl Transfer {
             return TxStep::Failed(TxError::TimedOut);
         }
         self.retx += 1;
+        if self.index == 0 && self.offer.is_some() {
+            self.offer = None;
+            self.fell_back = true;
+        }
         self.deadline = Some(now_ms + self.ack_timeout_ms as u64);
         TxStep::Send(self.frame(msg, self.index))
     }
@@ -253,13 +374,33 @@ impl Transfer {
     /// Whether the last frame of the message (the header if the length is
     /// 0, else the last body) was sent at least once. A
     /// [`TxError::TimedOut`] failure with this true has an unknown outcome.
+    /// (An FD header is never the last frame: it is sent only for L > 8.)
     pub fn last_frame_sent(&self) -> bool {
-        self.state != State::New && self.index == self.last_index()
+        self.state != State::New
+            && self.index == self.last_index()
+            && (self.index > 0 || self.offer.is_none())
     }
 
     /// Whether the transfer ended (success or failure).
     pub fn finished(&self) -> bool {
         matches!(self.state, State::Done | State::Failed)
+    }
+
+    /// Whether the sender fell back from the FD to the classic header
+    /// (for `FdPeers::on_fallback`).
+    pub fn fell_back(&self) -> bool {
+        self.fell_back
+    }
+
+    /// Whether the receiver acked the FD header (for
+    /// `FdPeers::on_fd_ack`).
+    pub fn fd_acked(&self) -> bool {
+        self.offer.is_some() && self.index > 0
+    }
+
+    /// The body size in use (8 until an FD header was acked).
+    pub fn body_size(&self) -> BodySize {
+        self.body
     }
 }
 

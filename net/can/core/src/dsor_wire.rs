@@ -499,7 +499,9 @@ impl BodySize {
 /// Number of bodies of an `len`-byte message with body size `b`:
 /// ceil(len / B).
 pub const fn fd_body_count(len: u16, b: BodySize) -> u16 {
-    (len as u32).div_ceil(b.0 as u32) as u16
+    // `max(1)`: a BodySize is never 0, but the compiler cannot see it;
+    // this keeps a division-by-zero panic path out of the kernel build.
+    (len as u32).div_ceil(if b.0 == 0 { 1 } else { b.0 as u32 }) as u16
 }
 
 /// Payload bytes of body `k` (1-based): min(B, len - B(k-1)); 0 if there

@@ -333,7 +333,7 @@ fn segm(len: u16) -> Header {
 fn fd_transfer_doc_example() {
     let msg: Vec<u8> = (0..90u8).collect();
     let t0 = Timers::default();
-    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
+    let mut t = FdTransfer::new_fd(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
     let h = t.start(&msg, 0);
     assert_eq!((h.id, h.len, h.fdf), (0x0800_0280, 12, true));
     assert_eq!(
@@ -360,7 +360,7 @@ fn fd_transfer_doc_example() {
 fn fd_transfer_fallback() {
     let msg = msg_of(90, 1);
     let t0 = Timers::default();
-    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
+    let mut t = FdTransfer::new_fd(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
     let fd = t.start(&msg, 0);
     assert!(fd.fdf);
     assert_eq!(t.on_timer(&msg, 99), FdStep::Nothing);
@@ -391,7 +391,7 @@ fn fd_transfer_fallback() {
     assert_eq!(t.body_size(), BodySize::CLASSIC);
 
     // The fallback counts against N_retx: 11 header transmissions in all.
-    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
+    let mut t = FdTransfer::new_fd(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
     t.start(&msg, 0);
     for i in 1..=10u64 {
         let FdStep::Send(f) = t.on_timer(&msg, 100 * i) else {
@@ -406,7 +406,7 @@ fn fd_transfer_fallback() {
     assert!(!t.last_frame_sent());
 
     // Refusal of the FD header.
-    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), true, &t0, Some(BodySize::MAX));
+    let mut t = FdTransfer::new_fd(5, 0, 0, 0x40, segm(90), true, &t0, Some(BodySize::MAX));
     t.start(&msg, 0);
     assert_eq!(
         t.on_ack(&ack_id(true), &[0, 0, 2, 8], &msg, 1),
@@ -454,7 +454,7 @@ proptest! {
         let msg = msg_of(len as usize, 9);
         let t0 = Timers::default();
         let mut c = Transfer::new(5, 0, 0, 0x40, segm(len), q, &t0);
-        let mut f = FdTransfer::new(5, 0, 0, 0x40, segm(len), q, &t0,
+        let mut f = FdTransfer::new_fd(5, 0, 0, 0x40, segm(len), q, &t0,
                                     offer.then_some(BodySize::MAX));
         prop_assert_eq!(FdFrame::from(c.start(&msg, 0)), f.start(&msg, 0));
         let mut now = 0u64;
@@ -503,7 +503,7 @@ proptest! {
             BodySize::ALL.iter().copied().filter(|b| *b <= offer).collect();
         let chosen = choices[pick % choices.len()];
         let t0 = Timers::default();
-        let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(len), q, &t0, Some(offer));
+        let mut t = FdTransfer::new_fd(5, 0, 0, 0x40, segm(len), q, &t0, Some(offer));
         let h = t.start(&msg, 0);
         let fh = FdHeader::decode(h.payload()).unwrap();
         prop_assert_eq!((fh.header, fh.max_body), (segm(len), offer));
@@ -558,7 +558,7 @@ fn fd_receiver_doc_example() {
     let msg: Vec<u8> = (0..90u8).collect();
     let mut r = rx(Some(BodySize::MAX));
     let t0 = Timers::default();
-    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
+    let mut t = FdTransfer::new_fd(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
     let mut f = t.start(&msg, 0);
     let want_acks: [(u32, &[u8]); 3] = [
         (0x0801_4040, &[0, 0, 0, 0x40]),
@@ -598,7 +598,7 @@ fn classic_receiver_ignores_fd_header_and_fallback_works() {
     let msg = msg_of(90, 4);
     let mut r = rx(None);
     let t0 = Timers::default();
-    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
+    let mut t = FdTransfer::new_fd(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
     let f = t.start(&msg, 0);
     assert_eq!(feed(&mut r, &f, 0), (None, None));
     assert_eq!(r.states(), 0);
@@ -631,7 +631,7 @@ fn classic_receiver_ignores_fd_header_and_fallback_works() {
     // header that follows starts the message anew, classic bodies.
     let msg = msg_of(90, 5);
     let mut r = rx(Some(BodySize::MAX));
-    let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
+    let mut t = FdTransfer::new_fd(5, 0, 0, 0x40, segm(90), false, &t0, Some(BodySize::MAX));
     let f = t.start(&msg, 0);
     let (lost, _) = feed(&mut r, &f, 0);
     assert_eq!(lost.unwrap().len, 4);
@@ -680,7 +680,7 @@ proptest! {
         let msg = msg_of(len as usize, seed);
         let t0 = Timers::default();
         let mut r = rx(cap);
-        let mut t = FdTransfer::new(5, 0, 0, 0x40, segm(len), q, &t0, Some(offer));
+        let mut t = FdTransfer::new_fd(5, 0, 0, 0x40, segm(len), q, &t0, Some(offer));
         let mut fates = fates.into_iter().cycle();
         let mut to_rx: std::collections::VecDeque<FdFrame> = [t.start(&msg, 0)].into();
         let mut to_tx: std::collections::VecDeque<Frame> = Default::default();

@@ -45,6 +45,7 @@ pub const TESTS: &[Test] = test_table![
     dsor_sja1000_two_interfaces,
     dsor_delivery_full_queue,
     dsor_delivery_receiver_closes,
+    dsor_fd_bodies_mtu72,
 ];
 
 /// Node of the peer program.
@@ -2010,5 +2011,388 @@ fn dsor_delivery_receiver_closes(ctx: &mut Ctx) -> TestResult {
         }
     }
     ensure!(problems.is_empty(), "{}", problems.join("; "));
+    Ok(())
+}
+
+/// One frame as a CAN_RAW socket with CAN_RAW_FD_FRAMES reads it: the
+/// identifier (with flags), whether it is an FD frame, its data.
+struct Seen {
+    id: u32,
+    fd: bool,
+    data: Vec<u8>,
+}
+
+impl Seen {
+    fn dsor(&self) -> Option<u32> {
+        (self.id & libc::CAN_EFF_FLAG != 0).then_some(self.id & libc::CAN_EFF_MASK)
+    }
+    /// DSOR frame type T (0 header, 1 body, 2 ack), destination, source.
+    fn t_dst_src(&self) -> Option<(u32, u32, u32)> {
+        self.dsor()
+            .map(|id| ((id >> 5) & 3, (id >> 14) & 0x7f, (id >> 7) & 0x7f))
+    }
+}
+
+/// A CAN_RAW socket with CAN_RAW_FD_FRAMES on `idx`, with room for every
+/// frame of a test's messages.
+fn fd_monitor(idx: u32) -> Result<socketcan::CanFdSocket, String> {
+    use socketcan::Socket;
+    let s = socketcan::CanFdSocket::open_iface(idx).or_fail("CanFdSocket on can0")?;
+    s.set_read_timeout(canraw::RAW_RX_TIMEOUT)
+        .or_fail("SO_RCVTIMEO")?;
+    crate::sys::set_rcvbufforce(&s, 16 << 20).or_fail("SO_RCVBUFFORCE")?;
+    Ok(s)
+}
+
+fn read_seen(s: &socketcan::CanFdSocket) -> Result<Seen, String> {
+    use socketcan::{CanAnyFrame, EmbeddedFrame, Frame, Socket};
+    // The socket reports ENETDOWN once after each `ip link set down`
+    // (the mtu changes), as mainline's raw sockets do.
+    let f = loop {
+        match s.read_frame() {
+            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => continue,
+            r => break r.or_fail("reading the FD monitor")?,
+        }
+    };
+    Ok(match f {
+        CanAnyFrame::Normal(f) => Seen {
+            id: f.raw_id()
+                | if f.is_extended() {
+                    libc::CAN_EFF_FLAG
+                } else {
+                    0
+                },
+            fd: false,
+            data: f.data().to_vec(),
+        },
+        CanAnyFrame::Fd(f) => {
+            let raw: &libc::canfd_frame = f.as_ref();
+            Seen {
+                id: raw.can_id,
+                fd: raw.flags & 0x04 != 0,
+                data: f.data().to_vec(),
+            }
+        }
+        other => Seen {
+            id: libc::CAN_ERR_FLAG,
+            fd: false,
+            data: format!("{other:?}").into_bytes(),
+        },
+    })
+}
+
+/// Reads the monitor until the ack from `to` to `from` of index `last`
+/// (the end of a message); returns the DSOR frames between `from` and
+/// `to` seen on the way.
+fn frames_until_last_ack(
+    s: &socketcan::CanFdSocket,
+    from: u32,
+    to: u32,
+    last: u16,
+) -> Result<Vec<Seen>, String> {
+    let mut out = Vec::new();
+    loop {
+        let f = read_seen(s)?;
+        let Some((t, dst, src)) = f.t_dst_src() else {
+            continue;
+        };
+        if !((src == from && dst == to) || (src == to && dst == from)) {
+            continue;
+        }
+        let end = t == 2 && src == to && f.data.len() >= 2 && f.data[..2] == last.to_be_bytes();
+        out.push(f);
+        if end {
+            return Ok(out);
+        }
+    }
+}
+
+/// The smallest CAN FD length holding `r` bytes.
+fn fd_len_up(r: usize) -> usize {
+    *[0usize, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64]
+        .iter()
+        .find(|&&l| l >= r)
+        .unwrap_or(&64)
+}
+
+/// Checks the frames of one `msg` sent by node 0 to itself on an FD
+/// interface: for more than 8 bytes the FD header (length 12, byte 8 =
+/// 6 for segmented, B_max 64), its 4-byte classic ack choosing 64, then
+/// FD bodies of 64 bytes and a last one of the next FD length with zero
+/// padding, each acked by a classic frame; up to 8 bytes the classic
+/// rules (classic header DLC 6, one classic body). No retransmission is
+/// expected (T_ack is 500 ms, the peer is the local node).
+fn check_fd_frames(frames: &[Seen], msg: &[u8]) -> TestResult {
+    let len = msg.len();
+    let what = format!("{len}-byte message");
+    let headers: Vec<&Seen> = frames
+        .iter()
+        .filter(|f| f.t_dst_src().unwrap().0 == 0)
+        .collect();
+    let bodies: Vec<&Seen> = frames
+        .iter()
+        .filter(|f| f.t_dst_src().unwrap().0 == 1)
+        .collect();
+    let acks: Vec<&Seen> = frames
+        .iter()
+        .filter(|f| f.t_dst_src().unwrap().0 == 2)
+        .collect();
+    ensure!(
+        headers.len() == 1,
+        "{what}: {} header frames",
+        headers.len()
+    );
+    let h = headers[0];
+    let mut want_len = vec![(len >> 8) as u8, len as u8];
+    want_len.extend_from_slice(&0x1234_5678u32.to_be_bytes());
+    if len > 8 {
+        ensure!(
+            h.fd && h.data.len() == 12 && h.data[..6] == want_len[..] && h.data[8..10] == [6, 64],
+            "{what}: header fd={} {:02x?}, expected the FD header (12 bytes, 6, 64)",
+            h.fd,
+            h.data
+        );
+        ensure!(
+            acks[0].data == [0, 0, 0, 64] && !acks[0].fd,
+            "{what}: ack of the FD header {:02x?}, expected 00 00 00 40",
+            acks[0].data
+        );
+        let n = len.div_ceil(64);
+        ensure!(
+            bodies.len() == n,
+            "{what}: {} bodies, expected {n}",
+            bodies.len()
+        );
+        let mut got = Vec::new();
+        for (k, b) in bodies.iter().enumerate() {
+            let r = (len - 64 * k).min(64);
+            let want = if k + 1 < n { 64 } else { fd_len_up(r) };
+            ensure!(
+                b.fd && b.data.len() == want && b.data[r..].iter().all(|&x| x == 0),
+                "{what}: body {} fd={} length {}, expected an FD frame of {want} ({r} bytes + zero padding)",
+                k + 1,
+                b.fd,
+                b.data.len()
+            );
+            got.extend_from_slice(&b.data[..r]);
+        }
+        ensure!(got == msg, "{what}: the FD bodies do not carry the message");
+    } else {
+        ensure!(
+            !h.fd && h.data == want_len,
+            "{what}: header fd={} {:02x?}, expected the classic header",
+            h.fd,
+            h.data
+        );
+        ensure!(
+            bodies.len() == usize::from(len > 0) && bodies.iter().all(|b| !b.fd && b.data == msg),
+            "{what}: bodies {:?}",
+            bodies
+                .iter()
+                .map(|b| (b.fd, b.data.len()))
+                .collect::<Vec<_>>()
+        );
+    }
+    ensure!(
+        acks.len() == bodies.len() + 1 && acks.iter().all(|a| !a.fd),
+        "{what}: {} acks (FD: {}), expected {} classic ones",
+        acks.len(),
+        acks.iter().filter(|a| a.fd).count(),
+        bodies.len() + 1
+    );
+    Ok(())
+}
+
+/// DSOR over CAN FD (dsor-wire.rst, "Message transfer with CAN FD
+/// bodies"): on can0 at `mtu 72`, messages of 0 to 4000 bytes between two
+/// rcan_dsor sockets go with the FD header and 64-byte FD bodies, seen on
+/// the wire by a CAN_RAW socket with CAN_RAW_FD_FRAMES; at `mtu 16` the
+/// same stays classic; and a classic node (a plain CAN_RAW socket acting
+/// as node 0x20, which never sees FD frames) gets a message after the
+/// fallback to the classic header, and the next one with the classic
+/// header at once (the sender remembers it); a classic message from that
+/// node is answered with classic acks and delivered.
+fn dsor_fd_bodies_mtu72(ctx: &mut Ctx) -> TestResult {
+    // T_ack 500 ms: no retransmission on a slow (debug) kernel; a short
+    // reassembly timeout, since a 0-byte message waits for it after load.
+    let idx = dsor_stack(
+        ctx,
+        &["ack_timeout_ms=500", "max_retx=4", "reasm_timeout_ms=3000"],
+    )?;
+    ctx.link_down("can0")?;
+    run_ip(&["link", "set", "can0", "mtu", "72"])?;
+    ctx.link_up("can0")?;
+    let rx = sock()?;
+    let id = 0x1234_5678;
+    rx.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: DSOR_NODE_ANY,
+        id,
+    })
+    .or_fail("bind")?;
+    let tx = sock()?;
+    let to = DsorAddr::Segm {
+        prio: 0x40,
+        node: 0,
+        id,
+    };
+    let mon = fd_monitor(idx)?;
+    for (j, &len) in [1usize, 63, 64, 65, 1000, 4000, 0].iter().enumerate() {
+        let msg = pattern(len, j as u64, 11);
+        tx.send_to(&msg, &to)
+            .or_fail(format!("sendto {len} bytes"))?;
+        let (got, _) = recv_msg(&rx)?;
+        ensure!(
+            got == msg,
+            "{len}-byte message over FD: {}",
+            how_wrong(&got, &msg)
+        );
+        let last = if len > 8 {
+            len.div_ceil(64)
+        } else {
+            usize::from(len > 0)
+        };
+        let frames = frames_until_last_ack(&mon, 0, 0, last as u16)?;
+        check_fd_frames(&frames, &msg)?;
+    }
+
+    // mtu 16: classic.
+    ctx.link_down("can0")?;
+    run_ip(&["link", "set", "can0", "mtu", "16"])?;
+    ctx.link_up("can0")?;
+    let msg = pattern(1000, 7, 11);
+    tx.send_to(&msg, &to)
+        .or_fail("sendto 1000 bytes at mtu 16")?;
+    let (got, _) = recv_msg(&rx)?;
+    ensure!(
+        got == msg,
+        "1000 bytes at mtu 16: {}",
+        how_wrong(&got, &msg)
+    );
+    let frames = frames_until_last_ack(&mon, 0, 0, 125)?;
+    let bodies: Vec<&Seen> = frames
+        .iter()
+        .filter(|f| f.t_dst_src().unwrap().0 == 1)
+        .collect();
+    ensure!(
+        frames.iter().all(|f| !f.fd)
+            && bodies.len() == 125
+            && bodies.iter().all(|b| b.data.len() == 8),
+        "mtu 16: {} FD frames, {} bodies (expected 125 classic 8-byte ones)",
+        frames.iter().filter(|f| f.fd).count(),
+        bodies.len()
+    );
+
+    // A classic node 0x20 on the FD interface.
+    ctx.link_down("can0")?;
+    run_ip(&["link", "set", "can0", "mtu", "72"])?;
+    ctx.link_up("can0")?;
+    let classic = canraw::open(idx)?;
+    let to20 = DsorAddr::Segm {
+        prio: 0x40,
+        node: 0x20,
+        id,
+    };
+    for round in 0..2 {
+        let msg = pattern(20, round, 5);
+        let sender = {
+            let tx = sock()?;
+            let msg = msg.clone();
+            thread::spawn(move || tx.send_to(&msg, &to20).map(|_| ()))
+        };
+        // Node 0x20's side: classic frames only (the FD header is not
+        // delivered to a socket without CAN_RAW_FD_FRAMES).
+        let mut got = Vec::new();
+        let mut expect_t = 0;
+        while expect_t == 0 || got.len() < msg.len() {
+            let f = canraw::recv(&classic)?;
+            let c: &libc::can_frame = f.as_ref();
+            if c.can_id & libc::CAN_EFF_FLAG == 0 {
+                continue;
+            }
+            let cid = c.can_id & libc::CAN_EFF_MASK;
+            let (t, dst, src) = ((cid >> 5) & 3, (cid >> 14) & 0x7f, (cid >> 7) & 0x7f);
+            if dst != 0x20 || src != 0 {
+                continue;
+            }
+            let data = &c.data[..usize::from(c.can_dlc)];
+            ensure!(
+                t == expect_t,
+                "node 0x20 got T={t}, expected {expect_t}: {data:02x?}"
+            );
+            let index = if t == 0 {
+                ensure!(
+                    data.len() == 6 && data[..2] == [0, 20],
+                    "classic header {data:02x?}"
+                );
+                expect_t = 1;
+                0u16
+            } else {
+                got.extend_from_slice(data);
+                got.len().div_ceil(8) as u16
+            };
+            // Ack: same priority, Q and channel, back to node 0.
+            let ack = (cid & !(0x7f << 14 | 0x7f << 7 | 3 << 5)) | 2 << 5 | 0x20 << 7;
+            raw_frame(&classic, ack, &index.to_be_bytes())?;
+        }
+        sender
+            .join()
+            .map_err(|_| "sender thread panicked".to_string())?
+            .or_fail(format!("sendto node 0x20 (round {round})"))?;
+        ensure!(got == msg, "node 0x20 round {round}: got {got:02x?}");
+        let frames = frames_until_last_ack(&mon, 0, 0x20, 3)?;
+        let fd_headers = frames
+            .iter()
+            .filter(|f| f.fd && f.t_dst_src().unwrap().0 == 0)
+            .count();
+        let want = if round == 0 { 1 } else { 0 };
+        ensure!(
+            fd_headers == want && frames.iter().filter(|f| f.fd).count() == want,
+            "node 0x20 round {round}: {fd_headers} FD headers, {} FD frames; expected {want} \
+             (round 0 tries FD and falls back, round 1 knows the node is classic)",
+            frames.iter().filter(|f| f.fd).count()
+        );
+    }
+
+    // The classic node 0x20 sends a 12-byte message to node 0 (on the FD
+    // interface): classic header and bodies, answered with classic acks
+    // (DLC 2 or 3, never the FD header's 4-byte ack), delivered.
+    let msg = pattern(12, 9, 5);
+    let mut frames = vec![(0u32, vec![0u8, 12])];
+    frames[0].1.extend_from_slice(&id.to_be_bytes());
+    frames.push((1, msg[..8].to_vec()));
+    frames.push((0, msg[8..].to_vec()));
+    for (k, (q, data)) in frames.iter().enumerate() {
+        let ftype = u32::from(k > 0);
+        raw_frame(&classic, dsor_id(0x40, 0, 0x20, ftype, *q, 0), data)?;
+        let ack = loop {
+            let f = canraw::recv(&classic)?;
+            let c: &libc::can_frame = f.as_ref();
+            let cid = c.can_id & libc::CAN_EFF_MASK;
+            if c.can_id & libc::CAN_EFF_FLAG != 0
+                && (cid >> 5) & 3 == 2
+                && (cid >> 14) & 0x7f == 0x20
+                && (cid >> 7) & 0x7f == 0
+            {
+                break c.data[..usize::from(c.can_dlc)].to_vec();
+            }
+        };
+        ensure!(
+            (ack.len() == 2 || (ack.len() == 3 && ack[2] == 0))
+                && ack[..2] == (k as u16).to_be_bytes(),
+            "node 0 acked frame {k} of a classic node's message with {ack:02x?}"
+        );
+    }
+    let (got, from) = recv_msg(&rx)?;
+    ensure!(
+        got == msg
+            && from
+                == Some(DsorAddr::Segm {
+                    prio: 0x40,
+                    node: 0x20,
+                    id
+                }),
+        "from the classic node: {got:02x?} from {from:?}"
+    );
     Ok(())
 }

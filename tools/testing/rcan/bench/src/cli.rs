@@ -76,7 +76,7 @@ pub struct Cli {
     /// Frames per latency run (default 100000)
     #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = num::<u64>)]
     latency_frames: Option<u64>,
-    /// DSOR part: protocols, comma-separated: isotp (ISO-TP, default options), isotp0 (ISO-TP, frame_txtime 0), dsor (default isotp,isotp0,dsor)
+    /// DSOR part: protocols, comma-separated: isotp (ISO-TP, default options), isotp0 (ISO-TP, frame_txtime 0), dsor, dsorfd (DSOR with CAN FD bodies, rcan_loop at mtu 72; not in the default) (default isotp,isotp0,dsor)
     #[arg(long, value_name = "LIST", allow_hyphen_values = true, value_parser = protos)]
     proto: Option<List<Proto>>,
     /// DSOR part: message sizes in bytes, 8 to 8300, comma-separated (default 1024,4096)
@@ -225,6 +225,7 @@ fn protos(v: &str) -> Result<List<Proto>, String> {
         "isotp" => Ok(Proto::Isotp),
         "isotp0" => Ok(Proto::IsotpNoGap),
         "dsor" => Ok(Proto::Dsor),
+        "dsorfd" => Ok(Proto::DsorFd),
         other => Err(format!("unknown protocol '{other}'")),
     })
 }
@@ -839,6 +840,14 @@ mod tests {
                 "--proto",
                 "dsor"
             ]),
+            Ok(e)
+        );
+        let mut e = defaults();
+        parts(&mut e, false, false, true, false);
+        e.cpu = None;
+        e.protos = vec![Proto::Dsor, Proto::DsorFd];
+        assert_eq!(
+            parse(&["--part", "dsor", "--cpu", "any", "--proto", "dsor,dsorfd"]),
             Ok(e)
         );
     }

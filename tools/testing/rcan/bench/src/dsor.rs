@@ -295,7 +295,7 @@ impl Pair {
                 rx.set_timeouts(IO_TIMEOUT)?;
                 Ok(Pair::Isotp { tx, rx })
             }
-            Proto::Dsor => {
+            Proto::Dsor | Proto::DsorFd => {
                 let rx = DsorSocket::new()?;
                 rx.bind(&DsorAddr::Segm {
                     prio: 0,
@@ -624,7 +624,8 @@ pub fn summary(c: &Config, s: &Samples, header: &str) -> String {
     );
     let _ = writeln!(
         o,
-        "DSOR: rcan_dsor over rcan_loop (node 0 to itself); ISO-TP: can-isotp over vcan echo=1, \
+        "DSOR: rcan_dsor over rcan_loop (node 0 to itself); DSOR-FD: the same at mtu 72 \
+         (64-byte CAN FD bodies); ISO-TP: can-isotp over vcan echo=1, \
          29-bit ids, default options (BS 0, STmin 0, no padding, frame_txtime 50 us); \
          ISO-TP/0: the same with frame_txtime 0"
     );

@@ -234,6 +234,9 @@ pub enum Proto {
     IsotpNoGap,
     /// rcan DSOR: `rcan_pf` + `rcan_can` + `rcan_loop` + `rcan_dsor`.
     Dsor,
+    /// The same with the interface at `mtu 72`: DSOR with 64-byte CAN FD
+    /// bodies (dsor.rst, "CAN FD bodies").
+    DsorFd,
 }
 
 impl fmt::Display for Proto {
@@ -242,6 +245,7 @@ impl fmt::Display for Proto {
             Proto::Isotp => "ISO-TP",
             Proto::IsotpNoGap => "ISO-TP/0",
             Proto::Dsor => "DSOR",
+            Proto::DsorFd => "DSOR-FD",
         })
     }
 }
@@ -255,7 +259,7 @@ fn proto_files(proto: Proto) -> &'static [&'static str] {
             "net/can/can-isotp.ko",
             "drivers/net/can/vcan.ko",
         ],
-        Proto::Dsor => &[
+        Proto::Dsor | Proto::DsorFd => &[
             "net/can/rcan_pf.ko",
             "net/can/rcan_can.ko",
             "drivers/net/can/rcan_loop.ko",
@@ -270,7 +274,7 @@ fn proto_dir(proto: Proto, paths: &Paths) -> Result<&Path, String> {
             .kbuild
             .as_deref()
             .ok_or_else(|| "RCAN_KBUILD is not set: cannot find can-isotp.ko".to_string()),
-        Proto::Dsor => Ok(&paths.root),
+        Proto::Dsor | Proto::DsorFd => Ok(&paths.root),
     }
 }
 
@@ -288,7 +292,8 @@ pub fn missing_proto_module(proto: Proto, paths: &Paths) -> Option<PathBuf> {
 /// Loads the stack of `proto` on `iface` and brings it up. Call
 /// `unload_all` first. ISO-TP: can, can-isotp, (can-dev,) `vcan echo=1`,
 /// `ip link add IFACE type vcan`. DSOR: rcan_pf, rcan_can, rcan_loop
-/// (creates can0), link up, then `rcan_dsor ifname=IFACE` (node 0).
+/// (creates can0), link up (DSOR-FD: `mtu 72` first), then `rcan_dsor
+/// ifname=IFACE` (node 0).
 pub fn load_proto(proto: Proto, paths: &Paths, iface: &str) -> Result<(), String> {
     let dir = proto_dir(proto, paths)?;
     match proto {
@@ -303,10 +308,13 @@ pub fn load_proto(proto: Proto, paths: &Paths, iface: &str) -> Result<(), String
             run("ip", &["link", "add", "dev", iface, "type", "vcan"])?;
             run("ip", &["link", "set", iface, "up"])
         }
-        Proto::Dsor => {
+        Proto::Dsor | Proto::DsorFd => {
             insmod(&dir.join("net/can/rcan_pf.ko"), &[])?;
             insmod(&dir.join("net/can/rcan_can.ko"), &[])?;
             insmod(&dir.join("drivers/net/can/rcan_loop.ko"), &[])?;
+            if proto == Proto::DsorFd {
+                run("ip", &["link", "set", iface, "mtu", "72"])?;
+            }
             run("ip", &["link", "set", iface, "up"])?;
             insmod(
                 &dir.join("net/can/dsor/rcan_dsor.ko"),
