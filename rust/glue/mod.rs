@@ -18,6 +18,7 @@
 //! [`isa`] (claimed memory/port windows, interrupt autoprobe), [`percpu`]
 //! (per-CPU counters), [`params`] (module parameters of the C shims),
 //! [`kmod`] (loading modules on demand), [`net`] (network namespaces),
+//! [`ring`] (a driver's fixed-capacity receive queue),
 //! [`can`] (the CAN framework: the receive table), [`simcard`]
 //! (simulated CAN cards on a simulated bus, for the drivers' simulated
 //! front-ends), [`kaddr`] (a kernel object's address as an opaque
@@ -59,6 +60,7 @@ pub(crate) mod params;
 pub(crate) mod pci;
 pub(crate) mod percpu;
 pub(crate) mod procfs;
+pub(crate) mod ring;
 pub(crate) mod simcard;
 pub(crate) mod skb;
 pub(crate) mod sock;

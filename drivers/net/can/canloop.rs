@@ -38,7 +38,7 @@
 //!
 //! Contexts: `start_xmit` runs with BH disabled under the device's TX lock
 //! (so the per-device counters need no lock of their own); the receive
-//! FIFO ([`Fifo`]) is protected by its own spinlock, taken by `start_xmit`,
+//! FIFO (a [`Ring`] of `FIFO_LEN` skbs) is protected by its own spinlock, taken by `start_xmit`,
 //! the NAPI poll (NET_RX softirq) and `stop` (process context, under RTNL,
 //! after the poll was disabled); `open`/`stop` run in process context
 //! under RTNL. The parameters are read with READ_ONCE and may change at
@@ -53,6 +53,7 @@ use glue::can::ctrl;
 use glue::lock::{new_irq_spinlock, IrqSpinLock};
 use glue::netdev::{Dev, Driver, Napi, Registration, Setup, Xmit};
 use glue::params::Param;
+use glue::ring::Ring;
 use glue::skb::Skb;
 use kernel::c_str;
 use rcan_core::canloop::{DropRate, FrameDump};
@@ -87,53 +88,8 @@ struct LoopDriver;
 /// whose receive FIFO overflows.
 const FIFO_LEN: usize = 512;
 
-/// The receive FIFO of one device: a ring of `FIFO_LEN` entries,
-/// `ring[(head + i) % FIFO_LEN]` for i < len. Under its [`IrqSpinLock`]
-/// (the device's private data).
-struct Fifo {
-    ring: KVec<Option<Skb>>,
-    head: usize,
-    len: usize,
-}
-
-impl Fifo {
-    /// An empty FIFO. Process context.
-    fn new() -> Result<Self> {
-        let mut ring = KVec::with_capacity(FIFO_LEN, GFP_KERNEL)?;
-        for _ in 0..FIFO_LEN {
-            ring.push(None, GFP_KERNEL)?;
-        }
-        Ok(Fifo {
-            ring,
-            head: 0,
-            len: 0,
-        })
-    }
-
-    /// Appends `skb`; gives it back if the FIFO is full.
-    fn push(&mut self, skb: Skb) -> core::result::Result<(), Skb> {
-        if self.len == FIFO_LEN {
-            return Err(skb);
-        }
-        self.ring[(self.head + self.len) % FIFO_LEN] = Some(skb);
-        self.len += 1;
-        Ok(())
-    }
-
-    /// Takes the oldest frame.
-    fn pop(&mut self) -> Option<Skb> {
-        if self.len == 0 {
-            return None;
-        }
-        let skb = self.ring[self.head].take();
-        self.head = (self.head + 1) % FIFO_LEN;
-        self.len -= 1;
-        skb
-    }
-}
-
 impl Driver for LoopDriver {
-    type Priv = IrqSpinLock<Fifo>;
+    type Priv = IrqSpinLock<Ring<Skb>>;
 
     const NAPI_WEIGHT: u32 = 64;
 
@@ -251,7 +207,7 @@ impl kernel::Module for CanLoop {
         for _ in 0..count {
             let reg = Registration::<LoopDriver>::register(
                 c_str!("can%d"),
-                new_irq_spinlock!(Fifo::new()?, "canloop::Fifo")?,
+                new_irq_spinlock!(Ring::new(FIFO_LEN)?, "canloop::Fifo")?,
             )?;
             pr_info!(
                 "{}: CAN loopback device, droprate {}%\n",

@@ -676,15 +676,15 @@ pub(crate) fn rx_filters(
 pub(crate) const MAX_WANTED: usize = 24;
 
 /// What the sockets bound to `dev` (or to every interface) want, as
-/// [`Wanted`](crate::rcan_core::sja1000::Wanted) sets handed to `derive`,
+/// [`Wanted`](crate::rcan_core::filter::Wanted) sets handed to `derive`,
 /// which computes a driver's hardware filter from them. `None` when the
 /// hardware filter must be open: `dev` is promiscuous, or more than
 /// [`MAX_WANTED`] filters apply. Any context.
 pub(crate) fn wanted<T>(
     dev: &NetDev,
-    derive: impl FnOnce(&[crate::rcan_core::sja1000::Wanted]) -> T,
+    derive: impl FnOnce(&[crate::rcan_core::filter::Wanted]) -> T,
 ) -> Option<T> {
-    use crate::rcan_core::{rxtable::Filter, sja1000::Wanted};
+    use crate::rcan_core::{filter::Wanted, rxtable::Filter};
     if dev.is_promisc() {
         return None;
     }

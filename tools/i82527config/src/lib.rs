@@ -4,9 +4,9 @@
 //! definition.
 
 use clap::{CommandFactory, Parser, Subcommand};
+use rcan_chips::i82527::ANSWERS;
 use rcan_core::arb::CAN_EFF_FLAG;
 use rcan_core::frame::CanFrame;
-use rcan_core::i82527::ANSWERS;
 
 /// Show the setup of an rcan Intel 82527 interface and publish the
 /// answers its message objects give to remote frames

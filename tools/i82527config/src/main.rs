@@ -15,8 +15,8 @@
 
 use clap::Parser;
 use i82527config::{Cli, Cmd};
+use rcan_chips::i82527::{bitrate, AnswerReq, Setup, ANSWER_LEN, SETUP_LEN};
 use rcan_core::frame::CanFrame;
-use rcan_core::i82527::{bitrate, AnswerReq, Setup, ANSWER_LEN, SETUP_LEN};
 use std::process::ExitCode;
 
 use rcan_uapi::{dev_ioctl, SIOCDEVPRIVATE};

@@ -20,7 +20,7 @@
 
 use clap::error::ErrorKind;
 use clap::Parser;
-use rcan_core::sja1000::{bitrate, timing_for, Setup, SETUP_LEN};
+use rcan_chips::sja1000::{bitrate, timing_for, Setup, SETUP_LEN};
 use sja1000config::{command, Cli, Setting};
 use std::io;
 use std::process::ExitCode;

@@ -4,7 +4,7 @@
 //! but register access and probing, which the front-end supplies through
 //! [`Regs`] (32-bit accesses in the core's window). The register
 //! programming and frame (de)coding are the pure, host-tested
-//! `rcan_core::ctucanfd` ([`Chip`]).
+//! `crate::rcan_chips::ctucanfd` ([`Chip`]).
 //!
 //! Per device ([`CtuPriv`]):
 //!
@@ -57,13 +57,13 @@ use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
 use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
 use crate::glue::netdev::{Dev, Driver, NetDev, Xmit};
 use crate::glue::skb::Skb;
+use crate::rcan_chips::ctucanfd::{
+    reg, Chip, Config, ErrReport, Event, Regs, CORE_SPAN, DATA_CONST, MAX_TXT_BUFFERS,
+    NOMINAL_CONST,
+};
 use crate::rcan_core::bittiming;
 use crate::rcan_core::candev::{
     ctrlmode, err, error_frame, CanState, Settings, CTUCANFD_CTRLMODE_SUPPORTED,
-};
-use crate::rcan_core::ctucanfd::{
-    reg, Chip, Config, ErrReport, Event, Regs, CORE_SPAN, DATA_CONST, MAX_TXT_BUFFERS,
-    NOMINAL_CONST,
 };
 use crate::rcan_core::frame::{AnyFrame, CAN_MTU};
 use core::marker::PhantomData;

@@ -15,12 +15,12 @@
 
 use kernel::prelude::*;
 
-use crate::{ctucanfd, glue, rcan_core};
+use crate::{ctucanfd, glue};
 
+use crate::rcan_chips::ctucanfd::CORE_SPAN;
 use ctucanfd::{add_core, Core, IoRegs};
 use glue::pci::{self, IoMem};
 use kernel::c_str;
-use rcan_core::ctucanfd::CORE_SPAN;
 
 /// Offset of the card identification word in BAR 0.
 const BAR0_CARD_ID: usize = 0x0000;

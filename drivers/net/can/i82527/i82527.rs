@@ -6,7 +6,7 @@
 //!
 //! This file is compiled into each front-end module (`#[path]`), like the
 //! SJA1000 driver; the chip logic (message-object allocation, masks,
-//! interrupt handling) is the pure, host-tested `rcan_core::i82527`.
+//! interrupt handling) is the pure, host-tested `crate::rcan_chips::i82527`.
 //!
 //! Per device ([`I82527Priv`]): the chip, the echo skb of the frame in
 //! the transmit object, the receive queue, the programmed masks and the
@@ -19,7 +19,7 @@
 //!
 //! Receive path (mainline's `can_rx_offload` scheme): the interrupt
 //! handler only moves frames from the chip into the device's receive
-//! queue ([`RxQueue`], under the chip lock) and schedules the device's
+//! queue (a [`Ring`] of skbs, under the chip lock) and schedules the device's
 //! NAPI poll; the poll, in NET_RX softirq with interrupts on and no lock
 //! held, takes them out one at a time and hands each to the protocol
 //! handlers (`netif_receive_skb`: pf_can, packet sockets, tc). Echoes go
@@ -63,15 +63,16 @@ use crate::glue::can::ctrl::{self, SIOCDEVPRIVATE};
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
 use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
+use crate::glue::ring::Ring;
 use crate::glue::skb::Skb;
 use crate::rcan_api::{self, FilterListener};
-use crate::rcan_core::bittiming::{self, I82527_BITTIMING_CONST};
-use crate::rcan_core::candev::{self, CanState, Settings};
-use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_MTU};
-use crate::rcan_core::i82527::{
+use crate::rcan_chips::i82527::{
     bitrate, error_frame, masks_for, sys_clock, AnswerReq, Chip, Config, Event, I82527Error, Masks,
     Regs, State, ANSWER_LEN, CTRLMODE_SUPPORTED,
 };
+use crate::rcan_core::bittiming::{self, I82527_BITTIMING_CONST};
+use crate::rcan_core::candev::{self, CanState, Settings};
+use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_MTU};
 use core::marker::PhantomData;
 use kernel::prelude::*;
 
@@ -98,57 +99,14 @@ const RXQ_LEN: usize = 1024;
 /// NAPI weight: frames handed up per poll.
 const NAPI_WEIGHT: u32 = 64;
 
-/// The frames taken from the chip, waiting for the NAPI poll (FIFO):
-/// `slots[(head + i) % RXQ_LEN]` for i < len.
-pub(crate) struct RxQueue {
-    slots: KVec<Option<Skb>>,
-    head: usize,
-    len: usize,
-}
-
-impl RxQueue {
-    /// An empty queue. Process context (probe).
-    fn new() -> Result<Self> {
-        let mut slots = KVec::with_capacity(RXQ_LEN, GFP_KERNEL)?;
-        for _ in 0..RXQ_LEN {
-            slots.push(None, GFP_KERNEL)?;
-        }
-        Ok(RxQueue {
-            slots,
-            head: 0,
-            len: 0,
-        })
-    }
-
-    /// Appends `skb`; gives it back if the queue is full.
-    fn push(&mut self, skb: Skb) -> core::result::Result<(), Skb> {
-        if self.len == RXQ_LEN {
-            return Err(skb);
-        }
-        self.slots[(self.head + self.len) % RXQ_LEN] = Some(skb);
-        self.len += 1;
-        Ok(())
-    }
-
-    /// Takes the oldest frame.
-    fn pop(&mut self) -> Option<Skb> {
-        if self.len == 0 {
-            return None;
-        }
-        let skb = self.slots[self.head].take();
-        self.head = (self.head + 1) % RXQ_LEN;
-        self.len -= 1;
-        skb
-    }
-}
-
 /// The chip and what goes with it, under the device's lock.
 pub(crate) struct ChipState<R: Regs> {
     pub(crate) chip: Chip<R>,
     /// The frame in the transmit object, kept for the echo.
     echo: Option<Skb>,
     /// Frames for the NAPI poll.
-    rxq: RxQueue,
+    /// Frames taken from the chip, waiting for the NAPI poll (FIFO).
+    rxq: Ring<Skb>,
     running: bool,
 }
 
@@ -223,7 +181,7 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
             ChipState {
                 chip,
                 echo: None,
-                rxq: RxQueue::new()?,
+                rxq: Ring::new(RXQ_LEN)?,
                 running: false,
             },
             "I82527Priv::chip"
@@ -274,7 +232,7 @@ fn remask<R: Regs + Send + 'static>(dev: &NetDev, p: &I82527Priv<R>) {
 
 /// Queues `skb` for the NAPI poll; a full queue drops it. Chip lock held
 /// (interrupt handler).
-fn enqueue(dev: &NetDev, rxq: &mut RxQueue, skb: Skb) {
+fn enqueue(dev: &NetDev, rxq: &mut Ring<Skb>, skb: Skb) {
     if let Err(skb) = rxq.push(skb) {
         dev.stats_rx_dropped();
         // Interrupts are off: the free (an echo's destructor) is deferred.
@@ -285,7 +243,7 @@ fn enqueue(dev: &NetDev, rxq: &mut RxQueue, skb: Skb) {
 /// Builds the skb of a frame from the bus (or an error frame) with the
 /// one CAN skb builder ([`ctrl::rx_skb`]) and queues it for the NAPI poll.
 /// Chip lock held (interrupt handler).
-fn rx_frame(dev: &NetDev, rxq: &mut RxQueue, frame: &CanFrame) {
+fn rx_frame(dev: &NetDev, rxq: &mut Ring<Skb>, frame: &CanFrame) {
     if let Some(skb) = ctrl::rx_skb(dev, &AnyFrame::Classic(*frame)) {
         enqueue(dev, rxq, skb);
     }
@@ -474,7 +432,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                 dev.stop_queue();
                 p.can.bus_off(dev);
             }
-            (handled, rxq.len != 0)
+            (handled, !rxq.is_empty())
         };
         // Outside the chip lock (the poll takes it).
         if queued {

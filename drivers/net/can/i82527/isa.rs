@@ -18,13 +18,13 @@
 
 use kernel::prelude::*;
 
-use crate::{glue, i82527, rcan_core};
+use crate::{glue, i82527};
 
+use crate::rcan_chips::i82527::{Config, Regs};
 use glue::isa::{IoWindow, Space};
 use glue::params::Param;
 use i82527::{add_channel, Channel};
 use kernel::c_str;
-use rcan_core::i82527::{Config, Regs};
 
 /// Crystal of the cards the thesis used (16 MHz).
 const XTAL_HZ: u32 = 16_000_000;

@@ -17,6 +17,8 @@ mod i82527;
 mod isa;
 #[path = "../../../../net/can/rcan_api.rs"]
 mod rcan_api;
+#[path = "../rcan_chips.rs"]
+mod rcan_chips;
 #[path = "../../../../net/can/rcan_core.rs"]
 mod rcan_core;
 

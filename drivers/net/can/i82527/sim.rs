@@ -3,7 +3,7 @@
 //! rcan_i82527_sim: simulated Intel 82527 cards on one simulated bus.
 //! Nothing emulates the 82527 (DESIGN section 3), so this front-end's
 //! register accesses go to the register-level model
-//! (`rcan_core::i82527_model`, the one the host tests use), and the
+//! (`crate::rcan_chips::i82527_model`, the one the host tests use), and the
 //! unchanged driver (`i82527.rs`) runs beneath pf_can and the protocols.
 //!
 //! The bus, its timer and teardown are the glue's simulated-card
@@ -48,14 +48,14 @@
 
 use kernel::prelude::*;
 
-use crate::{glue, i82527, rcan_core};
+use crate::{glue, i82527};
 
+use crate::rcan_chips::i82527::{bits, reg, Config, Regs};
+use crate::rcan_chips::i82527_model::{Fault, I82527Model, TxAttempt};
 use glue::params::{Param, ParamStr};
 use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN, MAX_CARDS};
 use i82527::{add_channel, Channel};
 use kernel::c_str;
-use rcan_core::i82527::{bits, reg, Config, Regs};
-use rcan_core::i82527_model::{Fault, I82527Model, TxAttempt};
 
 /// The model's crystal (for the logged bit rate only).
 const XTAL_HZ: u32 = 16_000_000;

@@ -15,6 +15,8 @@ mod glue;
 mod i82527;
 #[path = "../../../../net/can/rcan_api.rs"]
 mod rcan_api;
+#[path = "../rcan_chips.rs"]
+mod rcan_chips;
 #[path = "../../../../net/can/rcan_core.rs"]
 mod rcan_core;
 #[path = "sim.rs"]

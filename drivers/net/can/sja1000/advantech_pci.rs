@@ -14,18 +14,18 @@
 
 use kernel::prelude::*;
 
-use crate::{glue, rcan_core, sja1000};
+use crate::{glue, sja1000};
 
+use crate::rcan_chips::sja1000::{Config, CDR_CBP};
 use glue::pci;
 use kernel::c_str;
-use rcan_core::sja1000::{Config, CDR_CBP};
 use sja1000::{add_channel, Channel, IoRegs};
 
 const CHANNELS: usize = 2;
 /// Output control: TX0 push-pull, normal mode (what these boards use).
 const ADVANTECH_OCR: u8 = 0xDA;
 /// Clock divider: comparator bypass, clock out off.
-const ADVANTECH_CDR: u8 = CDR_CBP | rcan_core::sja1000::CDR_CLK_OFF;
+const ADVANTECH_CDR: u8 = CDR_CBP | crate::rcan_chips::sja1000::CDR_CLK_OFF;
 
 fn config() -> Config {
     sja1000::module_config(ADVANTECH_OCR, ADVANTECH_CDR)

@@ -16,11 +16,11 @@
 
 use kernel::prelude::*;
 
-use crate::{glue, rcan_core, sja1000};
+use crate::{glue, sja1000};
 
+use crate::rcan_chips::sja1000::{Config, CDR_CBP};
 use glue::pci::{self, IoMem};
 use kernel::c_str;
-use rcan_core::sja1000::{Config, CDR_CBP};
 use sja1000::{add_channel, Channel, IoRegs};
 
 const MAX_CHANNELS: usize = 4;

@@ -10,7 +10,7 @@
 //!
 //! Only register access and probing live here; the driver is
 //! `sja1000.rs`, the PITA sequences are the host-tested
-//! `rcan_core::sja1000_boards`. QEMU has no PCAN-PCI: the module loads and
+//! `crate::rcan_chips::sja1000_boards`. QEMU has no PCAN-PCI: the module loads and
 //! binds nothing there.
 //!
 //! Contexts: probe/remove in process context (PCI core); register access
@@ -22,14 +22,14 @@
 
 use kernel::prelude::*;
 
-use crate::{glue, rcan_core, sja1000};
+use crate::{glue, sja1000};
 
-use glue::pci::{self, IoMem};
-use kernel::c_str;
-use rcan_core::sja1000::{Config, Regs, CDR_CBP};
-use rcan_core::sja1000_boards::{
+use crate::rcan_chips::sja1000::{Config, Regs, CDR_CBP};
+use crate::rcan_chips::sja1000_boards::{
     pita_ack, pita_init, pita_irq, SpacedRegs, PCAN_CHAN_SIZE, PCAN_MAX_CHANNELS,
 };
+use glue::pci::{self, IoMem};
+use kernel::c_str;
 use sja1000::{add_channel, Channel};
 
 /// Bytes of PITA registers mapped from BAR 0.

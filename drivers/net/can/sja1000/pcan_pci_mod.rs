@@ -15,6 +15,8 @@ mod glue;
 mod pcan_pci;
 #[path = "../../../../net/can/rcan_api.rs"]
 mod rcan_api;
+#[path = "../rcan_chips.rs"]
+mod rcan_chips;
 #[path = "../../../../net/can/rcan_core.rs"]
 mod rcan_core;
 #[path = "sja1000.rs"]

@@ -3,7 +3,7 @@
 //! rcan_sja1000_sim: simulated SJA1000 cards on one simulated bus, with
 //! fault injection. QEMU's SJA1000 cards never produce bus errors (DESIGN
 //! section 3), so this front-end's register accesses go to the
-//! register-level model (`rcan_core::sja1000_model`, the one the host
+//! register-level model (`crate::rcan_chips::sja1000_model`, the one the host
 //! tests use), and the unchanged SJA1000 driver (`sja1000.rs`) runs
 //! beneath pf_can and the protocols, with error frames, error states,
 //! bus-off and restarts that user space sees as on real hardware.
@@ -49,13 +49,13 @@
 
 use kernel::prelude::*;
 
-use crate::{glue, rcan_core, sja1000};
+use crate::{glue, sja1000};
 
+use crate::rcan_chips::sja1000::{cmd, reg, Regs, CDR_CBP, CDR_CLK_OFF};
+use crate::rcan_chips::sja1000_model::{ecc, Fault, Sja1000Model, TxAttempt};
 use glue::params::{Param, ParamStr};
 use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN, MAX_CARDS};
 use kernel::c_str;
-use rcan_core::sja1000::{cmd, reg, Regs, CDR_CBP, CDR_CLK_OFF};
-use rcan_core::sja1000_model::{ecc, Fault, Sja1000Model, TxAttempt};
 use sja1000::{add_channel, module_config, Channel};
 
 /// The model's crystal (as the PCI boards: 16 MHz, an 8 MHz CAN clock).

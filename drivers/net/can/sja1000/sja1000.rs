@@ -6,7 +6,7 @@
 //!
 //! This file is compiled into each front-end module (`#[path]`), so a
 //! front-end and the driver it drives are one module; the chip logic
-//! itself is the pure, host-tested `rcan_core::sja1000`.
+//! itself is the pure, host-tested `crate::rcan_chips::sja1000`.
 //!
 //! Per device ([`Sja1000Priv`]):
 //!
@@ -78,13 +78,13 @@ use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf,
 use crate::glue::params::Param;
 use crate::glue::skb::Skb;
 use crate::rcan_api::{self, FilterListener};
-use crate::rcan_core::bittiming::{self, SJA1000_BITTIMING_CONST};
-use crate::rcan_core::candev::{self, CanState, Settings};
-use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_MTU};
-use crate::rcan_core::sja1000::{
+use crate::rcan_chips::sja1000::{
     bitrate, hw_filter, restarted_frame, Chip, Config, Event, HwFilter, Regs, Setup, CDR_PELICAN,
     SETUP_LEN,
 };
+use crate::rcan_core::bittiming::{self, SJA1000_BITTIMING_CONST};
+use crate::rcan_core::candev::{self, CanState, Settings};
+use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_MTU};
 use core::marker::PhantomData;
 use kernel::prelude::*;
 
@@ -109,8 +109,8 @@ impl Regs for IoRegs {
 
 /// Register access through a claimed ISA/PC/104 window
 /// ([`crate::glue::isa::IoWindow`]) for the board logic of
-/// `rcan_core::sja1000_boards`.
-impl crate::rcan_core::sja1000_boards::Io for crate::glue::isa::IoWindow {
+/// `crate::rcan_chips::sja1000_boards`.
+impl crate::rcan_chips::sja1000_boards::Io for crate::glue::isa::IoWindow {
     fn inb(&mut self, off: usize) -> u8 {
         self.read8(off)
     }
@@ -121,7 +121,7 @@ impl crate::rcan_core::sja1000_boards::Io for crate::glue::isa::IoWindow {
 
 /// The same for a mapped PCI BAR (the PITA of a PCAN-PCI), with real
 /// 16-bit accesses.
-impl crate::rcan_core::sja1000_boards::Io for crate::glue::pci::IoMem {
+impl crate::rcan_chips::sja1000_boards::Io for crate::glue::pci::IoMem {
     fn inb(&mut self, off: usize) -> u8 {
         self.read8(off)
     }
@@ -442,8 +442,8 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
                 let s = {
                     let mut st = p.chip.lock();
                     let cfg = st.chip.cfg;
-                    let rxerr = st.chip.regs.read(crate::rcan_core::sja1000::reg::RXERR);
-                    let txerr = st.chip.regs.read(crate::rcan_core::sja1000::reg::TXERR);
+                    let rxerr = st.chip.regs.read(crate::rcan_chips::sja1000::reg::RXERR);
+                    let txerr = st.chip.regs.read(crate::rcan_chips::sja1000::reg::TXERR);
                     Setup {
                         btr0,
                         btr1,
@@ -693,8 +693,8 @@ impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
     /// RTNL; takes the chip lock.
     fn berr_counter(_dev: &Dev<Self>, p: &Self::Priv) -> (u16, u16) {
         let mut st = p.chip.lock();
-        let tx = st.chip.regs.read(crate::rcan_core::sja1000::reg::TXERR);
-        let rx = st.chip.regs.read(crate::rcan_core::sja1000::reg::RXERR);
+        let tx = st.chip.regs.read(crate::rcan_chips::sja1000::reg::TXERR);
+        let rx = st.chip.regs.read(crate::rcan_chips::sja1000::reg::RXERR);
         (u16::from(tx), u16::from(rx))
     }
 

@@ -10,7 +10,7 @@
 //!
 //! Only register access and probing live here; the driver is
 //! `sja1000.rs`, the autoprobe sequence is the host-tested
-//! `rcan_core::sja1000_boards`.
+//! `crate::rcan_chips::sja1000_boards`.
 //!
 //! Contexts: everything here runs in module init/exit (process context);
 //! register access from the driver is serialised by its chip lock.
@@ -18,13 +18,13 @@
 
 use kernel::prelude::*;
 
-use crate::{glue, rcan_core, sja1000};
+use crate::{glue, sja1000};
 
+use crate::rcan_chips::sja1000::{cmd, reg, Chip, Config, Regs, CDR_CBP};
+use crate::rcan_chips::sja1000_boards::{autoprobe_ack, autoprobe_arm, autoprobe_fire, SpacedRegs};
 use glue::isa::{self, IoWindow, Space};
 use glue::params::{Param, ParamArray};
 use kernel::c_str;
-use rcan_core::sja1000::{cmd, reg, Chip, Config, Regs, CDR_CBP};
-use rcan_core::sja1000_boards::{autoprobe_ack, autoprobe_arm, autoprobe_fire, SpacedRegs};
 use sja1000::{add_probed, Channel};
 
 /// Bytes of memory per SJA1000 (registers 0..31, byte spacing).

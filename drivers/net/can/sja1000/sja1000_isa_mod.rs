@@ -13,6 +13,8 @@ use kernel::prelude::*;
 mod glue;
 #[path = "../../../../net/can/rcan_api.rs"]
 mod rcan_api;
+#[path = "../rcan_chips.rs"]
+mod rcan_chips;
 #[path = "../../../../net/can/rcan_core.rs"]
 mod rcan_core;
 #[path = "sja1000.rs"]

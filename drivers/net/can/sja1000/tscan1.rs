@@ -11,7 +11,7 @@
 //!
 //! Only register access and probing live here; the driver is
 //! `sja1000.rs`, identification and mapping are the host-tested
-//! `rcan_core::sja1000_boards`.
+//! `crate::rcan_chips::sja1000_boards`.
 //!
 //! Contexts: module init/exit (process context); register access from
 //! the driver is serialised by its chip lock.
@@ -19,15 +19,15 @@
 
 use kernel::prelude::*;
 
-use crate::{glue, rcan_core, sja1000};
+use crate::{glue, sja1000};
 
-use glue::isa::{IoWindow, Space};
-use kernel::c_str;
-use rcan_core::sja1000::{Config, CDR_CBP};
-use rcan_core::sja1000_boards::{
+use crate::rcan_chips::sja1000::{Config, CDR_CBP};
+use crate::rcan_chips::sja1000_boards::{
     tscan1_identify, tscan1_map, tscan1_unmap, Io, SpacedRegs, Tscan1, Tscan1Error,
     TSCAN1_MAX_BOARDS, TSCAN1_PLD, TSCAN1_PLD_SIZE, TSCAN1_SJA1000_ADDRESSES, TSCAN1_SJA1000_SIZE,
 };
+use glue::isa::{IoWindow, Space};
+use kernel::c_str;
 use sja1000::{add_channel, Channel};
 
 /// Output control: both TX pins push-pull.

@@ -67,6 +67,37 @@ pub struct BittimingConst {
     pub brp_inc: u32,
 }
 
+/// The CTU CAN FD's nominal bit-timing limits (mainline `ctu_can_fd_bit_timing_max`):
+/// PROP 7 bits plus PH1 6 bits make TSEG1 up to 190 quanta, PH2 6 bits,
+/// SJW 5 bits. The prescaler field has 8 bits; mainline limits it to 8,
+/// and so do we, so that both drivers compute the same timing.
+pub const CTUCANFD_NOMINAL_CONST: BittimingConst = BittimingConst {
+    name: "ctu_can_fd",
+    tseg1_min: 2,
+    tseg1_max: 190,
+    tseg2_min: 1,
+    tseg2_max: 63,
+    sjw_max: 31,
+    brp_min: 1,
+    brp_max: 8,
+    brp_inc: 1,
+};
+
+/// The CTU CAN FD's data-phase limits (mainline `ctu_can_fd_bit_timing_data_max`):
+/// PROP_FD 6 bits plus PH1_FD 5 bits make TSEG1 up to 94, PH2_FD 5 bits;
+/// prescaler up to 2 as mainline's.
+pub const CTUCANFD_DATA_CONST: BittimingConst = BittimingConst {
+    name: "ctu_can_fd",
+    tseg1_min: 2,
+    tseg1_max: 94,
+    tseg2_min: 1,
+    tseg2_max: 31,
+    sjw_max: 31,
+    brp_min: 1,
+    brp_max: 2,
+    brp_inc: 1,
+};
+
 /// The SJA1000's limits, as mainline's `sja1000_bittiming_const`
 /// (datasheet 6.5.1/6.5.2: BRP 6 bits, SJW 2 bits, TSEG1 4 bits, TSEG2 3
 /// bits, each field holding its value minus one). The clock these count
@@ -86,7 +117,7 @@ pub const SJA1000_BITTIMING_CONST: BittimingConst = BittimingConst {
 /// The Intel 82527's limits. Mainline 6.12 drives this chip only through
 /// `cc770` (the Bosch CC770 is its pin-compatible successor), which
 /// copies the SJA1000's limits; ours follow the 82527 datasheet as the
-/// driver's [`super::i82527::timing_for`] always has: bit timing registers
+/// driver's `i82527::timing_for` always has: bit timing registers
 /// laid out like the SJA1000's (BRP 6 bits, SJW 2 bits, TSEG1 4 bits,
 /// TSEG2 3 bits, SPL for three samples in BTR1 bit 7), but programmed
 /// TSEG1 2..15 and TSEG2 1..7, that is TSEG1 3..16 and TSEG2 2..8 quanta.

@@ -6,10 +6,11 @@
 //! errno ([`validate`], [`changelink`], [`open`]), the error states from
 //! the error counters ([`state_of_counter`], [`change_state`]), and the
 //! error frames of `<linux/can/error.h>` ([`err`], [`error_frame`],
-//! [`sja1000_error`], [`i82527_lec`]).
+//! [`i82527_lec`]; the SJA1000's decoder is in its chip file,
+//! `sja1000::sja1000_error`).
 //!
-//! Nothing here registers the "can" link kind yet: this is the logic the
-//! netlink glue will call, each function's context being its caller's
+//! Nothing here registers the "can" link kind: this is the logic the
+//! netlink glue (`rust/glue/can/link.rs`) calls, each function's context being its caller's
 //! (the rtnetlink calls hold RTNL in process context; the error-frame
 //! decoders run in the drivers' hardirq handlers and must not sleep, and
 //! do not). [`Settings`] and [`CanState`] are owned by the device; the
@@ -573,23 +574,6 @@ pub fn error_frame() -> CanFrame {
     }
 }
 
-/// SJA1000 error code capture register (ECC) fields.
-pub mod ecc {
-    /// Segment where the error happened (bits 4..0); the codes are the
-    /// `CAN_ERR_PROT_LOC_*` values.
-    pub const SEG: u8 = 0x1F;
-    /// Direction: set on reception, clear on transmission.
-    pub const DIR: u8 = 0x20;
-    /// Error type (bits 7..6).
-    pub const MASK: u8 = 0xC0;
-    /// Type: bit error.
-    pub const BIT: u8 = 0x00;
-    /// Type: form error.
-    pub const FORM: u8 = 0x40;
-    /// Type: stuff error.
-    pub const STUFF: u8 = 0x80;
-}
-
 /// Interface statistics an SJA1000 error interrupt counts (`struct
 /// net_device_stats` fields).
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
@@ -600,134 +584,6 @@ pub struct NetErrStats {
     pub tx_errors: u32,
     /// Receive overruns.
     pub rx_over_errors: u32,
-}
-
-/// The registers an SJA1000 error interrupt is decoded from.
-#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
-pub struct Sja1000ErrRegs {
-    /// Interrupt register: the causes (DOI, EI, BEI, EPI, ALI are looked at).
-    pub ir: u8,
-    /// Status register.
-    pub sr: u8,
-    /// Transmit error counter.
-    pub txerr: u8,
-    /// Receive error counter.
-    pub rxerr: u8,
-    /// Error code capture, read by the caller only when IR has BEI
-    /// (reading it re-arms the capture); else 0.
-    pub ecc: u8,
-    /// Arbitration lost capture, read only when IR has ALI; else 0.
-    pub alc: u8,
-}
-
-/// What one SJA1000 error interrupt reported (mainline `sja1000_err`).
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct Sja1000Err {
-    /// The error frame for CAN_RAW sockets with `CAN_RAW_ERR_FILTER`.
-    pub frame: CanFrame,
-    /// The chip went bus-off: the driver stops the queue and starts the
-    /// restart timer (mainline `can_bus_off`).
-    pub bus_off: bool,
-}
-
-/// Decodes an SJA1000 error interrupt from `r` as mainline's
-/// `sja1000_err` does; updates the device's `state` and statistics.
-/// Hardirq context in the driver; pure.
-///
-/// Data overrun: [`err::CRTL`], [`err::CRTL_RX_OVERFLOW`], one receive
-/// overrun and receive error (the caller clears the overrun). Error
-/// warning: the state becomes bus-off (SR.BS), warning (SR.ES) or active.
-/// Unless that state is bus-off, [`err::CNT`] with the counters in
-/// data[6]/data[7]. Bus error: [`err::PROT`] | [`err::BUSERROR`], the
-/// ECC type in data[2] (bit, form or stuff; other: unspecified), the ECC
-/// segment in data[3], [`err::PROT_TX`] and a transmit error when ECC.DIR
-/// is clear, else a receive error. Error passive: the state becomes
-/// passive, or warning if it was passive. Arbitration lost:
-/// [`err::LOSTARB`] with ALC bits 4..0 in data[0]. A changed state goes
-/// through [`change_state`], counted on the side whose counter is the
-/// larger (both when equal).
-pub fn sja1000_error(
-    state: &mut CanState,
-    stats: &mut CanStats,
-    net: &mut NetErrStats,
-    r: &Sja1000ErrRegs,
-) -> Sja1000Err {
-    use super::sja1000::{irq, status};
-    let Sja1000ErrRegs {
-        ir,
-        sr,
-        txerr,
-        rxerr,
-        ecc,
-        alc,
-    } = *r;
-    let mut cf = error_frame();
-    let mut new = *state;
-    if ir & irq::DOI != 0 {
-        cf.can_id |= err::CRTL;
-        cf.data[1] = err::CRTL_RX_OVERFLOW;
-        net.rx_over_errors += 1;
-        net.rx_errors += 1;
-    }
-    if ir & irq::EI != 0 {
-        new = if sr & status::BS != 0 {
-            CanState::BusOff
-        } else if sr & status::ES != 0 {
-            CanState::ErrorWarning
-        } else {
-            CanState::ErrorActive
-        };
-    }
-    if new != CanState::BusOff {
-        cf.can_id |= err::CNT;
-        cf.data[6] = txerr;
-        cf.data[7] = rxerr;
-    }
-    if ir & irq::BEI != 0 {
-        stats.bus_error += 1;
-        cf.can_id |= err::PROT | err::BUSERROR;
-        cf.data[2] |= match ecc & ecc::MASK {
-            ecc::BIT => err::PROT_BIT,
-            ecc::FORM => err::PROT_FORM,
-            ecc::STUFF => err::PROT_STUFF,
-            _ => 0,
-        };
-        cf.data[3] = ecc & ecc::SEG;
-        if ecc & ecc::DIR == 0 {
-            net.tx_errors += 1;
-            cf.data[2] |= err::PROT_TX;
-        } else {
-            net.rx_errors += 1;
-        }
-    }
-    if ir & irq::EPI != 0 {
-        new = if new == CanState::ErrorPassive {
-            CanState::ErrorWarning
-        } else {
-            CanState::ErrorPassive
-        };
-    }
-    if ir & irq::ALI != 0 {
-        stats.arbitration_lost += 1;
-        cf.can_id |= err::LOSTARB;
-        cf.data[0] = alc & 0x1F;
-    }
-    let mut bus_off = false;
-    if new != *state {
-        let tx = if txerr >= rxerr {
-            new
-        } else {
-            CanState::ErrorActive
-        };
-        let rx = if txerr <= rxerr {
-            new
-        } else {
-            CanState::ErrorActive
-        };
-        change_state(state, stats, Some(&mut cf), tx, rx);
-        bus_off = new == CanState::BusOff;
-    }
-    Sja1000Err { frame: cf, bus_off }
 }
 
 /// 82527 status register: last error code (bits 2..0).

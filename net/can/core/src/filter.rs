@@ -133,3 +133,111 @@ mod tests {
         assert!(!r.matches(3, a));
     }
 }
+
+// ---------------------------------------------------------------------
+// What a set of receive filters wants, as hardware acceptance filters
+// see it: the input of the SJA1000's and the 82527's filter derivation
+// (`sja1000::hw_filter`, `i82527::masks_for`) and of the glue's
+// `can::proto::wanted`.
+// ---------------------------------------------------------------------
+
+/// A set of wanted frames of one format as a ternary pattern over `bits`
+/// bits: a frame is in it when `(frame_bits ^ value) & care == 0`.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Cube {
+    /// Pattern (bits outside `care` are zero).
+    pub value: u32,
+    /// Bits that must match.
+    pub care: u32,
+}
+
+impl Cube {
+    /// The cube of `value` over the bits in `care`.
+    pub fn new(value: u32, care: u32) -> Cube {
+        Cube {
+            value: value & care,
+            care,
+        }
+    }
+
+    /// The smallest cube containing both.
+    pub fn merge(self, o: Cube) -> Cube {
+        let care = self.care & o.care & !(self.value ^ o.value);
+        Cube::new(self.value, care)
+    }
+}
+
+/// What one filter wants, per frame format: standard frames as a cube over
+/// 12 bits (identifier bits 11..1, RTR bit 0) and extended frames over 30
+/// bits (identifier bits 29..1, RTR bit 0). `None`: no frame of that
+/// format.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Wanted {
+    /// Standard frames.
+    pub sff: Option<Cube>,
+    /// Extended frames.
+    pub eff: Option<Cube>,
+}
+
+impl Wanted {
+    /// Every frame.
+    pub const ALL: Wanted = Wanted {
+        sff: Some(Cube { value: 0, care: 0 }),
+        eff: Some(Cube { value: 0, care: 0 }),
+    };
+
+    /// The frames a receive filter accepts (a superset where a filter is
+    /// not expressible as a cube: inverted filters want "everything").
+    pub fn of(f: &super::rxtable::Filter) -> Wanted {
+        use super::arb::{
+            CAN_EFF_FLAG, CAN_EFF_MASK, CAN_IDE, CAN_RTR, CAN_RTR_FLAG, CAN_SFF_MASK,
+        };
+        use super::rxtable::Filter;
+        match *f {
+            Filter::Id { inv: true, .. } => Wanted::ALL,
+            Filter::Id {
+                id,
+                mask,
+                inv: false,
+            } => {
+                let rtr_care = u32::from(mask & CAN_RTR_FLAG != 0);
+                let rtr_val = u32::from(id & CAN_RTR_FLAG != 0);
+                let eff_care = mask & CAN_EFF_FLAG != 0;
+                let is_eff = id & CAN_EFF_FLAG != 0;
+                // Standard frames have zero identifier bits 11..28.
+                let high = CAN_EFF_MASK & !CAN_SFF_MASK;
+                let sff_possible = (!eff_care || !is_eff) && id & mask & high == 0;
+                let sff = sff_possible.then(|| {
+                    Cube::new(
+                        ((id & CAN_SFF_MASK) << 1) | rtr_val,
+                        ((mask & CAN_SFF_MASK) << 1) | rtr_care,
+                    )
+                });
+                let eff = (!eff_care || is_eff).then(|| {
+                    Cube::new(
+                        ((id & CAN_EFF_MASK) << 1) | rtr_val,
+                        ((mask & CAN_EFF_MASK) << 1) | rtr_care,
+                    )
+                });
+                Wanted { sff, eff }
+            }
+            Filter::Arb(a) => {
+                // Arbitration field: care = !mask (thesis: 1 = don't care).
+                let (pat, care) = (a.arb(), !a.mask());
+                let rtr_care = u32::from(care & CAN_RTR != 0);
+                let rtr_val = u32::from(pat & CAN_RTR != 0);
+                let ide_care = care & CAN_IDE != 0;
+                let is_eff = pat & CAN_IDE != 0;
+                // Standard frames have zero extension bits (20..3).
+                let ext = 0x001F_FFF8;
+                let sff_possible = (!ide_care || !is_eff) && pat & care & ext == 0;
+                let sff = sff_possible.then(|| {
+                    Cube::new(((pat >> 21) << 1) | rtr_val, ((care >> 21) << 1) | rtr_care)
+                });
+                let eff = (!ide_care || is_eff)
+                    .then(|| Cube::new(((pat >> 3) << 1) | rtr_val, ((care >> 3) << 1) | rtr_care));
+                Wanted { sff, eff }
+            }
+        }
+    }
+}

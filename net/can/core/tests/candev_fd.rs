@@ -11,9 +11,11 @@
 //! the VM test `ctucanfd_ip_fd_matches_mainline` checks the same
 //! `ip -details` lines against mainline's ctucanfd_pci.
 
-use rcan_core::bittiming::{Bittiming, EBUSY, EINVAL, EOPNOTSUPP, SJA1000_BITTIMING_CONST};
+use rcan_core::bittiming::{
+    Bittiming, CTUCANFD_DATA_CONST as DATA_CONST, CTUCANFD_NOMINAL_CONST as NOMINAL_CONST, EBUSY,
+    EINVAL, EOPNOTSUPP, SJA1000_BITTIMING_CONST,
+};
 use rcan_core::candev::*;
-use rcan_core::ctucanfd::{DATA_CONST, NOMINAL_CONST};
 
 const CTU: Device = Device {
     btc: Some(&NOMINAL_CONST),

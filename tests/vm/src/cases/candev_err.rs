@@ -11,7 +11,7 @@
 //!
 //! Not portable: QEMU's cards, which mainline's drivers run on, produce no
 //! bus errors. The expected frames are mainline's (`sja1000_err`), worked
-//! out in net/can/core/tests/sja1000_faults.rs, which checks the same
+//! out in drivers/net/can/chips/tests/sja1000_faults.rs, which checks the same
 //! sequences against the model on the host.
 
 use socketcan::{CanFrame, CanSocket, SocketOptions};

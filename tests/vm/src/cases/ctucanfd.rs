@@ -16,7 +16,7 @@
 //! fault confinement (FAULT_STATE, REC/TEC and ERR_CAPT read 0, no error
 //! interrupt): error states, error frames and bus-off are covered by the
 //! host tests of the chip logic against the register model with fault
-//! injection (net/can/core/tests/ctucanfd_chip.rs). What QEMU shows is
+//! injection (drivers/net/can/chips/tests/ctucanfd_chip.rs). What QEMU shows is
 //! tested here: the control modes as `ip` sets and shows them, listen-only
 //! (the driver drops what it would send), counters 0, restart refused
 //! while not bus-off.

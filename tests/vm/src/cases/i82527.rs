@@ -9,7 +9,7 @@
 //! load where there is no card.
 //!
 //! Chip-level behaviour (allocation, overrun, bus-off, masks) is covered
-//! by the host tests (net/can/core/tests/i82527_*.rs).
+//! by the host tests (drivers/net/can/chips/tests/i82527_*.rs).
 
 use std::thread;
 use std::time::{Duration, Instant};

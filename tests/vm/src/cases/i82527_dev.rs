@@ -11,7 +11,7 @@
 //! Not portable: mainline has no 82527 driver for a card QEMU emulates
 //! (its cc770 drives the successor chip on ISA/platform boards), and no
 //! emulated card produces bus errors. The expected frames are worked out
-//! in net/can/core/tests/i82527_chip.rs, which checks the same sequences
+//! in drivers/net/can/chips/tests/i82527_chip.rs, which checks the same sequences
 //! against the model on the host.
 
 use super::candev::{details_json, ip, ip_ok};

@@ -8,7 +8,7 @@
 //!
 //! QEMU delivers frames instantly, ignores bit timing and has no error
 //! frames: bus errors and bus-off are covered by the host tests of the
-//! chip logic (net/can/core/tests/sja1000_chip.rs). Remote frames are sent
+//! chip logic (drivers/net/can/chips/tests/sja1000_chip.rs). Remote frames are sent
 //! with DLC 0 only (a QEMU FIFO bug, see `all_kinds`).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

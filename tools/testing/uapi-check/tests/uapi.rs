@@ -369,8 +369,8 @@ fn the_compiler_reads_the_headers_in_this_tree() {
 
 #[test]
 fn driver_ioctl_structs_agree_with_the_headers() {
+    use rcan_chips::{i82527, sja1000};
     use rcan_core::frame::{CanFrame, CAN_FRAME_LEN};
-    use rcan_core::{i82527, sja1000};
     let values = values();
     let same = |name: &str, x: i128| assert_eq!(x, v(&values, name), "rcan_core: {name}");
 

@@ -17,7 +17,7 @@
 //! offset rounded down, and the driver only ever makes 32-bit accesses.
 
 use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK};
-use super::bittiming::{Bittiming, BittimingConst};
+use super::bittiming::Bittiming;
 use super::candev::{err, error_frame, CanState, CanStats, NetErrStats};
 use core::num::NonZeroU32;
 
@@ -477,35 +477,10 @@ pub fn decode(w: &[u32]) -> AnyFrame {
 // Bit timing.
 // ---------------------------------------------------------------------
 
-/// Nominal bit-timing limits (mainline `ctu_can_fd_bit_timing_max`):
-/// PROP 7 bits plus PH1 6 bits make TSEG1 up to 190 quanta, PH2 6 bits,
-/// SJW 5 bits. The prescaler field has 8 bits; mainline limits it to 8,
-/// and so do we, so that both drivers compute the same timing.
-pub const NOMINAL_CONST: BittimingConst = BittimingConst {
-    name: "ctu_can_fd",
-    tseg1_min: 2,
-    tseg1_max: 190,
-    tseg2_min: 1,
-    tseg2_max: 63,
-    sjw_max: 31,
-    brp_min: 1,
-    brp_max: 8,
-    brp_inc: 1,
-};
-
-/// Data-phase limits (mainline `ctu_can_fd_bit_timing_data_max`):
-/// PROP_FD 6 bits plus PH1_FD 5 bits make TSEG1 up to 94, PH2_FD 5 bits;
-/// prescaler up to 2 as mainline's.
-pub const DATA_CONST: BittimingConst = BittimingConst {
-    name: "ctu_can_fd",
-    tseg1_min: 2,
-    tseg1_max: 94,
-    tseg2_min: 1,
-    tseg2_max: 31,
-    sjw_max: 31,
-    brp_min: 1,
-    brp_max: 2,
-    brp_inc: 1,
+/// Nominal and data-phase bit-timing limits, beside the other chips' in
+/// the device layer's bit-timing file.
+pub use super::bittiming::{
+    CTUCANFD_DATA_CONST as DATA_CONST, CTUCANFD_NOMINAL_CONST as NOMINAL_CONST,
 };
 
 /// The fields of a BTR or BTR_FD register.

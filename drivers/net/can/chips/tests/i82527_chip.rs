@@ -1,18 +1,18 @@
 // SPDX-License-Identifier: GPL-2.0
-//! The 82527 driver core (`rcan_core::i82527::Chip`) against the
-//! register-level model (`rcan_core::i82527_model`), two chips on one
+//! The 82527 driver core (`rcan_chips::i82527::Chip`) against the
+//! register-level model (`rcan_chips::i82527_model`), two chips on one
 //! simulated bus: probing, the thesis' message-object allocation (5.3.10),
 //! transmit and receive of every frame kind, automatic remote answers,
 //! the single transmit object, object 15's double buffer and overrun,
 //! the interrupt priority order, error warning and bus-off with recovery,
 //! and the masks keeping unwanted frames out.
 
+use rcan_chips::i82527::*;
+use rcan_chips::i82527_model::{Fault, I82527Model, TxAttempt};
+use rcan_chips::sja1000::Wanted;
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
 use rcan_core::frame::CanFrame;
-use rcan_core::i82527::*;
-use rcan_core::i82527_model::{Fault, I82527Model, TxAttempt};
 use rcan_core::rxtable::{CanFilterKind, Filter};
-use rcan_core::sja1000::Wanted;
 
 fn frame(can_id: u32, data: &[u8]) -> CanFrame {
     let mut f = CanFrame {

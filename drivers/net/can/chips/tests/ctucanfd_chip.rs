@@ -1,18 +1,18 @@
 // SPDX-License-Identifier: GPL-2.0
-//! The CTU CAN FD driver core (`rcan_core::ctucanfd::Chip`) against the
-//! register-level model (`rcan_core::ctucanfd_model`): two cores on one
+//! The CTU CAN FD driver core (`rcan_chips::ctucanfd::Chip`) against the
+//! register-level model (`rcan_chips::ctucanfd_model`): two cores on one
 //! bus as on QEMU's ctucan_pci card, classic and FD frames both ways,
 //! the TX ring's order, the RX budget, data overrun, stop, and the bit
 //! timing registers. The model encodes frames by its own reading of the
 //! datasheet, so a round trip checks the driver's encoding against it.
 
 use proptest::prelude::*;
+use rcan_chips::ctucanfd::*;
+use rcan_chips::ctucanfd_model::{BusFrame, CtuModel};
 use rcan_core::arb::CAN_ERR_FLAG;
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_RTR_FLAG};
 use rcan_core::bittiming::{self, Bittiming};
 use rcan_core::candev::{err, CanState};
-use rcan_core::ctucanfd::*;
-use rcan_core::ctucanfd_model::{BusFrame, CtuModel};
 use rcan_core::frame::{
     can_fd_dlc2len, AnyFrame, CanFdFrame, CanFrame, CANFD_BRS, CANFD_ESI, CANFD_FDF,
 };
@@ -251,7 +251,7 @@ fn overrun_reported_and_buffer_kept() {
     while b.regs.deliver(&big) {
         stored += 1;
     }
-    assert_eq!(stored, rcan_core::ctucanfd_model::RX_BUF_BYTES / 80);
+    assert_eq!(stored, rcan_chips::ctucanfd_model::RX_BUF_BYTES / 80);
     let mut rx = 0;
     let mut overruns = 0;
     while b.regs.irq_line() {

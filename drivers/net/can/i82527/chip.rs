@@ -24,8 +24,8 @@
 
 use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK, MAX_DLC};
 use super::bittiming::{self, Bittiming};
+use super::filter::{Cube, Wanted};
 use super::frame::CanFrame;
-use super::sja1000::{Cube, Wanted};
 
 /// Register offsets.
 pub mod reg {

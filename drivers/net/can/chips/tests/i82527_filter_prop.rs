@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: GPL-2.0
 //! Soundness of the 82527 masks derived from the bound filters (thesis
-//! 5.3.4, 5.3.10; `rcan_core::i82527::masks_for`): for any set of receive
+//! 5.3.4, 5.3.10; `rcan_chips::i82527::masks_for`): for any set of receive
 //! filters (mainline and thesis forms) and any data frame some filter
 //! wants, a chip programmed by the driver core with those masks stores
 //! the frame (checked on the register-level model, through the driver's
@@ -12,12 +12,12 @@ mod common;
 
 use common::filters::{can_id, filter};
 use proptest::prelude::*;
+use rcan_chips::i82527::{masks_for, Chip, Config, Event, Masks};
+use rcan_chips::i82527_model::I82527Model;
+use rcan_chips::sja1000::Wanted;
 use rcan_core::arb::*;
 use rcan_core::frame::CanFrame;
-use rcan_core::i82527::{masks_for, Chip, Config, Event, Masks};
-use rcan_core::i82527_model::I82527Model;
 use rcan_core::rxtable::frame_key;
-use rcan_core::sja1000::Wanted;
 
 fn data_frame(can_id: u32, len: u8, data: [u8; 8]) -> CanFrame {
     let mut f = CanFrame {

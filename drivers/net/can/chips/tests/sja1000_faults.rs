@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: GPL-2.0
-//! Bus faults injected into the SJA1000 model (`rcan_core::sja1000_model`)
-//! and what the real driver core (`rcan_core::sja1000::Chip`) makes of
+//! Bus faults injected into the SJA1000 model (`rcan_chips::sja1000_model`)
+//! and what the real driver core (`rcan_chips::sja1000::Chip`) makes of
 //! them: the error frames, the error states, the CAN device and interface
 //! statistics, bus-off and the restart, the control modes.
 //!
@@ -16,10 +16,10 @@
 mod common;
 
 use common::sja1000_model::{ecc, Fault, Sja1000Model, TxAttempt};
+use rcan_chips::sja1000::*;
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_ERR_FLAG};
 use rcan_core::candev::{ctrlmode, err, CanState, CanStats, NetErrStats};
 use rcan_core::frame::CanFrame;
-use rcan_core::sja1000::*;
 
 const CFG: Config = Config {
     btr0: 0x00,

@@ -12,7 +12,7 @@
 
 use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK, MAX_DLC};
 use super::bittiming::{self, Bittiming};
-use super::candev::{self, ctrlmode, CanState, CanStats, NetErrStats, Sja1000ErrRegs};
+use super::candev::{self, ctrlmode, err, CanState, CanStats, NetErrStats};
 use super::frame::CanFrame;
 
 /// Register offsets (PeliCAN mode).
@@ -260,7 +260,7 @@ pub enum Event {
     TxAborted,
     /// Error causes (data overrun, error warning, bus error, error
     /// passive, arbitration lost), decoded as mainline's `sja1000_err`
-    /// decodes them ([`candev::sja1000_error`]): the error frame, whether
+    /// decodes them ([`sja1000_error`]): the error frame, whether
     /// the chip went bus-off, and what to add to the CAN device and
     /// interface statistics.
     Error(ErrReport),
@@ -592,7 +592,7 @@ impl<R: Regs> Chip<R> {
         };
         let mut stats = CanStats::default();
         let mut net = NetErrStats::default();
-        let e = candev::sja1000_error(&mut self.state, &mut stats, &mut net, &regs);
+        let e = sja1000_error(&mut self.state, &mut stats, &mut net, &regs);
         ErrReport {
             frame: e.frame,
             bus_off: e.bus_off,
@@ -848,103 +848,7 @@ impl Setup {
     }
 }
 
-/// A set of wanted frames of one format as a ternary pattern over `bits`
-/// bits: a frame is in it when `(frame_bits ^ value) & care == 0`.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct Cube {
-    /// Pattern (bits outside `care` are zero).
-    pub value: u32,
-    /// Bits that must match.
-    pub care: u32,
-}
-
-impl Cube {
-    fn new(value: u32, care: u32) -> Cube {
-        Cube {
-            value: value & care,
-            care,
-        }
-    }
-
-    /// The smallest cube containing both.
-    pub fn merge(self, o: Cube) -> Cube {
-        let care = self.care & o.care & !(self.value ^ o.value);
-        Cube::new(self.value, care)
-    }
-}
-
-/// What one filter wants, per frame format: standard frames as a cube over
-/// 12 bits (identifier bits 11..1, RTR bit 0) and extended frames over 30
-/// bits (identifier bits 29..1, RTR bit 0). `None`: no frame of that
-/// format.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct Wanted {
-    /// Standard frames.
-    pub sff: Option<Cube>,
-    /// Extended frames.
-    pub eff: Option<Cube>,
-}
-
-impl Wanted {
-    /// Every frame.
-    pub const ALL: Wanted = Wanted {
-        sff: Some(Cube { value: 0, care: 0 }),
-        eff: Some(Cube { value: 0, care: 0 }),
-    };
-
-    /// The frames a receive filter accepts (a superset where a filter is
-    /// not expressible as a cube: inverted filters want "everything").
-    pub fn of(f: &super::rxtable::Filter) -> Wanted {
-        use super::arb::{CAN_IDE, CAN_RTR};
-        use super::rxtable::Filter;
-        match *f {
-            Filter::Id { inv: true, .. } => Wanted::ALL,
-            Filter::Id {
-                id,
-                mask,
-                inv: false,
-            } => {
-                let rtr_care = u32::from(mask & CAN_RTR_FLAG != 0);
-                let rtr_val = u32::from(id & CAN_RTR_FLAG != 0);
-                let eff_care = mask & CAN_EFF_FLAG != 0;
-                let is_eff = id & CAN_EFF_FLAG != 0;
-                // Standard frames have zero identifier bits 11..28.
-                let high = CAN_EFF_MASK & !CAN_SFF_MASK;
-                let sff_possible = (!eff_care || !is_eff) && id & mask & high == 0;
-                let sff = sff_possible.then(|| {
-                    Cube::new(
-                        ((id & CAN_SFF_MASK) << 1) | rtr_val,
-                        ((mask & CAN_SFF_MASK) << 1) | rtr_care,
-                    )
-                });
-                let eff = (!eff_care || is_eff).then(|| {
-                    Cube::new(
-                        ((id & CAN_EFF_MASK) << 1) | rtr_val,
-                        ((mask & CAN_EFF_MASK) << 1) | rtr_care,
-                    )
-                });
-                Wanted { sff, eff }
-            }
-            Filter::Arb(a) => {
-                // Arbitration field: care = !mask (thesis: 1 = don't care).
-                let (pat, care) = (a.arb(), !a.mask());
-                let rtr_care = u32::from(care & CAN_RTR != 0);
-                let rtr_val = u32::from(pat & CAN_RTR != 0);
-                let ide_care = care & CAN_IDE != 0;
-                let is_eff = pat & CAN_IDE != 0;
-                // Standard frames have zero extension bits (20..3).
-                let ext = 0x001F_FFF8;
-                let sff_possible = (!ide_care || !is_eff) && pat & care & ext == 0;
-                let sff = sff_possible.then(|| {
-                    Cube::new(((pat >> 21) << 1) | rtr_val, ((care >> 21) << 1) | rtr_care)
-                });
-                let eff = (!ide_care || is_eff)
-                    .then(|| Cube::new(((pat >> 3) << 1) | rtr_val, ((care >> 3) << 1) | rtr_care));
-                Wanted { sff, eff }
-            }
-        }
-    }
-}
+pub use super::filter::{Cube, Wanted};
 
 /// A cube placed in the 32 acceptance bits of single filter mode, or in
 /// the 16 bits of one dual-mode filter.
@@ -1291,4 +1195,148 @@ mod tests {
         assert_eq!(hw_filter(&[], true), HwFilter::OPEN);
         assert!(HwFilter::OPEN.accepts(&frame(CAN_EFF_FLAG | 0x123, &[])));
     }
+}
+
+/// SJA1000 error code capture register (ECC) fields.
+pub mod ecc {
+    /// Segment where the error happened (bits 4..0); the codes are the
+    /// `CAN_ERR_PROT_LOC_*` values.
+    pub const SEG: u8 = 0x1F;
+    /// Direction: set on reception, clear on transmission.
+    pub const DIR: u8 = 0x20;
+    /// Error type (bits 7..6).
+    pub const MASK: u8 = 0xC0;
+    /// Type: bit error.
+    pub const BIT: u8 = 0x00;
+    /// Type: form error.
+    pub const FORM: u8 = 0x40;
+    /// Type: stuff error.
+    pub const STUFF: u8 = 0x80;
+}
+
+/// The registers an SJA1000 error interrupt is decoded from.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub struct Sja1000ErrRegs {
+    /// Interrupt register: the causes (DOI, EI, BEI, EPI, ALI are looked at).
+    pub ir: u8,
+    /// Status register.
+    pub sr: u8,
+    /// Transmit error counter.
+    pub txerr: u8,
+    /// Receive error counter.
+    pub rxerr: u8,
+    /// Error code capture, read by the caller only when IR has BEI
+    /// (reading it re-arms the capture); else 0.
+    pub ecc: u8,
+    /// Arbitration lost capture, read only when IR has ALI; else 0.
+    pub alc: u8,
+}
+
+/// What one SJA1000 error interrupt reported (mainline `sja1000_err`).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Sja1000Err {
+    /// The error frame for CAN_RAW sockets with `CAN_RAW_ERR_FILTER`.
+    pub frame: CanFrame,
+    /// The chip went bus-off: the driver stops the queue and starts the
+    /// restart timer (mainline `can_bus_off`).
+    pub bus_off: bool,
+}
+
+/// Decodes an SJA1000 error interrupt from `r` as mainline's
+/// `sja1000_err` does; updates the device's `state` and statistics.
+/// Hardirq context in the driver; pure.
+///
+/// Data overrun: [`err::CRTL`], [`err::CRTL_RX_OVERFLOW`], one receive
+/// overrun and receive error (the caller clears the overrun). Error
+/// warning: the state becomes bus-off (SR.BS), warning (SR.ES) or active.
+/// Unless that state is bus-off, [`err::CNT`] with the counters in
+/// data[6]/data[7]. Bus error: [`err::PROT`] | [`err::BUSERROR`], the
+/// ECC type in data[2] (bit, form or stuff; other: unspecified), the ECC
+/// segment in data[3], [`err::PROT_TX`] and a transmit error when ECC.DIR
+/// is clear, else a receive error. Error passive: the state becomes
+/// passive, or warning if it was passive. Arbitration lost:
+/// [`err::LOSTARB`] with ALC bits 4..0 in data[0]. A changed state goes
+/// through [`candev::change_state`], counted on the side whose counter is the
+/// larger (both when equal).
+pub fn sja1000_error(
+    state: &mut CanState,
+    stats: &mut CanStats,
+    net: &mut NetErrStats,
+    r: &Sja1000ErrRegs,
+) -> Sja1000Err {
+    let Sja1000ErrRegs {
+        ir,
+        sr,
+        txerr,
+        rxerr,
+        ecc,
+        alc,
+    } = *r;
+    let mut cf = candev::error_frame();
+    let mut new = *state;
+    if ir & irq::DOI != 0 {
+        cf.can_id |= err::CRTL;
+        cf.data[1] = err::CRTL_RX_OVERFLOW;
+        net.rx_over_errors += 1;
+        net.rx_errors += 1;
+    }
+    if ir & irq::EI != 0 {
+        new = if sr & status::BS != 0 {
+            CanState::BusOff
+        } else if sr & status::ES != 0 {
+            CanState::ErrorWarning
+        } else {
+            CanState::ErrorActive
+        };
+    }
+    if new != CanState::BusOff {
+        cf.can_id |= err::CNT;
+        cf.data[6] = txerr;
+        cf.data[7] = rxerr;
+    }
+    if ir & irq::BEI != 0 {
+        stats.bus_error += 1;
+        cf.can_id |= err::PROT | err::BUSERROR;
+        cf.data[2] |= match ecc & ecc::MASK {
+            ecc::BIT => err::PROT_BIT,
+            ecc::FORM => err::PROT_FORM,
+            ecc::STUFF => err::PROT_STUFF,
+            _ => 0,
+        };
+        cf.data[3] = ecc & ecc::SEG;
+        if ecc & ecc::DIR == 0 {
+            net.tx_errors += 1;
+            cf.data[2] |= err::PROT_TX;
+        } else {
+            net.rx_errors += 1;
+        }
+    }
+    if ir & irq::EPI != 0 {
+        new = if new == CanState::ErrorPassive {
+            CanState::ErrorWarning
+        } else {
+            CanState::ErrorPassive
+        };
+    }
+    if ir & irq::ALI != 0 {
+        stats.arbitration_lost += 1;
+        cf.can_id |= err::LOSTARB;
+        cf.data[0] = alc & 0x1F;
+    }
+    let mut bus_off = false;
+    if new != *state {
+        let tx = if txerr >= rxerr {
+            new
+        } else {
+            CanState::ErrorActive
+        };
+        let rx = if txerr <= rxerr {
+            new
+        } else {
+            CanState::ErrorActive
+        };
+        candev::change_state(state, stats, Some(&mut cf), tx, rx);
+        bus_off = new == CanState::BusOff;
+    }
+    Sja1000Err { frame: cf, bus_off }
 }

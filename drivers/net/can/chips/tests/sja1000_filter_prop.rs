@@ -10,10 +10,10 @@ mod common;
 
 use common::filters::{can_id, filter};
 use proptest::prelude::*;
+use rcan_chips::sja1000::{hw_filter, Wanted};
 use rcan_core::arb::*;
 use rcan_core::frame::CanFrame;
 use rcan_core::rxtable::{frame_key, CanFilterKind, Filter};
-use rcan_core::sja1000::{hw_filter, Wanted};
 
 fn frame(can_id: u32, len: u8, data: [u8; 8]) -> CanFrame {
     let mut f = CanFrame {
@@ -36,7 +36,7 @@ fn frame(can_id: u32, len: u8, data: [u8; 8]) -> CanFrame {
 /// can_sja_accept_filter, as of QEMU 7-9), bugs included: in single mode a
 /// standard frame's mask takes AMR1 shifted left, so identifier bits 2..0
 /// are always compared. Written from reading that code.
-fn qemu_accepts(hw: &rcan_core::sja1000::HwFilter, f: &CanFrame) -> bool {
+fn qemu_accepts(hw: &rcan_chips::sja1000::HwFilter, f: &CanFrame) -> bool {
     let (acr, amr) = (hw.acr, hw.amr);
     let id = f.can_id;
     let eff = id & CAN_EFF_FLAG != 0;

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: GPL-2.0
-//! The SJA1000 driver core (`rcan_core::sja1000::Chip`) against the
+//! The SJA1000 driver core (`rcan_chips::sja1000::Chip`) against the
 //! register-level model in `common/sja1000_model.rs`: probing, the
 //! initialisation sequence, transmit and its completion, receive FIFO
 //! draining, data overrun, error state changes and bus-off, and the
@@ -8,11 +8,11 @@
 mod common;
 
 use common::sja1000_model::{Fault, Sja1000Model, TxAttempt};
+use rcan_chips::sja1000::*;
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK};
 use rcan_core::candev::err;
 use rcan_core::frame::CanFrame;
 use rcan_core::rxtable::{CanFilterKind, Filter};
-use rcan_core::sja1000::*;
 
 const CFG: Config = Config {
     btr0: 0x01,

@@ -9,9 +9,9 @@
 mod common;
 
 use common::sja1000_model::{Fault, Sja1000Model, TxAttempt};
+use rcan_chips::sja1000::{Chip, Config, Event, HwFilter, Regs, CDR_CBP};
+use rcan_chips::sja1000_boards::*;
 use rcan_core::frame::CanFrame;
-use rcan_core::sja1000::{Chip, Config, Event, HwFilter, Regs, CDR_CBP};
-use rcan_core::sja1000_boards::*;
 
 const CFG: Config = Config {
     btr0: 0x01,
