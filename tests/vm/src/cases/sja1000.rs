@@ -673,7 +673,7 @@ fn sja1000_pcan_pci_no_device(ctx: &mut Ctx) -> TestResult {
 
 /// Sets the interrupt affinity of every line that serves `dev` (shared
 /// lines list several devices) to `mask`; returns the lines' numbers.
-fn irq_affinity(dev: &str, mask: &str) -> Result<Vec<String>, String> {
+pub(super) fn irq_affinity(dev: &str, mask: &str) -> Result<Vec<String>, String> {
     let text = std::fs::read_to_string("/proc/interrupts").or_fail("/proc/interrupts")?;
     let mut lines = Vec::new();
     for l in text.lines() {
