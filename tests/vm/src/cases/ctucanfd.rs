@@ -668,7 +668,7 @@ const FRAMES_PER_MOVE: u32 = 40;
 /// What arrived, in arrival order, against `0..n` sent: `None` if every
 /// frame came once and in order, else a description (missing,
 /// duplicated, first place out of order with its neighbourhood).
-fn order_report(got: &[u32], n: u32) -> Option<String> {
+pub(super) fn order_report(got: &[u32], n: u32) -> Option<String> {
     if got.len() == n as usize && got.iter().zip(0..n).all(|(&g, w)| g == w) {
         return None;
     }
