@@ -9,10 +9,34 @@
 //! Per device ([`CtuPriv`]):
 //!
 //! * `st`: the chip (with its TX buffer ring), the echo skb of each TX
-//!   buffer and the running flag, behind an [`IrqSpinLock`]: the
-//!   interrupt handler (hardirq), `start_xmit` (softirq/process, BH off)
+//!   buffer, the receive queue and the running flag, behind an
+//!   [`IrqSpinLock`]: the interrupt handler (hardirq), `start_xmit`
+//!   (softirq/process, BH off), the NAPI poll (NET_RX softirq), `restart`
 //!   and `open`/`stop` (process, RTNL) all touch the core's registers
-//!   and the ring, which must not interleave.
+//!   and the rings, which must not interleave.
+//! * `restart`: a [`BhLock`] serialising restarts (see `restart`); lock
+//!   order: it, then `st`.
+//!
+//! Receive path (mainline's `can_rx_offload` scheme, as the 82527
+//! driver's): the interrupt handler takes the frames off the core (its RX
+//! buffer, read until empty, as before) and queues their skbs, with the
+//! echoes of completed TX buffers and the error frames in the order the
+//! core reported them, in the device's receive queue (a [`Ring`] of skbs
+//! under `st`), then schedules the device's NAPI poll (weight
+//! [`NAPI_WEIGHT`]). The poll, in NET_RX softirq with interrupts on and no
+//! lock held, takes them out one at a time and hands each to the protocol
+//! handlers (`netif_receive_skb`). One NAPI instance is polled by one CPU
+//! at a time, so frames reach user space in the core's order whichever
+//! CPU the interrupt moves to; handing them to `netif_rx` from the
+//! handler, as this driver did before, queued them on the backlog of the
+//! CPU that took the interrupt, and two CPUs' backlogs drain
+//! independently (frames were reordered after an `smp_affinity` change).
+//! The core is still read in the handler, not in the poll as mainline's
+//! `ctucanfd` does: the card's two cores share one interrupt line, and
+//! QEMU's model drives that line from the last core whose registers were
+//! touched ([`Regs::irq_sync`]); keeping the register traffic in the
+//! handler, under the lock that already orders it, leaves that scheme as
+//! it is tested.
 //! * The TX queue is stopped while every TX buffer holds a frame and
 //!   woken when the oldest completes; frames leave in queueing order (the
 //!   ring rotates TX_PRIORITY, as mainline's driver does).
@@ -54,8 +78,9 @@
 
 use crate::glue::can::ctrl;
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
-use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
+use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{Dev, Driver, NetDev, Xmit};
+use crate::glue::ring::Ring;
 use crate::glue::skb::Skb;
 use crate::rcan_chips::ctucanfd::{
     reg, Chip, Config, ErrReport, Event, Regs, CORE_SPAN, DATA_CONST, MAX_TXT_BUFFERS,
@@ -107,11 +132,24 @@ impl Regs for IoRegs {
 /// sendmsg instead of getting ENOBUFS.
 const TX_QUEUE_LEN: u32 = 1000;
 
+/// Frames the receive queue holds between two polls (a full queue drops,
+/// counted in `rx_dropped`): as the 82527 driver's, about the per-CPU
+/// backlog `netif_rx` gave (1000) and mainline's `can_rx_offload` queue
+/// for weight 64; the handler may run on one CPU while the poll is owned
+/// by another that does not get to run. Allocated at probe.
+const RXQ_LEN: usize = 1024;
+
+/// NAPI weight: frames handed up per poll (mainline `ctucanfd`'s).
+const NAPI_WEIGHT: u32 = 64;
+
 /// The chip and what goes with it, under the device's lock.
 pub(crate) struct ChipState<R: Regs> {
     chip: Chip<R>,
     /// The skb of the frame in each TX buffer (its echo).
     echo: [Option<Skb>; MAX_TXT_BUFFERS],
+    /// Frames taken from the core (and echoes, error frames) waiting for
+    /// the NAPI poll (FIFO).
+    rxq: Ring<Skb>,
     running: bool,
 }
 
@@ -124,6 +162,11 @@ pub(crate) struct CtuPriv<R: Regs> {
     clock_hz: u32,
     /// The device layer's state: bit timing, statistics.
     can: CanDev,
+    /// Serialises restarts (`ip ... restart` in process context, the
+    /// `restart-ms` timer in softirq) with bottom halves off, so the NAPI
+    /// poll a restart schedules for `CAN_ERR_RESTARTED` runs when they
+    /// come back on. Lock order: this, then `st`.
+    restart: BhLock<()>,
 }
 
 /// One registered core.
@@ -151,6 +194,7 @@ pub(crate) fn add_core<R: Regs + Send + 'static>(
             ChipState {
                 chip,
                 echo: Default::default(),
+                rxq: Ring::new(RXQ_LEN)?,
                 running: false,
             },
             "CtuPriv::st"
@@ -158,6 +202,7 @@ pub(crate) fn add_core<R: Regs + Send + 'static>(
         irq,
         clock_hz,
         can: CanDev::new(Settings::default())?,
+        restart: new_bh_spinlock!((), "CtuPriv::restart")?,
     };
     let reg =
         crate::glue::netdev::Registration::<CtuCanFd<R>>::register(kernel::c_str!("can%d"), prv)?;
@@ -174,11 +219,22 @@ pub(crate) fn add_core<R: Regs + Send + 'static>(
 /// The CTU CAN FD driver for register access `R`.
 pub(crate) struct CtuCanFd<R>(PhantomData<R>);
 
-/// Hands a frame (from the bus, or an error frame) to the network
-/// stack, counted as [`ctrl::rx_skb`] counts it. Any context.
-fn rx_frame(dev: &NetDev, frame: &AnyFrame) {
+/// Queues `skb` for the NAPI poll; a full queue drops it (`rx_dropped`).
+/// Chip lock held (interrupt handler, restart).
+fn enqueue(dev: &NetDev, rxq: &mut Ring<Skb>, skb: Skb) {
+    if let Err(skb) = rxq.push(skb) {
+        dev.stats_rx_dropped();
+        // Interrupts are off: the free (an echo's destructor) is deferred.
+        skb.drop_any();
+    }
+}
+
+/// Builds the skb of a frame from the bus (or an error frame), counted as
+/// [`ctrl::rx_skb`] counts it, and queues it for the NAPI poll. Chip lock
+/// held (interrupt handler, restart).
+fn rx_frame(dev: &NetDev, rxq: &mut Ring<Skb>, frame: &AnyFrame) {
     if let Some(skb) = ctrl::rx_skb(dev, frame) {
-        dev.rx(skb);
+        enqueue(dev, rxq, skb);
     }
 }
 
@@ -196,9 +252,9 @@ fn state_name(s: CanState) -> &'static str {
 
 /// Counts what an error round reported (the CAN device statistics and
 /// the interface's error counters), logs a state change as mainline
-/// does, and hands the error frame up. Hardirq context (the chip lock
-/// held).
-fn report_error<R: Regs>(dev: &NetDev, p: &CtuPriv<R>, r: &ErrReport) {
+/// does, and queues the error frame for the NAPI poll. Hardirq context
+/// (the chip lock held).
+fn report_error<R: Regs>(dev: &NetDev, p: &CtuPriv<R>, rxq: &mut Ring<Skb>, r: &ErrReport) {
     ctrl::count_errors(dev, &p.can, &r.stats, &r.net);
     if let Some((from, to)) = r.state {
         pr_info!(
@@ -208,7 +264,7 @@ fn report_error<R: Regs>(dev: &NetDev, p: &CtuPriv<R>, r: &ErrReport) {
             state_name(to)
         );
     }
-    rx_frame(dev, &AnyFrame::Classic(r.frame));
+    rx_frame(dev, rxq, &AnyFrame::Classic(r.frame));
 }
 
 /// What [`Chip::start`] programs for the device layer's settings: BTR
@@ -249,6 +305,7 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
     }
 
     const HAS_CHANGE_MTU: bool = true;
+    const NAPI_WEIGHT: u32 = NAPI_WEIGHT;
 
     /// `ip link set canX mtu 72|16`: FD on or off (mainline
     /// `can_change_mtu`). Process context, RTNL.
@@ -273,7 +330,10 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
 
     /// `ip link set canX down`. Process context, RTNL: stops the core;
     /// the frames still in its TX buffers are freed after the chip lock
-    /// ([`ctrl::stop`]).
+    /// ([`ctrl::stop`]). The glue has disabled NAPI: no poll runs or
+    /// starts until the next open, and the handler queues nothing once
+    /// `running` is off, so what is left in the receive queue is freed
+    /// here, one frame per lock hold, outside the chip lock.
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         ctrl::stop(dev, p, || {
             let mut st = p.st.lock();
@@ -281,6 +341,12 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
             st.chip.stop();
             core::mem::take(&mut st.echo)
         });
+        loop {
+            let Some(skb) = p.st.lock().rxq.pop() else {
+                break;
+            };
+            drop(skb);
+        }
         Ok(())
     }
 
@@ -316,49 +382,80 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
     }
 
     /// Hardirq context; the line is shared with the card's other core.
+    /// Takes the frames, echoes and error frames off the core into the
+    /// receive queue, in the core's order, and schedules the NAPI poll.
     fn irq(dev: &Dev<Self>, p: &Self::Priv) -> bool {
-        let mut st = p.st.lock();
-        let ChipState {
-            chip,
-            echo,
-            running,
-        } = &mut *st;
-        if !*running {
-            return false;
-        }
-        let mut woke = false;
-        let mut bus_off = false;
-        let handled = chip.irq(|ev| match ev {
-            Event::Rx(f) => rx_frame(dev, &f),
-            Event::TxDone { buf, ok } => {
-                if let Some(e) = echo.get_mut(buf) {
-                    if ok {
-                        if let Some(skb) = ctrl::echo_done_any(dev, e) {
-                            dev.rx(skb);
+        let (handled, queued) = {
+            let mut st = p.st.lock();
+            let ChipState {
+                chip,
+                echo,
+                rxq,
+                running,
+            } = &mut *st;
+            if !*running {
+                return false;
+            }
+            let mut woke = false;
+            let mut bus_off = false;
+            let handled = chip.irq(|ev| match ev {
+                Event::Rx(f) => rx_frame(dev, rxq, &f),
+                Event::TxDone { buf, ok } => {
+                    if let Some(e) = echo.get_mut(buf) {
+                        if ok {
+                            if let Some(skb) = ctrl::echo_done_any(dev, e) {
+                                enqueue(dev, rxq, skb);
+                            }
+                        } else {
+                            // Mainline: a frame the core gave up on
+                            // (one-shot, abort) is dropped, not echoed.
+                            ctrl::echo_dropped(dev, e);
                         }
-                    } else {
-                        // Mainline: a frame the core gave up on (one-shot,
-                        // abort) is dropped, not echoed.
-                        ctrl::echo_dropped(dev, e);
                     }
+                    woke = true;
                 }
-                woke = true;
+                Event::Error(r) => {
+                    report_error(dev, p, rxq, &r);
+                    bus_off |= r.bus_off;
+                }
+            });
+            if bus_off {
+                // Mainline can_bus_off: carrier off, restart timer armed
+                // with restart-ms; the frames in the TX buffers wait for
+                // the restart.
+                p.can.bus_off(dev);
             }
-            Event::Error(r) => {
-                report_error(dev, p, &r);
-                bus_off |= r.bus_off;
+            if woke {
+                dev.wake_queue();
             }
-        });
-        if bus_off {
-            // Mainline can_bus_off: carrier off, restart timer armed with
-            // restart-ms; the frames in the TX buffers wait for the
-            // restart.
-            p.can.bus_off(dev);
-        }
-        if woke {
-            dev.wake_queue();
+            (handled, !rxq.is_empty())
+        };
+        // Outside the chip lock (the poll takes it).
+        if queued {
+            dev.napi_schedule();
         }
         handled
+    }
+
+    /// The NAPI poll (NET_RX softirq): hands up to `budget` queued frames
+    /// to the protocol handlers, oldest first.
+    fn poll(
+        _dev: &Dev<Self>,
+        p: &Self::Priv,
+        napi: &crate::glue::netdev::Napi,
+        budget: usize,
+    ) -> usize {
+        let mut done = 0;
+        while done < budget {
+            // One frame per lock hold: the handlers run unlocked, with
+            // interrupts on, and may send on this device.
+            let Some(skb) = p.st.lock().rxq.pop() else {
+                break;
+            };
+            napi.receive(skb);
+            done += 1;
+        }
+        done
     }
 }
 
@@ -398,11 +495,13 @@ impl<R: Regs + Send + 'static> CanDevice for CtuCanFd<R> {
     /// Restarts the core after bus-off (mainline `can_restart`, with
     /// `can_flush_echo_skb`, and `ctucan_do_set_mode(CAN_MODE_START)`):
     /// the frames in the TX buffers are dropped (`tx_dropped`),
-    /// the core is reset and started, `CAN_ERR_RESTARTED` goes up, the
-    /// carrier comes back, the restart is counted and the queue wakes.
-    /// Process context (`ip link ... restart`) or softirq (the
-    /// `restart-ms` timer); takes the chip lock.
+    /// the core is reset and started, `CAN_ERR_RESTARTED` is queued for
+    /// the NAPI poll (after what the core gave before), the carrier comes
+    /// back, the restart is counted and the queue wakes. Process context
+    /// (`ip link ... restart`) or softirq (the `restart-ms` timer); takes
+    /// the restart lock (bottom halves off), then the chip lock.
     fn restart(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        let _bh = p.restart.lock();
         // The echoes taken and the core restarted under one lock hold, so
         // that no frame queued in between is forgotten by the reset.
         let mut lost = {
@@ -411,16 +510,17 @@ impl<R: Regs + Send + 'static> CanDevice for CtuCanFd<R> {
                 return Err(EINVAL);
             }
             st.chip.restart();
+            let mut cf = error_frame();
+            cf.can_id |= err::RESTARTED;
+            rx_frame(dev, &mut st.rxq, &AnyFrame::Classic(cf));
             core::mem::take(&mut st.echo)
         };
         for e in lost.iter_mut() {
             ctrl::echo_dropped(dev, e);
         }
-        // Handed up without the chip lock: from process context, netif_rx
-        // must not run with interrupts off.
-        let mut cf = error_frame();
-        cf.can_id |= err::RESTARTED;
-        rx_frame(dev, &AnyFrame::Classic(cf));
+        // Outside the chip lock (the poll takes it); the poll runs when
+        // `_bh` lets bottom halves run again.
+        dev.napi_schedule();
         dev.set_carrier(true);
         p.can.count(CanStat::Restarts);
         dev.wake_queue();

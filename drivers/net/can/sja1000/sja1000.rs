@@ -11,16 +11,35 @@
 //! Per device ([`Sja1000Priv`]):
 //!
 //! * `chip`: the chip, the echo skb of the frame in the TX buffer, the
-//!   programmed hardware filter and the running flag, behind an
-//!   [`IrqSpinLock`]: the interrupt handler (hardirq), `start_xmit`
+//!   programmed hardware filter, the receive queue and the running flag,
+//!   behind an [`IrqSpinLock`]: the interrupt handler (hardirq), `start_xmit`
 //!   (softirq/process, BH off), `open`/`stop` (process, RTNL),
-//!   `set_rx_mode` (BH off) and the filter listener (process) all touch the
-//!   chip's registers, which must not interleave.
+//!   `set_rx_mode` (BH off), the filter listener (process), `restart` and
+//!   the NAPI poll (NET_RX softirq) all touch the chip's registers or the
+//!   queue, which must not interleave.
+//! * `bh`: a [`BhLock`] taken around the process-context paths that queue
+//!   frames (the filter listener, `restart`), so that the NAPI poll they
+//!   schedule runs when bottom halves come back on. Lock order: it, then
+//!   `chip`.
+//!
+//! Receive path (mainline's `can_rx_offload` scheme, as the 82527 and CTU
+//! CAN FD drivers'; mainline's `sja1000` hands frames to `netif_rx` from
+//! its interrupt): the interrupt handler reads the receive FIFO and
+//! queues the frames' skbs, with the echoes and error frames in the order
+//! the chip reported them, in the device's receive queue (a [`Ring`] of
+//! skbs under `chip`), then schedules the device's NAPI poll (weight
+//! [`NAPI_WEIGHT`]); the poll (NET_RX softirq, interrupts on, no lock
+//! held) hands them to the stack one at a time (`netif_receive_skb`).
+//! One NAPI instance is polled by one CPU at a time, so frames keep the
+//! chip's order whichever CPU takes the interrupt; with `netif_rx`, frames
+//! queued in two CPUs' backlogs after the interrupt moved drained
+//! independently. The frames a filter change reads out of the FIFO go
+//! through the same queue.
 //! * The TX queue is stopped from `start_xmit` until the chip reports the
 //!   frame sent or aborted (one TX buffer, thesis 5.3.6).
 //!
 //! Echo (IFF_ECHO): the sent skb is kept until transmission completes and
-//! then fed back into the receive path (`netif_rx`) if its sender asked for
+//! then fed back into the receive path (the receive queue) if its sender asked for
 //! loopback (`PACKET_LOOPBACK`; a frame written through a packet socket
 //! asks for it too, as on mainline), so local sockets see frames only once
 //! they are really on the bus. The echo is marked as mainline's
@@ -73,9 +92,10 @@
 
 use crate::glue::can::ctrl::{self, SIOCDEVPRIVATE};
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
-use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
+use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::params::Param;
+use crate::glue::ring::Ring;
 use crate::glue::skb::Skb;
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_chips::sja1000::{
@@ -189,6 +209,14 @@ const MAX_IRQ_ROUNDS: usize = 20;
 /// ENOBUFS from a full queue, as it would with mainline's 10.
 const TX_QUEUE_LEN: u32 = 1000;
 
+/// Frames the receive queue holds between two polls (a full queue drops,
+/// counted in `rx_dropped`): as the 82527 and CTU CAN FD drivers', about
+/// the per-CPU backlog `netif_rx` gave (1000). Allocated at probe.
+const RXQ_LEN: usize = 1024;
+
+/// NAPI weight: frames handed up per poll (mainline's CAN drivers' 64).
+const NAPI_WEIGHT: u32 = 64;
+
 /// The chip and what goes with it, under the device's lock.
 pub(crate) struct ChipState<R: Regs> {
     pub(crate) chip: Chip<R>,
@@ -199,6 +227,9 @@ pub(crate) struct ChipState<R: Regs> {
     filter: HwFilter,
     /// `filter` differs from what the chip has.
     filter_pending: bool,
+    /// Frames read from the chip (and echoes, error frames) waiting for
+    /// the NAPI poll (FIFO).
+    rxq: Ring<Skb>,
     running: bool,
 }
 
@@ -212,6 +243,10 @@ pub(crate) struct Sja1000Priv<R: Regs> {
     xtal_hz: u32,
     /// The device layer's state: bit timing, control modes, statistics.
     can: CanDev,
+    /// Bottom halves off around the process-context paths that queue
+    /// frames and schedule the poll (see the module doc). Lock order:
+    /// this, then `chip`.
+    bh: BhLock<()>,
 }
 
 impl<R: Regs + Send + 'static> Sja1000Priv<R> {
@@ -225,6 +260,7 @@ impl<R: Regs + Send + 'static> Sja1000Priv<R> {
                     echo: None,
                     filter: HwFilter::OPEN,
                     filter_pending: false,
+                    rxq: Ring::new(RXQ_LEN)?,
                     running: false,
                 },
                 "Sja1000Priv::chip"
@@ -232,6 +268,7 @@ impl<R: Regs + Send + 'static> Sja1000Priv<R> {
             irq,
             xtal_hz,
             can: CanDev::new(preset_settings(xtal_hz / 2))?,
+            bh: new_bh_spinlock!((), "Sja1000Priv::bh")?,
         })
     }
 }
@@ -303,121 +340,80 @@ fn wanted_filter(dev: &NetDev) -> HwFilter {
     rcan_api::wanted(dev, |w| hw_filter(w, false)).unwrap_or(HwFilter::OPEN)
 }
 
-/// Frames read from the receive FIFO while the chip lock is held, handed
-/// to the stack once it is released ([`RxBatch::hand_up`]). In process
-/// context `netif_rx` must not run with interrupts disabled: its
-/// `local_bh_enable` warns there, and may run the NET_RX softirq on the
-/// spot, whose receivers may send on this device, and `start_xmit` takes
-/// the chip lock this CPU holds. On the stack: 32 frames of 16 bytes.
-struct RxBatch {
-    frames: [CanFrame; RX_BATCH],
-    n: usize,
-    /// Frames that did not fit (none: the chip's FIFO holds at most 21,
-    /// and `Chip::set_filter` reads at most 32); counted as dropped.
-    lost: u32,
-    /// The filter could not be programmed (logged with the frames).
-    failed: bool,
-}
-
-/// Frames one [`RxBatch`] holds: the most `Chip::set_filter` drains.
-const RX_BATCH: usize = 32;
-
-impl RxBatch {
-    fn new() -> Self {
-        RxBatch {
-            frames: [CanFrame::default(); RX_BATCH],
-            n: 0,
-            lost: 0,
-            failed: false,
-        }
-    }
-
-    /// Keeps `f` for later. Any context (chip lock held).
-    fn push(&mut self, f: CanFrame) {
-        match self.frames.get_mut(self.n) {
-            Some(slot) => {
-                *slot = f;
-                self.n += 1;
-            }
-            None => self.lost += 1,
-        }
-    }
-
-    /// Hands the frames up in the order they were read, and logs a
-    /// failed reprogramming. Any context without the chip lock.
-    fn hand_up(self, dev: &NetDev) {
-        for f in &self.frames[..self.n] {
-            rx_frame(dev, f);
-        }
-        for _ in 0..self.lost {
-            dev.stats_rx_dropped();
-        }
-        if self.failed {
-            pr_warn!("{}: cannot reprogram the acceptance filter\n", dev.name());
-        }
-    }
-}
-
 /// Reprograms the hardware filter if it changed. Process context (the
 /// filter listener, [`FilterListener::filters_changed`]) or with BH
 /// disabled (`set_rx_mode`, under the device's address lock); takes the
-/// chip lock. Frames already accepted are read out first and handed up
-/// after the lock is released; while a frame waits in the TX buffer (a
+/// BH lock, then the chip lock. Frames already accepted are read out
+/// first into the receive queue; while a frame waits in the TX buffer (a
 /// reset would abort it) the change is left to the transmit-completion
 /// interrupt.
-fn refilter<R: Regs + Send + 'static>(dev: &NetDev, p: &Sja1000Priv<R>) {
+fn refilter<R: Regs + Send + 'static>(dev: &Dev<Sja1000<R>>, p: &Sja1000Priv<R>) {
     let f = wanted_filter(dev);
-    let mut rx = RxBatch::new();
-    {
+    let _bh = p.bh.lock();
+    let (failed, queued) = {
         let mut st = p.chip.lock();
         if st.filter == f && !st.filter_pending {
             return;
         }
         st.filter = f;
         st.filter_pending = true;
-        apply_pending_filter(&mut st, &mut rx);
+        let failed = apply_pending_filter(dev, &mut st);
+        (failed, !st.rxq.is_empty())
+    };
+    // Outside the chip lock (the poll takes it); the poll runs when `_bh`
+    // lets bottom halves run again.
+    if queued {
+        dev.napi_schedule();
     }
-    rx.hand_up(dev);
+    if failed {
+        pr_warn!("{}: cannot reprogram the acceptance filter\n", dev.name());
+    }
 }
 
 /// Programs `st.filter` if a change is pending and the TX buffer is free;
-/// the frames the chip had accepted before the reset go to `rx`, for the
-/// caller to hand up once it has released the chip lock. Chip lock held:
-/// process context, BH-disabled, or the interrupt handler (hardirq).
-fn apply_pending_filter<R: Regs>(st: &mut ChipState<R>, rx: &mut RxBatch) {
+/// the frames the chip had accepted before the reset go to the receive
+/// queue. Whether the programming failed (for the caller to log after
+/// the lock). Chip lock held: process context, BH-disabled, or the
+/// interrupt handler (hardirq).
+fn apply_pending_filter<R: Regs>(dev: &NetDev, st: &mut ChipState<R>) -> bool {
     if !st.filter_pending || st.echo.is_some() {
-        return;
+        return false;
     }
     if st.chip.can_state() == CanState::BusOff {
         // Leaving reset mode would end bus-off: the restart programs it.
-        return;
+        return false;
     }
     st.filter_pending = false;
     if !st.running {
         // Programmed at the next open.
-        return;
+        return false;
     }
     let f = st.filter;
-    if st
-        .chip
-        .set_filter(&f, true, |ev| {
-            if let Event::Rx(fr) = ev {
-                rx.push(fr);
-            }
-        })
-        .is_err()
-    {
-        rx.failed = true;
+    let ChipState { chip, rxq, .. } = st;
+    chip.set_filter(&f, true, |ev| {
+        if let Event::Rx(fr) = ev {
+            rx_frame(dev, rxq, &fr);
+        }
+    })
+    .is_err()
+}
+
+/// Queues `skb` for the NAPI poll; a full queue drops it (`rx_dropped`).
+/// Chip lock held.
+fn enqueue(dev: &NetDev, rxq: &mut Ring<Skb>, skb: Skb) {
+    if let Err(skb) = rxq.push(skb) {
+        dev.stats_rx_dropped();
+        // Interrupts are off: the free (an echo's destructor) is deferred.
+        skb.drop_any();
     }
 }
 
-/// Hands a frame to the network stack (`netif_rx`). Hardirq (the
-/// interrupt handler, chip lock held) or process/softirq context without
-/// the chip lock: `netif_rx` must not run with interrupts disabled
-/// outside hardirq.
-fn rx_frame(dev: &NetDev, frame: &CanFrame) {
+/// Builds the skb of a frame from the bus (or an error frame) with the
+/// one CAN skb builder ([`ctrl::rx_skb`]) and queues it for the NAPI
+/// poll. Chip lock held.
+fn rx_frame(dev: &NetDev, rxq: &mut Ring<Skb>, frame: &CanFrame) {
     if let Some(skb) = ctrl::rx_skb(dev, &AnyFrame::Classic(*frame)) {
-        dev.rx(skb);
+        enqueue(dev, rxq, skb);
     }
 }
 
@@ -431,6 +427,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     type Priv = Sja1000Priv<R>;
     const HAS_SET_RX_MODE: bool = true;
     const HAS_PRIVATE_IOCTL: bool = true;
+    const NAPI_WEIGHT: u32 = NAPI_WEIGHT;
 
     /// `sja1000config`'s ioctls. Process context (RTNL held); takes the
     /// chip lock, copies to and from user space outside it.
@@ -540,7 +537,11 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     }
 
     /// `ip link set canX down`. Process context, RTNL; the echo skb is
-    /// freed and the interrupt line released after the chip lock.
+    /// freed and the interrupt line released after the chip lock. The
+    /// glue has disabled NAPI: no poll runs or starts until the next
+    /// open, and nothing queues once `running` is off, so what is left in
+    /// the receive queue is freed here, one frame per lock hold, outside
+    /// the chip lock.
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         ctrl::stop(dev, p, || {
             let mut st = p.chip.lock();
@@ -548,6 +549,12 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             let _ = st.chip.stop();
             st.echo.take()
         });
+        loop {
+            let Some(skb) = p.chip.lock().rxq.pop() else {
+                break;
+            };
+            drop(skb);
+        }
         Ok(())
     }
 
@@ -590,16 +597,16 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     /// of the card and with other devices), or HRTIMER_SOFTIRQ softirq
     /// for the simulated card, whose bus timer calls it
     /// ([`Channel::irq`]) with interrupts enabled. Takes the chip lock
-    /// (interrupts off); frames from the bus and echoes go up under it,
-    /// as mainline's handler hands them up from hardirq: `netif_rx` only
-    /// queues them on the backlog there (in hardirq or softirq it neither
-    /// disables nor re-enables bottom halves).
+    /// (interrupts off); frames from the bus, echoes and error frames go
+    /// to the receive queue under it, in the chip's order, and the NAPI
+    /// poll is scheduled after it.
     fn irq(dev: &Dev<Self>, p: &Self::Priv) -> bool {
         let mut st = p.chip.lock();
         let ChipState {
             chip,
             echo,
             running,
+            rxq,
             ..
         } = &mut *st;
         if !*running {
@@ -610,10 +617,10 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         let one_shot = chip.ctrlmode & candev::ctrlmode::ONE_SHOT != 0;
         let mut bus_off = false;
         let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| match ev {
-            Event::Rx(f) => rx_frame(dev, &f),
+            Event::Rx(f) => rx_frame(dev, rxq, &f),
             Event::TxDone => {
                 if let Some(skb) = ctrl::echo_done(dev, echo) {
-                    dev.rx(skb);
+                    enqueue(dev, rxq, skb);
                 }
                 dev.wake_queue();
             }
@@ -632,7 +639,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             }
             Event::Error(r) => {
                 ctrl::count_errors(dev, &p.can, &r.stats, &r.net);
-                rx_frame(dev, &r.frame);
+                rx_frame(dev, rxq, &r.frame);
                 bus_off |= r.bus_off;
             }
         });
@@ -645,12 +652,39 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         // chip's causes are cleared, or the line would fire again at once.
         let board = chip.regs.irq_done();
         // A filter change that waited for the TX buffer; the frames it
-        // reads out go up after the chip lock, like refilter's.
-        let mut rx = RxBatch::new();
-        apply_pending_filter(&mut st, &mut rx);
+        // reads out go to the receive queue too.
+        let failed = apply_pending_filter(dev, &mut st);
+        let queued = !st.rxq.is_empty();
         drop(st);
-        rx.hand_up(dev);
+        // Outside the chip lock (the poll takes it).
+        if queued {
+            dev.napi_schedule();
+        }
+        if failed {
+            pr_warn!("{}: cannot reprogram the acceptance filter\n", dev.name());
+        }
         handled || board
+    }
+
+    /// The NAPI poll (NET_RX softirq): hands up to `budget` queued frames
+    /// to the protocol handlers, oldest first.
+    fn poll(
+        _dev: &Dev<Self>,
+        p: &Self::Priv,
+        napi: &crate::glue::netdev::Napi,
+        budget: usize,
+    ) -> usize {
+        let mut done = 0;
+        while done < budget {
+            // One frame per lock hold: the handlers run unlocked, with
+            // interrupts on, and may send on this device.
+            let Some(skb) = p.chip.lock().rxq.pop() else {
+                break;
+            };
+            napi.receive(skb);
+            done += 1;
+        }
+        done
     }
 }
 
@@ -700,23 +734,25 @@ impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
 
     /// Restarts the chip after bus-off (mainline `can_restart` and
     /// `sja1000_set_mode(CAN_MODE_START)`): the frame lost with the
-    /// bus-off is dropped (a TX error), `CAN_ERR_RESTARTED` goes up, the
-    /// carrier comes back, the restart is counted, the chip starts (with
-    /// a filter change that waited, if any) and the queue wakes. Process
-    /// context (`ip link ... restart`) or softirq (the `restart-ms`
-    /// timer); takes the chip lock.
+    /// bus-off is dropped (a TX error), `CAN_ERR_RESTARTED` is queued for
+    /// the NAPI poll, the carrier comes back, the restart is counted, the
+    /// chip starts (with a filter change that waited, if any) and the
+    /// queue wakes. Process context (`ip link ... restart`) or softirq
+    /// (the `restart-ms` timer); takes the BH lock, then the chip lock.
     fn restart(dev: &Dev<Self>, p: &Self::Priv) -> Result {
+        let _bh = p.bh.lock();
         let mut echo = {
             let mut st = p.chip.lock();
             if !st.running {
                 return Err(EINVAL);
             }
+            rx_frame(dev, &mut st.rxq, &restarted_frame());
             st.echo.take()
         };
         ctrl::echo_lost(dev, &mut echo, Stat::TxErrors);
-        // Handed up without the chip lock: from process context, netif_rx
-        // must not run with interrupts off.
-        rx_frame(dev, &restarted_frame());
+        // Outside the chip lock (the poll takes it); the poll runs when
+        // `_bh` lets bottom halves run again.
+        dev.napi_schedule();
         dev.set_carrier(true);
         p.can.count(CanStat::Restarts);
         let started = {
