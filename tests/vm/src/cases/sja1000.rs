@@ -839,12 +839,29 @@ fn sja1000_rx_order_irq_moves(ctx: &mut Ctx) -> TestResult {
     let over0 = ctx.stat("can1", "rx_over_errors")?;
     let rx = canraw::open(i1)?;
     crate::sys::set_rcvbufforce(&rx, 64 << 20).or_fail("SO_RCVBUFFORCE")?;
+    // Short reads, so that frames lost to an overrun cost one second, not
+    // a whole read timeout; the reader stops only once every frame is
+    // sent and a read then times out (a slow sender is waited for).
+    rx.set_read_timeout(Duration::from_secs(1))
+        .or_fail("SO_RCVTIMEO")?;
     let tx = canraw::open(i0)?;
+    let sent_all = Arc::new(AtomicBool::new(false));
+    let sent = Arc::clone(&sent_all);
     let recv = thread::spawn(move || -> Vec<u32> {
         let mut got = Vec::with_capacity(n as usize);
-        // Ends at the first read timeout: all frames in, or some lost.
+        // Ends with all frames in, at a read timeout after the last frame
+        // was sent (some lost), or after 30 s without a frame (the sender
+        // failed).
+        let mut idle = 0;
         while got.len() < n as usize {
-            let Ok(f) = rx.read_frame() else { break };
+            let Ok(f) = rx.read_frame() else {
+                idle += 1;
+                if sent.load(Ordering::SeqCst) || idle >= 30 {
+                    break;
+                }
+                continue;
+            };
+            idle = 0;
             let d = f.data();
             got.push(u32::from_le_bytes(
                 d.get(..4)
@@ -866,6 +883,7 @@ fn sja1000_rx_order_irq_moves(ctx: &mut Ctx) -> TestResult {
         d[..4].copy_from_slice(&seq.to_le_bytes());
         canraw::send(&tx, &ext(0x0300_0000 | (seq & 0xFFFF), &d))?;
     }
+    sent_all.store(true, Ordering::SeqCst);
     let got = recv.join().map_err(|_| "receiver panicked".to_string())?;
     let _ = irq_affinity("can0", "3");
     let _ = irq_affinity("can1", "3");
