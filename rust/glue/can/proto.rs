@@ -550,10 +550,9 @@ pub(crate) fn rx_set_locked<T: CanProtocol>(
         filters: filters.as_ptr(),
         nfilters: filters.len(),
     };
-    // SAFETY: `spec` and its filters live for the call; `rcv` is the
-    // receiver reserved for `sk`, not removed for good (only rx_release
-    // does that, clearing the slot under the socket lock that `s` holds);
-    // `sk` is a live sock of `T`.
+    // SAFETY: `spec` and its filters live for the call; `sk` is a live sock
+    // of `T`; `rcv` is its reserved receiver, not removed for good (only
+    // rx_release does, clearing the slot under the socket lock `s` holds).
     let ret = unsafe { abi::rcan_rx_set_reserved(rcv, sk.as_ptr(), cookie, &spec, true) };
     crate::glue::to_result(ret).map(|_| ())
 }

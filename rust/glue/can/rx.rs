@@ -924,10 +924,9 @@ impl<R: Receiver> RxTable<R> {
             if live.is_null() {
                 if rcv.first().is_none() {
                     // Readers reach receivers only through registrations.
-                    // SAFETY: a reserved receiver that never had a
-                    // registration: leaked from a KBox by `reserve`, now
-                    // off the map, never reachable by readers, so it is
-                    // freed at once.
+                    // SAFETY: a reserved receiver that never had one: leaked
+                    // from a KBox by `reserve`, now off the map, never
+                    // reachable by readers, so it is freed at once.
                     drop(unsafe { KBox::from_raw((rcv as *const Rcv<R>).cast_mut()) });
                 } else {
                     // Its registrations were retired earlier (`keep`):
