@@ -397,6 +397,25 @@ impl Napi {
         // what netif_receive_skb requires; it consumes the reference.
         unsafe { bindings::rcan_netif_receive_skb(skb.into_raw()) };
     }
+
+    /// Hands up to `budget` frames to [`receive`](Self::receive), one
+    /// `pop()` per frame, and returns how many it handed up (the value a
+    /// [`Driver::poll`] returns). `pop` takes the driver's receive queue
+    /// off its lock and returns the next frame, `None` when the queue is
+    /// empty: the lock is held for one `pop()` only and released before
+    /// the frame goes up, so the protocol handlers run unlocked, with
+    /// interrupts on, and may send on the same device.
+    pub(crate) fn drain(&self, budget: usize, mut pop: impl FnMut() -> Option<Skb>) -> usize {
+        let mut done = 0;
+        while done < budget {
+            let Some(skb) = pop() else {
+                break;
+            };
+            self.receive(skb);
+            done += 1;
+        }
+        done
+    }
 }
 
 /// A device of driver `T`, borrowed inside one of `T`'s callbacks.
