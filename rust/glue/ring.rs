@@ -2,12 +2,14 @@
 
 //! A fixed-capacity FIFO of owned values ([`Ring`]), allocated once: the
 //! receive queue of a driver whose interrupt (or transmit path) takes frames
-//! that its NAPI poll hands up later. Safe code only; the slot arithmetic is
+//! that its NAPI poll hands up later, and the DSOR engine's queue of frames
+//! to send. Safe code only; the slot arithmetic is
 //! `rcan_core::ring::RingIndex`, host-tested against `VecDeque`.
 //!
 //! A `Ring` has no lock of its own: it lives inside the lock that guards
-//! the device state it belongs to (canloop's `IrqSpinLock<Ring<Skb>>`, the
-//! 82527's chip lock), and every method takes `&mut self`.
+//! the state it belongs to (canloop's `IrqSpinLock<Ring<Skb>>`, the
+//! 82527's, SJA1000's and CTU CAN FD's chip locks, DSOR's `ENGINE`), and
+//! every method takes `&mut self`.
 
 use crate::rcan_core::ring::RingIndex;
 use kernel::prelude::*;

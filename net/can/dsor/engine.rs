@@ -32,13 +32,14 @@ use crate::glue::hrtimer::ktime_get_mono_ns;
 use crate::glue::lock::{BhSpinLock, WaitQueue};
 use crate::glue::netdev::DevRef;
 use crate::glue::neterr;
+use crate::glue::ring::Ring;
 use crate::glue::sock::SockRef;
 use crate::params::{Config, PARAM_REASM_TIMEOUT_MS};
 use crate::rcan_core::dsor_addr::DsorAddr;
 use crate::rcan_core::dsor_fd::{BodySize, FdPeers, FdStep, FdTransfer};
 use crate::rcan_core::dsor_rx::{Incoming, Limits, Reassembler};
 use crate::rcan_core::dsor_tx::{TxError, TxStreams};
-use crate::rcan_core::dsor_wire::{AckStatus, DsorId, FdFrame, FrameType, Header, FD_MAX_LEN};
+use crate::rcan_core::dsor_wire::{AckStatus, DsorId, FdFrame, FrameType, Header};
 use crate::rx::{accept, deliver, wanted, RxBuf};
 use crate::socket::DsorProto;
 use crate::stats::Stats;
@@ -97,10 +98,8 @@ pub(crate) struct Engine {
     pub(crate) streams: KBox<TxStreams>,
     pub(crate) tx: KVec<TxEntry>,
     next_gen: u32,
-    /// Ring of frames to send: `out[(out_head + i) % OUT_LEN]`, i < out_len.
-    out: KVec<FdFrame>,
-    out_head: usize,
-    out_len: usize,
+    /// Frames to send, oldest first ([`OUT_LEN`] at most).
+    out: Ring<FdFrame>,
     pub(crate) binds: KVec<Bind>,
     /// canip0 while it is registered (a counted reference, set by
     /// `udpip::Canip::register`, taken back before it unregisters).
@@ -151,24 +150,14 @@ impl Engine {
     }
 
     fn push_out(&mut self, f: FdFrame) {
-        if self.out_len == OUT_LEN {
+        if self.out.push(f).is_err() {
             // The protocol recovers by retransmission.
             self.stats.out_overflow += 1;
-            return;
         }
-        let i = (self.out_head + self.out_len) % OUT_LEN;
-        self.out[i] = f;
-        self.out_len += 1;
     }
 
     pub(crate) fn pop_out(&mut self) -> Option<FdFrame> {
-        if self.out_len == 0 {
-            return None;
-        }
-        let f = self.out[self.out_head].clone();
-        self.out_head = (self.out_head + 1) % OUT_LEN;
-        self.out_len -= 1;
-        Some(f)
+        self.out.pop()
     }
 
     /// Ends the transfer in slot `i` with `result` (0 or a negative errno):
@@ -435,13 +424,7 @@ pub(crate) fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
     for _ in 0..TX_SLOTS {
         tx.push(TxEntry::Free, GFP_KERNEL)?;
     }
-    let blank = FdFrame {
-        id: 0,
-        len: 0,
-        fdf: false,
-        data: [0; FD_MAX_LEN],
-    };
-    let out = KVec::from_elem(blank, OUT_LEN, GFP_KERNEL)?;
+    let out = Ring::new(OUT_LEN)?;
     Ok(KBox::new(
         Engine {
             cfg,
@@ -450,8 +433,6 @@ pub(crate) fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
             tx,
             next_gen: 1,
             out,
-            out_head: 0,
-            out_len: 0,
             binds: KVec::new(),
             canip: None,
             stats: Stats::default(),
