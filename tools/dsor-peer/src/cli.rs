@@ -6,7 +6,7 @@
 //! [`Cli::args`], with clap's usage error (exit 2) when one is missing.
 
 use crate::node::Config;
-use crate::wire::{parse_ipv4, Kind};
+use crate::wire::{parse_ipv4, Kind, FD_LONG_LENS};
 use clap::error::ErrorKind;
 use clap::{CommandFactory, Parser, ValueEnum};
 
@@ -60,9 +60,18 @@ pub struct Cli {
     /// Buffered bytes in all; more are answered NO_MEMORY [default: 1048560].
     #[arg(long, value_name = "B", value_parser = num)]
     pub max_bytes: Option<u64>,
-    /// Log every frame received, sent and dropped on stderr as ID#DATA.
+    /// Log every frame received, sent and dropped on stderr as ID#DATA
+    /// (ID##DATA for CAN FD frames).
     #[arg(long)]
     pub verbose: bool,
+    /// Be a classic node even on an interface in CAN FD mode (MTU 72): no
+    /// FD header offered, FD frames not read (no CAN_RAW_FD_FRAMES).
+    #[arg(long)]
+    pub classic: bool,
+    /// On an interface in CAN FD mode: the largest body size offered and
+    /// accepted, 12, 16, 20, 24, 32, 48 or 64 [default: 64].
+    #[arg(long, value_name = "B", value_parser = fd_body, conflicts_with = "classic")]
+    pub fd_body: Option<u8>,
     /// Messages to receive (recv, echo) or send (send) [send's default: 1].
     #[arg(long, value_name = "K", value_parser = num)]
     pub count: Option<u64>,
@@ -164,6 +173,8 @@ pub struct Args {
     pub linger_ms: Option<u64>,
     /// Log frames.
     pub verbose: bool,
+    /// A classic node whatever the interface's MTU.
+    pub classic: bool,
     /// Messages to receive or send.
     pub count: u64,
     /// Give up after this long.
@@ -197,6 +208,15 @@ fn percent(s: &str) -> Result<f64, String> {
         .ok()
         .filter(|p| (0.0..=100.0).contains(p))
         .ok_or_else(|| "wants 0..100".to_string())
+}
+
+fn fd_body(s: &str) -> Result<u8, String> {
+    let b = num_max::<64>(s)? as usize;
+    if FD_LONG_LENS.contains(&b) {
+        Ok(b as u8)
+    } else {
+        Err("wants 12, 16, 20, 24, 32, 48 or 64".to_string())
+    }
 }
 
 fn port(s: &str) -> Result<(u8, u8), String> {
@@ -244,6 +264,10 @@ impl Cli {
         cfg.app_queue = self.app_queue.map(|v| v as usize);
         cfg.close_after_frames = self.close_after_frames;
         cfg.close_after_ms = self.close_after_ms;
+        // cfg.fd is the interface's mode, decided when the socket opens.
+        if let Some(b) = self.fd_body {
+            cfg.fd_b_max = b;
+        }
         let mode = match self.mode {
             ModeName::Recv => Mode::Recv,
             ModeName::Echo => Mode::Echo,
@@ -273,6 +297,7 @@ impl Cli {
             seed: self.seed,
             linger_ms: self.linger_ms,
             verbose: self.verbose,
+            classic: self.classic,
             count,
             timeout_s: self.timeout_s,
             mode,

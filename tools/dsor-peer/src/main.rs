@@ -7,7 +7,7 @@ use clap::Parser;
 use dsor_peer::cli::{Cli, Mode};
 use dsor_peer::node::{Event, Node, SendError};
 use dsor_peer::wire::{fmt_ipv4, fnv1a64, pattern, Frame, Kind, Status};
-use socketcan::{CanFrame, CanSocket, Socket};
+use socketcan::{CanAnyFrame, CanFdFrame, CanFdSocket, CanFrame, CanSocket, Socket};
 use std::collections::{HashMap, VecDeque};
 use std::io::ErrorKind;
 use std::process::exit;
@@ -33,7 +33,8 @@ impl Rng {
 
 fn show(f: &Frame) -> String {
     let d: String = f.bytes().iter().map(|b| format!("{b:02X}")).collect();
-    format!("{:08X}#{d}", f.id)
+    let sep = if f.fd { "##" } else { "#" };
+    format!("{:08X}{sep}{d}", f.id)
 }
 
 fn status_reason(s: Status) -> &'static str {
@@ -53,11 +54,27 @@ fn kind_str(k: &Kind) -> String {
     }
 }
 
+/// The CAN_RAW socket: classic (struct can_frame only), or with
+/// CAN_RAW_FD_FRAMES on an interface in CAN FD mode (MTU 72), where it
+/// reads and writes both kinds.
+enum Sock {
+    Classic(CanSocket),
+    Fd(CanFdSocket),
+}
+
 struct Io {
-    sock: CanSocket,
+    sock: Sock,
     rng: Rng,
     drop_pct: f64,
     verbose: bool,
+}
+
+/// Whether `ifname` is in CAN FD mode (MTU 72, `CANFD_MTU`).
+fn fd_interface(ifname: &str) -> bool {
+    std::fs::read_to_string(format!("/sys/class/net/{ifname}/mtu"))
+        .ok()
+        .and_then(|m| m.trim().parse::<u32>().ok())
+        == Some(72)
 }
 
 impl Io {
@@ -71,13 +88,27 @@ impl Io {
         if self.verbose {
             eprintln!("tx   {}", show(f));
         }
-        let mut c = socketcan::frame::can_frame_default();
-        c.can_id = f.id | libc::CAN_EFF_FLAG;
-        c.can_dlc = f.dlc;
-        c.data = f.data;
-        let cf = CanFrame::from(c);
+        let any: CanAnyFrame = if f.fd {
+            let mut c = socketcan::frame::canfd_frame_default();
+            c.can_id = f.id | libc::CAN_EFF_FLAG;
+            c.len = f.len;
+            c.flags = libc::CANFD_FDF as u8;
+            c.data = f.data;
+            CanAnyFrame::Fd(CanFdFrame::from(c))
+        } else {
+            let mut c = socketcan::frame::can_frame_default();
+            c.can_id = f.id | libc::CAN_EFF_FLAG;
+            c.can_dlc = f.len;
+            c.data.copy_from_slice(&f.data[..8]);
+            CanAnyFrame::from(CanFrame::from(c))
+        };
         for _ in 0..1000 {
-            match self.sock.write_frame(&cf) {
+            let r = match (&self.sock, &any) {
+                (Sock::Fd(s), a) => s.write_frame(a),
+                (Sock::Classic(s), CanAnyFrame::Normal(d)) => s.write_frame(d),
+                (Sock::Classic(_), _) => unreachable!("an FD frame on a classic node"),
+            };
+            match r {
                 Ok(()) => return,
                 // Transmit queue full: wait for it to drain.
                 Err(e)
@@ -99,20 +130,42 @@ impl Io {
         );
     }
 
-    /// Waits up to `wait` for a DSOR frame (extended data frame).
+    /// Waits up to `wait` for a DSOR frame (extended data frame, classic
+    /// or, on an FD socket, CAN FD).
     fn read(&mut self, wait: Duration) -> Option<Frame> {
-        match self.sock.read_frame_timeout(wait) {
-            Ok(cf) => {
+        let got = match &self.sock {
+            Sock::Classic(s) => s.read_frame_timeout(wait).map(|cf| {
                 let c: &libc::can_frame = cf.as_ref();
-                let flags = c.can_id & !libc::CAN_EFF_MASK;
-                if flags != libc::CAN_EFF_FLAG || c.can_dlc > 8 {
+                (c.can_id, c.can_dlc, false, c.data.to_vec())
+            }),
+            Sock::Fd(s) => s.read_frame_timeout(wait).map(|af| match af {
+                CanAnyFrame::Fd(ff) => {
+                    let c: &libc::canfd_frame = ff.as_ref();
+                    (c.can_id, c.len, true, c.data.to_vec())
+                }
+                other => {
+                    // Classic data, remote and error frames: the flags of
+                    // the id tell them apart below.
+                    let c: &libc::can_frame = match &other {
+                        CanAnyFrame::Normal(d) => d.as_ref(),
+                        CanAnyFrame::Remote(r) => r.as_ref(),
+                        CanAnyFrame::Error(e) => e.as_ref(),
+                        CanAnyFrame::Fd(_) => unreachable!(),
+                    };
+                    (c.can_id, c.can_dlc, false, c.data.to_vec())
+                }
+            }),
+        };
+        match got {
+            Ok((can_id, len, fd, bytes)) => {
+                let flags = can_id & !libc::CAN_EFF_MASK;
+                if flags != libc::CAN_EFF_FLAG || usize::from(len) > bytes.len() {
                     return None; // standard, remote or error frame
                 }
-                let f = Frame {
-                    id: c.can_id & libc::CAN_EFF_MASK,
-                    dlc: c.can_dlc,
-                    data: c.data,
-                };
+                let mut f = Frame::new(can_id & libc::CAN_EFF_MASK, &[]);
+                f.data[..bytes.len()].copy_from_slice(&bytes);
+                f.len = len;
+                f.fd = fd;
                 if self.verbose {
                     eprintln!("rx   {}", show(&f));
                 }
@@ -146,7 +199,15 @@ struct Pending {
 fn main() {
     let cli = Cli::parse();
     let a = cli.args().unwrap_or_else(|e| e.exit());
-    let sock = CanSocket::open(&a.ifname).unwrap_or_else(|e| {
+    let mut cfg = a.cfg.clone();
+    // An FD node on an interface in CAN FD mode, unless told to be classic.
+    cfg.fd = !a.classic && fd_interface(&a.ifname);
+    let opened = if cfg.fd {
+        CanFdSocket::open(&a.ifname).map(Sock::Fd)
+    } else {
+        CanSocket::open(&a.ifname).map(Sock::Classic)
+    };
+    let sock = opened.unwrap_or_else(|e| {
         eprintln!("dsor-peer: {}: {e}", a.ifname);
         exit(3)
     });
@@ -163,7 +224,7 @@ fn main() {
         .unwrap_or(if a.drop_pct > 0.0 { 3000 } else { 0 });
     let start = Instant::now();
     let now = || start.elapsed().as_millis() as u64;
-    let mut node = Node::new(a.cfg.clone());
+    let mut node = Node::new(cfg);
     let mut queue: VecDeque<Pending> = VecDeque::new();
     let mut inflight: HashMap<u64, (u64, usize, u64)> = HashMap::new(); // handle -> (n, len, sha)
     let (mut received, mut sent_ok, mut sent_fail, mut started) = (0u64, 0u64, 0u64, 0u64);

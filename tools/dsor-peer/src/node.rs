@@ -7,7 +7,10 @@
 //! and events ([`Node::pop_event`]). Time is a number of milliseconds from
 //! any origin, so tests run on a virtual clock.
 
-use crate::wire::{bodies, body_dlc, Ack, Frame, Header, Id, Kind, Status, Type};
+use crate::wire::{
+    bodies_of, body_frame_len, body_payload, Ack, FdAck, FdHeader, Frame, Header, Id, Kind, Status,
+    Type, FD_LONG_LENS,
+};
 use std::collections::{HashMap, VecDeque};
 
 /// Protocol parameters.
@@ -42,6 +45,14 @@ pub struct Config {
     /// The receiving application goes away this many ms after the first
     /// header it accepted (same effect as `close_after_frames`).
     pub close_after_ms: Option<u64>,
+    /// The interface is in CAN FD mode and the node implements the FD
+    /// extension (dsor-wire.rst, "Message transfer with CAN FD bodies"):
+    /// it offers FD bodies for messages longer than 8 bytes and takes
+    /// them. False: a classic node, which ignores FD frames.
+    pub fd: bool,
+    /// The largest body size offered (B_max) and accepted: 12, 16, 20,
+    /// 24, 32, 48 or 64.
+    pub fd_b_max: u8,
 }
 
 impl Config {
@@ -59,6 +70,8 @@ impl Config {
             app_queue: None,
             close_after_frames: None,
             close_after_ms: None,
+            fd: false,
+            fd_b_max: 64,
         }
     }
 }
@@ -140,11 +153,25 @@ pub enum SendError {
     BadNode,
 }
 
+/// What the sender knows of a destination node (dsor-wire.rst,
+/// "Sender"): it acked an FD header, or the sender fell back to the
+/// classic header for it. Unknown nodes are offered FD bodies.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum PeerMode {
+    Fd,
+    Classic,
+}
+
 /// A message being sent on one (dst, channel).
 struct TxTransfer {
     handle: u64,
     prio: u8,
-    header: ([u8; 8], u8),
+    header: Header,
+    /// The header sent (and to send again) is the FD header; cleared by
+    /// the fallback to the classic header.
+    fd_offer: bool,
+    /// Body size: 8 (classic bodies) until an FD header's ack chose another.
+    b: u8,
     len: u16,
     payload: Vec<u8>,
     /// Frame awaiting its ack: 0 header, k body k.
@@ -160,7 +187,12 @@ enum RxState {
     Receiving {
         prio: u8,
         hdr_q: bool,
+        /// The header's bytes (an FD header's in canonical form, so that
+        /// duplicates compare equal whatever their reserved bytes; 12
+        /// bytes only for an FD header, whose duplicates get the 4-byte ack).
         hdr: Vec<u8>,
+        /// Body size: 8 after a classic header, the chosen B after an FD one.
+        b: u8,
         kind: Kind,
         len: u16,
         buf: Vec<u8>,
@@ -207,6 +239,8 @@ pub struct Node {
     body_frames: u64,
     /// When the first header was accepted (for `close_after_ms`).
     first_accept: Option<u64>,
+    /// FD or classic, per destination node; absent = unknown.
+    peers: HashMap<u8, PeerMode>,
 }
 
 impl Node {
@@ -225,6 +259,7 @@ impl Node {
             app_closed: false,
             body_frames: 0,
             first_accept: None,
+            peers: HashMap::new(),
         }
     }
 
@@ -319,10 +354,15 @@ impl Node {
         let q = self.last_q.get(&(dst, chan)).is_some_and(|q| !q);
         let handle = self.next_handle;
         self.next_handle += 1;
+        // FD headers only on an FD interface, for more than 8 bytes, to a
+        // node not known to be classic.
+        let fd_offer = self.cfg.fd && len > 8 && self.peers.get(&dst) != Some(&PeerMode::Classic);
         let t = TxTransfer {
             handle,
             prio,
-            header: Header { len, kind }.encode(),
+            header: Header { len, kind },
+            fd_offer,
+            b: 8,
             len,
             payload,
             index: 0,
@@ -337,23 +377,43 @@ impl Node {
 
     /// Transmits the current frame of the transfer on (dst, chan).
     fn transmit(&mut self, now: u64, dst: u8, chan: u8) {
+        let b_max = self.cfg.fd_b_max;
         let t = self.tx.get_mut(&(dst, chan)).expect("transfer");
-        let (typ, bytes): (Type, &[u8]) = if t.index == 0 {
-            (Type::Header, &t.header.0[..usize::from(t.header.1)])
-        } else {
-            let start = 8 * usize::from(t.index - 1);
-            let end = start + usize::from(body_dlc(t.len, t.index));
-            (Type::Body, &t.payload[start..end])
-        };
         let id = Id {
             prio: t.prio,
             dst,
             src: self.cfg.node,
-            typ,
+            typ: if t.index == 0 {
+                Type::Header
+            } else {
+                Type::Body
+            },
             q: t.q,
             chan,
+        }
+        .encode();
+        let frame = if t.index == 0 && t.fd_offer {
+            let fh = FdHeader {
+                header: t.header,
+                b_max,
+            };
+            Frame::new_fd(id, &fh.encode())
+        } else if t.index == 0 {
+            let (b, dlc) = t.header.encode();
+            Frame::new(id, &b[..usize::from(dlc)])
+        } else {
+            let start = usize::from(t.b) * usize::from(t.index - 1);
+            let end = start + body_payload(t.len, t.b, t.index);
+            let bytes = &t.payload[start..end];
+            // Classic bodies with B = 8; FD frames (the last one padded)
+            // with any other B.
+            if t.b == 8 {
+                Frame::new(id, bytes)
+            } else {
+                Frame::new_fd(id, bytes)
+            }
         };
-        self.out.push_back(Frame::new(id.encode(), bytes));
+        self.out.push_back(frame);
         t.sent += 1;
         t.deadline = now + self.cfg.t_ack;
         self.last_q.insert((dst, chan), t.q);
@@ -362,7 +422,8 @@ impl Node {
     /// Handles a received extended data frame.
     pub fn on_frame(&mut self, now: u64, f: &Frame) {
         let id = Id::decode(f.id);
-        if id.dst != self.cfg.node {
+        // A classic node takes any frame with FDF set as malformed.
+        if id.dst != self.cfg.node || (f.fd && !self.cfg.fd) {
             return;
         }
         match id.typ {
@@ -375,7 +436,7 @@ impl Node {
 
     fn finish(&mut self, dst: u8, chan: u8, result: Result<(), Fail>) {
         let t = self.tx.remove(&(dst, chan)).expect("transfer");
-        let last = bodies(t.len);
+        let last = bodies_of(t.len, t.b);
         let last_frame_sent = t.index == last;
         self.events.push_back(Event::Sent {
             handle: t.handle,
@@ -385,13 +446,38 @@ impl Node {
     }
 
     fn on_ack(&mut self, now: u64, id: Id, b: &[u8]) {
-        let Some(ack) = Ack::decode(b) else { return };
         let key = (id.src, id.chan);
+        let b_max = self.cfg.fd_b_max;
         let Some(t) = self.tx.get_mut(&key) else {
             return;
         };
+        let fd_header_out = t.index == 0 && t.fd_offer;
+        // Only the ack of an FD header has DLC 4; after an FD header the
+        // acks of index 0 with DLC 2 or 3 are ignored, and after the
+        // classic header (or the fallback) the DLC 4 ones.
+        let ack = if b.len() == 4 {
+            let Some(a) = FdAck::decode(b) else { return };
+            if !fd_header_out || (a.status == Status::Ok && a.b > b_max) {
+                return;
+            }
+            Ack {
+                index: 0,
+                status: a.status,
+            }
+        } else {
+            let Some(a) = Ack::decode(b) else { return };
+            if a.index == 0 && fd_header_out {
+                return;
+            }
+            a
+        };
         if id.q != t.q || ack.index != t.index {
             return; // stale duplicate
+        }
+        if fd_header_out && ack.status == Status::Ok {
+            // The receiver takes FD bodies (B may still be 8: classic ones).
+            t.b = b[3];
+            self.peers.insert(key.0, PeerMode::Fd);
         }
         let fail = match ack.status {
             Status::Ok => None,
@@ -401,7 +487,7 @@ impl Node {
         };
         if let Some(fail) = fail {
             self.finish(key.0, key.1, Err(fail));
-        } else if t.index == bodies(t.len) {
+        } else if t.index == bodies_of(t.len, t.b) {
             self.finish(key.0, key.1, Ok(()));
         } else {
             t.index += 1;
@@ -425,6 +511,26 @@ impl Node {
             .push_back(Frame::new(id.encode(), &b[..usize::from(n)]));
     }
 
+    /// Answers a header (index 0) with `status`: the 4-byte ack with body
+    /// size `b` if it was an FD header, else the classic ack.
+    fn ack_header(&mut self, id: Id, status: Status, fd_hdr: bool, b: u8) {
+        if !fd_hdr {
+            self.ack(id.prio, id.src, id.chan, id.q, 0, status);
+            return;
+        }
+        let aid = Id {
+            prio: id.prio,
+            dst: id.src,
+            src: self.cfg.node,
+            typ: Type::Ack,
+            q: id.q,
+            chan: id.chan,
+        };
+        let b = if status == Status::Ok { b } else { 8 };
+        self.out
+            .push_back(Frame::new(aid.encode(), &FdAck { status, b }.encode()));
+    }
+
     fn drop_rx(&mut self, key: (u8, u8)) {
         // A refusing state's buffer was freed when it started refusing.
         if let Some(RxState::Receiving {
@@ -436,7 +542,32 @@ impl Node {
     }
 
     fn on_header(&mut self, now: u64, id: Id, b: &[u8]) {
-        let Some(h) = Header::decode(b) else { return };
+        // A header of length 12 is an FD header (a classic node ignores
+        // it); 4, 6, 8 classic ones. Kept in canonical form for the
+        // duplicate check.
+        let (h, b_max, canon) = if b.len() == 12 {
+            if !self.cfg.fd {
+                return;
+            }
+            let Some(fh) = FdHeader::decode(b) else {
+                return;
+            };
+            (fh.header, Some(fh.b_max), fh.encode().to_vec())
+        } else {
+            let Some(h) = Header::decode(b) else { return };
+            (h, None, b.to_vec())
+        };
+        let b = &canon[..];
+        let fd_hdr = b_max.is_some();
+        // The body size this receiver takes: the largest FD length up to
+        // both B_max values.
+        let body = b_max.map_or(8, |m| {
+            FD_LONG_LENS
+                .into_iter()
+                .filter(|&l| l <= usize::from(m.min(self.cfg.fd_b_max)))
+                .max()
+                .unwrap_or(8) as u8
+        });
         let key = (id.src, id.chan);
         let refresh = now + self.cfg.t_reasm;
         // A retransmitted header whose ack was lost: answer it as before.
@@ -446,10 +577,11 @@ impl Node {
                 hdr,
                 next,
                 deadline,
+                b: chosen,
                 ..
             }) if *next == 1 && *hdr_q == id.q && hdr == b => {
                 *deadline = refresh;
-                Some(Status::Ok)
+                Some((Status::Ok, *chosen))
             }
             Some(RxState::Done {
                 last_index: 0,
@@ -459,12 +591,12 @@ impl Node {
                 ..
             }) if *q == id.q && hdr == b => {
                 *deadline = refresh;
-                Some(*hdr_status)
+                Some((*hdr_status, 8))
             }
             _ => None,
         };
-        if let Some(status) = duplicate {
-            self.ack(id.prio, id.src, id.chan, id.q, 0, status);
+        if let Some((status, chosen)) = duplicate {
+            self.ack_header(id, status, fd_hdr, chosen);
             return;
         }
         self.drop_rx(key);
@@ -503,7 +635,7 @@ impl Node {
             } else {
                 status
             };
-            self.ack(id.prio, id.src, id.chan, id.q, 0, status);
+            self.ack_header(id, status, fd_hdr, body);
             // Remember the answer so that a retransmission of this header
             // gets the same one (a refused message is never delivered).
             self.rx.insert(
@@ -519,7 +651,7 @@ impl Node {
             );
             return;
         }
-        self.ack(id.prio, id.src, id.chan, id.q, 0, status);
+        self.ack_header(id, status, fd_hdr, body);
         self.rx_bytes += usize::from(h.len);
         self.rx.insert(
             key,
@@ -527,6 +659,7 @@ impl Node {
                 prio: id.prio,
                 hdr_q: id.q,
                 hdr: b.to_vec(),
+                b: body,
                 kind: h.kind,
                 len: h.len,
                 buf: Vec::with_capacity(usize::from(h.len)),
@@ -584,6 +717,7 @@ impl Node {
                 expect_q,
                 deadline,
                 refuse,
+                b: body,
                 ..
             }) => {
                 if id.q != *expect_q {
@@ -594,9 +728,13 @@ impl Node {
                     }
                     (*next - 1, Status::Ok)
                 } else {
-                    if b.len() != usize::from(body_dlc(*len, *next)) {
+                    // The length must be the one for body size B (FDF
+                    // itself is not looked at); padding is dropped.
+                    if b.len() != body_frame_len(*len, *body, *next) {
                         return;
                     }
+                    let b = &b[..body_payload(*len, *body, *next)];
+                    let n = bodies_of(*len, *body);
                     let (prio, k, len, kind) = (*prio, *next, *len, *kind);
                     if let Some(status) = *refuse {
                         // The application went away: refuse this body,
@@ -616,7 +754,7 @@ impl Node {
                     }
                     buf.extend_from_slice(b);
                     self.body_frames += 1;
-                    if k == bodies(len) {
+                    if k == n {
                         let payload = std::mem::take(buf);
                         self.rx_bytes -= usize::from(len);
                         // Hand the message over before the last ack: the
@@ -664,12 +802,19 @@ impl Node {
             .collect();
         due.sort_unstable();
         for (dst, chan) in due {
-            let t = &self.tx[&(dst, chan)];
+            let t = self.tx.get_mut(&(dst, chan)).expect("transfer");
             if t.sent > self.cfg.n_retx {
                 self.finish(dst, chan, Err(Fail::Timeout));
-            } else {
-                self.transmit(now, dst, chan);
+                continue;
             }
+            if t.index == 0 && t.fd_offer {
+                // The FD header went unanswered: fall back to the classic
+                // header (same Q; it counts as a retransmission) and send
+                // the classic header to this node from now on.
+                t.fd_offer = false;
+                self.peers.insert(dst, PeerMode::Classic);
+            }
+            self.transmit(now, dst, chan);
         }
         let expired: Vec<(u8, u8)> = self
             .rx

@@ -8,33 +8,64 @@
 //!      T 0 header 1 body 2 ack 3 reserved, Q sequence bit, C channel 4 bits
 //! ```
 
-/// An extended CAN data frame (IDE 1, RTR 0): 29-bit id, DLC 0..=8.
+/// An extended CAN data frame (IDE 1, RTR 0): 29-bit id, a classic frame
+/// of 0..=8 bytes or, on an interface in CAN FD mode, a CAN FD frame
+/// (FDF 1) of one of the FD lengths (dsor-wire.rst, "FD lengths").
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct Frame {
     /// 29-bit identifier.
     pub id: u32,
-    /// Data length 0..=8.
-    pub dlc: u8,
-    /// Data; bytes past `dlc` are zero.
-    pub data: [u8; 8],
+    /// Data length: 0..=8, or an FD length up to 64 if `fd`.
+    pub len: u8,
+    /// A CAN FD frame (FDF 1).
+    pub fd: bool,
+    /// Data; bytes past `len` are zero.
+    pub data: [u8; 64],
 }
 
 impl Frame {
-    /// A frame with the first `bytes.len()` (at most 8) data bytes.
+    /// A classic frame with the first `bytes.len()` (at most 8) data bytes.
     pub fn new(id: u32, bytes: &[u8]) -> Frame {
-        let mut data = [0u8; 8];
+        let mut data = [0u8; 64];
         data[..bytes.len()].copy_from_slice(bytes);
         Frame {
             id: id & 0x1fff_ffff,
-            dlc: bytes.len() as u8,
+            len: bytes.len() as u8,
+            fd: false,
             data,
         }
     }
 
-    /// The data bytes.
-    pub fn bytes(&self) -> &[u8] {
-        &self.data[..usize::from(self.dlc.min(8))]
+    /// A CAN FD frame carrying `bytes` (at most 64), of the smallest FD
+    /// length that holds them, padded with 0x00.
+    pub fn new_fd(id: u32, bytes: &[u8]) -> Frame {
+        let mut f = Frame::new(id, &[]);
+        f.data[..bytes.len()].copy_from_slice(bytes);
+        f.len = fd_len_round_up(bytes.len()) as u8;
+        f.fd = true;
+        f
     }
+
+    /// The data bytes (padding included).
+    pub fn bytes(&self) -> &[u8] {
+        &self.data[..usize::from(self.len.min(64))]
+    }
+}
+
+/// The data lengths a CAN FD frame can have above 8 (DLC 9..=15).
+pub const FD_LONG_LENS: [usize; 7] = [12, 16, 20, 24, 32, 48, 64];
+
+/// The smallest CAN FD length >= `r` (`r` <= 64).
+pub fn fd_len_round_up(r: usize) -> usize {
+    if r <= 8 {
+        return r;
+    }
+    FD_LONG_LENS.into_iter().find(|&l| l >= r).unwrap_or(64)
+}
+
+/// Whether `b` is a body size: 8 (classic bodies) or an FD length above 8.
+pub fn valid_body_size(b: u8) -> bool {
+    b == 8 || FD_LONG_LENS.contains(&usize::from(b))
 }
 
 /// Frame type (identifier bits 6..5).
@@ -258,15 +289,112 @@ impl Ack {
     }
 }
 
-/// Number of body frames of a message of `len` bytes.
-pub fn bodies(len: u16) -> u16 {
-    len.div_ceil(8)
+/// An FD header (dsor-wire.rst, "FD header frame (T = 0)"): the classic
+/// header's fields and the largest body size the sender offers.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct FdHeader {
+    /// Length and addressing, as in the classic header.
+    pub header: Header,
+    /// B_max: 12, 16, 20, 24, 32, 48 or 64.
+    pub b_max: u8,
 }
 
-/// DLC of body `k` (1-based) of a message of `len` bytes.
+impl FdHeader {
+    /// The 12 data bytes: the classic header's bytes zero-filled to 8,
+    /// its DLC, B_max, two reserved zero bytes.
+    pub fn encode(&self) -> [u8; 12] {
+        let (b, dlc) = self.header.encode();
+        let mut out = [0u8; 12];
+        out[..usize::from(dlc)].copy_from_slice(&b[..usize::from(dlc)]);
+        out[8] = dlc;
+        out[9] = self.b_max;
+        out
+    }
+
+    /// Parses the data of a 12-byte header frame; `None` if byte 8 is not
+    /// 4, 6 or 8, byte 9 is not an FD body size above 8, or L <= 8 (all
+    /// malformed: ignored). The reserved bytes and the zero fill are not
+    /// looked at.
+    pub fn decode(b: &[u8]) -> Option<FdHeader> {
+        if b.len() != 12 {
+            return None;
+        }
+        let dlc = usize::from(b[8]);
+        if !matches!(dlc, 4 | 6 | 8) || !FD_LONG_LENS.contains(&usize::from(b[9])) {
+            return None;
+        }
+        let header = Header::decode(&b[..dlc])?;
+        if header.len <= 8 {
+            return None;
+        }
+        Some(FdHeader {
+            header,
+            b_max: b[9],
+        })
+    }
+}
+
+/// The ack of an FD header (index 0, a classic frame of DLC 4): status and
+/// the body size the receiver chose.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct FdAck {
+    /// Status.
+    pub status: Status,
+    /// Body size: 8 or an FD length above 8 (8 with a non-zero status).
+    pub b: u8,
+}
+
+impl FdAck {
+    /// The 4 data bytes: index 0, status, B.
+    pub fn encode(&self) -> [u8; 4] {
+        [0, 0, self.status.code(), self.b]
+    }
+
+    /// Parses a 4-byte ack payload; `None` unless the index is 0, the
+    /// status is defined and, with status OK, byte 3 is a body size (with
+    /// a non-zero status byte 3 is ignored).
+    pub fn decode(b: &[u8]) -> Option<FdAck> {
+        let [0, 0, s, sz] = *b else { return None };
+        let status = Status::from_code(s)?;
+        if status == Status::Ok && !valid_body_size(sz) {
+            return None;
+        }
+        Some(FdAck { status, b: sz })
+    }
+}
+
+/// Number of body frames of a message of `len` bytes (body size 8).
+pub fn bodies(len: u16) -> u16 {
+    bodies_of(len, 8)
+}
+
+/// Number of body frames of a message of `len` bytes with body size `b`.
+pub fn bodies_of(len: u16, b: u8) -> u16 {
+    len.div_ceil(u16::from(b))
+}
+
+/// DLC of body `k` (1-based) of a message of `len` bytes (body size 8).
 pub fn body_dlc(len: u16, k: u16) -> u8 {
-    let start = 8 * usize::from(k - 1);
-    (usize::from(len) - start).min(8) as u8
+    body_payload(len, 8, k) as u8
+}
+
+/// Message bytes in body `k` (1-based) of a message of `len` bytes with
+/// body size `b`: `b`, or what is left for the last body.
+pub fn body_payload(len: u16, b: u8, k: u16) -> usize {
+    let start = usize::from(b) * usize::from(k - 1);
+    (usize::from(len) - start).min(usize::from(b))
+}
+
+/// Frame length of body `k` with body size `b`: the payload for classic
+/// bodies (`b` = 8); for FD bodies `b`, and the FD length that holds the
+/// last body's payload.
+pub fn body_frame_len(len: u16, b: u8, k: u16) -> usize {
+    let p = body_payload(len, b, k);
+    if b == 8 {
+        p
+    } else {
+        fd_len_round_up(p)
+    }
 }
 
 /// Deterministic test content: byte `i` of message `j` is

@@ -310,3 +310,39 @@ fn application_going_away_refuses_the_rest() {
         assert!(st.failed > 0 && st.ok < 60, "seed {seed}: {st:?}");
     }
 }
+
+#[test]
+fn fd_nodes_lossy_bus_guarantees_hold() {
+    // Both nodes on an FD interface (FD headers, 64-byte bodies), then
+    // with different body size caps (the receiver picks the smaller).
+    for (b3, b40) in [(64, 64), (64, 12), (20, 48)] {
+        let mut total = Stats::default();
+        for seed in 1..15 {
+            let st = run_app(seed, 40, 4, 25, 10, 120, &|c| Config {
+                fd: true,
+                fd_b_max: if c.node == 3 { b3 } else { b40 },
+                ..c
+            });
+            total.ok += st.ok;
+            total.failed += st.failed;
+        }
+        assert!(total.ok >= total.failed * 50, "B {b3}/{b40}: {total:?}");
+    }
+}
+
+#[test]
+fn fd_node_and_classic_node_interoperate() {
+    // Node 3 is an FD node, node 0x40 a classic one: 3's FD headers go
+    // unanswered, it falls back and remembers; 0x40 never offers FD.
+    for (seed, loss) in [(1, 0), (2, 0), (3, 20), (4, 20)] {
+        let st = run_app(seed, 40, 4, loss, 10, 80, &|c| Config {
+            fd: c.node == 3,
+            ..c
+        });
+        if loss == 0 {
+            assert_eq!((st.ok, st.failed), (80, 0), "seed {seed}: {st:?}");
+        } else {
+            assert!(st.ok >= st.failed * 20, "seed {seed}: {st:?}");
+        }
+    }
+}

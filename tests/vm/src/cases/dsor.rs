@@ -46,6 +46,7 @@ pub const TESTS: &[Test] = test_table![
     dsor_delivery_full_queue,
     dsor_delivery_receiver_closes,
     dsor_fd_bodies_mtu72,
+    dsor_peer_fd_mtu72,
 ];
 
 /// Node of the peer program.
@@ -2393,6 +2394,180 @@ fn dsor_fd_bodies_mtu72(ctx: &mut Ctx) -> TestResult {
                     id
                 }),
         "from the classic node: {got:02x?} from {from:?}"
+    );
+    Ok(())
+}
+
+/// Body frames and the header's ack of one message between `from` and
+/// `to`, as the FD monitor saw them: (the ack of index 0, each body's FD
+/// flag and length).
+fn bodies_seen(frames: &[Seen], from: u32) -> (Vec<u8>, Vec<(bool, usize)>) {
+    let ack0 = frames
+        .iter()
+        .find(|f| {
+            let (t, dst, _) = f.t_dst_src().unwrap();
+            t == 2 && dst == from && f.data.len() >= 2 && f.data[..2] == [0, 0]
+        })
+        .map(|f| f.data.clone())
+        .unwrap_or_default();
+    let bodies = frames
+        .iter()
+        .filter(|f| {
+            let (t, _, src) = f.t_dst_src().unwrap();
+            t == 1 && src == from
+        })
+        .map(|f| (f.fd, f.data.len()))
+        .collect();
+    (ack0, bodies)
+}
+
+/// Checks that a `len`-byte message went with body size `b`: the header's
+/// ack chose `b` (4-byte ack), every body but the last an FD frame of `b`
+/// bytes.
+fn check_body_size(what: &str, frames: &[Seen], from: u32, len: usize, b: u8) -> TestResult {
+    let (ack0, bodies) = bodies_seen(frames, from);
+    let n = len.div_ceil(usize::from(b));
+    ensure!(
+        ack0 == [0, 0, 0, b],
+        "{what}: the header's ack is {ack0:02x?}, expected 00 00 00 {b:02x}"
+    );
+    ensure!(
+        bodies.len() == n
+            && bodies.iter().all(|(fd, _)| *fd)
+            && bodies[..n - 1].iter().all(|(_, l)| *l == usize::from(b))
+            && bodies[n - 1].1 == fd_len_up(len - usize::from(b) * (n - 1)),
+        "{what}: bodies (FD, length) {bodies:?}, expected {n} FD frames of {b} bytes"
+    );
+    Ok(())
+}
+
+/// DSOR over CAN FD against the independent node (dsor-peer, which reads
+/// the FD extension from dsor-wire.rst alone) on can0 at `mtu 72`: the
+/// kernel's messages reach an FD peer with 64-byte FD bodies, the peer's
+/// messages reach the kernel the same way, a peer that caps the body size
+/// at 16 (`--fd-body 16`) gets 16-byte bodies, and a peer that stays
+/// classic (`--classic`: no CAN_RAW_FD_FRAMES) gets its message after the
+/// kernel falls back to the classic header. Contents checked by hash on
+/// the peer's side and byte for byte on the kernel's; frames on the wire
+/// by a CAN_RAW_FD_FRAMES monitor.
+fn dsor_peer_fd_mtu72(ctx: &mut Ctx) -> TestResult {
+    let idx = dsor_stack(ctx, &PEER_TIMERS)?;
+    ctx.link_down("can0")?;
+    run_ip(&["link", "set", "can0", "mtu", "72"])?;
+    ctx.link_up("can0")?;
+    let mon = fd_monitor(idx)?;
+    let s = sock()?;
+    let segrx = sock()?;
+    segrx
+        .bind(&DsorAddr::Segm {
+            prio: 0,
+            node: PEER,
+            id: DSOR_ID_ANY,
+        })
+        .or_fail("bind segm")?;
+    let peer_node = u32::from(PEER);
+    // Kernel -> FD peer (B 64), then -> a peer capped at 16, then -> a
+    // classic peer (last: the kernel then remembers node 5 as classic).
+    let lens: &[usize] = if debug_kernel() {
+        &[9, 65, 600]
+    } else {
+        &[9, 65, 1000, 4000]
+    };
+    for (mode, b) in [("fd", 64u8), ("fd16", 16), ("classic", 8)] {
+        let lens = if mode == "fd" { lens } else { &[200][..] };
+        let mut args = PEER_ARGS.to_vec();
+        match mode {
+            "fd16" => args.extend(["--fd-body", "16"]),
+            "classic" => args.push("--classic"),
+            _ => {}
+        }
+        let count = lens.len().to_string();
+        args.extend(["recv", "--count", &count, "--timeout-s", "150"]);
+        let rxp = peer(&args)?;
+        thread::sleep(PEER_START);
+        let mut sent = Vec::new();
+        for (j, &len) in lens.iter().enumerate() {
+            let m = pattern(len, j as u64, 3);
+            s.send_to(
+                &m,
+                &DsorAddr::Segm {
+                    prio: 0x11,
+                    node: PEER,
+                    id: 0x200 + j as u32,
+                },
+            )
+            .or_fail(format!("{mode}: segm {len} -> peer"))?;
+            sent.push((len, fnv1a64(&m)));
+            let last = len.div_ceil(usize::from(b)) as u16;
+            let frames = frames_until_last_ack(&mon, 0, peer_node, last)?;
+            let what = format!("{mode} peer, {len} bytes");
+            if b > 8 {
+                check_body_size(&what, &frames, 0, len, b)?;
+            } else {
+                let fd_headers = frames.iter().filter(|f| f.fd).count();
+                let (ack0, bodies) = bodies_seen(&frames, 0);
+                ensure!(
+                    fd_headers == 1
+                        && ack0.len() == 2
+                        && bodies.len() == len.div_ceil(8)
+                        && bodies.iter().all(|(fd, _)| !fd),
+                    "{what}: {fd_headers} FD frames, header ack {ack0:02x?}, bodies {bodies:?}; \
+                     expected one FD header, then the classic header and classic bodies"
+                );
+            }
+        }
+        let lines = peer_output(rxp, mode)?;
+        let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
+        ensure!(
+            rx.len() == sent.len(),
+            "{mode} peer received {} of {} messages: {lines:?}",
+            rx.len(),
+            sent.len()
+        );
+        for (l, (len, sha)) in rx.iter().zip(&sent) {
+            ensure!(
+                field(l, "len=") == Some(&len.to_string())
+                    && field(l, "sha=") == Some(&format!("{sha:016x}")),
+                "{mode} peer line {l}: want len={len} sha={sha:016x}"
+            );
+        }
+        if mode == "fd" {
+            // FD peer -> kernel: the kernel takes 64-byte bodies.
+            let len = if debug_kernel() { 300 } else { 1000 };
+            let mut args = PEER_ARGS.to_vec();
+            let len_s = len.to_string();
+            args.extend([
+                "send",
+                "--to",
+                "0",
+                "--prio",
+                "0x21",
+                "--segm",
+                "0x77",
+                "--len",
+                &len_s,
+                "--count",
+                "2",
+                "--pattern",
+                "5",
+            ]);
+            let txp = peer(&args)?;
+            for j in 0..2u64 {
+                let (got, _) = recv_msg(&segrx)?;
+                let want = pattern(len, j, 5);
+                ensure!(
+                    got == want,
+                    "FD peer -> kernel, message {j}: {}",
+                    how_wrong(&got, &want)
+                );
+                let frames = frames_until_last_ack(&mon, peer_node, 0, len.div_ceil(64) as u16)?;
+                check_body_size("FD peer -> kernel", &frames, peer_node, len, 64)?;
+            }
+            peer_output(txp, "send")?;
+        }
+    }
+    ctx.note(
+        "kernel <-> dsor-peer over CAN FD: B 64 both ways, B 16, classic fallback".to_string(),
     );
     Ok(())
 }
