@@ -21,6 +21,17 @@ fn classic_node(n: u8) -> Node {
     Node::new(Config::new(n))
 }
 
+/// The FD header of a `len`-byte segmented message offering 64.
+fn fd_header(len: u16) -> FdHeader {
+    FdHeader {
+        header: Header {
+            len,
+            kind: Kind::Segm { id: MSG_ID },
+        },
+        b_max: 64,
+    }
+}
+
 /// Moves frames between `a` and `b` until neither sends any; returns
 /// them in bus order with the sender's index.
 fn pump(now: u64, a: &mut Node, b: &mut Node) -> Vec<(usize, Frame)> {
@@ -174,26 +185,13 @@ fn short_messages_use_the_classic_header() {
 
 #[test]
 fn malformed_fd_headers_are_ignored() {
-    let h = FdHeader {
-        header: Header {
-            len: 90,
-            kind: Kind::Segm { id: MSG_ID },
-        },
-        b_max: 64,
-    };
+    let h = fd_header(90);
     let good = h.encode();
     let mut bad_type = good;
     bad_type[8] = 5;
     let mut bad_b = good;
     bad_b[9] = 40;
-    let short = FdHeader {
-        header: Header {
-            len: 8,
-            kind: Kind::Segm { id: MSG_ID },
-        },
-        b_max: 64,
-    }
-    .encode();
+    let short = fd_header(8).encode();
     for bytes in [bad_type, bad_b, short] {
         assert_eq!(FdHeader::decode(&bytes), None);
         let mut rx = fd_node(0x00, 64);
@@ -212,14 +210,7 @@ fn malformed_fd_headers_are_ignored() {
 #[test]
 fn duplicate_fd_header_gets_the_same_4_byte_ack() {
     let mut rx = fd_node(0x00, 32);
-    let h = FdHeader {
-        header: Header {
-            len: 90,
-            kind: Kind::Segm { id: MSG_ID },
-        },
-        b_max: 64,
-    }
-    .encode();
+    let h = fd_header(90).encode();
     rx.on_frame(0, &Frame::new_fd(0x0800_0280, &h));
     let a1 = rx.pop_frame().unwrap();
     let mut h2 = h;
@@ -243,14 +234,7 @@ fn refused_fd_header_is_acked_with_4_bytes() {
         refuse: true,
         ..Config::new(0)
     });
-    let h = FdHeader {
-        header: Header {
-            len: 90,
-            kind: Kind::Segm { id: MSG_ID },
-        },
-        b_max: 64,
-    }
-    .encode();
+    let h = fd_header(90).encode();
     rx.on_frame(0, &Frame::new_fd(0x0800_0280, &h));
     let a = rx.pop_frame().unwrap();
     assert_eq!(a.bytes(), &[0, 0, 1, 8]);

@@ -1049,6 +1049,46 @@ fn field<'a>(line: &'a str, key: &str) -> Option<&'a str> {
     line.split_whitespace().find_map(|w| w.strip_prefix(key))
 }
 
+/// A DSOR socket bound to every segmented message from the peer.
+fn peer_segm_sock() -> Result<DsorSocket, String> {
+    let s = sock()?;
+    s.bind(&DsorAddr::Segm {
+        prio: 0,
+        node: PEER,
+        id: DSOR_ID_ANY,
+    })
+    .or_fail("bind segm")?;
+    Ok(s)
+}
+
+/// `ip link set can0 mtu MTU`, between down and up as users do (the MTU
+/// of a CAN device changes only while it is down).
+fn set_mtu(ctx: &mut Ctx, mtu: u32) -> TestResult {
+    ctx.link_down("can0")?;
+    run_ip(&["link", "set", "can0", "mtu", &mtu.to_string()])?;
+    ctx.link_up("can0")
+}
+
+/// Checks dsor-peer's `RX` lines against the messages sent to it, in
+/// order: (length, FNV-1a hash) each.
+fn peer_received(lines: &[String], sent: &[(usize, u64)], what: &str) -> TestResult {
+    let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
+    ensure!(
+        rx.len() == sent.len(),
+        "{what} received {} of {} messages: {lines:?}",
+        rx.len(),
+        sent.len()
+    );
+    for (l, (len, sha)) in rx.iter().zip(sent) {
+        ensure!(
+            field(l, "len=") == Some(&len.to_string())
+                && field(l, "sha=") == Some(&format!("{sha:016x}")),
+            "{what} line {l}: want len={len} sha={sha:016x}"
+        );
+    }
+    Ok(())
+}
+
 /// The kernel and the independent user-space node exchange segmented and
 /// port messages both ways, once with the peer dropping 20 % of its own
 /// frames (so the kernel sees retransmissions and lost acks).
@@ -1060,14 +1100,7 @@ fn dsor_peer_exchange(ctx: &mut Ctx) -> TestResult {
         port: dsor_port(0, 3),
     })
     .or_fail("bind 0:3")?;
-    let segrx = sock()?;
-    segrx
-        .bind(&DsorAddr::Segm {
-            prio: 0,
-            node: PEER,
-            id: DSOR_ID_ANY,
-        })
-        .or_fail("bind segm")?;
+    let segrx = peer_segm_sock()?;
     for drop_pct in ["0", "20"] {
         // Kernel -> peer: segmented and port messages.
         let count = 6;
@@ -1422,24 +1455,7 @@ fn dsor_sja1000_two_interfaces(ctx: &mut Ctx) -> TestResult {
         .or_fail(format!("{len} bytes can0 -> can1"))?;
         sent.push((len, fnv1a64(&m)));
     }
-    let lines = peer_output(rxp, "recv on can1")?;
-    let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
-    ensure!(
-        rx.len() == sent.len(),
-        "peer received {} of {}: {lines:?}",
-        rx.len(),
-        sent.len()
-    );
-    for (l, (len, sha)) in rx.iter().zip(&sent) {
-        ensure!(
-            field(l, "len=") == Some(&len.to_string()),
-            "peer line {l}: want len {len}"
-        );
-        ensure!(
-            field(l, "sha=") == Some(&format!("{sha:016x}")),
-            "peer line {l}: content differs"
-        );
-    }
+    peer_received(&peer_output(rxp, "recv on can1")?, &sent, "peer")?;
     let r = sock()?;
     r.bind(&DsorAddr::Segm {
         prio: 0,
@@ -2220,9 +2236,7 @@ fn dsor_fd_bodies_mtu72(ctx: &mut Ctx) -> TestResult {
         ctx,
         &["ack_timeout_ms=500", "max_retx=4", "reasm_timeout_ms=3000"],
     )?;
-    ctx.link_down("can0")?;
-    run_ip(&["link", "set", "can0", "mtu", "72"])?;
-    ctx.link_up("can0")?;
+    set_mtu(ctx, 72)?;
     let rx = sock()?;
     let id = 0x1234_5678;
     rx.bind(&DsorAddr::Segm {
@@ -2258,9 +2272,7 @@ fn dsor_fd_bodies_mtu72(ctx: &mut Ctx) -> TestResult {
     }
 
     // mtu 16: classic.
-    ctx.link_down("can0")?;
-    run_ip(&["link", "set", "can0", "mtu", "16"])?;
-    ctx.link_up("can0")?;
+    set_mtu(ctx, 16)?;
     let msg = pattern(1000, 7, 11);
     tx.send_to(&msg, &to)
         .or_fail("sendto 1000 bytes at mtu 16")?;
@@ -2285,9 +2297,7 @@ fn dsor_fd_bodies_mtu72(ctx: &mut Ctx) -> TestResult {
     );
 
     // A classic node 0x20 on the FD interface.
-    ctx.link_down("can0")?;
-    run_ip(&["link", "set", "can0", "mtu", "72"])?;
-    ctx.link_up("can0")?;
+    set_mtu(ctx, 72)?;
     let classic = canraw::open(idx)?;
     let to20 = DsorAddr::Segm {
         prio: 0x40,
@@ -2452,19 +2462,10 @@ fn check_body_size(what: &str, frames: &[Seen], from: u32, len: usize, b: u8) ->
 /// by a CAN_RAW_FD_FRAMES monitor.
 fn dsor_peer_fd_mtu72(ctx: &mut Ctx) -> TestResult {
     let idx = dsor_stack(ctx, &PEER_TIMERS)?;
-    ctx.link_down("can0")?;
-    run_ip(&["link", "set", "can0", "mtu", "72"])?;
-    ctx.link_up("can0")?;
+    set_mtu(ctx, 72)?;
     let mon = fd_monitor(idx)?;
     let s = sock()?;
-    let segrx = sock()?;
-    segrx
-        .bind(&DsorAddr::Segm {
-            prio: 0,
-            node: PEER,
-            id: DSOR_ID_ANY,
-        })
-        .or_fail("bind segm")?;
+    let segrx = peer_segm_sock()?;
     let peer_node = u32::from(PEER);
     // Kernel -> FD peer (B 64), then -> a peer capped at 16, then -> a
     // classic peer (last: the kernel then remembers node 5 as classic).
@@ -2516,21 +2517,7 @@ fn dsor_peer_fd_mtu72(ctx: &mut Ctx) -> TestResult {
                 );
             }
         }
-        let lines = peer_output(rxp, mode)?;
-        let rx: Vec<&String> = lines.iter().filter(|l| l.starts_with("RX ")).collect();
-        ensure!(
-            rx.len() == sent.len(),
-            "{mode} peer received {} of {} messages: {lines:?}",
-            rx.len(),
-            sent.len()
-        );
-        for (l, (len, sha)) in rx.iter().zip(&sent) {
-            ensure!(
-                field(l, "len=") == Some(&len.to_string())
-                    && field(l, "sha=") == Some(&format!("{sha:016x}")),
-                "{mode} peer line {l}: want len={len} sha={sha:016x}"
-            );
-        }
+        peer_received(&peer_output(rxp, mode)?, &sent, &format!("{mode} peer"))?;
         if mode == "fd" {
             // FD peer -> kernel: the kernel takes 64-byte bodies.
             let len = if debug_kernel() { 300 } else { 1000 };
