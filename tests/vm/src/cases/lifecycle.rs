@@ -140,6 +140,7 @@ fn rmmod_loop_under_traffic(ctx: &mut Ctx) -> TestResult {
         rx.set_rcvtimeo(Duration::from_millis(100))
             .or_fail("SO_RCVTIMEO")?;
         let stop = AtomicBool::new(false);
+        let sent_ok = AtomicUsize::new(0);
         let (sent, received) = thread::scope(|sc| -> Result<(Tally, Tally), String> {
             let _stop = OnDrop(|| stop.store(true, Ordering::SeqCst));
             let sender = sc.spawn(|| {
@@ -147,6 +148,9 @@ fn rmmod_loop_under_traffic(ctx: &mut Ctx) -> TestResult {
                 let mut i = 0u32;
                 while !stop.load(Ordering::SeqCst) {
                     let r = tx.send_to(&i.to_le_bytes(), arb_std(i & 0x7FF, false), idx);
+                    if r.is_ok() {
+                        sent_ok.fetch_add(1, Ordering::SeqCst);
+                    }
                     *t.entry(r.err().map_or(0, |e| errno_of(&e))).or_default() += 1;
                     i = i.wrapping_add(1);
                 }
@@ -160,6 +164,11 @@ fn rmmod_loop_under_traffic(ctx: &mut Ctx) -> TestResult {
                 }
                 t
             });
+            // Traffic first (on a loaded debug kernel a new thread may take
+            // longer than any fixed sleep to send its first frame).
+            wait_for(Duration::from_secs(30), "the first frame sent", || {
+                Ok((sent_ok.load(Ordering::SeqCst) > 0).then_some(()))
+            })?;
             thread::sleep(Duration::from_millis(100));
             let rm = ctx.rmmod(Module::Loop);
             thread::sleep(Duration::from_millis(100));
