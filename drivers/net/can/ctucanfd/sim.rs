@@ -72,9 +72,10 @@ use kernel::c_str;
 pub(crate) const RX_WORDS: usize = 256;
 /// The core clock (as on the PCI card).
 const CLOCK_HZ: u32 = 100_000_000;
-/// Most deliveries of one frame to one core under the `overrun` fault
-/// (more than its RX buffer holds).
-const OVERRUN_COPIES: usize = 64;
+/// Most deliveries of one frame to one core under the `overrun` fault:
+/// one more than its RX buffer holds of the smallest frame (4 words), so
+/// each frame overruns an empty buffer once.
+const OVERRUN_COPIES: usize = RX_WORDS / 4 + 1;
 
 /// Module parameter `cards` (number 0 in sim_c.c).
 const CARDS: Param<u32> = Param::new(0);

@@ -7,6 +7,7 @@ mod candev_err;
 mod canutils;
 mod capture;
 mod ctucanfd;
+mod ctucanfd_sim;
 mod daemons;
 mod dsor;
 mod errors;
@@ -186,6 +187,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         netns::OURS,
         fd::TESTS,
         robust::OURS,
+        ctucanfd_sim::TESTS,
     ]
     .into_iter()
     .flatten()
