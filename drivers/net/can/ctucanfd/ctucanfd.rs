@@ -72,7 +72,9 @@
 //! restart`) drops the frames in the TX buffers (`tx_dropped`), sends
 //! `CAN_ERR_RESTARTED` and starts the core again. QEMU's model has no
 //! fault confinement (FAULT_STATE and the counters read 0, no error
-//! interrupt but the data overrun): the state stays error active there.
+//! interrupt but the data overrun): the state stays error active there;
+//! the simulated cores of `rcan_ctucanfd_sim` (`sim.rs`) have it, and
+//! run this driver unchanged.
 //! See Documentation/networking/rcan/ctucanfd.rst.
 #![forbid(unsafe_code)]
 
