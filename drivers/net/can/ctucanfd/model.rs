@@ -101,7 +101,6 @@ const BEI: u32 = 1 << 6;
 const FAULT_ERA: u32 = 1 << 16;
 const FAULT_ERP: u32 = 1 << 17;
 const FAULT_BOF: u32 = 1 << 18;
-const FAULT_MASK: u32 = 0x7 << 16;
 const TXBHCI: u32 = 1 << 11;
 
 /// MODE bits of the transmitter.
