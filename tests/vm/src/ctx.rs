@@ -780,7 +780,8 @@ mod tests {
                 "rcan_i82527_sim",
                 "rcan_i82527_isa",
                 "rcan_sja1000_sim",
-                "rcan_ctucanfd_pci"
+                "rcan_ctucanfd_pci",
+                "rcan_ctucanfd_sim"
             ]
         );
         assert_eq!(
