@@ -121,6 +121,13 @@ pub(crate) trait SimBus: Sized + Send + 'static {
     fn card_irq(card: &Self::Card) -> bool;
     /// Logs the bus's statistics at module exit. Process context.
     fn report(&self);
+    /// The bus of `cards` cards on the heap (module init). By default
+    /// [`SimBus::new`] boxed; a bus whose models are too large to be
+    /// built on the stack (the CTU CAN FD core's RX buffer) allocates
+    /// them here instead. Process context.
+    fn alloc(cards: usize) -> Result<KBox<Self>> {
+        Ok(KBox::new(Self::new(cards), GFP_KERNEL)?)
+    }
 }
 
 /// The simulated cards of a front-end, on one bus: a `static` of the
@@ -185,6 +192,24 @@ impl<B: SimBus> SimCards<B> {
         }
     }
 
+    /// Runs `f` on the bus under the bus lock; `None` outside the
+    /// module's lifetime. For a front-end whose registers are wider than
+    /// [`SimCards::read`]'s bytes (the CTU CAN FD core's 32-bit words):
+    /// it reads and writes its models here and calls
+    /// [`SimCards::request_tx`] for a write that requests a
+    /// transmission. Any context that may take the bus lock (the
+    /// driver's, under its chip lock); `f` must not sleep.
+    pub(crate) fn with_bus<T>(&'static self, f: impl FnOnce(&mut B) -> T) -> Option<T> {
+        self.bus.lock().as_mut().map(|b| f(b))
+    }
+
+    /// A register write through [`SimCards::with_bus`] requested a
+    /// transmission: runs the bus now. Any context; not under the bus
+    /// lock.
+    pub(crate) fn request_tx(&'static self) {
+        self.kick();
+    }
+
     /// Runs the bus now (unless the module is going away). Any context.
     fn kick(&'static self) {
         if !self.dying.load(Ordering::SeqCst) {
@@ -220,7 +245,7 @@ impl<B: SimBus> SimCards<B> {
         n: usize,
         mut add: impl FnMut(usize) -> Result<Option<B::Card>>,
     ) -> Result {
-        let bus = KBox::new(B::new(n), GFP_KERNEL)?;
+        let bus = B::alloc(n)?;
         *self.bus.lock() = Some(bus);
         self.timer
             .init(ClockId::Monotonic, HrTimerMode::RelativeSoft, ())?;

@@ -16,6 +16,8 @@ pub(crate) use crate::rcan_core::{arb, bittiming, candev, filter, frame, rxtable
 
 #[path = "ctucanfd/chip.rs"]
 pub(crate) mod ctucanfd;
+#[path = "ctucanfd/model.rs"]
+pub(crate) mod ctucanfd_model;
 #[path = "i82527/chip.rs"]
 pub(crate) mod i82527;
 #[path = "i82527/model.rs"]

@@ -87,11 +87,13 @@ pub enum Module {
     Sja1000Sim,
     /// CTU CAN FD driver for the CTU CAN FD PCI card (QEMU `ctucan_pci`).
     CtuCanFdPci,
+    /// Simulated CTU CAN FD cores on a simulated bus, with fault injection.
+    CtuCanFdSim,
 }
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 18] = [
+    pub const ALL: [Module; 19] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
@@ -110,6 +112,7 @@ impl Module {
         Module::I82527Isa,
         Module::Sja1000Sim,
         Module::CtuCanFdPci,
+        Module::CtuCanFdSim,
     ];
 
     /// Name as shown by `/proc/modules` and taken by `rmmod`.
@@ -133,6 +136,7 @@ impl Module {
             Module::I82527Isa => "rcan_i82527_isa",
             Module::Sja1000Sim => "rcan_sja1000_sim",
             Module::CtuCanFdPci => "rcan_ctucanfd_pci",
+            Module::CtuCanFdSim => "rcan_ctucanfd_sim",
         }
     }
 
@@ -157,6 +161,7 @@ impl Module {
             Module::I82527Isa => "drivers/net/can/i82527/rcan_i82527_isa.ko",
             Module::Sja1000Sim => "drivers/net/can/sja1000/rcan_sja1000_sim.ko",
             Module::CtuCanFdPci => "drivers/net/can/ctucanfd/rcan_ctucanfd_pci.ko",
+            Module::CtuCanFdSim => "drivers/net/can/ctucanfd/rcan_ctucanfd_sim.ko",
         }
     }
 }
@@ -295,6 +300,7 @@ impl Ctx {
             Module::I82527Sim,
             Module::I82527Isa,
             Module::CtuCanFdPci,
+            Module::CtuCanFdSim,
         ];
         if needs_dev.contains(&m) && !self.is_loaded(Module::Dev) {
             self.insmod(Module::Dev, &[])?;
@@ -774,7 +780,8 @@ mod tests {
                 "rcan_i82527_sim",
                 "rcan_i82527_isa",
                 "rcan_sja1000_sim",
-                "rcan_ctucanfd_pci"
+                "rcan_ctucanfd_pci",
+                "rcan_ctucanfd_sim"
             ]
         );
         assert_eq!(

@@ -15,12 +15,30 @@
 //! bit-timing registers (stored; QEMU ignores them), four TX buffers with
 //! the TX_COMMAND state changes and the priority the core sends by, the
 //! RX buffer as a ring of words with RX_DATA popping one word per read,
-//! the frame counters, data overrun, and YOLO. Fault confinement is not
-//! modelled (as in QEMU: FAULT_STATE reads 0, the counters 0).
+//! the frame counters, data overrun, and YOLO.
 //!
-//! The model is not a bus: the caller (a test) asks a core to send its
-//! highest-priority ready buffer with [`CtuModel::transmit`] and offers
-//! frames with [`CtuModel::deliver`]. The frame (de)coding here is
+//! Beyond QEMU (whose core has no fault confinement: FAULT_STATE and the
+//! counters read 0 there), fault confinement as the CTU CAN FD datasheet
+//! describes it: the 9-bit error counters REC and TEC (a failed
+//! transmission +8, a missing acknowledgement while error passive not
+//! counted, a frame sent -1, a frame received -1 or from above 127 back
+//! to 119), the error warning limit EWL (reset value 96) and error-passive
+//! limit ERP (128) in the EWL word, FAULT_STATE (ERA, ERP, BOF) from
+//! them, bus-off when TEC passes 255. Interrupts: EWLI when a counter
+//! crosses the warning limit (either way, as the SJA1000's EI), FCSI at
+//! each fault confinement state change, BEI at each bus error with its
+//! type and position in ERR_CAPT, ALI with the bit in ALC, DOI as before;
+//! the retransmit counter (RETR_CTR) and the retransmit limit (RTRLE,
+//! RTRTH: a frame that fails more than RTRTH times goes to TX failed).
+//! Bus-off moves every ready TX buffer to TX failed and takes the core
+//! off the bus (it sends, receives and acknowledges nothing) until a soft
+//! reset (the driver's restart) or an ERCRST command (here at once: the
+//! model has no bus time for the 128 recessive sequences).
+//!
+//! The model is not a bus: the caller (a test, or the simulated card
+//! `rcan_ctucanfd_sim`) asks a core to make one attempt to send its
+//! highest-priority ready buffer under a named [`Fault`] with
+//! [`CtuModel::transmit`] and offers frames with [`CtuModel::deliver`]. The frame (de)coding here is
 //! written from the datasheet's field table on its own, not with
 //! [`super::ctucanfd::encode`], so the tests compare two readings of it.
 
@@ -28,7 +46,9 @@ use super::ctucanfd::{reg, DEVICE_ID, YOLO_VALUE};
 
 /// RX buffer size in bytes (QEMU's `CTUCAN_RCV_BUF_LEN`).
 pub const RX_BUF_BYTES: usize = 8192;
-const RX_WORDS: usize = RX_BUF_BYTES / 4;
+/// RX buffer size in words of [`CtuModel`]'s default core (the RX buffer
+/// size is a synthesis parameter of the core; RX_MEM_INFO reports it).
+pub const RX_WORDS: usize = RX_BUF_BYTES / 4;
 /// TX buffers of the modelled core (as QEMU's).
 pub const TXT_BUFFERS: usize = 4;
 /// Words of one TX buffer.
@@ -79,8 +99,116 @@ const BEI: u32 = 1 << 6;
 
 /// FAULT_STATE bits of the EWL word.
 const FAULT_ERA: u32 = 1 << 16;
-const FAULT_MASK: u32 = 0x7 << 16;
+const FAULT_ERP: u32 = 1 << 17;
+const FAULT_BOF: u32 = 1 << 18;
 const TXBHCI: u32 = 1 << 11;
+
+/// MODE bits of the transmitter.
+const MODE_BMM: u32 = 1 << 1;
+const MODE_STM: u32 = 1 << 2;
+const MODE_RTRLE: u32 = 1 << 16;
+const RTRTH_SHIFT: u32 = 17;
+/// COMMAND ERCRST: error counters reset (leaves bus-off).
+const CMD_ERCRST: u32 = 1 << 4;
+
+/// ERR_CAPT's ERR_TYPE (bits 7..5): the kind of a bus error.
+pub mod err_type {
+    /// Bit error.
+    pub const BIT: u8 = 0;
+    /// CRC error.
+    pub const CRC: u8 = 1;
+    /// Form error.
+    pub const FORM: u8 = 2;
+    /// Acknowledgement error.
+    pub const ACK: u8 = 3;
+    /// Stuff error.
+    pub const STUFF: u8 = 4;
+}
+
+/// ERR_CAPT's ERR_POS (bits 4..0): where in the frame a bus error was.
+pub mod err_pos {
+    /// Start of frame.
+    pub const SOF: u8 = 0;
+    /// Arbitration field.
+    pub const ARB: u8 = 1;
+    /// Control field.
+    pub const CTRL: u8 = 2;
+    /// Data field.
+    pub const DATA: u8 = 3;
+    /// CRC field.
+    pub const CRC: u8 = 4;
+    /// Acknowledgement field.
+    pub const ACK: u8 = 5;
+    /// End of frame.
+    pub const EOF: u8 = 6;
+}
+
+/// The ERR_CAPT byte of a bus error of type `ty` ([`err_type`]) at
+/// position `pos` ([`err_pos`]).
+pub const fn err_capt(ty: u8, pos: u8) -> u8 {
+    (ty & 0x7) << 5 | (pos & 0x1F)
+}
+
+/// ALC_ID_FIELD of an arbitration lost in the base identifier.
+const ALC_BASE_ID: u32 = 1;
+
+/// What happens on the bus during one transmission attempt
+/// ([`CtuModel::transmit`]).
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub enum Fault {
+    /// Nothing: the frame goes out if some node acknowledges it.
+    #[default]
+    None,
+    /// No node acknowledges (as when the core is alone on the bus).
+    NoAck,
+    /// The attempt ends in a bus error whose ERR_CAPT byte is `capt`
+    /// (see [`err_capt`]).
+    BusError {
+        /// ERR_TYPE and ERR_POS.
+        capt: u8,
+    },
+    /// The core loses arbitration at bit `bit` (0..31, ALC_BIT) of the
+    /// base identifier on the first attempt of each frame, and retries.
+    ArbitrationLost {
+        /// The bit position ALC_BIT reports.
+        bit: u8,
+    },
+}
+
+/// What one transmission attempt came to.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum TxAttempt {
+    /// Nothing to send (or not allowed to: disabled, bus monitoring,
+    /// bus-off).
+    Idle,
+    /// The frame is on the bus (deliver it to the other nodes).
+    Sent(BusFrame),
+    /// The attempt failed (bus error or arbitration lost); the core
+    /// retries unless the retransmit limit is reached or it went
+    /// bus-off.
+    Failed,
+}
+
+impl TxAttempt {
+    /// The frame sent, if one was.
+    pub fn sent(self) -> Option<BusFrame> {
+        match self {
+            TxAttempt::Sent(f) => Some(f),
+            _ => None,
+        }
+    }
+}
+
+/// Fault confinement state (FAULT_STATE).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Confinement {
+    /// Error active (ERA).
+    Active,
+    /// Error passive (ERP).
+    Passive,
+    /// Bus-off (BOF): off the bus until a reset or ERCRST.
+    BusOff,
+}
 
 const ST_RXNE: u32 = 1;
 const ST_DOR: u32 = 2;
@@ -93,8 +221,9 @@ const TXT_ERR: u32 = 0x6;
 const TXT_ABT: u32 = 0x7;
 const TXT_ETY: u32 = 0x8;
 
-/// One modelled core.
-pub struct CtuModel {
+/// One modelled core with an RX buffer of `RXW` words (a synthesis
+/// parameter of the core; [`RX_WORDS`] by default, as QEMU's).
+pub struct CtuModel<const RXW: usize = RX_WORDS> {
     mode: u32,
     status: u32,
     int_stat: u32,
@@ -105,7 +234,7 @@ pub struct CtuModel {
     tx_status: u32,
     tx_priority: u32,
     txtb: [[u32; TXTB_WORDS]; TXT_BUFFERS],
-    rx: [u32; RX_WORDS],
+    rx: [u32; RXW],
     /// Word index of the next word to read.
     rx_tail: usize,
     /// Words buffered.
@@ -116,14 +245,31 @@ pub struct CtuModel {
     rxfrc: u32,
     rx_fr_ctr: u32,
     tx_fr_ctr: u32,
-    /// Injected EWL word (limits, FAULT_STATE); 0 as on QEMU.
-    ewl: u32,
-    /// Injected REC/TEC word.
-    rec_tec: u32,
-    /// Injected ERR_CAPT.
+    /// Error warning limit (EWL bits 7..0).
+    ewl_limit: u8,
+    /// Error passive limit (EWL bits 15..8).
+    erp_limit: u8,
+    /// Receive and transmit error counters (9 bits each).
+    rec: u16,
+    tec: u16,
+    /// Fault confinement state.
+    conf: Confinement,
+    /// An EWL word injected by [`CtuModel::set_fault`], read instead of
+    /// the modelled one until the next reset.
+    ewl_pinned: Option<u32>,
+    /// ERR_CAPT (7..0, the last bus error) and ALC (23..16).
     err_capt: u32,
+    /// Retransmit counter of the frame being sent.
+    retr: u32,
+    /// Which TX buffers' frames have lost arbitration once
+    /// ([`Fault::ArbitrationLost`]).
+    lost_once: [bool; TXT_BUFFERS],
     /// Register accesses since creation (reads, writes).
     pub accesses: (u64, u64),
+    /// Frames sent and transmission attempts failed since creation.
+    pub sent: u64,
+    /// See `sent`.
+    pub tx_failed: u64,
 }
 
 impl Default for CtuModel {
@@ -133,8 +279,15 @@ impl Default for CtuModel {
 }
 
 impl CtuModel {
-    /// A core after power-on.
+    /// A core after power-on, with QEMU's RX buffer size.
     pub fn new() -> Self {
+        Self::with_rx_words()
+    }
+}
+
+impl<const RXW: usize> CtuModel<RXW> {
+    /// A core after power-on whose RX buffer holds `RXW` words.
+    pub fn with_rx_words() -> Self {
         let mut m = CtuModel {
             mode: 0,
             status: 0,
@@ -146,17 +299,25 @@ impl CtuModel {
             tx_status: 0,
             tx_priority: 0,
             txtb: [[0; TXTB_WORDS]; TXT_BUFFERS],
-            rx: [0; RX_WORDS],
+            rx: [0; RXW],
             rx_tail: 0,
             rx_cnt: 0,
             rx_frame_rem: 0,
             rxfrc: 0,
             rx_fr_ctr: 0,
             tx_fr_ctr: 0,
-            ewl: 0,
-            rec_tec: 0,
+            ewl_limit: 96,
+            erp_limit: 128,
+            rec: 0,
+            tec: 0,
+            conf: Confinement::Active,
+            ewl_pinned: None,
             err_capt: 0,
+            retr: 0,
+            lost_once: [false; TXT_BUFFERS],
             accesses: (0, 0),
+            sent: 0,
+            tx_failed: 0,
         };
         m.hw_reset();
         m
@@ -178,25 +339,129 @@ impl CtuModel {
         self.int_mask = 0;
         self.rx_fr_ctr = 0;
         self.tx_fr_ctr = 0;
-        self.rec_tec = 0;
-        if self.ewl & FAULT_MASK != 0 {
-            self.ewl = (self.ewl & !FAULT_MASK) | FAULT_ERA;
-        }
+        // Fault confinement starts over: error active, counters 0, the
+        // limits at their reset values.
+        self.ewl_limit = 96;
+        self.erp_limit = 128;
+        self.rec = 0;
+        self.tec = 0;
+        self.conf = Confinement::Active;
+        self.ewl_pinned = None;
+        self.err_capt = 0;
+        self.retr = 0;
+        self.lost_once = [false; TXT_BUFFERS];
     }
 
     /// Fault injection: the EWL word (`ewl_word`: warning limit in bits
-    /// 7..0, FAULT_STATE bits 18..16) and the error counters the core
-    /// reports from now on. Raises nothing: see [`CtuModel::raise_error`].
+    /// 7..0, FAULT_STATE bits 18..16, all 0 as QEMU's core reads it) the
+    /// core reports until its next reset, and the error counters. Raises
+    /// nothing: see [`CtuModel::raise_error`]. Fault confinement follows
+    /// the injected state (bus-off included) from then on.
     pub fn set_fault(&mut self, ewl_word: u32, rec: u16, tec: u16) {
-        self.ewl = ewl_word;
-        self.rec_tec = u32::from(rec & 0x1FF) | u32::from(tec & 0x1FF) << 16;
+        self.ewl_pinned = Some(ewl_word);
+        self.rec = rec & 0x1FF;
+        self.tec = tec & 0x1FF;
+        self.conf = if ewl_word & FAULT_BOF != 0 {
+            Confinement::BusOff
+        } else if ewl_word & FAULT_ERP != 0 {
+            Confinement::Passive
+        } else {
+            Confinement::Active
+        };
+    }
+
+    /// The fault confinement state.
+    pub fn confinement(&self) -> Confinement {
+        self.conf
+    }
+
+    /// (REC, TEC).
+    pub fn error_counters(&self) -> (u16, u16) {
+        (self.rec, self.tec)
+    }
+
+    /// Whether this core acknowledges frames on the bus: enabled, not
+    /// bus-off, not in bus monitoring (listen-only) mode.
+    pub fn acks(&self) -> bool {
+        self.enabled() && self.conf != Confinement::BusOff && self.mode & MODE_BMM == 0
+    }
+
+    /// Whether a TX buffer is ready (the core has something to send).
+    pub fn tx_pending(&self) -> bool {
+        (0..TXT_BUFFERS).any(|i| (self.tx_status >> (4 * i)) & 0xF == TXT_RDY)
+    }
+
+    fn warning(&self) -> bool {
+        let l = u16::from(self.ewl_limit);
+        self.rec >= l || self.tec >= l
+    }
+
+    /// Changes the counters with `f` and raises EWLI and FCSI for what
+    /// that changed (not out of bus-off: only a reset or ERCRST leaves
+    /// it).
+    fn counters(&mut self, f: impl FnOnce(&mut Self)) {
+        let warn = self.warning();
+        f(self);
+        self.rec = self.rec.min(0x1FF);
+        self.tec = self.tec.min(0x1FF);
+        if self.warning() != warn {
+            self.raise(EWLI);
+        }
+        if self.conf == Confinement::BusOff {
+            return;
+        }
+        let next = if self.tec > 255 {
+            Confinement::BusOff
+        } else if self.rec >= u16::from(self.erp_limit) || self.tec >= u16::from(self.erp_limit) {
+            Confinement::Passive
+        } else {
+            Confinement::Active
+        };
+        if next != self.conf {
+            self.conf = next;
+            self.raise(FCSI);
+            if next == Confinement::BusOff {
+                self.enter_bus_off();
+            }
+        }
+    }
+
+    /// Bus-off: every ready TX buffer goes to TX failed (TXBHCI); the
+    /// core stays off the bus until a reset or ERCRST.
+    fn enter_bus_off(&mut self) {
+        let mut changed = false;
+        for i in 0..TXT_BUFFERS {
+            if (self.tx_status >> (4 * i)) & 0xF == TXT_RDY {
+                self.tx_status = (self.tx_status & !(0xF << (4 * i))) | TXT_ERR << (4 * i);
+                changed = true;
+            }
+        }
+        self.retr = 0;
+        if changed {
+            self.raise(TXBHCI);
+        }
+        self.update_txnf();
+    }
+
+    /// The EWL word the core reads: limits and FAULT_STATE.
+    fn ewl_word(&self) -> u32 {
+        if let Some(w) = self.ewl_pinned {
+            return w;
+        }
+        let fs = match self.conf {
+            Confinement::Active => FAULT_ERA,
+            Confinement::Passive => FAULT_ERP,
+            Confinement::BusOff => FAULT_BOF,
+        };
+        u32::from(self.ewl_limit) | u32::from(self.erp_limit) << 8 | fs
     }
 
     /// Fault injection: latches the error interrupt causes `ints` (of
     /// EWLI, FCSI, ALI, BEI; masked ones are not latched) and sets
     /// ERR_CAPT to `err_capt`, as the core does on such an event.
     pub fn raise_error(&mut self, ints: u32, err_capt: u32) {
-        self.err_capt = err_capt;
+        self.err_capt = err_capt & 0x00FF_00FF;
+        self.retr = (err_capt >> 8) & 0xF;
         self.raise(ints & (EWLI | FCSI | ALI | BEI));
         self.update_irq();
     }
@@ -252,14 +517,14 @@ impl CtuModel {
             reg::INT_MASK_SET | reg::INT_MASK_CLR => self.int_mask,
             reg::BTR => self.btr,
             reg::BTR_FD => self.btr_fd,
-            reg::RX_MEM_INFO => (RX_WORDS as u32) | (((RX_WORDS - self.rx_cnt) as u32) << 16),
+            reg::RX_MEM_INFO => (RXW as u32) | (((RXW - self.rx_cnt) as u32) << 16),
             reg::RX_POINTERS => {
-                let head = (self.rx_tail + self.rx_cnt) % RX_WORDS;
+                let head = (self.rx_tail + self.rx_cnt) % RXW;
                 (head as u32 * 4) | ((self.rx_tail as u32 * 4) << 16)
             }
             reg::RX_STATUS => {
                 let rxe = u32::from(self.rxfrc == 0);
-                let rxf = u32::from(self.rx_cnt == RX_WORDS) << 1;
+                let rxf = u32::from(self.rx_cnt == RXW) << 1;
                 rxe | rxf | (self.rxfrc & 0x7FF) << 4
             }
             reg::RX_DATA => self.pop_rx(),
@@ -268,9 +533,9 @@ impl CtuModel {
             reg::RX_FR_CTR => self.rx_fr_ctr,
             reg::TX_FR_CTR => self.tx_fr_ctr,
             reg::YOLO => YOLO_VALUE,
-            reg::EWL => self.ewl,
-            reg::REC => self.rec_tec,
-            reg::ERR_CAPT => self.err_capt,
+            reg::EWL => self.ewl_word(),
+            reg::REC => u32::from(self.rec) | u32::from(self.tec) << 16,
+            reg::ERR_CAPT => self.err_capt | (self.retr & 0xF) << 8,
             _ => 0,
         }
     }
@@ -291,7 +556,7 @@ impl CtuModel {
                 self.status &= !ST_RXNE;
             }
         }
-        self.rx_tail = (self.rx_tail + 1) % RX_WORDS;
+        self.rx_tail = (self.rx_tail + 1) % RXW;
         v
     }
 
@@ -330,6 +595,18 @@ impl CtuModel {
                 if val & (1 << 6) != 0 {
                     self.tx_fr_ctr = 0;
                 }
+                if val & CMD_ERCRST != 0 && self.conf == Confinement::BusOff {
+                    // Reintegration (128 x 11 recessive bits) takes no
+                    // time here.
+                    self.rec = 0;
+                    self.tec = 0;
+                    self.conf = Confinement::Active;
+                    self.raise(FCSI | EWLI);
+                }
+            }
+            reg::EWL => {
+                self.ewl_limit = val as u8;
+                self.erp_limit = (val >> 8) as u8;
             }
             reg::INT_STAT => self.int_stat &= !val,
             reg::INT_ENA_SET => self.int_ena |= val & 0xFFF,
@@ -349,6 +626,7 @@ impl CtuModel {
                     }
                     if val & 2 != 0 && matches!(st, TXT_TOK | TXT_ERR | TXT_ABT | TXT_ETY) {
                         st = TXT_RDY;
+                        self.lost_once[i] = false;
                     }
                     if val & 1 != 0 && matches!(st, TXT_TOK | TXT_ERR | TXT_ABT) {
                         st = TXT_ETY;
@@ -363,14 +641,28 @@ impl CtuModel {
         self.update_irq();
     }
 
-    /// Sends the ready TX buffer of highest priority (the lowest-numbered
-    /// one among equals, as QEMU scans), if the core is enabled: marks it
-    /// done, counts it and raises TXI and TXBHCI. QEMU does this within
-    /// the TX_COMMAND write; a test calls it when it wants the bus to
-    /// move.
-    pub fn transmit(&mut self) -> Option<BusFrame> {
-        if !self.enabled() {
-            return None;
+    /// One attempt to send the ready TX buffer of highest priority (the
+    /// lowest-numbered one among equals, as QEMU scans) with `fault` on
+    /// the bus and `acked` telling whether another node acknowledges
+    /// (self-test mode, STM, needs none). Nothing is sent while the core
+    /// is disabled, in bus monitoring mode or bus-off.
+    ///
+    /// * Sent: the buffer goes to TX OK, TX_FR_CTR counts, TXI and TXBHCI,
+    ///   TEC -1.
+    /// * Bus error (the fault's, or an acknowledgement error without
+    ///   acknowledgement): ERR_CAPT captures it, BEI, TEC +8 (a missing
+    ///   acknowledgement while error passive counts nothing); past 255
+    ///   bus-off. The retransmit counter counts; with RTRLE a frame that
+    ///   failed more than RTRTH times goes to TX failed (TXBHCI).
+    /// * Arbitration lost (the first attempt of each frame under
+    ///   [`Fault::ArbitrationLost`]): ALC captures the bit, ALI; no
+    ///   counter moves but the retransmit counter.
+    ///
+    /// QEMU sends within the TX_COMMAND write; a test (or the simulated
+    /// card's bus) calls this when it wants the bus to move.
+    pub fn transmit(&mut self, fault: Fault, acked: bool) -> TxAttempt {
+        if !self.enabled() || self.conf == Confinement::BusOff || self.mode & MODE_BMM != 0 {
+            return TxAttempt::Idle;
         }
         let mut best: Option<(usize, u32)> = None;
         for i in 0..TXT_BUFFERS {
@@ -382,14 +674,64 @@ impl CtuModel {
                 best = Some((i, prio));
             }
         }
-        let (i, _) = best?;
+        let Some((i, _)) = best else {
+            return TxAttempt::Idle;
+        };
+        let self_test = self.mode & MODE_STM != 0;
+        let capt = match fault {
+            Fault::ArbitrationLost { bit } if !self.lost_once[i] => {
+                self.lost_once[i] = true;
+                self.err_capt =
+                    (self.err_capt & 0xFF) | (u32::from(bit & 0x1F) | ALC_BASE_ID << 5) << 16;
+                self.raise(ALI);
+                self.tx_failed += 1;
+                self.retry_or_fail(i);
+                self.update_irq();
+                return TxAttempt::Failed;
+            }
+            Fault::BusError { capt } => Some(capt),
+            Fault::NoAck if !self_test => Some(err_capt(err_type::ACK, err_pos::ACK)),
+            _ if !acked && !self_test => Some(err_capt(err_type::ACK, err_pos::ACK)),
+            _ => None,
+        };
+        if let Some(capt) = capt {
+            self.tx_failed += 1;
+            self.err_capt = (self.err_capt & 0x00FF_0000) | u32::from(capt);
+            self.raise(BEI);
+            let ack_err = capt == err_capt(err_type::ACK, err_pos::ACK);
+            if !(ack_err && self.conf == Confinement::Passive) {
+                self.counters(|m| m.tec += 8);
+            }
+            if self.conf != Confinement::BusOff {
+                self.retry_or_fail(i);
+            }
+            self.update_irq();
+            return TxAttempt::Failed;
+        }
         let f = Self::from_words(&self.txtb[i]);
         self.tx_fr_ctr = self.tx_fr_ctr.wrapping_add(1);
+        self.sent += 1;
+        self.retr = 0;
+        self.counters(|m| m.tec = m.tec.saturating_sub(1));
         self.raise(TXI | TXBHCI);
         self.tx_status = (self.tx_status & !(0xF << (4 * i))) | TXT_TOK << (4 * i);
         self.update_txnf();
         self.update_irq();
-        Some(f)
+        TxAttempt::Sent(f)
+    }
+
+    /// After a failed attempt of buffer `i`: the retransmit counter
+    /// counts; past the limit (RTRLE, RTRTH) the buffer goes to TX failed.
+    fn retry_or_fail(&mut self, i: usize) {
+        let limit = (self.mode >> RTRTH_SHIFT) & 0xF;
+        if self.mode & MODE_RTRLE != 0 && self.retr >= limit {
+            self.retr = 0;
+            self.tx_status = (self.tx_status & !(0xF << (4 * i))) | TXT_ERR << (4 * i);
+            self.raise(TXBHCI);
+            self.update_txnf();
+        } else {
+            self.retr = (self.retr + 1).min(0xF);
+        }
     }
 
     fn from_words(w: &[u32; TXTB_WORDS]) -> BusFrame {
@@ -420,16 +762,22 @@ impl CtuModel {
         }
     }
 
-    /// Offers a frame from the bus. An enabled core stores it (RXI, and
-    /// RXFI when the buffer is full afterwards) or, without room, drops
-    /// it with a data overrun (DOR, DOI). Returns whether it was stored.
+    /// Offers a frame from the bus. An enabled core that is not bus-off
+    /// counts a frame received without error (REC -1, or back to 119
+    /// from above 127; not in bus monitoring mode) and stores it (RXI,
+    /// and RXFI when the buffer is full afterwards) or, without room,
+    /// drops it with a data overrun (DOR, DOI). Returns whether it was
+    /// stored.
     pub fn deliver(&mut self, f: &BusFrame) -> bool {
-        if !self.enabled() {
+        if !self.enabled() || self.conf == Confinement::BusOff {
             return false;
+        }
+        if self.mode & MODE_BMM == 0 && self.rec != 0 {
+            self.counters(|m| m.rec = if m.rec > 127 { 119 } else { m.rec - 1 });
         }
         let data_words = usize::from(f.len).div_ceil(4);
         let words = 4 + data_words;
-        if self.rx_cnt + words > RX_WORDS {
+        if self.rx_cnt + words > RXW {
             self.status |= ST_DOR;
             self.raise(DOI);
             self.update_irq();
@@ -468,14 +816,14 @@ impl CtuModel {
             ]);
         }
         for w in &img[..words] {
-            self.rx[(self.rx_tail + self.rx_cnt) % RX_WORDS] = *w;
+            self.rx[(self.rx_tail + self.rx_cnt) % RXW] = *w;
             self.rx_cnt += 1;
         }
         self.rxfrc += 1;
         self.rx_fr_ctr = self.rx_fr_ctr.wrapping_add(1);
         self.status |= ST_RXNE;
         let mut bits = RXI;
-        if self.rx_cnt == RX_WORDS {
+        if self.rx_cnt == RXW {
             bits |= RXFI;
         }
         self.raise(bits);
@@ -484,7 +832,7 @@ impl CtuModel {
     }
 }
 
-impl super::ctucanfd::Regs for CtuModel {
+impl<const RXW: usize> super::ctucanfd::Regs for CtuModel<RXW> {
     fn read32(&mut self, off: usize) -> u32 {
         CtuModel::read32(self, off)
     }

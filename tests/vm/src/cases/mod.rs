@@ -7,6 +7,7 @@ mod candev_err;
 mod canutils;
 mod capture;
 mod ctucanfd;
+mod ctucanfd_sim;
 mod daemons;
 mod dsor;
 mod errors;
@@ -135,6 +136,10 @@ pub const RELEASE_ONLY: &[&str] = &[
     // The state and counters `ip -d` shows; candev_ctucanfd_ctrlmodes
     // reaches the same state/berr-counter/restart paths on the debug kernel.
     "ctucanfd_error_active_when_up",
+    // ctucanfd_sim_bus_off_auto_restart reaches bus-off and the restart
+    // on the debug kernel, ctucanfd_sim_candump_arblost_overrun the bus
+    // error, arbitration-lost and overrun interrupts.
+    "ctucanfd_sim_bus_off_manual_restart",
 ];
 
 /// Every test, in running order.
@@ -186,6 +191,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         netns::OURS,
         fd::TESTS,
         robust::OURS,
+        ctucanfd_sim::TESTS,
     ]
     .into_iter()
     .flatten()

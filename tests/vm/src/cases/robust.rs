@@ -231,7 +231,7 @@ fn modules_load_unload_cycles(ctx: &mut Ctx) -> TestResult {
     let n = sized("RCAN_MODULE_CYCLES", 100, 1);
     // (module, parameters, modules it needs, loads: false if it must fail)
     let stack = [Module::Pf, Module::Can, Module::Raw, Module::Loop];
-    let plan: [(Module, &[&str], &[Module], bool); 18] = [
+    let plan: [(Module, &[&str], &[Module], bool); 19] = [
         (Module::Pf, &[], &[], true),
         (Module::Can, &[], &[Module::Pf], true),
         (Module::Raw, &[], &[Module::Pf], true),
@@ -275,6 +275,12 @@ fn modules_load_unload_cycles(ctx: &mut Ctx) -> TestResult {
             false,
         ),
         (Module::CtuCanFdPci, &[], &[Module::Pf, Module::Dev], true),
+        (
+            Module::CtuCanFdSim,
+            &["cards=2"],
+            &[Module::Pf, Module::Dev],
+            true,
+        ),
     ];
     // A module added to Module::ALL without a line here would go
     // untested: fail instead.

@@ -8,7 +8,7 @@
 
 use proptest::prelude::*;
 use rcan_chips::ctucanfd::*;
-use rcan_chips::ctucanfd_model::{BusFrame, CtuModel};
+use rcan_chips::ctucanfd_model::{BusFrame, CtuModel, Fault};
 use rcan_core::arb::CAN_ERR_FLAG;
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_RTR_FLAG};
 use rcan_core::bittiming::{self, Bittiming};
@@ -54,7 +54,7 @@ fn running(cfg: &Config) -> Chip<CtuModel> {
 /// Moves every ready frame of `a` onto the bus, where `b` receives it.
 fn pump(a: &mut Chip<CtuModel>, b: &mut Chip<CtuModel>) -> Vec<BusFrame> {
     let mut sent = Vec::new();
-    while let Some(f) = a.regs.transmit() {
+    while let Some(f) = a.regs.transmit(Fault::None, true).sent() {
         b.regs.deliver(&f);
         sent.push(f);
     }
@@ -375,7 +375,7 @@ mod shared_line {
             // QEMU sends within the TX_COMMAND write: the receiver
             // drives the line, then the sender.
             let other = 1 - self.idx;
-            while let Some(f) = c.cores[self.idx].transmit() {
+            while let Some(f) = c.cores[self.idx].transmit(Fault::None, true).sent() {
                 c.cores[other].deliver(&f);
                 c.line = c.cores[other].irq_line();
             }
