@@ -944,6 +944,9 @@ impl<R: Receiver> RxTable<R> {
         };
         self.link_reg(w, reg, fresh);
         r.reg.set(reg);
+        // Nothing was unlinked, so no group lost its last node: no
+        // `shrink_groups` (an empty group left by a shrink that failed for
+        // ENOMEM waits for the next removal, as in `apply`).
         let mut changed = Changed::default();
         changed.ifindex[0] = (!reg.filters.is_empty()).then_some(reg.ifindex);
         Ok(changed)
