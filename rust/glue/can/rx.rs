@@ -895,7 +895,9 @@ impl<R: Receiver> RxTable<R> {
     /// its new registration; `None` (or a spec that wants nothing) retires
     /// its registration, and with `keep` the receiver stays reserved (and
     /// `rcv` valid) for a later registration, else it is removed for good
-    /// (which consumes `rcv`; pass `keep` false exactly once). Process
+    /// (which consumes `rcv`; pass `keep` false exactly once). The new
+    /// registration is built under the writer mutex: the receiver's first
+    /// in its slot ([`RxTable::set_first`]), a later one boxed. Process
     /// context; sleeps. ENOMEM, as `set`.
     pub(crate) fn set_reserved(
         &self,
