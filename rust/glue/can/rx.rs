@@ -231,7 +231,8 @@ struct Node<R: Receiver> {
     /// Hashed: `id & mask`.
     value: u32,
     reg: *const Reg<R>,
-    /// Hashed, writer side only: the key entry whose `members` we are on.
+    /// Hashed, writer side only: the key entry whose `members` we are on
+    /// (before linking: the linked entry `new_keys` found, or NULL).
     key: Cell<*const KeyEntry<R>>,
 }
 
@@ -381,7 +382,9 @@ struct Rcv<R: Receiver> {
     reg: Cell<*const Reg<R>>,
     /// The first registration: filled once, under the writer mutex, before
     /// any of its nodes is linked, and never changed afterwards (then only
-    /// read, through the table's lists and `reg`).
+    /// read, through the table's lists and `reg`); emptied again, under
+    /// the mutex, only if its linking cannot be prepared (ENOMEM) and so
+    /// none of its nodes was ever linked.
     first: UnsafeCell<Option<Reg<R>>>,
 }
 
@@ -403,9 +406,9 @@ impl<R: Receiver> Rcv<R> {
     /// The inline first registration, if filled. Writer mutex held (the
     /// slot is filled only under it).
     fn first(&self) -> Option<&Reg<R>> {
-        // SAFETY: the slot is written only by `fill_first`, under the
-        // writer mutex that our caller holds, while it is empty; a filled
-        // slot is never written again.
+        // SAFETY: the slot is written only under the writer mutex that our
+        // caller holds (filled while empty, emptied before anything of it
+        // was linked); a linked slot is never written again.
         unsafe { (*self.first.get()).as_ref() }
     }
 
@@ -430,6 +433,37 @@ impl<R: Receiver> Rcv<R> {
         let f = slot.insert(reg);
         f.place(NonNull::from(self));
         f
+    }
+}
+
+impl<R: Receiver> Rcv<R> {
+    /// Builds the registration for `spec` in the empty first slot
+    /// ([`RxTable::make_reg_into`]) and places it ([`Reg::place`]);
+    /// returns it, to be linked. On error the slot stays empty.
+    ///
+    /// # Safety
+    ///
+    /// As for [`Rcv::fill_first`].
+    unsafe fn fill_first_with(&self, spec: Spec) -> Result<&Reg<R>> {
+        // SAFETY: an empty slot, as in `fill_first` (caller's contract).
+        let slot = unsafe { &mut *self.first.get() };
+        RxTable::<R>::make_reg_into(spec, slot)?;
+        let f = slot.as_mut().ok_or(kernel::error::code::ENOMEM)?;
+        f.place(NonNull::from(self));
+        Ok(f)
+    }
+
+    /// Empties the first slot again, after [`Rcv::fill_first_with`] when
+    /// linking its registration cannot be prepared (ENOMEM).
+    ///
+    /// # Safety
+    ///
+    /// The caller holds the writer mutex, and the slot's registration was
+    /// never linked and is no longer referred to.
+    unsafe fn empty_first(&self) {
+        // SAFETY: never linked, so no reader or node refers to it; no
+        // reference into the slot is live (caller's contract).
+        unsafe { *self.first.get() = None };
     }
 }
 
@@ -861,7 +895,9 @@ impl<R: Receiver> RxTable<R> {
     /// its new registration; `None` (or a spec that wants nothing) retires
     /// its registration, and with `keep` the receiver stays reserved (and
     /// `rcv` valid) for a later registration, else it is removed for good
-    /// (which consumes `rcv`; pass `keep` false exactly once). Process
+    /// (which consumes `rcv`; pass `keep` false exactly once). The new
+    /// registration is built under the writer mutex: the receiver's first
+    /// in its slot ([`RxTable::set_first`]), a later one boxed. Process
     /// context; sleeps. ENOMEM, as `set`.
     pub(crate) fn set_reserved(
         &self,
@@ -869,16 +905,53 @@ impl<R: Receiver> RxTable<R> {
         new: Option<Spec>,
         keep: bool,
     ) -> Result<Changed> {
-        let prepared = match new.filter(wants) {
-            Some(spec) => Some((Self::make_reg(spec)?, None)),
-            None => None,
-        };
+        let new = new.filter(wants);
         let mut w = self.writer.lock();
         // SAFETY: a receiver of this table, on its map (RcvHandle
         // invariant), so freed only by a removal under the writer mutex,
         // which we hold (`w`) while `r` is used.
         let r: &Rcv<R> = unsafe { rcv.0.cast::<Rcv<R>>().as_ref() };
+        // Registrations are built under the mutex: whether this is the
+        // receiver's first (built in its slot) is known only under it.
+        let prepared = match new {
+            Some(spec) if r.first().is_none() => return self.set_first(&mut w, r, spec),
+            Some(spec) => Some((Self::make_reg(spec)?, None)),
+            None => None,
+        };
         self.apply(&mut w, r.data.id(), Some(r), prepared, keep)
+    }
+
+    /// The first registration of the reserved receiver `r` (its slot is
+    /// empty, so it has no live registration), built in its slot and
+    /// linked: a socket's first bind, which then moves no registration
+    /// and allocates nothing but missing key entries and group snapshots.
+    /// Writer mutex held (`w` is its data). ENOMEM leaves `r` as it was.
+    fn set_first(&self, w: &mut Writer, r: &Rcv<R>, spec: Spec) -> Result<Changed> {
+        // SAFETY: writer mutex held (`w`); the slot is empty (our caller
+        // checked under the mutex); `r` is leaked and on the map.
+        let reg = unsafe { r.fill_first_with(spec) }?;
+        // Everything that can fail comes before anything is linked.
+        let fresh = match self
+            .new_keys(w, reg)
+            .and_then(|fresh| self.grow_groups(w, reg).map(|()| fresh))
+        {
+            Ok(fresh) => fresh,
+            Err(e) => {
+                // SAFETY: writer mutex held; the registration was never
+                // linked (nothing refers to it) and `reg` is not used
+                // again.
+                unsafe { r.empty_first() };
+                return Err(e);
+            }
+        };
+        self.link_reg(w, reg, fresh);
+        r.reg.set(reg);
+        // Nothing was unlinked, so no group lost its last node: no
+        // `shrink_groups` (an empty group left by a shrink that failed for
+        // ENOMEM waits for the next removal, as in `apply`).
+        let mut changed = Changed::default();
+        changed.ifindex[0] = (!reg.filters.is_empty()).then_some(reg.ifindex);
+        Ok(changed)
     }
 
     /// The body of [`RxTable::set`] and [`RxTable::set_reserved`], under
@@ -1026,11 +1099,21 @@ impl<R: Receiver> RxTable<R> {
     /// Builds an unlinked, unplaced registration for `spec` (receiver and
     /// the nodes' back pointers still unset: [`Reg::place`]).
     fn make_reg(spec: Spec) -> Result<Reg<R>> {
+        let mut out = None;
+        Self::make_reg_into(spec, &mut out)?;
+        out.ok_or(kernel::error::code::ENOMEM)
+    }
+
+    /// [`Self::make_reg`] writing into `out` (which it overwrites), so that
+    /// a reserved receiver's first registration is built where it stays
+    /// instead of being moved there (a registration is ~230 bytes). On
+    /// error `out` is `None`. Process context (may allocate and sleep).
+    fn make_reg_into(spec: Spec, out: &mut Option<Reg<R>>) -> Result {
+        *out = None;
         let join = rxtable::join_scanned(&spec.filters, spec.join);
-        let filters = spec.filters;
         let mut scanned = KVec::new();
         let mut hashed = 0;
-        for f in filters.iter() {
+        for f in spec.filters.iter() {
             match f.place() {
                 Place::Hashed { .. } if !join => hashed += 1,
                 _ => scanned.push(*f, GFP_KERNEL)?,
@@ -1039,51 +1122,62 @@ impl<R: Receiver> RxTable<R> {
         let extra = (hashed
             + usize::from(!scanned.is_empty())
             + usize::from(spec.err_mask != 0)
-            + usize::from(!filters.is_empty()))
+            + usize::from(!spec.filters.is_empty()))
         .saturating_sub(INLINE_NODES);
-        let mut nodes = Nodes::new();
-        if extra > 0 {
-            nodes.more = KVec::with_capacity(extra, GFP_KERNEL)?;
-        }
-        let node = |kind, mask, value| Node {
-            link: Link::new(),
-            key: Cell::new(ptr::null()),
-            kind,
-            ifindex: spec.ifindex,
-            mask,
-            value,
-            reg: ptr::null(),
+        let more = if extra > 0 {
+            KVec::with_capacity(extra, GFP_KERNEL)?
+        } else {
+            KVec::new()
         };
-        // All nodes are added before any is linked (and within the
-        // capacity reserved above).
-        if !join {
-            for f in filters.iter() {
-                if let Place::Hashed { mask, value } = f.place() {
-                    nodes.push(node(Kind::Hashed, mask, value))?;
-                }
-            }
-        }
-        if !scanned.is_empty() {
-            nodes.push(node(Kind::Scanned, 0, 0))?;
-        }
-        if spec.err_mask != 0 {
-            nodes.push(node(Kind::Err, spec.err_mask, 0))?;
-        }
-        if !filters.is_empty() {
-            nodes.push(node(Kind::ByIf, 0, 0))?;
-        }
-        Ok(Reg {
+        let (ifindex, err_mask) = (spec.ifindex, spec.err_mask);
+        // Nothing below allocates: the nodes fit the inline room and the
+        // capacity reserved above.
+        let reg = out.insert(Reg {
             // SAFETY: an all-zero callback_head is what call_rcu expects.
             rcu: unsafe { core::mem::zeroed() },
             rcv: NonNull::dangling(),
             last: Cell::new(false),
             cookie: spec.cookie,
-            ifindex: spec.ifindex,
-            filters,
+            ifindex,
+            filters: spec.filters,
             scanned,
             join,
-            nodes,
-        })
+            nodes: Nodes {
+                inline: [const { None }; INLINE_NODES],
+                more,
+            },
+        });
+        let node = |kind, mask, value| Node {
+            link: Link::new(),
+            key: Cell::new(ptr::null()),
+            kind,
+            ifindex,
+            mask,
+            value,
+            reg: ptr::null(),
+        };
+        // All nodes are added before any is linked.
+        let mut res = Ok(());
+        if !join {
+            for f in reg.filters.iter() {
+                if let Place::Hashed { mask, value } = f.place() {
+                    res = res.and(reg.nodes.push(node(Kind::Hashed, mask, value)));
+                }
+            }
+        }
+        if !reg.scanned.is_empty() {
+            res = res.and(reg.nodes.push(node(Kind::Scanned, 0, 0)));
+        }
+        if err_mask != 0 {
+            res = res.and(reg.nodes.push(node(Kind::Err, err_mask, 0)));
+        }
+        if !reg.filters.is_empty() {
+            res = res.and(reg.nodes.push(node(Kind::ByIf, 0, 0)));
+        }
+        if res.is_err() {
+            *out = None;
+        }
+        res
     }
 
     /// The list a non-hashed node belongs on.
@@ -1113,15 +1207,21 @@ impl<R: Receiver> RxTable<R> {
     }
 
     /// Allocates the key entries `reg`'s hashed nodes need and the table
-    /// lacks (one per distinct key), so that linking cannot fail. Writer
-    /// mutex held.
+    /// lacks (one per distinct key), so that linking cannot fail; a node
+    /// whose key the table has gets it in its `key` now, so that
+    /// [`Self::link_reg`] does not look it up again. Writer mutex held
+    /// (the entries found stay linked until `link_reg`: nothing is
+    /// unlinked in between).
     fn new_keys(&self, w: &Writer, reg: &Reg<R>) -> Result<KVec<KBox<KeyEntry<R>>>> {
         let mut fresh: KVec<KBox<KeyEntry<R>>> = KVec::new();
         for n in reg.nodes.iter().filter(|n| n.kind == Kind::Hashed) {
-            let known = self.find_key(w, n.ifindex, n.mask, n.value).is_some()
-                || fresh
-                    .iter()
-                    .any(|e| e.ifindex == n.ifindex && e.mask == n.mask && e.value == n.value);
+            if let Some(e) = self.find_key(w, n.ifindex, n.mask, n.value) {
+                n.key.set(e);
+                continue;
+            }
+            let known = fresh
+                .iter()
+                .any(|e| e.ifindex == n.ifindex && e.mask == n.mask && e.value == n.value);
             if !known {
                 let e = KBox::new(
                     KeyEntry {
@@ -1143,9 +1243,10 @@ impl<R: Receiver> RxTable<R> {
         Ok(fresh)
     }
 
-    /// Links every node of `reg`, taking key entries from `fresh` (made by
-    /// [`Self::new_keys`] for this registration) where the table has none.
-    /// Writer mutex held.
+    /// Links every node of `reg`, into the key entry [`Self::new_keys`]
+    /// found for it, else one taken from `fresh` (made by `new_keys` for
+    /// this registration), else (a key two of its nodes share) the one
+    /// linked for the first of them. Writer mutex held.
     fn link_reg(&self, w: &Writer, reg: &Reg<R>, mut fresh: KVec<KBox<KeyEntry<R>>>) {
         for n in reg.nodes.iter() {
             if n.kind != Kind::Hashed {
@@ -1155,15 +1256,24 @@ impl<R: Receiver> RxTable<R> {
                 unsafe { self.list_of(n).push(n) };
                 continue;
             }
-            let e: &KeyEntry<R> = match self.find_key(w, n.ifindex, n.mask, n.value) {
-                Some(e) => e,
-                None => {
-                    let i = fresh.iter().position(|e| {
-                        e.ifindex == n.ifindex && e.mask == n.mask && e.value == n.value
-                    });
+            // SAFETY: NULL, or the linked entry new_keys found, under the
+            // writer mutex held since (nothing unlinked it).
+            let found = unsafe { n.key.get().as_ref() };
+            let i = match found {
+                Some(_) => None,
+                None => fresh
+                    .iter()
+                    .position(|e| e.ifindex == n.ifindex && e.mask == n.mask && e.value == n.value),
+            };
+            let e: &KeyEntry<R> = match (found, i) {
+                (Some(e), _) => e,
+                (None, None) => match self.find_key(w, n.ifindex, n.mask, n.value) {
+                    Some(e) => e,
                     // new_keys made one for every missing key.
-                    let Some(e) = i.and_then(|i| super::super::kvec_swap_remove(&mut fresh, i))
-                    else {
+                    None => continue,
+                },
+                (None, Some(i)) => {
+                    let Some(e) = super::super::kvec_swap_remove(&mut fresh, i) else {
                         continue;
                     };
                     let e: &KeyEntry<R> = KBox::leak(e);

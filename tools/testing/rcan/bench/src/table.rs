@@ -633,8 +633,18 @@ fn sockets_step(
         1,
         close_first_us,
     );
+    // The 10th percentiles too: a busy host lengthens some calls (the
+    // guest's CPU descheduled) but rarely the fastest tenth, so on a
+    // loaded host they compare builds more steadily than the medians.
+    let (bind_p10, close_p10) = (
+        percentile_f64(bind_each.clone(), FAST_PERCENTILE),
+        percentile_f64(close_each.clone(), FAST_PERCENTILE),
+    );
     let (bind_med, close_med) = (median(bind_each), median(close_each));
     println!("{tag} (d) {name}: per call, medians: bind {bind_med:.2} us, close {close_med:.2} us");
+    println!(
+        "{tag} (d) {name}: per call, 10th percentiles: bind {bind_p10:.2} us, close {close_p10:.2} us"
+    );
     s.put(
         stack,
         round,
