@@ -34,11 +34,13 @@
 //!   A front-end whose [`SimBus::bus_ns`] is 0 (the default) gives frames
 //!   no bus time. One that tells how long the frame just sent takes at
 //!   its bit timing gets a bus that paces itself as a real one: the bus
-//!   is busy until that time has passed (`SimCards::busy_until`), the
-//!   timer runs next only then (one frame per run), and a transmission
-//!   request meanwhile does not start it earlier. So a burst goes at most
-//!   at the bit rate, and the frames of a run never pile up in a
-//!   receiver that keeps up with the bit rate before NET_RX can run.
+//!   is busy until that time has passed (`SimCards::busy_until`, which
+//!   the frame's time extends from the end of the previous frame, or from
+//!   [`LATE_NS`] ago if the bus was idle or the timer late), the timer
+//!   runs next only then, and a transmission request meanwhile does not
+//!   start it earlier. So a burst goes at most at the bit rate (plus
+//!   [`LATE_NS`] of catching up), and frames never reach a receiver
+//!   faster than a real bus would bring them.
 //! * Teardown ([`SimCards::stop`], from the module's exit): `dying` stops
 //!   the callback from touching anything, the timer is cancelled, the
 //!   cards are taken out of the cards lock and unregistered (their `stop`
@@ -70,6 +72,13 @@ pub(crate) const REARM_NS: i64 = 20_000;
 /// Rounds of a run (interrupt handling without frames moving included)
 /// before re-arming.
 pub(crate) const MAX_ROUNDS: usize = 64;
+/// How far behind the wall clock a paced bus ([`SimBus::bus_ns`]) may
+/// run, ns: a timer that fires late lets the frames queued meanwhile
+/// catch up, back to back (a token bucket of 1 ms: some 8 frames at
+/// 1 Mbit/s), instead of adding its latency to every frame. Over any
+/// interval the bus still carries no more than the bit rate allows plus
+/// this much.
+pub(crate) const LATE_NS: i64 = 1_000_000;
 /// Delay before a failed attempt is retried, ns: bounds the rate of
 /// error interrupts on a faulty bus (2 ms: 500 attempts/s per card).
 pub(crate) const RETRY_NS: i64 = 2_000_000;
@@ -316,8 +325,12 @@ impl<B: SimBus> SimCards<B> {
                 (n, r, bus_ns)
             };
             if bus_ns > 0 {
-                self.busy_until
-                    .store(ktime_get_mono_ns() + bus_ns, Ordering::Relaxed);
+                // The frame follows the previous one on the bus, or
+                // starts now if the bus has been idle (catching up at
+                // most LATE_NS).
+                let now = ktime_get_mono_ns();
+                let start = self.busy_until.load(Ordering::Relaxed).max(now - LATE_NS);
+                self.busy_until.store(start + bus_ns, Ordering::Relaxed);
             }
             // The bus lock is released: the handlers take their chip lock
             // and then the bus lock for each register access.
@@ -335,9 +348,10 @@ impl<B: SimBus> SimCards<B> {
                 timer.start(RETRY_NS);
                 return;
             }
-            if bus_ns > 0 {
+            let busy = self.busy_for();
+            if busy > 0 {
                 // The next frame goes out once this one is through.
-                timer.start(self.busy_for());
+                timer.start(busy);
                 return;
             }
             frames += usize::from(r.moved);

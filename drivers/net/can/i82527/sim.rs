@@ -20,7 +20,8 @@
 //! (without stuff bits, with the intermission) at the bit timing the
 //! sender's BT0/BT1 program (`ip link set canX type can bitrate ...`),
 //! and the bus runs its next round only when that time has passed
-//! ([`glue::simcard`]'s pacing). So a burst goes at most at the bit rate
+//! ([`glue::simcard`]'s pacing; a late timer catches up by at most
+//! [`glue::simcard::LATE_NS`]). So a burst goes at most at the bit rate
 //! (500 kbit/s by default: some 4,000 frames/s), as on a real bus, and
 //! the simulated interrupt, which may run on a CPU other than the one
 //! that owns the device's NAPI poll, cannot queue frames faster than
