@@ -31,7 +31,16 @@
 //!   [`REARM_NS`] instead (softirqs, NET_RX among them, run in between),
 //!   and after a failed attempt (the chip retries by itself) after
 //!   [`RETRY_NS`], so a faulty bus raises errors at a bounded rate.
-//!   Frames take no bus time.
+//!   A front-end whose [`SimBus::bus_ns`] is 0 (the default) gives frames
+//!   no bus time. One that tells how long the frame just sent takes at
+//!   its bit timing gets a bus that paces itself as a real one: the bus
+//!   is busy until that time has passed (`SimCards::busy_until`, which
+//!   the frame's time extends from the end of the previous frame, or from
+//!   [`LATE_NS`] ago if the bus was idle or the timer late), the timer
+//!   runs next only then, and a transmission request meanwhile does not
+//!   start it earlier. So a burst goes at most at the bit rate (plus
+//!   [`LATE_NS`] of catching up), and frames never reach a receiver
+//!   faster than a real bus would bring them.
 //! * Teardown ([`SimCards::stop`], from the module's exit): `dying` stops
 //!   the callback from touching anything, the timer is cancelled, the
 //!   cards are taken out of the cards lock and unregistered (their `stop`
@@ -41,11 +50,12 @@
 //! No `unsafe` here: the cards are reached only through the `static`, so
 //! nothing can outlive what it points to.
 
+use super::hrtimer::ktime_get_mono_ns;
 use super::hrtimer::{ClockId, HrTimer, HrTimerCallback, HrTimerMode};
 use super::lock::StaticIrqSpinLock;
 use super::params::ParamStr;
 use core::marker::PhantomData;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicI64, Ordering};
 use kernel::prelude::*;
 use kernel::str::CStr;
 
@@ -62,6 +72,13 @@ pub(crate) const REARM_NS: i64 = 20_000;
 /// Rounds of a run (interrupt handling without frames moving included)
 /// before re-arming.
 pub(crate) const MAX_ROUNDS: usize = 64;
+/// How far behind the wall clock a paced bus ([`SimBus::bus_ns`]) may
+/// run, ns: a timer that fires late lets the frames queued meanwhile
+/// catch up, back to back (a token bucket of 1 ms: some 8 frames at
+/// 1 Mbit/s), instead of adding its latency to every frame. Over any
+/// interval the bus still carries no more than the bit rate allows plus
+/// this much.
+pub(crate) const LATE_NS: i64 = 1_000_000;
 /// Delay before a failed attempt is retried, ns: bounds the rate of
 /// error interrupts on a faulty bus (2 ms: 500 attempts/s per card).
 pub(crate) const RETRY_NS: i64 = 2_000_000;
@@ -128,6 +145,13 @@ pub(crate) trait SimBus: Sized + Send + 'static {
     fn alloc(cards: usize) -> Result<KBox<Self>> {
         Ok(KBox::new(Self::new(cards), GFP_KERNEL)?)
     }
+
+    /// How long the frame the last [`SimBus::round`] sent takes on the
+    /// bus, ns (its bits at the sender's bit timing); 0 (the default):
+    /// frames take no bus time.
+    fn bus_ns(&self) -> i64 {
+        0
+    }
 }
 
 /// The simulated cards of a front-end, on one bus: a `static` of the
@@ -142,6 +166,10 @@ pub(crate) struct SimCards<B: SimBus> {
     cards: StaticIrqSpinLock<KVec<B::Card>>,
     /// Set while the module goes away: no kicks, no callback work.
     dying: AtomicBool,
+    /// `CLOCK_MONOTONIC` ns until which the frame last sent occupies the
+    /// bus ([`SimBus::bus_ns`]); the next round waits for it. Written by
+    /// the timer callback, read by it and by kicks (any context).
+    busy_until: AtomicI64,
     /// The bus and interrupt timer.
     timer: HrTimer<Wires<B>>,
 }
@@ -167,6 +195,7 @@ impl<B: SimBus> SimCards<B> {
             bus: StaticIrqSpinLock::new(None, bus),
             cards: StaticIrqSpinLock::new(KVec::new(), cards),
             dying: AtomicBool::new(false),
+            busy_until: AtomicI64::new(0),
             timer: HrTimer::new(),
         }
     }
@@ -210,10 +239,17 @@ impl<B: SimBus> SimCards<B> {
         self.kick();
     }
 
-    /// Runs the bus now (unless the module is going away). Any context.
+    /// How long the bus is still busy with the frame last sent, ns (0:
+    /// free). Any context.
+    fn busy_for(&self) -> i64 {
+        (self.busy_until.load(Ordering::Relaxed) - ktime_get_mono_ns()).max(0)
+    }
+
+    /// Runs the bus now, or once the frame on it is through (unless the
+    /// module is going away). Any context.
     fn kick(&'static self) {
         if !self.dying.load(Ordering::SeqCst) {
-            self.timer.start(0);
+            self.timer.start(self.busy_for());
         }
     }
 
@@ -288,6 +324,12 @@ impl<B: SimBus> SimCards<B> {
         if self.dying.load(Ordering::SeqCst) {
             return;
         }
+        let busy = self.busy_for();
+        if busy > 0 {
+            // A kick started the timer while a frame was on the bus.
+            timer.start(busy);
+            return;
+        }
         let fault = B::fault();
         let mut frames = 0;
         for _ in 0..MAX_ROUNDS {
@@ -295,18 +337,27 @@ impl<B: SimBus> SimCards<B> {
                 break;
             }
             let mut lines = [false; MAX_CARDS];
-            let (n, r) = {
+            let (n, r, bus_ns) = {
                 let mut g = self.bus.lock();
                 let Some(b) = g.as_mut() else {
                     return;
                 };
                 let r = b.round(fault);
+                let bus_ns = if r.moved { b.bus_ns() } else { 0 };
                 let n = b.cards();
                 for (i, l) in lines.iter_mut().enumerate().take(n) {
                     *l = b.irq_line(i);
                 }
-                (n, r)
+                (n, r, bus_ns)
             };
+            if bus_ns > 0 {
+                // The frame follows the previous one on the bus, or
+                // starts now if the bus has been idle (catching up at
+                // most LATE_NS).
+                let now = ktime_get_mono_ns();
+                let start = self.busy_until.load(Ordering::Relaxed).max(now - LATE_NS);
+                self.busy_until.store(start + bus_ns, Ordering::Relaxed);
+            }
             // The bus lock is released: the handlers take their chip lock
             // and then the bus lock for each register access.
             let mut handled = false;
@@ -321,6 +372,12 @@ impl<B: SimBus> SimCards<B> {
             if r.failed {
                 // The chip retries by itself, a little later.
                 timer.start(RETRY_NS);
+                return;
+            }
+            let busy = self.busy_for();
+            if busy > 0 {
+                // The next frame goes out once this one is through.
+                timer.start(busy);
                 return;
             }
             frames += usize::from(r.moved);

@@ -359,6 +359,20 @@ pub fn bitrate(bt0: u8, bt1: u8, cpu_if: u8, xtal_hz: u32) -> u32 {
         .bitrate
 }
 
+/// Length of one bit in ns of bit timing `bt0`/`bt1` with crystal
+/// `xtal_hz` and CPU interface register `cpu_if` (BRP + 1 system clock
+/// periods per tq, 3 + TSEG1 + TSEG2 tq per bit), rounded down; 0 with a
+/// zero crystal. The simulated bus gives a frame its bus time with it.
+pub fn bit_ns(bt0: u8, bt1: u8, cpu_if: u8, xtal_hz: u32) -> u32 {
+    let sys = sys_clock(cpu_if, xtal_hz);
+    if sys == 0 {
+        return 0;
+    }
+    let (bt, _) = bittiming::from_btr(bt0, bt1, sys);
+    let clocks = u64::from(bt.brp) * u64::from(bt.bit_time());
+    (clocks * 1_000_000_000 / u64::from(sys)) as u32
+}
+
 /// The system clock, which the bit timing counts: the crystal, halved
 /// when the CPU interface register's DSC bit is set.
 pub fn sys_clock(cpu_if: u8, xtal_hz: u32) -> u32 {
@@ -1152,6 +1166,18 @@ impl AnswerReq {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bit_ns_of_the_registers() {
+        // The simulated card's preset: 500 kbit/s, 2 us a bit.
+        let c = Config::DEFAULT;
+        assert_eq!(bit_ns(c.bt0, c.bt1, c.cpu_if, 16_000_000), 2_000);
+        // 1 Mbit/s from the same 8 MHz system clock: BRP 1, 8 tq.
+        assert_eq!(bit_ns(0x00, 0x14, cpu_if::DSC, 16_000_000), 1_000);
+        // No DSC: the 16 MHz crystal is the system clock.
+        assert_eq!(bit_ns(c.bt0, c.bt1, 0, 16_000_000), 1_000);
+        assert_eq!(bit_ns(c.bt0, c.bt1, c.cpu_if, 0), 0);
+    }
 
     #[test]
     fn two_bit_fields() {

@@ -29,13 +29,17 @@
 //! not count), and with it WARN (96) and BOFF (256, INIT set).
 //!
 //! What it does not model: bit timing on a wire (frames move instantly,
-//! the caller is the bus), error counters other than through
+//! the caller is the bus; [`I82527Model::frame_ns`] tells it how long a
+//! frame takes at the programmed bit timing), error counters other than through
 //! [`I82527Model::set_errors`] and [`I82527Model::attempt`], the ports, serial/parallel interface
 //! modes, the high-speed read registers, sleep and wake up.
 
 use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK, MAX_DLC};
+use super::bittiming::frame_bits;
 use super::frame::CanFrame;
-use super::i82527::{arb_bytes, arb_id, bits, cpu_if, ctrl, intid, mcfg, reg, status, EXT_RX};
+use super::i82527::{
+    arb_bytes, arb_id, bit_ns, bits, cpu_if, ctrl, intid, mcfg, reg, status, EXT_RX,
+};
 
 /// The contents of one receive buffer: arbitration, configuration, data.
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
@@ -454,6 +458,19 @@ impl I82527Model {
         false
     }
 
+    /// How long frame `f` takes on the bus at the bit timing this chip's
+    /// BT0/BT1 and CPU interface registers program from crystal `xtal_hz`,
+    /// ns ([`frame_bits`]: no stuff bits, the intermission included).
+    pub fn frame_ns(&self, f: &CanFrame, xtal_hz: u32) -> u64 {
+        let bit = bit_ns(
+            self.r(reg::BT0),
+            self.r(reg::BT1),
+            self.r(reg::CPU_IF),
+            xtal_hz,
+        );
+        u64::from(frame_bits(f.can_id, f.len)) * u64::from(bit)
+    }
+
     /// The bus is free for this chip: the lowest-numbered object with a
     /// transmission request goes out (a transmit object's data frame, or
     /// a receive object's remote frame). Returns the frame, with the
@@ -567,6 +584,32 @@ impl super::i82527::Regs for I82527Model {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn frame_ns_at_the_programmed_rate() {
+        let mut m = I82527Model::new();
+        m.write(reg::CONTROL, ctrl::INIT | ctrl::CCE);
+        m.write(reg::CPU_IF, cpu_if::DSC);
+        // 500 kbit/s from a 16 MHz crystal: 2 us a bit.
+        m.write(reg::BT0, 0x00);
+        m.write(reg::BT1, 0x2B);
+        let sff8 = CanFrame {
+            can_id: 0x123,
+            len: 8,
+            pad: 0,
+            res0: 0,
+            len8_dlc: 0,
+            data: [0; 8],
+        };
+        assert_eq!(m.frame_ns(&sff8, 16_000_000), 111 * 2_000);
+        // 1 Mbit/s: 8 tq a bit.
+        m.write(reg::BT1, 0x14);
+        assert_eq!(m.frame_ns(&sff8, 16_000_000), 111 * 1_000);
+        // Outside INIT + CCE the timing registers do not change.
+        m.write(reg::CONTROL, 0);
+        m.write(reg::BT1, 0x2B);
+        assert_eq!(m.frame_ns(&sff8, 16_000_000), 111 * 1_000);
+    }
 
     #[test]
     fn two_bit_write_merge() {

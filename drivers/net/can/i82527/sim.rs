@@ -16,9 +16,17 @@
 //! frame from a card whose object wants to send (cards in turn), offers
 //! it to every other card's model, then calls the driver's interrupt
 //! handler of each card whose interrupt output is raised, and repeats
-//! until nothing moves, or re-arms itself after a few frames. Frames take
-//! no bus time; each frame is in its receivers' queues before the next
-//! frame goes out. The callback may run on either CPU from one run to
+//! until nothing moves. A frame takes its bus time: the bits of the frame
+//! (without stuff bits, with the intermission) at the bit timing the
+//! sender's BT0/BT1 program (`ip link set canX type can bitrate ...`),
+//! and the bus runs its next round only when that time has passed
+//! ([`glue::simcard`]'s pacing; a late timer catches up by at most
+//! [`glue::simcard::LATE_NS`]). So a burst goes at most at the bit rate
+//! (500 kbit/s by default: some 4,000 frames/s), as on a real bus, and
+//! the simulated interrupt, which may run on a CPU other than the one
+//! that owns the device's NAPI poll, cannot queue frames faster than
+//! that. Each frame is in its receivers' queues before the next frame
+//! goes out. The callback may run on either CPU from one run to
 //! the next; the driver keeps frame order all the same, because its
 //! interrupt handler only queues frames (under the chip lock, which is
 //! taken with interrupts off) and the device's NAPI poll hands them up in
@@ -57,7 +65,7 @@ use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN, MAX_CA
 use i82527::{add_channel, Channel};
 use kernel::c_str;
 
-/// The model's crystal (for the logged bit rate only).
+/// The model's crystal (the logged bit rate, a frame's bus time).
 const XTAL_HZ: u32 = 16_000_000;
 /// Module parameter `cards` (number 0 in sim_c.c).
 const CARDS: Param<u32> = Param::new(0);
@@ -70,6 +78,8 @@ pub(crate) struct Bus {
     n: usize,
     /// The card that sends first in the next round (fairness).
     next: usize,
+    /// Bus time of the frame the last round sent, ns.
+    last_ns: i64,
 }
 
 /// The bus and the registered cards (see [`glue::simcard`]).
@@ -106,6 +116,7 @@ impl SimBus for Bus {
             models: core::array::from_fn(|_| I82527Model::new()),
             n,
             next: 0,
+            last_ns: 0,
         }
     }
 
@@ -133,6 +144,8 @@ impl SimBus for Bus {
             let i = (self.next + k) % n;
             match self.models[i].attempt(fault) {
                 TxAttempt::Sent(f) => {
+                    let ns = self.models[i].frame_ns(&f, XTAL_HZ);
+                    self.last_ns = i64::try_from(ns).unwrap_or(0);
                     for j in (0..n).filter(|&j| j != i) {
                         self.models[j].receive(&f);
                     }
@@ -170,6 +183,10 @@ impl SimBus for Bus {
 
     fn card_irq(c: &Channel<SimRegs>) -> bool {
         c.irq()
+    }
+
+    fn bus_ns(&self) -> i64 {
+        self.last_ns
     }
 
     fn report(&self) {

@@ -674,9 +674,41 @@ pub fn from_btr(btr0: u8, btr1: u8, clock_hz: u32) -> (Bittiming, bool) {
     (bt, btr1 & BTR1_TRIPLE != 0)
 }
 
+/// Bits a classic CAN data or remote frame of identifier `can_id` (with
+/// `CAN_EFF_FLAG`/`CAN_RTR_FLAG`) and length `len` (0..=8) occupies on
+/// the bus, without stuff bits, with the 3-bit intermission before the
+/// next frame: a standard frame's 19 bits of header (SOF, identifier,
+/// RTR, IDE, r0, DLC), an extended frame's 39 (SOF, base identifier,
+/// SRR, IDE, extension, RTR, r1, r0, DLC), then the data (none in a
+/// remote frame), 15 CRC bits, CRC delimiter, ACK slot and delimiter, 7
+/// EOF bits and the intermission (ISO 11898-1). The simulated cards'
+/// bus uses it to give a frame its bus time. Any context.
+pub const fn frame_bits(can_id: u32, len: u8) -> u32 {
+    let header = if can_id & 0x8000_0000 != 0 { 39 } else { 19 };
+    let data = if can_id & 0x4000_0000 != 0 {
+        0
+    } else {
+        8 * if len > 8 { 8 } else { len as u32 }
+    };
+    header + data + 15 + 1 + 2 + 7 + 3
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn frame_bits_classic() {
+        // ISO 11898-1 without stuff bits: 44 + 8n (standard), 64 + 8n
+        // (extended), plus the intermission.
+        assert_eq!(frame_bits(0x123, 0), 47);
+        assert_eq!(frame_bits(0x123, 8), 111);
+        assert_eq!(frame_bits(0x8000_0000 | 0x1234_5678, 8), 131);
+        assert_eq!(frame_bits(0x8000_0000 | 0x1234_5678, 0), 67);
+        // A remote frame carries no data, whatever its DLC.
+        assert_eq!(frame_bits(0x4000_0000 | 0x123, 8), 47);
+        assert_eq!(frame_bits(0xC000_0000 | 0x1234_5678, 4), 67);
+    }
 
     fn want(bitrate: u32, sample_point: u32) -> Bittiming {
         Bittiming {

@@ -195,7 +195,9 @@ fn candev_direct_timing(ctx: &mut Ctx) -> TestResult {
 }
 
 /// Impossible settings are refused with mainline's errno and message, and
-/// leave the timing set before unchanged.
+/// leave the timing set before unchanged. A control mode the SJA1000
+/// lacks (`fd on`: it is a classic controller) is refused with
+/// EOPNOTSUPP and leaves the modes as they were.
 fn candev_errors(ctx: &mut Ctx) -> TestResult {
     ctx.sja1000_cards()?;
     set_can("can0", &["bitrate", "250000"])?;
@@ -257,9 +259,15 @@ fn candev_errors(ctx: &mut Ctx) -> TestResult {
         ]),
         "Invalid argument",
     )?;
+    ip_fails(&with(&["fd", "on"]), "Operation not supported")?;
+    let j = details_json("can0")?;
     ensure!(
-        details_json("can0")?.contains(r#""bitrate":250000"#),
+        j.contains(r#""bitrate":250000"#),
         "a refused setting changed the bit timing"
+    );
+    ensure!(
+        !j.contains(r#""FD""#),
+        "a refused fd on shows in the control modes: {j}"
     );
     Ok(())
 }

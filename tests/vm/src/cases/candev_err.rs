@@ -147,6 +147,24 @@ pub(super) fn details_have(dev: &str, want: &[&str]) -> TestResult {
     Ok(())
 }
 
+/// `ip -d link show DEV` until it contains `want` (the chip retries
+/// every 2 ms, so the state moves on its own); fails with the last output
+/// after some 200 reads. Not a timing assertion: the bound only ends a
+/// wait for a state that never comes.
+fn details_become(dev: &str, want: &str) -> TestResult {
+    let mut last = String::new();
+    for _ in 0..200 {
+        last = ip_ok(&["-d", "link", "show", dev])?;
+        if last.contains(want) {
+            return Ok(());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    Err(format!(
+        "ip -d link show {dev}: {want:?} never came: {last}"
+    ))
+}
+
 /// The CAN device statistics `ip -s -d link show DEV` prints: re-started,
 /// bus-errors, arbit-lost, error-warn, error-pass, bus-off.
 pub(super) fn can_stats(dev: &str) -> Result<[u64; 6], String> {
@@ -305,8 +323,11 @@ fn sja1000_sim_bus_off_manual_restart(ctx: &mut Ctx) -> TestResult {
 
 /// Missing acknowledgement with berr-reporting on, seen by `candump -e`
 /// (the can-utils way: `candump -e can0,0:0,#FFFFFFFF`): one bus error
-/// per attempt, ACK slot, on transmission, TXERR rising by 8. Then the
-/// acknowledgement comes back and the frame reaches can1.
+/// per attempt, ACK slot, on transmission, TXERR rising by 8; the
+/// counter stops at error passive (ACK errors of an error-passive
+/// transmitter do not count), which `ip -d` shows as `state
+/// ERROR-PASSIVE (berr-counter tx 128 rx 0)`. Then the acknowledgement
+/// comes back and the frame reaches can1.
 fn sja1000_sim_bus_errors_candump(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = sim2(ctx, &["berr-reporting", "on", "restart-ms", "100"], &[])?;
     let rx1 = canraw::open(i1)?;
@@ -315,6 +336,7 @@ fn sja1000_sim_bus_errors_candump(ctx: &mut Ctx) -> TestResult {
     fault("noack")?;
     send_one(i0, &canraw::std(0x55, &[0x55]))?;
     let out = dump.finish(tools::TOOL_LIMIT)?;
+    details_become("can0", "state ERROR-PASSIVE (berr-counter tx 128 rx 0)")?;
     fault("none")?;
     // candump -e prints each error frame with "ERRORFRAME" (and, in
     // Debian's can-utils, the frame again on a line of its own).

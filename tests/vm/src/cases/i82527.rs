@@ -275,11 +275,18 @@ fn burst_one(
     Ok(())
 }
 
-/// Bursts both ways: every frame arrives, once, in order, intact; no
+/// Bursts both ways at 1 Mbit/s (`ip link set canX type can bitrate
+/// 1000000`, the simulated bus paces frames by their bits at that rate):
+/// every frame arrives, once, in order, intact; nothing dropped, no
 /// overrun; the statistics (`ip -s link`) count them.
 fn i82527_burst(ctx: &mut Ctx) -> TestResult {
     let n = burst_len();
     let (i0, i1) = sim2(ctx)?;
+    for d in ["can0", "can1"] {
+        super::candev::ip_ok(&["link", "set", d, "down"])?;
+        super::candev::ip_ok(&["link", "set", d, "type", "can", "bitrate", "1000000"])?;
+        super::candev::ip_ok(&["link", "set", d, "up"])?;
+    }
     let big = |s: &socketcan::CanSocket| -> TestResult {
         crate::sys::set_rcvbufforce(s, 64 << 20).or_fail("SO_RCVBUFFORCE")
     };
@@ -300,6 +307,8 @@ fn i82527_burst(ctx: &mut Ctx) -> TestResult {
     for d in ["can0", "can1"] {
         let over = ctx.stat(d, "rx_over_errors")?;
         ensure!(over == 0, "{d}: {over} message object overruns");
+        let dropped = ctx.stat(d, "rx_dropped")?;
+        ensure!(dropped == 0, "{d}: {dropped} frames dropped (rx_dropped)");
     }
     Ok(())
 }

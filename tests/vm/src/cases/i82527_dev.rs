@@ -165,7 +165,14 @@ fn i82527_sim_ip_bittiming(ctx: &mut Ctx) -> TestResult {
         out.stdout
     );
     let unsupported = "Operation not supported";
-    for mode in ["loopback", "listen-only", "one-shot", "presume-ack"] {
+    for mode in [
+        "loopback",
+        "listen-only",
+        "one-shot",
+        "presume-ack",
+        "cc-len8-dlc",
+        "fd",
+    ] {
         set_can_fails("can0", &[mode, "on"], unsupported)?;
     }
     set_can("can0", &["triple-sampling", "on"])?;
