@@ -63,6 +63,11 @@ pub enum Fault {
     /// recessive read): +8 per attempt, warning after 12, bus-off after
     /// 32.
     BitErr,
+    /// Every attempt succeeds, and the bus (the caller) offers each frame
+    /// twice to the other nodes before their host can read the first: a
+    /// receive object still holding it sets MsgLst, as when a host falls
+    /// behind a busy bus (a receive overrun).
+    Overrun,
 }
 
 /// What one transmission attempt did.
@@ -191,7 +196,7 @@ impl I82527Model {
     /// has a frame to send records the error (LEC, status interrupt with
     /// SIE) and its counters move (WARN/BOFF, status interrupt with EIE).
     pub fn attempt(&mut self, fault: Fault) -> TxAttempt {
-        if fault == Fault::None {
+        if matches!(fault, Fault::None | Fault::Overrun) {
             return match self.transmit() {
                 Some(f) => TxAttempt::Sent(f),
                 None => TxAttempt::Idle,

@@ -41,7 +41,10 @@
 //! `rcan_sja1000_sim`'s): `none`; `noack` (no node acknowledges: an ACK
 //! error per attempt, the transmit error counter climbs to error passive,
 //! which the 82527 shows as warning, and stays there); `biterr` (a bit 0
-//! error per attempt: warning after 12 attempts, bus-off after 32). A
+//! error per attempt: warning after 12 attempts, bus-off after 32);
+//! `overrun` (every frame reaches the other cards twice before their
+//! driver can read the first, so the receive object overflows: MsgLst,
+//! an overrun error frame and `rx_over_errors` on the receiver). A
 //! failed attempt re-arms the timer after [`glue::simcard::RETRY_NS`] (the chip
 //! retries by itself).
 //!
@@ -130,6 +133,7 @@ impl SimBus for Bus {
         match param_word(&FAULT, &mut [0u8; FAULT_LEN]) {
             b"noack" => Fault::NoAck,
             b"biterr" => Fault::BitErr,
+            b"overrun" => Fault::Overrun,
             _ => Fault::None,
         }
     }
@@ -148,6 +152,10 @@ impl SimBus for Bus {
                     self.last_ns = i64::try_from(ns).unwrap_or(0);
                     for j in (0..n).filter(|&j| j != i) {
                         self.models[j].receive(&f);
+                        if fault == Fault::Overrun {
+                            // Again, before the driver has run.
+                            self.models[j].receive(&f);
+                        }
                     }
                     r.moved = true;
                 }

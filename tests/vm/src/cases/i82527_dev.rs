@@ -27,6 +27,7 @@ use crate::tools;
 pub const TESTS: &[crate::Test] = test_table![
     i82527_sim_ip_bittiming,
     i82527_sim_bus_errors_candump,
+    i82527_sim_overrun_candump,
     i82527_sim_bus_off_restarts,
 ];
 
@@ -229,6 +230,55 @@ fn i82527_sim_bus_errors_candump(ctx: &mut Ctx) -> TestResult {
     ensure!(
         errs >= 3,
         "ip -s -d: {errs} bus errors after 3 seen by candump: {t}"
+    );
+    Ok(())
+}
+
+/// A receive overrun (`fault=overrun`: each frame reaches can1 twice
+/// before its driver reads the first), seen by `candump -e`
+/// (`candump -e can1,0:0,#FFFFFFFF`) as mainline reports it: an error
+/// frame of class CRTL (0x20000004) with `CAN_ERR_CRTL_RX_OVERFLOW` in
+/// byte 1, then the frame itself (the second copy); `ip -s -d` counts an
+/// RX overrun. With `fault=none` the next frame comes alone.
+fn i82527_sim_overrun_candump(ctx: &mut Ctx) -> TestResult {
+    load(ctx)?;
+    let (i0, i1) = up2(ctx, &[])?;
+    let rx1 = canraw::open(i1)?;
+    let mut dump = tools::spawn("candump", &["-e", "-n", "2", "can1,0:0,#FFFFFFFF"], None)?;
+    dump.wait_listening()?;
+    fault("overrun")?;
+    send_one(i0, &canraw::std(0x66, &[6, 6]))?;
+    let out = dump.finish(tools::TOOL_LIMIT)?;
+    fault("none")?;
+    // candump -e decodes an error frame on the next line
+    // ("controller-problem{rx-overflow}").
+    let lines: Vec<&str> = out
+        .stdout
+        .lines()
+        .map(str::trim)
+        .filter(|l| l.starts_with("can1"))
+        .collect();
+    ensure!(
+        out.stdout.contains("rx-overflow")
+            && lines.len() == 2
+            && lines[0].starts_with("can1  20000004")
+            && lines[0].contains("[8]  00 01 00 00 00 00 00 00")
+            && lines[0].contains("ERRORFRAME")
+            && lines[1].starts_with("can1  066")
+            && lines[1].contains("[2]  06 06"),
+        "candump -e: expected the overflow error frame (20000004, byte 1 = 01) \
+         and then 066#0606 on can1, got {:?}",
+        out.stdout
+    );
+    canraw::expect(&rx1, &canraw::std(0x66, &[6, 6]), "can1 after the overrun")?;
+    let over = ctx.stat("can1", "rx_over_errors")?;
+    ensure!(over == 1, "can1: rx_over_errors {over}, expected 1");
+    send_one(i0, &canraw::std(0x67, &[7]))?;
+    canraw::expect(&rx1, &canraw::std(0x67, &[7]), "can1 with fault=none")?;
+    let over = ctx.stat("can1", "rx_over_errors")?;
+    ensure!(
+        over == 1,
+        "can1: rx_over_errors {over} after a frame without overrun"
     );
     Ok(())
 }

@@ -128,6 +128,7 @@ pub const RELEASE_ONLY: &[&str] = &[
     "dsor_loss_accounting",
     "i82527_sim_ip_bittiming",
     "i82527_sim_bus_errors_candump",
+    "i82527_sim_overrun_candump",
     "candev_ctucanfd_classic_both_ways",
     "ctucanfd_burst",
     "candev_ctucanfd_cansend_candump",
