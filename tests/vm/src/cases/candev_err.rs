@@ -151,7 +151,7 @@ pub(super) fn details_have(dev: &str, want: &[&str]) -> TestResult {
 /// every 2 ms, so the state moves on its own); fails with the last output
 /// after some 200 reads. Not a timing assertion: the bound only ends a
 /// wait for a state that never comes.
-fn details_become(dev: &str, want: &str) -> TestResult {
+pub(super) fn details_become(dev: &str, want: &str) -> TestResult {
     let mut last = String::new();
     for _ in 0..200 {
         last = ip_ok(&["-d", "link", "show", dev])?;

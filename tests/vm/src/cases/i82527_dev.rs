@@ -16,7 +16,8 @@
 
 use super::candev::{details_json, ip, ip_ok};
 use super::candev_err::{
-    check_same, details_have, err_socket, restarted_by_timer, send_one, shows, stats_are, until,
+    check_same, details_become, details_have, err_socket, restarted_by_timer, send_one, shows,
+    stats_are, until,
 };
 use super::test_table;
 use crate::canraw;
@@ -194,7 +195,8 @@ fn i82527_sim_ip_bittiming(ctx: &mut Ctx) -> TestResult {
 
 /// Missing acknowledgement with berr-reporting on, seen by `candump -e`
 /// (`candump -e can0,0:0,#FFFFFFFF`): one bus error per attempt, class
-/// ACK | BUSERROR (0x200000A0), no counters (the 82527 has none). Then
+/// ACK | BUSERROR (0x200000A0), no counters (the 82527 has none); `ip -d`
+/// shows `state ERROR-WARNING` once the chip's WARN bit is set. Then
 /// the acknowledgement comes back and the frame reaches can1; the bus
 /// errors are counted in `ip -s -d`.
 fn i82527_sim_bus_errors_candump(ctx: &mut Ctx) -> TestResult {
@@ -206,6 +208,9 @@ fn i82527_sim_bus_errors_candump(ctx: &mut Ctx) -> TestResult {
     fault("noack")?;
     send_one(i0, &canraw::std(0x55, &[0x55]))?;
     let out = dump.finish(tools::TOOL_LIMIT)?;
+    // The attempts go on: 12 ACK errors take the chip to warning, which
+    // `ip -d` shows (the 82527 has no readable counters: 0/0).
+    details_become("can0", "state ERROR-WARNING (berr-counter tx 0 rx 0)")?;
     fault("none")?;
     let lines: Vec<&str> = out
         .stdout
