@@ -32,18 +32,19 @@ pub const TESTS: &[crate::Test] = test_table![
     sja1000_sim_listen_only_presume_ack,
 ];
 
-/// Error classes (`<linux/can/error.h>`).
-const LOSTARB: u32 = 0x02;
-const CRTL: u32 = 0x04;
-const PROT: u32 = 0x08;
-const BUSOFF: u32 = 0x40;
-const BUSERROR: u32 = 0x80;
-const RESTARTED: u32 = 0x100;
-const CNT: u32 = 0x200;
+/// Error classes (`<linux/can/error.h>`), shared by the simulated cards'
+/// tests.
+pub(super) const LOSTARB: u32 = 0x02;
+pub(super) const CRTL: u32 = 0x04;
+pub(super) const PROT: u32 = 0x08;
+pub(super) const BUSOFF: u32 = 0x40;
+pub(super) const BUSERROR: u32 = 0x80;
+pub(super) const RESTARTED: u32 = 0x100;
+pub(super) const CNT: u32 = 0x200;
 /// data[1]: TX warning, TX passive, RX overflow.
-const CRTL_TX_WARNING: u8 = 0x08;
-const CRTL_TX_PASSIVE: u8 = 0x20;
-const CRTL_RX_OVERFLOW: u8 = 0x01;
+pub(super) const CRTL_TX_WARNING: u8 = 0x08;
+pub(super) const CRTL_TX_PASSIVE: u8 = 0x20;
+pub(super) const CRTL_RX_OVERFLOW: u8 = 0x01;
 /// data[2]: bit error, on transmission; data[3]: data field, ACK slot.
 const PROT_BIT: u8 = 0x01;
 const PROT_TX: u8 = 0x80;
@@ -296,14 +297,27 @@ fn sja1000_sim_bus_off_manual_restart(ctx: &mut Ctx) -> TestResult {
         ),
         "bus-off frame",
     )?;
-    details_have(
-        "can0",
-        &["state BUS-OFF", "berr-counter tx 127 rx 0", "NO-CARRIER"],
-    )?;
+    restarted_by_hand(&e, i0, &rx1, "berr-counter tx 127 rx 0")
+}
+
+/// can0 is bus-off after 32 bit errors (`ip -d` shows `state BUS-OFF`,
+/// `busoff_counters` and NO-CARRIER; `ip -s -d` one bus-off and 32 bus
+/// errors) and `restart-ms` is 0: `ip link set can0 type can restart`
+/// brings `CAN_ERR_RESTARTED` on `e` and error active with counters 0;
+/// a second `restart` is refused with EBUSY, as mainline; a frame then
+/// reaches can1 (`rx1`). Shared by the simulated cards' manual-restart
+/// tests.
+pub(super) fn restarted_by_hand(
+    e: &CanSocket,
+    i0: u32,
+    rx1: &CanSocket,
+    busoff_counters: &str,
+) -> TestResult {
+    details_have("can0", &["state BUS-OFF", busoff_counters, "NO-CARRIER"])?;
     stats_are("can0", [0, 32, 0, 1, 1, 1])?;
     ip_ok(&["link", "set", "can0", "type", "can", "restart"])?;
     check_same(
-        &canraw::recv(&e)?,
+        &canraw::recv(e)?,
         &canraw::err_frame(RESTARTED, &[]),
         "after ip ... restart",
     )?;
@@ -318,7 +332,7 @@ fn sja1000_sim_bus_off_manual_restart(ctx: &mut Ctx) -> TestResult {
     );
     let f = canraw::std(0x8, &[8]);
     send_one(i0, &f)?;
-    canraw::expect(&rx1, &f, "can1 after the manual restart")
+    canraw::expect(rx1, &f, "can1 after the manual restart")
 }
 
 /// Missing acknowledgement with berr-reporting on, seen by `candump -e`

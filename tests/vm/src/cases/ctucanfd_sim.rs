@@ -19,8 +19,12 @@
 //! at most 32 failed attempts 2 ms apart, 64 copies for the overrun), so
 //! the debug kernel runs them as they are.
 
-use super::candev::{ip, ip_ok};
-use super::candev_err::{check_same, details_have, err_socket, send_one, shows, stats_are, until};
+use super::candev::ip_ok;
+use super::candev_err::{
+    check_same, details_have, err_socket, restarted_by_hand, send_one, shows, stats_are, until,
+    BUSERROR, BUSOFF, CNT, CRTL, CRTL_RX_OVERFLOW, CRTL_TX_PASSIVE, CRTL_TX_WARNING, LOSTARB, PROT,
+    RESTARTED,
+};
 use super::test_table;
 use crate::canraw;
 use crate::check::{ensure, TestResult};
@@ -32,19 +36,6 @@ pub const TESTS: &[crate::Test] = test_table![
     ctucanfd_sim_bus_off_manual_restart,
     ctucanfd_sim_candump_arblost_overrun,
 ];
-
-/// Error classes (`<linux/can/error.h>`).
-const LOSTARB: u32 = 0x02;
-const CRTL: u32 = 0x04;
-const PROT: u32 = 0x08;
-const BUSOFF: u32 = 0x40;
-const BUSERROR: u32 = 0x80;
-const RESTARTED: u32 = 0x100;
-const CNT: u32 = 0x200;
-/// data[1]: TX warning, TX passive, RX overflow.
-const CRTL_TX_WARNING: u8 = 0x08;
-const CRTL_TX_PASSIVE: u8 = 0x20;
-const CRTL_RX_OVERFLOW: u8 = 0x01;
 
 const PARAMS: &str = "/sys/module/rcan_ctucanfd_sim/parameters";
 
@@ -182,29 +173,7 @@ fn ctucanfd_sim_bus_off_manual_restart(ctx: &mut Ctx) -> TestResult {
         &canraw::err_frame(PROT | BUSERROR | BUSOFF, &[]),
         "bus-off frame",
     )?;
-    details_have(
-        "can0",
-        &["state BUS-OFF", "berr-counter tx 256 rx 0", "NO-CARRIER"],
-    )?;
-    stats_are("can0", [0, 32, 0, 1, 1, 1])?;
-    ip_ok(&["link", "set", "can0", "type", "can", "restart"])?;
-    check_same(
-        &canraw::recv(&e)?,
-        &canraw::err_frame(RESTARTED, &[]),
-        "after ip ... restart",
-    )?;
-    details_have("can0", &["state ERROR-ACTIVE", "berr-counter tx 0 rx 0"])?;
-    stats_are("can0", [1, 32, 0, 1, 1, 1])?;
-    let out = ip(&["link", "set", "can0", "type", "can", "restart"])?;
-    ensure!(
-        !out.status.success() && out.stderr.contains("Device or resource busy"),
-        "restart while error active: expected EBUSY, got {} {:?}",
-        out.status,
-        out.stderr.trim()
-    );
-    let f = canraw::std(0x8, &[8]);
-    send_one(i0, &f)?;
-    canraw::expect(&rx1, &f, "can1 after the manual restart")
+    restarted_by_hand(&e, i0, &rx1, "berr-counter tx 256 rx 0")
 }
 
 /// `candump -e any,0:0,#FFFFFFFF` (every error class, no data frame) with

@@ -2578,8 +2578,6 @@ fn dsor_peer_fd_mtu72(ctx: &mut Ctx) -> TestResult {
             peer_output(txp, "send")?;
         }
     }
-    ctx.note(
-        "kernel <-> dsor-peer over CAN FD: B 64 both ways, B 16, classic fallback".to_string(),
-    );
+    ctx.note("kernel <-> dsor-peer over CAN FD: B 64 both ways, B 16, classic fallback");
     Ok(())
 }

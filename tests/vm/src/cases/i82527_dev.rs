@@ -17,7 +17,7 @@
 use super::candev::{details_json, ip, ip_ok};
 use super::candev_err::{
     check_same, details_become, details_have, err_socket, restarted_by_timer, send_one, shows,
-    stats_are, until,
+    stats_are, until, BUSOFF, CRTL, RESTARTED,
 };
 use super::test_table;
 use crate::canraw;
@@ -32,10 +32,6 @@ pub const TESTS: &[crate::Test] = test_table![
     i82527_sim_bus_off_restarts,
 ];
 
-/// Error classes (`<linux/can/error.h>`).
-const CRTL: u32 = 0x04;
-const BUSOFF: u32 = 0x40;
-const RESTARTED: u32 = 0x100;
 /// data[1]: RX and TX warning (the 82527 does not say which counter).
 const CRTL_WARNING: u8 = 0x04 | 0x08;
 
