@@ -345,9 +345,14 @@ impl Worker<'_> {
 
     /// The layout to check an address from `fd` against: its kind if `fd`
     /// names the socket it named before the call (inode `before`).
+    /// `fd` must name that socket after [`Self::ident`]'s queries too:
+    /// another thread may close the number and reuse it for a socket of
+    /// another protocol between `ident`'s `fstat` and its `getsockopt`s,
+    /// which would pair the old inode with the new socket's kind (seed
+    /// 1795764822 took a DSOR socket's address for a CAN_RAW one's).
     fn layout_after(&self, fd: c_int, before: Option<u64>) -> Option<leak::Kind> {
-        match (before, Self::ident(fd)) {
-            (Some(b), Some((a, kind))) if a == b => kind,
+        match (before, Self::ident(fd), sys::ino(fd).ok()) {
+            (Some(b), Some((a, kind)), Some(c)) if a == b && c == b => kind,
             _ => None,
         }
     }
