@@ -22,6 +22,8 @@ pub(crate) mod ctucanfd_model;
 pub(crate) mod i82527;
 #[path = "i82527/model.rs"]
 pub(crate) mod i82527_model;
+#[path = "chips/sim_bus.rs"]
+pub(crate) mod sim_bus;
 #[path = "sja1000/chip.rs"]
 pub(crate) mod sja1000;
 #[path = "sja1000/boards.rs"]

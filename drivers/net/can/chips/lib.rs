@@ -26,6 +26,7 @@ pub mod ctucanfd_model;
 pub mod i82527;
 #[path = "../i82527/model.rs"]
 pub mod i82527_model;
+pub mod sim_bus;
 #[path = "../sja1000/chip.rs"]
 pub mod sja1000;
 #[path = "../sja1000/boards.rs"]

@@ -43,6 +43,7 @@
 //! [`super::ctucanfd::encode`], so the tests compare two readings of it.
 
 use super::ctucanfd::{reg, DEVICE_ID, YOLO_VALUE};
+use super::sim_bus::{Attempt, BusNode};
 
 /// RX buffer size in bytes (QEMU's `CTUCAN_RCV_BUF_LEN`).
 pub const RX_BUF_BYTES: usize = 8192;
@@ -175,29 +176,11 @@ pub enum Fault {
     },
 }
 
-/// What one transmission attempt came to.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub enum TxAttempt {
-    /// Nothing to send (or not allowed to: disabled, bus monitoring,
-    /// bus-off).
-    Idle,
-    /// The frame is on the bus (deliver it to the other nodes).
-    Sent(BusFrame),
-    /// The attempt failed (bus error or arbitration lost); the core
-    /// retries unless the retransmit limit is reached or it went
-    /// bus-off.
-    Failed,
-}
-
-impl TxAttempt {
-    /// The frame sent, if one was.
-    pub fn sent(self) -> Option<BusFrame> {
-        match self {
-            TxAttempt::Sent(f) => Some(f),
-            _ => None,
-        }
-    }
-}
+/// What one transmission attempt came to: `Idle` (nothing to send, or
+/// not allowed to: disabled, bus monitoring, bus-off), `Sent` (the frame
+/// is on the bus), `Failed` (bus error or arbitration lost; the core
+/// retries unless the retransmit limit is reached or it went bus-off).
+pub type TxAttempt = Attempt<BusFrame>;
 
 /// Fault confinement state (FAULT_STATE).
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -839,5 +822,28 @@ impl<const RXW: usize> super::ctucanfd::Regs for CtuModel<RXW> {
 
     fn write32(&mut self, off: usize, val: u32) {
         CtuModel::write32(self, off, val)
+    }
+}
+
+/// The core on a simulated bus ([`super::sim_bus::round`]).
+impl<const RXW: usize> BusNode for CtuModel<RXW> {
+    type Frame = BusFrame;
+    type Fault = Fault;
+
+    fn tx_pending(&self) -> bool {
+        CtuModel::tx_pending(self)
+    }
+
+    fn acks(&self) -> bool {
+        CtuModel::acks(self)
+    }
+
+    fn attempt(&mut self, fault: Fault, acked: bool) -> TxAttempt {
+        self.transmit(fault, acked)
+    }
+
+    /// False once the RX buffer refuses it (full, or the core disabled).
+    fn deliver(&mut self, f: &BusFrame) -> bool {
+        CtuModel::deliver(self, f)
     }
 }

@@ -60,7 +60,8 @@ use kernel::prelude::*;
 use crate::{ctucanfd, glue};
 
 use crate::rcan_chips::ctucanfd::{reg, txcmd, Regs};
-use crate::rcan_chips::ctucanfd_model::{err_capt, err_pos, err_type, CtuModel, Fault, TxAttempt};
+use crate::rcan_chips::ctucanfd_model::{err_capt, err_pos, err_type, CtuModel, Fault};
+use crate::rcan_chips::sim_bus;
 use ctucanfd::{add_core, Core};
 use glue::params::{Param, ParamStr};
 use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN};
@@ -172,39 +173,12 @@ impl SimBus for Bus {
 
     /// One attempt by the first core (in turn) with a ready TX buffer.
     fn round(&mut self, (fault, overrun): (Fault, bool)) -> Round {
-        let n = self.models.len();
-        let mut r = Round {
-            moved: false,
-            failed: false,
-        };
-        for k in 0..n {
-            let i = (self.next + k) % n;
-            if !self.models[i].tx_pending() {
-                continue;
-            }
-            let acked = (0..n).any(|j| j != i && self.models[j].acks());
-            match self.models[i].transmit(fault, acked) {
-                TxAttempt::Sent(f) => {
-                    for j in (0..n).filter(|&j| j != i) {
-                        let copies = if overrun { OVERRUN_COPIES } else { 1 };
-                        for _ in 0..copies {
-                            if !self.models[j].deliver(&f) {
-                                break;
-                            }
-                        }
-                    }
-                    self.next = (i + 1) % n;
-                    r.moved = true;
-                }
-                TxAttempt::Failed => {
-                    self.next = (i + 1) % n;
-                    r.failed = true;
-                }
-                TxAttempt::Idle => continue,
-            }
-            break;
+        let copies = if overrun { OVERRUN_COPIES } else { 1 };
+        let out = sim_bus::round(&mut self.models, &mut self.next, fault, copies);
+        Round {
+            moved: out.moved(),
+            failed: out.failed(),
         }
-        r
     }
 
     fn irq_line(&mut self, i: usize) -> bool {

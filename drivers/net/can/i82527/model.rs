@@ -40,6 +40,7 @@ use super::frame::CanFrame;
 use super::i82527::{
     arb_bytes, arb_id, bit_ns, bits, cpu_if, ctrl, intid, mcfg, reg, status, EXT_RX,
 };
+use super::sim_bus::{Attempt, BusNode};
 
 /// The contents of one receive buffer: arbitration, configuration, data.
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
@@ -70,16 +71,10 @@ pub enum Fault {
     Overrun,
 }
 
-/// What one transmission attempt did.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub enum TxAttempt {
-    /// Nothing to send (or off the bus).
-    Idle,
-    /// The frame went out (the caller offers it to the other nodes).
-    Sent(CanFrame),
-    /// The attempt failed with a bus error; the chip retries by itself.
-    Failed,
-}
+/// What one transmission attempt did: `Idle` (nothing to send, or off
+/// the bus), `Sent` (the frame went out), `Failed` (a bus error; the chip
+/// retries by itself).
+pub type TxAttempt = Attempt<CanFrame>;
 
 /// One 82527.
 #[derive(Clone, Debug)]
@@ -622,5 +617,32 @@ mod tests {
         assert_eq!(merge(0x95, 0xFD), 0x95);
         assert_eq!(merge(0x96, 0xFD), 0x95);
         assert_eq!(merge(0x95, 0x00), 0x95);
+    }
+}
+
+/// The chip on a simulated bus ([`super::sim_bus::round`]). It needs no
+/// acknowledgement from the bus: [`Fault::NoAck`] stands for a bus where
+/// nobody acknowledges.
+impl BusNode for I82527Model {
+    type Frame = CanFrame;
+    type Fault = Fault;
+
+    fn tx_pending(&self) -> bool {
+        I82527Model::tx_pending(self)
+    }
+
+    fn acks(&self) -> bool {
+        !self.absent && !self.in_init() && !self.bus_off()
+    }
+
+    fn attempt(&mut self, fault: Fault, _acked: bool) -> TxAttempt {
+        I82527Model::attempt(self, fault)
+    }
+
+    /// Every copy arrives (under [`Fault::Overrun`] the second one sets
+    /// MsgLst); the model counts each one no object takes.
+    fn deliver(&mut self, f: &CanFrame) -> bool {
+        self.receive(f);
+        true
     }
 }

@@ -62,7 +62,8 @@ use kernel::prelude::*;
 use crate::{glue, i82527};
 
 use crate::rcan_chips::i82527::{bits, reg, Config, Regs};
-use crate::rcan_chips::i82527_model::{Fault, I82527Model, TxAttempt};
+use crate::rcan_chips::i82527_model::{Fault, I82527Model};
+use crate::rcan_chips::sim_bus::{self, Outcome};
 use glue::params::{Param, ParamStr};
 use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN, MAX_CARDS};
 use i82527::{add_channel, Channel};
@@ -138,34 +139,21 @@ impl SimBus for Bus {
         }
     }
 
+    /// One attempt by the first card (in turn) with a frame pending;
+    /// under `overrun` the others receive it twice before their driver
+    /// runs.
     fn round(&mut self, fault: Fault) -> Round {
-        let n = self.n;
-        let mut r = Round {
-            moved: false,
-            failed: false,
-        };
-        for k in 0..n {
-            let i = (self.next + k) % n;
-            match self.models[i].attempt(fault) {
-                TxAttempt::Sent(f) => {
-                    let ns = self.models[i].frame_ns(&f, XTAL_HZ);
-                    self.last_ns = i64::try_from(ns).unwrap_or(0);
-                    for j in (0..n).filter(|&j| j != i) {
-                        self.models[j].receive(&f);
-                        if fault == Fault::Overrun {
-                            // Again, before the driver has run.
-                            self.models[j].receive(&f);
-                        }
-                    }
-                    r.moved = true;
-                }
-                TxAttempt::Failed => r.failed = true,
-                TxAttempt::Idle => continue,
-            }
-            self.next = (i + 1) % n;
-            break;
+        let copies = if fault == Fault::Overrun { 2 } else { 1 };
+        let models = &mut self.models[..self.n];
+        let out = sim_bus::round(models, &mut self.next, fault, copies);
+        if let Outcome::Sent(i, f) = out {
+            let ns = self.models[i].frame_ns(&f, XTAL_HZ);
+            self.last_ns = i64::try_from(ns).unwrap_or(0);
         }
-        r
+        Round {
+            moved: out.moved(),
+            failed: out.failed(),
+        }
     }
 
     fn irq_line(&mut self, i: usize) -> bool {

@@ -35,6 +35,7 @@
 
 use super::candev::{cc_dlc, ctrlmode::CC_LEN8_DLC};
 use super::frame::CanFrame;
+use super::sim_bus::{Attempt, BusNode};
 use super::sja1000::{cmd, decode_cc, encode_dlc, irq, mode, reg, status, HwFilter, Regs};
 
 /// Receive FIFO size in bytes (datasheet: 64-byte RX FIFO).
@@ -91,17 +92,11 @@ pub enum Fault {
     },
 }
 
-/// What one transmission attempt came to.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub enum TxAttempt {
-    /// Nothing to send (or not allowed to: reset mode, listen-only).
-    Idle,
-    /// The frame is on the bus (deliver it to the other nodes).
-    Sent(CanFrame),
-    /// The attempt failed (error or arbitration lost); the chip retries
-    /// unless single shot was asked for or it went bus-off.
-    Failed,
-}
+/// What one transmission attempt came to: `Idle` (nothing to send, or
+/// not allowed to: reset mode, listen-only), `Sent` (the frame is on the
+/// bus), `Failed` (error or arbitration lost; the chip retries unless
+/// single shot was asked for or it went bus-off).
+pub type TxAttempt = Attempt<CanFrame>;
 
 /// The 64-byte receive FIFO: frame images, oldest first.
 #[derive(Clone, Copy, Debug)]
@@ -623,5 +618,28 @@ impl Regs for Sja1000Model {
             0x10..=0x1C if !self.in_reset() => self.tx[usize::from(r - 0x10)] = v,
             _ => {}
         }
+    }
+}
+
+/// The chip on a simulated bus ([`super::sim_bus::round`]).
+impl BusNode for Sja1000Model {
+    type Frame = CanFrame;
+    type Fault = Fault;
+
+    fn tx_pending(&self) -> bool {
+        self.tx_pending
+    }
+
+    fn acks(&self) -> bool {
+        Sja1000Model::acks(self)
+    }
+
+    fn attempt(&mut self, fault: Fault, acked: bool) -> TxAttempt {
+        self.transmit(fault, acked)
+    }
+
+    /// False once the FIFO refuses it (full, or reset mode).
+    fn deliver(&mut self, f: &CanFrame) -> bool {
+        Sja1000Model::deliver(self, f)
     }
 }

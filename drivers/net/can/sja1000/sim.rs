@@ -51,8 +51,9 @@ use kernel::prelude::*;
 
 use crate::{glue, sja1000};
 
+use crate::rcan_chips::sim_bus;
 use crate::rcan_chips::sja1000::{cmd, reg, Regs, CDR_CBP, CDR_CLK_OFF};
-use crate::rcan_chips::sja1000_model::{ecc, Fault, Sja1000Model, TxAttempt};
+use crate::rcan_chips::sja1000_model::{ecc, Fault, Sja1000Model};
 use glue::params::{Param, ParamStr};
 use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN, MAX_CARDS};
 use kernel::c_str;
@@ -147,39 +148,12 @@ impl SimBus for Bus {
 
     /// One attempt by the first card (in turn) with a frame pending.
     fn round(&mut self, (fault, overrun): (Fault, bool)) -> Round {
-        let n = self.n;
-        let mut r = Round {
-            moved: false,
-            failed: false,
-        };
-        for k in 0..n {
-            let i = (self.next + k) % n;
-            if !self.models[i].tx_pending {
-                continue;
-            }
-            let acked = (0..n).any(|j| j != i && self.models[j].acks());
-            match self.models[i].transmit(fault, acked) {
-                TxAttempt::Sent(f) => {
-                    for j in (0..n).filter(|&j| j != i) {
-                        let copies = if overrun { OVERRUN_COPIES } else { 1 };
-                        for _ in 0..copies {
-                            if !self.models[j].deliver(&f) {
-                                break;
-                            }
-                        }
-                    }
-                    self.next = (i + 1) % n;
-                    r.moved = true;
-                }
-                TxAttempt::Failed => {
-                    self.next = (i + 1) % n;
-                    r.failed = true;
-                }
-                TxAttempt::Idle => continue,
-            }
-            break;
+        let copies = if overrun { OVERRUN_COPIES } else { 1 };
+        let out = sim_bus::round(&mut self.models[..self.n], &mut self.next, fault, copies);
+        Round {
+            moved: out.moved(),
+            failed: out.failed(),
         }
-        r
     }
 
     fn irq_line(&mut self, i: usize) -> bool {
