@@ -192,12 +192,15 @@ impl<R: Regs + Send + 'static> Core<R> {
 /// none. The initial setting of every core: `ip link set canX type can`
 /// replaces it where the link kind is registered, and it is the only way
 /// to a bit timing where it is not (`rcan_dev rtnl_link=N`).
+// Unused in `rcan_ctucanfd_sim`, which has no such parameters.
+#[allow(dead_code)]
 #[derive(Clone, Copy, Default)]
 pub(crate) struct Preset {
     pub(crate) bitrate: u32,
     pub(crate) dbitrate: u32,
 }
 
+#[allow(dead_code)]
 impl Preset {
     /// The settings a core starts with: each rate computed by the same
     /// search as `ip link set canX type can bitrate N` (mainline
@@ -237,6 +240,7 @@ impl Preset {
 }
 
 /// A refused [`Preset`]: the parameter and, if the search gave one, why.
+#[allow(dead_code)]
 pub(crate) struct PresetError {
     pub(crate) param: &'static str,
     pub(crate) why: Option<bittiming::Msg>,
