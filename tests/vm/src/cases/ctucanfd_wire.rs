@@ -55,7 +55,7 @@ use crate::check::{ensure, OrFail, TestResult};
 use crate::ctx::{sized, Ctx, Mainline, Module};
 use crate::Test;
 
-pub const TESTS: &[Test] = test_table![ctucanfd_wire_peer_mainline];
+pub const TESTS: &[Test] = test_table![ctucanfd_bitrate_params, ctucanfd_wire_peer_mainline];
 
 /// `CANFD_BRS`, `CANFD_ESI`, `CANFD_FDF` (`<linux/can.h>`).
 const CANFD_BRS: u8 = 0x01;
@@ -404,5 +404,62 @@ fn ctucanfd_wire_peer_mainline(ctx: &mut Ctx) -> TestResult {
         n - got_ba,
         oa2 - oa
     ));
+    Ok(())
+}
+
+/// `rcan_ctucanfd_pci bitrate= dbitrate=`: values no bit timing meets
+/// (`bitrate=7`), `dbitrate` without `bitrate` or below it refuse the
+/// load with EINVAL and a kernel log line naming the parameter; good ones
+/// (with the link kind registered as usual) give every core that timing,
+/// as `ip -d` shows it (the same as `ip ... bitrate 500000 dbitrate
+/// 2000000` computes), a log line per core, and `up` needs no `ip ...
+/// type can`; `mtu 72` turns CAN FD on with the preset data timing.
+fn ctucanfd_bitrate_params(ctx: &mut Ctx) -> TestResult {
+    ctx.insmod(Module::Pf, &[])?;
+    ctx.insmod(Module::Raw, &[])?;
+    ctx.insmod(Module::Dev, &[])?;
+    for (params, why) in [
+        (&["bitrate=7"][..], "bitrate:"),
+        (&["dbitrate=2000000"][..], "dbitrate:"),
+        (&["bitrate=1000000", "dbitrate=500000"][..], "dbitrate:"),
+    ] {
+        let mut kmsg = ctx.kmsg()?;
+        let err = match ctx.insmod(Module::CtuCanFdPci, params) {
+            Ok(()) => return Err(format!("rcan_ctucanfd_pci {params:?} loaded")),
+            Err(e) => e,
+        };
+        ensure!(
+            err.contains("Invalid argument"),
+            "{params:?}: not EINVAL: {err}"
+        );
+        let log = kmsg.read_new()?;
+        ensure!(
+            log.iter().any(|l| l.contains("rcan_ctucanfd_pci")
+                && l.contains("refused")
+                && l.contains(why)),
+            "{params:?}: no kernel log line naming {why:?}: {log:?}"
+        );
+    }
+    let mut kmsg = ctx.kmsg()?;
+    ctx.insmod(Module::CtuCanFdPci, &["bitrate=500000", "dbitrate=2000000"])?;
+    let log = kmsg.read_new()?;
+    ensure!(
+        log.iter().any(|l| l
+            .contains("can0: bit timing from module parameters: bitrate 500000, dbitrate 2000000")),
+        "no log line for can0's preset: {log:?}"
+    );
+    json_has(
+        "can0",
+        &[
+            r#""bittiming":{"bitrate":500000,"#,
+            r#""data_bittiming":{"bitrate":2000000,"sample_point":"0.740""#,
+        ],
+        &[r#""ctrlmode":["FD"#],
+    )?;
+    ctx.link_up("can0")?;
+    ctx.link_down("can0")?;
+    ip_ok(&["link", "set", "can0", "mtu", "72"])?;
+    ctx.link_up("can0")?;
+    json_has("can0", &[r#""mtu":72"#, r#""ctrlmode":["FD"]"#], &[])?;
     Ok(())
 }
