@@ -37,6 +37,8 @@ rcan_kbuild() { echo "$RCAN_CACHE/kernel/$RCAN_KERNEL-$(rcan_kernel_key)"; }
 # QEMU's emulated SJA1000 cards on one virtual CAN bus, for the VM test
 # suite: two Kvaser PCIcan (can0/can1 when only rcan_kvaser_pci is loaded),
 # a PCM-3680I and a MIOe-3680 (two channels each). On a second bus, so the
-# SJA1000 tests see none of its traffic: a CTU CAN FD PCI card (two cores,
-# can0/can1 when only rcan_ctucanfd_pci or mainline ctucanfd_pci is loaded).
-RCAN_QEMU_CAN="-object can-bus,id=bus0 -device kvaser_pci,canbus=bus0 -device kvaser_pci,canbus=bus0 -device pcm3680_pci,canbus0=bus0,canbus1=bus0 -device mioe3680_pci,canbus0=bus0,canbus1=bus0 -object can-bus,id=bus1 -device ctucan_pci,canbus0=bus1,canbus1=bus1"
+# SJA1000 tests see none of its traffic: two CTU CAN FD PCI cards (two cores
+# each; can0/can1 are the first card's when only rcan_ctucanfd_pci or
+# mainline ctucanfd_pci is loaded, PCI order; the second card is the wire
+# peer of ctucanfd_wire_peer_mainline, mainline's driver bound to it).
+RCAN_QEMU_CAN="-object can-bus,id=bus0 -device kvaser_pci,canbus=bus0 -device kvaser_pci,canbus=bus0 -device pcm3680_pci,canbus0=bus0,canbus1=bus0 -device mioe3680_pci,canbus0=bus0,canbus1=bus0 -object can-bus,id=bus1 -device ctucan_pci,canbus0=bus1,canbus1=bus1 -device ctucan_pci,canbus0=bus1,canbus1=bus1"

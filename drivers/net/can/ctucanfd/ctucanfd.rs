@@ -187,14 +187,87 @@ impl<R: Regs + Send + 'static> Core<R> {
     }
 }
 
+/// The bit rates a front-end's module parameters give its cores at
+/// probe (`bitrate=`, `dbitrate=` of `rcan_ctucanfd_pci`), in bit/s; 0:
+/// none. The initial setting of every core: `ip link set canX type can`
+/// replaces it where the link kind is registered, and it is the only way
+/// to a bit timing where it is not (`rcan_dev rtnl_link=N`).
+// Unused in `rcan_ctucanfd_sim`, which has no such parameters.
+#[allow(dead_code)]
+#[derive(Clone, Copy, Default)]
+pub(crate) struct Preset {
+    pub(crate) bitrate: u32,
+    pub(crate) dbitrate: u32,
+}
+
+#[allow(dead_code)]
+impl Preset {
+    /// The settings a core starts with: each rate computed by the same
+    /// search as `ip link set canX type can bitrate N` (mainline
+    /// `can_calc_bittiming`, [`bittiming::get`], the default sample point)
+    /// against the core's limits and `clock_hz`; CAN FD stays off (MTU 16)
+    /// until `ip link set canX mtu 72`, which needs no link kind. Refused
+    /// with the parameter's name and the reason: a rate the core cannot
+    /// meet within 5 %, `dbitrate` without `bitrate` or below it (mainline
+    /// `open_candev` would refuse that data bit timing with FD on).
+    /// Any context.
+    pub(crate) fn settings(&self, clock_hz: u32) -> core::result::Result<Settings, PresetError> {
+        let mut s = Settings::default();
+        if self.bitrate == 0 && self.dbitrate == 0 {
+            return Ok(s);
+        }
+        if self.bitrate == 0 || (self.dbitrate != 0 && self.dbitrate < self.bitrate) {
+            return Err(PresetError {
+                param: "dbitrate",
+                why: None,
+            });
+        }
+        let calc = |param: &'static str, btc: &bittiming::BittimingConst, rate: u32| {
+            let want = bittiming::Bittiming {
+                bitrate: rate,
+                ..Default::default()
+            };
+            bittiming::get(btc, clock_hz, &want)
+                .map(|c| c.bt)
+                .map_err(|e| PresetError { param, why: e.msg })
+        };
+        s.bittiming = calc("bitrate", &NOMINAL_CONST, self.bitrate)?;
+        if self.dbitrate != 0 {
+            s.data_bittiming = calc("dbitrate", &DATA_CONST, self.dbitrate)?;
+        }
+        Ok(s)
+    }
+}
+
+/// A refused [`Preset`]: the parameter and, if the search gave one, why.
+#[allow(dead_code)]
+pub(crate) struct PresetError {
+    pub(crate) param: &'static str,
+    pub(crate) why: Option<bittiming::Msg>,
+}
+
+impl core::fmt::Display for PresetError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match &self.why {
+            Some(m) => write!(f, "{}: {}", self.param, m),
+            None if self.param == "dbitrate" => {
+                f.write_str("dbitrate: needs bitrate, and at least its value")
+            }
+            None => write!(f, "{}: no bit timing for this rate", self.param),
+        }
+    }
+}
+
 /// Probes the core behind `regs` and, if one answers (DEVICE_ID 0xCAFD),
-/// registers a `can%d` device for it on interrupt line `irq`; `None` if
-/// there is none. Logs the device name with `what`. Process context
+/// registers a `can%d` device for it on interrupt line `irq` with the
+/// settings `preset` (a front-end's [`Preset::settings`], or none); `None`
+/// if there is no core. Logs the device name with `what`. Process context
 /// (front-end probe).
 pub(crate) fn add_core<R: Regs + Send + 'static>(
     regs: R,
     irq: u32,
     clock_hz: u32,
+    preset: Settings,
     what: core::fmt::Arguments<'_>,
 ) -> Result<Option<Core<R>>> {
     let mut chip = Chip::new(regs);
@@ -214,7 +287,7 @@ pub(crate) fn add_core<R: Regs + Send + 'static>(
         )?,
         irq,
         clock_hz,
-        can: CanDev::new(Settings::default())?,
+        can: CanDev::new(preset)?,
         restart: new_bh_spinlock!((), "CtuPriv::restart")?,
     };
     let reg =
@@ -226,6 +299,14 @@ pub(crate) fn add_core<R: Regs + Send + 'static>(
         irq,
         bufs
     );
+    if preset.bittiming.bitrate != 0 {
+        pr_info!(
+            "{}: bit timing from module parameters: bitrate {}, dbitrate {}\n",
+            reg.dev().name(),
+            preset.bittiming.bitrate,
+            preset.data_bittiming.bitrate
+        );
+    }
     Ok(Some(Core { reg }))
 }
 

@@ -9,6 +9,14 @@
 //! the card's interrupt line. Only register access and probing live
 //! here; the driver is `ctucanfd.rs`.
 //!
+//! Module parameters `bitrate` and `dbitrate` (bit/s, default 0: none):
+//! the bit timing every core starts with ([`ctucanfd::Preset`]), computed
+//! as `ip link set canX type can bitrate N dbitrate M` computes it; a
+//! value no bit timing meets refuses the module load with `EINVAL` and a
+//! kernel log line naming the parameter. With `rcan_dev rtnl_link=N`
+//! (mainline's `can-dev` holding the link kind) they are the only way to
+//! a bit timing; FD is then switched on with `ip link set canX mtu 72`.
+//!
 //! Contexts: probe/remove in process context (PCI core); register access
 //! from every context the driver uses, serialised by each core's lock.
 #![forbid(unsafe_code)]
@@ -18,7 +26,8 @@ use kernel::prelude::*;
 use crate::{ctucanfd, glue};
 
 use crate::rcan_chips::ctucanfd::CORE_SPAN;
-use ctucanfd::{add_core, Core, IoRegs};
+use ctucanfd::{add_core, Core, IoRegs, Preset};
+use glue::params::Param;
 use glue::pci::{self, IoMem};
 use kernel::c_str;
 
@@ -32,6 +41,19 @@ const BAR0_LEN: usize = 0x4000 + 0x54;
 const MAX_CORES: usize = 15;
 /// The core clock on the card (mainline `ctucanfd_pci`: 100 MHz).
 const CLOCK_HZ: u32 = 100_000_000;
+
+/// Module parameter `bitrate` (number 0 in ctucanfd_pci_c.c, read-only).
+const BITRATE: Param<u32> = Param::new(0);
+/// Module parameter `dbitrate` (number 1, read-only).
+const DBITRATE: Param<u32> = Param::new(1);
+
+/// The module parameters' bit timing preset.
+fn preset() -> Preset {
+    Preset {
+        bitrate: BITRATE.get(),
+        dbitrate: DBITRATE.get(),
+    }
+}
 
 /// Number of cores from the identification word: its low four bits when
 /// the top bits carry the card's 0xC000_0000 signature, else two (what
@@ -73,6 +95,8 @@ impl pci::Driver for CtuCanFdPci {
             _enabled: enabled,
         };
         card.irq_enable(false);
+        // Checked at module init; the parameters are read-only.
+        let preset = preset().settings(CLOCK_HZ).unwrap_or_default();
         for i in 0..n {
             let regs = IoRegs {
                 io: dev.iomap(1, n * CORE_SPAN)?,
@@ -83,6 +107,7 @@ impl pci::Driver for CtuCanFdPci {
                 regs,
                 dev.irq(),
                 CLOCK_HZ,
+                preset,
                 format_args!("core {i} of a CTU CAN FD PCI card"),
             )?
             else {
@@ -117,6 +142,16 @@ pub(crate) struct CtuCanFdPciModule;
 
 impl kernel::Module for CtuCanFdPciModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
+        if let Err(e) = preset().settings(CLOCK_HZ) {
+            pr_err!(
+                "bitrate={} dbitrate={} refused for the card's {} Hz clock: {}\n",
+                BITRATE.get(),
+                DBITRATE.get(),
+                CLOCK_HZ,
+                e
+            );
+            return Err(EINVAL);
+        }
         DRIVER.register(c_str!("rcan_ctucanfd_pci"), &IDS)?;
         Ok(CtuCanFdPciModule)
     }

@@ -62,6 +62,7 @@ use crate::{ctucanfd, glue};
 use crate::rcan_chips::ctucanfd::{reg, txcmd, Regs};
 use crate::rcan_chips::ctucanfd_model::{err_capt, err_pos, err_type, CtuModel, Fault};
 use crate::rcan_chips::sim_bus;
+use crate::rcan_core::candev::Settings;
 use ctucanfd::{add_core, Core};
 use glue::params::{Param, ParamStr};
 use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN};
@@ -124,6 +125,7 @@ impl SimBus for Bus {
             SimRegs { idx: i },
             0,
             CLOCK_HZ,
+            Settings::default(),
             format_args!("simulated core {i}"),
         )
     }

@@ -11,8 +11,29 @@
 #include <linux/can/netlink.h>
 #include <net/netlink.h>
 #include <net/rtnetlink.h>
+#include <linux/moduleparam.h>
 
 #include "../../../../rust/helpers/rcan_helpers.c"
+#include "../../../../rust/helpers/rcan_params.h"
+
+/*
+ * rtnl_link=N loads the module without registering the "can" link kind,
+ * so that mainline's can-dev (and its drivers) can hold the kind in the
+ * same boot; rcan's devices then take their bit timing from their
+ * drivers' module parameters (can-dev.rst, "Beside mainline's can-dev").
+ */
+static bool rtnl_link = true;
+module_param(rtnl_link, bool, 0444);
+MODULE_PARM_DESC(rtnl_link, "Register the rtnetlink link kind \"can\" (default Y; N: leave it to mainline's can-dev, ip link set ... type can is then refused on rcan devices)");
+
+/* Parameter numbers shared with candev.rs: 0 rtnl_link. */
+u64 rcan_module_param(unsigned int which, unsigned int idx)
+{
+	switch (which) {
+	case 0: return READ_ONCE(rtnl_link);
+	default: return 0;
+	}
+}
 
 int rcan_can_validate(struct nlattr *tb[], struct nlattr *data[],
 		      struct netlink_ext_ack *extack);

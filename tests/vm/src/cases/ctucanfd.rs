@@ -78,7 +78,7 @@ fn ctucan2(ctx: &mut Ctx, args: &[&str]) -> Result<(u32, u32), String> {
 }
 
 /// Standard, extended and remote frames, DLC 0..8.
-fn classic_kinds() -> Vec<socketcan::CanFrame> {
+pub(super) fn classic_kinds() -> Vec<socketcan::CanFrame> {
     let mut v = Vec::new();
     for n in 0..=8usize {
         let data: Vec<u8> = (0..n as u8).map(|i| 0xC0 | i).collect();
@@ -115,7 +115,7 @@ fn candev_ctucanfd_classic_both_ways(ctx: &mut Ctx) -> TestResult {
 }
 
 /// A CAN_RAW socket with CAN_RAW_FD_FRAMES bound to `ifindex`.
-fn fd_open(ifindex: u32) -> Result<CanFdSocket, String> {
+pub(super) fn fd_open(ifindex: u32) -> Result<CanFdSocket, String> {
     let s = CanFdSocket::open_iface(ifindex)
         .or_fail(format_args!("CanFdSocket bound to ifindex {ifindex}"))?;
     s.set_read_timeout(canraw::RAW_RX_TIMEOUT)
@@ -400,7 +400,7 @@ fn ctucanfd_rmmod_during_traffic(ctx: &mut Ctx) -> TestResult {
 
 /// Runs `ip ARGS...`, which must fail with `want` in its error output
 /// (the errno's text).
-fn ip_fails(args: &[&str], want: &str) -> TestResult {
+pub(super) fn ip_fails(args: &[&str], want: &str) -> TestResult {
     let out = ip(args)?;
     ensure!(
         !out.status.success() && out.stderr.contains(want),
@@ -414,7 +414,7 @@ fn ip_fails(args: &[&str], want: &str) -> TestResult {
 
 /// Checks that `ip -j -d link show DEV` contains every one of `want`,
 /// and none of `not`.
-fn json_has(dev: &str, want: &[&str], not: &[&str]) -> TestResult {
+pub(super) fn json_has(dev: &str, want: &[&str], not: &[&str]) -> TestResult {
     let j = details_json(dev)?;
     for w in want {
         ensure!(
