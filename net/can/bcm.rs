@@ -35,9 +35,13 @@
 //! interrupts saved, may run a socket filter and wakes readers, all of
 //! which softirq context allows; mainline queues RX_CHANGED under
 //! `bcm_rx_update_lock` in the same way), so one operation's messages
-//! keep their order. Frames are sent after `state` is released (`Pending`):
-//! the driver's transmit path runs outside the operation's lock, as in
-//! mainline.
+//! keep their order. Frames are sent after `state` is released: the driver's
+//! transmit path runs outside the operation's lock, as in mainline. A
+//! transmit operation's frame is copied out of the operation under `state`
+//! ([`TxFrame`], mainline's "read currframe under lock protection") and its
+//! skb built and sent after the lock is released (mainline `bcm_can_tx`);
+//! remote-frame replies of receive operations are built under `state` and
+//! sent after it (`Pending`).
 //!
 //! Contexts: system calls and the netdevice notifier run in process
 //! context; [`BcmProto::rx`] in NET_RX softirq under RCU; the timer
@@ -86,7 +90,7 @@ use rcan_core::bcm::{
 };
 use rcan_core::bcm_rx::{RxOp, RxOut, RxSlot, TRAFFIC_LOCAL, TRAFFIC_OWN};
 use rcan_core::bcm_tx::{TxOp, TxOut};
-use rcan_core::frame::{AnyFrame, CanFdFrame};
+use rcan_core::frame::{AnyFrame, CanFdFrame, CANFD_MTU};
 
 /// `CAN_BCM` in `<linux/can.h>`.
 const CAN_BCM: i32 = 2;
@@ -191,10 +195,9 @@ struct RxState {
     rx_stamp: i64,
 }
 
-/// Frames to send once the state lock is released. A transmit operation
-/// sends at most one frame per event; a received frame makes at most one
-/// remote-frame reply per matching operation, and at most two operations
-/// of a socket match a frame (its interface's and "any"'s).
+/// Remote-frame replies to send once the state lock is released: a
+/// received frame makes at most one per matching operation, and at most
+/// two operations of a socket match a frame (its interface's and "any"'s).
 struct Pending {
     sends: [Option<(Skb, DevRef)>; 2],
 }
@@ -258,6 +261,33 @@ fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32, t
     }
 }
 
+/// The frame a transmit operation's state machine sent in one event (at
+/// most one: see [`TxOut`]): its interface (held) and its image, copied
+/// out of the operation under `state`, so that the skb is built and sent
+/// after the lock is released (mainline `bcm_can_tx`).
+struct TxFrame {
+    dev: DevRef,
+    image: [u8; CANFD_MTU],
+    /// Bytes of `image` in use: the operation's `cfsiz` (16 or 72).
+    len: usize,
+}
+
+impl TxFrame {
+    /// Builds the skb (owned by `sk`) and sends it with loopback, as
+    /// mainline's BCM always does; errors are dropped as mainline's
+    /// `bcm_can_tx` drops them. Process or softirq context, no spinlock
+    /// held. Returns whether the driver took the frame.
+    fn send(self, sk: &S) -> bool {
+        let Some(image) = self.image.get(..self.len) else {
+            return false;
+        };
+        match frame_skb(sk, &self.dev, image) {
+            Some(skb) => rcan_api::send(skb, &self.dev, true).is_ok(),
+            None => false,
+        }
+    }
+}
+
 /// The effects of a transmit operation's state machine.
 struct TxEffects<'a, 'p> {
     job: JobRef<'a, BcmOp>,
@@ -265,7 +295,8 @@ struct TxEffects<'a, 'p> {
     ifindex: i32,
     cfsiz: usize,
     frames: &'a [u8],
-    pending: &'p mut Pending,
+    /// The frame to send once `state` is released.
+    sent: &'p mut Option<TxFrame>,
     /// Outside the timer callback: the expiry to arm once the pending
     /// frames are sent (see [`with_tx`]); `None` arms at once.
     arm_later: Option<&'p mut Option<u64>>,
@@ -282,8 +313,18 @@ impl TxOut for TxEffects<'_, '_> {
         else {
             return true;
         };
-        if let Some(skb) = frame_skb(self.sk, &dev, bytes) {
-            self.pending.push(skb, dev);
+        // One frame per event (TxOut); a second would be dropped, as the
+        // skb of a failed allocation is.
+        if self.sent.is_none() {
+            let mut image = [0u8; CANFD_MTU];
+            if let Some(dst) = image.get_mut(..bytes.len()) {
+                dst.copy_from_slice(bytes);
+                *self.sent = Some(TxFrame {
+                    dev,
+                    image,
+                    len: bytes.len(),
+                });
+            }
         }
         true
     }
@@ -410,7 +451,7 @@ fn with_tx(
 ) -> Option<u64> {
     let d = job.data();
     let sk = d.sk.sock();
-    let mut pending = Pending::new();
+    let mut sent = None;
     let mut later = None;
     {
         let mut st = d.state.lock();
@@ -427,14 +468,15 @@ fn with_tx(
                 ifindex: *ifindex,
                 cfsiz: *cfsiz,
                 frames,
-                pending: &mut pending,
+                sent: &mut sent,
                 arm_later: Some(&mut later),
             };
             f(op, &mut out);
         }
     }
-    let sent = pending.flush();
-    d.frames_abs.fetch_add(sent, Ordering::Relaxed);
+    if sent.is_some_and(|frame| frame.send(&sk)) {
+        d.frames_abs.fetch_add(1, Ordering::Relaxed);
+    }
     if in_callback {
         return later;
     }

@@ -41,10 +41,12 @@
 //! FIFO (a [`Ring`] of `FIFO_LEN` skbs) is protected by its own spinlock, taken by `start_xmit`,
 //! the NAPI poll (NET_RX softirq) and `stop` (process context, under RTNL,
 //! after the poll was disabled); `open`/`stop` run in process context
-//! under RTNL. The parameters are read with READ_ONCE and may change at
-//! any time through sysfs.
+//! under RTNL. `verbose` and `droprate` may change at any time through
+//! sysfs: `start_xmit` reads them from Rust atomics ([`Mirror`]) that the
+//! parameter setter writes, so a frame costs no call into the C shim.
 #![forbid(unsafe_code)]
 
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use kernel::prelude::*;
 
 use crate::{glue, rcan_core};
@@ -67,17 +69,44 @@ const PARAM_COUNT: i32 = 0;
 const PARAM_VERBOSE: i32 = 1;
 const PARAM_DROPRATE: i32 = 2;
 const COUNT: Param<u32> = Param::new(PARAM_COUNT as u32);
-const VERBOSE: Param<bool> = Param::new(PARAM_VERBOSE as u32);
 const DROPRATE: Param<u32> = Param::new(PARAM_DROPRATE as u32);
 
+/// The values of `verbose` and `droprate` as `start_xmit` reads them.
+///
+/// Starts with the C variables' defaults (0: quiet, no drops) and is
+/// written only by [`param_set`], which the C setter calls for every value
+/// it stores (at load, before [`CanLoop::init`], and on each sysfs write,
+/// under the kernel's parameter lock): so it always holds what the C
+/// variable holds or is about to. Read with relaxed loads in any context:
+/// a frame sees the old or the new value, as with the C variable's
+/// READ_ONCE. (`count` is read once, in `init`, through [`Param`].)
+struct Mirror {
+    verbose: AtomicBool,
+    /// A valid [`DropRate`] percentage (0-100).
+    droprate: AtomicU32,
+}
+
+static MIRROR: Mirror = Mirror {
+    verbose: AtomicBool::new(false),
+    droprate: AtomicU32::new(0),
+};
+
 /// Validates a parameter value for the C parameter setter
-/// (`rcan_loop_param_ok` in canloop_mod.rs): refusing a bad value at insmod
-/// time makes the load fail with EINVAL. Process context.
-pub(crate) fn param_ok(which: i32, val: u32) -> bool {
+/// (`rcan_loop_param_record` in canloop_mod.rs) and, if valid, records it
+/// in [`MIRROR`] just before the setter stores it: refusing a bad value
+/// at insmod time makes the load fail with EINVAL. Process context.
+pub(crate) fn param_set(which: i32, val: u32) -> bool {
     match which {
         PARAM_COUNT => (1..=MAX_COUNT).contains(&val),
-        PARAM_VERBOSE => val <= 1,
-        _ => DropRate::new(val).is_some(),
+        PARAM_VERBOSE if val <= 1 => {
+            MIRROR.verbose.store(val == 1, Ordering::Relaxed);
+            true
+        }
+        PARAM_DROPRATE if DropRate::new(val).is_some() => {
+            MIRROR.droprate.store(val, Ordering::Relaxed);
+            true
+        }
+        _ => false,
     }
 }
 
@@ -150,7 +179,7 @@ impl Driver for LoopDriver {
         let Some((mut skb, frame)) = skb.can_xmit_start_any(dev) else {
             return Xmit::Ok;
         };
-        if VERBOSE.get() {
+        if MIRROR.verbose.load(Ordering::Relaxed) {
             pr_info!(
                 "{}: tx {}\n",
                 dev.name(),
@@ -158,7 +187,7 @@ impl Driver for LoopDriver {
             );
         }
         // The parameter setter only stores valid rates.
-        let drop_it = match DropRate::new(DROPRATE.get()) {
+        let drop_it = match DropRate::new(MIRROR.droprate.load(Ordering::Relaxed)) {
             Some(rate) if rate.percent() > 0 => rate.should_drop(glue::random_u32()),
             _ => false,
         };

@@ -2,7 +2,8 @@
 /*
  * C side of rcan_loop: module parameters (6.12's Rust module! macro has
  * none) and the module's private copy of the helpers. Validation of the
- * values is Rust's (rcan_loop_param_ok); this file only parses and stores.
+ * values is Rust's (rcan_loop_param_record, which also records a valid value
+ * for the transmit path); this file only parses and stores.
  */
 #include <linux/kernel.h>
 #include <linux/moduleparam.h>
@@ -10,7 +11,7 @@
 #include "../../../rust/helpers/rcan_helpers.c"
 #include "../../../rust/helpers/rcan_params.h"
 
-bool rcan_loop_param_ok(int which, unsigned int val);
+bool rcan_loop_param_record(int which, unsigned int val);
 
 unsigned int rcan_loop_count = 1;
 unsigned int rcan_loop_verbose;
@@ -24,7 +25,7 @@ static int rcan_loop_param_set(const char *val, const struct kernel_param *kp,
 
 	if (ret)
 		return ret;
-	if (!rcan_loop_param_ok(which, v))
+	if (!rcan_loop_param_record(which, v))
 		return -EINVAL;
 	WRITE_ONCE(*(unsigned int *)kp->arg, v);
 	return 0;

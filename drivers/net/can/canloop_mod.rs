@@ -28,8 +28,9 @@ module! {
 
 /// Called by canloop_c.c's parameter setter (process context) before it
 /// stores a value: refusing one makes the write (or the load) fail with
-/// EINVAL.
+/// EINVAL; a valid value is recorded for the transmit path
+/// (`canloop::param_set`).
 #[no_mangle]
-extern "C" fn rcan_loop_param_ok(which: i32, val: u32) -> bool {
-    canloop::param_ok(which, val)
+extern "C" fn rcan_loop_param_record(which: i32, val: u32) -> bool {
+    canloop::param_set(which, val)
 }

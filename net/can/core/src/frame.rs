@@ -270,6 +270,20 @@ impl AnyFrame {
         None
     }
 
+    /// Which flavour [`AnyFrame::parse`] would find in `bytes`, without
+    /// building the frame: `Some(false)` classic, `Some(true)` CAN FD,
+    /// `None` exactly when `parse` gives `None`. Mainline `can_send`'s
+    /// checks (the buffer's length, then the frame's `len`), for a send
+    /// path that only needs to know which and that the frame is sound.
+    pub fn kind(bytes: &[u8]) -> Option<bool> {
+        let len = usize::from(*bytes.get(4)?);
+        match bytes.len() {
+            CAN_FRAME_LEN => (len <= MAX_DLC).then_some(false),
+            CANFD_MTU => (len <= CANFD_MAX_DLEN).then_some(true),
+            _ => None,
+        }
+    }
+
     /// The identifier with its flags.
     pub fn can_id(&self) -> u32 {
         match self {

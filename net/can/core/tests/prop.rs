@@ -351,3 +351,30 @@ proptest! {
         prop_assert!(d.as_str().len() <= 40);
     }
 }
+
+/// Buffers of every length around the two frame sizes, their `len` byte
+/// often in the interesting range (0-80).
+fn frame_buffers() -> impl Strategy<Value = Vec<u8>> {
+    use proptest::collection::vec;
+    let bytes = prop_oneof![
+        vec(any::<u8>(), 16..=16),
+        vec(any::<u8>(), 72..=72),
+        vec(any::<u8>(), 0..80),
+    ];
+    (bytes, proptest::option::of(0u8..80)).prop_map(|(mut b, len)| {
+        if let (Some(l), Some(slot)) = (len, b.get_mut(4)) {
+            *slot = l;
+        }
+        b
+    })
+}
+
+proptest! {
+    /// pf_can's send check (`AnyFrame::kind`) accepts exactly the buffers
+    /// `AnyFrame::parse` accepts, and names the same flavour.
+    #[test]
+    fn any_frame_kind_agrees_with_parse(b in frame_buffers()) {
+        use rcan_core::frame::AnyFrame;
+        prop_assert_eq!(AnyFrame::kind(&b), AnyFrame::parse(&b).map(|f| f.is_fd()));
+    }
+}
