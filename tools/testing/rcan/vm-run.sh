@@ -32,9 +32,14 @@
 # --scan only scans the given kernel logs: 126 if they hold a report, else 0.
 #
 # Environment: RCAN_KERNEL (release|debug) picks the default kernel and
-# memory size; RCAN_KVM=auto|0|1 (default auto) picks the accelerator:
+# memory size; RCAN_KVM=auto|0|1|icount (default auto) picks the accelerator:
 # auto probes once whether KVM guests actually boot here (nested KVM often
-# hangs) and caches the verdict, falling back to TCG.
+# hangs) and caches the verdict, falling back to TCG; icount is
+# single-threaded TCG with instruction counting (the guest clock advances
+# 1 ns per guest instruction and skips idle time), so CPU time measured in
+# the guest counts instructions whatever the host's load: for benchmarks
+# on a shared host (Documentation/networking/rcan/benchmarks.rst), never
+# for the test suite (much slower).
 set -euo pipefail
 # shellcheck source=lib.sh source-path=SCRIPTDIR
 . "$(dirname "$0")/lib.sh"
@@ -173,6 +178,7 @@ pick_accel() {
 	local kernel=$1 initrd=$2 key file verdict=
 	case ${RCAN_KVM:-auto} in
 	0) verdict=tcg ;;
+	icount) verdict=icount ;;
 	1) kvm_usable || die "RCAN_KVM=1 but /dev/kvm is not usable"; verdict=kvm ;;
 	auto)
 		if kvm_usable; then
@@ -194,10 +200,12 @@ pick_accel() {
 			verdict=tcg
 		fi
 		;;
-	*) die "RCAN_KVM must be auto, 0 or 1" ;;
+	*) die "RCAN_KVM must be auto, 0, 1 or icount" ;;
 	esac
 	if [ "$verdict" = kvm ]; then
 		accel=(-accel kvm -cpu host)
+	elif [ "$verdict" = icount ]; then
+		accel=(-accel "tcg,thread=single" -icount "shift=0,sleep=off" -cpu max)
 	else
 		# Multi-threaded TCG: one host thread per vCPU.
 		accel=(-accel "tcg,thread=multi" -cpu max)
