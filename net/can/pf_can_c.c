@@ -10,22 +10,18 @@
 
 #include "../../rust/helpers/rcan_helpers.c"
 
-static DEFINE_MUTEX(rcan_pf_mutex);
+/*
+ * The writers' mutexes, each its own lock class. Not static: the Rust side
+ * (rust/glue/can/family.rs) takes their addresses as extern statics, so a
+ * lock is one call to rcan_mutex_lock, not an address lookup first. Not
+ * exported: only this module uses them.
+ */
+extern struct mutex rcan_pf_mutex;
+DEFINE_MUTEX(rcan_pf_mutex);
 
-struct mutex *rcan_pf_mutex_ptr(void);
-struct mutex *rcan_pf_mutex_ptr(void)
-{
-	return &rcan_pf_mutex;
-}
-
-/* The receive table's writers (its own lock class). */
-static DEFINE_MUTEX(rcan_rx_mutex);
-
-struct mutex *rcan_rx_mutex_ptr(void);
-struct mutex *rcan_rx_mutex_ptr(void)
-{
-	return &rcan_rx_mutex;
-}
+/* The receive table's writers. */
+extern struct mutex rcan_rx_mutex;
+DEFINE_MUTEX(rcan_rx_mutex);
 
 void rcan_proto_register(void);
 void rcan_proto_unregister(void);

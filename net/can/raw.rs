@@ -135,8 +135,8 @@ enum RawFilters {
     Many(KVec<RxFilter>),
 }
 
-/// What sendmsg needs, readable without the socket lock (mainline reads
-/// these fields unlocked too). Written under the socket lock, together
+/// What sendmsg and getname need, readable without the socket lock
+/// (mainline reads these fields unlocked too). Written under the socket lock, together
 /// with the copies in [`RawSock`].
 struct RawShared {
     /// The bound interface (0 = unbound or all).
@@ -412,7 +412,9 @@ impl glue::sock::Proto for RawProto {
         if peer {
             return Err(neterr::EOPNOTSUPP());
         }
-        let ifindex = sk.lock().ifindex;
+        // Without the socket lock, as mainline's raw_getname: the bound
+        // index as of some moment during the call.
+        let ifindex = sk.shared().ifindex.load(Ordering::Relaxed);
         out[..RAW_MIN_NAMELEN].fill(0);
         out[..2].copy_from_slice(&AF_CAN.to_ne_bytes());
         out[4..RAW_MIN_NAMELEN].copy_from_slice(&ifindex.to_ne_bytes());

@@ -165,24 +165,32 @@ impl<T> RtnlLocked<T> {
 }
 
 /// A `struct mutex` defined in C with `DEFINE_MUTEX` (its own lockdep
-/// class, named after its definition), known by the C function that
-/// returns its address. Only [`StaticMutex::new`], an `unsafe fn`, makes
-/// one, so a safe caller cannot hand [`CMutex`] a bad address.
+/// class, named after its definition), known by its address (taken from
+/// the C definition as an extern static, so a lock costs no call to find
+/// it). Only [`StaticMutex::new`], an `unsafe fn`, makes one, so a safe
+/// caller cannot hand [`CMutex`] a bad address.
 #[derive(Clone, Copy)]
-pub(crate) struct StaticMutex(fn() -> *mut bindings::mutex);
+pub(crate) struct StaticMutex(*mut bindings::mutex);
+
+// SAFETY: the address of a statically defined kernel mutex, which any
+// thread may lock (StaticMutex::new's contract); the pointer is never
+// dereferenced but by the C mutex functions.
+unsafe impl Send for StaticMutex {}
+// SAFETY: as for Send; a shared StaticMutex only hands out the address.
+unsafe impl Sync for StaticMutex {}
 
 impl StaticMutex {
     /// # Safety
     ///
-    /// `addr` returns, on every call, the address of the same statically
-    /// defined and initialised `struct mutex`, which nothing else uses as
-    /// anything but a mutex.
-    pub(crate) const unsafe fn new(addr: fn() -> *mut bindings::mutex) -> Self {
+    /// `addr` is the address of a statically defined and initialised
+    /// `struct mutex` (`DEFINE_MUTEX`), which nothing uses as anything but
+    /// a mutex.
+    pub(crate) const unsafe fn new(addr: *mut bindings::mutex) -> Self {
         StaticMutex(addr)
     }
 
     fn ptr(self) -> *mut bindings::mutex {
-        (self.0)()
+        self.0
     }
 }
 

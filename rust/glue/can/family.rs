@@ -167,28 +167,24 @@ impl Drop for Target {
 /// of `pf_can_c.c` with a lockdep class of its own). Process context.
 pub(crate) const RX_MUTEX: StaticMutex = {
     extern "C" {
-        fn rcan_rx_mutex_ptr() -> *mut bindings::mutex;
+        static mut rcan_rx_mutex: bindings::mutex;
     }
-    fn addr() -> *mut bindings::mutex {
-        // SAFETY: pf_can_c.c returns the address of its DEFINE_MUTEX.
-        unsafe { rcan_rx_mutex_ptr() }
-    }
-    // SAFETY: `addr` always returns the same static, initialised mutex,
-    // used only as the receive table's lock.
-    unsafe { StaticMutex::new(addr) }
+    // SAFETY: pf_can_c.c's DEFINE_MUTEX (static storage, initialised at
+    // compile time), used only as the receive table's lock; only its
+    // address is taken here.
+    unsafe { StaticMutex::new(&raw mut rcan_rx_mutex) }
 };
 
+/// `rcan_pf_mutex` (`DEFINE_MUTEX` of `pf_can_c.c`), `WRITERS`' lock.
+/// Process context.
 const PF_MUTEX: StaticMutex = {
     extern "C" {
-        fn rcan_pf_mutex_ptr() -> *mut bindings::mutex;
+        static mut rcan_pf_mutex: bindings::mutex;
     }
-    fn addr() -> *mut bindings::mutex {
-        // SAFETY: pf_can_c.c returns the address of its DEFINE_MUTEX.
-        unsafe { rcan_pf_mutex_ptr() }
-    }
-    // SAFETY: `addr` always returns the same static, initialised mutex,
-    // used only as `WRITERS`' lock.
-    unsafe { StaticMutex::new(addr) }
+    // SAFETY: pf_can_c.c's DEFINE_MUTEX (static storage, initialised at
+    // compile time), used only as `WRITERS`' lock; only its address is
+    // taken here.
+    unsafe { StaticMutex::new(&raw mut rcan_pf_mutex) }
 };
 
 /// A driver that wants to know when the receive table changes for its

@@ -183,16 +183,17 @@ pub(crate) trait CanProtocol: Proto {
 /// each is removed by the protocol's `release` (under RTNL) before the
 /// sock can be freed.
 pub(crate) struct SockSet<T: CanProtocol> {
-    /// `SOCKSET_BUCKETS` vectors once the first socket arrives (96 KiB,
+    /// `SOCKSET_BUCKETS` vectors once the first socket arrives (12 KiB,
     /// `kvmalloc`); a socket is in at most one, once.
     buckets: kernel::alloc::KVVec<kernel::alloc::KVec<usize>>,
     /// Socks of `T` only: a set cannot be swapped with another protocol's.
     _t: PhantomData<fn() -> T>,
 }
 
-/// About 2.4 sockets per bucket at 10,000 sockets (512 buckets meant ~20,
-/// a scan that showed in the close's profile under TCG).
-const SOCKSET_BUCKETS: usize = 4096;
+/// About 20 sockets per bucket at 10,000 sockets. 4,096 buckets (96 KiB
+/// per protocol module) were tried: no gain in bind + close at 10,000
+/// sockets measured in two sessions (benchmarks.rst, 2026-11-27).
+const SOCKSET_BUCKETS: usize = 512;
 
 impl<T: CanProtocol> SockSet<T> {
     pub(crate) const fn new() -> Self {
