@@ -36,6 +36,7 @@
 use crate::glue::can::dev::{CanDev, CanDevice, CanStat};
 use crate::glue::can::skb::alloc_rx;
 use crate::glue::netdev::{Dev, NetDev, Setup, Stat};
+use crate::glue::ring::Ring;
 use crate::glue::skb::Skb;
 use crate::rcan_core::arb::CAN_ERR_FLAG;
 use crate::rcan_core::bittiming;
@@ -130,13 +131,24 @@ pub(crate) fn open<'a, T: CanDevice>(
 /// under the driver's chip lock and returns what the chip held (the echo
 /// skb, frames not yet handed up); that is freed after `halt` returns,
 /// outside the lock. Then the interrupt line is freed and the carrier
-/// turned off. Process context, RTNL.
-pub(crate) fn stop<T: CanDevice, H>(dev: &Dev<T>, p: &T::Priv, halt: impl FnOnce() -> H) {
+/// turned off. Last, the frames still queued for the NAPI poll (which no
+/// longer runs) are freed: `pop` takes one from the queue under the chip
+/// lock and releases the lock before it returns, so each free runs
+/// outside it. Process context, RTNL.
+pub(crate) fn stop<T: CanDevice, H>(
+    dev: &Dev<T>,
+    p: &T::Priv,
+    halt: impl FnOnce() -> H,
+    mut pop: impl FnMut() -> Option<Skb>,
+) {
     dev.stop_queue();
     T::can_dev(p).disarm_restart();
     drop(halt());
     dev.free_irq();
     dev.set_carrier(false);
+    while let Some(skb) = pop() {
+        drop(skb);
+    }
 }
 
 /// The skb of `frame`, received on `dev` (or an error frame the driver
@@ -154,6 +166,24 @@ pub(crate) fn rx_skb(dev: &NetDev, frame: &AnyFrame) -> Option<Skb> {
         dev.stats_rx(frame.len() as u32);
     }
     Some(skb)
+}
+
+/// Queues `skb` for the device's NAPI poll in `rxq`; a full queue drops
+/// it (`rx_dropped`). Chip lock held, interrupts off (interrupt handler,
+/// restart): the free of a dropped skb (an echo's destructor) is deferred.
+pub(crate) fn rx_enqueue(dev: &NetDev, rxq: &mut Ring<Skb>, skb: Skb) {
+    if let Err(skb) = rxq.push(skb) {
+        dev.stats_rx_dropped();
+        skb.drop_any();
+    }
+}
+
+/// The skb of `frame` ([`rx_skb`]), queued for the NAPI poll
+/// ([`rx_enqueue`]). Chip lock held, interrupts off.
+pub(crate) fn rx_frame(dev: &NetDev, rxq: &mut Ring<Skb>, frame: &AnyFrame) {
+    if let Some(skb) = rx_skb(dev, frame) {
+        rx_enqueue(dev, rxq, skb);
+    }
 }
 
 /// The frame in the transmit buffer went out: its skb, taken from

@@ -206,6 +206,20 @@ pub(crate) fn link_setup<T: CanDevice>() -> LinkSetup {
     }
 }
 
+/// The settings a device of driver `T` whose bit timing counts
+/// `clock_hz` starts with for the module parameters' rates `preset`
+/// ([`candev::Preset::settings`] against `T`'s limits): the same search
+/// as `ip link set canX type can bitrate N`. Any context.
+pub(crate) fn preset_settings<T: CanDevice>(
+    preset: &candev::Preset,
+    clock_hz: u32,
+) -> core::result::Result<Settings, candev::PresetError> {
+    preset.settings(&candev::Device {
+        clock_hz,
+        ..Adapter::<T>::device()
+    })
+}
+
 // ---------------------------------------------------------------------
 // The typed side.
 // ---------------------------------------------------------------------

@@ -187,81 +187,11 @@ impl<R: Regs + Send + 'static> Core<R> {
     }
 }
 
-/// The bit rates a front-end's module parameters give its cores at
-/// probe (`bitrate=`, `dbitrate=` of `rcan_ctucanfd_pci`), in bit/s; 0:
-/// none. The initial setting of every core: `ip link set canX type can`
-/// replaces it where the link kind is registered, and it is the only way
-/// to a bit timing where it is not (`rcan_dev rtnl_link=N`).
-// Unused in `rcan_ctucanfd_sim`, which has no such parameters.
-#[allow(dead_code)]
-#[derive(Clone, Copy, Default)]
-pub(crate) struct Preset {
-    pub(crate) bitrate: u32,
-    pub(crate) dbitrate: u32,
-}
-
-#[allow(dead_code)]
-impl Preset {
-    /// The settings a core starts with: each rate computed by the same
-    /// search as `ip link set canX type can bitrate N` (mainline
-    /// `can_calc_bittiming`, [`bittiming::get`], the default sample point)
-    /// against the core's limits and `clock_hz`; CAN FD stays off (MTU 16)
-    /// until `ip link set canX mtu 72`, which needs no link kind. Refused
-    /// with the parameter's name and the reason: a rate the core cannot
-    /// meet within 5 %, `dbitrate` without `bitrate` or below it (mainline
-    /// `open_candev` would refuse that data bit timing with FD on).
-    /// Any context.
-    pub(crate) fn settings(&self, clock_hz: u32) -> core::result::Result<Settings, PresetError> {
-        let mut s = Settings::default();
-        if self.bitrate == 0 && self.dbitrate == 0 {
-            return Ok(s);
-        }
-        if self.bitrate == 0 || (self.dbitrate != 0 && self.dbitrate < self.bitrate) {
-            return Err(PresetError {
-                param: "dbitrate",
-                why: None,
-            });
-        }
-        let calc = |param: &'static str, btc: &bittiming::BittimingConst, rate: u32| {
-            let want = bittiming::Bittiming {
-                bitrate: rate,
-                ..Default::default()
-            };
-            bittiming::get(btc, clock_hz, &want)
-                .map(|c| c.bt)
-                .map_err(|e| PresetError { param, why: e.msg })
-        };
-        s.bittiming = calc("bitrate", &NOMINAL_CONST, self.bitrate)?;
-        if self.dbitrate != 0 {
-            s.data_bittiming = calc("dbitrate", &DATA_CONST, self.dbitrate)?;
-        }
-        Ok(s)
-    }
-}
-
-/// A refused [`Preset`]: the parameter and, if the search gave one, why.
-#[allow(dead_code)]
-pub(crate) struct PresetError {
-    pub(crate) param: &'static str,
-    pub(crate) why: Option<bittiming::Msg>,
-}
-
-impl core::fmt::Display for PresetError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match &self.why {
-            Some(m) => write!(f, "{}: {}", self.param, m),
-            None if self.param == "dbitrate" => {
-                f.write_str("dbitrate: needs bitrate, and at least its value")
-            }
-            None => write!(f, "{}: no bit timing for this rate", self.param),
-        }
-    }
-}
-
 /// Probes the core behind `regs` and, if one answers (DEVICE_ID 0xCAFD),
 /// registers a `can%d` device for it on interrupt line `irq` with the
-/// settings `preset` (a front-end's [`Preset::settings`], or none); `None`
-/// if there is no core. Logs the device name with `what`. Process context
+/// settings `preset` (a front-end's module parameters through
+/// [`preset_settings`](crate::glue::can::dev::preset_settings), or none);
+/// `None` if there is no core. Logs the device name with `what`. Process context
 /// (front-end probe).
 pub(crate) fn add_core<R: Regs + Send + 'static>(
     regs: R,
@@ -313,25 +243,6 @@ pub(crate) fn add_core<R: Regs + Send + 'static>(
 /// The CTU CAN FD driver for register access `R`.
 pub(crate) struct CtuCanFd<R>(PhantomData<R>);
 
-/// Queues `skb` for the NAPI poll; a full queue drops it (`rx_dropped`).
-/// Chip lock held (interrupt handler, restart).
-fn enqueue(dev: &NetDev, rxq: &mut Ring<Skb>, skb: Skb) {
-    if let Err(skb) = rxq.push(skb) {
-        dev.stats_rx_dropped();
-        // Interrupts are off: the free (an echo's destructor) is deferred.
-        skb.drop_any();
-    }
-}
-
-/// Builds the skb of a frame from the bus (or an error frame), counted as
-/// [`ctrl::rx_skb`] counts it, and queues it for the NAPI poll. Chip lock
-/// held (interrupt handler, restart).
-fn rx_frame(dev: &NetDev, rxq: &mut Ring<Skb>, frame: &AnyFrame) {
-    if let Some(skb) = ctrl::rx_skb(dev, frame) {
-        enqueue(dev, rxq, skb);
-    }
-}
-
 /// Mainline's names of the states (`ctucan_state_to_str`), for the log.
 fn state_name(s: CanState) -> &'static str {
     match s {
@@ -358,7 +269,7 @@ fn report_error<R: Regs>(dev: &NetDev, p: &CtuPriv<R>, rxq: &mut Ring<Skb>, r: &
             state_name(to)
         );
     }
-    rx_frame(dev, rxq, &AnyFrame::Classic(r.frame));
+    ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(r.frame));
 }
 
 /// What [`Chip::start`] programs for the device layer's settings: BTR
@@ -427,20 +338,19 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
     /// ([`ctrl::stop`]). The glue has disabled NAPI: no poll runs or
     /// starts until the next open, and the handler queues nothing once
     /// `running` is off, so what is left in the receive queue is freed
-    /// here, one frame per lock hold, outside the chip lock.
+    /// by [`ctrl::stop`], one frame per lock hold, outside the chip lock.
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        ctrl::stop(dev, p, || {
-            let mut st = p.st.lock();
-            st.running = false;
-            st.chip.stop();
-            core::mem::take(&mut st.echo)
-        });
-        loop {
-            let Some(skb) = p.st.lock().rxq.pop() else {
-                break;
-            };
-            drop(skb);
-        }
+        ctrl::stop(
+            dev,
+            p,
+            || {
+                let mut st = p.st.lock();
+                st.running = false;
+                st.chip.stop();
+                core::mem::take(&mut st.echo)
+            },
+            || p.st.lock().rxq.pop(),
+        );
         Ok(())
     }
 
@@ -493,12 +403,12 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
             let mut woke = false;
             let mut bus_off = false;
             let handled = chip.irq(|ev| match ev {
-                Event::Rx(f) => rx_frame(dev, rxq, &f),
+                Event::Rx(f) => ctrl::rx_frame(dev, rxq, &f),
                 Event::TxDone { buf, ok } => {
                     if let Some(e) = echo.get_mut(buf) {
                         if ok {
                             if let Some(skb) = ctrl::echo_done_any(dev, e) {
-                                enqueue(dev, rxq, skb);
+                                ctrl::rx_enqueue(dev, rxq, skb);
                             }
                         } else {
                             // Mainline: a frame the core gave up on
@@ -598,7 +508,7 @@ impl<R: Regs + Send + 'static> CanDevice for CtuCanFd<R> {
             st.chip.restart();
             let mut cf = error_frame();
             cf.can_id |= err::RESTARTED;
-            rx_frame(dev, &mut st.rxq, &AnyFrame::Classic(cf));
+            ctrl::rx_frame(dev, &mut st.rxq, &AnyFrame::Classic(cf));
             core::mem::take(&mut st.echo)
         };
         for e in lost.iter_mut() {

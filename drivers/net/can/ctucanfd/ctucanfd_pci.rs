@@ -10,7 +10,7 @@
 //! here; the driver is `ctucanfd.rs`.
 //!
 //! Module parameters `bitrate` and `dbitrate` (bit/s, default 0: none):
-//! the bit timing every core starts with ([`ctucanfd::Preset`]), computed
+//! the bit timing every core starts with ([`Preset`]), computed
 //! as `ip link set canX type can bitrate N dbitrate M` computes it; a
 //! value no bit timing meets refuses the module load with `EINVAL` and a
 //! kernel log line naming the parameter. With `rcan_dev rtnl_link=N`
@@ -26,7 +26,8 @@ use kernel::prelude::*;
 use crate::{ctucanfd, glue};
 
 use crate::rcan_chips::ctucanfd::CORE_SPAN;
-use ctucanfd::{add_core, Core, IoRegs, Preset};
+use crate::rcan_core::candev::{Preset, PresetError, Settings};
+use ctucanfd::{add_core, Core, CtuCanFd, IoRegs};
 use glue::params::Param;
 use glue::pci::{self, IoMem};
 use kernel::c_str;
@@ -47,12 +48,14 @@ const BITRATE: Param<u32> = Param::new(0);
 /// Module parameter `dbitrate` (number 1, read-only).
 const DBITRATE: Param<u32> = Param::new(1);
 
-/// The module parameters' bit timing preset.
-fn preset() -> Preset {
-    Preset {
+/// The settings every core starts with: the module parameters' rates
+/// against the core's limits at the card's clock. Any context.
+fn preset_settings() -> Result<Settings, PresetError> {
+    let preset = Preset {
         bitrate: BITRATE.get(),
         dbitrate: DBITRATE.get(),
-    }
+    };
+    glue::can::dev::preset_settings::<CtuCanFd<IoRegs>>(&preset, CLOCK_HZ)
 }
 
 /// Number of cores from the identification word: its low four bits when
@@ -96,7 +99,7 @@ impl pci::Driver for CtuCanFdPci {
         };
         card.irq_enable(false);
         // Checked at module init; the parameters are read-only.
-        let preset = preset().settings(CLOCK_HZ).unwrap_or_default();
+        let preset = preset_settings().unwrap_or_default();
         for i in 0..n {
             let regs = IoRegs {
                 io: dev.iomap(1, n * CORE_SPAN)?,
@@ -142,7 +145,7 @@ pub(crate) struct CtuCanFdPciModule;
 
 impl kernel::Module for CtuCanFdPciModule {
     fn init(_module: &'static ThisModule) -> Result<Self> {
-        if let Err(e) = preset().settings(CLOCK_HZ) {
+        if let Err(e) = preset_settings() {
             pr_err!(
                 "bitrate={} dbitrate={} refused for the card's {} Hz clock: {}\n",
                 BITRATE.get(),

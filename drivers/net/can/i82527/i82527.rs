@@ -72,7 +72,7 @@ use crate::rcan_chips::i82527::{
 };
 use crate::rcan_core::bittiming::{self, I82527_BITTIMING_CONST};
 use crate::rcan_core::candev::{self, CanState, Settings};
-use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_MTU};
+use crate::rcan_core::frame::{AnyFrame, CAN_MTU};
 use core::marker::PhantomData;
 use kernel::prelude::*;
 
@@ -132,15 +132,10 @@ pub(crate) struct I82527Priv<R: Regs> {
 /// timing, triple sampling), none if both are 0 (as mainline: no bit
 /// timing until user space sets one).
 fn preset_settings(cfg: &Config, clock_hz: u32) -> Settings {
-    let mut s = Settings::default();
-    if cfg.bt0 != 0 || cfg.bt1 != 0 {
-        let (bt, triple) = bittiming::from_btr(cfg.bt0, cfg.bt1, clock_hz);
-        s.bittiming = bt;
-        if triple {
-            s.ctrlmode |= candev::ctrlmode::THREE_SAMPLES;
-        }
+    if cfg.bt0 == 0 && cfg.bt1 == 0 {
+        return Settings::default();
     }
-    s
+    candev::settings_from_btr(cfg.bt0, cfg.bt1, clock_hz)
 }
 
 /// One registered channel: its network device and the filter listener
@@ -230,25 +225,6 @@ fn remask<R: Regs + Send + 'static>(dev: &NetDev, p: &I82527Priv<R>) {
     }
 }
 
-/// Queues `skb` for the NAPI poll; a full queue drops it. Chip lock held
-/// (interrupt handler).
-fn enqueue(dev: &NetDev, rxq: &mut Ring<Skb>, skb: Skb) {
-    if let Err(skb) = rxq.push(skb) {
-        dev.stats_rx_dropped();
-        // Interrupts are off: the free (an echo's destructor) is deferred.
-        skb.drop_any();
-    }
-}
-
-/// Builds the skb of a frame from the bus (or an error frame) with the
-/// one CAN skb builder ([`ctrl::rx_skb`]) and queues it for the NAPI poll.
-/// Chip lock held (interrupt handler).
-fn rx_frame(dev: &NetDev, rxq: &mut Ring<Skb>, frame: &CanFrame) {
-    if let Some(skb) = ctrl::rx_skb(dev, &AnyFrame::Classic(*frame)) {
-        enqueue(dev, rxq, skb);
-    }
-}
-
 /// Reads `struct rcan_i82527_setup` (`<linux/can/rcan_i82527.h>`).
 const SIOCRCANI82527GET: u32 = SIOCDEVPRIVATE;
 /// Publishes or withdraws a remote-frame answer (`struct
@@ -332,21 +308,20 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     /// `ip link set canX down`. Process context, RTNL. The glue has
     /// disabled NAPI: no poll runs or starts until the next open, and the
     /// handler queues nothing once `running` is off, so what is left in
-    /// the queue is freed here, one frame per lock hold, after the echo
-    /// ([`ctrl::stop`]), outside the chip lock.
+    /// the queue is freed by [`ctrl::stop`], one frame per lock hold,
+    /// after the echo, outside the chip lock.
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        ctrl::stop(dev, p, || {
-            let mut st = p.chip.lock();
-            st.running = false;
-            st.chip.stop();
-            st.echo.take()
-        });
-        loop {
-            let Some(skb) = p.chip.lock().rxq.pop() else {
-                break;
-            };
-            drop(skb);
-        }
+        ctrl::stop(
+            dev,
+            p,
+            || {
+                let mut st = p.chip.lock();
+                st.running = false;
+                st.chip.stop();
+                st.echo.take()
+            },
+            || p.chip.lock().rxq.pop(),
+        );
         Ok(())
     }
 
@@ -396,10 +371,10 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
             let mut bus_off = false;
             let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| {
                 match ev {
-                    Event::Rx(f) => rx_frame(dev, rxq, &f),
+                    Event::Rx(f) => ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(f)),
                     Event::TxDone => {
                         if let Some(skb) = ctrl::echo_done(dev, echo) {
-                            enqueue(dev, rxq, skb);
+                            ctrl::rx_enqueue(dev, rxq, skb);
                         }
                         dev.wake_queue();
                     }
@@ -423,7 +398,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                     Event::State(State::Active) | Event::Restarted => {}
                 }
                 if let Some(ef) = error_frame(&ev) {
-                    rx_frame(dev, rxq, &ef);
+                    ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(ef));
                 }
             });
             if bus_off {
@@ -513,7 +488,7 @@ impl<R: Regs + Send + 'static> CanDevice for I82527<R> {
                 chip, echo, rxq, ..
             } = &mut *st;
             if let Some(ef) = error_frame(&Event::Restarted) {
-                rx_frame(dev, rxq, &ef);
+                ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(ef));
             }
             chip.restart(&m);
             echo.take()

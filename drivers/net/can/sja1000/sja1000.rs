@@ -104,7 +104,7 @@ use crate::rcan_chips::sja1000::{
 };
 use crate::rcan_core::bittiming::{self, SJA1000_BITTIMING_CONST};
 use crate::rcan_core::candev::{self, CanState, Settings};
-use crate::rcan_core::frame::{AnyFrame, CanFrame, CAN_MTU};
+use crate::rcan_core::frame::{AnyFrame, CAN_MTU};
 use core::marker::PhantomData;
 use kernel::prelude::*;
 
@@ -188,15 +188,9 @@ pub(crate) fn module_config(ocr: u8, cdr: u8) -> Config {
 /// (bit timing, triple sampling), else none (as mainline: no bit timing
 /// until user space sets one).
 fn preset_settings(clock_hz: u32) -> Settings {
-    let mut s = Settings::default();
-    if let Some((b0, b1)) = preset_btr() {
-        let (bt, triple) = bittiming::from_btr(b0, b1, clock_hz);
-        s.bittiming = bt;
-        if triple {
-            s.ctrlmode |= candev::ctrlmode::THREE_SAMPLES;
-        }
-    }
-    s
+    preset_btr()
+        .map(|(b0, b1)| candev::settings_from_btr(b0, b1, clock_hz))
+        .unwrap_or_default()
 }
 
 /// Interrupt causes handled per interrupt before returning (mainline
@@ -392,29 +386,10 @@ fn apply_pending_filter<R: Regs>(dev: &NetDev, st: &mut ChipState<R>) -> bool {
     let ChipState { chip, rxq, .. } = st;
     chip.set_filter(&f, true, |ev| {
         if let Event::Rx(fr) = ev {
-            rx_frame(dev, rxq, &fr);
+            ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(fr));
         }
     })
     .is_err()
-}
-
-/// Queues `skb` for the NAPI poll; a full queue drops it (`rx_dropped`).
-/// Chip lock held.
-fn enqueue(dev: &NetDev, rxq: &mut Ring<Skb>, skb: Skb) {
-    if let Err(skb) = rxq.push(skb) {
-        dev.stats_rx_dropped();
-        // Interrupts are off: the free (an echo's destructor) is deferred.
-        skb.drop_any();
-    }
-}
-
-/// Builds the skb of a frame from the bus (or an error frame) with the
-/// one CAN skb builder ([`ctrl::rx_skb`]) and queues it for the NAPI
-/// poll. Chip lock held.
-fn rx_frame(dev: &NetDev, rxq: &mut Ring<Skb>, frame: &CanFrame) {
-    if let Some(skb) = ctrl::rx_skb(dev, &AnyFrame::Classic(*frame)) {
-        enqueue(dev, rxq, skb);
-    }
 }
 
 /// Reads `struct rcan_sja1000_setup` (`<linux/can/rcan_sja1000.h>`).
@@ -540,21 +515,20 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     /// freed and the interrupt line released after the chip lock. The
     /// glue has disabled NAPI: no poll runs or starts until the next
     /// open, and nothing queues once `running` is off, so what is left in
-    /// the receive queue is freed here, one frame per lock hold, outside
-    /// the chip lock.
+    /// the receive queue is freed by [`ctrl::stop`], one frame per lock
+    /// hold, outside the chip lock.
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        ctrl::stop(dev, p, || {
-            let mut st = p.chip.lock();
-            st.running = false;
-            let _ = st.chip.stop();
-            st.echo.take()
-        });
-        loop {
-            let Some(skb) = p.chip.lock().rxq.pop() else {
-                break;
-            };
-            drop(skb);
-        }
+        ctrl::stop(
+            dev,
+            p,
+            || {
+                let mut st = p.chip.lock();
+                st.running = false;
+                let _ = st.chip.stop();
+                st.echo.take()
+            },
+            || p.chip.lock().rxq.pop(),
+        );
         Ok(())
     }
 
@@ -617,10 +591,10 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
         let one_shot = chip.ctrlmode & candev::ctrlmode::ONE_SHOT != 0;
         let mut bus_off = false;
         let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| match ev {
-            Event::Rx(f) => rx_frame(dev, rxq, &f),
+            Event::Rx(f) => ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(f)),
             Event::TxDone => {
                 if let Some(skb) = ctrl::echo_done(dev, echo) {
-                    enqueue(dev, rxq, skb);
+                    ctrl::rx_enqueue(dev, rxq, skb);
                 }
                 dev.wake_queue();
             }
@@ -639,7 +613,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
             }
             Event::Error(r) => {
                 ctrl::count_errors(dev, &p.can, &r.stats, &r.net);
-                rx_frame(dev, rxq, &r.frame);
+                ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(r.frame));
                 bus_off |= r.bus_off;
             }
         });
@@ -738,7 +712,7 @@ impl<R: Regs + Send + 'static> CanDevice for Sja1000<R> {
             if !st.running {
                 return Err(EINVAL);
             }
-            rx_frame(dev, &mut st.rxq, &restarted_frame());
+            ctrl::rx_frame(dev, &mut st.rxq, &AnyFrame::Classic(restarted_frame()));
             st.echo.take()
         };
         ctrl::echo_lost(dev, &mut echo, Stat::TxErrors);

@@ -17,6 +17,8 @@
 //! caller serialises access as mainline does (RTNL for [`changelink`] and
 //! [`open`], the driver's interrupt handler for the state).
 
+use core::fmt;
+
 use super::arb::CAN_ERR_FLAG;
 use super::bittiming::{self, Bittiming, BittimingConst, Computed, Error, Msg};
 use super::bittiming::{EBUSY, EINVAL, EOPNOTSUPP};
@@ -308,6 +310,98 @@ pub fn open(settings: &Settings) -> Result<(), &'static str> {
         return Err(OPEN_BAD_DATA_BITTIMING);
     }
     Ok(())
+}
+
+/// The settings of a device whose bit timing registers hold a preset at
+/// probe (SJA1000 BTR0/BTR1 from its module parameters, 82527 BT0/BT1
+/// from its configuration): the timing they program at `clock_hz` and
+/// triple sampling as a control mode. What `ip -details` then shows until
+/// user space sets a timing. Any context.
+pub fn settings_from_btr(btr0: u8, btr1: u8, clock_hz: u32) -> Settings {
+    let (bittiming, triple) = bittiming::from_btr(btr0, btr1, clock_hz);
+    Settings {
+        bittiming,
+        ctrlmode: if triple { ctrlmode::THREE_SAMPLES } else { 0 },
+        ..Settings::default()
+    }
+}
+
+/// The bit rates a driver's module parameters give its devices at probe
+/// (`bitrate=`, `dbitrate=` of `rcan_ctucanfd_pci`), in bit/s; 0: none.
+/// The initial setting of every device: `ip link set canX type can`
+/// replaces it where the link kind is registered, and it is the only way
+/// to a bit timing where it is not (`rcan_dev rtnl_link=N`).
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub struct Preset {
+    /// `bitrate=`: the nominal rate.
+    pub bitrate: u32,
+    /// `dbitrate=`: the data-phase rate (CAN FD).
+    pub dbitrate: u32,
+}
+
+/// A refused [`Preset`]: the parameter at fault and, if the bit timing
+/// search gave one, why (its [`Display`](fmt::Display) is the kernel log
+/// line's tail).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct PresetError {
+    /// `"bitrate"` or `"dbitrate"`.
+    pub param: &'static str,
+    /// The search's reason; `None` for `dbitrate` without `bitrate` or
+    /// below it.
+    pub why: Option<Msg>,
+}
+
+impl fmt::Display for PresetError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.why {
+            Some(m) => write!(f, "{}: {}", self.param, m),
+            None if self.param == "dbitrate" => {
+                f.write_str("dbitrate: needs bitrate, and at least its value")
+            }
+            None => write!(f, "{}: no bit timing for this rate", self.param),
+        }
+    }
+}
+
+impl Preset {
+    /// The settings `dev` starts with: each rate computed by the same
+    /// search as `ip link set canX type can bitrate N` (mainline
+    /// `can_calc_bittiming`, [`bittiming::get`], the default sample
+    /// point) against the device's limits and clock; CAN FD stays off
+    /// (MTU 16) until `ip link set canX mtu 72`, which needs no link kind.
+    /// Refused with the parameter's name and the reason: a rate the
+    /// device cannot meet within 5 %, `dbitrate` without `bitrate` or
+    /// below it (mainline `open_candev` would refuse that data bit timing
+    /// with FD on), `dbitrate` on a device without a data phase, any rate
+    /// on a device without bit timing limits. No preset: the default
+    /// settings. Any context.
+    pub fn settings(&self, dev: &Device) -> Result<Settings, PresetError> {
+        let mut s = Settings::default();
+        if self.bitrate == 0 && self.dbitrate == 0 {
+            return Ok(s);
+        }
+        if self.bitrate == 0 || (self.dbitrate != 0 && self.dbitrate < self.bitrate) {
+            return Err(PresetError {
+                param: "dbitrate",
+                why: None,
+            });
+        }
+        let calc = |param: &'static str, btc: Option<&BittimingConst>, rate: u32| {
+            let btc = btc.ok_or(PresetError { param, why: None })?;
+            let want = Bittiming {
+                bitrate: rate,
+                ..Bittiming::default()
+            };
+            bittiming::get(btc, dev.clock_hz, &want)
+                .map(|c| c.bt)
+                .map_err(|e| PresetError { param, why: e.msg })
+        };
+        s.bittiming = calc("bitrate", dev.btc, self.bitrate)?;
+        if self.dbitrate != 0 {
+            s.data_bittiming = calc("dbitrate", dev.dbtc, self.dbitrate)?;
+        }
+        Ok(s)
+    }
 }
 
 /// `ip link set canX mtu N` on a device whose driver has mainline's
