@@ -26,6 +26,7 @@ libc = ctypes.CDLL("libc.so.6", use_errno=True)
 ifindex = socket.if_nametoindex(iface)
 # struct sockaddr_can: family, pad, ifindex, then 16 bytes of address union
 addr = ctypes.create_string_buffer(struct.pack("=HHi16x", socket.AF_CAN, 0, ifindex), 24)
+big = ctypes.create_string_buffer(200)
 mask = CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG
 mono = time.CLOCK_MONOTONIC
 bind, close = libc.bind, libc.close
@@ -42,6 +43,15 @@ for r in range(rounds):
         if bind(fd, addr, 24) != 0:
             sys.exit(f"bind: errno {ctypes.get_errno()}")
     t2 = time.clock_gettime_ns(mono)
+    # The floor of both loops: the same calls failing before the protocol
+    # (an address longer than sockaddr_storage: EINVAL in the generic
+    # code; fd -1: EBADF), so "bind - nullbind" is a bind's own cost.
+    for fd in fds:
+        bind(fd, big, 200)
+    t2n = time.clock_gettime_ns(mono)
+    for fd in fds:
+        close(-1)
+    t2c = time.clock_gettime_ns(mono)
     time.sleep(0.2)  # let the RCU work of the binds (none expected) settle
     t3 = time.clock_gettime_ns(mono)
     for fd in fds:
@@ -49,6 +59,8 @@ for r in range(rounds):
     t4 = time.clock_gettime_ns(mono)
     print(f"PHASE open {r} {t0} {t1}")
     print(f"PHASE bind {r} {t1} {t2}")
+    print(f"PHASE nullbind {r} {t2} {t2n}")
+    print(f"PHASE nullclose {r} {t2n} {t2c}")
     print(f"PHASE close {r} {t3} {t4}")
     time.sleep(0.5)  # RCU callbacks of the closes run here: not in "close"
     t5 = time.clock_gettime_ns(mono)

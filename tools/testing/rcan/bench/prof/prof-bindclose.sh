@@ -14,7 +14,8 @@
 # the workload's phase marks (marks-K.txt) and the samples, leaf first, as
 # perf script prints them with the modules still loaded (script-K.txt.gz);
 # prof-split.py turns them into the table. Env: N (10000), ROUNDS (3),
-# PERIOD (cpu-clock period in ns; under icount 1 ns = 1 instruction).
+# PERIOD (cpu-clock period in ns; under icount 1 ns = 1 instruction),
+# PERF=0 (only the timed run: to compare builds, e.g. ours:A ours:B ours:B ours:A).
 set -u
 cd "$(dirname "$0")/../../../../.." || exit 1
 N=${N:-10000} ROUNDS=${ROUNDS:-3} PERIOD=${PERIOD:-20000}
@@ -53,12 +54,16 @@ for st in "$@"; do
 	taskset -c 0 python3 tools/testing/rcan/bench/prof/bindclose.py can0 $N 1 > /dev/null || exit 1
 	taskset -c 0 python3 tools/testing/rcan/bench/prof/bindclose.py can0 $N $ROUNDS \
 		> $out/marks-noperf-$tag.txt || exit 1
+	if [ "${PERF:-1}" = 0 ]; then
+		echo "$tag: $(grep -c PHASE $out/marks-noperf-$tag.txt) phases"
+		continue
+	fi
 	# Leaf samples only (no -g): the kernel's guess unwinder scans the
 	# whole stack per sample, which would cost more than the period.
 	perf record -a -k CLOCK_MONOTONIC -e cpu-clock -c $PERIOD -o /tmp/perf.data -- \
 		taskset -c 0 python3 tools/testing/rcan/bench/prof/bindclose.py can0 $N $ROUNDS \
 		> $out/marks-$tag.txt 2> $out/perf-$tag.log || exit 1
-	perf script -i /tmp/perf.data --ns -F comm,cpu,time,ip,sym,dso 2>> $out/perf-$tag.log |
+	perf script -i /tmp/perf.data --ns -F comm,cpu,time,ip,sym,symoff,dso 2>> $out/perf-$tag.log |
 		gzip -1 > $out/script-$tag.txt.gz
 	rm -f /tmp/perf.data
 	echo "$tag: $(grep -c PHASE $out/marks-$tag.txt) phases, $(zcat $out/script-$tag.txt.gz | wc -l) samples"

@@ -98,7 +98,32 @@ def load(tag):
     return marks
 
 
+def lengths():
+    """Per-call length of each phase of the runs without perf, every
+    stack: under icount, instructions (the Python loop included; the
+    null phases are that floor)."""
+    n = int(os.environ.get("N", "10000"))
+    tags = sorted((os.path.basename(f)[len("marks-noperf-"):-len(".txt")]
+                   for f in glob.glob(f"{out}/marks-noperf-*.txt")), key=lambda t: int(t.split("-")[0]))
+    print(f"== per call, instructions (median over rounds), runs without perf ==")
+    cols = ["open", "bind", "nullbind", "close", "nullclose"]
+    print(f"{'run':24s}" + "".join(f"{c:>10s}" for c in cols) + f"{'bind-null':>11s}{'close-null':>11s}{'b+c-null':>10s}")
+    for tag in tags:
+        per = collections.defaultdict(list)
+        for l in open(f"{out}/marks-noperf-{tag}.txt"):
+            p = l.split()
+            if p and p[0] == "PHASE":
+                per[p[1]].append((int(p[4]) - int(p[3])) / n)
+        med = {k: sorted(v)[len(v) // 2] for k, v in per.items()}
+        row = "".join(f"{med.get(c, float('nan')):10.0f}" for c in cols)
+        b = med["bind"] - med.get("nullbind", 0)
+        c = med["close"] - med.get("nullclose", 0)
+        print(f"{tag:24s}{row}{b:11.0f}{c:11.0f}{b + c:10.0f}")
+    print()
+
+
 def main():
+    lengths()
     tags = sorted(os.path.basename(f)[len("script-"):-len(".txt.gz")] for f in glob.glob(f"{out}/script-*.txt.gz"))
     n = int(os.environ.get("N", "10000"))
     res = {}
@@ -130,7 +155,7 @@ def main():
             length[name] += b - a
         rounds_perf = collections.Counter(name for name, *_ in marks["perf"])
         res[tag] = (stack, cnt, fn, {k: length[k] / rounds[k] / n for k in length}, rounds_perf)
-    for ph in ("bind", "close", "after-close"):
+    for ph in ("bind", "nullbind", "close", "nullclose", "after-close"):
         print(f"== {ph}: instructions per call (samples x {period} / calls; "
               f"phase length without perf in brackets) ==")
         cats = sorted({c for t in res for c in res[t][1][ph]})
