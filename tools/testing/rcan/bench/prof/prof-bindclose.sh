@@ -60,7 +60,7 @@ for st in "$@"; do
 	fi
 	# Leaf samples only (no -g): the kernel's guess unwinder scans the
 	# whole stack per sample, which would cost more than the period.
-	perf record -a -k CLOCK_MONOTONIC -e cpu-clock -c $PERIOD -o /tmp/perf.data -- \
+	JITTER=1 perf record -a -k CLOCK_MONOTONIC -e cpu-clock -c $PERIOD -o /tmp/perf.data -- \
 		taskset -c 0 python3 tools/testing/rcan/bench/prof/bindclose.py can0 $N $ROUNDS \
 		> $out/marks-$tag.txt 2> $out/perf-$tag.log || exit 1
 	perf script -i /tmp/perf.data --ns -F comm,cpu,time,ip,sym,symoff,dso 2>> $out/perf-$tag.log |
