@@ -927,6 +927,9 @@ impl<R: Receiver> RxTable<R> {
     /// and allocates nothing but missing key entries and group snapshots.
     /// Writer mutex held (`w` is its data). ENOMEM leaves `r` as it was.
     fn set_first(&self, w: &mut Writer, r: &Rcv<R>, spec: Spec) -> Result<Changed> {
+        if let Some(g) = self.one_hashed_group(w, &spec) {
+            return self.set_first_one(w, r, spec, g);
+        }
         // SAFETY: writer mutex held (`w`); the slot is empty (our caller
         // checked under the mutex); `r` is leaked and on the map.
         let reg = unsafe { r.fill_first_with(spec) }?;
@@ -951,6 +954,130 @@ impl<R: Receiver> RxTable<R> {
         // ENOMEM waits for the next removal, as in `apply`).
         let mut changed = Changed::default();
         changed.ifindex[0] = (!reg.filters.is_empty()).then_some(reg.ifindex);
+        Ok(changed)
+    }
+
+    /// The common bind's shape, for [`Self::set_first_one`]: exactly one
+    /// frame filter, hashed, no error mask, and its group `(ifindex,
+    /// mask)` already counted in `w.groups`. Returns the group's index,
+    /// with the filter's mask and value. Writer mutex held (`w`).
+    fn one_hashed_group(&self, w: &Writer, spec: &Spec) -> Option<(usize, u32, u32)> {
+        if spec.err_mask != 0 {
+            return None;
+        }
+        let [f] = &spec.filters[..] else {
+            return None;
+        };
+        let Place::Hashed { mask, value } = f.place() else {
+            return None;
+        };
+        let g = w
+            .groups
+            .iter()
+            .position(|g| g.0 == spec.ifindex && g.1 == mask)?;
+        Some((g, mask, value))
+    }
+
+    /// [`Self::set_first`] for the shape [`Self::one_hashed_group`] found
+    /// (a socket with one filter, the common bind): the registration is
+    /// written into the receiver's slot in one piece with its two nodes
+    /// (the hashed one and the interface entry, in the order
+    /// [`Self::make_reg_into`] gives them), its key looked up once, and
+    /// no group snapshot is published (the group exists); the same
+    /// table state as the general path, without its loops over nodes
+    /// and filters. Allocates only a missing key entry (ENOMEM, before
+    /// anything is filled or linked). Writer mutex held (`w`).
+    fn set_first_one(
+        &self,
+        w: &mut Writer,
+        r: &Rcv<R>,
+        spec: Spec,
+        (g, mask, value): (usize, u32, u32),
+    ) -> Result<Changed> {
+        let ifindex = spec.ifindex;
+        // The entry of the filter's key if linked, else a new one (Err).
+        // A pointer, not a reference: `w` is borrowed mutably below.
+        let key: core::result::Result<NonNull<KeyEntry<R>>, KBox<KeyEntry<R>>> =
+            match self.find_key(w, ifindex, mask, value) {
+                Some(e) => Ok(NonNull::from(e)),
+                None => Err(KBox::new(
+                    KeyEntry {
+                        // SAFETY: an all-zero callback_head is what
+                        // call_rcu expects.
+                        rcu: unsafe { core::mem::zeroed() },
+                        link: Link::new(),
+                        ifindex,
+                        mask,
+                        value,
+                        members: List::new(),
+                        count: Cell::new(0),
+                    },
+                    GFP_KERNEL,
+                )?),
+            };
+        let node = |kind, mask, value| {
+            Some(Node {
+                link: Link::new(),
+                key: Cell::new(ptr::null()),
+                kind,
+                ifindex,
+                mask,
+                value,
+                reg: ptr::null(),
+            })
+        };
+        let reg = Reg {
+            // SAFETY: an all-zero callback_head is what call_rcu expects.
+            rcu: unsafe { core::mem::zeroed() },
+            rcv: NonNull::dangling(),
+            last: Cell::new(false),
+            cookie: spec.cookie,
+            ifindex,
+            filters: spec.filters,
+            scanned: KVec::new(),
+            // One filter: never joined (`rxtable::join_scanned`).
+            join: false,
+            nodes: Nodes {
+                inline: [node(Kind::Hashed, mask, value), node(Kind::ByIf, 0, 0)],
+                more: KVec::new(),
+            },
+        };
+        // SAFETY: writer mutex held (`w`); the slot is empty (our caller
+        // checked under the mutex); `r` is leaked and on the map.
+        let reg = unsafe { r.fill_first(reg) };
+        let e: &KeyEntry<R> = match key {
+            // SAFETY: the entry find_key found, linked, under the writer
+            // mutex held since (nothing was unlinked in between).
+            Ok(e) => unsafe { e.as_ref() },
+            Err(b) => {
+                let e: &KeyEntry<R> = KBox::leak(b);
+                // SAFETY: writer mutex held; a new, initialised entry,
+                // freed only by free_key a grace period after it is
+                // unlinked.
+                unsafe { self.buckets[rxtable::bucket(ifindex, mask, value)].push(e) };
+                e
+            }
+        };
+        for n in reg.nodes.iter() {
+            if n.kind == Kind::Hashed {
+                n.key.set(e);
+                e.count.set(e.count.get() + 1);
+                // SAFETY: writer mutex held; the node is initialised, not
+                // linked, and stays put inside the receiver's slot until
+                // the receiver is freed (after its unlinking and a grace
+                // period).
+                unsafe { e.members.push(n) };
+            } else {
+                // SAFETY: as above.
+                unsafe { self.list_of(n).push(n) };
+            }
+        }
+        if let Some(c) = w.groups.get_mut(g) {
+            c.2 += 1;
+        }
+        r.reg.set(reg);
+        let mut changed = Changed::default();
+        changed.ifindex[0] = Some(ifindex);
         Ok(changed)
     }
 
