@@ -730,7 +730,7 @@ impl ProcShow for ProcView {
                 op.can_id,
                 IfName(t.ifindex, sk.net())
             );
-            let (t1, t2) = (op.ival1.to_ns() / 1000, op.ival2.to_ns() / 1000);
+            let (t1, t2) = (op.ival1().to_ns() / 1000, op.ival2().to_ns() / 1000);
             if t1 != 0 {
                 let _ = write!(m, "t1={t1} ");
             }

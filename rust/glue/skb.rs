@@ -494,6 +494,33 @@ impl Skb {
         self.into_echo_if_wanted(dev).map(|skb| (skb, frame))
     }
 
+    /// [`Skb::can_xmit_start_any`] for a driver that needs only the
+    /// frame's flavour, not a copy of it (canloop, which reads the length
+    /// byte from the skb): the same checks, drops and `tx_dropped` counts,
+    /// through [`AnyFrame::kind`](crate::rcan_core::frame::AnyFrame::kind),
+    /// which reads two bytes, instead of building the frame. Returns the
+    /// skb and whether it holds a CAN FD frame. Transmit path of `dev`.
+    pub(crate) fn can_xmit_start_kind(
+        mut self,
+        dev: &super::netdev::NetDev,
+    ) -> Option<(Skb, bool)> {
+        use crate::rcan_core::frame::AnyFrame;
+        let fd = AnyFrame::kind(self.data()).filter(|&fd| {
+            let want = if fd {
+                bindings::ETH_P_CANFD
+            } else {
+                bindings::ETH_P_CAN
+            };
+            u32::from(self.protocol()) == want
+        });
+        let Some(fd) = fd.filter(|_| self.can_tx_prepare(dev)) else {
+            dev.stats_tx_dropped();
+            drop(self);
+            return None;
+        };
+        self.into_echo_if_wanted(dev).map(|skb| (skb, fd))
+    }
+
     /// The end of [`Skb::can_xmit_start`]: if the sender wants an echo,
     /// the skb made the driver's to keep ([`Skb::into_echo`]); `None` (and
     /// a `tx_dropped`) if that needs a clone that cannot be allocated.

@@ -352,8 +352,10 @@ struct net_device *rcan_next_can_dev(struct net *net, int after_ifindex)
 	return best;
 }
 
-int rcan_dev_queue_xmit(struct sk_buff *skb)
+/* dev_queue_xmit of @skb by @dev (sets skb->dev: one call, not two). */
+int rcan_dev_queue_xmit(struct sk_buff *skb, struct net_device *dev)
 {
+	skb->dev = dev;
 	return dev_queue_xmit(skb);
 }
 

@@ -85,7 +85,7 @@ struct net_device *rcan_next_can_dev(struct net *net, int after_ifindex);
 struct net *rcan_init_net(void);
 struct net *rcan_dev_net(const struct net_device *dev);
 void *rcan_net_generic(const struct net *net, unsigned int id);
-int rcan_dev_queue_xmit(struct sk_buff *skb);
+int rcan_dev_queue_xmit(struct sk_buff *skb, struct net_device *dev);
 struct net_device *rcan_netdev_notifier_dev(void *info);
 void rcan_dev_stats_tx(struct net_device *dev, unsigned int bytes);
 void rcan_dev_stats_rx(struct net_device *dev, unsigned int bytes);

@@ -59,7 +59,7 @@ use glue::ring::Ring;
 use glue::skb::Skb;
 use kernel::c_str;
 use rcan_core::canloop::{DropRate, FrameDump};
-use rcan_core::frame::{CANFD_MTU, CAN_MTU};
+use rcan_core::frame::{AnyFrame, CANFD_MTU, CAN_MTU};
 
 /// Most devices one module instance registers.
 const MAX_COUNT: u32 = 16;
@@ -176,15 +176,19 @@ impl Driver for LoopDriver {
         // packet socket's frame (mainline can_dropped_invalid_skb):
         // dropped and counted. Only a device with MTU 72 is handed FD
         // frames (pf_can and af_packet check the MTU).
-        let Some((mut skb, frame)) = skb.can_xmit_start_any(dev) else {
+        // Only the flavour is checked here; the frame is parsed only for
+        // the verbose dump.
+        let Some((mut skb, _fd)) = skb.can_xmit_start_kind(dev) else {
             return Xmit::Ok;
         };
         if MIRROR.verbose.load(Ordering::Relaxed) {
-            pr_info!(
-                "{}: tx {}\n",
-                dev.name(),
-                FrameDump::new_any(&frame).as_str()
-            );
+            if let Some(frame) = AnyFrame::parse(skb.data()) {
+                pr_info!(
+                    "{}: tx {}\n",
+                    dev.name(),
+                    FrameDump::new_any(&frame).as_str()
+                );
+            }
         }
         // The parameter setter only stores valid rates.
         let drop_it = match DropRate::new(MIRROR.droprate.load(Ordering::Relaxed)) {
@@ -196,7 +200,10 @@ impl Driver for LoopDriver {
             drop(skb);
             return Xmit::Ok;
         }
-        let bytes = frame.len() as u32;
+        // The payload length (what the statistics count): the frame's
+        // `len` byte, which the check above bounded (<= 8 classic, <= 64
+        // CAN FD), as `AnyFrame::len` gives it.
+        let bytes = skb.data().get(4).map_or(0, |&l| u32::from(l));
         dev.stats_tx(bytes);
         if !skb.wants_echo() {
             // Nobody asked for the echo: the frame "left on the bus".

@@ -650,11 +650,10 @@ extern "C" fn rcan_send(skb: *mut bindings::sk_buff, loopback: bool) -> ffi::c_i
 /// `dev_queue_xmit` of a prepared CAN skb on `dev` (sets `skb->dev`):
 /// consumes `skb`; congestion (`NET_XMIT_CN`) counts as sent, a drop is
 /// ENOBUFS. Process or softirq context.
-pub(crate) fn queue_xmit(mut skb: Skb, dev: &NetDev) -> Result {
-    skb.set_dev(dev);
-    // SAFETY: dev_queue_xmit consumes the skb in every case; skb->dev is
-    // `dev`, borrowed (so alive) for the call.
-    let ret = unsafe { bindings::rcan_dev_queue_xmit(skb.into_raw()) };
+pub(crate) fn queue_xmit(skb: Skb, dev: &NetDev) -> Result {
+    // SAFETY: the helper sets skb->dev to `dev`, borrowed (so alive) for
+    // the call, and dev_queue_xmit consumes the skb in every case.
+    let ret = unsafe { bindings::rcan_dev_queue_xmit(skb.into_raw(), dev.as_ptr()) };
     match ret {
         r if r < 0 => Err(Error::from_errno(r)),
         0 => Ok(()),

@@ -122,9 +122,11 @@ pub(crate) fn alloc_image(dev: &NetDev, image: &[u8], gfp: bindings::gfp_t) -> O
 /// send buffer (mainline BCM's timers and replies, and its TX_SEND):
 /// `sk` becomes the skb's owner the way mainline's `can_skb_set_owner`
 /// makes it (a counted reference, no send-buffer accounting), so that
-/// receivers of the echo see who sent it, and the skb takes the socket's
-/// priority and mark. Any context with `GFP_ATOMIC`, process context with
-/// `GFP_KERNEL`; `None` as [`alloc_image`].
+/// receivers of the echo see who sent it. As mainline's `bcm_can_tx` and
+/// `bcm_tx_send`, the skb does not take the socket's priority or mark
+/// (`SO_PRIORITY` and `SO_MARK` do not reach BCM frames). Any context with
+/// `GFP_ATOMIC`, process context with `GFP_KERNEL`; `None` as
+/// [`alloc_image`].
 pub(crate) fn alloc_image_for<T: Proto>(
     sk: &Sock<T>,
     dev: &NetDev,
@@ -133,7 +135,6 @@ pub(crate) fn alloc_image_for<T: Proto>(
 ) -> Option<Skb> {
     let mut skb = alloc_image(dev, image, gfp)?;
     skb.set_owner(sk);
-    skb.set_sock_params(sk);
     Some(skb)
 }
 

@@ -54,10 +54,14 @@ pub struct TxOp {
     pub flags: u32,
     /// Transmissions left at `ival1`.
     pub count: u32,
-    /// First interval as user space gave it.
-    pub ival1: BcmTimeval,
-    /// Second interval as user space gave it.
-    pub ival2: BcmTimeval,
+    /// First interval as user space gave it ([`TxOp::ival1`]).
+    ival1: BcmTimeval,
+    /// Second interval as user space gave it ([`TxOp::ival2`]).
+    ival2: BcmTimeval,
+    /// `ival1` and `ival2` in nanoseconds ([`BcmTimeval::to_ns`]), kept
+    /// in step with them by [`TxOp::setup`], their only writer: the
+    /// schedule reads them on every expiry.
+    ival_ns: [u64; 2],
     /// Frames in the sequence (1..=256).
     pub nframes: u32,
     /// Index of the next frame to send.
@@ -77,6 +81,7 @@ impl TxOp {
             count: 0,
             ival1: BcmTimeval::default(),
             ival2: BcmTimeval::default(),
+            ival_ns: [0, 0],
             nframes: head.nframes,
             currframe: 0,
             expires: None,
@@ -101,7 +106,8 @@ impl TxOp {
             self.count = head.count;
             self.ival1 = head.ival1;
             self.ival2 = head.ival2;
-            if self.ival1.to_ns() == 0 && self.ival2.to_ns() == 0 {
+            self.ival_ns = [head.ival1.to_ns(), head.ival2.to_ns()];
+            if self.ival_ns == [0, 0] {
                 self.stop(out);
             }
         }
@@ -121,15 +127,28 @@ impl TxOp {
     /// maybe `TX_EXPIRED`, and the timer re-armed for the next one.
     pub fn timer_expired(&mut self, now: u64, out: &mut impl TxOut) {
         self.expires = None;
-        if self.ival1.to_ns() != 0 && self.count > 0 {
+        let [i1, i2] = self.ival_ns;
+        if i1 != 0 && self.count > 0 {
             self.transmit(out);
             if self.count == 0 && self.flags & TX_COUNTEVT != 0 {
                 out.to_user(&self.notification(TX_EXPIRED, 0), false);
             }
-        } else if self.ival2.to_ns() != 0 {
+        } else if i2 != 0 {
             self.transmit(out);
         }
         self.start(now, out);
+    }
+
+    /// The first interval as user space gave it (zero before a
+    /// [`SETTIMER`]).
+    pub fn ival1(&self) -> BcmTimeval {
+        self.ival1
+    }
+
+    /// The second interval as user space gave it (zero before a
+    /// [`SETTIMER`]).
+    pub fn ival2(&self) -> BcmTimeval {
+        self.ival2
     }
 
     /// The `TX_STATUS` reply to `TX_READ` (with the frames).
@@ -140,7 +159,7 @@ impl TxOp {
     /// The next interval: `ival1` while `count` lasts, else `ival2`, else
     /// none (mainline's `bcm_tx_set_expiry`).
     pub fn next_interval(&self) -> Option<u64> {
-        let (i1, i2) = (self.ival1.to_ns(), self.ival2.to_ns());
+        let [i1, i2] = self.ival_ns;
         if i1 != 0 && self.count > 0 {
             Some(i1)
         } else if i2 != 0 {
