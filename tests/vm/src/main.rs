@@ -278,6 +278,11 @@ fn main() -> ExitCode {
         eprintln!("rcan-vmtest: {e}");
         return ExitCode::from(2);
     }
+    // The second ctucan_pci card is the wire-peer test's alone.
+    if let Err(e) = cases::park_spare_ctucan_cards() {
+        eprintln!("rcan-vmtest: {e}");
+        return ExitCode::from(2);
+    }
     // run_one turns a panic into a test failure; the hook only logs it as
     // a comment line, with its location.
     panic::set_hook(Box::new(|info| eprintln!("# panic: {info}")));

@@ -40,5 +40,7 @@ rcan_kbuild() { echo "$RCAN_CACHE/kernel/$RCAN_KERNEL-$(rcan_kernel_key)"; }
 # SJA1000 tests see none of its traffic: two CTU CAN FD PCI cards (two cores
 # each; can0/can1 are the first card's when only rcan_ctucanfd_pci or
 # mainline ctucanfd_pci is loaded, PCI order; the second card is the wire
-# peer of ctucanfd_wire_peer_mainline, mainline's driver bound to it).
+# peer of ctucanfd_wire_peer_mainline, mainline's driver bound to it, and
+# parked for every other test: rcan-vmtest sets its driver_override to a
+# name no driver has when it starts).
 RCAN_QEMU_CAN="-object can-bus,id=bus0 -device kvaser_pci,canbus=bus0 -device kvaser_pci,canbus=bus0 -device pcm3680_pci,canbus0=bus0,canbus1=bus0 -device mioe3680_pci,canbus0=bus0,canbus1=bus0 -object can-bus,id=bus1 -device ctucan_pci,canbus0=bus1,canbus1=bus1 -device ctucan_pci,canbus0=bus1,canbus1=bus1"

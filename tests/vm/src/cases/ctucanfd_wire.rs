@@ -29,9 +29,15 @@
 //!
 //! The cards are split with sysfs `driver_override` (both drivers match
 //! 1760:ff00): the first card in PCI order to `rcan_ctucanfd_pci`, the
-//! second to `ctucanfd_pci`, set before either module loads and cleared
-//! when the test ends (also on failure), so later tests see both cards
-//! as usual. Interface names are taken from what each load adds.
+//! second to `ctucanfd_pci`, set before either module loads and put back
+//! when the test ends (also on failure). Every other test sees the first
+//! card only: [`park_spare_ctucan_cards`], called once when rcan-vmtest
+//! starts, overrides the second card to [`PARKED`], a driver name no
+//! module has, and this test parks it again when it ends. (Each load of
+//! a CTU CAN FD driver probing four cores instead of two cost every CTU
+//! test 3-5 s on the debug kernel, and `modules_load_unload_cycles` 9 s
+//! on the release kernel.) Interface names are taken from what each load
+//! adds.
 //!
 //! Pacing: every frame is sent and awaited before the next (one frame in
 //! flight), a rate mainline's driver sustains on QEMU's card; the test
@@ -85,18 +91,42 @@ fn ctucan_pci_cards() -> Result<Vec<String>, String> {
     Ok(cards)
 }
 
+/// The `driver_override` of the spare `ctucan_pci` cards between tests:
+/// a name no driver has, so neither `rcan_ctucanfd_pci` nor mainline's
+/// `ctucanfd_pci` binds them (sysfs `driver_override`, "only a driver of
+/// that name may bind").
+pub const PARKED: &str = "rcan_vmtest_parked";
+
+/// Parks every `ctucan_pci` card but the first ([`PARKED`]), so the CTU
+/// CAN FD tests (ours and mainline's) probe the two cores can0/can1 of
+/// the first card only. Called once when rcan-vmtest starts, before any
+/// module is loaded; a VM without the cards is left alone.
+pub fn park_spare_ctucan_cards() -> TestResult {
+    for addr in ctucan_pci_cards()?.iter().skip(1) {
+        let p = format!("/sys/bus/pci/devices/{addr}/driver_override");
+        std::fs::write(&p, PARKED).map_err(|e| format!("echo {PARKED} > {p}: {e}"))?;
+    }
+    Ok(())
+}
+
 /// `echo DRIVER > /sys/bus/pci/devices/ADDR/driver_override` for each
-/// card; dropping it clears them again (an empty write), whatever the
-/// test's outcome.
-struct Overrides(Vec<String>);
+/// card; dropping it puts back what each had (an empty write for none),
+/// whatever the test's outcome.
+struct Overrides(Vec<(String, String)>);
 
 impl Overrides {
     fn set(pairs: &[(&str, &str)]) -> Result<Overrides, String> {
         let mut o = Overrides(Vec::new());
         for (addr, drv) in pairs {
             let p = format!("/sys/bus/pci/devices/{addr}/driver_override");
+            // Reads "(null)" when no override is set.
+            let was = std::fs::read_to_string(&p).or_fail(&p)?;
+            let was = match was.trim() {
+                "(null)" | "" => "\n".to_string(),
+                w => w.to_string(),
+            };
             std::fs::write(&p, drv).map_err(|e| format!("echo {drv} > {p}: {e}"))?;
-            o.0.push(p);
+            o.0.push((p, was));
         }
         Ok(o)
     }
@@ -104,8 +134,8 @@ impl Overrides {
 
 impl Drop for Overrides {
     fn drop(&mut self) {
-        for p in &self.0 {
-            let _ = std::fs::write(p, "\n");
+        for (p, was) in &self.0 {
+            let _ = std::fs::write(p, was);
         }
     }
 }

@@ -22,7 +22,7 @@
 use std::fs;
 use std::os::unix::fs::{symlink, PermissionsExt};
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use super::test_table;
 use crate::check::{ensure, OrFail, TestResult};
@@ -255,11 +255,20 @@ fn install_autoload(ctx: &mut Ctx) -> TestResult {
     let root = ctx.root().to_path_buf();
     let kver = fs::read_to_string("/proc/sys/kernel/osrelease").or_fail("osrelease")?;
     let kver = kver.trim();
+    // Where the test's time goes, one note line at the end (the test took
+    // 30 to 43 s in fresh-clone runs, with the host's load).
+    let mut laps: Vec<String> = Vec::new();
+    let mut t = Instant::now();
+    let mut lap = |what: &str| {
+        laps.push(format!("{what} {:.1} s", t.elapsed().as_secs_f64()));
+        t = Instant::now();
+    };
     unload_everything()?;
 
     let _scratch = Scratch::new()?;
     install_kernel_modules(&kbuild, kver)?;
     let before_lib = files_below(Path::new("/lib/modules"));
+    lap("scratch and kernel modules");
 
     // What the user types (as root, after `make`).
     let out = sh(
@@ -270,6 +279,7 @@ fn install_autoload(ctx: &mut Ctx) -> TestResult {
         ),
         MAKE_LIMIT,
     )?;
+    lap("make install");
     ctx.note(out.stdout.lines().last().unwrap_or(""));
     let conf = fs::read_to_string("/etc/modprobe.d/rcan.conf").or_fail("rcan.conf")?;
     ensure!(
@@ -285,6 +295,7 @@ fn install_autoload(ctx: &mut Ctx) -> TestResult {
         "modinfo rcan_kvaser_pci shows no pci:v000010E8d00008406 alias: {modinfo}"
     );
 
+    lap("modinfo");
     // Autoload by socket, from nothing loaded.
     for (ty, proto, module) in [
         ("SOCK_RAW", 1, "rcan_raw"),
@@ -305,6 +316,7 @@ fn install_autoload(ctx: &mut Ctx) -> TestResult {
         );
     }
 
+    lap("autoload by socket (4 python3 starts)");
     // Autoload by device: what udev does for each PCI device.
     unload_everything()?;
     let cards = sh(
@@ -343,6 +355,7 @@ fn install_autoload(ctx: &mut Ctx) -> TestResult {
         "no can0 after modprobe by modalias"
     );
     unload_everything()?;
+    lap("autoload by modalias");
 
     // Uninstall leaves what was there before, and nothing in PREFIX or
     // /etc/modprobe.d.
@@ -373,5 +386,7 @@ fn install_autoload(ctx: &mut Ctx) -> TestResult {
         !aliases.contains("rcan"),
         "modules.alias still names rcan modules after uninstall"
     );
+    lap("make uninstall");
+    ctx.note(format!("time: {}", laps.join(", ")));
     Ok(())
 }

@@ -9,6 +9,7 @@ mod capture;
 mod ctucanfd;
 mod ctucanfd_sim;
 mod ctucanfd_wire;
+pub use ctucanfd_wire::park_spare_ctucan_cards;
 mod daemons;
 mod dsor;
 mod errors;
