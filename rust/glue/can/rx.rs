@@ -1063,9 +1063,8 @@ impl<R: Receiver> RxTable<R> {
                 n.key.set(e);
                 e.count.set(e.count.get() + 1);
                 // SAFETY: writer mutex held; the node is initialised, not
-                // linked, and stays put inside the receiver's slot until
-                // the receiver is freed (after its unlinking and a grace
-                // period).
+                // linked, and stays in the receiver's slot until the receiver
+                // is freed (after its unlinking and a grace period).
                 unsafe { e.members.push(n) };
             } else {
                 // SAFETY: as above.
