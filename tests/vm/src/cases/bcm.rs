@@ -949,21 +949,18 @@ print("done", flush=True)
         gap >= Duration::from_millis(300),
         format!("only {gap:?} between the last frame before stop() and the next task"),
     )?;
-    // duration ended the second task by itself: at most 25 frames above
-    // (about 40 would come by bus.shutdown() 0.8 s later), and their span
-    // as the recorder saw it. The debug kernel under emulation stretches
-    // 20 ms timers and delays the recorder (1.1 s seen once), hence a
-    // wider bound there.
+    // duration ended the second task by itself: the 3..=25 frames above
+    // (about 40 would come by bus.shutdown() 0.8 s later) are the check.
+    // Their span as the recorder saw it is reported, not asserted: under
+    // emulation timers and the recorder stretch (1.1 s seen once on the
+    // debug kernel), and tests never assert on wall-clock time.
     let span = b[b.len() - 1].0 - b[0].0;
-    let bound = if crate::ctx::debug_kernel() {
-        3000
-    } else {
-        600
-    };
-    need(
-        span <= Duration::from_millis(bound),
-        format!("the duration=0.3 s task sent for {span:?} (bound {bound} ms)"),
-    )
+    println!(
+        "# the duration=0.3 s task: {} frames over {:.0} ms as the recorder saw them",
+        b.len(),
+        span.as_secs_f64() * 1e3
+    );
+    Ok(())
 }
 
 /// CAN_FD_FRAME (72-byte frames) on a classic interface (MTU 16): TX_SETUP

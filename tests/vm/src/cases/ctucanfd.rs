@@ -133,11 +133,25 @@ fn fd_pass(
     flags: u8,
     who: &str,
 ) -> TestResult {
+    fd_cross(tx, rx, id, data, flags, flags, who)
+}
+
+/// One FD frame `id`/`data`/`flags` from `tx` to `rx`, expected there
+/// with `want_flags` (plus CANFD_FDF), id and every byte as sent.
+pub(super) fn fd_cross(
+    tx: &CanFdSocket,
+    rx: &CanFdSocket,
+    id: u32,
+    data: &[u8],
+    flags: u8,
+    want_flags: u8,
+    who: &str,
+) -> TestResult {
     let eid = ExtendedId::new(id).ok_or("bad id")?;
     let f = CanFdFrame::with_flags(eid, data, FdFlags::from_bits_truncate(flags))
         .ok_or("bad FD frame")?;
     tx.write_frame(&f)
-        .or_fail(format_args!("{who}: write FD frame"))?;
+        .or_fail(format_args!("{who}: write FD frame {id:08X}"))?;
     let got = rx
         .read_frame()
         .or_fail(format_args!("{who}: waiting for FD frame {id:08X}"))?;
@@ -146,12 +160,16 @@ fn fd_pass(
     };
     let raw: &libc::canfd_frame = g.as_ref();
     ensure!(
-        raw.can_id == id | libc::CAN_EFF_FLAG && g.data() == data && raw.flags == flags | CANFD_FDF,
-        "{who}: expected FD {id:08X} [{}] flags {:#x}, got {:08X} [{}] flags {:#x}",
+        raw.can_id == id | libc::CAN_EFF_FLAG
+            && g.data() == data
+            && raw.flags == want_flags | CANFD_FDF,
+        "{who}: expected FD {id:08X} [{}] {:02X?} flags {:#x}, got {:08X} [{}] {:02X?} flags {:#x}",
         data.len(),
-        flags | CANFD_FDF,
+        data,
+        want_flags | CANFD_FDF,
         raw.can_id,
         g.data().len(),
+        g.data(),
         raw.flags
     );
     Ok(())

@@ -54,7 +54,7 @@ use socketcan::id::FdFlags;
 use socketcan::{CanAnyFrame, CanFdFrame, CanFdSocket, EmbeddedFrame, ExtendedId, Socket};
 
 use super::candev::ip_ok;
-use super::ctucanfd::{classic_kinds, fd_open, ip_fails, json_has};
+use super::ctucanfd::{classic_kinds, fd_cross, fd_open, ip_fails, json_has};
 use super::test_table;
 use crate::canraw;
 use crate::check::{ensure, OrFail, TestResult};
@@ -162,45 +162,6 @@ fn added(who: &str, load: impl FnOnce() -> TestResult) -> Result<Vec<String>, St
         .collect();
     ensure!(!new.is_empty(), "{who} made no CAN interface");
     Ok(new)
-}
-
-/// One FD frame `id`/`data`/`flags` from `tx` to `rx`, expected there
-/// with `want_flags` (plus CANFD_FDF), id and every byte as sent.
-fn fd_cross(
-    tx: &CanFdSocket,
-    rx: &CanFdSocket,
-    id: u32,
-    data: &[u8],
-    flags: u8,
-    want_flags: u8,
-    who: &str,
-) -> TestResult {
-    let eid = ExtendedId::new(id).ok_or("bad id")?;
-    let f = CanFdFrame::with_flags(eid, data, FdFlags::from_bits_truncate(flags))
-        .ok_or("bad FD frame")?;
-    tx.write_frame(&f)
-        .or_fail(format_args!("{who}: write FD frame {id:08X}"))?;
-    let got = rx
-        .read_frame()
-        .or_fail(format_args!("{who}: waiting for FD frame {id:08X}"))?;
-    let CanAnyFrame::Fd(g) = got else {
-        return Err(format!("{who}: expected FD frame {id:08X}, got {got:?}"));
-    };
-    let raw: &libc::canfd_frame = g.as_ref();
-    ensure!(
-        raw.can_id == id | libc::CAN_EFF_FLAG
-            && g.data() == data
-            && raw.flags == want_flags | CANFD_FDF,
-        "{who}: expected FD {id:08X} [{}] {:02X?} flags {:#x}, got {:08X} [{}] {:02X?} flags {:#x}",
-        data.len(),
-        data,
-        want_flags | CANFD_FDF,
-        raw.can_id,
-        g.data().len(),
-        g.data(),
-        raw.flags
-    );
-    Ok(())
 }
 
 /// Reads one classic frame and compares it with `want`, all 16 bytes
