@@ -14,7 +14,9 @@
 # echo=1), "ours" (this tree's modules) or "ours:DIR" (the modules of
 # another build, laid out as in the tree, like rcan-bench --ours-dir). For
 # each, OUT gets the workload's phase marks without perf
-# (marks-noperf-K.txt) and under perf (marks-K.txt), and the samples, leaf
+# (marks-noperf-K.txt) and under perf (marks-K.txt), /proc/softirqs and
+# /proc/stat before and after the timed rounds (cpus-{before,after}-K.txt),
+# and the samples, leaf
 # only, as perf script prints them with the modules still loaded
 # (script-K.txt.gz); prof-frame-split.py turns them into the tables.
 # Env: N (frames per round, 20480), ROUNDS (3), BATCH (64), PERIOD
@@ -58,7 +60,11 @@ for st in "$@"; do
 	# one warm-up round, then the phases timed without perf (under icount:
 	# instructions), then again under perf
 	$wl 1 $BATCH > /dev/null || exit 1
+	# Per-CPU softirq counts and CPU times around the timed rounds: what
+	# the other CPU does without perf running (perf keeps it awake).
+	cat /proc/softirqs /proc/stat > $out/cpus-before-$tag.txt
 	$wl $ROUNDS $BATCH > $out/marks-noperf-$tag.txt || exit 1
+	cat /proc/softirqs /proc/stat > $out/cpus-after-$tag.txt
 	if [ "${PERF:-1}" = 0 ]; then
 		echo "$tag: $(grep -c PHASE $out/marks-noperf-$tag.txt) phases"
 		continue
