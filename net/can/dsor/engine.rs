@@ -43,7 +43,7 @@ use crate::rcan_core::dsor_wire::{AckStatus, DsorId, FdFrame, FrameType, Header}
 use crate::rx::{accept, deliver, wanted, RxBuf};
 use crate::socket::DsorProto;
 use crate::stats::Stats;
-use crate::timers::kick;
+use crate::timers::TIMER;
 use crate::udpip;
 
 /// Reassembly slots (concurrent incoming messages, Done states included).
@@ -114,13 +114,22 @@ pub(crate) struct Engine {
     /// classic (a fallback), unknown. Forgotten when the DSOR interface
     /// goes down or away ([`Engine::fail_all`]).
     peers: FdPeers,
-    /// A drainer ([`drain`](crate::timers::drain), from
+    /// A drainer ([`drain_locked`](crate::timers::drain_locked), from
     /// [`Tick`](crate::timers::Tick) or from the receive callback) is
     /// running and will take every frame queued before it finds the queue
     /// empty (it checks and clears this in one critical section), so
-    /// queuing a frame needs no [`kick`]. At most one drainer runs at a
+    /// queuing a frame needs no [`Engine::kick`]. At most one drainer runs at a
     /// time, so frames leave in queue order.
     pub(crate) draining: bool,
+    /// The expiry (monotonic ns) [`TIMER`] was last started for, if no
+    /// run of [`Tick`](crate::timers::Tick) has begun since (each run
+    /// clears it under this lock first): the timer is then queued for that
+    /// time, or its run is about to take the lock. `None`: not known to be
+    /// armed. The timer is started only under this lock ([`Engine::arm`]),
+    /// so this is exact; it lets [`Engine::arm_for_deadline`] leave a
+    /// timer alone that fires early enough, instead of re-queuing it after
+    /// every frame.
+    pub(crate) timer_at: Option<i64>,
 }
 
 /// All protocol state; `None` outside the module's lifetime.
@@ -141,12 +150,35 @@ pub(crate) fn now_ms() -> u64 {
 }
 
 impl Engine {
-    /// Kicks [`Tick`](crate::timers::Tick) to send what was queued, unless it is draining the
-    /// queue anyway. Called with ENGINE held (it is the `&mut self`).
-    pub(crate) fn kick(&self) {
+    /// Kicks [`Tick`](crate::timers::Tick) to send what was queued, unless a drainer is
+    /// draining the queue anyway. Called with ENGINE held (it is the
+    /// `&mut self`).
+    pub(crate) fn kick(&mut self) {
         if !self.draining {
-            kick();
+            self.arm(ktime_get_mono_ns());
         }
+    }
+
+    /// Starts [`TIMER`] for `at` (monotonic ns), moving it if queued, and
+    /// notes it in [`Engine::timer_at`]. Under ENGINE, so a kick is never
+    /// overwritten by an older re-arm.
+    pub(crate) fn arm(&mut self, at: i64) {
+        TIMER.start(at);
+        self.timer_at = Some(at);
+    }
+
+    /// Arms [`TIMER`] for the protocol deadline `deadline_ms` (monotonic
+    /// ms), unless it is armed for that time or earlier: a run before the
+    /// deadline finds nothing due and arms the timer for the next one, so
+    /// an early expiry costs one timer run, while starting the timer again
+    /// after every frame (each moves the retransmission deadline later)
+    /// costs an hrtimer dequeue and enqueue per frame.
+    pub(crate) fn arm_for_deadline(&mut self, deadline_ms: u64) {
+        let at = (deadline_ms as i64).saturating_mul(1_000_000);
+        if self.timer_at.is_some_and(|t| t <= at) {
+            return;
+        }
+        self.arm(at);
     }
 
     fn push_out(&mut self, f: FdFrame) {
@@ -439,6 +471,7 @@ pub(crate) fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
             fd_iface: false,
             peers: FdPeers::new(),
             draining: false,
+            timer_at: None,
         },
         GFP_KERNEL,
     )?)
