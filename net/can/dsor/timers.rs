@@ -128,9 +128,7 @@ pub(crate) fn drain_locked(
             }
             if n == 0 {
                 e.draining = false;
-                if let Some(d) = e.next_deadline() {
-                    e.arm_for_deadline(d);
-                }
+                e.arm_after_drain();
                 break;
             }
             ifname = e.cfg.ifname;
