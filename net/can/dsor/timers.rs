@@ -141,7 +141,7 @@ pub(crate) fn drain_locked(
         sent += n;
         if dev
             .as_ref()
-            .is_some_and(|d| d.name().as_bytes() != ifname.bytes())
+            .is_some_and(|d| d.name_bytes() != ifname.bytes())
         {
             dev = None;
         }
