@@ -115,13 +115,20 @@ impl NetDev {
 
     /// The interface name ("can0").
     pub(crate) fn name(&self) -> &str {
+        core::str::from_utf8(self.name_bytes()).unwrap_or("?")
+    }
+
+    /// The interface name's bytes before its NUL, without the UTF-8 check
+    /// of [`NetDev::name`]: for comparing names per frame.
+    pub(crate) fn name_bytes(&self) -> &[u8] {
         // SAFETY: valid device; `name` is a NUL-terminated array that only
-        // changes under RTNL on rename (a torn read only garbles a log line).
+        // changes under RTNL on rename (a torn read only garbles a log line
+        // or fails one comparison).
         let name = unsafe { &(*self.as_ptr()).name };
         // SAFETY: c_char and u8 have the same layout.
         let bytes: &[u8] = unsafe { &*(name.as_slice() as *const [ffi::c_char] as *const [u8]) };
         let n = bytes.iter().position(|b| *b == 0).unwrap_or(bytes.len());
-        core::str::from_utf8(&bytes[..n]).unwrap_or("?")
+        &bytes[..n]
     }
 
     /// Counts a transmitted frame of `bytes` data bytes.

@@ -37,12 +37,13 @@
 //!   ([`Tick`](crate::timers::Tick)) and in `canip0`'s transmit path. Nothing sleeps or sends
 //!   frames under it; socket receive queues (their own spinlock) are fed
 //!   under it, so the order is ENGINE -> queue lock.
-//! * Frames are not sent from the receive callback (which runs in NET_RX
-//!   softirq and could send, see `KernelRx` in rust/glue/can/proto.rs;
-//!   this protocol keeps one sender): every frame is queued on
-//!   `Engine::out` and sent by [`Tick`](crate::timers::Tick), a soft hrtimer that is kicked to
-//!   "now" whenever frames are queued and otherwise armed for the earliest
-//!   protocol deadline.
+//! * Frames are queued on `Engine::out` under [`ENGINE`] and sent by one
+//!   drainer at a time after the lock is dropped (`timers::drain_locked`):
+//!   the receive callback itself when a frame it handled queued answers
+//!   (it runs in NET_RX softirq and may send, see `KernelRx` in
+//!   rust/glue/can/proto.rs), else [`Tick`](crate::timers::Tick), a soft
+//!   hrtimer that is kicked to "now" when frames are queued and otherwise
+//!   armed for the earliest protocol deadline.
 //! * Blocking senders sleep on [`WAITQ`] until their
 //!   transfer has finished; every finished transfer and every freed
 //!   channel wakes all waiters, which re-check under the lock.

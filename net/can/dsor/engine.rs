@@ -43,7 +43,7 @@ use crate::rcan_core::dsor_wire::{AckStatus, DsorId, FdFrame, FrameType, Header}
 use crate::rx::{accept, deliver, wanted, RxBuf};
 use crate::socket::DsorProto;
 use crate::stats::Stats;
-use crate::timers::kick;
+use crate::timers::TIMER;
 use crate::udpip;
 
 /// Reassembly slots (concurrent incoming messages, Done states included).
@@ -114,13 +114,32 @@ pub(crate) struct Engine {
     /// classic (a fallback), unknown. Forgotten when the DSOR interface
     /// goes down or away ([`Engine::fail_all`]).
     peers: FdPeers,
-    /// A drainer ([`drain`](crate::timers::drain), from
+    /// A drainer ([`drain_locked`](crate::timers::drain_locked), from
     /// [`Tick`](crate::timers::Tick) or from the receive callback) is
     /// running and will take every frame queued before it finds the queue
     /// empty (it checks and clears this in one critical section), so
-    /// queuing a frame needs no [`kick`]. At most one drainer runs at a
+    /// queuing a frame needs no [`Engine::kick`]. At most one drainer runs at a
     /// time, so frames leave in queue order.
     pub(crate) draining: bool,
+    /// The expiry (monotonic ns) [`TIMER`] was last started for, if no
+    /// run of [`Tick`](crate::timers::Tick) has begun since (each run
+    /// clears it under this lock first): the timer is then queued for that
+    /// time, or its run is about to take the lock. `None`: not known to be
+    /// armed. The timer is started only under this lock ([`Engine::arm`]),
+    /// so this is exact; it lets [`Engine::arm_for_deadline`] leave a
+    /// timer alone that fires early enough, instead of re-queuing it after
+    /// every frame.
+    pub(crate) timer_at: Option<i64>,
+    /// A lower bound (monotonic ms) of every protocol deadline set since
+    /// the drainer last held the deadlines against the timer
+    /// ([`Engine::arm_after_drain`]); `None`: none set since. A step of the
+    /// machines at `now` sets deadlines no earlier than `now` +
+    /// [`Engine::min_timeout_ms`] (T_ack for a transfer, T_reasm for a
+    /// reassembly state), so [`Engine::note_step`] keeps this without
+    /// looking at the machines.
+    deadline_floor: Option<u64>,
+    /// min(T_ack, T_reasm) of [`Engine::cfg`], ms.
+    min_timeout_ms: u64,
 }
 
 /// All protocol state; `None` outside the module's lifetime.
@@ -141,12 +160,63 @@ pub(crate) fn now_ms() -> u64 {
 }
 
 impl Engine {
-    /// Kicks [`Tick`](crate::timers::Tick) to send what was queued, unless it is draining the
-    /// queue anyway. Called with ENGINE held (it is the `&mut self`).
-    pub(crate) fn kick(&self) {
+    /// Kicks [`Tick`](crate::timers::Tick) to send what was queued, unless a drainer is
+    /// draining the queue anyway. Called with ENGINE held (it is the
+    /// `&mut self`).
+    pub(crate) fn kick(&mut self) {
         if !self.draining {
-            kick();
+            self.arm(ktime_get_mono_ns());
         }
+    }
+
+    /// Starts [`TIMER`] for `at` (monotonic ns), moving it if queued, and
+    /// notes it in [`Engine::timer_at`]. Under ENGINE, so a kick is never
+    /// overwritten by an older re-arm.
+    pub(crate) fn arm(&mut self, at: i64) {
+        TIMER.start(at);
+        self.timer_at = Some(at);
+    }
+
+    /// Notes that the machines stepped at `now` (ms): the deadlines they
+    /// set are at `now` + [`Engine::min_timeout_ms`] or later.
+    fn note_step(&mut self, now: u64) {
+        let f = now.saturating_add(self.min_timeout_ms);
+        self.deadline_floor = Some(self.deadline_floor.map_or(f, |x| x.min(f)));
+    }
+
+    /// The drainer found the queue empty: makes sure [`TIMER`] fires no
+    /// later than the earliest protocol deadline. If it is armed
+    /// ([`Engine::timer_at`]) no later than every deadline set since the
+    /// last call ([`Engine::deadline_floor`]), nothing needs looking at:
+    /// the deadlines older than those were held against it then (and a
+    /// timer moved since was moved to "now" or cleared by its run).
+    /// Otherwise the deadlines of all transfers and reassembly states are
+    /// scanned ([`Engine::next_deadline`]) and the timer armed for the
+    /// earliest if it fires later. Saves the scan of every slot per frame.
+    pub(crate) fn arm_after_drain(&mut self) {
+        let floor = self.deadline_floor.take();
+        if let Some(t) = self.timer_at {
+            if floor.is_none_or(|f| t <= (f as i64).saturating_mul(1_000_000)) {
+                return;
+            }
+        }
+        if let Some(d) = self.next_deadline() {
+            self.arm_for_deadline(d);
+        }
+    }
+
+    /// Arms [`TIMER`] for the protocol deadline `deadline_ms` (monotonic
+    /// ms), unless it is armed for that time or earlier: a run before the
+    /// deadline finds nothing due and arms the timer for the next one, so
+    /// an early expiry costs one timer run, while starting the timer again
+    /// after every frame (each moves the retransmission deadline later)
+    /// costs an hrtimer dequeue and enqueue per frame.
+    pub(crate) fn arm_for_deadline(&mut self, deadline_ms: u64) {
+        let at = (deadline_ms as i64).saturating_mul(1_000_000);
+        if self.timer_at.is_some_and(|t| t <= at) {
+            return;
+        }
+        self.arm(at);
     }
 
     fn push_out(&mut self, f: FdFrame) {
@@ -254,7 +324,9 @@ impl Engine {
             &self.cfg.timers,
             offer,
         );
-        let f = t.start(&msg, now_ms());
+        let now = now_ms();
+        let f = t.start(&msg, now);
+        self.note_step(now);
         self.push_out(f);
         let gen = self.next_gen;
         self.next_gen = self.next_gen.wrapping_add(1);
@@ -304,6 +376,7 @@ impl Engine {
     /// headers are answered, choosing 64-byte bodies; else they are
     /// ignored as by a classic node.
     pub(crate) fn on_frame(&mut self, id: &DsorId, data: &[u8], fd_iface: bool, now: u64) -> bool {
+        self.note_step(now);
         self.fd_iface = fd_iface;
         if self.rx.fd_body_size().is_some() != fd_iface {
             self.rx.set_fd_body_size(fd_iface.then_some(BodySize::MAX));
@@ -369,6 +442,7 @@ impl Engine {
 
     /// Runs due timers; returns whether frames were queued.
     pub(crate) fn on_timer(&mut self, now: u64) -> bool {
+        self.note_step(now);
         let mut kick = false;
         self.stats.rx_timed_out += self.rx.on_timer(now) as u64;
         for i in 0..self.tx.len() {
@@ -425,6 +499,7 @@ pub(crate) fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
         tx.push(TxEntry::Free, GFP_KERNEL)?;
     }
     let out = Ring::new(OUT_LEN)?;
+    let min_timeout_ms = u64::from(cfg.timers.ack_timeout_ms.min(cfg.timers.reasm_timeout_ms));
     Ok(KBox::new(
         Engine {
             cfg,
@@ -439,6 +514,9 @@ pub(crate) fn new_engine(cfg: Config) -> Result<KBox<Engine>> {
             fd_iface: false,
             peers: FdPeers::new(),
             draining: false,
+            timer_at: None,
+            deadline_floor: None,
+            min_timeout_ms,
         },
         GFP_KERNEL,
     )?)

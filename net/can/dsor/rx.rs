@@ -24,7 +24,7 @@ use crate::rcan_core::dsor_rx::{Delivered, Incoming};
 use crate::rcan_core::dsor_wire::{AckStatus, DsorId, MsgKind};
 use crate::rcan_core::frame::{AnyFrame, CANFD_MTU};
 use crate::stats::Stats;
-use crate::timers::drain;
+use crate::timers::drain_locked;
 use crate::udpip;
 
 /// Headroom of reassembly buffers: rebuilt IPv4 + UDP headers of canip0.
@@ -183,15 +183,16 @@ pub(crate) struct DsorRx;
 
 impl KernelRx for DsorRx {
     /// NET_RX softirq, under RCU. The frame's answers (acks, the next
-    /// body) are queued under ENGINE and sent right here, after the lock
-    /// is dropped ([`drain`]), instead of a timer hop later: a receive
-    /// callback runs in NET_RX softirq with no device lock held, so it may
+    /// body) are queued under ENGINE and sent right here, by the same
+    /// critical section turning drainer ([`drain_locked`]; sent after the
+    /// lock is dropped), instead of a timer hop later: a receive callback
+    /// runs in NET_RX softirq with no device lock held, so it may
     /// transmit.
     fn rx(&self, skb: &Skb, dev: &NetDev) {
-        let Some(frame) = AnyFrame::parse(skb.data()) else {
+        // Read in place: no copy of the frame.
+        let Some((can_id, data, _)) = AnyFrame::view(skb.data()) else {
             return;
         };
-        let can_id = frame.can_id();
         if can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_ERR_FLAG) != CAN_EFF_FLAG {
             return;
         }
@@ -201,31 +202,29 @@ impl KernelRx for DsorRx {
         if u32::from(id.dst) != NODE.load(Ordering::Relaxed) {
             return;
         }
-        let data = match &frame {
-            AnyFrame::Classic(cf) => cf.payload(),
-            AnyFrame::Fd(ff) => ff.payload(),
-        };
         // The interface's mode now decides whether FD headers are
         // answered (a CAN FD frame arrives only on an FD interface).
         let fd_iface = dev.mtu() as usize == CANFD_MTU;
         let now = now_ms();
         let mut g = ENGINE.lock();
         let Some(e) = g.as_mut() else { return };
-        if dev.name().as_bytes() != e.cfg.ifname.bytes() {
+        if dev.name_bytes() != e.cfg.ifname.bytes() {
             return;
         }
         let finished_before = e.stats.tx_ok + e.stats.tx_failed;
         let queued = e.on_frame(&id, data, fd_iface, now);
         let finished = e.stats.tx_ok + e.stats.tx_failed != finished_before;
-        drop(g);
-        if finished {
-            WAITQ.wake_all();
-        }
         if queued {
             // Becomes the drainer unless one runs (which then takes these
-            // frames too); sends on the device the frame came in on (the
-            // DSOR interface, checked above) without a lookup by name.
-            drain(false, Some(dev.hold()));
+            // frames too), without dropping ENGINE in between; sends on
+            // the device the frame came in on (the DSOR interface, checked
+            // above) without a lookup by name.
+            drain_locked(g, finished, Some(dev.hold()));
+        } else {
+            drop(g);
+            if finished {
+                WAITQ.wake_all();
+            }
         }
     }
 }

@@ -2,8 +2,11 @@
 
 //! Sending frames and running the protocol timers of `rcan_dsor`: one
 //! soft hrtimer, [`TIMER`] ([`Tick`]), kicked to "now" whenever frames are
-//! queued on the engine and otherwise armed for the earliest protocol
-//! deadline. [`drain`] takes the engine's queued frames in batches under
+//! queued on the engine outside a drainer and otherwise armed for the
+//! earliest protocol deadline (or earlier: it is started again only when
+//! a deadline comes before the expiry it is armed for, not once per
+//! frame; a run that finds nothing due re-arms it for the next one).
+//! [`drain_locked`] takes the engine's queued frames in batches under
 //! [`ENGINE`] and sends them without it, from the timer
 //! (HRTIMER_SOFTIRQ) or from the receive callback (NET_RX softirq); at
 //! most one drainer runs at a time (`Engine::draining`, under ENGINE), so
@@ -12,18 +15,20 @@
 #![forbid(unsafe_code)]
 
 use core::sync::atomic::{AtomicBool, Ordering};
+use kernel::alloc::KBox;
 use kernel::prelude::*;
 
-use crate::engine::{now_ms, ENGINE, WAITQ};
+use crate::engine::{now_ms, Engine, ENGINE, WAITQ};
 use crate::glue;
 use crate::glue::hrtimer::{ktime_get_mono_ns, HrTimer, HrTimerCallback};
+use crate::glue::lock::BhSpinGuard;
 use crate::glue::net::Net;
 use crate::glue::netdev::DevRef;
 use crate::glue::neterr;
 use crate::rcan_api;
 use crate::rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK};
 use crate::rcan_core::dsor_wire::FdFrame;
-use crate::rcan_core::frame::{AnyFrame, CanFdFrame, CanFrame, CANFD_FDF};
+use crate::rcan_core::frame::{CanFdFrame, CanFrame, CANFD_FDF};
 
 /// Frames sent per batch (taken from the queue under the lock).
 const BATCH: usize = 16;
@@ -37,13 +42,9 @@ const FRAMES_PER_RUN: usize = 1024;
 /// Set by module exit: the timer neither sends nor re-arms.
 pub(crate) static STOPPING: AtomicBool = AtomicBool::new(false);
 
-/// Kicks the sender timer. Call with ENGINE held (so that a kick is never
-/// overwritten by an older re-arm, see [`Tick`]).
-pub(crate) fn kick() {
-    TIMER.start(ktime_get_mono_ns());
-}
-
 /// The soft hrtimer that sends queued frames and runs protocol timers.
+/// Started only under ENGINE, through `Engine::arm` and
+/// `Engine::arm_for_deadline`, which remember what it is armed for.
 pub(crate) struct Tick;
 
 pub(crate) static TIMER: HrTimer<Tick> = HrTimer::new();
@@ -55,66 +56,66 @@ impl HrTimerCallback for Tick {
     /// unless another drainer (a receive callback on another CPU) is at
     /// it; that one re-arms the timer when it is done.
     fn run(_timer: &'static HrTimer<Self>, _state: &mut ()) {
-        drain(true, None);
+        let mut g = ENGINE.lock();
+        let Some(e) = g.as_mut() else { return };
+        // This run answers the last start: from here on the engine does
+        // not know the timer to be armed (`Engine::timer_at`).
+        e.timer_at = None;
+        if STOPPING.load(Ordering::Relaxed) {
+            return;
+        }
+        let before = e.stats.tx_ok + e.stats.tx_failed;
+        e.on_timer(now_ms());
+        let wake = e.stats.tx_ok + e.stats.tx_failed != before;
+        drain_locked(g, wake, None);
     }
 }
 
-/// Sends the queued frames. Softirq context (HRTIMER_SOFTIRQ or NET_RX).
+/// Sends the queued frames; `g` is ENGINE, held. Softirq context
+/// (HRTIMER_SOFTIRQ or NET_RX).
 ///
-/// With `timers`, first runs the protocol timers. Becomes the drainer if
-/// nobody is (`draining`), else returns at once: the running drainer takes
-/// what was queued. Takes frames from the queue in batches under ENGINE
-/// and sends them without it (on one device reference for the whole run);
-/// when the queue is empty, clears `draining` and re-arms the timer for
-/// the next deadline in the same critical section, so that a frame queued
-/// concurrently (also under ENGINE) is never left unsent. After
-/// [`FRAMES_PER_RUN`] frames it re-arms for "now" instead. `dev`, if
-/// given, is used as the DSOR interface if its name is still the
-/// configured one (else the device is looked up by name, as without).
-pub(crate) fn drain(timers: bool, mut dev: Option<DevRef>) {
-    let mut first = true;
-    let mut wake = false;
+/// Becomes the drainer if nobody is (`draining`), else returns at once:
+/// the running drainer takes what was queued. Takes frames from the queue
+/// in batches under ENGINE and sends them without it (on one device
+/// reference for the whole run); when the queue is empty, clears
+/// `draining` and arms the timer for the next deadline in the same
+/// critical section (unless it is armed no later already), so that a
+/// frame queued concurrently (also under ENGINE) is never left unsent.
+/// After [`FRAMES_PER_RUN`] frames it arms the timer for "now" instead.
+/// With `wake`, wakes [`WAITQ`] once ENGINE is dropped. `dev`, if given,
+/// is used as the DSOR interface while its name is the configured one
+/// (else the device is looked up by name, as without).
+pub(crate) fn drain_locked(
+    mut g: BhSpinGuard<Option<KBox<Engine>>>,
+    mut wake: bool,
+    mut dev: Option<DevRef>,
+) {
+    match g.as_mut() {
+        Some(e) if !e.draining && !STOPPING.load(Ordering::Relaxed) => e.draining = true,
+        _ => {
+            // Gone, stopping, or another drainer sends what was queued
+            // and arms the timer when it finds the queue empty.
+            drop(g);
+            if wake {
+                WAITQ.wake_all();
+            }
+            return;
+        }
+    }
     let mut sent = 0;
     loop {
-        if wake {
-            WAITQ.wake_all();
-            wake = false;
-        }
         let mut batch: [Option<FdFrame>; BATCH] = Default::default();
         let mut n = 0;
         let ifname;
         {
-            let mut g = ENGINE.lock();
-            let Some(e) = g.as_mut() else { return };
+            let Some(e) = g.as_mut() else { break };
             if STOPPING.load(Ordering::Relaxed) {
-                return;
-            }
-            if first {
-                first = false;
-                if timers {
-                    let before = e.stats.tx_ok + e.stats.tx_failed;
-                    e.on_timer(now_ms());
-                    wake = e.stats.tx_ok + e.stats.tx_failed != before;
-                }
-                if e.draining {
-                    // The running drainer sends what on_timer queued and
-                    // re-arms the timer when it finds the queue empty.
-                    drop(g);
-                    if wake {
-                        WAITQ.wake_all();
-                    }
-                    return;
-                }
-                e.draining = true;
+                break;
             }
             if sent >= FRAMES_PER_RUN {
                 e.draining = false;
-                kick();
-                drop(g);
-                if wake {
-                    WAITQ.wake_all();
-                }
-                return;
+                e.arm(ktime_get_mono_ns());
+                break;
             }
             while n < BATCH {
                 match e.pop_out() {
@@ -125,26 +126,25 @@ pub(crate) fn drain(timers: bool, mut dev: Option<DevRef>) {
                     None => break,
                 }
             }
-            ifname = e.cfg.ifname;
-            if dev
-                .as_ref()
-                .is_some_and(|d| d.name().as_bytes() != ifname.bytes())
-            {
-                dev = None;
-            }
             if n == 0 {
                 e.draining = false;
-                if let Some(d) = e.next_deadline() {
-                    TIMER.start((d as i64).saturating_mul(1_000_000));
-                }
-                drop(g);
-                if wake {
-                    WAITQ.wake_all();
-                }
-                return;
+                e.arm_after_drain();
+                break;
             }
+            ifname = e.cfg.ifname;
+        }
+        drop(g);
+        if wake {
+            WAITQ.wake_all();
+            wake = false;
         }
         sent += n;
+        if dev
+            .as_ref()
+            .is_some_and(|d| d.name_bytes() != ifname.bytes())
+        {
+            dev = None;
+        }
         if dev.is_none() {
             dev = DevRef::by_name(Net::init(), ifname.as_cstr());
         }
@@ -152,11 +152,16 @@ pub(crate) fn drain(timers: bool, mut dev: Option<DevRef>) {
             Some(d) => send_batch(d, &batch[..n]),
             None => n as u64,
         };
+        g = ENGINE.lock();
         if errors != 0 {
-            if let Some(e) = ENGINE.lock().as_mut() {
+            if let Some(e) = g.as_mut() {
                 e.stats.send_errors += errors;
             }
         }
+    }
+    drop(g);
+    if wake {
+        WAITQ.wake_all();
     }
 }
 
@@ -180,7 +185,9 @@ fn send_frame(dev: &DevRef, f: &FdFrame) -> Result {
         return Err(neterr::ENETDOWN());
     }
     let can_id = (f.id & CAN_EFF_MASK) | CAN_EFF_FLAG;
-    let frame = if f.fdf {
+    // The frame's image is built on the stack and copied into the skb
+    // once (no `AnyFrame` in between).
+    let skb = if f.fdf {
         let mut ff = CanFdFrame {
             can_id,
             len: f.len,
@@ -189,7 +196,7 @@ fn send_frame(dev: &DevRef, f: &FdFrame) -> Result {
         };
         let n = usize::from(f.len).min(ff.data.len());
         ff.data[..n].copy_from_slice(&f.data[..n]);
-        AnyFrame::Fd(ff)
+        glue::can::skb::alloc_image(dev, &ff.to_bytes(), glue::GFP_ATOMIC)
     } else {
         let mut cf = CanFrame {
             can_id,
@@ -198,9 +205,9 @@ fn send_frame(dev: &DevRef, f: &FdFrame) -> Result {
         };
         let n = usize::from(f.len.min(8));
         cf.data[..n].copy_from_slice(&f.data[..n]);
-        AnyFrame::Classic(cf)
-    };
-    let skb = glue::can::skb::alloc_frame(dev, &frame, glue::GFP_ATOMIC).ok_or(neterr::ENOBUFS())?;
+        glue::can::skb::alloc_image(dev, &cf.to_bytes(), glue::GFP_ATOMIC)
+    }
+    .ok_or(neterr::ENOBUFS())?;
     // Looped back, so that a node can talk to itself over canloop and
     // local CAN_RAW sockets see DSOR traffic.
     rcan_api::send(skb, dev, true)

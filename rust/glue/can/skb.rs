@@ -14,9 +14,10 @@
 //!   buffer, the caller appends the user's bytes: CAN_RAW) or
 //!   [`alloc_tx_frame`] (with a frame built in the kernel: CANPROTO_CAN);
 //! * senders without a send buffer to charge (timers, receive callbacks):
-//!   [`alloc_frame`] (a typed frame: the DSOR engine and time service) or
-//!   [`alloc_image`] (a frame image kept as the user wrote it, copied
-//!   verbatim as mainline's `bcm_can_tx` copies it), and
+//!   [`alloc_frame`] (a typed frame: the time service) or
+//!   [`alloc_image`] (a frame image, copied verbatim: as the user wrote
+//!   it, as mainline's `bcm_can_tx` copies it, or as the DSOR engine
+//!   built it), and
 //!   [`alloc_image_for`] for such a frame a socket sends (CAN_BCM);
 //! * drivers, for frames from the bus: [`alloc_rx`] (the SJA1000 and
 //!   82527 drivers).

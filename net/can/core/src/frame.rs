@@ -284,6 +284,18 @@ impl AnyFrame {
         }
     }
 
+    /// What [`AnyFrame::parse`] would give as `(can_id(), payload,
+    /// is_fd())`, read in place: the identifier with its flags, the
+    /// payload (`data[..len]`) as a slice of `bytes`, and the flavour;
+    /// `None` exactly when `parse` gives `None`. For a receive path that
+    /// only reads the frame (no 72-byte copy).
+    pub fn view(bytes: &[u8]) -> Option<(u32, &[u8], bool)> {
+        let fd = AnyFrame::kind(bytes)?;
+        let len = usize::from(bytes[4]);
+        let can_id = u32::from_ne_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
+        Some((can_id, bytes.get(8..8 + len)?, fd))
+    }
+
     /// The identifier with its flags.
     pub fn can_id(&self) -> u32 {
         match self {

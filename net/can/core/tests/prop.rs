@@ -377,4 +377,22 @@ proptest! {
         use rcan_core::frame::AnyFrame;
         prop_assert_eq!(AnyFrame::kind(&b), AnyFrame::parse(&b).map(|f| f.is_fd()));
     }
+
+    /// DSOR's receive path (`AnyFrame::view`) reads the same identifier,
+    /// payload and flavour as `AnyFrame::parse` builds, and refuses the
+    /// same buffers.
+    #[test]
+    fn any_frame_view_agrees_with_parse(b in frame_buffers()) {
+        use rcan_core::frame::AnyFrame;
+        let parsed = AnyFrame::parse(&b);
+        let want = parsed.as_ref().map(|f| {
+            let payload = match f {
+                AnyFrame::Classic(c) => c.payload().to_vec(),
+                AnyFrame::Fd(d) => d.payload().to_vec(),
+            };
+            (f.can_id(), payload, f.is_fd())
+        });
+        let got = AnyFrame::view(&b).map(|(id, p, fd)| (id, p.to_vec(), fd));
+        prop_assert_eq!(got, want);
+    }
 }
