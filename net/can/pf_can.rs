@@ -50,12 +50,12 @@ use crate::{family, glue, rcan_api, rcan_core};
 use kernel::prelude::*;
 
 use family::{Family, RxRequest, Target};
-use glue::can::rx::{Filters, RcvHandle, RxTable, Spec};
+use glue::can::rx::{RcvHandle, RxTable, Spec};
 use glue::net::Net;
 use glue::netdev::NetDev;
 use glue::skb::Skb;
 use glue::sync::{rcu_barrier, RcuReadGuard};
-use rcan_api::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
+use rcan_api::{RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use rcan_core::filter::ArbFilter;
 use rcan_core::frame::{AnyFrame, CANFD_FDF};
 use rcan_core::rxtable::{self, CanFilterKind, Filter};
@@ -88,31 +88,53 @@ fn table_make(net: &Net) -> Result<&RxTable<Target>> {
     }
 }
 
-/// Converts the C filters of a spec.
-fn filters_of(filters: &[RxFilter], err_mask: &mut u32) -> Result<Filters> {
-    let mut v = Filters::with_capacity(filters.len())?;
-    for f in filters {
-        match f.kind {
+/// Filters of a request converted on the stack; more go to the heap.
+const STACK_FILTERS: usize = 8;
+
+/// Calls `f` with the table's spec for a receiver's request: its filters
+/// converted (into a buffer on the stack, or the heap for more than
+/// [`STACK_FILTERS`]), the classes of its error filters added to its error
+/// mask, and that cut to the classes that exist. EINVAL (bad filter),
+/// ENOMEM.
+fn with_spec<T>(req: &RxRequest<'_>, f: impl FnOnce(Spec<'_>) -> Result<T>) -> Result<T> {
+    let mut err_mask = req.err_mask & rxtable::CAN_ERR_MASK;
+    let mut stack = [Filter::Id {
+        id: 0,
+        mask: 0,
+        inv: false,
+    }; STACK_FILTERS];
+    let mut heap = KVec::new();
+    let mut n = 0;
+    for x in req.filters {
+        let t = match x.kind {
             RX_FILTER_ARB => {
-                let af = ArbFilter::new(f.id, f.mask).map_err(|e| glue::errno(e.errno()))?;
-                v.push(Filter::Arb(af))?;
+                Filter::Arb(ArbFilter::new(x.id, x.mask).map_err(|e| glue::errno(e.errno()))?)
             }
-            RX_FILTER_CAN_ID => match Filter::from_can_filter(f.id, f.mask) {
-                CanFilterKind::Frames(x) => v.push(x)?,
-                CanFilterKind::Errors(m) => *err_mask |= m,
+            RX_FILTER_CAN_ID => match Filter::from_can_filter(x.id, x.mask) {
+                CanFilterKind::Frames(t) => t,
+                CanFilterKind::Errors(m) => {
+                    err_mask |= m;
+                    continue;
+                }
             },
             _ => return Err(EINVAL),
+        };
+        if req.filters.len() <= STACK_FILTERS {
+            // Fewer filters than STACK_FILTERS, so within the buffer.
+            if let Some(slot) = stack.get_mut(n) {
+                *slot = t;
+                n += 1;
+            }
+        } else {
+            heap.push(t, GFP_KERNEL)?;
         }
     }
-    Ok(v)
-}
-
-/// The table's spec for a receiver's request (filters converted, error
-/// mask cut to the classes that exist). EINVAL (bad filter), ENOMEM.
-fn spec_of(req: &RxRequest<'_>) -> Result<Spec> {
-    let mut err_mask = req.err_mask & rxtable::CAN_ERR_MASK;
-    let filters = filters_of(req.filters, &mut err_mask)?;
-    Ok(Spec {
+    let filters: &[Filter] = if req.filters.len() <= STACK_FILTERS {
+        stack.get(..n).unwrap_or(&[])
+    } else {
+        &heap
+    };
+    f(Spec {
         ifindex: req.ifindex,
         filters,
         join: req.join,
@@ -126,7 +148,10 @@ impl Family for PfCan {
     /// the table's mutex, then `rcan_pf_mutex` to tell the drivers).
     fn rx_set(net: &Net, id: usize, new: Option<(RxRequest<'_>, Target)>) -> Result {
         let changed = match new {
-            Some((req, t)) => table_make(net)?.set(id, Some((spec_of(&req)?, t)))?,
+            Some((req, t)) => {
+                let table = table_make(net)?;
+                with_spec(&req, |spec| table.set(id, Some((spec, t))))?
+            }
             // A namespace without a table has no receiver to remove.
             None => match table(net) {
                 Some(t) => t.set(id, None)?,
@@ -145,23 +170,17 @@ impl Family for PfCan {
 
     /// See [`rcan_api::rx_set_reserved`]. Process context; sleeps (may
     /// allocate, takes the table's mutex, then `rcan_pf_mutex` if a driver
-    /// listens).
-    fn rx_set_reserved(
-        net: &Net,
-        rcv: RcvHandle,
-        new: Option<RxRequest<'_>>,
-        keep: bool,
-    ) -> Result {
-        // The receiver was reserved in this namespace's table, so it has
-        // one (kept until the namespace exits, after its sockets).
-        let Some(table) = table(net) else {
-            return Err(EINVAL);
-        };
-        let spec = match new {
-            Some(req) => Some(spec_of(&req)?),
-            None => None,
-        };
-        let changed = table.set_reserved(rcv, spec, keep)?;
+    /// listens). The filters come in the table's form: nothing is
+    /// converted, and the receiver knows its table (no namespace lookup).
+    fn rx_set_reserved(rcv: RcvHandle, new: Option<RxRequest<'_, Filter>>, keep: bool) -> Result {
+        let spec = new.map(|req| Spec {
+            ifindex: req.ifindex,
+            filters: req.filters,
+            join: req.join,
+            err_mask: req.err_mask & rxtable::CAN_ERR_MASK,
+            cookie: req.cookie,
+        });
+        let changed = RxTable::<Target>::set_reserved(rcv, spec, keep)?;
         family::notify_listeners(&changed.ifindex);
         Ok(())
     }

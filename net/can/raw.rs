@@ -47,7 +47,7 @@ use glue::sync::Rtnl;
 use kernel::c_str;
 use rcan_api::{
     CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, RxSlot, Sockets,
-    CAN_RAW, RX_FILTER_CAN_ID, SOCK_RAW,
+    TableFilters, CAN_RAW, RX_FILTER_CAN_ID, SOCK_RAW,
 };
 use rcan_core::frame::{AnyFrame, CANFD_MTU};
 use rcan_core::rxtable::CAN_ERR_MASK;
@@ -86,9 +86,9 @@ const COOKIE_RECV_OWN: u32 = 1;
 /// lets CAN FD frames through to those devices too.
 const CANXL_MTUS: core::ops::RangeInclusive<u32> = 76..=2060;
 
-/// A `struct can_filter` as the user set it, kept in the form pf_can
-/// takes (`id` = `can_id`, `mask` = `can_mask`), so that bind and every
-/// filter change hand the socket's filters over without copying them.
+/// A `struct can_filter` as the user set it (`id` = `can_id`, `mask` =
+/// `can_mask`), returned by getsockopt; pf_can gets the socket's filters
+/// in the table's form instead ([`RawSock::table`]).
 fn can_filter(can_id: u32, can_mask: u32) -> RxFilter {
     RxFilter {
         kind: RX_FILTER_CAN_ID,
@@ -104,13 +104,19 @@ static DEFAULT_FILTER: [RxFilter; 1] = [RxFilter {
     mask: 0,
 }];
 
+/// [`DEFAULT_FILTER`] in the table's form.
+const DEFAULT_TABLE: TableFilters = TableFilters::can_filter(0, 0);
+
 /// A CAN_RAW socket's state, protected by its socket lock.
 struct RawSock {
     bound: bool,
     /// Interface given to bind (0 = all CAN interfaces).
     ifindex: i32,
-    /// Filters set with CAN_RAW_FILTER.
+    /// Filters set with CAN_RAW_FILTER, as set.
     filters: RawFilters,
+    /// The same filters in the receive table's form, converted when set,
+    /// so that bind and every re-subscription hand them over as they are.
+    table: TableFilters,
     err_mask: u32,
     /// Option values as the user set them (mainline keeps the int).
     loopback: i32,
@@ -248,6 +254,7 @@ impl CanProtocol for RawProto {
                 // Mainline forgets the filters too: a new bind receives
                 // nothing until CAN_RAW_FILTER is set again.
                 s.filters = RawFilters::Many(KVec::new());
+                s.table = TableFilters::none();
                 ENODEV
             } else {
                 neterr::ENETDOWN()
@@ -270,7 +277,7 @@ fn register(s: &SockGuard<'_, RawProto>) -> Result {
         s,
         s.cookie(),
         s.ifindex,
-        s.filters(),
+        &s.table,
         s.join_filters != 0,
         s.err_mask,
     )
@@ -299,7 +306,8 @@ fn read_int(opt: &OptIn) -> Result<i32> {
 
 /// A change of what a socket receives.
 enum Change {
-    Filters(RawFilters),
+    /// As set, and in the table's form.
+    Filters(RawFilters, TableFilters),
     ErrMask(u32),
     RecvOwn(i32),
     Join(i32),
@@ -314,7 +322,12 @@ fn update(sk: &S, change: Change) -> Result {
     let (err_mask, recv_own, join) = (s.err_mask, s.recv_own_msgs, s.join_filters);
     let mut old_filters = None;
     match change {
-        Change::Filters(v) => old_filters = Some(core::mem::replace(&mut s.filters, v)),
+        Change::Filters(v, t) => {
+            old_filters = Some((
+                core::mem::replace(&mut s.filters, v),
+                core::mem::replace(&mut s.table, t),
+            ))
+        }
         Change::ErrMask(m) => s.err_mask = m,
         Change::RecvOwn(v) => s.recv_own_msgs = v,
         Change::Join(v) => s.join_filters = v,
@@ -324,8 +337,9 @@ fn update(sk: &S, change: Change) -> Result {
             s.err_mask = err_mask;
             s.recv_own_msgs = recv_own;
             s.join_filters = join;
-            if let Some(f) = old_filters {
+            if let Some((f, t)) = old_filters {
                 s.filters = f;
+                s.table = t;
             }
             return Err(e);
         }
@@ -351,6 +365,7 @@ impl glue::sock::Proto for RawProto {
             bound: false,
             ifindex: 0,
             filters: RawFilters::Default,
+            table: DEFAULT_TABLE,
             err_mask: 0,
             loopback: 1,
             recv_own_msgs: 0,
@@ -369,6 +384,7 @@ impl glue::sock::Proto for RawProto {
         s.bound = false;
         s.ifindex = 0;
         s.filters = RawFilters::Default;
+        s.table = DEFAULT_TABLE;
         sk.shared().ifindex.store(0, Ordering::Relaxed);
     }
 
@@ -494,16 +510,18 @@ impl glue::sock::Proto for RawProto {
                         u32::from_ne_bytes([c[4], c[5], c[6], c[7]]),
                     )
                 };
-                let v = if len == CAN_FILTER_LEN {
-                    RawFilters::One(parse(raw))
+                let (v, t) = if len == CAN_FILTER_LEN {
+                    let f = parse(raw);
+                    (RawFilters::One(f), TableFilters::can_filter(f.id, f.mask))
                 } else {
                     let mut v = KVec::with_capacity(len / CAN_FILTER_LEN, GFP_KERNEL)?;
                     for c in raw.chunks_exact(CAN_FILTER_LEN) {
                         v.push(parse(c), GFP_KERNEL)?;
                     }
-                    RawFilters::Many(v)
+                    let t = TableFilters::can_filters(v.iter().map(|f| (f.id, f.mask)))?;
+                    (RawFilters::Many(v), t)
                 };
-                update(sk, Change::Filters(v))
+                update(sk, Change::Filters(v, t))
             }
             CAN_RAW_ERR_FILTER => {
                 let m = read_int(opt)? as u32 & CAN_ERR_MASK;

@@ -74,6 +74,27 @@ pub(crate) struct RxSpec {
     pub(crate) nfilters: usize,
 }
 
+/// A filter in the receive table's own form (`rcan_core::rxtable::Filter`,
+/// `#[repr(C)]`): what [`RxTableSpec`] carries and [`rcan_rx_filters`]
+/// returns. Every module compiles the same `rcan_core` source, so the
+/// layout is the same on both sides; a protocol converts its filters into
+/// it once, when they are set, and pf_can takes them as they are.
+pub(crate) use crate::rcan_core::rxtable::Filter as TableFilter;
+
+/// [`RxSpec`] with the filters in the table's own form, for
+/// [`rcan_rx_set_reserved`] (a socket's bind and filter changes): pf_can
+/// neither converts nor checks them. `err_mask` holds the error classes
+/// wanted, those of error filters included (pf_can cuts it to
+/// `CAN_ERR_MASK`).
+#[repr(C)]
+pub(crate) struct RxTableSpec {
+    pub(crate) ifindex: i32,
+    pub(crate) join: bool,
+    pub(crate) err_mask: u32,
+    pub(crate) filters: *const TableFilter,
+    pub(crate) nfilters: usize,
+}
+
 /// Receive callback. NET_RX softirq context (pf_can's ETH_P_CAN packet
 /// handler), under `rcu_read_lock`; must not sleep. Called at most once
 /// per frame and receiver.
@@ -117,7 +138,7 @@ extern "C" {
     /// a driver must not filter). Any context.
     pub(crate) fn rcan_rx_filters(
         dev: *const bindings::net_device,
-        out: *mut crate::rcan_core::rxtable::Filter,
+        out: *mut TableFilter,
         cap: usize,
     ) -> isize;
     /// Registers a protocol. Process context. EEXIST if the number is
@@ -153,18 +174,18 @@ extern "C" {
     /// first `rcan_rx_set` allocates as without reservation).
     pub(crate) fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> *mut ffi::c_void;
     /// [`rcan_rx_set`] for the receiver `rcv` that [`rcan_rx_reserve`]
-    /// returned for `sk`, found without a lookup: `spec` (with `cookie`)
-    /// replaces its registration; NULL, or a spec that wants nothing,
-    /// retires it, and then the receiver stays reserved if `keep`, else it
-    /// is removed for good (after which `rcv` must not be used again).
-    /// The caller serialises its calls for one `sk` (the socket lock) and
-    /// passes a `rcv` not yet removed for good. Process context; may
-    /// sleep. ENOMEM, EINVAL as `rcan_rx_set`; removal never fails.
+    /// returned, found without a lookup, in the table it was reserved in
+    /// (its socket's namespace's): `spec` (with `cookie`, filters in the
+    /// table's form) replaces its registration; NULL, or a spec that wants
+    /// nothing, retires it, and then the receiver stays reserved if
+    /// `keep`, else it is removed for good (after which `rcv` must not be
+    /// used again). The caller serialises its calls for one receiver (its
+    /// socket's lock) and passes a `rcv` not yet removed for good.
+    /// Process context; may sleep. ENOMEM; removal never fails.
     pub(crate) fn rcan_rx_set_reserved(
         rcv: *mut ffi::c_void,
-        sk: *mut bindings::sock,
         cookie: u32,
-        spec: *const RxSpec,
+        spec: *const RxTableSpec,
         keep: bool,
     ) -> ffi::c_int;
     /// Like [`rcan_rx_set`], for a receiver inside the kernel that has no

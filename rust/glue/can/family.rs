@@ -31,7 +31,9 @@
 //!   grace period later.
 
 use crate::glue::bindings;
-use crate::glue::can::abi::{CanProto, ListenFn, RxFilter, RxFn, RxSpec, CANPROTO_MAX};
+use crate::glue::can::abi::{
+    CanProto, ListenFn, RxFilter, RxFn, RxSpec, RxTableSpec, TableFilter, CANPROTO_MAX,
+};
 use crate::glue::can::rx::{RcvHandle, Receiver, RxTable};
 use crate::glue::net::{Net, Pernet, PernetData, PernetReg};
 use crate::glue::netdev::NetDev;
@@ -62,13 +64,17 @@ pub(crate) trait Family: 'static {
     /// `rx_set(net, id, None)` only retires its registration). Process
     /// context; may sleep. ENOMEM.
     fn rx_reserve(net: &Net, id: usize, t: Target) -> Result<RcvHandle>;
-    /// Like [`Family::rx_set`] for the reserved receiver `rcv` of namespace
-    /// `net` (no lookup, no new receiver data): `None` retires its
+    /// Like [`Family::rx_set`] for the reserved receiver `rcv` (no lookup,
+    /// no new receiver data; it is in the table it was reserved in), with
+    /// the filters in the table's own form: `None` retires its
     /// registration, and the receiver stays reserved with `keep`, else it
     /// is removed for good (consuming `rcv`). Process context; may sleep.
-    /// ENOMEM, EINVAL; on error the previous registration stays.
-    fn rx_set_reserved(net: &Net, rcv: RcvHandle, new: Option<RxRequest<'_>>, keep: bool)
-        -> Result;
+    /// ENOMEM; on error the previous registration stays.
+    fn rx_set_reserved(
+        rcv: RcvHandle,
+        new: Option<RxRequest<'_, TableFilter>>,
+        keep: bool,
+    ) -> Result;
     /// Copies the filters that apply to frames received on `dev` into
     /// `out`; `None` if there are more than fit. Any context.
     fn rx_filters(dev: &NetDev, out: &mut [crate::rcan_core::rxtable::Filter]) -> Option<usize>;
@@ -82,8 +88,11 @@ pub(crate) trait Family: 'static {
     fn rcv(skb: Skb, dev: &NetDev, fd: bool) -> bool;
 }
 
-/// A registration request as a receiver made it.
-pub(crate) struct RxRequest<'a> {
+/// A registration request as a receiver made it: its filters as the
+/// protocol gave them (`F` = [`RxFilter`], [`Family::rx_set`]) or already
+/// in the table's form (`F` = [`TableFilter`],
+/// [`Family::rx_set_reserved`]).
+pub(crate) struct RxRequest<'a, F = RxFilter> {
     /// Interface, 0 = every CAN interface.
     pub(crate) ifindex: i32,
     /// Deliver only frames that pass every filter.
@@ -91,7 +100,7 @@ pub(crate) struct RxRequest<'a> {
     /// Error classes wanted (0: none), unchecked.
     pub(crate) err_mask: u32,
     /// The receiver's filters, for the duration of the call.
-    pub(crate) filters: &'a [RxFilter],
+    pub(crate) filters: &'a [F],
     /// Handed back to the receiver with every frame.
     pub(crate) cookie: u32,
 }
@@ -265,22 +274,41 @@ pub(crate) fn notify_listeners(ifindexes: &[Option<i32>]) {
 ///
 /// # Safety
 ///
-/// `spec.filters` points to `spec.nfilters` readable filters that stay
-/// valid for `'a`.
-unsafe fn request<'a>(spec: &'a RxSpec, cookie: u32) -> RxRequest<'a> {
-    let filters = if spec.nfilters == 0 || spec.filters.is_null() {
+/// `filters` points to `nfilters` readable filters that stay valid for
+/// `'a`.
+unsafe fn request<'a, F>(
+    ifindex: i32,
+    join: bool,
+    err_mask: u32,
+    filters: *const F,
+    nfilters: usize,
+    cookie: u32,
+) -> RxRequest<'a, F> {
+    let filters = if nfilters == 0 || filters.is_null() {
         &[][..]
     } else {
         // SAFETY: this function's contract.
-        unsafe { core::slice::from_raw_parts(spec.filters, spec.nfilters) }
+        unsafe { core::slice::from_raw_parts(filters, nfilters) }
     };
     RxRequest {
-        ifindex: spec.ifindex,
-        join: spec.join,
-        err_mask: spec.err_mask,
+        ifindex,
+        join,
+        err_mask,
         filters,
         cookie,
     }
+}
+
+/// [`request`] of an [`RxSpec`].
+///
+/// # Safety
+///
+/// `spec.filters` points to `spec.nfilters` readable filters that stay
+/// valid for `'a`.
+unsafe fn request_of<'a>(spec: &'a RxSpec, cookie: u32) -> RxRequest<'a> {
+    let s = spec;
+    // SAFETY: this function's contract.
+    unsafe { request(s.ifindex, s.join, s.err_mask, s.filters, s.nfilters, cookie) }
 }
 
 /// See [`crate::glue::can::abi::rcan_rx_set`].
@@ -311,7 +339,7 @@ extern "C" fn rcan_rx_set(
             sock: true,
         };
         // SAFETY: the spec's filters are valid for the call (above).
-        (unsafe { request(spec, cookie) }, t)
+        (unsafe { request_of(spec, cookie) }, t)
     });
     match Impl::rx_set(net, id, new) {
         Ok(()) => 0,
@@ -346,23 +374,22 @@ extern "C" fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> *mut ffi::
 #[no_mangle]
 extern "C" fn rcan_rx_set_reserved(
     rcv: *mut ffi::c_void,
-    sk: *mut bindings::sock,
     cookie: u32,
-    spec: *const RxSpec,
+    spec: *const RxTableSpec,
     keep: bool,
 ) -> ffi::c_int {
     let Some(rcv) = NonNull::new(rcv) else {
         return code::EINVAL.to_errno();
     };
-    // SAFETY: as in rcan_rx_set.
-    let net = unsafe { Net::from_raw(bindings::rcan_sock_net(sk)) };
-    // SAFETY: `rcv` is what rcan_rx_reserve returned for `sk`, whose
-    // receiver is in the table of `sk`'s namespace (fixed for the sock's
-    // life) and not removed for good yet (abi contract).
+    // SAFETY: `rcv` is what rcan_rx_reserve returned, and its receiver is
+    // not removed for good yet (abi contract).
     let rcv = unsafe { RcvHandle::from_raw(rcv) };
-    // SAFETY: as in rcan_rx_set.
-    let new = unsafe { spec.as_ref() }.map(|spec| unsafe { request(spec, cookie) });
-    match Impl::rx_set_reserved(net, rcv, new, keep) {
+    // SAFETY: NULL or a valid spec, with its filters (valid table-form
+    // filters, which the caller's Rust code made), for the duration of
+    // the call (abi contract).
+    let new = unsafe { spec.as_ref() }
+        .map(|s| unsafe { request(s.ifindex, s.join, s.err_mask, s.filters, s.nfilters, cookie) });
+    match Impl::rx_set_reserved(rcv, new, keep) {
         Ok(()) => 0,
         Err(e) => e.to_errno(),
     }
@@ -390,7 +417,7 @@ extern "C" fn rcan_rx_set_kernel(
             sock: false,
         };
         // SAFETY: as in rcan_rx_set.
-        (unsafe { request(spec, cookie) }, t)
+        (unsafe { request_of(spec, cookie) }, t)
     });
     let ret = Impl::rx_set(Net::init(), id, new);
     // A registration this call replaced or removed is unlinked now; the
@@ -435,7 +462,7 @@ extern "C" fn rcan_rx_listen(
 #[no_mangle]
 extern "C" fn rcan_rx_filters(
     dev: *const bindings::net_device,
-    out: *mut crate::rcan_core::rxtable::Filter,
+    out: *mut TableFilter,
     cap: usize,
 ) -> isize {
     if dev.is_null() {

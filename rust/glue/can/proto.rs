@@ -29,7 +29,7 @@
 //! whose hardware filter follows the sockets implements [`FilterListener`]
 //! and holds a [`Listening`].
 
-use super::abi::{self, CanProto, RxSpec};
+use super::abi::{self, CanProto, RxSpec, RxTableSpec, TableFilter};
 // Re-exported for the protocols; not every module uses every one.
 #[allow(unused_imports)]
 pub(crate) use super::abi::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
@@ -39,9 +39,11 @@ use crate::glue::netdev::{self as gnetdev, DevRef, NetDev};
 use crate::glue::skb::Skb;
 use crate::glue::sock::{Proto, ProtoReg, Sock, SockGuard};
 use crate::glue::sync::{CCell, RcuReadGuard, Rtnl, RtnlLocked};
+use crate::rcan_core::rxtable::CanFilterKind;
 use core::marker::PhantomData;
 use core::mem::ManuallyDrop;
 use core::sync::atomic::{AtomicPtr, Ordering};
+use kernel::alloc::{flags::GFP_KERNEL, KVec};
 use kernel::error::{code, Result};
 use kernel::ffi;
 
@@ -94,17 +96,86 @@ impl RxSkb<'_> {
 }
 
 /// A socket's reserved receiver ([`CanProtocol::rx_slot`]): pf_can's
-/// handle for it, stored at `socket()` (before the socket is reachable)
-/// and then read and cleared only under the socket lock (the functions
-/// that use it take the lock's guard), so a handle is never used after
-/// [`rx_release`] removed its receiver. NULL: no receiver reserved
-/// (ENOMEM at `socket()`, or released).
+/// handle for it, stored at `socket()` (before the socket is reachable;
+/// after an ENOMEM there, at the first [`rx_set_locked`], under the socket
+/// lock) and then read and cleared only under the socket lock (the
+/// functions that use it take the lock's guard), so a handle is never
+/// used after [`rx_release`] removed its receiver. NULL: no receiver
+/// reserved (ENOMEM at `socket()` and no subscription since, or
+/// released).
 pub(crate) struct RxSlot(AtomicPtr<ffi::c_void>);
 
 impl RxSlot {
     /// An empty slot, for the protocol's `new_shared`.
     pub(crate) const fn new() -> Self {
         RxSlot(AtomicPtr::new(core::ptr::null_mut()))
+    }
+}
+
+/// A socket's filters in the receive table's own form
+/// ([`abi::TableFilter`]), for [`rx_set_locked`]: converted once, when the
+/// protocol's filters are set (mainline `struct can_filter`s, as CAN_RAW
+/// keeps them), so that a bind or any other re-subscription hands them to
+/// pf_can as they are, with nothing to convert or check. One filter is
+/// kept inline (a socket's common case allocates nothing).
+pub(crate) struct TableFilters {
+    frames: TableFrames,
+    /// Error classes of the error filters (`can_mask` with `CAN_ERR_FLAG`).
+    err_mask: u32,
+}
+
+enum TableFrames {
+    One(TableFilter),
+    /// None or several.
+    Many(KVec<TableFilter>),
+}
+
+impl TableFilters {
+    /// The single mainline filter `can_id`/`can_mask`. Allocates nothing.
+    pub(crate) const fn can_filter(can_id: u32, can_mask: u32) -> Self {
+        match TableFilter::from_can_filter(can_id, can_mask) {
+            CanFilterKind::Frames(f) => TableFilters {
+                frames: TableFrames::One(f),
+                err_mask: 0,
+            },
+            CanFilterKind::Errors(m) => TableFilters {
+                frames: TableFrames::Many(KVec::new()),
+                err_mask: m,
+            },
+        }
+    }
+
+    /// No filter: no frames, no error frames.
+    pub(crate) const fn none() -> Self {
+        TableFilters {
+            frames: TableFrames::Many(KVec::new()),
+            err_mask: 0,
+        }
+    }
+
+    /// The mainline filters `(can_id, can_mask)` of `filters`, each as
+    /// [`TableFilters::can_filter`] converts it. Process context (may
+    /// allocate). ENOMEM.
+    pub(crate) fn can_filters(filters: impl ExactSizeIterator<Item = (u32, u32)>) -> Result<Self> {
+        let mut v = KVec::with_capacity(filters.len(), GFP_KERNEL)?;
+        let mut err_mask = 0;
+        for (can_id, can_mask) in filters {
+            match TableFilter::from_can_filter(can_id, can_mask) {
+                CanFilterKind::Frames(f) => v.push(f, GFP_KERNEL)?,
+                CanFilterKind::Errors(m) => err_mask |= m,
+            }
+        }
+        Ok(TableFilters {
+            frames: TableFrames::Many(v),
+            err_mask,
+        })
+    }
+
+    fn frames(&self) -> &[TableFilter] {
+        match &self.frames {
+            TableFrames::One(f) => core::slice::from_ref(f),
+            TableFrames::Many(v) => v,
+        }
     }
 }
 
@@ -535,34 +606,59 @@ pub(crate) fn rx_remove<T: CanProtocol>(sk: &Sock<T>) {
 }
 
 /// [`rx_set`] for a socket of a protocol with an [`RxSlot`], socket lock
-/// held (`s`): its reserved receiver is set without a lookup (or, without
-/// one, as `rx_set` does). A subscription that wants nothing retires the
-/// registration and keeps the receiver. Process context; may sleep.
-/// ENOMEM, EINVAL (bad filter); on error the previous subscription stays.
+/// held (`s`), with its filters already in the table's form (`filters`,
+/// whose error classes add to `err_mask`): its reserved receiver is set
+/// without a lookup; a socket without one (ENOMEM at `socket()`) reserves
+/// it now. A subscription that wants nothing retires the registration and
+/// keeps the receiver. Process context; may sleep. ENOMEM; on error the
+/// previous subscription stays.
 pub(crate) fn rx_set_locked<T: CanProtocol>(
     s: &SockGuard<'_, T>,
     cookie: u32,
     ifindex: i32,
-    filters: &[RxFilter],
+    filters: &TableFilters,
     join: bool,
     err_mask: u32,
 ) -> Result {
     let sk = s.sock();
-    let Some(rcv) = reserved(sk) else {
-        return rx_set(sk, cookie, ifindex, filters, join, err_mask);
+    let rcv = match reserved(sk) {
+        Some(rcv) => rcv,
+        None => reserve_now(s)?,
     };
-    let spec = RxSpec {
+    let frames = filters.frames();
+    let spec = RxTableSpec {
         ifindex,
         join,
-        err_mask,
-        filters: filters.as_ptr(),
-        nfilters: filters.len(),
+        err_mask: err_mask | filters.err_mask,
+        filters: frames.as_ptr(),
+        nfilters: frames.len(),
     };
-    // SAFETY: `spec` and its filters live for the call; `sk` is a live sock
-    // of `T`; `rcv` is its reserved receiver, not removed for good (only
-    // rx_release does, clearing the slot under the socket lock `s` holds).
-    let ret = unsafe { abi::rcan_rx_set_reserved(rcv, sk.as_ptr(), cookie, &spec, true) };
+    // SAFETY: `spec` and its filters (table-form filters made by
+    // `TableFilters`) live for the call; `rcv` is the socket's reserved
+    // receiver, not removed for good (only rx_release does, clearing the
+    // slot under the socket lock `s` holds, which also serialises our
+    // calls for it).
+    let ret = unsafe { abi::rcan_rx_set_reserved(rcv, cookie, &spec, true) };
     crate::glue::to_result(ret).map(|_| ())
+}
+
+/// Reserves the receiver of a socket whose reservation failed at
+/// `socket()` (ENOMEM), and stores it in its slot. Socket lock held
+/// (`s`). Process context; may sleep. ENOMEM.
+#[cold]
+fn reserve_now<T: CanProtocol>(s: &SockGuard<'_, T>) -> Result<*mut ffi::c_void> {
+    let sk = s.sock();
+    let slot = T::rx_slot(sk.shared()).ok_or(code::EINVAL)?;
+    // SAFETY: `sk` is a live sock of `T`; rx_trampoline::<T> expects
+    // exactly such an owner. The protocol's release removes the receiver
+    // (rx_slot contract).
+    let h = unsafe { abi::rcan_rx_reserve(rx_trampoline::<T>, sk.as_ptr()) };
+    if h.is_null() {
+        return Err(code::ENOMEM);
+    }
+    // Under the socket lock (`s`), as every later read of the slot.
+    slot.0.store(h, Ordering::Relaxed);
+    Ok(h)
 }
 
 /// [`rx_remove`] for a socket of a protocol with an [`RxSlot`], socket
@@ -572,30 +668,26 @@ pub(crate) fn rx_set_locked<T: CanProtocol>(
 /// context; may sleep.
 pub(crate) fn rx_unset_locked<T: CanProtocol>(s: &SockGuard<'_, T>) {
     let sk = s.sock();
-    match reserved(sk) {
+    // Without a reserved receiver the socket never subscribed
+    // (rx_set_locked reserves one first): nothing to retire.
+    if let Some(rcv) = reserved(sk) {
         // SAFETY: as in rx_set_locked; a NULL spec retires.
-        Some(rcv) => unsafe {
-            abi::rcan_rx_set_reserved(rcv, sk.as_ptr(), 0, core::ptr::null(), true);
-        },
-        None => rx_remove(sk),
+        unsafe { abi::rcan_rx_set_reserved(rcv, 0, core::ptr::null(), true) };
     }
 }
 
-/// Removes the socket's receiver for good (reserved or not), from its
+/// Removes the socket's receiver for good, if it has one, from its
 /// protocol's `release`, socket lock held (`s`). Never fails. Process
 /// context; may sleep.
 pub(crate) fn rx_release<T: CanProtocol>(s: &SockGuard<'_, T>) {
     let sk = s.sock();
-    match reserved(sk) {
-        Some(rcv) => {
-            if let Some(slot) = T::rx_slot(sk.shared()) {
-                slot.0.store(core::ptr::null_mut(), Ordering::Relaxed);
-            }
-            // SAFETY: as in rx_set_locked; the slot is cleared above (socket
-            // lock held), so `rcv` is never used again.
-            unsafe { abi::rcan_rx_set_reserved(rcv, sk.as_ptr(), 0, core::ptr::null(), false) };
+    if let Some(rcv) = reserved(sk) {
+        if let Some(slot) = T::rx_slot(sk.shared()) {
+            slot.0.store(core::ptr::null_mut(), Ordering::Relaxed);
         }
-        None => rx_remove(sk),
+        // SAFETY: as in rx_set_locked; the slot is cleared above (socket
+        // lock held), so `rcv` is never used again.
+        unsafe { abi::rcan_rx_set_reserved(rcv, 0, core::ptr::null(), false) };
     }
 }
 

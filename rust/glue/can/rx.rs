@@ -92,31 +92,29 @@ pub(crate) struct Filters {
 }
 
 impl Filters {
-    /// No filters, with room for `n` without reallocating. Process
-    /// context (may allocate and sleep).
-    pub(crate) fn with_capacity(n: usize) -> Result<Self> {
-        Ok(Filters {
+    /// No filters.
+    const fn new() -> Self {
+        Filters {
             one: None,
-            more: if n > 1 {
-                KVec::with_capacity(n, GFP_KERNEL)?
-            } else {
-                KVec::new()
-            },
-        })
+            more: KVec::new(),
+        }
     }
 
-    /// Appends `f`. Process context (may allocate and sleep).
-    pub(crate) fn push(&mut self, f: Filter) -> Result {
-        if self.one.is_none() && self.more.capacity() == 0 {
-            self.one = Some(f);
-            return Ok(());
+    /// A copy of `fs`: one filter inline, more in a vector. Process
+    /// context (may allocate and sleep).
+    fn from_slice(fs: &[Filter]) -> Result<Self> {
+        match fs {
+            [] => Ok(Filters::new()),
+            [f] => Ok(Filters {
+                one: Some(*f),
+                more: KVec::new(),
+            }),
+            _ => {
+                let mut more = KVec::with_capacity(fs.len(), GFP_KERNEL)?;
+                more.extend_from_slice(fs, GFP_KERNEL)?;
+                Ok(Filters { one: None, more })
+            }
         }
-        if let Some(o) = self.one {
-            self.more.push(o, GFP_KERNEL)?;
-            self.one = None;
-        }
-        self.more.push(f, GFP_KERNEL)?;
-        Ok(())
     }
 }
 
@@ -131,13 +129,15 @@ impl core::ops::Deref for Filters {
     }
 }
 
-/// What a registration asks for.
-pub(crate) struct Spec {
+/// What a registration asks for. Borrowed: the table copies what it
+/// keeps (the filters, into the registration).
+#[derive(Clone, Copy)]
+pub(crate) struct Spec<'a> {
     /// Interface, 0 = all.
     pub(crate) ifindex: i32,
-    /// Filters for data and remote frames (none: no such frames); kept by
-    /// the registration.
-    pub(crate) filters: Filters,
+    /// Filters for data and remote frames (none: no such frames), in the
+    /// table's own form.
+    pub(crate) filters: &'a [Filter],
     /// Deliver only frames that pass every filter.
     pub(crate) join: bool,
     /// Error classes wanted (0: no error frames).
@@ -179,9 +179,10 @@ impl RcvHandle {
     ///
     /// # Safety
     ///
-    /// `p` came from [`RcvHandle::into_raw`] of a handle of the table the
-    /// caller will use it with, and its receiver has not been removed for
-    /// good since (no `set_reserved` with `keep` false on it).
+    /// `p` came from [`RcvHandle::into_raw`] of a handle of a table of
+    /// receivers of the type the caller will use it with, and its receiver
+    /// has not been removed for good since (no `set_reserved` with `keep`
+    /// false on it).
     pub(crate) unsafe fn from_raw(p: NonNull<core::ffi::c_void>) -> Self {
         // INVARIANT: the caller's contract.
         RcvHandle(p)
@@ -242,6 +243,23 @@ impl<R: Receiver> Linked for Node<R> {
     }
 }
 
+impl<R: Receiver> Node<R> {
+    /// An unlinked node of registration `reg` (NULL until the
+    /// registration is placed, [`Reg::place`]): for the general path and
+    /// the common bind's alike.
+    fn new(kind: Kind, ifindex: i32, mask: u32, value: u32, reg: *const Reg<R>) -> Self {
+        Node {
+            link: Link::new(),
+            kind,
+            ifindex,
+            mask,
+            value,
+            reg,
+            key: Cell::new(ptr::null()),
+        }
+    }
+}
+
 /// One distinct hash key `(ifindex, mask, value)` in a bucket, with the
 /// hashed nodes of every registration that wants it: a frame walks the
 /// distinct keys of its bucket, not every socket's filter, so receivers of
@@ -258,6 +276,27 @@ struct KeyEntry<R: Receiver> {
     members: List<Node<R>>,
     /// Writer side only: number of members.
     count: Cell<usize>,
+}
+
+impl<R: Receiver> KeyEntry<R> {
+    /// A new, unlinked entry without members. Process context (may
+    /// allocate and sleep). ENOMEM.
+    fn new_boxed(ifindex: i32, mask: u32, value: u32) -> Result<KBox<Self>> {
+        Ok(KBox::new(
+            KeyEntry {
+                // SAFETY: an all-zero callback_head is what call_rcu
+                // expects.
+                rcu: unsafe { core::mem::zeroed() },
+                link: Link::new(),
+                ifindex,
+                mask,
+                value,
+                members: List::new(),
+                count: Cell::new(0),
+            },
+            GFP_KERNEL,
+        )?)
+    }
 }
 
 impl<R: Receiver> Linked for KeyEntry<R> {
@@ -380,17 +419,29 @@ struct Rcv<R: Receiver> {
     /// receiver that has had none yet, or whose registration was retired
     /// with `keep`, [`RxTable::set_reserved`]).
     reg: Cell<*const Reg<R>>,
-    /// The first registration: filled once, under the writer mutex, before
-    /// any of its nodes is linked, and never changed afterwards (then only
-    /// read, through the table's lists and `reg`); emptied again, under
-    /// the mutex, only if its linking cannot be prepared (ENOMEM) and so
-    /// none of its nodes was ever linked.
-    first: UnsafeCell<Option<Reg<R>>>,
+    /// The table the receiver is in, which outlives it (a static, or a
+    /// namespace's table, freed at the namespace's exit after its
+    /// sockets): [`RxTable::set_reserved`] finds it from the handle, with
+    /// no namespace lookup.
+    table: NonNull<RxTable<R>>,
+    /// Writer side only: `first` has been filled (and stays so, even once
+    /// replaced, until the receiver is freed; cleared again only if its
+    /// linking could not be prepared, ENOMEM, before any node was linked).
+    first_used: Cell<bool>,
+    /// The first registration. Unused (`first_used` false) it is the
+    /// empty registration ([`Reg::empty`]): no filters, no nodes, so that
+    /// the first registration is written into it field by field, where it
+    /// stays, instead of being built elsewhere and moved in (~230 bytes).
+    /// Filled once, under the writer mutex, before any of its nodes is
+    /// linked, and never changed afterwards (then only read, through the
+    /// table's lists and `reg`).
+    first: UnsafeCell<Reg<R>>,
 }
 
 impl<R: Receiver> Rcv<R> {
-    /// A receiver without registration. Process context (may allocate).
-    fn new(data: R) -> Result<Self> {
+    /// A receiver of `table` without registration. Process context (may
+    /// allocate).
+    fn new(data: R, table: &RxTable<R>) -> Result<Self> {
         Ok(Rcv {
             // SAFETY: an all-zero callback_head is what call_rcu expects.
             rcu: unsafe { core::mem::zeroed() },
@@ -399,7 +450,9 @@ impl<R: Receiver> Rcv<R> {
             chain: Link::new(),
             reserved: Cell::new(false),
             reg: Cell::new(ptr::null()),
-            first: UnsafeCell::new(None),
+            table: NonNull::from(table),
+            first_used: Cell::new(false),
+            first: UnsafeCell::new(Reg::empty()),
         })
     }
 
@@ -407,9 +460,9 @@ impl<R: Receiver> Rcv<R> {
     /// slot is filled only under it).
     fn first(&self) -> Option<&Reg<R>> {
         // SAFETY: the slot is written only under the writer mutex that our
-        // caller holds (filled while empty, emptied before anything of it
-        // was linked); a linked slot is never written again.
-        unsafe { (*self.first.get()).as_ref() }
+        // caller holds (filled while unused, emptied before anything of it
+        // was linked); a filled slot is never written again.
+        self.first_used.get().then(|| unsafe { &*self.first.get() })
     }
 
     /// Whether `reg` is this receiver's inline first registration. Writer
@@ -418,38 +471,51 @@ impl<R: Receiver> Rcv<R> {
         self.first().is_some_and(|f| ptr::eq(f, reg))
     }
 
-    /// Puts `reg` into the empty first slot and places it there
+    /// The unused first slot, to be written in place; the caller marks it
+    /// used ([`Rcv::first_used`]) once written, and places it.
+    ///
+    /// # Safety
+    ///
+    /// The caller holds the writer mutex, the slot is unused, no other
+    /// reference into it is live, and `self` is at its final address
+    /// (leaked from its KBox).
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn first_slot(&self) -> &mut Reg<R> {
+        // SAFETY: an unused slot: nothing refers into it (readers reach a
+        // registration only through its linked nodes, and it has none;
+        // the caller holds no other reference), and the writer mutex
+        // (caller) excludes other writers.
+        unsafe { &mut *self.first.get() }
+    }
+
+    /// Puts `reg` into the unused first slot and places it there
     /// ([`Reg::place`]); returns it, to be linked.
     ///
     /// # Safety
     ///
-    /// The caller holds the writer mutex, the slot is empty, and `self` is
-    /// at its final address (leaked from its KBox).
+    /// As for [`Rcv::first_slot`].
     unsafe fn fill_first(&self, reg: Reg<R>) -> &Reg<R> {
-        // SAFETY: an empty slot: nothing refers into it (readers reach a
-        // registration only through its linked nodes, and it has none),
-        // and the writer mutex (caller) excludes other writers.
-        let slot = unsafe { &mut *self.first.get() };
-        let f = slot.insert(reg);
+        // SAFETY: the caller's contract.
+        let f = unsafe { self.first_slot() };
+        *f = reg;
         f.place(NonNull::from(self));
+        self.first_used.set(true);
         f
     }
-}
 
-impl<R: Receiver> Rcv<R> {
-    /// Builds the registration for `spec` in the empty first slot
+    /// Builds the registration for `spec` in the unused first slot
     /// ([`RxTable::make_reg_into`]) and places it ([`Reg::place`]);
-    /// returns it, to be linked. On error the slot stays empty.
+    /// returns it, to be linked. On error the slot stays unused.
     ///
     /// # Safety
     ///
-    /// As for [`Rcv::fill_first`].
-    unsafe fn fill_first_with(&self, spec: Spec) -> Result<&Reg<R>> {
-        // SAFETY: an empty slot, as in `fill_first` (caller's contract).
-        let slot = unsafe { &mut *self.first.get() };
-        RxTable::<R>::make_reg_into(spec, slot)?;
-        let f = slot.as_mut().ok_or(kernel::error::code::ENOMEM)?;
+    /// As for [`Rcv::first_slot`].
+    unsafe fn fill_first_with(&self, spec: &Spec<'_>) -> Result<&Reg<R>> {
+        // SAFETY: the caller's contract.
+        let f = unsafe { self.first_slot() };
+        RxTable::<R>::make_reg_into(spec, f)?;
         f.place(NonNull::from(self));
+        self.first_used.set(true);
         Ok(f)
     }
 
@@ -461,9 +527,10 @@ impl<R: Receiver> Rcv<R> {
     /// The caller holds the writer mutex, and the slot's registration was
     /// never linked and is no longer referred to.
     unsafe fn empty_first(&self) {
+        self.first_used.set(false);
         // SAFETY: never linked, so no reader or node refers to it; no
         // reference into the slot is live (caller's contract).
-        unsafe { *self.first.get() = None };
+        unsafe { *self.first.get() = Reg::empty() };
     }
 }
 
@@ -540,6 +607,24 @@ impl<R: Receiver> Nodes<R> {
 }
 
 impl<R: Receiver> Reg<R> {
+    /// The empty registration: no filters, no nodes, not placed. What an
+    /// unused first slot holds ([`Rcv::first`]) and what the general path
+    /// fills ([`RxTable::make_reg_into`]).
+    fn empty() -> Self {
+        Reg {
+            // SAFETY: an all-zero callback_head is what call_rcu expects.
+            rcu: unsafe { core::mem::zeroed() },
+            rcv: NonNull::dangling(),
+            last: Cell::new(false),
+            cookie: 0,
+            ifindex: 0,
+            filters: Filters::new(),
+            scanned: KVec::new(),
+            join: false,
+            nodes: Nodes::new(),
+        }
+    }
+
     fn rcv(&self) -> &Rcv<R> {
         // SAFETY: the receiver is freed only with (after) its last
         // registration.
@@ -608,7 +693,7 @@ fn id_bucket(id: usize) -> usize {
 
 /// Whether `s` wants anything (frames or error frames); a spec that does
 /// not removes its receiver's registration.
-fn wants(s: &Spec) -> bool {
+fn wants(s: &Spec<'_>) -> bool {
     !s.filters.is_empty() || s.err_mask != 0
 }
 
@@ -836,7 +921,7 @@ impl<R: Receiver> RxTable<R> {
     /// sleeps. ENOMEM.
     pub(crate) fn reserve(&self, id: usize, data: R) -> Result<RcvHandle> {
         // Allocated before locking; freed again if the receiver exists.
-        let s = KBox::new(Rcv::new(data)?, GFP_KERNEL)?;
+        let s = KBox::new(Rcv::new(data, self)?, GFP_KERNEL)?;
         let _w = self.writer.lock();
         let chain = &self.rcvs[id_bucket(id)];
         // SAFETY: writer mutex held (`_w`) while the chain is walked.
@@ -871,12 +956,12 @@ impl<R: Receiver> RxTable<R> {
     /// change (the boxed registration); in each case plus a key entry per
     /// key the table lacks and a group snapshot when a group is new. A
     /// removal allocates nothing.
-    pub(crate) fn set(&self, id: usize, new: Option<(Spec, R)>) -> Result<Changed> {
+    pub(crate) fn set(&self, id: usize, new: Option<(Spec<'_>, R)>) -> Result<Changed> {
         let new = new.filter(|(s, _)| wants(s));
         // The registration is built before locking (unplaced); where it
         // goes (inside its receiver, or boxed) is decided under the lock.
         let prepared = match new {
-            Some((spec, data)) => Some((Self::make_reg(spec)?, Some(data))),
+            Some((spec, data)) => Some((Self::make_reg(&spec)?, Some(data))),
             None => None,
         };
         let mut w = self.writer.lock();
@@ -891,47 +976,53 @@ impl<R: Receiver> RxTable<R> {
     }
 
     /// Like [`RxTable::set`] for the reserved receiver `rcv`, found without
-    /// a lookup and without new receiver data (it has its own): `new` is
-    /// its new registration; `None` (or a spec that wants nothing) retires
-    /// its registration, and with `keep` the receiver stays reserved (and
-    /// `rcv` valid) for a later registration, else it is removed for good
-    /// (which consumes `rcv`; pass `keep` false exactly once). The new
-    /// registration is built under the writer mutex: the receiver's first
-    /// in its slot ([`RxTable::set_first`]), a later one boxed. Process
-    /// context; sleeps. ENOMEM, as `set`.
+    /// a lookup and without new receiver data (it has its own), in the
+    /// table it was reserved in (the receiver knows it: no namespace
+    /// lookup): `new` is its new registration; `None` (or a spec that
+    /// wants nothing) retires its registration, and with `keep` the
+    /// receiver stays reserved (and `rcv` valid) for a later registration,
+    /// else it is removed for good (which consumes `rcv`; pass `keep` false
+    /// exactly once). The new registration is built under the writer
+    /// mutex: the receiver's first in its slot ([`RxTable::set_first`]), a
+    /// later one boxed. Process context; sleeps. ENOMEM, as `set`.
     pub(crate) fn set_reserved(
-        &self,
         rcv: RcvHandle,
-        new: Option<Spec>,
+        new: Option<Spec<'_>>,
         keep: bool,
     ) -> Result<Changed> {
+        // SAFETY: a receiver on its table's map (RcvHandle invariant), so
+        // alive until a removal for good, which only a `set_reserved` with
+        // `keep` false on this handle makes (its owner serialises them):
+        // not before this call ends. `table` is immutable and the table
+        // outlives its receivers.
+        let table: &RxTable<R> = unsafe { rcv.0.cast::<Rcv<R>>().as_ref().table.as_ref() };
         let new = new.filter(wants);
-        let mut w = self.writer.lock();
-        // SAFETY: a receiver of this table, on its map (RcvHandle
-        // invariant), so freed only by a removal under the writer mutex,
-        // which we hold (`w`) while `r` is used.
+        let mut w = table.writer.lock();
+        // SAFETY: as above; freed only by a removal under the writer
+        // mutex, which we hold (`w`) while `r` is used.
         let r: &Rcv<R> = unsafe { rcv.0.cast::<Rcv<R>>().as_ref() };
         // Registrations are built under the mutex: whether this is the
         // receiver's first (built in its slot) is known only under it.
         let prepared = match new {
-            Some(spec) if r.first().is_none() => return self.set_first(&mut w, r, spec),
-            Some(spec) => Some((Self::make_reg(spec)?, None)),
+            Some(spec) if r.first().is_none() => return table.set_first(&mut w, r, &spec),
+            Some(spec) => Some((Self::make_reg(&spec)?, None)),
             None => None,
         };
-        self.apply(&mut w, r.data.id(), Some(r), prepared, keep)
+        table.apply(&mut w, r.data.id(), Some(r), prepared, keep)
     }
 
     /// The first registration of the reserved receiver `r` (its slot is
-    /// empty, so it has no live registration), built in its slot and
+    /// unused, so it has no live registration), built in its slot and
     /// linked: a socket's first bind, which then moves no registration
     /// and allocates nothing but missing key entries and group snapshots.
     /// Writer mutex held (`w` is its data). ENOMEM leaves `r` as it was.
-    fn set_first(&self, w: &mut Writer, r: &Rcv<R>, spec: Spec) -> Result<Changed> {
-        if let Some(g) = self.one_hashed_group(w, &spec) {
+    fn set_first(&self, w: &mut Writer, r: &Rcv<R>, spec: &Spec<'_>) -> Result<Changed> {
+        if let Some(g) = self.one_hashed_group(w, spec) {
             return self.set_first_one(w, r, spec, g);
         }
-        // SAFETY: writer mutex held (`w`); the slot is empty (our caller
-        // checked under the mutex); `r` is leaked and on the map.
+        // SAFETY: writer mutex held (`w`); the slot is unused (our caller
+        // checked under the mutex) and not referred to; `r` is leaked and
+        // on the map.
         let reg = unsafe { r.fill_first_with(spec) }?;
         // Everything that can fail comes before anything is linked.
         let fresh = match self
@@ -960,12 +1051,12 @@ impl<R: Receiver> RxTable<R> {
     /// The common bind's shape, for [`Self::set_first_one`]: exactly one
     /// frame filter, hashed, no error mask, and its group `(ifindex,
     /// mask)` already counted in `w.groups`. Returns the group's index,
-    /// with the filter's mask and value. Writer mutex held (`w`).
-    fn one_hashed_group(&self, w: &Writer, spec: &Spec) -> Option<(usize, u32, u32)> {
+    /// with the filter, its mask and value. Writer mutex held (`w`).
+    fn one_hashed_group(&self, w: &Writer, spec: &Spec<'_>) -> Option<(usize, Filter, u32, u32)> {
         if spec.err_mask != 0 {
             return None;
         }
-        let [f] = &spec.filters[..] else {
+        let [f] = spec.filters else {
             return None;
         };
         let Place::Hashed { mask, value } = f.place() else {
@@ -975,24 +1066,25 @@ impl<R: Receiver> RxTable<R> {
             .groups
             .iter()
             .position(|g| g.0 == spec.ifindex && g.1 == mask)?;
-        Some((g, mask, value))
+        Some((g, *f, mask, value))
     }
 
     /// [`Self::set_first`] for the shape [`Self::one_hashed_group`] found
     /// (a socket with one filter, the common bind): the registration is
-    /// written into the receiver's slot in one piece with its two nodes
-    /// (the hashed one and the interface entry, in the order
-    /// [`Self::make_reg_into`] gives them), its key looked up once, and
-    /// no group snapshot is published (the group exists); the same
-    /// table state as the general path, without its loops over nodes
-    /// and filters. Allocates only a missing key entry (ENOMEM, before
-    /// anything is filled or linked). Writer mutex held (`w`).
+    /// written into the receiver's unused slot field by field (nothing is
+    /// built elsewhere and moved in), with its two nodes (the hashed one
+    /// and the interface entry, in the order [`Self::make_reg_into`] gives
+    /// them), its key looked up once, and no group snapshot is published
+    /// (the group exists); the same table state as the general path,
+    /// without its loops over nodes and filters. Allocates only a missing
+    /// key entry (ENOMEM, before anything is filled or linked). Writer
+    /// mutex held (`w`).
     fn set_first_one(
         &self,
         w: &mut Writer,
         r: &Rcv<R>,
-        spec: Spec,
-        (g, mask, value): (usize, u32, u32),
+        spec: &Spec<'_>,
+        (g, f, mask, value): (usize, Filter, u32, u32),
     ) -> Result<Changed> {
         let ifindex = spec.ifindex;
         // The entry of the filter's key if linked, else a new one (Err).
@@ -1000,51 +1092,23 @@ impl<R: Receiver> RxTable<R> {
         let key: core::result::Result<NonNull<KeyEntry<R>>, KBox<KeyEntry<R>>> =
             match self.find_key(w, ifindex, mask, value) {
                 Some(e) => Ok(NonNull::from(e)),
-                None => Err(KBox::new(
-                    KeyEntry {
-                        // SAFETY: an all-zero callback_head is what
-                        // call_rcu expects.
-                        rcu: unsafe { core::mem::zeroed() },
-                        link: Link::new(),
-                        ifindex,
-                        mask,
-                        value,
-                        members: List::new(),
-                        count: Cell::new(0),
-                    },
-                    GFP_KERNEL,
-                )?),
+                None => Err(KeyEntry::new_boxed(ifindex, mask, value)?),
             };
-        let node = |kind, mask, value| {
-            Some(Node {
-                link: Link::new(),
-                key: Cell::new(ptr::null()),
-                kind,
-                ifindex,
-                mask,
-                value,
-                reg: ptr::null(),
-            })
-        };
-        let reg = Reg {
-            // SAFETY: an all-zero callback_head is what call_rcu expects.
-            rcu: unsafe { core::mem::zeroed() },
-            rcv: NonNull::dangling(),
-            last: Cell::new(false),
-            cookie: spec.cookie,
-            ifindex,
-            filters: spec.filters,
-            scanned: KVec::new(),
-            // One filter: never joined (`rxtable::join_scanned`).
-            join: false,
-            nodes: Nodes {
-                inline: [node(Kind::Hashed, mask, value), node(Kind::ByIf, 0, 0)],
-                more: KVec::new(),
-            },
-        };
-        // SAFETY: writer mutex held (`w`); the slot is empty (our caller
-        // checked under the mutex); `r` is leaked and on the map.
-        let reg = unsafe { r.fill_first(reg) };
+        // SAFETY: writer mutex held (`w`); the slot is unused (our caller
+        // checked under the mutex) and not referred to; `r` is leaked and
+        // on the map.
+        let slot = unsafe { r.first_slot() };
+        // An unused slot is the empty registration: only what differs is
+        // written (one filter is never joined, `rxtable::join_scanned`).
+        let me: *const Reg<R> = slot;
+        slot.rcv = NonNull::from(r);
+        slot.cookie = spec.cookie;
+        slot.ifindex = ifindex;
+        slot.filters.one = Some(f);
+        slot.nodes.inline[0] = Some(Node::new(Kind::Hashed, ifindex, mask, value, me));
+        slot.nodes.inline[1] = Some(Node::new(Kind::ByIf, ifindex, 0, 0, me));
+        r.first_used.set(true);
+        let reg: &Reg<R> = slot;
         let e: &KeyEntry<R> = match key {
             // SAFETY: the entry find_key found, linked, under the writer
             // mutex held since (nothing was unlinked in between).
@@ -1058,17 +1122,15 @@ impl<R: Receiver> RxTable<R> {
                 e
             }
         };
-        for n in reg.nodes.iter() {
-            if n.kind == Kind::Hashed {
-                n.key.set(e);
-                e.count.set(e.count.get() + 1);
-                // SAFETY: writer mutex held; the node is initialised, not
-                // linked, and stays in the receiver's slot until the receiver
-                // is freed (after its unlinking and a grace period).
-                unsafe { e.members.push(n) };
-            } else {
-                // SAFETY: as above.
-                unsafe { self.list_of(n).push(n) };
+        if let [Some(hashed), Some(by_if)] = &reg.nodes.inline {
+            hashed.key.set(e);
+            e.count.set(e.count.get() + 1);
+            // SAFETY: writer mutex held; the nodes are initialised, not
+            // linked, and stay in the receiver's slot until the receiver
+            // is freed (after their unlinking and a grace period).
+            unsafe {
+                e.members.push(hashed);
+                self.by_if[if_bucket(ifindex)].push(by_if);
             }
         }
         if let Some(c) = w.groups.get_mut(g) {
@@ -1173,7 +1235,7 @@ impl<R: Receiver> RxTable<R> {
             None => {
                 // `set` always brings data; `set_reserved` always has `old`.
                 let data = data.ok_or(kernel::error::code::EINVAL)?;
-                Home::New(KBox::new(Rcv::new(data)?, GFP_KERNEL)?, reg)
+                Home::New(KBox::new(Rcv::new(data, self)?, GFP_KERNEL)?, reg)
             }
         };
         // Everything that can fail comes before anything is linked.
@@ -1224,22 +1286,22 @@ impl<R: Receiver> RxTable<R> {
 
     /// Builds an unlinked, unplaced registration for `spec` (receiver and
     /// the nodes' back pointers still unset: [`Reg::place`]).
-    fn make_reg(spec: Spec) -> Result<Reg<R>> {
-        let mut out = None;
-        Self::make_reg_into(spec, &mut out)?;
-        out.ok_or(kernel::error::code::ENOMEM)
+    fn make_reg(spec: &Spec<'_>) -> Result<Reg<R>> {
+        let mut reg = Reg::empty();
+        Self::make_reg_into(spec, &mut reg)?;
+        Ok(reg)
     }
 
-    /// [`Self::make_reg`] writing into `out` (which it overwrites), so that
-    /// a reserved receiver's first registration is built where it stays
-    /// instead of being moved there (a registration is ~230 bytes). On
-    /// error `out` is `None`. Process context (may allocate and sleep).
-    fn make_reg_into(spec: Spec, out: &mut Option<Reg<R>>) -> Result {
-        *out = None;
-        let join = rxtable::join_scanned(&spec.filters, spec.join);
+    /// [`Self::make_reg`] writing into the empty registration `reg`, so
+    /// that a reserved receiver's first registration is built where it
+    /// stays instead of being moved there (a registration is ~230 bytes).
+    /// On error `reg` is empty again. Process context (may allocate and
+    /// sleep).
+    fn make_reg_into(spec: &Spec<'_>, reg: &mut Reg<R>) -> Result {
+        let join = rxtable::join_scanned(spec.filters, spec.join);
         let mut scanned = KVec::new();
         let mut hashed = 0;
-        for f in spec.filters.iter() {
+        for f in spec.filters {
             match f.place() {
                 Place::Hashed { .. } if !join => hashed += 1,
                 _ => scanned.push(*f, GFP_KERNEL)?,
@@ -1255,33 +1317,17 @@ impl<R: Receiver> RxTable<R> {
         } else {
             KVec::new()
         };
+        let filters = Filters::from_slice(spec.filters)?;
         let (ifindex, err_mask) = (spec.ifindex, spec.err_mask);
         // Nothing below allocates: the nodes fit the inline room and the
         // capacity reserved above.
-        let reg = out.insert(Reg {
-            // SAFETY: an all-zero callback_head is what call_rcu expects.
-            rcu: unsafe { core::mem::zeroed() },
-            rcv: NonNull::dangling(),
-            last: Cell::new(false),
-            cookie: spec.cookie,
-            ifindex,
-            filters: spec.filters,
-            scanned,
-            join,
-            nodes: Nodes {
-                inline: [const { None }; INLINE_NODES],
-                more,
-            },
-        });
-        let node = |kind, mask, value| Node {
-            link: Link::new(),
-            key: Cell::new(ptr::null()),
-            kind,
-            ifindex,
-            mask,
-            value,
-            reg: ptr::null(),
-        };
+        reg.cookie = spec.cookie;
+        reg.ifindex = ifindex;
+        reg.filters = filters;
+        reg.scanned = scanned;
+        reg.join = join;
+        reg.nodes.more = more;
+        let node = |kind, mask, value| Node::new(kind, ifindex, mask, value, ptr::null());
         // All nodes are added before any is linked.
         let mut res = Ok(());
         if !join {
@@ -1301,7 +1347,7 @@ impl<R: Receiver> RxTable<R> {
             res = res.and(reg.nodes.push(node(Kind::ByIf, 0, 0)));
         }
         if res.is_err() {
-            *out = None;
+            *reg = Reg::empty();
         }
         res
     }
@@ -1349,20 +1395,7 @@ impl<R: Receiver> RxTable<R> {
                 .iter()
                 .any(|e| e.ifindex == n.ifindex && e.mask == n.mask && e.value == n.value);
             if !known {
-                let e = KBox::new(
-                    KeyEntry {
-                        // SAFETY: an all-zero callback_head is what
-                        // call_rcu expects.
-                        rcu: unsafe { core::mem::zeroed() },
-                        link: Link::new(),
-                        ifindex: n.ifindex,
-                        mask: n.mask,
-                        value: n.value,
-                        members: List::new(),
-                        count: Cell::new(0),
-                    },
-                    GFP_KERNEL,
-                )?;
+                let e = KeyEntry::new_boxed(n.ifindex, n.mask, n.value)?;
                 fresh.push(e, GFP_KERNEL)?;
             }
         }
