@@ -384,10 +384,11 @@ extern "C" fn rcan_rx_set_reserved(
     // SAFETY: `rcv` is what rcan_rx_reserve returned, and its receiver is
     // not removed for good yet (abi contract).
     let rcv = unsafe { RcvHandle::from_raw(rcv) };
-    // SAFETY: NULL or a valid spec, with its filters (valid table-form
-    // filters, which the caller's Rust code made), for the duration of
-    // the call (abi contract).
+    // SAFETY: NULL or a valid spec for the duration of the call (abi
+    // contract).
     let new = unsafe { spec.as_ref() }
+        // SAFETY: its filters are valid table-form filters, which the
+        // caller's Rust code made, for the call (abi contract).
         .map(|s| unsafe { request(s.ifindex, s.join, s.err_mask, s.filters, s.nfilters, cookie) });
     match Impl::rx_set_reserved(rcv, new, keep) {
         Ok(()) => 0,

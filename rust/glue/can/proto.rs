@@ -633,11 +633,11 @@ pub(crate) fn rx_set_locked<T: CanProtocol>(
         filters: frames.as_ptr(),
         nfilters: frames.len(),
     };
-    // SAFETY: `spec` and its filters (table-form filters made by
-    // `TableFilters`) live for the call; `rcv` is the socket's reserved
-    // receiver, not removed for good (only rx_release does, clearing the
-    // slot under the socket lock `s` holds, which also serialises our
-    // calls for it).
+    // `rcv` is the socket's reserved receiver, not removed for good (only
+    // rx_release does, clearing the slot under the socket lock `s` holds,
+    // which also serialises our calls for it).
+    // SAFETY: `spec` and its filters (table-form, made by `TableFilters`)
+    // live for the call; `rcv` is valid, as said just above.
     let ret = unsafe { abi::rcan_rx_set_reserved(rcv, cookie, &spec, true) };
     crate::glue::to_result(ret).map(|_| ())
 }

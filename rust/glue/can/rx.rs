@@ -481,9 +481,9 @@ impl<R: Receiver> Rcv<R> {
     /// (leaked from its KBox).
     #[allow(clippy::mut_from_ref)]
     unsafe fn first_slot(&self) -> &mut Reg<R> {
-        // SAFETY: an unused slot: nothing refers into it (readers reach a
-        // registration only through its linked nodes, and it has none;
-        // the caller holds no other reference), and the writer mutex
+        // An unused slot: readers reach a registration only through its
+        // linked nodes, and it has none; the caller holds no other reference.
+        // SAFETY: so nothing refers into the slot, and the writer mutex
         // (caller) excludes other writers.
         unsafe { &mut *self.first.get() }
     }
@@ -990,11 +990,11 @@ impl<R: Receiver> RxTable<R> {
         new: Option<Spec<'_>>,
         keep: bool,
     ) -> Result<Changed> {
-        // SAFETY: a receiver on its table's map (RcvHandle invariant), so
-        // alive until a removal for good, which only a `set_reserved` with
-        // `keep` false on this handle makes (its owner serialises them):
-        // not before this call ends. `table` is immutable and the table
-        // outlives its receivers.
+        // A receiver on its table's map (RcvHandle invariant) lives until a
+        // removal for good, which only a `set_reserved` with `keep` false on
+        // this handle makes (its owner serialises them).
+        // SAFETY: so it is alive until this call ends; `table` is immutable
+        // and the table outlives its receivers.
         let table: &RxTable<R> = unsafe { rcv.0.cast::<Rcv<R>>().as_ref().table.as_ref() };
         let new = new.filter(wants);
         let mut w = table.writer.lock();
