@@ -27,34 +27,11 @@ set -u
 cd "$(dirname "$0")/../../../../.." || exit 1
 N=${N:-20480} ROUNDS=${ROUNDS:-3} BATCH=${BATCH:-64} PERIOD=${PERIOD:-9973} CPU=${CPU:-0}
 out=${RCAN_OUT:-/tmp}
-unload() {
-	ip link del can0 2>/dev/null
-	for m in rcan_loop rcan_raw rcan_can rcan_pf can_raw vcan can_dev can; do
-		rmmod $m 2>/dev/null
-	done
-}
+. tools/testing/rcan/bench/prof/stack.sh
 i=0
 for st in "$@"; do
 	i=$((i + 1))
-	unload
-	case $st in
-	mainline)
-		kb=$RCAN_KBUILD
-		insmod $kb/net/can/can.ko && insmod $kb/net/can/can-raw.ko || exit 1
-		modinfo -F depends $kb/drivers/net/can/vcan.ko | grep -q "can.dev" &&
-			insmod $kb/drivers/net/can/dev/can-dev.ko
-		insmod $kb/drivers/net/can/vcan.ko echo=1 && ip link add dev can0 type vcan || exit 1
-		;;
-	ours | ours:*)
-		d=.
-		[ "$st" = ours ] || d=${st#ours:}
-		for m in net/can/rcan_pf net/can/rcan_can net/can/rcan_raw drivers/net/can/rcan_loop; do
-			insmod $d/$m.ko || exit 1
-		done
-		;;
-	*) echo "unknown stack $st" >&2; exit 1 ;;
-	esac
-	ip link set can0 up || exit 1
+	stack_load "$st" || exit 1
 	tag=$i-${st%%:*}
 	wl="taskset -c $CPU python3 tools/testing/rcan/bench/prof/frame.py can0 $N"
 	# one warm-up round, then the phases timed without perf (under icount:
@@ -78,5 +55,5 @@ for st in "$@"; do
 	rm -f /tmp/perf.data
 	echo "$tag: $(grep -c PHASE $out/marks-$tag.txt) phases, $(zcat $out/script-$tag.txt.gz | wc -l) samples"
 done
-unload
+stack_unload
 exit 0
