@@ -197,6 +197,7 @@ impl Family for PfCan {
     /// (16 bytes) or a CAN FD frame (72 bytes, which gets `CANFD_FDF` set
     /// as mainline sets it); an FD frame on a classic device (MTU 16) is
     /// EMSGSIZE here (CAN_RAW refuses it earlier, with EINVAL).
+    #[inline]
     fn send(mut skb: Skb, dev: &NetDev, loopback: bool) -> Result {
         // Mainline can_send's checks; the frame itself is not needed here
         // (the driver reads it).

@@ -40,8 +40,12 @@ pub(crate) const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv
 /// interface it is sent by or received on, `skbcnt` 0.
 fn put_priv(skb: &mut Skb, ifindex: i32) -> bool {
     skb.reserve(SKB_PRIV_LEN);
+    // Byte by byte, not `copy_from_slice`, which the compiler left as a
+    // call on every frame.
     let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&ifindex.to_ne_bytes());
+    for (d, s) in prv.iter_mut().zip(ifindex.to_ne_bytes()) {
+        *d = s;
+    }
     skb.write_headroom(&prv)
 }
 
@@ -65,6 +69,7 @@ fn is_frame_size(image: &[u8]) -> bool {
 /// `can_skb_reserve`, `can_skb_prv(skb)->ifindex`); the caller appends
 /// the frame. Process context; blocks while the send buffer is full
 /// unless `nonblock` (EAGAIN), honouring SO_SNDTIMEO.
+#[inline]
 pub(crate) fn alloc_tx<T: Proto>(
     sk: &Sock<T>,
     dev: &NetDev,
