@@ -331,6 +331,7 @@ impl Skb {
 
     /// Writes `src` into the control buffer at `off` (clamped to its 48
     /// bytes).
+    #[inline]
     pub(crate) fn cb_write(&mut self, off: usize, src: &[u8]) {
         // SAFETY: valid skb we own; the copy is clamped to the 48-byte cb.
         unsafe {
@@ -342,6 +343,7 @@ impl Skb {
 
     /// Reads `dst.len()` bytes of the control buffer from `off` (bytes
     /// beyond its 48 are left as they are).
+    #[inline]
     pub(crate) fn cb_read(&self, off: usize, dst: &mut [u8]) {
         // SAFETY: valid skb; the copy is clamped to the 48-byte cb.
         unsafe {

@@ -382,6 +382,7 @@ impl Msg {
     }
 
     /// Stores a source address for recvmsg (if the caller asked for one).
+    #[inline]
     pub(crate) fn set_name(&mut self, addr: &[u8]) {
         // SAFETY: for recvmsg, msg_name is NULL or a kernel
         // sockaddr_storage (128 bytes) that is copied out afterwards.
