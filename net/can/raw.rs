@@ -437,6 +437,7 @@ impl glue::sock::Proto for RawProto {
         Ok(RAW_MIN_NAMELEN)
     }
 
+    #[inline]
     fn sendmsg(sk: &S, msg: &mut Msg, len: usize) -> Result<usize> {
         if !(MIN_WRITE..=MAX_WRITE).contains(&len) {
             return Err(EINVAL);
@@ -459,9 +460,11 @@ impl glue::sock::Proto for RawProto {
         // Mainline raw_check_txframe: a classic frame anywhere; a CAN FD
         // frame only with CAN_RAW_FD_FRAMES on a CAN FD (or CAN XL)
         // device; nothing else (no CAN XL here).
-        let ok = match AnyFrame::parse(skb.data()) {
-            Some(AnyFrame::Classic(_)) => true,
-            Some(AnyFrame::Fd(_)) => {
+        // (`AnyFrame::kind`: the same test as `parse`, without building
+        // a copy of the frame.)
+        let ok = match AnyFrame::kind(skb.data()) {
+            Some(false) => true,
+            Some(true) => {
                 let mtu = dev.mtu();
                 sh.fd_frames.load(Ordering::Relaxed)
                     && (mtu == CANFD_MTU as u32 || CANXL_MTUS.contains(&mtu))
@@ -476,6 +479,7 @@ impl glue::sock::Proto for RawProto {
         Ok(len)
     }
 
+    #[inline]
     fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
         if flags as u32 & glue::msg::ERRQUEUE != 0 {
             return sk.recv_errqueue(msg, len, SOL_CAN_RAW, SCM_CAN_RAW_ERRQUEUE);

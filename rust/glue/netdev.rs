@@ -402,7 +402,7 @@ impl Napi {
         // SAFETY: we are in a NAPI poll (only the glue makes a `Napi`, and
         // only there): softirq context with interrupts enabled, which is
         // what netif_receive_skb requires; it consumes the reference.
-        unsafe { bindings::rcan_netif_receive_skb(skb.into_raw()) };
+        unsafe { bindings::netif_receive_skb(skb.into_raw()) };
     }
 
     /// Hands up to `budget` frames to [`receive`](Self::receive), one
@@ -729,7 +729,7 @@ impl<T: Driver> Adapter<T> {
         // SAFETY: the instance was added by `register` for a device of `T`
         // and lives in its private area; the core polls only enabled
         // instances, i.e. between open and stop of the registered device.
-        let dev = unsafe { bindings::rcan_napi_dev(napi) };
+        let dev = unsafe { (*napi).dev };
         // SAFETY: as above: a registered device of ours.
         let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
         let budget = usize::try_from(budget).unwrap_or(0);

@@ -73,16 +73,33 @@ impl Skb {
     }
 
     /// Reserves headroom in an empty skb.
+    ///
+    /// Only on an empty linear skb with at least `len` bytes of tailroom
+    /// (a fresh one); anything else is left as it is (`skb_reserve` itself
+    /// does not check), so the caller's later headroom test fails instead.
+    #[inline]
     pub(crate) fn reserve(&mut self, len: u32) {
-        // SAFETY: valid skb; the kernel checks bounds (skb_reserve on an empty
-        // skb only moves data/tail within the allocated head).
-        unsafe { bindings::rcan_skb_reserve(self.as_ptr(), len as i32) };
+        // SAFETY: valid skb we own (`&mut self`: nobody else moves its
+        // data meanwhile). `skb_reserve` (data and tail move by `len`),
+        // written here rather than by a C helper, with the bounds it
+        // leaves to its callers checked first: data and tail stay inside
+        // the head.
+        unsafe {
+            let skb = &mut *self.as_ptr();
+            if skb.len != 0 || skb.data_len != 0 || len > skb.end.saturating_sub(skb.tail) {
+                return;
+            }
+            skb.data = skb.data.add(len as usize);
+            skb.tail += len;
+        }
     }
 
-    /// Headroom in front of `data`.
+    /// Headroom in front of `data` (`skb_headroom`).
+    #[inline]
     pub(crate) fn headroom(&self) -> u32 {
-        // SAFETY: valid skb.
-        unsafe { bindings::rcan_skb_headroom(self.as_ptr()) }
+        // SAFETY: valid skb; `data` and `head` point into its one head
+        // buffer, `data` not in front of `head`, less than 4 GiB apart.
+        unsafe { (*self.as_ptr()).data.offset_from((*self.as_ptr()).head) as u32 }
     }
 
     /// Appends `src` (skb_put + copy). The caller allocated enough tailroom;
@@ -148,10 +165,14 @@ impl Skb {
     ///
     /// The caller holds a reference on `dev` for as long as the skb may use
     /// it (the transmit path holds it until dev_queue_xmit returns).
+    #[inline]
     pub(crate) fn set_can_tx(&mut self, dev: &super::netdev::NetDev, loopback: bool) {
-        let eth_p = self.can_eth_p();
-        // SAFETY: valid skb we own; `dev` is a live device (NetDev invariant).
-        unsafe { bindings::rcan_skb_set_can_tx(self.as_ptr(), dev.as_ptr(), loopback, eth_p) };
+        let pkt_type = if loopback {
+            bindings::PACKET_LOOPBACK
+        } else {
+            bindings::PACKET_HOST
+        };
+        self.mark_can(dev, pkt_type as u8);
     }
 
     /// Marks the skb as a CAN frame arriving on `dev`, as mainline marks
@@ -162,10 +183,42 @@ impl Skb {
     /// is how protocols tell their own frames.
     ///
     /// The caller is `dev`'s driver (or holds a reference on `dev`).
+    #[inline]
     pub(crate) fn set_can_rx(&mut self, dev: &super::netdev::NetDev) {
+        self.mark_can(dev, bindings::PACKET_BROADCAST as u8);
+    }
+
+    /// [`Skb::set_can_tx`] and [`Skb::set_can_rx`]: `skb->dev`, the
+    /// protocol, `pkt_type`, `CHECKSUM_UNNECESSARY` and the mac, network and
+    /// transport headers reset to the data (`skb_reset_mac_header` and its
+    /// twins), written here rather than by a C helper: every frame is
+    /// marked once on the way out and once on the way in.
+    #[inline]
+    fn mark_can(&mut self, dev: &super::netdev::NetDev, pkt_type: u8) {
         let eth_p = self.can_eth_p();
-        // SAFETY: valid skb we own; `dev` is a live device (NetDev invariant).
-        unsafe { bindings::rcan_skb_set_can_rx(self.as_ptr(), dev.as_ptr(), eth_p) };
+        let skb = self.as_ptr();
+        // SAFETY: valid skb (type invariant) that the caller owns and has
+        // not shared (`&mut self`: a CAN skb being built or re-marked by its
+        // only holder), so nobody else reads or writes these header fields
+        // meanwhile; `data` and `head` point into the same buffer, `data`
+        // at most 64 KiB past `head` (the kernel's own `u16` header offsets
+        // rely on that); `dev` is a live device (NetDev invariant) that the
+        // caller keeps alive for as long as the skb may use it.
+        unsafe {
+            (*skb)
+                .__bindgen_anon_1
+                .__bindgen_anon_1
+                .__bindgen_anon_1
+                .dev = dev.as_ptr();
+            let off = (*skb).data.offset_from((*skb).head) as u16;
+            let h = (*skb).__bindgen_anon_4.__bindgen_anon_1.as_mut();
+            h.protocol = eth_p.to_be();
+            h.set_pkt_type(pkt_type);
+            h.set_ip_summed(bindings::CHECKSUM_UNNECESSARY as u8);
+            h.mac_header = off;
+            h.network_header = off;
+            h.transport_header = off;
+        }
     }
 
     /// For a driver's `start_xmit` (mainline `can_skb_headroom_valid`):
@@ -174,7 +227,29 @@ impl Skb {
     /// CAN fields a CAN socket's skb has, including the echo request
     /// (`PACKET_LOOPBACK`) on an IFF_ECHO device, so local CAN sockets see
     /// it as on mainline. Transmit path of `dev`.
+    #[inline]
     pub(crate) fn can_tx_prepare(&mut self, dev: &super::netdev::NetDev) -> bool {
+        // The common case, a CAN socket's skb with its private area, is
+        // told here (the helper's own first two tests, read in place); only
+        // a packet socket's skb, or one without room, goes to the helper.
+        // SAFETY: valid skb we hold; reading its head, data and a header
+        // bitfield, which nobody writes while the transmit path holds it.
+        let (headroom, ip_summed) = unsafe {
+            let skb = self.as_ptr();
+            (
+                (*skb).data.offset_from((*skb).head),
+                (*skb)
+                    .__bindgen_anon_4
+                    .__bindgen_anon_1
+                    .as_ref()
+                    .ip_summed(),
+            )
+        };
+        if headroom >= core::mem::size_of::<bindings::can_skb_priv>() as isize
+            && u32::from(ip_summed) != bindings::CHECKSUM_NONE
+        {
+            return true;
+        }
         // SAFETY: valid skb we own (the transmit path hands the driver its
         // reference); the helper checks the headroom before writing it;
         // `dev` is the transmitting device.
@@ -191,6 +266,7 @@ impl Skb {
     /// Appends `len` bytes copied from the user's buffers of `msg`
     /// (`skb_put` + `memcpy_from_msg`). EINVAL if the tailroom is too
     /// small, EFAULT on a bad user pointer.
+    #[inline]
     pub(crate) fn put_from_msg(
         &mut self,
         msg: &mut super::sock::Msg,
@@ -216,10 +292,22 @@ impl Skb {
 
     /// Copies the socket's priority and mark into the skb, as every
     /// protocol's sendmsg does for the qdisc layer.
+    #[inline]
     pub(crate) fn set_sock_params<T: super::sock::Proto>(&mut self, sk: &super::sock::Sock<T>) {
-        // SAFETY: valid skb we own; `sk` is a live sock: a `Sock` is only
-        // made for a sock the caller holds (a system call's own socket).
-        unsafe { bindings::rcan_skb_sock_params(self.as_ptr(), sk.as_ptr()) };
+        // READ_ONCE of the two socket fields (setsockopt writes them
+        // without the caller's knowledge), as the kernel's sendmsg paths
+        // read them; written here rather than by a C helper, once a frame.
+        // SAFETY: valid skb we own and have not shared (`&mut self`); `sk`
+        // is a live sock: a `Sock` is only made for a sock the caller holds
+        // (a system call's own socket).
+        unsafe {
+            let sk = sk.as_ptr();
+            let priority = core::ptr::read_volatile(core::ptr::addr_of!((*sk).sk_priority));
+            let mark = core::ptr::read_volatile(core::ptr::addr_of!((*sk).sk_mark));
+            let h = (*self.as_ptr()).__bindgen_anon_4.__bindgen_anon_1.as_mut();
+            h.priority = priority;
+            h.__bindgen_anon_4.mark = mark;
+        }
     }
 
     /// Makes `sk` the skb's owner the way mainline's `can_skb_set_owner`
@@ -243,6 +331,7 @@ impl Skb {
 
     /// Writes `src` into the control buffer at `off` (clamped to its 48
     /// bytes).
+    #[inline]
     pub(crate) fn cb_write(&mut self, off: usize, src: &[u8]) {
         // SAFETY: valid skb we own; the copy is clamped to the 48-byte cb.
         unsafe {
@@ -254,6 +343,7 @@ impl Skb {
 
     /// Reads `dst.len()` bytes of the control buffer from `off` (bytes
     /// beyond its 48 are left as they are).
+    #[inline]
     pub(crate) fn cb_read(&self, off: usize, dst: &mut [u8]) {
         // SAFETY: valid skb; the copy is clamped to the 48-byte cb.
         unsafe {
@@ -370,6 +460,7 @@ impl Skb {
     }
 
     /// The linear data, writable.
+    #[inline]
     pub(crate) fn data_mut(&mut self) -> &mut [u8] {
         // SAFETY: we own a reference; the head holds `len - data_len`
         // initialised bytes from `data`. A shared skb must not be written:
@@ -418,9 +509,17 @@ impl Skb {
     ///
     /// The caller holds a reference on `dev` for as long as the skb may use
     /// it.
+    #[inline]
     pub(crate) fn set_dev(&mut self, dev: &super::netdev::NetDev) {
-        // SAFETY: valid skb we own; `dev` is a live device.
-        unsafe { bindings::rcan_skb_set_dev(self.as_ptr(), dev.as_ptr()) };
+        // SAFETY: valid skb we own and have not shared (`&mut self`); `dev`
+        // is a live device.
+        unsafe {
+            (*self.as_ptr())
+                .__bindgen_anon_1
+                .__bindgen_anon_1
+                .__bindgen_anon_1
+                .dev = dev.as_ptr()
+        };
     }
 
     /// Frees as dropped from any context, including hardirq and code
@@ -536,9 +635,17 @@ impl Skb {
     }
 
     /// `ntohs(skb->protocol)`.
+    #[inline]
     pub(crate) fn protocol(&self) -> u16 {
-        // SAFETY: valid skb; reading a header field of an skb we hold.
-        unsafe { bindings::rcan_skb_protocol(self.as_ptr()) }
+        // SAFETY: valid skb; reading a header field of an skb we hold
+        // (nobody writes it while we hold our reference: see `pkt_type`).
+        u16::from_be(unsafe {
+            (*self.as_ptr())
+                .__bindgen_anon_4
+                .__bindgen_anon_1
+                .as_ref()
+                .protocol
+        })
     }
 
     /// The end of an IFF_ECHO driver's transmission (mainline

@@ -160,10 +160,13 @@ impl<T: Proto> Sock<T> {
     /// A user socket holds a reference on it (`sk_alloc` with `kern` 0);
     /// a kernel socket's creator closes it before its namespace exits, by
     /// the kernel's rule for kernel sockets. Any context.
+    #[inline]
     pub(crate) fn net(&self) -> &Net {
+        // `read_pnet(&sk->sk_net)` (CONFIG_NET_NS), read in place: every
+        // sendmsg asks.
         // SAFETY: a live sock (type invariant), whose namespace outlives
-        // it (above).
-        unsafe { Net::from_raw(bindings::rcan_sock_net(self.sk)) }
+        // it (above); `skc_net` is set at `sk_alloc` and never changes.
+        unsafe { Net::from_raw((*self.sk).__sk_common.skc_net.net) }
     }
 
     /// The state readable without the socket lock.
@@ -379,6 +382,7 @@ impl Msg {
     }
 
     /// Stores a source address for recvmsg (if the caller asked for one).
+    #[inline]
     pub(crate) fn set_name(&mut self, addr: &[u8]) {
         // SAFETY: for recvmsg, msg_name is NULL or a kernel
         // sockaddr_storage (128 bytes) that is copied out afterwards.

@@ -99,32 +99,11 @@ void rcan_consume_skb(struct sk_buff *skb)
 	consume_skb(skb);
 }
 
-void rcan_skb_reserve(struct sk_buff *skb, int len)
-{
-	skb_reserve(skb, len);
-}
-
-unsigned int rcan_skb_headroom(const struct sk_buff *skb)
-{
-	return skb_headroom(skb);
-}
-
 void rcan_skb_reset_headers(struct sk_buff *skb)
 {
 	skb_reset_mac_header(skb);
 	skb_reset_network_header(skb);
 	skb_reset_transport_header(skb);
-}
-
-/* ntohs(skb->protocol), for code that cannot reach the bitfield union. */
-u16 rcan_skb_protocol(const struct sk_buff *skb)
-{
-	return ntohs(skb->protocol);
-}
-
-void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev)
-{
-	skb->dev = dev;
 }
 
 void rcan_skb_stamp_if_unset(struct sk_buff *skb)
@@ -139,39 +118,10 @@ bool rcan_dev_nit_active(struct net_device *dev)
 	return dev_nit_active(dev);
 }
 
-/* Marks @skb as a CAN frame leaving by @dev (mainline can_send), with
- * protocol @eth_p (ETH_P_CAN or ETH_P_CANFD, chosen by the caller from the
- * frame's length): PACKET_LOOPBACK asks an IFF_ECHO driver for the echo, PACKET_HOST does
- * not. CHECKSUM_UNNECESSARY tells drivers that the CAN stack built the skb
- * (a packet socket's skb has CHECKSUM_NONE, see rcan_can_skb_tx_prepare).
+/* The CAN marks of an skb (protocol, pkt_type, CHECKSUM_UNNECESSARY,
+ * headers reset) are written in Rust: Skb::set_can_tx and Skb::set_can_rx
+ * in rust/glue/skb.rs.
  */
-void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopback,
-			 u16 eth_p)
-{
-	skb->dev = dev;
-	skb->protocol = htons(eth_p);
-	skb->pkt_type = loopback ? PACKET_LOOPBACK : PACKET_HOST;
-	skb->ip_summed = CHECKSUM_UNNECESSARY;
-	skb_reset_mac_header(skb);
-	skb_reset_network_header(skb);
-	skb_reset_transport_header(skb);
-}
-
-/* Marks @skb as a CAN frame (protocol @eth_p) arriving on @dev: a frame from the bus
- * (mainline alloc_can_skb) or an echo (mainline __can_get_echo_skb,
- * vcan_rx, can_send's clone). Every CAN frame is a broadcast; skb->sk is
- * left as it is, so an echo still names its sending socket.
- */
-void rcan_skb_set_can_rx(struct sk_buff *skb, struct net_device *dev, u16 eth_p)
-{
-	skb->dev = dev;
-	skb->protocol = htons(eth_p);
-	skb->pkt_type = PACKET_BROADCAST;
-	skb->ip_summed = CHECKSUM_UNNECESSARY;
-	skb_reset_mac_header(skb);
-	skb_reset_network_header(skb);
-	skb_reset_transport_header(skb);
-}
 
 /* Mainline can_skb_headroom_valid (include/linux/can/skb.h) for a classic
  * CAN frame about to be sent by @dev: false if there is no room for struct
@@ -209,12 +159,6 @@ struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp)
 int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len)
 {
 	return memcpy_from_msg(skb_put(skb, len), msg, len);
-}
-
-void rcan_skb_sock_params(struct sk_buff *skb, struct sock *sk)
-{
-	skb->priority = READ_ONCE(sk->sk_priority);
-	skb->mark = READ_ONCE(sk->sk_mark);
 }
 
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
@@ -350,13 +294,6 @@ struct net_device *rcan_next_can_dev(struct net *net, int after_ifindex)
 		dev_hold(best);
 	rcu_read_unlock();
 	return best;
-}
-
-/* dev_queue_xmit of @skb by @dev (sets skb->dev: one call, not two). */
-int rcan_dev_queue_xmit(struct sk_buff *skb, struct net_device *dev)
-{
-	skb->dev = dev;
-	return dev_queue_xmit(skb);
 }
 
 struct net_device *rcan_netdev_notifier_dev(void *info)
@@ -723,15 +660,6 @@ void rcan_napi_complete_done(struct napi_struct *napi, int work_done)
 	napi_complete_done(napi, work_done);
 }
 
-struct net_device *rcan_napi_dev(const struct napi_struct *napi)
-{
-	return napi->dev;
-}
-
-int rcan_netif_receive_skb(struct sk_buff *skb)
-{
-	return netif_receive_skb(skb);
-}
 
 /* skb->tstamp (a union member bindgen names unpredictably), in ns. */
 s64 rcan_skb_tstamp(const struct sk_buff *skb)

@@ -38,22 +38,14 @@ void rcan_kfree_skb(struct sk_buff *skb);
 void rcan_consume_skb(struct sk_buff *skb);
 void rcan_dev_kfree_skb_any(struct sk_buff *skb);
 void rcan_dev_consume_skb_any(struct sk_buff *skb);
-void rcan_skb_reserve(struct sk_buff *skb, int len);
-unsigned int rcan_skb_headroom(const struct sk_buff *skb);
 void rcan_skb_reset_headers(struct sk_buff *skb);
 void rcan_skb_stamp_if_unset(struct sk_buff *skb);
 s64 rcan_skb_tstamp(const struct sk_buff *skb);
 void rcan_skb_set_tstamp(struct sk_buff *skb, s64 ns);
 bool rcan_dev_nit_active(struct net_device *dev);
-void rcan_skb_set_dev(struct sk_buff *skb, struct net_device *dev);
-u16 rcan_skb_protocol(const struct sk_buff *skb);
-void rcan_skb_set_can_tx(struct sk_buff *skb, struct net_device *dev, bool loopback,
-			 u16 eth_p);
-void rcan_skb_set_can_rx(struct sk_buff *skb, struct net_device *dev, u16 eth_p);
 bool rcan_can_skb_tx_prepare(struct sk_buff *skb, struct net_device *dev);
 struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp);
 int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len);
-void rcan_skb_sock_params(struct sk_buff *skb, struct sock *sk);
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 			       struct msghdr *msg, int size);
 int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len);
@@ -85,7 +77,6 @@ struct net_device *rcan_next_can_dev(struct net *net, int after_ifindex);
 struct net *rcan_init_net(void);
 struct net *rcan_dev_net(const struct net_device *dev);
 void *rcan_net_generic(const struct net *net, unsigned int id);
-int rcan_dev_queue_xmit(struct sk_buff *skb, struct net_device *dev);
 struct net_device *rcan_netdev_notifier_dev(void *info);
 void rcan_dev_stats_tx(struct net_device *dev, unsigned int bytes);
 void rcan_dev_stats_rx(struct net_device *dev, unsigned int bytes);
@@ -197,8 +188,6 @@ void rcan_napi_enable(struct napi_struct *napi);
 void rcan_napi_disable(struct napi_struct *napi);
 void rcan_napi_schedule(struct napi_struct *napi);
 void rcan_napi_complete_done(struct napi_struct *napi, int work_done);
-struct net_device *rcan_napi_dev(const struct napi_struct *napi);
-int rcan_netif_receive_skb(struct sk_buff *skb);
 
 /* procfs (rust/glue/procfs.rs) */
 struct proc_dir_entry;

@@ -678,10 +678,14 @@ extern "C" fn rcan_send(skb: *mut bindings::sk_buff, loopback: bool) -> ffi::c_i
 /// `dev_queue_xmit` of a prepared CAN skb on `dev` (sets `skb->dev`):
 /// consumes `skb`; congestion (`NET_XMIT_CN`) counts as sent, a drop is
 /// ENOBUFS. Process or softirq context.
+#[inline]
 pub(crate) fn queue_xmit(skb: Skb, dev: &NetDev) -> Result {
-    // SAFETY: the helper sets skb->dev to `dev`, borrowed (so alive) for
-    // the call, and dev_queue_xmit consumes the skb in every case.
-    let ret = unsafe { bindings::rcan_dev_queue_xmit(skb.into_raw(), dev.as_ptr()) };
+    let mut skb = skb;
+    skb.set_dev(dev);
+    // SAFETY: skb->dev is `dev`, borrowed (so alive) for the call;
+    // `dev_queue_xmit` (this, with no subordinate device) consumes the skb
+    // in every case.
+    let ret = unsafe { bindings::__dev_queue_xmit(skb.into_raw(), core::ptr::null_mut()) };
     match ret {
         r if r < 0 => Err(Error::from_errno(r)),
         0 => Ok(()),

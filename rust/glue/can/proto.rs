@@ -703,6 +703,7 @@ fn reserved<T: CanProtocol>(sk: &Sock<T>) -> Option<*mut ffi::c_void> {
 /// `skb->dev`; `dev`'s reference covers the call); with `loopback` local
 /// receivers get it too. Consumes `skb`. EINVAL, EMSGSIZE, EPERM,
 /// ENETDOWN, ENOBUFS, ENOMEM. Process or softirq context.
+#[inline(always)]
 pub(crate) fn send(mut skb: Skb, dev: &DevRef, loopback: bool) -> Result {
     skb.set_dev(dev);
     // SAFETY: rcan_send consumes the skb in every case; skb->dev is `dev`,

@@ -40,8 +40,15 @@ pub(crate) const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv
 /// interface it is sent by or received on, `skbcnt` 0.
 fn put_priv(skb: &mut Skb, ifindex: i32) -> bool {
     skb.reserve(SKB_PRIV_LEN);
+    // By constant indices: `copy_from_slice` and iterator adapters are
+    // left as calls into `core` on every frame (the kernel's `core` is not
+    // inlined across crates), a loop of them costs ~100 instructions.
+    let b = ifindex.to_ne_bytes();
     let mut prv = [0u8; SKB_PRIV_LEN as usize];
-    prv[..4].copy_from_slice(&ifindex.to_ne_bytes());
+    prv[0] = b[0];
+    prv[1] = b[1];
+    prv[2] = b[2];
+    prv[3] = b[3];
     skb.write_headroom(&prv)
 }
 
@@ -65,6 +72,7 @@ fn is_frame_size(image: &[u8]) -> bool {
 /// `can_skb_reserve`, `can_skb_prv(skb)->ifindex`); the caller appends
 /// the frame. Process context; blocks while the send buffer is full
 /// unless `nonblock` (EAGAIN), honouring SO_SNDTIMEO.
+#[inline]
 pub(crate) fn alloc_tx<T: Proto>(
     sk: &Sock<T>,
     dev: &NetDev,
@@ -164,11 +172,18 @@ const CB_FLAGS: usize = MIN_NAMELEN;
 /// (`raw_rcv`, `bcm_send_to_user`). Any context; the skb is about to be
 /// queued on a socket, whose queue owns the cb from then on.
 pub(crate) fn set_rx_meta(skb: &mut Skb, ifindex: i32, flags: u32) {
-    let mut name = [0u8; MIN_NAMELEN];
-    name[..2].copy_from_slice(&(bindings::AF_CAN as u16).to_ne_bytes());
-    name[4..].copy_from_slice(&ifindex.to_ne_bytes());
-    skb.cb_write(CB_NAME, &name);
-    skb.cb_write(CB_FLAGS, &flags.to_ne_bytes());
+    // Built by constant indices, not `copy_from_slice` (a call into `core`
+    // and from there to `memcpy` per slice, on every frame received).
+    let (fam, idx, fl) = (
+        (bindings::AF_CAN as u16).to_ne_bytes(),
+        ifindex.to_ne_bytes(),
+        flags.to_ne_bytes(),
+    );
+    let meta: [u8; MIN_NAMELEN + 4] = [
+        fam[0], fam[1], 0, 0, idx[0], idx[1], idx[2], idx[3], fl[0], fl[1], fl[2], fl[3],
+    ];
+    const _: () = assert!(CB_FLAGS == CB_NAME + MIN_NAMELEN);
+    skb.cb_write(CB_NAME, &meta);
 }
 
 /// The recvmsg of CAN_RAW and CAN_BCM (mainline `raw_recvmsg`,
