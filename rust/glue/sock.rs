@@ -161,9 +161,11 @@ impl<T: Proto> Sock<T> {
     /// a kernel socket's creator closes it before its namespace exits, by
     /// the kernel's rule for kernel sockets. Any context.
     pub(crate) fn net(&self) -> &Net {
+        // `sock_net` inline (`read_pnet`: a plain load of the field set by
+        // `sk_alloc`), without a call to a C helper.
         // SAFETY: a live sock (type invariant), whose namespace outlives
         // it (above).
-        unsafe { Net::from_raw(bindings::rcan_sock_net(self.sk)) }
+        unsafe { Net::from_raw((*self.sk).__sk_common.skc_net.net) }
     }
 
     /// The state readable without the socket lock.
