@@ -392,13 +392,15 @@ impl glue::sock::Proto for RawProto {
         let mut ifindex = parse_addr(addr)?;
         let mut enetdown = false;
         {
-            let _rtnl = Rtnl::lock();
+            let rtnl = Rtnl::lock();
             let mut s = sk.lock();
             if s.bound && s.ifindex == ifindex {
                 return Ok(());
             }
             if ifindex != 0 {
-                let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
+                // Under RTNL, held until the registration is made: the
+                // device cannot go in between, so no reference is taken.
+                let dev = NetDev::by_index_rtnl(sk.net(), ifindex, &rtnl).ok_or(ENODEV)?;
                 if !dev.is_can() {
                     return Err(ENODEV);
                 }

@@ -15,7 +15,7 @@
 use super::bindings;
 use super::net::Net;
 use super::skb::Skb;
-use super::sync::RcuReadGuard;
+use super::sync::{RcuReadGuard, Rtnl};
 use core::marker::PhantomData;
 use core::ptr::NonNull;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -52,6 +52,24 @@ impl NetDev {
 
     pub(crate) fn as_ptr(&self) -> *mut bindings::net_device {
         self.0.get()
+    }
+
+    /// `__dev_get_by_index(net, ifindex)` with RTNL held (`_rtnl`), for as
+    /// long as it stays held: no reference is taken (no `dev_hold` and
+    /// `dev_put`, no RCU section), as mainline's RTNL callers do. A device
+    /// leaves its namespace's index (unregistration, a move) only under
+    /// RTNL and is freed only after that, so the borrow, which cannot
+    /// outlive the guard, stays valid. Process context.
+    pub(crate) fn by_index_rtnl<'a>(
+        net: &Net,
+        ifindex: i32,
+        _rtnl: &'a Rtnl,
+    ) -> Option<&'a NetDev> {
+        // SAFETY: `net` is alive and RTNL held (`_rtnl`), as required; NULL
+        // or a device listed in `net`, valid while RTNL is held (above).
+        NonNull::new(unsafe { bindings::__dev_get_by_index(net.as_ptr(), ifindex) })
+            // SAFETY: a listed device, valid for 'a (above).
+            .map(|p| unsafe { NetDev::from_raw(p.as_ptr()) })
     }
 
     /// A counted reference to this device (`dev_hold`), e.g. to send on

@@ -110,7 +110,8 @@ impl Rtnl {
     /// Takes the RTNL mutex.
     pub(crate) fn lock() -> Self {
         // SAFETY: process context (callers' contract); unlocked in Drop.
-        unsafe { bindings::rcan_rtnl_lock() };
+        // Called directly (an exported function): no C helper in between.
+        unsafe { bindings::rtnl_lock() };
         Rtnl(PhantomData)
     }
 
@@ -126,7 +127,7 @@ impl Rtnl {
 impl Drop for Rtnl {
     fn drop(&mut self) {
         // SAFETY: paired with rtnl_lock() in lock().
-        unsafe { bindings::rcan_rtnl_unlock() };
+        unsafe { bindings::rtnl_unlock() };
     }
 }
 
