@@ -54,16 +54,6 @@ void rcan_mutex_unlock(struct mutex *lock)
 	mutex_unlock(lock);
 }
 
-void rcan_rtnl_lock(void)
-{
-	rtnl_lock();
-}
-
-void rcan_rtnl_unlock(void)
-{
-	rtnl_unlock();
-}
-
 void rcan_assert_rtnl(void)
 {
 	ASSERT_RTNL();

@@ -28,8 +28,6 @@ void rcan_rcu_read_unlock(void);
 /* Locks defined with DEFINE_MUTEX in the modules' C files */
 void rcan_mutex_lock(struct mutex *lock);
 void rcan_mutex_unlock(struct mutex *lock);
-void rcan_rtnl_lock(void);
-void rcan_rtnl_unlock(void);
 void rcan_assert_rtnl(void);
 
 /* sk_buff */
