@@ -218,8 +218,9 @@ impl KernelRx for DsorRx {
             // Becomes the drainer unless one runs (which then takes these
             // frames too), without dropping ENGINE in between; sends on
             // the device the frame came in on (the DSOR interface, checked
-            // above) without a lookup by name.
-            drain_locked(g, finished, Some(dev.hold()));
+            // above, valid for this call) without a lookup by name or a
+            // reference of its own.
+            drain_locked(g, finished, Some(dev));
         } else {
             drop(g);
             if finished {

@@ -23,7 +23,7 @@ use crate::glue;
 use crate::glue::hrtimer::{ktime_get_mono_ns, HrTimer, HrTimerCallback};
 use crate::glue::lock::BhSpinGuard;
 use crate::glue::net::Net;
-use crate::glue::netdev::DevRef;
+use crate::glue::netdev::{DevRef, NetDev};
 use crate::glue::neterr;
 use crate::rcan_api;
 use crate::rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK};
@@ -80,9 +80,12 @@ impl HrTimerCallback for Tick {
 /// critical section (unless it is armed no later already), so that a
 /// frame queued concurrently (also under ENGINE) is never left unsent.
 /// After [`FRAMES_PER_RUN`] frames it arms the timer for "now" instead.
-/// With `wake`, wakes [`WAITQ`] once ENGINE is dropped. `dev`, if given,
-/// is used as the DSOR interface while its name is the configured one
-/// (else the device is looked up by name, as without).
+/// With `wake`, wakes [`WAITQ`] once ENGINE is dropped. `dev`, if given
+/// (the receive callback lends the device the frame came in on, valid
+/// for the callback: no reference taken and dropped per frame), is used
+/// as the DSOR interface while its name is the configured one (else the
+/// device is looked up by name, as without, and that reference kept for
+/// the run).
 ///
 /// One frame per lock round, not a batch: the queue holds one frame at a
 /// time in the common case (stop-and-wait; the receive callback drains
@@ -92,7 +95,7 @@ impl HrTimerCallback for Tick {
 pub(crate) fn drain_locked(
     mut g: BhSpinGuard<Option<KBox<Engine>>>,
     mut wake: bool,
-    mut dev: Option<DevRef>,
+    mut dev: Option<&NetDev>,
 ) {
     match g.as_mut() {
         Some(e) if !e.draining && !STOPPING.load(Ordering::Relaxed) => e.draining = true,
@@ -106,6 +109,7 @@ pub(crate) fn drain_locked(
             return;
         }
     }
+    let mut held: Option<DevRef> = None;
     let mut sent = 0;
     loop {
         let frame;
@@ -134,16 +138,17 @@ pub(crate) fn drain_locked(
             wake = false;
         }
         sent += 1;
-        if dev
-            .as_ref()
-            .is_some_and(|d| d.name_bytes() != ifname.bytes())
-        {
+        if dev.is_some_and(|d| d.name_bytes() != ifname.bytes()) {
             dev = None;
         }
-        if dev.is_none() {
-            dev = DevRef::by_name(Net::init(), ifname.as_cstr());
+        if dev.is_none()
+            && held
+                .as_ref()
+                .is_none_or(|d| d.name_bytes() != ifname.bytes())
+        {
+            held = DevRef::by_name(Net::init(), ifname.as_cstr());
         }
-        let failed = match &dev {
+        let failed = match dev.or(held.as_deref()) {
             Some(d) => send_frame(d, &frame).is_err(),
             None => true,
         };
@@ -164,7 +169,7 @@ pub(crate) fn drain_locked(
 /// ESI clear) if it is one (an FD header or FD body); on an interface no
 /// longer in FD mode pf_can refuses the latter (a send error, the
 /// protocol retransmits until the transfer fails).
-fn send_frame(dev: &DevRef, f: &FdFrame) -> Result {
+fn send_frame(dev: &NetDev, f: &FdFrame) -> Result {
     if !dev.is_can() || !dev.is_up() {
         return Err(neterr::ENETDOWN());
     }
