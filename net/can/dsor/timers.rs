@@ -82,10 +82,12 @@ impl HrTimerCallback for Tick {
 /// After [`FRAMES_PER_RUN`] frames it arms the timer for "now" instead.
 /// With `wake`, wakes [`WAITQ`] once ENGINE is dropped. `dev`, if given
 /// (the receive callback lends the device the frame came in on, valid
-/// for the callback: no reference taken and dropped per frame), is used
-/// as the DSOR interface while its name is the configured one (else the
-/// device is looked up by name, as without, and that reference kept for
-/// the run).
+/// for the callback: no reference taken and dropped per frame), is one
+/// the caller found to bear the configured name (`Config::ifname`) while
+/// holding `g`, so the first frame goes out on it unchecked (the name
+/// can change only after `g` is dropped); later frames use it while its
+/// name is still the configured one (else the device is looked up by
+/// name, as without `dev`, and that reference kept for the run).
 ///
 /// One frame per lock round, not a batch: the queue holds one frame at a
 /// time in the common case (stop-and-wait; the receive callback drains
@@ -110,6 +112,8 @@ pub(crate) fn drain_locked(
         }
     }
     let mut held: Option<DevRef> = None;
+    // `dev`'s name was compared with `ifname` under `g` (by the caller).
+    let mut dev_checked = dev.is_some();
     let mut sent = 0;
     loop {
         let frame;
@@ -138,7 +142,9 @@ pub(crate) fn drain_locked(
             wake = false;
         }
         sent += 1;
-        if dev.is_some_and(|d| d.name_bytes() != ifname.bytes()) {
+        if !core::mem::take(&mut dev_checked)
+            && dev.is_some_and(|d| d.name_bytes() != ifname.bytes())
+        {
             dev = None;
         }
         if dev.is_none()
