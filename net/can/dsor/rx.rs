@@ -217,9 +217,11 @@ impl KernelRx for DsorRx {
         if queued {
             // Becomes the drainer unless one runs (which then takes these
             // frames too), without dropping ENGINE in between; sends on
-            // the device the frame came in on (the DSOR interface, checked
-            // above) without a lookup by name.
-            drain_locked(g, finished, Some(dev.hold()));
+            // the device the frame came in on (the DSOR interface: its
+            // name checked above under this same ENGINE hold; valid for
+            // this call) without a lookup by name, a reference of its own
+            // or a second name check for this frame's answer.
+            drain_locked(g, finished, Some(dev));
         } else {
             drop(g);
             if finished {

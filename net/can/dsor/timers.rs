@@ -6,8 +6,8 @@
 //! earliest protocol deadline (or earlier: it is started again only when
 //! a deadline comes before the expiry it is armed for, not once per
 //! frame; a run that finds nothing due re-arms it for the next one).
-//! [`drain_locked`] takes the engine's queued frames in batches under
-//! [`ENGINE`] and sends them without it, from the timer
+//! [`drain_locked`] takes the engine's queued frames one at a time under
+//! [`ENGINE`] and sends each without it, from the timer
 //! (HRTIMER_SOFTIRQ) or from the receive callback (NET_RX softirq); at
 //! most one drainer runs at a time (`Engine::draining`, under ENGINE), so
 //! frames leave in queue order.
@@ -23,15 +23,13 @@ use crate::glue;
 use crate::glue::hrtimer::{ktime_get_mono_ns, HrTimer, HrTimerCallback};
 use crate::glue::lock::BhSpinGuard;
 use crate::glue::net::Net;
-use crate::glue::netdev::DevRef;
+use crate::glue::netdev::{DevRef, NetDev};
 use crate::glue::neterr;
 use crate::rcan_api;
 use crate::rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK};
 use crate::rcan_core::dsor_wire::FdFrame;
 use crate::rcan_core::frame::{CanFdFrame, CanFrame, CANFD_FDF};
 
-/// Frames sent per batch (taken from the queue under the lock).
-const BATCH: usize = 16;
 /// Frames one run of [`Tick`] sends at most before it re-arms itself for
 /// "now" and returns, so that one long message (which, with the direct
 /// echo, is acked within the same run: the queue then holds one frame at a
@@ -75,20 +73,31 @@ impl HrTimerCallback for Tick {
 /// (HRTIMER_SOFTIRQ or NET_RX).
 ///
 /// Becomes the drainer if nobody is (`draining`), else returns at once:
-/// the running drainer takes what was queued. Takes frames from the queue
-/// in batches under ENGINE and sends them without it (on one device
-/// reference for the whole run); when the queue is empty, clears
+/// the running drainer takes what was queued. Takes the frames from the
+/// queue one at a time under ENGINE and sends each without it (on one
+/// device reference for the whole run); when the queue is empty, clears
 /// `draining` and arms the timer for the next deadline in the same
 /// critical section (unless it is armed no later already), so that a
 /// frame queued concurrently (also under ENGINE) is never left unsent.
 /// After [`FRAMES_PER_RUN`] frames it arms the timer for "now" instead.
-/// With `wake`, wakes [`WAITQ`] once ENGINE is dropped. `dev`, if given,
-/// is used as the DSOR interface while its name is the configured one
-/// (else the device is looked up by name, as without).
+/// With `wake`, wakes [`WAITQ`] once ENGINE is dropped. `dev`, if given
+/// (the receive callback lends the device the frame came in on, valid
+/// for the callback: no reference taken and dropped per frame), is one
+/// the caller found to bear the configured name (`Config::ifname`) while
+/// holding `g`, so the first frame goes out on it unchecked (the name
+/// can change only after `g` is dropped); later frames use it while its
+/// name is still the configured one (else the device is looked up by
+/// name, as without `dev`, and that reference kept for the run).
+///
+/// One frame per lock round, not a batch: the queue holds one frame at a
+/// time in the common case (stop-and-wait; the receive callback drains
+/// the one answer it queued), and a batch array set up per round (16
+/// `Option<FdFrame>`, zeroed, then copied into) cost more than the lock
+/// rounds it saved.
 pub(crate) fn drain_locked(
     mut g: BhSpinGuard<Option<KBox<Engine>>>,
     mut wake: bool,
-    mut dev: Option<DevRef>,
+    mut dev: Option<&NetDev>,
 ) {
     match g.as_mut() {
         Some(e) if !e.draining && !STOPPING.load(Ordering::Relaxed) => e.draining = true,
@@ -102,10 +111,12 @@ pub(crate) fn drain_locked(
             return;
         }
     }
+    let mut held: Option<DevRef> = None;
+    // `dev`'s name was compared with `ifname` under `g` (by the caller).
+    let mut dev_checked = dev.is_some();
     let mut sent = 0;
     loop {
-        let mut batch: [Option<FdFrame>; BATCH] = Default::default();
-        let mut n = 0;
+        let frame;
         let ifname;
         {
             let Some(e) = g.as_mut() else { break };
@@ -117,20 +128,12 @@ pub(crate) fn drain_locked(
                 e.arm(ktime_get_mono_ns());
                 break;
             }
-            while n < BATCH {
-                match e.pop_out() {
-                    Some(f) => {
-                        batch[n] = Some(f);
-                        n += 1;
-                    }
-                    None => break,
-                }
-            }
-            if n == 0 {
+            let Some(f) = e.pop_out() else {
                 e.draining = false;
                 e.arm_after_drain();
                 break;
-            }
+            };
+            frame = f;
             ifname = e.cfg.ifname;
         }
         drop(g);
@@ -138,24 +141,27 @@ pub(crate) fn drain_locked(
             WAITQ.wake_all();
             wake = false;
         }
-        sent += n;
-        if dev
-            .as_ref()
-            .is_some_and(|d| d.name_bytes() != ifname.bytes())
+        sent += 1;
+        if !core::mem::take(&mut dev_checked)
+            && dev.is_some_and(|d| d.name_bytes() != ifname.bytes())
         {
             dev = None;
         }
-        if dev.is_none() {
-            dev = DevRef::by_name(Net::init(), ifname.as_cstr());
+        if dev.is_none()
+            && held
+                .as_ref()
+                .is_none_or(|d| d.name_bytes() != ifname.bytes())
+        {
+            held = DevRef::by_name(Net::init(), ifname.as_cstr());
         }
-        let errors = match &dev {
-            Some(d) => send_batch(d, &batch[..n]),
-            None => n as u64,
+        let failed = match dev.or(held.as_deref()) {
+            Some(d) => send_frame(d, &frame).is_err(),
+            None => true,
         };
         g = ENGINE.lock();
-        if errors != 0 {
+        if failed {
             if let Some(e) = g.as_mut() {
-                e.stats.send_errors += errors;
+                e.stats.send_errors += 1;
             }
         }
     }
@@ -165,22 +171,11 @@ pub(crate) fn drain_locked(
     }
 }
 
-/// Sends frames on the DSOR interface; returns how many failed. Softirq.
-fn send_batch(dev: &DevRef, frames: &[Option<FdFrame>]) -> u64 {
-    let mut errors = 0;
-    for f in frames.iter().flatten() {
-        if send_frame(dev, f).is_err() {
-            errors += 1;
-        }
-    }
-    errors
-}
-
 /// Sends `f` as a classic frame, or as a CAN FD frame (FDF set, BRS and
 /// ESI clear) if it is one (an FD header or FD body); on an interface no
 /// longer in FD mode pf_can refuses the latter (a send error, the
 /// protocol retransmits until the transfer fails).
-fn send_frame(dev: &DevRef, f: &FdFrame) -> Result {
+fn send_frame(dev: &NetDev, f: &FdFrame) -> Result {
     if !dev.is_can() || !dev.is_up() {
         return Err(neterr::ENETDOWN());
     }

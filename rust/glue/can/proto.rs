@@ -35,7 +35,7 @@ use super::abi::{self, CanProto, RxSpec, RxTableSpec, TableFilter};
 pub(crate) use super::abi::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use crate::glue::bindings;
 use crate::glue::net::Net;
-use crate::glue::netdev::{self as gnetdev, DevRef, NetDev};
+use crate::glue::netdev::{self as gnetdev, NetDev};
 use crate::glue::skb::Skb;
 use crate::glue::sock::{Proto, ProtoReg, Sock, SockGuard};
 use crate::glue::sync::{CCell, RcuReadGuard, Rtnl, RtnlLocked};
@@ -700,14 +700,17 @@ fn reserved<T: CanProtocol>(sk: &Sock<T>) -> Option<*mut ffi::c_void> {
 }
 
 /// Sends the CAN frame in `skb` on `dev` (mainline `can_send`; sets
-/// `skb->dev`; `dev`'s reference covers the call); with `loopback` local
-/// receivers get it too. Consumes `skb`. EINVAL, EMSGSIZE, EPERM,
-/// ENETDOWN, ENOBUFS, ENOMEM. Process or softirq context.
+/// `skb->dev`); with `loopback` local receivers get it too. Consumes
+/// `skb`. EINVAL, EMSGSIZE, EPERM, ENETDOWN, ENOBUFS, ENOMEM. Process or
+/// softirq context. `dev` need only be valid for the call, as for
+/// mainline's `can_send`: a counted reference
+/// ([`DevRef`](gnetdev::DevRef) derefs to it) or the receiving device a
+/// [`KernelRx`] callback is lent.
 #[inline(always)]
-pub(crate) fn send(mut skb: Skb, dev: &DevRef, loopback: bool) -> Result {
+pub(crate) fn send(mut skb: Skb, dev: &NetDev, loopback: bool) -> Result {
     skb.set_dev(dev);
     // SAFETY: rcan_send consumes the skb in every case; skb->dev is `dev`,
-    // whose reference the caller holds until after the call returns.
+    // which the borrow keeps valid until after the call returns.
     crate::glue::to_result(unsafe { abi::rcan_send(skb.into_raw(), loopback) }).map(|_| ())
 }
 
