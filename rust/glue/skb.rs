@@ -79,11 +79,11 @@ impl Skb {
     /// does not check), so the caller's later headroom test fails instead.
     #[inline]
     pub(crate) fn reserve(&mut self, len: u32) {
+        // `skb_reserve` (data and tail move by `len`), written here rather
+        // than by a C helper, with the bounds it leaves to its callers
+        // checked first: data and tail stay inside the head.
         // SAFETY: valid skb we own (`&mut self`: nobody else moves its
-        // data meanwhile). `skb_reserve` (data and tail move by `len`),
-        // written here rather than by a C helper, with the bounds it
-        // leaves to its callers checked first: data and tail stay inside
-        // the head.
+        // data meanwhile); the bounds are checked before anything moves.
         unsafe {
             let skb = &mut *self.as_ptr();
             if skb.len != 0 || skb.data_len != 0 || len > skb.end.saturating_sub(skb.tail) {
@@ -197,13 +197,14 @@ impl Skb {
     fn mark_can(&mut self, dev: &super::netdev::NetDev, pkt_type: u8) {
         let eth_p = self.can_eth_p();
         let skb = self.as_ptr();
-        // SAFETY: valid skb (type invariant) that the caller owns and has
-        // not shared (`&mut self`: a CAN skb being built or re-marked by its
-        // only holder), so nobody else reads or writes these header fields
+        // The skb is valid (type invariant) and the caller owns it unshared
+        // (`&mut self`: a CAN skb being built or re-marked by its only
+        // holder), so nobody else reads or writes these header fields
         // meanwhile; `data` and `head` point into the same buffer, `data`
         // at most 64 KiB past `head` (the kernel's own `u16` header offsets
-        // rely on that); `dev` is a live device (NetDev invariant) that the
-        // caller keeps alive for as long as the skb may use it.
+        // rely on that).
+        // SAFETY: as just said; `dev` is a live device (NetDev invariant)
+        // that the caller keeps alive for as long as the skb may use it.
         unsafe {
             (*skb)
                 .__bindgen_anon_1
