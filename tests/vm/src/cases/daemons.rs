@@ -18,7 +18,7 @@
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant, SystemTime};
@@ -503,11 +503,21 @@ time.sleep(600)
 
 /// A client that stops reading never stalls another: with `--queue 256
 /// --sndbuf 4096`, 2,000 frames sent on can0 (one a millisecond, a busy
-/// bus) all reach a reading client in order while a python client that reads nothing is connected; when the
-/// latter goes, cantcpd reports the frames it dropped for it (and none for
-/// the reading client).
+/// bus) all reach a reading client in order while a python client that
+/// reads nothing is connected; when the latter goes, cantcpd reports the
+/// frames it dropped for it (and none for the reading client).
+///
+/// The sender stays at most `AHEAD` frames ahead of what the reading
+/// client has read: a reader that keeps up with the bus is the claim, and
+/// on a slow guest the test's own reader thread (not cantcpd) could fall
+/// 256 frames behind a sender at one a millisecond (it did twice, on a
+/// loaded host: "error dropped" on the reading client). `AHEAD` is half
+/// the queue, so the reading client's queue never fills while the one
+/// that reads nothing still overflows (2,000 frames against 256 queued
+/// plus its small socket buffers).
 fn cantcpd_slow_client_drops_alone(ctx: &mut Ctx) -> TestResult {
     const N: u32 = 2000;
+    const AHEAD: u32 = 128;
     let idx = raw1(ctx)?;
     let tx = canraw::open(idx)?;
     let mut srv = tools::spawn_own("cantcpd", &["--queue", "256", "--sndbuf", "4096"], None)?;
@@ -539,22 +549,38 @@ fn cantcpd_slow_client_drops_alone(ctx: &mut Ctx) -> TestResult {
     })?;
     // The reading client reads while the frames are sent, as a client on
     // a busy bus does.
+    let read = Arc::new(AtomicU32::new(0));
+    let done = Arc::new(AtomicBool::new(false));
+    let (read_r, done_r) = (Arc::clone(&read), Arc::clone(&done));
     let reader = thread::spawn(move || -> TestResult {
-        for i in 0..N {
-            let m = read_msg(&mut fast, &mut pend)?;
-            let want = format!("{:08X}", i.swap_bytes());
-            ensure!(
-                m.starts_with("< frame 100 ") && m.ends_with(&format!(" {want} >")),
-                "reading client, frame {i}: got {m:?}"
-            );
-        }
-        Ok(())
+        let r = (|| {
+            for i in 0..N {
+                let m = read_msg(&mut fast, &mut pend)?;
+                let want = format!("{:08X}", i.swap_bytes());
+                ensure!(
+                    m.starts_with("< frame 100 ") && m.ends_with(&format!(" {want} >")),
+                    "reading client, frame {i}: got {m:?}"
+                );
+                read_r.store(i + 1, Ordering::Release);
+            }
+            Ok(())
+        })();
+        done_r.store(true, Ordering::Release);
+        r
     });
+    let mut paced = 0u32;
     for i in 0..N {
+        while i >= read.load(Ordering::Acquire) + AHEAD && !done.load(Ordering::Acquire) {
+            paced += 1;
+            thread::sleep(Duration::from_millis(1));
+        }
         send_retry(&tx, &numbered(i))?;
         thread::sleep(Duration::from_millis(1));
     }
     reader.join().map_err(|_| "reader panicked")??;
+    ctx.note(format!(
+        "cantcpd: {N} frames, the sender waited {paced} ms for the reading client"
+    ));
     drop(slow);
     // Both connections are closed now (the reading one when its thread
     // ended): one "closed" line each, with its drop count.
