@@ -798,3 +798,45 @@ mod tests {
         assert!(Stack::parse("vcan").is_err());
     }
 }
+
+/// The PCI ids (vendor, device) of the CAN cards the VM carries
+/// (`RCAN_QEMU_CAN`): Kvaser PCIcan, Advantech PCM-3680 and MIOe-3680,
+/// CTU CAN FD.
+const CAN_CARD_IDS: [(u32, u32); 4] = [
+    (0x10e8, 0x8406),
+    (0x13fe, 0xc002),
+    (0x13fe, 0xc302),
+    (0x1760, 0xff00),
+];
+
+/// Enables every PCI CAN card once, as `echo 1 >
+/// /sys/bus/pci/devices/ADDR/enable` does, and leaves it enabled for the
+/// whole run. `pci_enable_device()` counts its callers: the first one
+/// routes the card's interrupt, which on QEMU's q35 means evaluating the
+/// ACPI `_PRT` method of the root bus (hundreds of ACPI objects allocated
+/// and freed), and the last `pci_disable_device()` undoes it. On the debug
+/// kernel, where KASAN and kmemleak record a stack trace for every
+/// allocation, that was most of each driver load and unload (build.rst).
+/// Held here, a driver's probe and remove still make both calls, and
+/// they only count. Called once when rcan-vmtest starts; a VM without the
+/// cards is left alone. Returns how many cards it enabled.
+pub fn hold_can_cards_enabled() -> Result<usize, String> {
+    let dir = "/sys/bus/pci/devices";
+    let hex = |p: &Path, f: &str| {
+        let s = fs::read_to_string(p.join(f)).unwrap_or_default();
+        u32::from_str_radix(s.trim().trim_start_matches("0x"), 16).ok()
+    };
+    let mut n = 0;
+    for e in fs::read_dir(dir).or_fail(dir)? {
+        let p = e.or_fail(dir)?.path();
+        let (Some(v), Some(d)) = (hex(&p, "vendor"), hex(&p, "device")) else {
+            continue;
+        };
+        if CAN_CARD_IDS.contains(&(v, d)) {
+            let f = p.join("enable");
+            fs::write(&f, "1").map_err(|e| format!("echo 1 > {}: {e}", f.display()))?;
+            n += 1;
+        }
+    }
+    Ok(n)
+}

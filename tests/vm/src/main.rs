@@ -283,6 +283,11 @@ fn main() -> ExitCode {
         eprintln!("rcan-vmtest: {e}");
         return ExitCode::from(2);
     }
+    // Each driver load would otherwise route the cards' interrupts anew.
+    if let Err(e) = ctx::hold_can_cards_enabled() {
+        eprintln!("rcan-vmtest: {e}");
+        return ExitCode::from(2);
+    }
     // run_one turns a panic into a test failure; the hook only logs it as
     // a comment line, with its location.
     panic::set_hook(Box::new(|info| eprintln!("# panic: {info}")));
