@@ -99,6 +99,10 @@ vm_stage() {
 	local cmd=(target/release/rcan-vmtest)
 	echo "=== VM suite on the $variant kernel"
 	if [ "$variant" = debug ]; then
+		# The VM runs in the checkout, which it sees at its host path even
+		# below /tmp (vm-run.sh binds it there); the programs load the
+		# debug modules from target/rcan-debug (--root), whose target/ is
+		# the checkout's.
 		if ! make_debug_root; then
 			echo "rcan: copying the sources to $RCAN_ROOT/target/rcan-debug failed"
 			tally "vm-$variant" 1 /dev/null
@@ -106,6 +110,7 @@ vm_stage() {
 			return
 		fi
 		root=$debug_root
+		cmd+=(--root "$root")
 	fi
 	if ! RCAN_KERNEL=$variant make --no-print-directory -C "$root" modules > "$log_dir/build-$variant.log" 2>&1; then
 		tail -n 40 "$log_dir/build-$variant.log"
@@ -121,7 +126,7 @@ vm_stage() {
 	if [ "$variant" = debug ]; then
 		limit=$((3300 + 900))
 		fuzz_cmd
-		cmd=(bash -c "${cmd[*]}; echo \$? > \"\$RCAN_OUT/suite.rc\"; echo '$fuzz_marker'; ${fuzz[*]}; echo \$? > \"\$RCAN_OUT/fuzz.rc\"")
+		cmd=(bash -c "$(printf '%q ' "${cmd[@]}"); echo \$? > \"\$RCAN_OUT/suite.rc\"; echo '$fuzz_marker'; $(printf '%q ' "${fuzz[@]}"); echo \$? > \"\$RCAN_OUT/fuzz.rc\"")
 	fi
 	out=$log_dir/out-$variant
 	mkdir -p "$out"
@@ -129,7 +134,7 @@ vm_stage() {
 	# beside ours and runs make install KDIR=... against it; other tests
 	# load the same kernel's mainline CAN modules to compare in one boot.
 	RCAN_KERNEL=$variant RCAN_KBUILD=$(RCAN_KERNEL=$variant bash "$RCAN_ROOT/tools/testing/rcan/build-kernel.sh") \
-		bash "$root/tools/testing/rcan/vm-run.sh" --timeout "$limit" --out "$out" --qemu-extra "$RCAN_QEMU_CAN" -- \
+		bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout "$limit" --out "$out" --qemu-extra "$RCAN_QEMU_CAN" -- \
 		"${cmd[@]}" 2>&1 | tee "$log_dir/vm-$variant.log"
 	rc=${PIPESTATUS[0]}
 	if [ "$variant" != debug ]; then
@@ -182,8 +187,8 @@ fuzz_cmd() {
 	local tseed
 	tseed=${RCAN_FUZZ_SEED:-$(date +%s)}
 	echo "=== syscall fuzzer on the debug kernel: seeds 1 and $tseed (time-derived), ${RCAN_FUZZ_SECONDS:-45} s each, after the suite in its boot"
-	fuzz=(target/release/rcan-fuzz --seed 1 --seed "$tseed" --seconds "${RCAN_FUZZ_SECONDS:-45}"
-		--iterations 1000000)
+	fuzz=(target/release/rcan-fuzz --root "$debug_root" --seed 1 --seed "$tseed"
+		--seconds "${RCAN_FUZZ_SECONDS:-45}" --iterations 1000000)
 }
 
 vm_stage release
