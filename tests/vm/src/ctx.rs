@@ -821,22 +821,34 @@ const CAN_CARD_IDS: [(u32, u32); 4] = [
 /// they only count. Called once when rcan-vmtest starts; a VM without the
 /// cards is left alone. Returns how many cards it enabled.
 pub fn hold_can_cards_enabled() -> Result<usize, String> {
+    let cards = pci_devices(&CAN_CARD_IDS)?;
+    for addr in &cards {
+        let f = format!("/sys/bus/pci/devices/{addr}/enable");
+        fs::write(&f, "1").map_err(|e| format!("echo 1 > {f}: {e}"))?;
+    }
+    Ok(cards.len())
+}
+
+/// The PCI addresses (as in `/sys/bus/pci/devices`) of the devices whose
+/// (vendor, device) ids are in `ids`, in PCI order.
+pub fn pci_devices(ids: &[(u32, u32)]) -> Result<Vec<String>, String> {
     let dir = "/sys/bus/pci/devices";
     let hex = |p: &Path, f: &str| {
         let s = fs::read_to_string(p.join(f)).unwrap_or_default();
         u32::from_str_radix(s.trim().trim_start_matches("0x"), 16).ok()
     };
-    let mut n = 0;
+    let mut found = Vec::new();
     for e in fs::read_dir(dir).or_fail(dir)? {
         let p = e.or_fail(dir)?.path();
         let (Some(v), Some(d)) = (hex(&p, "vendor"), hex(&p, "device")) else {
             continue;
         };
-        if CAN_CARD_IDS.contains(&(v, d)) {
-            let f = p.join("enable");
-            fs::write(&f, "1").map_err(|e| format!("echo 1 > {}: {e}", f.display()))?;
-            n += 1;
+        if ids.contains(&(v, d)) {
+            if let Some(n) = p.file_name().and_then(|n| n.to_str()) {
+                found.push(n.to_string());
+            }
         }
     }
-    Ok(n)
+    found.sort();
+    Ok(found)
 }

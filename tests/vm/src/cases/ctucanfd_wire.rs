@@ -76,19 +76,7 @@ const DBITRATE: &str = "4000000";
 /// The PCI addresses of QEMU's `ctucan_pci` cards (1760:ff00), in PCI
 /// order.
 fn ctucan_pci_cards() -> Result<Vec<String>, String> {
-    let mut cards = Vec::new();
-    let dir = "/sys/bus/pci/devices";
-    for e in std::fs::read_dir(dir).or_fail(dir)? {
-        let p = e.or_fail(dir)?.path();
-        let id = |f: &str| std::fs::read_to_string(p.join(f)).unwrap_or_default();
-        if id("vendor").trim() == "0x1760" && id("device").trim() == "0xff00" {
-            if let Some(n) = p.file_name().and_then(|n| n.to_str()) {
-                cards.push(n.to_string());
-            }
-        }
-    }
-    cards.sort();
-    Ok(cards)
+    crate::ctx::pci_devices(&[(0x1760, 0xff00)])
 }
 
 /// The `driver_override` of the spare `ctucan_pci` cards between tests:
