@@ -1453,6 +1453,12 @@ impl<R: Receiver> RxTable<R> {
     /// Unlinks every node of `reg` and drops its group counts. Writer
     /// mutex held (`w` is its data).
     fn unlink_reg(&self, w: &mut Writer, reg: &Reg<R>) {
+        if let ([Some(hashed), Some(by_if)], true) = (&reg.nodes.inline, reg.nodes.more.is_empty())
+        {
+            if hashed.kind == Kind::Hashed && by_if.kind == Kind::ByIf {
+                return self.unlink_one(w, hashed, by_if);
+            }
+        }
         for n in reg.nodes.iter() {
             // SAFETY: writer mutex held (`w` is its data); `reg` is linked.
             unsafe { List::unlink(n) };
@@ -1481,6 +1487,45 @@ impl<R: Receiver> RxTable<R> {
                     g.2 -= 1;
                 }
             }
+        }
+    }
+
+    /// [`Self::unlink_reg`] for the shape [`Self::set_first_one`] makes
+    /// (the common close: one hashed filter and the interface entry, no
+    /// other node), the mirror of that fast path: both nodes unlinked
+    /// directly, the key entry reached through the node, with no loop
+    /// over nodes and no list lookup by kind; the same table state as the
+    /// general loop. Writer mutex held (`w` is its data).
+    fn unlink_one(&self, w: &mut Writer, hashed: &Node<R>, by_if: &Node<R>) {
+        // SAFETY: writer mutex held (`w` is its data); both nodes are
+        // linked (the registration is).
+        unsafe {
+            List::unlink(hashed);
+            List::unlink(by_if);
+        }
+        // SAFETY: set when the node was linked; the entry lives while it
+        // has members (writer mutex held).
+        let e = unsafe { &*hashed.key.get() };
+        let left = e.count.get() - 1;
+        e.count.set(left);
+        if left == 0 {
+            // SAFETY: writer mutex held; the entry is linked.
+            unsafe { List::unlink(e) };
+            // SAFETY: unlinked: unreachable for new readers; free_key
+            // frees it.
+            unsafe {
+                defer(
+                    e as *const KeyEntry<R> as *mut bindings::callback_head,
+                    free_key::<R>,
+                )
+            };
+        }
+        if let Some(g) = w
+            .groups
+            .iter_mut()
+            .find(|g| g.0 == hashed.ifindex && g.1 == hashed.mask)
+        {
+            g.2 -= 1;
         }
     }
 
