@@ -24,8 +24,19 @@ use kernel::ffi;
 #[repr(C)]
 struct SockObj<D, S> {
     sk: bindings::sock,
+    /// The sock's place on its protocol module's socket set.
+    set: SetLink,
     shared: S,
     data: D,
+}
+
+/// A sock's links on its protocol module's socket set
+/// (`can::proto::SockSet`, a doubly linked list through the socks): the
+/// addresses of its neighbours, 0 at either end and off the set. Read
+/// and written only by that set, under RTNL, which protects it.
+pub(in crate::glue) struct SetLink {
+    pub(in crate::glue) prev: core::cell::Cell<usize>,
+    pub(in crate::glue) next: core::cell::Cell<usize>,
 }
 
 /// The sock object of protocol `T`.
@@ -167,6 +178,15 @@ impl<T: Proto> Sock<T> {
         // SAFETY: a live sock (type invariant), whose namespace outlives
         // it (above); `skc_net` is set at `sk_alloc` and never changes.
         unsafe { Net::from_raw((*self.sk).__sk_common.skc_net.net) }
+    }
+
+    /// The sock's links on its protocol's socket set, for that set only
+    /// (which touches them under RTNL).
+    pub(in crate::glue) fn set_link(&self) -> &SetLink {
+        // SAFETY: a live sock created by `create` for `T` (type
+        // invariant), so it is an `ObjOf<T>` with an initialised link;
+        // only its cells are written, and only by the set.
+        unsafe { &(*self.sk.cast::<ObjOf<T>>()).set }
     }
 
     /// The state readable without the socket lock.
@@ -526,6 +546,10 @@ impl<T: Proto> ProtoReg<T> {
             }
             bindings::sock_init_data(sock, sk);
             (*sk).sk_protocol = protocol as u16;
+            core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).set).write(SetLink {
+                prev: core::cell::Cell::new(0),
+                next: core::cell::Cell::new(0),
+            });
             core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).data).write(T::new_data());
             core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).shared).write(T::new_shared());
             (*sk).sk_destruct = Some(destruct::<T>);

@@ -234,7 +234,10 @@ static PROTOS: [RcuPtr<CanProto>; CANPROTO_MAX] = [const { RcuPtr::null() }; CAN
 /// Tells the drivers of the interfaces in `ifindexes` (0: all of them)
 /// that their wanted filters changed. Process context; takes `WRITERS` (so
 /// a listener being removed is not called after its removal returns),
-/// unless no driver listens.
+/// unless no driver listens. Inline: every bind and close asks, and with
+/// no listener the answer is a fence and a load, without a call
+/// ([`notify_listeners_now`] when a driver listens).
+#[inline(always)]
 pub(crate) fn notify_listeners(ifindexes: &[Option<i32>]) {
     if ifindexes.iter().all(|i| i.is_none()) {
         return;
@@ -253,6 +256,13 @@ pub(crate) fn notify_listeners(ifindexes: &[Option<i32>]) {
     if NLISTENERS.load(Ordering::Relaxed) == 0 {
         return;
     }
+    notify_listeners_now(ifindexes);
+}
+
+/// [`notify_listeners`] once a listener is known. Process context; takes
+/// `WRITERS`.
+#[inline(never)]
+fn notify_listeners_now(ifindexes: &[Option<i32>]) {
     let reg = WRITERS.lock();
     for l in reg.listeners.iter() {
         // The device's index now: a move to another namespace may have

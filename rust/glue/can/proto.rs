@@ -37,7 +37,7 @@ use crate::glue::bindings;
 use crate::glue::net::Net;
 use crate::glue::netdev::{self as gnetdev, NetDev};
 use crate::glue::skb::Skb;
-use crate::glue::sock::{Proto, ProtoReg, Sock, SockGuard};
+use crate::glue::sock::{Proto, ProtoReg, SetLink, Sock, SockGuard};
 use crate::glue::sync::{CCell, RcuReadGuard, Rtnl, RtnlLocked};
 use crate::rcan_core::rxtable::CanFilterKind;
 use core::marker::PhantomData;
@@ -242,69 +242,87 @@ pub(crate) trait CanProtocol: Proto {
     fn netdev_event(_event: NetdevEvent, _dev: &NetDev, _sockets: &Sockets<'_, Self>) {}
 }
 
-/// A set of socket addresses (`*mut sock` as `usize`): the open sockets of
-/// a protocol module, for its netdevice notifier. Insertion and removal are
-/// O(1) on average (hashed buckets, a few sockets each at 10,000), so
-/// closing one of n sockets does not scan the other n - 1. Protected by
-/// RTNL (in [`ProtoModule::sockets`]).
+/// The open sockets of a protocol module, for its netdevice notifier: a
+/// doubly linked list through the socks themselves ([`SetLink`], inside
+/// each sock object), so a socket joins it at `socket()` and leaves it at
+/// `close()` in O(1), without an allocation and without a scan (mainline
+/// raw.c keeps its `raw_notifier_list` the same way). Protected by RTNL
+/// (in [`ProtoModule::sockets`]).
 ///
 /// # Invariants
 ///
 /// Only [`ProtoModule`] inserts, and only live socks of its protocol;
 /// each is removed by the protocol's `release` (under RTNL) before the
-/// sock can be freed.
+/// sock can be freed. `head` and the links of the socks on the set are
+/// the addresses of socks on the set, or 0.
 pub(crate) struct SockSet<T: CanProtocol> {
-    /// `SOCKSET_BUCKETS` vectors once the first socket arrives (12 KiB,
-    /// `kvmalloc`); a socket is in at most one, once.
-    buckets: kernel::alloc::KVVec<kernel::alloc::KVec<usize>>,
+    /// The first sock's address; 0 for an empty set.
+    head: usize,
     /// Socks of `T` only: a set cannot be swapped with another protocol's.
     _t: PhantomData<fn() -> T>,
 }
 
-/// About 20 sockets per bucket at 10,000 sockets. 4,096 buckets (96 KiB
-/// per protocol module) were tried: no gain in bind + close at 10,000
-/// sockets measured in two sessions (benchmarks.rst, 2026-11-27).
-const SOCKSET_BUCKETS: usize = 512;
-
 impl<T: CanProtocol> SockSet<T> {
     pub(crate) const fn new() -> Self {
         SockSet {
-            buckets: kernel::alloc::KVVec::new(),
+            head: 0,
             _t: PhantomData,
         }
     }
 
-    fn bucket(p: usize) -> usize {
-        // Socks are cache-line aligned: drop the low bits, then a
-        // multiplicative hash.
-        (((p >> 6) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-            >> (64 - SOCKSET_BUCKETS.trailing_zeros())) as usize
+    /// Calls `f` with the set link of the sock at address `p`.
+    ///
+    /// # Safety
+    ///
+    /// `p` is the address of a sock on the set, and RTNL is held.
+    unsafe fn with_link(p: usize, f: impl FnOnce(&SetLink)) {
+        // SAFETY: a sock on the set is a live sock of `T` until its
+        // release takes it off, which needs RTNL, held by our caller.
+        let sk = unsafe { Sock::<T>::from_raw(p as *mut bindings::sock) };
+        f(sk.set_link());
     }
 
-    /// Adds `p`. Process context (allocates). ENOMEM.
-    fn insert(&mut self, p: usize) -> Result {
-        use kernel::alloc::{flags::GFP_KERNEL, KVVec, KVec};
-        if self.buckets.is_empty() {
-            let mut b = KVVec::with_capacity(SOCKSET_BUCKETS, GFP_KERNEL)?;
-            for _ in 0..SOCKSET_BUCKETS {
-                b.push(KVec::new(), GFP_KERNEL)?;
-            }
-            self.buckets = b;
+    /// Adds `sk`, a new sock of `T` not on the set. Process context, RTNL
+    /// held (`&mut self`). Never fails.
+    fn insert(&mut self, sk: &Sock<T>) {
+        let me = sk.as_ptr() as usize;
+        let l = sk.set_link();
+        l.prev.set(0);
+        l.next.set(self.head);
+        if self.head != 0 {
+            // SAFETY: a non-zero head is a sock on the set (type
+            // invariant); RTNL is held (`&mut self`).
+            unsafe { Self::with_link(self.head, |h| h.prev.set(me)) };
         }
-        self.buckets[Self::bucket(p)].push(p, GFP_KERNEL)?;
-        Ok(())
+        // INVARIANT: `sk` is live and stays so until its release removes
+        // it; every link above names a sock on the set.
+        self.head = me;
     }
 
-    /// Removes socket `sk` if present. The protocol's `release` calls this
-    /// under RTNL. A socket is inserted once (at its creation), so the scan
-    /// stops at the first match.
+    /// Removes socket `sk` if it is on the set (a socket whose creation
+    /// failed before it was inserted is not). The protocol's `release`
+    /// calls this under RTNL. O(1).
     pub(crate) fn remove(&mut self, sk: &Sock<T>) {
-        let p = sk.as_ptr() as usize;
-        if let Some(b) = self.buckets.get_mut(Self::bucket(p)) {
-            if let Some(i) = b.iter().position(|&x| x == p) {
-                crate::glue::kvec_swap_remove(b, i);
-            }
+        let me = sk.as_ptr() as usize;
+        let l = sk.set_link();
+        let (prev, next) = (l.prev.get(), l.next.get());
+        if prev == 0 && self.head != me {
+            return;
         }
+        if prev != 0 {
+            // SAFETY: `sk` is on the set (checked above), so its non-zero
+            // neighbours are too (type invariant); RTNL is held (`&mut
+            // self`).
+            unsafe { Self::with_link(prev, |p| p.next.set(next)) };
+        } else {
+            self.head = next;
+        }
+        if next != 0 {
+            // SAFETY: as for `prev`.
+            unsafe { Self::with_link(next, |n| n.prev.set(prev)) };
+        }
+        l.prev.set(0);
+        l.next.set(0);
     }
 }
 
@@ -323,12 +341,16 @@ impl<T: CanProtocol> Sockets<'_, T> {
     /// order. The sockets stay alive during the call: `release` needs RTNL
     /// to leave the set.
     pub(crate) fn for_each(&self, mut f: impl FnMut(&Sock<T>)) {
-        for &p in self.set.buckets.iter().flat_map(|b| b.iter()) {
+        let mut p = self.set.head;
+        while p != 0 {
             // The borrow handed to `f` cannot outlive this call.
             // SAFETY: the set holds only live socks of `T` until their
             // release removes them under RTNL, which our caller holds for
             // 'a (SockSet invariant).
             let sk = unsafe { Sock::<T>::from_raw(p as *mut bindings::sock) };
+            // Read before `f`, which cannot take a sock off the set
+            // anyway (that needs a release, under the RTNL held here).
+            p = sk.set_link().next.get();
             if core::ptr::eq(sk.net().as_ptr(), self.net) {
                 f(&sk);
             }
@@ -437,16 +459,12 @@ impl<T: CanProtocol> ProtoModule<T> {
         }
         // SAFETY: create succeeded, so `sock->sk` is our new sock.
         let sk = unsafe { (*sock).sk } as usize;
-        let mut rtnl = Rtnl::lock();
-        // INVARIANT: a live sock of `T`, removed by its release.
-        if self.sockets.get(&mut rtnl).insert(sk).is_err() {
-            // The socket layer calls release on failure, which copes with
-            // a socket missing from the list.
-            return code::ENOMEM.to_errno();
-        }
-        drop(rtnl);
         // SAFETY: our live new sock of `T`, for this call.
         let sock = unsafe { Sock::<T>::from_raw(sk as *mut bindings::sock) };
+        let mut rtnl = Rtnl::lock();
+        // INVARIANT: a live sock of `T`, removed by its release.
+        self.sockets.get(&mut rtnl).insert(&sock);
+        drop(rtnl);
         if let Some(slot) = T::rx_slot(sock.shared()) {
             // Best effort: without a reservation (ENOMEM: NULL) the first
             // rx_set_locked allocates the receiver itself. The protocol's

@@ -1006,6 +1006,7 @@ impl<R: Receiver> RxTable<R> {
         let prepared = match new {
             Some(spec) if r.first().is_none() => return table.set_first(&mut w, r, &spec),
             Some(spec) => Some((Self::make_reg(&spec)?, None)),
+            None if !keep => return Ok(table.remove_rcv(&mut w, r)),
             None => None,
         };
         table.apply(&mut w, r.data.id(), Some(r), prepared, keep)
@@ -1162,62 +1163,23 @@ impl<R: Receiver> RxTable<R> {
             let Some(rcv) = old else {
                 return Ok(changed);
             };
+            if !keep {
+                return Ok(self.remove_rcv(w, rcv));
+            }
+            // The registration goes, the receiver stays reserved.
             let live = rcv.reg.get();
-            if keep {
-                // The registration goes, the receiver stays reserved.
-                // SAFETY: NULL or the receiver's live registration.
-                if let Some(o) = unsafe { live.as_ref() } {
-                    changed.ifindex[0] = (!o.filters.is_empty()).then_some(o.ifindex);
-                    self.unlink_reg(w, o);
-                    self.shrink_groups(w);
-                    rcv.reg.set(ptr::null());
-                    if !rcv.is_first(o) {
-                        // SAFETY: unlinked and no longer the receiver's
-                        // live registration; the receiver stays (`last`
-                        // false); free_reg frees it.
-                        unsafe { defer(live.cast_mut().cast(), free_reg::<R>) };
-                    }
+            // SAFETY: NULL or the receiver's live registration.
+            if let Some(o) = unsafe { live.as_ref() } {
+                changed.ifindex[0] = (!o.filters.is_empty()).then_some(o.ifindex);
+                self.unlink_reg(w, o);
+                self.shrink_groups(w);
+                rcv.reg.set(ptr::null());
+                if !rcv.is_first(o) {
+                    // SAFETY: unlinked and no longer the receiver's live
+                    // registration; the receiver stays (`last` false);
+                    // free_reg frees it.
+                    unsafe { defer(live.cast_mut().cast(), free_reg::<R>) };
                 }
-                return Ok(changed);
-            }
-            // SAFETY: writer mutex held; `rcv` is on the map.
-            unsafe { List::unlink(rcv) };
-            if live.is_null() {
-                if rcv.first().is_none() {
-                    // Readers reach receivers only through registrations.
-                    // SAFETY: a reserved receiver that never had one: leaked
-                    // from a KBox by `reserve`, now off the map, never
-                    // reachable by readers, so it is freed at once.
-                    drop(unsafe { KBox::from_raw((rcv as *const Rcv<R>).cast_mut()) });
-                } else {
-                    // Its registrations were retired earlier (`keep`):
-                    // readers may still hold the last one until a grace
-                    // period has passed.
-                    // SAFETY: off the map, every registration unlinked:
-                    // unreachable for new readers and writers; free_rcv
-                    // frees it (with its inline registration).
-                    unsafe { defer((rcv as *const Rcv<R>).cast_mut().cast(), free_rcv::<R>) };
-                }
-                return Ok(changed);
-            }
-            // SAFETY: a non-NULL `reg` is the receiver's live registration.
-            let o = unsafe { &*live };
-            changed.ifindex[0] = (!o.filters.is_empty()).then_some(o.ifindex);
-            changed.removed = true;
-            self.unlink_reg(w, o);
-            self.shrink_groups(w);
-            if rcv.is_first(o) {
-                // SAFETY: the receiver's only registration ever (inline) is
-                // unlinked and the receiver is off the map: unreachable
-                // for new readers and writers; free_rcv frees both.
-                unsafe { defer((rcv as *const Rcv<R>).cast_mut().cast(), free_rcv::<R>) };
-            } else {
-                o.last.set(true);
-                // free_reg frees it and the receiver (with its inline
-                // registration, retired earlier).
-                // SAFETY: unlinked above and the receiver is off the map:
-                // unreachable for new readers and writers.
-                unsafe { defer((o as *const Reg<R>).cast_mut().cast(), free_reg::<R>) };
             }
             return Ok(changed);
         };
@@ -1282,6 +1244,57 @@ impl<R: Receiver> RxTable<R> {
         }
         self.shrink_groups(w);
         Ok(changed)
+    }
+
+    /// Removes the receiver `rcv` (on the map) for good: its live
+    /// registration is unlinked, and it is freed at once if it never had
+    /// one, else after a grace period. The removal of [`Self::apply`],
+    /// called directly by [`Self::set_reserved`] for a socket's close, so
+    /// that a close does not go through the general body. Writer mutex
+    /// held (`w` is its data).
+    fn remove_rcv(&self, w: &mut Writer, rcv: &Rcv<R>) -> Changed {
+        let mut changed = Changed::default();
+        let live = rcv.reg.get();
+        // SAFETY: writer mutex held; `rcv` is on the map.
+        unsafe { List::unlink(rcv) };
+        if live.is_null() {
+            if rcv.first().is_none() {
+                // Readers reach receivers only through registrations.
+                // SAFETY: a reserved receiver that never had one: leaked
+                // from a KBox by `reserve`, now off the map, never
+                // reachable by readers, so it is freed at once.
+                drop(unsafe { KBox::from_raw((rcv as *const Rcv<R>).cast_mut()) });
+            } else {
+                // Its registrations were retired earlier (`keep`):
+                // readers may still hold the last one until a grace
+                // period has passed.
+                // SAFETY: off the map, every registration unlinked:
+                // unreachable for new readers and writers; free_rcv
+                // frees it (with its inline registration).
+                unsafe { defer((rcv as *const Rcv<R>).cast_mut().cast(), free_rcv::<R>) };
+            }
+            return changed;
+        }
+        // SAFETY: a non-NULL `reg` is the receiver's live registration.
+        let o = unsafe { &*live };
+        changed.ifindex[0] = (!o.filters.is_empty()).then_some(o.ifindex);
+        changed.removed = true;
+        self.unlink_reg(w, o);
+        self.shrink_groups(w);
+        if rcv.is_first(o) {
+            // SAFETY: the receiver's only registration ever (inline) is
+            // unlinked and the receiver is off the map: unreachable
+            // for new readers and writers; free_rcv frees both.
+            unsafe { defer((rcv as *const Rcv<R>).cast_mut().cast(), free_rcv::<R>) };
+        } else {
+            o.last.set(true);
+            // free_reg frees it and the receiver (with its inline
+            // registration, retired earlier).
+            // SAFETY: unlinked above and the receiver is off the map:
+            // unreachable for new readers and writers.
+            unsafe { defer((o as *const Reg<R>).cast_mut().cast(), free_reg::<R>) };
+        }
+        changed
     }
 
     /// Builds an unlinked, unplaced registration for `spec` (receiver and
@@ -1453,6 +1466,12 @@ impl<R: Receiver> RxTable<R> {
     /// Unlinks every node of `reg` and drops its group counts. Writer
     /// mutex held (`w` is its data).
     fn unlink_reg(&self, w: &mut Writer, reg: &Reg<R>) {
+        if let ([Some(hashed), Some(by_if)], true) = (&reg.nodes.inline, reg.nodes.more.is_empty())
+        {
+            if hashed.kind == Kind::Hashed && by_if.kind == Kind::ByIf {
+                return self.unlink_one(w, hashed, by_if);
+            }
+        }
         for n in reg.nodes.iter() {
             // SAFETY: writer mutex held (`w` is its data); `reg` is linked.
             unsafe { List::unlink(n) };
@@ -1481,6 +1500,45 @@ impl<R: Receiver> RxTable<R> {
                     g.2 -= 1;
                 }
             }
+        }
+    }
+
+    /// [`Self::unlink_reg`] for the shape [`Self::set_first_one`] makes
+    /// (the common close: one hashed filter and the interface entry, no
+    /// other node), the mirror of that fast path: both nodes unlinked
+    /// directly, the key entry reached through the node, with no loop
+    /// over nodes and no list lookup by kind; the same table state as the
+    /// general loop. Writer mutex held (`w` is its data).
+    fn unlink_one(&self, w: &mut Writer, hashed: &Node<R>, by_if: &Node<R>) {
+        // SAFETY: writer mutex held (`w` is its data); both nodes are
+        // linked (the registration is).
+        unsafe {
+            List::unlink(hashed);
+            List::unlink(by_if);
+        }
+        // SAFETY: set when the node was linked; the entry lives while it
+        // has members (writer mutex held).
+        let e = unsafe { &*hashed.key.get() };
+        let left = e.count.get() - 1;
+        e.count.set(left);
+        if left == 0 {
+            // SAFETY: writer mutex held; the entry is linked.
+            unsafe { List::unlink(e) };
+            // SAFETY: unlinked: unreachable for new readers; free_key
+            // frees it.
+            unsafe {
+                defer(
+                    e as *const KeyEntry<R> as *mut bindings::callback_head,
+                    free_key::<R>,
+                )
+            };
+        }
+        if let Some(g) = w
+            .groups
+            .iter_mut()
+            .find(|g| g.0 == hashed.ifindex && g.1 == hashed.mask)
+        {
+            g.2 -= 1;
         }
     }
 
@@ -1518,11 +1576,20 @@ impl<R: Receiver> RxTable<R> {
 
     /// Drops groups without nodes from the published snapshot; on ENOMEM
     /// they stay (a probe of an empty group costs time, not correctness).
-    /// Writer mutex held.
+    /// Writer mutex held. Inline: every removal asks, and usually no group
+    /// is empty, which is a loop over the few groups, without the call
+    /// and the register saves of the rebuild ([`Self::shrink_groups_now`]).
+    #[inline(always)]
     fn shrink_groups(&self, w: &mut Writer) {
-        if !w.groups.iter().any(|g| g.2 == 0) {
+        if w.groups.iter().all(|g| g.2 != 0) {
             return;
         }
+        self.shrink_groups_now(w);
+    }
+
+    /// [`Self::shrink_groups`] once a group without nodes is known.
+    #[inline(never)]
+    fn shrink_groups_now(&self, w: &mut Writer) {
         let Ok(mut kept) = KVec::with_capacity(w.groups.len(), GFP_KERNEL) else {
             return;
         };
