@@ -291,28 +291,6 @@ struct net_device *rcan_netdev_notifier_dev(void *info)
 	return netdev_notifier_info_to_dev(info);
 }
 
-void rcan_dev_stats_tx(struct net_device *dev, unsigned int bytes)
-{
-	DEV_STATS_INC(dev, tx_packets);
-	DEV_STATS_ADD(dev, tx_bytes, bytes);
-}
-
-void rcan_dev_stats_rx(struct net_device *dev, unsigned int bytes)
-{
-	DEV_STATS_INC(dev, rx_packets);
-	DEV_STATS_ADD(dev, rx_bytes, bytes);
-}
-
-void rcan_dev_stats_tx_dropped(struct net_device *dev)
-{
-	DEV_STATS_INC(dev, tx_dropped);
-}
-
-void rcan_dev_stats_rx_dropped(struct net_device *dev)
-{
-	DEV_STATS_INC(dev, rx_dropped);
-}
-
 bool rcan_try_module_get(struct module *mod)
 {
 	return try_module_get(mod);
@@ -406,6 +384,17 @@ void rcan_spinlock_free(spinlock_t *lock)
 	kfree(lock);
 }
 
+/*
+ * rust/glue/lock.rs calls _raw_spin_lock_irqsave and
+ * _raw_spin_unlock_irqrestore on a spinlock_t's raw_spinlock directly
+ * (spin_lock_irqsave without a helper): true only without PREEMPT_RT and
+ * with the raw lock at offset 0.
+ */
+#ifdef CONFIG_PREEMPT_RT
+#error "rcan's Irq lock backend assumes spinlock_t wraps a raw_spinlock (no PREEMPT_RT)"
+#endif
+static_assert(offsetof(spinlock_t, rlock) == 0);
+
 unsigned long rcan_local_irq_save(void)
 {
 	unsigned long flags;
@@ -417,19 +406,6 @@ unsigned long rcan_local_irq_save(void)
 void rcan_local_irq_restore(unsigned long flags)
 {
 	local_irq_restore(flags);
-}
-
-unsigned long rcan_spin_lock_irqsave(spinlock_t *lock)
-{
-	unsigned long flags;
-
-	spin_lock_irqsave(lock, flags);
-	return flags;
-}
-
-void rcan_spin_unlock_irqrestore(spinlock_t *lock, unsigned long flags)
-{
-	spin_unlock_irqrestore(lock, flags);
 }
 
 void rcan_pci_set_drvdata(struct pci_dev *pdev, void *data)
@@ -639,17 +615,6 @@ void rcan_napi_disable(struct napi_struct *napi)
 {
 	napi_disable(napi);
 }
-
-void rcan_napi_schedule(struct napi_struct *napi)
-{
-	napi_schedule(napi);
-}
-
-void rcan_napi_complete_done(struct napi_struct *napi, int work_done)
-{
-	napi_complete_done(napi, work_done);
-}
-
 
 /* skb->tstamp (a union member bindgen names unpredictably), in ns. */
 s64 rcan_skb_tstamp(const struct sk_buff *skb)

@@ -76,10 +76,6 @@ struct net *rcan_init_net(void);
 struct net *rcan_dev_net(const struct net_device *dev);
 void *rcan_net_generic(const struct net *net, unsigned int id);
 struct net_device *rcan_netdev_notifier_dev(void *info);
-void rcan_dev_stats_tx(struct net_device *dev, unsigned int bytes);
-void rcan_dev_stats_rx(struct net_device *dev, unsigned int bytes);
-void rcan_dev_stats_tx_dropped(struct net_device *dev);
-void rcan_dev_stats_rx_dropped(struct net_device *dev);
 
 void rcan_sk_report_error(struct sock *sk, int err);
 
@@ -108,8 +104,6 @@ void rcan_spinlock_free(spinlock_t *lock);
 /* local interrupts off on this CPU (the glue's one-time initialisation) */
 unsigned long rcan_local_irq_save(void);
 void rcan_local_irq_restore(unsigned long flags);
-unsigned long rcan_spin_lock_irqsave(spinlock_t *lock);
-void rcan_spin_unlock_irqrestore(spinlock_t *lock, unsigned long flags);
 
 /* PCI */
 struct pci_dev;
@@ -184,8 +178,6 @@ void rcan_napi_add(struct net_device *dev, struct napi_struct *napi,
 		   int (*poll)(struct napi_struct *, int), int weight);
 void rcan_napi_enable(struct napi_struct *napi);
 void rcan_napi_disable(struct napi_struct *napi);
-void rcan_napi_schedule(struct napi_struct *napi);
-void rcan_napi_complete_done(struct napi_struct *napi, int work_done);
 
 /* procfs (rust/glue/procfs.rs) */
 struct proc_dir_entry;

@@ -167,8 +167,22 @@ impl Driver for LoopDriver {
     fn poll(_dev: &Dev<Self>, p: &Self::Priv, napi: &Napi, budget: usize) -> usize {
         // The lock is not held while a frame is handed up (the guard goes
         // when the closure returns): a receiver may send on this device,
-        // which takes the lock in start_xmit.
-        napi.drain(budget, || p.lock().pop())
+        // which takes the lock in start_xmit. A pop that leaves the FIFO
+        // empty ends the poll without taking the lock once more to find it
+        // empty: a frame pushed after it is followed by its sender's
+        // `napi_schedule`, which, while this poll runs, marks the instance
+        // missed, so `napi_complete_done` polls again (the same handoff as
+        // for a frame pushed after a pop that found the FIFO empty).
+        let mut more = true;
+        napi.drain(budget, || {
+            if !more {
+                return None;
+            }
+            let mut fifo = p.lock();
+            let skb = fifo.pop();
+            more = !fifo.is_empty();
+            skb
+        })
     }
 
     fn start_xmit(skb: Skb, dev: &Dev<Self>, p: &Self::Priv) -> Xmit {
