@@ -1423,6 +1423,9 @@ fn sent_during(ctx: &Ctx, dev: &str, t: Duration) -> Result<u64, String> {
 ///    holds the module: EAGAIN from a non-blocking delete_module); after
 ///    close() it unloads at once.
 fn teardown_bcm_cyclic_jobs(ctx: &mut Ctx) -> TestResult {
+    // Each phase line says when it ended (the test took 20 s alone but
+    // 150-230 s inside the whole debug suite: the phases tell where).
+    let start = Instant::now();
     let ifs = ctx.bcm_ifaces(2)?;
     let debug = crate::ctx::debug_kernel();
     let ival_us = if debug { 250_000 } else { 10_000 };
@@ -1431,11 +1434,17 @@ fn teardown_bcm_cyclic_jobs(ctx: &mut Ctx) -> TestResult {
 
     // 1. close
     let bcm = busy_socket(ifs[0], 0x100, ival_us)?;
+    let made = start.elapsed();
     let before = sent_during(ctx, &dev0, window)?;
+    let t = Instant::now();
     drop(bcm);
+    let closed = t.elapsed();
     thread::sleep(Duration::from_millis(50));
     let after = sent_during(ctx, &dev0, window)?;
-    println!("# close: {before} frames sent in {window:?} before, {after} after");
+    println!(
+        "# close: {before} frames sent in {window:?} before, {after} after (jobs set up at {made:?}, close took {closed:?}, at {:?})",
+        start.elapsed()
+    );
     need(
         before >= u64::from(TEARDOWN_JOBS),
         format!("only {before} frames before close"),
@@ -1465,7 +1474,10 @@ fn teardown_bcm_cyclic_jobs(ctx: &mut Ctx) -> TestResult {
             Err(e) => errs.push(e.raw_os_error().unwrap_or(0)),
         }
     }
-    println!("# ifdown + removal: socket errors {errs:?}");
+    println!(
+        "# ifdown + removal: socket errors {errs:?} (at {:?})",
+        start.elapsed()
+    );
     need(
         errs.last() == Some(&libc::ENODEV),
         format!("socket errors {errs:?}, want ENODEV last"),
@@ -1510,8 +1522,9 @@ fn teardown_bcm_cyclic_jobs(ctx: &mut Ctx) -> TestResult {
     let waited = t0.elapsed();
     let after = sent_during(ctx, &dev0, window)?;
     println!(
-        "# rmmod: {before} frames before, refused while open ({}), {after} after close + rmmod (rmmod went through {waited:?} after close)",
-        busy.err().unwrap_or_default()
+        "# rmmod: {before} frames before, refused while open ({}), {after} after close + rmmod (rmmod went through {waited:?} after close; at {:?})",
+        busy.err().unwrap_or_default(),
+        start.elapsed()
     );
     need(after == 0, format!("{after} frames after rmmod"))
 }
