@@ -543,10 +543,9 @@ impl<T: Driver> Dev<T> {
         if T::NAPI_WEIGHT > 0 {
             // (`napi_schedule` inlined: two exported calls, no C helper.)
             let napi = self.state().napi.get();
-            // SAFETY: the instance was added at registration (NAPI_WEIGHT
-            // > 0) and lives in the private area as long as the device;
-            // `napi_schedule_prep` fails on a disabled instance, so
-            // `__napi_schedule` runs only for one it has just claimed.
+            // SAFETY: added at registration (NAPI_WEIGHT > 0), the instance
+            // lives as long as the device; prep fails on a disabled one, so
+            // `__napi_schedule` runs only for an instance it just claimed.
             if unsafe { bindings::napi_schedule_prep(napi) } {
                 // SAFETY: claimed above (NAPI_STATE_SCHED is ours).
                 unsafe { bindings::__napi_schedule(napi) };
