@@ -18,7 +18,8 @@
 # /proc/stat before and after the timed rounds (cpus-{before,after}-K.txt),
 # and the samples, leaf
 # only, as perf script prints them with the modules still loaded
-# (script-K.txt.gz); prof-frame-split.py turns them into the tables.
+# (script-K.txt.gz); prof-frame-split.py turns them into the tables by
+# category, prof-frame-syms.py by function.
 # Env: N (frames per round, 20480), ROUNDS (3), BATCH (64), PERIOD
 # (cpu-clock period in ns; under icount 1 ns = 1 instruction; 9973),
 # CPU (the CPU the workload is pinned to, 0), PERF=0 (only the timed runs:
