@@ -1476,29 +1476,7 @@ impl<R: Receiver> RxTable<R> {
             // SAFETY: writer mutex held (`w` is its data); `reg` is linked.
             unsafe { List::unlink(n) };
             if n.kind == Kind::Hashed {
-                // SAFETY: set when the node was linked; the entry lives
-                // while it has members (writer mutex held).
-                let e = unsafe { &*n.key.get() };
-                e.count.set(e.count.get() - 1);
-                if e.count.get() == 0 {
-                    // SAFETY: writer mutex held; the entry is linked.
-                    unsafe { List::unlink(e) };
-                    // SAFETY: unlinked: unreachable for new readers;
-                    // free_key frees it.
-                    unsafe {
-                        defer(
-                            e as *const KeyEntry<R> as *mut bindings::callback_head,
-                            free_key::<R>,
-                        )
-                    };
-                }
-                if let Some(g) = w
-                    .groups
-                    .iter_mut()
-                    .find(|g| g.0 == n.ifindex && g.1 == n.mask)
-                {
-                    g.2 -= 1;
-                }
+                Self::leave_key(w, n);
             }
         }
     }
@@ -1516,9 +1494,19 @@ impl<R: Receiver> RxTable<R> {
             List::unlink(hashed);
             List::unlink(by_if);
         }
+        Self::leave_key(w, hashed);
+    }
+
+    /// A hashed node just unlinked leaves its key entry (unlinked, and
+    /// freed after a grace period, when it was the last member) and its
+    /// group's count. Shared by [`Self::unlink_reg`] and
+    /// [`Self::unlink_one`]. Writer mutex held (`w` is its data); `n` was
+    /// linked under it until now.
+    #[inline]
+    fn leave_key(w: &mut Writer, n: &Node<R>) {
         // SAFETY: set when the node was linked; the entry lives while it
         // has members (writer mutex held).
-        let e = unsafe { &*hashed.key.get() };
+        let e = unsafe { &*n.key.get() };
         let left = e.count.get() - 1;
         e.count.set(left);
         if left == 0 {
@@ -1536,7 +1524,7 @@ impl<R: Receiver> RxTable<R> {
         if let Some(g) = w
             .groups
             .iter_mut()
-            .find(|g| g.0 == hashed.ifindex && g.1 == hashed.mask)
+            .find(|g| g.0 == n.ifindex && g.1 == n.mask)
         {
             g.2 -= 1;
         }
