@@ -705,11 +705,16 @@ pub fn summary(c: &Config, s: &Samples, header: &str) -> String {
     for &size in &c.sizes {
         for &iso in &isos {
             for (how, f) in &measures {
+                // Against burst ISO-TP (frame_txtime 0) the bound is the
+                // stack's target (issue 11: kernel CPU per KiB <= 1.5x);
+                // against ISO-TP with its default gap, DSOR's older goal
+                // of no more CPU than ISO-TP.
+                let bound = if iso == Proto::IsotpNoGap { 1.5 } else { 1.0 };
                 let v = match (med(Proto::Dsor, size, None, f), med(iso, size, None, f)) {
                     (Some(d), Some(i)) if i > 0.0 => format!(
-                        "DSOR {d:.0} vs {iso} {i:.0} us/KiB = {:.2}x, want <= 1.00x: target {}",
+                        "DSOR {d:.0} vs {iso} {i:.0} us/KiB = {:.2}x, want <= {bound:.2}x: target {}",
                         d / i,
-                        if d <= i { "met" } else { "missed" }
+                        if d <= bound * i { "met" } else { "missed" }
                     ),
                     _ => "needs both protocols: target not measured".to_string(),
                 };
