@@ -87,8 +87,19 @@ make_debug_root() {
 	local dst=$RCAN_ROOT/target/rcan-debug
 	git -C "$RCAN_ROOT" rev-parse --git-dir > /dev/null 2>&1 || return 0
 	mkdir -p "$dst" || return 1
-	(cd "$RCAN_ROOT" && git ls-files -z --cached --others --exclude-standard |
-		tar --null --ignore-failed-read -T - -cf -) | tar -xf - -C "$dst" || return 1
+	# The copy's file list is kept beside it: a file gone from the
+	# checkout since the last copy is deleted from the copy too, so the
+	# debug build never sees a source the release build no longer has.
+	local files
+	files=$(cd "$RCAN_ROOT" && git ls-files --cached --others --exclude-standard | sort -u) || return 1
+	if [ -f "$dst/.rcan-files" ]; then
+		comm -23 "$dst/.rcan-files" - <<< "$files" | while IFS= read -r f; do
+			rm -f -- "$dst/$f"
+		done
+	fi
+	(cd "$RCAN_ROOT" && tar --ignore-failed-read -T - -cf - <<< "$files") |
+		tar -xf - -C "$dst" || return 1
+	printf '%s\n' "$files" > "$dst/.rcan-files" || return 1
 	[ -L "$dst/target" ] || ln -s .. "$dst/target" || return 1
 	debug_root=$dst
 	debug_in_place=0
