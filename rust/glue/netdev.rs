@@ -289,11 +289,13 @@ unsafe impl Send for DevRef {}
 impl DevRef {
     /// `dev_get_by_index(net, ifindex)`: an interface index means a device
     /// of one namespace (a socket's: [`Sock::net`](super::sock::Sock::net)).
-    /// Process or softirq context.
+    /// Process or softirq context. Called directly (exported), once a
+    /// frame on CAN_RAW's send path.
+    #[inline]
     pub(crate) fn by_index(net: &Net, ifindex: i32) -> Option<DevRef> {
         // SAFETY: `net` is alive for the call; returns a held device or
         // NULL.
-        NonNull::new(unsafe { bindings::rcan_dev_get_by_index(net.as_ptr(), ifindex) }).map(DevRef)
+        NonNull::new(unsafe { bindings::dev_get_by_index(net.as_ptr(), ifindex) }).map(DevRef)
     }
 
     /// `dev_get_by_name(net, name)`. Process or softirq context.
@@ -324,6 +326,12 @@ impl core::ops::Deref for DevRef {
 
 impl Drop for DevRef {
     fn drop(&mut self) {
+        // `dev_put` stays a C helper: it is `static inline`, and with
+        // CONFIG_PCPU_DEV_REFCNT its body is `this_cpu_dec`, a per-CPU
+        // (%gs-relative on x86-64) decrement that the kernel's Rust (6.12)
+        // has no accessor for; open-coding it would take inline assembly
+        // tied to the architecture, SMP and the refcount-tracker options,
+        // for a call and a return a frame.
         // SAFETY: we own one reference (type invariant).
         unsafe { bindings::rcan_dev_put(self.0.as_ptr()) };
     }

@@ -127,6 +127,7 @@ impl Skb {
 
     /// Writes `src` into the headroom just in front of `data` (for
     /// `struct can_skb_priv`); false if the headroom is too small.
+    #[inline]
     pub(crate) fn write_headroom(&mut self, src: &[u8]) -> bool {
         if (src.len() as u64) > u64::from(self.headroom()) {
             return false;
@@ -266,29 +267,57 @@ impl Skb {
 
     /// Appends `len` bytes copied from the user's buffers of `msg`
     /// (`skb_put` + `memcpy_from_msg`). EINVAL if the tailroom is too
-    /// small, EFAULT on a bad user pointer.
+    /// small, EFAULT on a bad user pointer (the bytes are then put but not
+    /// all copied, as with `memcpy_from_msg(skb_put(..))`: the caller
+    /// drops the skb). Process context (the copy may fault and sleep).
     #[inline]
     pub(crate) fn put_from_msg(
         &mut self,
         msg: &mut super::sock::Msg,
         len: usize,
     ) -> kernel::error::Result {
-        // SAFETY: valid skb; reading the tail/end offsets.
-        let tailroom = unsafe {
-            let skb = &*self.as_ptr();
-            if skb.data_len != 0 {
+        // `skb_put` written here (tail and len move by `len`), with the
+        // test that makes `skb_put` call `skb_over_panic` done first
+        // instead: a linear skb (`SKB_LINEAR_ASSERT`) whose tail stays
+        // inside the head; and `check_copy_size`'s `INT_MAX` limit. (Its
+        // object-size test is the tailroom test here; `check_object_size`
+        // is empty without CONFIG_HARDENED_USERCOPY.)
+        // SAFETY: valid skb we own and have not shared (`&mut self`:
+        // nobody else moves its tail); the bounds are checked before
+        // anything moves, so `dst` and the `len` bytes after it lie in the
+        // head buffer (`tail` and `end` are offsets from `head`).
+        let dst = unsafe {
+            let skb = &mut *self.as_ptr();
+            if skb.data_len != 0
+                || len > i32::MAX as usize
+                || len as u64 > u64::from(skb.end.saturating_sub(skb.tail))
+            {
                 return Err(kernel::error::code::EINVAL);
             }
-            skb.end.saturating_sub(skb.tail)
+            let dst = skb.head.add(skb.tail as usize);
+            skb.tail += len as u32;
+            skb.len += len as u32;
+            dst
         };
-        if len as u64 > u64::from(tailroom) {
-            return Err(kernel::error::code::EINVAL);
+        // `memcpy_from_msg`'s `copy_from_iter_full`, its exported body
+        // called directly: a short copy is undone on the iterator
+        // (`iov_iter_revert`) and is EFAULT.
+        // SAFETY: `dst` points to the `len` writable bytes just put (above);
+        // `msg` is the live msghdr of the current sendmsg call, whose
+        // `msg_iter` nobody else advances during the call.
+        let ok = unsafe {
+            let iter = core::ptr::addr_of_mut!((*msg.as_ptr()).msg_iter);
+            let copied = bindings::_copy_from_iter(dst.cast(), len, iter);
+            if copied != len {
+                bindings::iov_iter_revert(iter, copied);
+            }
+            copied == len
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err(kernel::error::code::EFAULT)
         }
-        // SAFETY: tailroom checked above; the helper copies into the
-        // `len` bytes skb_put reserves.
-        let ret =
-            unsafe { bindings::rcan_skb_put_from_msg(self.as_ptr(), msg.as_ptr(), len as i32) };
-        super::to_result(ret).map(|_| ())
     }
 
     /// Copies the socket's priority and mark into the skb, as every

@@ -273,6 +273,8 @@ impl<T: Proto> Sock<T> {
 
     /// Allocates an skb charged to the send buffer, blocking while it is
     /// full unless `nonblock` (then EAGAIN); honours SO_SNDTIMEO.
+    /// Inline: it is a call and an error conversion on every frame sent.
+    #[inline]
     pub(crate) fn alloc_send_skb(&self, size: u32, nonblock: bool) -> Result<Skb> {
         let mut err: ffi::c_int = 0;
         // SAFETY: live sock; `err` is a valid place for the error. This is

@@ -146,11 +146,6 @@ struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp)
 	return n;
 }
 
-int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len)
-{
-	return memcpy_from_msg(skb_put(skb, len), msg, len);
-}
-
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 			       struct msghdr *msg, int size)
 {
@@ -237,11 +232,6 @@ void rcan_dev_hold(struct net_device *dev)
 void rcan_dev_put(struct net_device *dev)
 {
 	dev_put(dev);
-}
-
-struct net_device *rcan_dev_get_by_index(struct net *net, int ifindex)
-{
-	return dev_get_by_index(net, ifindex);
 }
 
 struct net_device *rcan_dev_get_by_name(struct net *net, const char *name)

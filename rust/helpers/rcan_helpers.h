@@ -43,7 +43,6 @@ void rcan_skb_set_tstamp(struct sk_buff *skb, s64 ns);
 bool rcan_dev_nit_active(struct net_device *dev);
 bool rcan_can_skb_tx_prepare(struct sk_buff *skb, struct net_device *dev);
 struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp);
-int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len);
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 			       struct msghdr *msg, int size);
 int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len);
@@ -67,7 +66,6 @@ void rcan_netif_start_queue(struct net_device *dev);
 void rcan_netif_stop_queue(struct net_device *dev);
 void rcan_dev_hold(struct net_device *dev);
 void rcan_dev_put(struct net_device *dev);
-struct net_device *rcan_dev_get_by_index(struct net *net, int ifindex);
 struct net_device *rcan_dev_get_by_name(struct net *net, const char *name);
 struct net_device *rcan_next_can_dev(struct net *net, int after_ifindex);
 
