@@ -379,6 +379,12 @@ impl<T: Proto> Drop for SockGuard<'_, T> {
 }
 
 /// A `struct msghdr` of a sendmsg/recvmsg call.
+///
+/// # Invariants
+///
+/// Made only by the sendmsg and recvmsg trampolines of this file, from
+/// the socket layer's argument: a valid msghdr for the duration of the
+/// call, used by nobody else meanwhile.
 pub(crate) struct Msg(*mut bindings::msghdr);
 
 impl Msg {
@@ -427,12 +433,37 @@ impl Msg {
         super::to_result(ret).map(|_| ())
     }
 
-    /// Copies `src` to the user's buffers; EFAULT on a bad pointer.
+    /// Copies `src` to the user's buffers of a recvmsg (mainline
+    /// `memcpy_to_msg`); EFAULT on a bad pointer or a short copy, and on
+    /// a message whose buffers are a source (a sendmsg's). Process
+    /// context; may fault pages in.
+    ///
+    /// This is the inline `copy_to_iter` written out: its
+    /// `check_copy_size` comes down, for a slice (whose object size is
+    /// its length), to the length fitting an `int`; `_copy_to_iter`
+    /// (exported) would warn and copy nothing into a source iterator,
+    /// which is refused here first.
+    #[inline(always)]
     pub(crate) fn copy_to_user(&mut self, src: &[u8]) -> Result {
-        // SAFETY: valid msghdr; `src` is a readable kernel buffer.
-        let ret =
-            unsafe { bindings::rcan_memcpy_to_msg(self.0, src.as_ptr().cast(), src.len() as i32) };
-        super::to_result(ret).map(|_| ())
+        // SAFETY: `self.0` is the valid msghdr of the current call (Msg is
+        // only made by the sendmsg/recvmsg trampolines from the socket
+        // layer's argument); its iterator is not used by anyone else
+        // during the call.
+        let iter = unsafe { core::ptr::addr_of_mut!((*self.0).msg_iter) };
+        // SAFETY: `iter` is valid (above); plain read of the direction.
+        let source = unsafe { (*iter).data_source };
+        if source || src.len() > i32::MAX as usize {
+            return Err(code::EFAULT);
+        }
+        // SAFETY: `src` is readable for `src.len()` bytes; `iter` is the
+        // message's destination iterator, which `_copy_to_iter` advances
+        // by what it copied.
+        let n = unsafe { bindings::_copy_to_iter(src.as_ptr().cast(), src.len(), iter) };
+        if n == src.len() {
+            Ok(())
+        } else {
+            Err(code::EFAULT)
+        }
     }
 
     /// Copies `len` bytes of `skb` from `offset` to the user's buffers.

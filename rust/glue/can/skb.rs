@@ -208,10 +208,11 @@ pub(crate) fn recvmsg_queued<T: Proto>(
         n
     };
     // A CAN skb holds its frame in its linear part (drivers and pf_can
-    // build it so): copied from there with `memcpy_to_msg`, as mainline's
-    // `raw_recvmsg` does, without the datagram iterator's walk over
-    // fragments (about 70 instructions a frame); a non-linear skb (which
-    // a packet socket could hand in) goes through that walk.
+    // build it so): copied from there with `memcpy_to_msg`'s
+    // `_copy_to_iter`, as mainline's `raw_recvmsg` does, without the
+    // datagram iterator's walk over fragments (about 70 instructions a
+    // frame); a non-linear skb (which a packet socket could hand in) goes
+    // through that walk.
     let head = skb.data();
     let copied = match head.get(..size) {
         Some(bytes) if head.len() == n => msg.copy_to_user(bytes),
