@@ -167,12 +167,6 @@ int rcan_sock_queue_rcv_skb(struct sock *sk, struct sk_buff *skb)
 	return sock_queue_rcv_skb(sk, skb);
 }
 
-void rcan_sock_recv_cmsgs(struct msghdr *msg, struct sock *sk,
-			  struct sk_buff *skb)
-{
-	sock_recv_cmsgs(msg, sk, skb);
-}
-
 void rcan_lock_sock(struct sock *sk)
 {
 	lock_sock(sk);

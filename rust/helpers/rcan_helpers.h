@@ -48,8 +48,6 @@ int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 			       struct msghdr *msg, int size);
 int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len);
 int rcan_sock_queue_rcv_skb(struct sock *sk, struct sk_buff *skb);
-void rcan_sock_recv_cmsgs(struct msghdr *msg, struct sock *sk,
-			  struct sk_buff *skb);
 
 /* sock */
 void rcan_lock_sock(struct sock *sk);

@@ -193,6 +193,12 @@ pub(crate) fn set_rx_meta(skb: &mut Skb, ifindex: i32, flags: u32) {
 /// control messages (timestamps), the source address ([`MIN_NAMELEN`]
 /// bytes) and the recorded flags; returns the bytes copied. Process
 /// context; may sleep (blocking read, SO_RCVTIMEO).
+///
+/// Always inlined, with what it calls on the way of a linear frame
+/// ([`Sock::recv_datagram`], the copy, the control messages' test), into
+/// the protocol's recvmsg and so into the glue's recvmsg trampoline: one
+/// function a frame, as mainline's `raw_recvmsg` is.
+#[inline(always)]
 pub(crate) fn recvmsg_queued<T: Proto>(
     sk: &Sock<T>,
     msg: &mut crate::glue::sock::Msg,
