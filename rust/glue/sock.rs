@@ -241,10 +241,12 @@ impl<T: Proto> Sock<T> {
     /// Queues `skb` on the receive queue (charging the receive buffer) and
     /// wakes readers. Softirq or process context. The skb is freed if the
     /// queue is full.
+    #[inline(always)]
     pub(crate) fn queue_rcv(&self, skb: Skb) -> Result {
         let p = skb.into_raw();
-        // SAFETY: live sock; on success the queue owns the skb.
-        let ret = unsafe { bindings::rcan_sock_queue_rcv_skb(self.sk, p) };
+        // SAFETY: live sock; on success the queue owns the skb. This is
+        // the inline sock_queue_rcv_skb (no drop reason asked for).
+        let ret = unsafe { bindings::sock_queue_rcv_skb_reason(self.sk, p, core::ptr::null_mut()) };
         if ret < 0 {
             // SAFETY: on failure the reference is still ours.
             drop(unsafe { Skb::from_raw(p) });

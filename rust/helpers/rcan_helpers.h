@@ -47,7 +47,6 @@ int rcan_skb_put_from_msg(struct sk_buff *skb, struct msghdr *msg, int len);
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 			       struct msghdr *msg, int size);
 int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len);
-int rcan_sock_queue_rcv_skb(struct sock *sk, struct sk_buff *skb);
 
 /* sock */
 void rcan_lock_sock(struct sock *sk);

@@ -171,6 +171,7 @@ const CB_FLAGS: usize = MIN_NAMELEN;
 /// MSG_CONFIRM) set: mainline keeps the `sockaddr_can` in the cb too
 /// (`raw_rcv`, `bcm_send_to_user`). Any context; the skb is about to be
 /// queued on a socket, whose queue owns the cb from then on.
+#[inline]
 pub(crate) fn set_rx_meta(skb: &mut Skb, ifindex: i32, flags: u32) {
     // Built by constant indices, not `copy_from_slice` (a call into `core`
     // and from there to `memcpy` per slice, on every frame received).
