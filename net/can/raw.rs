@@ -205,7 +205,9 @@ impl CanProtocol for RawProto {
     /// with CAN_RAW_RECV_OWN_MSGS, CAN FD frames only with
     /// CAN_RAW_FD_FRAMES (pf_can hands up only well-formed 16- and 72-byte
     /// frames), MSG_DONTROUTE for frames sent from this host, MSG_CONFIRM
-    /// for frames sent by this socket.
+    /// for frames sent by this socket. Always inlined into the glue's
+    /// receive trampoline (one function a frame, as `raw_rcv`).
+    #[inline(always)]
     fn rx(sk: &S, skb: RxSkb<'_>, cookie: u32) {
         let local = skb.skb().is_local();
         let own = skb.skb().sent_by(sk);

@@ -414,6 +414,7 @@ impl Skb {
 
     /// The socket that sent the skb (`skb->sk`), for identity comparisons
     /// only; NULL for frames from the bus.
+    #[inline]
     fn sk_ptr(&self) -> *mut bindings::sock {
         // SAFETY: valid skb; reading a pointer field.
         unsafe { (*self.as_ptr()).sk }
@@ -422,12 +423,14 @@ impl Skb {
     /// Whether the frame was sent from this host (`skb->sk` set: an echo
     /// of a local socket's frame); false for frames from the bus. Any
     /// context.
+    #[inline]
     pub(crate) fn is_local(&self) -> bool {
         !self.sk_ptr().is_null()
     }
 
     /// Whether socket `sk` sent this frame (`skb->sk == sk`), by identity;
     /// the socket is not dereferenced. Any context.
+    #[inline]
     pub(crate) fn sent_by<T: super::sock::Proto>(&self, sk: &super::sock::Sock<T>) -> bool {
         core::ptr::eq(self.sk_ptr(), sk.as_ptr())
     }
@@ -717,6 +720,7 @@ impl Skb {
     }
 
     /// ifindex of the device the skb arrived on / leaves by (0 if none).
+    #[inline]
     pub(crate) fn ifindex(&self) -> i32 {
         // SAFETY: valid skb; `dev` is NULL or a device kept alive by the
         // path that handed us the skb (receive path or transmit path).

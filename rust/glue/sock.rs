@@ -241,10 +241,12 @@ impl<T: Proto> Sock<T> {
     /// Queues `skb` on the receive queue (charging the receive buffer) and
     /// wakes readers. Softirq or process context. The skb is freed if the
     /// queue is full.
+    #[inline(always)]
     pub(crate) fn queue_rcv(&self, skb: Skb) -> Result {
         let p = skb.into_raw();
-        // SAFETY: live sock; on success the queue owns the skb.
-        let ret = unsafe { bindings::rcan_sock_queue_rcv_skb(self.sk, p) };
+        // SAFETY: live sock; on success the queue owns the skb. This is
+        // the inline sock_queue_rcv_skb (no drop reason asked for).
+        let ret = unsafe { bindings::sock_queue_rcv_skb_reason(self.sk, p, core::ptr::null_mut()) };
         if ret < 0 {
             // SAFETY: on failure the reference is still ours.
             drop(unsafe { Skb::from_raw(p) });
@@ -255,6 +257,7 @@ impl<T: Proto> Sock<T> {
 
     /// Waits for and dequeues one skb (`skb_recv_datagram`), honouring
     /// MSG_DONTWAIT, MSG_PEEK, SO_RCVTIMEO and pending `sk_err`.
+    #[inline(always)]
     pub(crate) fn recv_datagram(&self, flags: i32) -> Result<Skb> {
         let mut err: ffi::c_int = 0;
         // SAFETY: live sock.
@@ -265,6 +268,7 @@ impl<T: Proto> Sock<T> {
 
     /// Frees an skb obtained from [`Sock::recv_datagram`]
     /// (`skb_free_datagram`).
+    #[inline(always)]
     pub(crate) fn free_datagram(&self, skb: Skb) {
         // SAFETY: live sock; `skb` came from skb_recv_datagram on it and we
         // give its reference away.
@@ -381,6 +385,12 @@ impl<T: Proto> Drop for SockGuard<'_, T> {
 }
 
 /// A `struct msghdr` of a sendmsg/recvmsg call.
+///
+/// # Invariants
+///
+/// Made only by the sendmsg and recvmsg trampolines of this file, from
+/// the socket layer's argument: a valid msghdr for the duration of the
+/// call, used by nobody else meanwhile.
 pub(crate) struct Msg(*mut bindings::msghdr);
 
 impl Msg {
@@ -429,12 +439,37 @@ impl Msg {
         super::to_result(ret).map(|_| ())
     }
 
-    /// Copies `src` to the user's buffers; EFAULT on a bad pointer.
+    /// Copies `src` to the user's buffers of a recvmsg (mainline
+    /// `memcpy_to_msg`); EFAULT on a bad pointer or a short copy, and on
+    /// a message whose buffers are a source (a sendmsg's). Process
+    /// context; may fault pages in.
+    ///
+    /// This is the inline `copy_to_iter` written out: its
+    /// `check_copy_size` comes down, for a slice (whose object size is
+    /// its length), to the length fitting an `int`; `_copy_to_iter`
+    /// (exported) would warn and copy nothing into a source iterator,
+    /// which is refused here first.
+    #[inline(always)]
     pub(crate) fn copy_to_user(&mut self, src: &[u8]) -> Result {
-        // SAFETY: valid msghdr; `src` is a readable kernel buffer.
-        let ret =
-            unsafe { bindings::rcan_memcpy_to_msg(self.0, src.as_ptr().cast(), src.len() as i32) };
-        super::to_result(ret).map(|_| ())
+        // SAFETY: `self.0` is the valid msghdr of the current call (Msg is
+        // only made by the sendmsg/recvmsg trampolines from the socket
+        // layer's argument); its iterator is not used by anyone else
+        // during the call.
+        let iter = unsafe { core::ptr::addr_of_mut!((*self.0).msg_iter) };
+        // SAFETY: `iter` is valid (above); plain read of the direction.
+        let source = unsafe { (*iter).data_source };
+        if source || src.len() > i32::MAX as usize {
+            return Err(code::EFAULT);
+        }
+        // SAFETY: `src` is readable for `src.len()` bytes; `iter` is the
+        // message's destination iterator, which `_copy_to_iter` advances
+        // by what it copied.
+        let n = unsafe { bindings::_copy_to_iter(src.as_ptr().cast(), src.len(), iter) };
+        if n == src.len() {
+            Ok(())
+        } else {
+            Err(code::EFAULT)
+        }
     }
 
     /// Copies `len` bytes of `skb` from `offset` to the user's buffers.
@@ -453,15 +488,65 @@ impl Msg {
     }
 
     /// Adds `flag` (e.g. MSG_TRUNC) to the flags returned to the user.
+    #[inline]
     pub(crate) fn add_flags(&mut self, flag: u32) {
         // SAFETY: valid msghdr.
         unsafe { (*self.0).msg_flags |= flag };
     }
 
-    /// Timestamps and other control messages the socket asked for.
+    /// Timestamps and other control messages the socket asked for
+    /// (mainline's inline `sock_recv_cmsgs`, written out: its test reads
+    /// `sk_flags` and `sk_tsflags` in place, so `__sock_recv_cmsgs` is
+    /// called only when SO_TIMESTAMP*, SO_RXQ_OVFL, SO_RCVMARK or
+    /// SO_TIMESTAMPING asks for a message; otherwise only the socket's
+    /// last-packet stamp (`sk_stamp`, for SIOCGSTAMP) is kept as the
+    /// kernel keeps it). Process context.
+    #[inline(always)]
     pub(crate) fn recv_cmsgs<T: Proto>(&mut self, sk: &Sock<T>, skb: &Skb) {
-        // SAFETY: valid msghdr, sock and skb.
-        unsafe { bindings::rcan_sock_recv_cmsgs(self.0, sk.as_ptr(), skb.as_ptr()) };
+        const FLAGS_RECV_CMSGS: ffi::c_ulong = (1 << bindings::sock_flags_SOCK_RXQ_OVFL)
+            | (1 << bindings::sock_flags_SOCK_RCVTSTAMP)
+            | (1 << bindings::sock_flags_SOCK_RCVMARK);
+        const TSFLAGS_ANY: u32 =
+            bindings::SOF_TIMESTAMPING_SOFTWARE | bindings::SOF_TIMESTAMPING_RAW_HARDWARE;
+        const SOCK_TIMESTAMP: ffi::c_ulong = 1 << bindings::sock_flags_SOCK_TIMESTAMP;
+        /// `SK_DEFAULT_STAMP`: no packet stamped yet.
+        const SK_DEFAULT_STAMP: i64 = -1_000_000_000;
+        // `sk_stamp` is read and written with READ_ONCE/WRITE_ONCE on
+        // 64-bit kernels only (32-bit ones take a seqlock).
+        const _: () = assert!(usize::BITS == 64);
+        let sk = sk.as_ptr();
+        // SAFETY: `sk` is live (a `Sock` is only made for a sock the
+        // caller holds: here the recvmsg's own socket). READ_ONCE of the
+        // two flag words, as the kernel's inline reads them (setsockopt
+        // may change them concurrently).
+        let (flags, tsflags) = unsafe {
+            (
+                core::ptr::read_volatile(core::ptr::addr_of!(
+                    (*sk).__sk_common.__bindgen_anon_5.skc_flags
+                )),
+                core::ptr::read_volatile(core::ptr::addr_of!((*sk).sk_tsflags)),
+            )
+        };
+        if flags & FLAGS_RECV_CMSGS != 0 || tsflags & TSFLAGS_ANY != 0 {
+            // SAFETY: the valid msghdr of the current recvmsg (Msg's
+            // invariant), a live sock and a valid skb we hold.
+            unsafe { bindings::__sock_recv_cmsgs(self.0, sk, skb.as_ptr()) };
+            return;
+        }
+        // SAFETY: live sock (above); `sk_stamp` is a plain 64-bit field
+        // that the kernel reads and writes with READ_ONCE/WRITE_ONCE.
+        let stamp = unsafe { core::ptr::addr_of_mut!((*sk).sk_stamp) };
+        if flags & SOCK_TIMESTAMP != 0 {
+            let t = skb.tstamp();
+            // SAFETY: `stamp` is valid (above); WRITE_ONCE.
+            unsafe { core::ptr::write_volatile(stamp, t) };
+            return;
+        }
+        // SAFETY: `stamp` is valid (above); READ_ONCE.
+        if unsafe { core::ptr::read_volatile(stamp) } == SK_DEFAULT_STAMP {
+            // SAFETY: as above; WRITE_ONCE.
+            unsafe { core::ptr::write_volatile(stamp, 0) };
+        }
     }
 }
 

@@ -157,22 +157,6 @@ int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len)
 	return memcpy_from_msg(data, msg, len);
 }
 
-int rcan_memcpy_to_msg(struct msghdr *msg, const void *data, int len)
-{
-	return memcpy_to_msg(msg, (void *)data, len);
-}
-
-int rcan_sock_queue_rcv_skb(struct sock *sk, struct sk_buff *skb)
-{
-	return sock_queue_rcv_skb(sk, skb);
-}
-
-void rcan_sock_recv_cmsgs(struct msghdr *msg, struct sock *sk,
-			  struct sk_buff *skb)
-{
-	sock_recv_cmsgs(msg, sk, skb);
-}
-
 void rcan_lock_sock(struct sock *sk)
 {
 	lock_sock(sk);

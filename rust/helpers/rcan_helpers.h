@@ -46,10 +46,6 @@ struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp);
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 			       struct msghdr *msg, int size);
 int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len);
-int rcan_memcpy_to_msg(struct msghdr *msg, const void *data, int len);
-int rcan_sock_queue_rcv_skb(struct sock *sk, struct sk_buff *skb);
-void rcan_sock_recv_cmsgs(struct msghdr *msg, struct sock *sk,
-			  struct sk_buff *skb);
 
 /* sock */
 void rcan_lock_sock(struct sock *sk);

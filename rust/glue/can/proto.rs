@@ -70,6 +70,7 @@ pub(crate) enum RxSkb<'a> {
 
 impl RxSkb<'_> {
     /// The frame, to look at.
+    #[inline]
     pub(crate) fn skb(&self) -> &Skb {
         match self {
             RxSkb::Shared(s) => s,
@@ -79,6 +80,7 @@ impl RxSkb<'_> {
 
     /// An skb this receiver owns, to queue: the one handed over, or a
     /// clone (GFP_ATOMIC; `None` if that fails). Any context.
+    #[inline]
     pub(crate) fn into_owned(self) -> Option<Skb> {
         match self {
             RxSkb::Shared(s) => s.clone_atomic(),
@@ -88,6 +90,7 @@ impl RxSkb<'_> {
 
     /// The receiver has used the frame without keeping it: an owned
     /// reference is freed as consumed (not counted as a drop).
+    #[inline]
     pub(crate) fn done(self) {
         if let RxSkb::Owned(s) = self {
             s.consume();

@@ -173,6 +173,7 @@ const CB_FLAGS: usize = MIN_NAMELEN;
 /// MSG_CONFIRM) set: mainline keeps the `sockaddr_can` in the cb too
 /// (`raw_rcv`, `bcm_send_to_user`). Any context; the skb is about to be
 /// queued on a socket, whose queue owns the cb from then on.
+#[inline]
 pub(crate) fn set_rx_meta(skb: &mut Skb, ifindex: i32, flags: u32) {
     // Built by constant indices, not `copy_from_slice` (a call into `core`
     // and from there to `memcpy` per slice, on every frame received).
@@ -195,6 +196,12 @@ pub(crate) fn set_rx_meta(skb: &mut Skb, ifindex: i32, flags: u32) {
 /// control messages (timestamps), the source address ([`MIN_NAMELEN`]
 /// bytes) and the recorded flags; returns the bytes copied. Process
 /// context; may sleep (blocking read, SO_RCVTIMEO).
+///
+/// Always inlined, with what it calls on the way of a linear frame
+/// ([`Sock::recv_datagram`], the copy, the control messages' test), into
+/// the protocol's recvmsg and so into the glue's recvmsg trampoline: one
+/// function a frame, as mainline's `raw_recvmsg` is.
+#[inline(always)]
 pub(crate) fn recvmsg_queued<T: Proto>(
     sk: &Sock<T>,
     msg: &mut crate::glue::sock::Msg,
@@ -210,10 +217,11 @@ pub(crate) fn recvmsg_queued<T: Proto>(
         n
     };
     // A CAN skb holds its frame in its linear part (drivers and pf_can
-    // build it so): copied from there with `memcpy_to_msg`, as mainline's
-    // `raw_recvmsg` does, without the datagram iterator's walk over
-    // fragments (about 70 instructions a frame); a non-linear skb (which
-    // a packet socket could hand in) goes through that walk.
+    // build it so): copied from there with `memcpy_to_msg`'s
+    // `_copy_to_iter`, as mainline's `raw_recvmsg` does, without the
+    // datagram iterator's walk over fragments (about 70 instructions a
+    // frame); a non-linear skb (which a packet socket could hand in) goes
+    // through that walk.
     let head = skb.data();
     let copied = match head.get(..size) {
         Some(bytes) if head.len() == n => msg.copy_to_user(bytes),
