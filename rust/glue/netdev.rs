@@ -467,6 +467,7 @@ impl Napi {
     /// empty: the lock is held for one `pop()` only and released before
     /// the frame goes up, so the protocol handlers run unlocked, with
     /// interrupts on, and may send on the same device.
+    #[inline]
     pub(crate) fn drain(&self, budget: usize, mut pop: impl FnMut() -> Option<Skb>) -> usize {
         let mut done = 0;
         while done < budget {
