@@ -248,30 +248,30 @@ impl Family for PfCan {
     /// `canfd_rcv` / `can_rcv`). Receivers get both flavours; each protocol
     /// takes what it understands (CAN_RAW FD frames only with
     /// CAN_RAW_FD_FRAMES, the others classic frames only).
-    fn rcv(skb: Skb, dev: &NetDev, fd: bool) -> bool {
+    #[inline(always)]
+    fn rcv(g: &RcuReadGuard, skb: Skb, dev: &NetDev, fd: bool) -> bool {
         let Some(can_id) = valid_frame(&skb, dev, fd) else {
             drop(skb); // counted as a drop
             return false;
         };
-        let g = RcuReadGuard::new();
         // The table of the device's namespace: only its receivers see the
         // frame.
-        let Some(table) = table(dev.net(&g)) else {
+        let Some(table) = table(dev.net(g)) else {
             skb.consume();
             return true;
         };
         let mut pending: Option<(&Target, u32)> = None;
-        table.for_each_match(&g, dev.ifindex(), can_id, |t, cookie| {
+        table.for_each_match(g, dev.ifindex(), can_id, |t, cookie| {
             if let Some((prev, c)) = pending.replace((t, cookie)) {
                 // The receiver was found in the table inside our read-side
                 // section, so it (with the sock reference it holds, or a
                 // kernel receiver's data, whose removal waits for a grace
                 // period) lives until the section ends.
-                prev.deliver(&g, &skb, c);
+                prev.deliver(g, &skb, c);
             }
         });
         match pending {
-            Some((last, c)) => last.deliver_last(&g, skb, c),
+            Some((last, c)) => last.deliver_last(g, skb, c),
             None => skb.consume(),
         }
         true

@@ -33,6 +33,7 @@ tmp=$(mktemp)
 	--allowlist-function "$allow_fn" \
 	--allowlist-type '(napi_struct|net_device_flags|sock_type|netdev_priv_flags|sock|socket|sk_buff|net_device|proto|proto_ops|net_proto_family|packet_type|can_frame|can_skb_priv|notifier_block|netdev_notifier_info|msghdr|sockaddr|hrtimer|pci_dev|pci_driver|pci_device_id|callback_head|rtnl_link_stats64|ifreq|pernet_operations)' \
 	--allowlist-var '(AF|PF|SOCK|SOL|SO|MSG|IFF|ARPHRD|ETH_P|CAN|NETDEV|NET_RX|NET_XMIT|NETDEV_TX|PACKET|CHECKSUM|E[A-Z0-9]+|HRTIMER|CLOCK|IRQF|SIOC|NOTIFY|SOCK_RCU|RCAN|NET_NAME|CONFIG_PROVE|__GFP|___GFP)_?.*' \
+	--allowlist-var init_net \
 	-o "$tmp" -- $cflags -DMODULE '-DKBUILD_MODNAME="rcan"' \
 	'-DKBUILD_BASENAME="rcan"' -D__KBUILD_MODNAME=kmod_rcan)
 # Constants the kernel hides behind RUST_CONST_HELPER_ names get their

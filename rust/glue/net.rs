@@ -45,9 +45,9 @@ impl Net {
     }
 
     /// Whether this is the initial namespace (`net_eq(net, &init_net)`).
+    #[inline]
     pub(crate) fn is_init(&self) -> bool {
-        // SAFETY: a valid namespace (type invariant).
-        unsafe { bindings::rcan_net_is_init(self.as_ptr()) }
+        core::ptr::eq(self.as_ptr(), &raw const bindings::init_net)
     }
 }
 

@@ -92,10 +92,12 @@ impl NetDev {
     /// The device's namespace (`dev_net`), for the read-side section `_g`:
     /// a device moves between namespaces only under RTNL, and a namespace
     /// it left is freed only after a grace period. Any context.
+    #[inline]
     pub(crate) fn net<'g>(&self, _g: &'g RcuReadGuard) -> &'g Net {
-        // SAFETY: a valid device; its namespace stays valid until `_g`
-        // ends (above).
-        unsafe { Net::from_raw(bindings::rcan_dev_net(self.as_ptr())) }
+        // SAFETY: a valid device; `nd_net.net` is what `dev_net` reads
+        // (`read_pnet`, CONFIG_NET_NS), and that namespace stays valid
+        // until `_g` ends (above).
+        unsafe { Net::from_raw((*self.as_ptr()).nd_net.net) }
     }
 
     /// Whether the device is in namespace `net` now. Any context.
@@ -473,6 +475,7 @@ impl Napi {
     /// empty: the lock is held for one `pop()` only and released before
     /// the frame goes up, so the protocol handlers run unlocked, with
     /// interrupts on, and may send on the same device.
+    #[inline]
     pub(crate) fn drain(&self, budget: usize, mut pop: impl FnMut() -> Option<Skb>) -> usize {
         let mut done = 0;
         while done < budget {

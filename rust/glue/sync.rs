@@ -29,6 +29,21 @@ impl RcuReadGuard {
         unsafe { bindings::rcan_rcu_read_lock() };
         RcuReadGuard(PhantomData)
     }
+
+    /// The read-side section the caller is already in, as a guard that
+    /// does not end it when dropped: a callback the core runs inside its
+    /// own `rcu_read_lock()` (a packet handler) hands this to code that
+    /// asks for a guard, and saves the nested lock and unlock (two calls
+    /// into the RCU core under PREEMPT_RCU).
+    ///
+    /// # Safety
+    ///
+    /// The caller is inside an RCU read-side critical section that lasts
+    /// at least as long as the returned value, on this CPU.
+    #[inline]
+    pub(crate) unsafe fn assume_held() -> core::mem::ManuallyDrop<Self> {
+        core::mem::ManuallyDrop::new(RcuReadGuard(PhantomData))
+    }
 }
 
 impl Drop for RcuReadGuard {

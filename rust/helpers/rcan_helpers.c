@@ -193,11 +193,6 @@ struct net *rcan_sock_net(const struct sock *sk)
 	return sock_net(sk);
 }
 
-bool rcan_net_is_init(const struct net *net)
-{
-	return net_eq(net, &init_net);
-}
-
 void rcan_netif_start_queue(struct net_device *dev)
 {
 	netif_start_queue(dev);
@@ -226,11 +221,6 @@ struct net_device *rcan_dev_get_by_name(struct net *net, const char *name)
 struct net *rcan_init_net(void)
 {
 	return &init_net;
-}
-
-struct net *rcan_dev_net(const struct net_device *dev)
-{
-	return dev_net(dev);
 }
 
 void *rcan_net_generic(const struct net *net, unsigned int id)

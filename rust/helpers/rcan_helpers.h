@@ -55,7 +55,6 @@ void rcan_sock_orphan(struct sock *sk);
 void rcan_sk_purge_queues(struct sock *sk);
 void rcan_release_sock(struct sock *sk);
 struct net *rcan_sock_net(const struct sock *sk);
-bool rcan_net_is_init(const struct net *net);
 
 /* net_device */
 void rcan_netif_start_queue(struct net_device *dev);
@@ -67,7 +66,6 @@ struct net_device *rcan_next_can_dev(struct net *net, int after_ifindex);
 
 /* network namespaces */
 struct net *rcan_init_net(void);
-struct net *rcan_dev_net(const struct net_device *dev);
 void *rcan_net_generic(const struct net *net, unsigned int id);
 struct net_device *rcan_netdev_notifier_dev(void *info);
 

@@ -83,9 +83,10 @@ pub(crate) trait Family: 'static {
     fn send(skb: Skb, dev: &NetDev, loopback: bool) -> Result;
     /// The ETH_P_CAN (`fd` false) and ETH_P_CANFD (`fd` true) packet
     /// handlers: a frame received on `dev`. NET_RX softirq, inside the
-    /// core's RCU read-side section. Returns false if the frame was
-    /// dropped as malformed.
-    fn rcv(skb: Skb, dev: &NetDev, fd: bool) -> bool;
+    /// core's RCU read-side section, which `rcu` stands for (the handler
+    /// takes no nested one). Returns false if the frame was dropped as
+    /// malformed.
+    fn rcv(rcu: &RcuReadGuard, skb: Skb, dev: &NetDev, fd: bool) -> bool;
 }
 
 /// A registration request as a receiver made it: its filters as the
@@ -647,7 +648,9 @@ unsafe extern "C" fn canfd_rcv(
 ///
 /// # Safety
 ///
-/// As [`can_rcv`].
+/// As [`can_rcv`]. One copy for both handlers, with the family's `rcv`
+/// and the table's lookup inlined into it.
+#[inline(never)]
 unsafe fn rcv_common(
     skb: *mut bindings::sk_buff,
     dev: *mut bindings::net_device,
@@ -661,7 +664,11 @@ unsafe fn rcv_common(
             None => return bindings::NET_RX_DROP as ffi::c_int,
         }
     };
-    if Impl::rcv(skb, dev, fd) {
+    // SAFETY: the core calls packet handlers inside its rcu_read_lock()
+    // (netif_receive_skb_internal, netif_receive_skb_list_internal,
+    // process_backlog, netif_receive_skb_core), which lasts past our return.
+    let rcu = unsafe { RcuReadGuard::assume_held() };
+    if Impl::rcv(&rcu, skb, dev, fd) {
         bindings::NET_RX_SUCCESS as ffi::c_int
     } else {
         bindings::NET_RX_DROP as ffi::c_int

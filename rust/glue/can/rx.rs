@@ -822,6 +822,7 @@ impl<R: Receiver> RxTable<R> {
     /// frame `can_id` received on `ifindex`. NET_RX softirq context only
     /// (the per-CPU marks assume one frame at a time per CPU); `f` runs
     /// inside the read-side section of `g`.
+    #[inline(always)]
     pub(crate) fn for_each_match<'g>(
         &'g self,
         g: &'g RcuReadGuard,
