@@ -282,10 +282,11 @@ impl Skb {
         // inside the head; and `check_copy_size`'s `INT_MAX` limit. (Its
         // object-size test is the tailroom test here; `check_object_size`
         // is empty without CONFIG_HARDENED_USERCOPY.)
-        // SAFETY: valid skb we own and have not shared (`&mut self`:
-        // nobody else moves its tail); the bounds are checked before
-        // anything moves, so `dst` and the `len` bytes after it lie in the
-        // head buffer (`tail` and `end` are offsets from `head`).
+        // A valid skb we own and have not shared (`&mut self`: nobody
+        // else moves its tail).
+        // SAFETY: as just said; the bounds are checked before anything
+        // moves, so `dst` and the `len` bytes after it lie in the head
+        // buffer (`tail` and `end` are offsets from `head`).
         let dst = unsafe {
             let skb = &mut *self.as_ptr();
             if skb.data_len != 0

@@ -451,10 +451,10 @@ impl Msg {
     /// which is refused here first.
     #[inline(always)]
     pub(crate) fn copy_to_user(&mut self, src: &[u8]) -> Result {
-        // SAFETY: `self.0` is the valid msghdr of the current call (Msg is
-        // only made by the sendmsg/recvmsg trampolines from the socket
-        // layer's argument); its iterator is not used by anyone else
-        // during the call.
+        // Msg is only made by the sendmsg/recvmsg trampolines from the
+        // socket layer's argument.
+        // SAFETY: so `self.0` is the valid msghdr of the current call; its
+        // iterator is not used by anyone else during the call.
         let iter = unsafe { core::ptr::addr_of_mut!((*self.0).msg_iter) };
         // SAFETY: `iter` is valid (above); plain read of the direction.
         let source = unsafe { (*iter).data_source };
@@ -515,10 +515,10 @@ impl Msg {
         // 64-bit kernels only (32-bit ones take a seqlock).
         const _: () = assert!(usize::BITS == 64);
         let sk = sk.as_ptr();
+        // READ_ONCE of the two flag words, as the kernel's inline reads
+        // them (setsockopt may change them concurrently).
         // SAFETY: `sk` is live (a `Sock` is only made for a sock the
-        // caller holds: here the recvmsg's own socket). READ_ONCE of the
-        // two flag words, as the kernel's inline reads them (setsockopt
-        // may change them concurrently).
+        // caller holds: here the recvmsg's own socket).
         let (flags, tsflags) = unsafe {
             (
                 core::ptr::read_volatile(core::ptr::addr_of!(
