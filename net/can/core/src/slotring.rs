@@ -25,11 +25,12 @@
 //! device's TX lock; its consumer is the NAPI poll, which never runs
 //! concurrently with itself).
 //!
-//! The storage is the caller's (`S`, a slice of atomic words: a `KVec` in
-//! the kernel, an array or `Vec` in the tests), so this file stays
+//! The storage is the caller's (`S`, anything that derefs to a slice of
+//! atomic words: a `KVec` in the kernel, a `Vec` in the tests), so this file stays
 //! allocation-free.
 
 use core::num::NonZeroUsize;
+use core::ops::Deref;
 use core::sync::atomic::{AtomicUsize, Ordering};
 
 /// A ring of `slots.len()` (a power of two) token slots with the
@@ -43,11 +44,11 @@ pub struct SlotRing<S> {
     tail: AtomicUsize,
 }
 
-impl<S: AsRef<[AtomicUsize]>> SlotRing<S> {
+impl<S: Deref<Target = [AtomicUsize]>> SlotRing<S> {
     /// A ring over `slots`, which must all be 0 (empty) and be a power of
     /// two in number (the index wraps by a mask); `None` otherwise.
     pub fn new(slots: S) -> Option<Self> {
-        let s = slots.as_ref();
+        let s: &[AtomicUsize] = &slots;
         if !s.len().is_power_of_two() || s.iter().any(|v| v.load(Ordering::Relaxed) != 0) {
             return None;
         }
@@ -61,7 +62,7 @@ impl<S: AsRef<[AtomicUsize]>> SlotRing<S> {
     /// The slot for index `i`.
     #[inline]
     fn slot(&self, i: usize) -> &AtomicUsize {
-        let s = self.slots.as_ref();
+        let s: &[AtomicUsize] = &self.slots;
         // In range: the length is a non-zero power of two (new).
         &s[i & (s.len() - 1)]
     }
@@ -108,14 +109,13 @@ impl<S: AsRef<[AtomicUsize]>> SlotRing<S> {
     /// come in slot order, not FIFO order.
     pub fn take_any(&self) -> Option<NonZeroUsize> {
         self.slots
-            .as_ref()
             .iter()
             .find_map(|s| NonZeroUsize::new(s.swap(0, Ordering::Acquire)))
     }
 
     /// The number of slots.
     pub fn capacity(&self) -> usize {
-        self.slots.as_ref().len()
+        self.slots.len()
     }
 }
 
