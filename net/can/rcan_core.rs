@@ -40,6 +40,8 @@ pub(crate) mod frame;
 pub(crate) mod ring;
 #[path = "core/src/rxtable.rs"]
 pub(crate) mod rxtable;
+#[path = "core/src/slotring.rs"]
+pub(crate) mod slotring;
 #[path = "core/src/sockaddr.rs"]
 pub(crate) mod sockaddr;
 #[path = "core/src/timesvc.rs"]

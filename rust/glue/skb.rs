@@ -33,6 +33,28 @@ impl Skb {
     }
 
     /// Gives the reference away (to a C function that consumes it).
+    /// Gives up our reference as the skb's address (exposed, never 0):
+    /// what a slot of a lock-free queue holds ([`super::ring::SkbRing`]).
+    /// [`Skb::from_addr`] takes it back.
+    #[inline]
+    pub(crate) fn into_addr(self) -> core::num::NonZeroUsize {
+        let a = self.0.expose_provenance();
+        core::mem::forget(self);
+        a
+    }
+
+    /// Takes back the reference [`Skb::into_addr`] gave up.
+    ///
+    /// # Safety
+    ///
+    /// `addr` came from [`Skb::into_addr`] and is taken back once.
+    #[inline]
+    pub(crate) unsafe fn from_addr(addr: core::num::NonZeroUsize) -> Skb {
+        // INVARIANT: the address of an skb whose reference `into_addr`
+        // gave up, taken back once (the safety contract).
+        Skb(NonNull::with_exposed_provenance(addr))
+    }
+
     pub(crate) fn into_raw(self) -> *mut bindings::sk_buff {
         let p = self.0.as_ptr();
         core::mem::forget(self);

@@ -38,10 +38,13 @@
 //!
 //! Contexts: `start_xmit` runs with BH disabled under the device's TX lock
 //! (so the per-device counters need no lock of their own); the receive
-//! FIFO (a [`Ring`] of `FIFO_LEN` skbs) is protected by its own spinlock, taken by `start_xmit`,
-//! the NAPI poll (NET_RX softirq) and `stop` (process context, under RTNL,
-//! after the poll was disabled); `open`/`stop` run in process context
-//! under RTNL. `verbose` and `droprate` may change at any time through
+//! FIFO (an [`SkbRing`] of `FIFO_LEN` skbs) takes no lock: it has one
+//! producer, `start_xmit` (serialised by the TX lock, as canloop sets no
+//! LLTX), and one consumer at a time, the NAPI poll (NET_RX softirq, never
+//! concurrent with itself) or `stop` (process context, under RTNL, after
+//! the core stopped transmissions and disabled the poll), which may run
+//! on two CPUs at once (the ring's slot protocol is made for that);
+//! `open`/`stop` run in process context under RTNL. `verbose` and `droprate` may change at any time through
 //! sysfs: `start_xmit` reads them from Rust atomics ([`Mirror`]) that the
 //! parameter setter writes, so a frame costs no call into the C shim.
 #![forbid(unsafe_code)]
@@ -52,10 +55,9 @@ use kernel::prelude::*;
 use crate::{glue, rcan_core};
 
 use glue::can::ctrl;
-use glue::lock::{new_irq_spinlock, IrqSpinLock};
 use glue::netdev::{Dev, Driver, Napi, Registration, Setup, Xmit};
 use glue::params::Param;
-use glue::ring::Ring;
+use glue::ring::SkbRing;
 use glue::skb::Skb;
 use kernel::c_str;
 use rcan_core::canloop::{DropRate, FrameDump};
@@ -118,7 +120,7 @@ struct LoopDriver;
 const FIFO_LEN: usize = 512;
 
 impl Driver for LoopDriver {
-    type Priv = IrqSpinLock<Ring<Skb>>;
+    type Priv = SkbRing;
 
     const NAPI_WEIGHT: u32 = 64;
 
@@ -154,8 +156,7 @@ impl Driver for LoopDriver {
     /// dropped here.
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         dev.stop_queue();
-        let mut fifo = p.lock();
-        while let Some(skb) = fifo.pop() {
+        while let Some(skb) = p.pop() {
             dev.stats_rx_dropped();
             drop(skb);
         }
@@ -166,11 +167,10 @@ impl Driver for LoopDriver {
     /// FIFO order. Inline: the glue's NAPI adapter is its only caller.
     #[inline]
     fn poll(_dev: &Dev<Self>, p: &Self::Priv, napi: &Napi, budget: usize) -> usize {
-        // The lock is not held while a frame is handed up (the guard goes
-        // when the closure returns): a receiver may send on this device,
-        // which takes the lock in start_xmit. A pop that leaves the FIFO
-        // empty ends the poll without taking the lock once more to find it
-        // empty: a frame pushed after it is followed by its sender's
+        // A receiver may send on this device while a frame is handed up:
+        // start_xmit pushes while this pops, without a lock. A pop that
+        // leaves the FIFO empty ends the poll without looking once more:
+        // a frame pushed after it is followed by its sender's
         // `napi_schedule`, which, while this poll runs, marks the instance
         // missed, so `napi_complete_done` polls again (the same handoff as
         // for a frame pushed after a pop that found the FIFO empty).
@@ -179,9 +179,8 @@ impl Driver for LoopDriver {
             if !more {
                 return None;
             }
-            let mut fifo = p.lock();
-            let skb = fifo.pop();
-            more = !fifo.is_empty();
+            let skb = p.pop();
+            more = !p.is_empty();
             skb
         })
     }
@@ -229,7 +228,7 @@ impl Driver for LoopDriver {
         // comes back as a received, locally originated frame (mainline
         // can_create_echo_skb + vcan_rx).
         skb.set_can_rx(dev);
-        let queued = p.lock().push(skb);
+        let queued = p.push(skb);
         match queued {
             Ok(()) => dev.stats_rx(bytes),
             Err(skb) => {
@@ -251,10 +250,8 @@ impl kernel::Module for CanLoop {
         let count = COUNT.get();
         let mut devs = KVec::new();
         for _ in 0..count {
-            let reg = Registration::<LoopDriver>::register(
-                c_str!("can%d"),
-                new_irq_spinlock!(Ring::new(FIFO_LEN)?, "canloop::Fifo")?,
-            )?;
+            let reg =
+                Registration::<LoopDriver>::register(c_str!("can%d"), SkbRing::new(FIFO_LEN)?)?;
             pr_info!(
                 "{}: CAN loopback device, droprate {}%\n",
                 reg.dev().name(),

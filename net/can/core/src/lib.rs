@@ -26,5 +26,6 @@ pub mod filter;
 pub mod frame;
 pub mod ring;
 pub mod rxtable;
+pub mod slotring;
 pub mod sockaddr;
 pub mod timesvc;
