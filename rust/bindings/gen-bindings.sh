@@ -24,7 +24,7 @@ cflags=$(sed -n 's/^savedcmd_[^ ]* := bindgen .* -- \(.*\)$/\1/p' "$saved" |
 	sed -e 's/;.*$//' -e 's/-Wp,-MMD,[^ ]*//' -e "s/-DKBUILD_[A-Z]*='[^']*'//g" \
 	    -e 's/-D__KBUILD_MODNAME=[^ ]*//')
 params=$(grep -Ev '^#|^$' "$ksrc/rust/bindgen_parameters")
-allow_fn='(ioread|iowrite|sock|sk|skb|__skb|kfree_skb|consume_skb|dev|__dev|netdev|netif|register_pernet|unregister_pernet|alloc_netdev|free_netdev|register_netdev|unregister_netdev|register_netdevice|unregister_netdevice|datagram|proto|synchronize_rcu|rcu_barrier|call_rcu|try_module_get|module_put|get_random|rtnl|__rtnl|pci|__pci|request_threaded_irq|free_irq|hrtimer|ktime|rcan|memcpy_from_msg|memcpy_to_msg|_copy_from_iter|iov_iter_revert|put_cmsg|kfree|__kmalloc|_printk|ether|can|napi|__napi|_raw_spin|_copy_to_iter|__sock_recv_cmsgs)_?.*'
+allow_fn='(ioread|iowrite|sock|sk|skb|__skb|kfree_skb|consume_skb|dev|__dev|netdev|netif|register_pernet|unregister_pernet|alloc_netdev|free_netdev|register_netdev|unregister_netdev|register_netdevice|unregister_netdevice|datagram|proto|synchronize_rcu|rcu_barrier|call_rcu|try_module_get|module_put|get_random|rtnl|__rtnl|pci|__pci|request_threaded_irq|free_irq|hrtimer|ktime|rcan|_copy_from_iter|iov_iter_revert|put_cmsg|kfree|__kmalloc|_printk|ether|can|napi|__napi|_raw_spin|_copy_to_iter|__sock_recv_cmsgs)_?.*'
 tmp=$(mktemp)
 # shellcheck disable=SC2086
 (cd "$kbuild" && bindgen "$here/rcan_bindings.h" $params \

@@ -322,25 +322,9 @@ impl Skb {
             skb.len += len as u32;
             dst
         };
-        // `memcpy_from_msg`'s `copy_from_iter_full`, its exported body
-        // called directly: a short copy is undone on the iterator
-        // (`iov_iter_revert`) and is EFAULT.
-        // SAFETY: `dst` points to the `len` writable bytes just put (above);
-        // `msg` is the live msghdr of the current sendmsg call, whose
-        // `msg_iter` nobody else advances during the call.
-        let ok = unsafe {
-            let iter = core::ptr::addr_of_mut!((*msg.as_ptr()).msg_iter);
-            let copied = bindings::_copy_from_iter(dst.cast(), len, iter);
-            if copied != len {
-                bindings::iov_iter_revert(iter, copied);
-            }
-            copied == len
-        };
-        if ok {
-            Ok(())
-        } else {
-            Err(kernel::error::code::EFAULT)
-        }
+        // SAFETY: `dst` points to the `len` bytes just put (above), inside
+        // the head of an skb nobody else touches while we own it.
+        unsafe { msg.copy_from_user_raw(dst, len) }
     }
 
     /// Copies the socket's priority and mark into the skb, as every

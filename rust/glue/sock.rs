@@ -429,14 +429,59 @@ impl Msg {
         }
     }
 
-    /// Copies `dst.len()` bytes from the user's buffers; EFAULT on a bad
-    /// pointer.
+    /// Copies `dst.len()` bytes from the user's buffers of a sendmsg
+    /// (mainline `memcpy_from_msg`); EFAULT on a bad pointer or a short
+    /// copy (the iterator is then where it was). Process context; may
+    /// fault pages in.
+    #[inline]
     pub(crate) fn copy_from_user(&mut self, dst: &mut [u8]) -> Result {
-        // SAFETY: valid msghdr; `dst` is a writable kernel buffer.
-        let ret = unsafe {
-            bindings::rcan_memcpy_from_msg(dst.as_mut_ptr().cast(), self.0, dst.len() as i32)
+        // SAFETY: a slice we borrow mutably: its `len` bytes are writable
+        // and nobody else touches them during the call.
+        unsafe { self.copy_from_user_raw(dst.as_mut_ptr(), dst.len()) }
+    }
+
+    /// [`Msg::copy_from_user`] into raw memory (bytes that may not be
+    /// initialised yet, such as the room [`Skb::put_from_msg`] just put).
+    ///
+    /// This is `memcpy_from_msg`'s inline `copy_from_iter_full` written
+    /// out: `check_copy_size` comes down, for a buffer whose size is
+    /// `len`, to `len` fitting an `int`; the exported `_copy_from_iter`
+    /// copies (it warns and copies nothing from a destination iterator,
+    /// a recvmsg's, so that is refused here first); a short copy is
+    /// undone on the iterator (`iov_iter_revert`) and is EFAULT.
+    ///
+    /// # Safety
+    ///
+    /// `dst` points to `len` bytes that are writable and that nothing
+    /// else reads or writes during the call.
+    #[inline(always)]
+    pub(crate) unsafe fn copy_from_user_raw(&mut self, dst: *mut u8, len: usize) -> Result {
+        // Msg is only made by the sendmsg/recvmsg trampolines from the
+        // socket layer's argument.
+        // SAFETY: so `self.0` is the valid msghdr of the current call; its
+        // iterator is not used by anyone else during the call.
+        let iter = unsafe { core::ptr::addr_of_mut!((*self.0).msg_iter) };
+        // SAFETY: `iter` is valid (above); plain read of the direction.
+        let source = unsafe { (*iter).data_source };
+        if !source || len > i32::MAX as usize {
+            return Err(code::EFAULT);
+        }
+        // SAFETY: `dst` is writable for `len` bytes (the caller's
+        // contract); `iter` is the message's source iterator, which
+        // `_copy_from_iter` advances by what it copied and
+        // `iov_iter_revert` moves back by as much.
+        let copied = unsafe {
+            let copied = bindings::_copy_from_iter(dst.cast(), len, iter);
+            if copied != len {
+                bindings::iov_iter_revert(iter, copied);
+            }
+            copied
         };
-        super::to_result(ret).map(|_| ())
+        if copied == len {
+            Ok(())
+        } else {
+            Err(code::EFAULT)
+        }
     }
 
     /// Copies `src` to the user's buffers of a recvmsg (mainline

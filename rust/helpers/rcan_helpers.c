@@ -152,11 +152,6 @@ int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 	return skb_copy_datagram_msg(skb, offset, msg, size);
 }
 
-int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len)
-{
-	return memcpy_from_msg(data, msg, len);
-}
-
 void rcan_lock_sock(struct sock *sk)
 {
 	lock_sock(sk);

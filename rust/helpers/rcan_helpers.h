@@ -45,7 +45,6 @@ bool rcan_can_skb_tx_prepare(struct sk_buff *skb, struct net_device *dev);
 struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp);
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 			       struct msghdr *msg, int size);
-int rcan_memcpy_from_msg(void *data, struct msghdr *msg, int len);
 
 /* sock */
 void rcan_lock_sock(struct sock *sk);
