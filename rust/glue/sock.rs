@@ -466,10 +466,9 @@ impl Msg {
         if !source || len > i32::MAX as usize {
             return Err(code::EFAULT);
         }
-        // SAFETY: `dst` is writable for `len` bytes (the caller's
-        // contract); `iter` is the message's source iterator, which
-        // `_copy_from_iter` advances by what it copied and
-        // `iov_iter_revert` moves back by as much.
+        // `iter` is the message's source iterator: `_copy_from_iter`
+        // advances it by what it copied, `iov_iter_revert` moves it back.
+        // SAFETY: as said; `dst` is writable for `len` bytes (our contract).
         let copied = unsafe {
             let copied = bindings::_copy_from_iter(dst.cast(), len, iter);
             if copied != len {
