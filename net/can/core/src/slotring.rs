@@ -26,8 +26,8 @@
 //! concurrently with itself).
 //!
 //! The storage is the caller's (`S`, anything that derefs to a slice of
-//! atomic words: a `KVec` in the kernel, a `Vec` in the tests), so this file stays
-//! allocation-free.
+//! atomic words: a `KVec` in the kernel, a `Vec` in the tests), so this
+//! file stays allocation-free.
 
 use core::num::NonZeroUsize;
 use core::ops::Deref;
