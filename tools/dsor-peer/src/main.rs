@@ -211,6 +211,16 @@ fn main() {
         eprintln!("dsor-peer: {}: {e}", a.ifname);
         exit(3)
     });
+    // The socket is bound: every frame sent to this node from now on is
+    // queued for us. Whoever started us waits for this line instead of
+    // guessing how long a start takes (dsor-peer.rst, "Output").
+    println!(
+        "READY if={} node={:#04x} mode={}",
+        a.ifname,
+        cfg.node,
+        if cfg.fd { "fd" } else { "classic" }
+    );
+    let _ = std::io::Write::flush(&mut std::io::stdout());
     let mut io = Io {
         sock,
         rng: Rng(a.seed),
