@@ -55,8 +55,6 @@ const PEER: u8 = 5;
 /// software-emulated (and, in CI, debug) kernel can take tens of ms to
 /// answer, so both sides allow 200 ms per ack and 2.2 s per frame.
 const PEER_TIMERS: [&str; 2] = ["ack_timeout_ms=200", "reasm_timeout_ms=5000"];
-/// Time for a freshly started dsor-peer to open its socket.
-const PEER_START: Duration = Duration::from_millis(1500);
 
 /// Loads the stack with one canloop interface and rcan_dsor on it.
 fn dsor_stack(ctx: &mut Ctx, params: &[&str]) -> Result<u32, String> {
@@ -1027,18 +1025,46 @@ fn peer(args: &[&str]) -> Result<Child, String> {
     peer_on("can0", args)
 }
 
-/// Runs dsor-peer with `args` as node 5 on `ifname`, stdout captured.
+/// Runs dsor-peer with `args` as node 5 on `ifname`, stdout captured, and
+/// returns once it is ready: its first line, `READY`, says that its
+/// socket is bound, so nothing sent to it from then on is lost. (A fixed
+/// pause was not enough: a start outlasting it cost the kernel's first
+/// frames, which for an FD header means the fallback to classic.)
 fn peer_on(ifname: &str, args: &[&str]) -> Result<Child, String> {
+    use std::io::Read;
     let bin = std::env::current_exe()
         .or_fail("current_exe")?
         .with_file_name("dsor-peer");
-    Command::new(&bin)
+    let mut c = Command::new(&bin)
         .args(["--if", ifname, "--node", "5"])
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .map_err(|e| format!("{}: {e}", bin.display()))
+        .map_err(|e| format!("{}: {e}", bin.display()))?;
+    // Byte by byte, so that the lines after it stay in the pipe for
+    // `peer_output`.
+    let mut out = c.stdout.take().ok_or("dsor-peer: no stdout")?;
+    let mut line = Vec::new();
+    let mut b = [0u8; 1];
+    while b[0] != b'\n' {
+        match out.read(&mut b) {
+            Ok(0) => break,
+            Ok(_) => line.push(b[0]),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(format!("reading dsor-peer's stdout: {e}")),
+        }
+    }
+    c.stdout = Some(out);
+    if !line.starts_with(b"READY ") {
+        // It exited before its socket was open: its own message says why.
+        let why = peer_output(c, "start").err().unwrap_or_default();
+        return Err(format!(
+            "dsor-peer {args:?} not ready: {:?} {why}",
+            String::from_utf8_lossy(&line)
+        ));
+    }
+    Ok(c)
 }
 
 fn peer_output(c: Child, what: &str) -> Result<Vec<String>, String> {
@@ -1133,7 +1159,6 @@ fn dsor_peer_exchange(ctx: &mut Ctx) -> TestResult {
             "--timeout-s",
             "150",
         ])?;
-        thread::sleep(PEER_START);
         // Under the debug kernel a frame takes tens of ms and every frame
         // the peer drops costs an ack timeout: keep the round well inside
         // the peer's timeout and the runner's watchdog.
@@ -1344,7 +1369,7 @@ fn dsor_udp_over_can(ctx: &mut Ctx) -> TestResult {
         "--timeout-s",
         "60",
     ])?;
-    thread::sleep(PEER_START.max(Duration::from_secs(5).saturating_sub(inserted.elapsed())));
+    thread::sleep(Duration::from_secs(5).saturating_sub(inserted.elapsed()));
     let mut sent = Vec::new();
     for (j, len) in [0usize, 1, 100, 1400].into_iter().enumerate() {
         let m = pattern(len, j as u64, 4);
@@ -1459,7 +1484,6 @@ fn dsor_sja1000_two_interfaces(ctx: &mut Ctx) -> TestResult {
             "60",
         ],
     )?;
-    thread::sleep(PEER_START);
     let mut sent = Vec::new();
     for (j, len) in [0usize, 9, 500, 3000].into_iter().enumerate() {
         let m = pattern(len, j as u64, 11);
@@ -1705,7 +1729,6 @@ fn dsor_delivery_full_queue(ctx: &mut Ctx) -> TestResult {
         &timeout,
     ]);
     let rxp = peer(&args)?;
-    thread::sleep(PEER_START);
     let tx = sock()?;
     let (mut ok, mut other) = (0u64, Vec::new());
     for j in 0..n {
@@ -2021,7 +2044,6 @@ fn dsor_delivery_receiver_closes(ctx: &mut Ctx) -> TestResult {
         let mut args = PEER_ARGS.to_vec();
         args.extend(["recv", opt, val, "--count", "1", "--timeout-s", "300"]);
         let rxp = peer(&args)?;
-        thread::sleep(PEER_START);
         let r = sock()?.send_to(
             &pattern(len, 0, 21),
             &DsorAddr::Segm {
@@ -2478,7 +2500,10 @@ fn check_body_size(what: &str, frames: &[Seen], from: u32, len: usize, b: u8) ->
 /// classic (`--classic`: no CAN_RAW_FD_FRAMES) gets its message after the
 /// kernel falls back to the classic header. Contents checked by hash on
 /// the peer's side and byte for byte on the kernel's; frames on the wire
-/// by a CAN_RAW_FD_FRAMES monitor.
+/// by a CAN_RAW_FD_FRAMES monitor. Each peer is sent to only once it is
+/// ready (`peer_on`): an FD header sent before its socket was bound went
+/// unanswered, and the kernel, as the extension says, fell back to the
+/// classic header and took node 5 for a classic node from then on.
 fn dsor_peer_fd_mtu72(ctx: &mut Ctx) -> TestResult {
     // T_ack 3 s on both sides: an FD header answered late is taken for a
     // classic node (the fallback), which would change what this test
@@ -2524,7 +2549,6 @@ fn dsor_peer_fd_mtu72(ctx: &mut Ctx) -> TestResult {
         let count = lens.len().to_string();
         args.extend(["recv", "--count", &count, "--timeout-s", "150"]);
         let rxp = peer(&args)?;
-        thread::sleep(PEER_START);
         let mut sent = Vec::new();
         for (j, &len) in lens.iter().enumerate() {
             let m = pattern(len, j as u64, 3);
