@@ -260,7 +260,7 @@ fn burst_one(
                 return (Err(format!("frame {next}: got {}", canraw::show(&f))), rx);
             }
             next += 1;
-            if next % BURST_HEARTBEAT == 0 {
+            if next.is_multiple_of(BURST_HEARTBEAT) {
                 crate::heartbeat();
             }
         }
