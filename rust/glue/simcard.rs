@@ -41,6 +41,20 @@
 //!   start it earlier. So a burst goes at most at the bit rate (plus
 //!   [`LATE_NS`] of catching up), and frames never reach a receiver
 //!   faster than a real bus would bring them.
+//! * Flow control ([`Round::held`]): a front-end whose models tell which
+//!   frame they send next and whether a receiver is ready for it (see
+//!   `sim_bus`) gets a bus that keeps a frame pending while a receiving
+//!   host has not read what is in its way, instead of overrunning it. The
+//!   bus then waits without its timer; a register write of the host that
+//!   reads a receive buffer ([`SimBus::frees_rx`]) kicks it again. Pacing
+//!   alone does not keep a receiver from losing frames in a guest: the
+//!   timer runs on one virtual CPU while the receiving host may run on
+//!   another that the host machine does not schedule for many frame
+//!   times.
+//! * The interrupt lines: a register write that turns a card's interrupt
+//!   output on ([`SimBus::enables_irq`], a driver that had turned it off
+//!   while it had no room) kicks the timer too, whose run calls the
+//!   handler if a cause is pending, as a real line would.
 //! * Teardown ([`SimCards::stop`], from the module's exit): `dying` stops
 //!   the callback from touching anything, the timer is cancelled, the
 //!   cards are taken out of the cards lock and unregistered (their `stop`
@@ -89,6 +103,9 @@ pub(crate) struct Round {
     pub(crate) moved: bool,
     /// An attempt failed: the chip retries it by itself.
     pub(crate) failed: bool,
+    /// Nothing moved because a frame waits for a receiver's host to read
+    /// ([`SimBus::frees_rx`] kicks the bus again).
+    pub(crate) held: bool,
 }
 
 /// A simulated bus: the models of its cards, as a front-end describes
@@ -132,6 +149,19 @@ pub(crate) trait SimBus: Sized + Send + 'static {
     /// Whether writing `val` to register `reg` requests a transmission
     /// (the bus then has work). Any context, no lock.
     fn is_tx_request(reg: u8, val: u8) -> bool;
+    /// Whether writing `val` to register `reg` may free a receive buffer
+    /// a held frame waits for ([`Round::held`]): the bus is kicked if one
+    /// does. By default never (a front-end whose rounds never hold). Any
+    /// context, no lock.
+    fn frees_rx(_reg: u8, _val: u8) -> bool {
+        false
+    }
+    /// Whether writing `val` to register `reg` turns a card's interrupt
+    /// output on: the bus is kicked, so that a pending cause reaches the
+    /// driver's handler. By default never. Any context, no lock.
+    fn enables_irq(_reg: u8, _val: u8) -> bool {
+        false
+    }
     /// Runs the driver's interrupt handler of `card`; whether the chip
     /// had a cause. Softirq context, the cards lock held (not the bus
     /// lock).
@@ -166,6 +196,11 @@ pub(crate) struct SimCards<B: SimBus> {
     cards: StaticIrqSpinLock<KVec<B::Card>>,
     /// Set while the module goes away: no kicks, no callback work.
     dying: AtomicBool,
+    /// The last round held a frame for a receiver ([`Round::held`]).
+    /// Written and read under the bus lock only (the round, and register
+    /// writes that may free a receive buffer), so a write either comes
+    /// before the round and is seen by it, or after it and kicks.
+    held: AtomicBool,
     /// `CLOCK_MONOTONIC` ns until which the frame last sent occupies the
     /// bus ([`SimBus::bus_ns`]); the next round waits for it. Written by
     /// the timer callback, read by it and by kicks (any context).
@@ -195,6 +230,7 @@ impl<B: SimBus> SimCards<B> {
             bus: StaticIrqSpinLock::new(None, bus),
             cards: StaticIrqSpinLock::new(KVec::new(), cards),
             dying: AtomicBool::new(false),
+            held: AtomicBool::new(false),
             busy_until: AtomicI64::new(0),
             timer: HrTimer::new(),
         }
@@ -210,13 +246,18 @@ impl<B: SimBus> SimCards<B> {
         }
     }
 
-    /// Writes register `reg` of card `card`; a transmission request
-    /// kicks the bus. Any context that may take the bus lock.
+    /// Writes register `reg` of card `card`; a transmission request, a
+    /// write that turns an interrupt output on, and one that may free a
+    /// receive buffer while a frame is held for one kick the bus. Any
+    /// context that may take the bus lock.
     pub(crate) fn write(&'static self, card: usize, reg: u8, val: u8) {
+        let mut kick = B::is_tx_request(reg, val) || B::enables_irq(reg, val);
         if let Some(b) = self.bus.lock().as_mut() {
             b.write(card, reg, val);
+            // Under the bus lock, as the round that sets it.
+            kick |= B::frees_rx(reg, val) && self.held.load(Ordering::Relaxed);
         }
-        if B::is_tx_request(reg, val) {
+        if kick {
             self.kick();
         }
     }
@@ -343,6 +384,7 @@ impl<B: SimBus> SimCards<B> {
                     return;
                 };
                 let r = b.round(fault);
+                self.held.store(r.held, Ordering::Relaxed);
                 let bus_ns = if r.moved { b.bus_ns() } else { 0 };
                 let n = b.cards();
                 for (i, l) in lines.iter_mut().enumerate().take(n) {
@@ -382,6 +424,8 @@ impl<B: SimBus> SimCards<B> {
             }
             frames += usize::from(r.moved);
             if !r.moved && !handled {
+                // Idle, or a frame held for a receiver whose host reads
+                // later (its write then kicks the bus).
                 return;
             }
         }

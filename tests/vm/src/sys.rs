@@ -455,6 +455,32 @@ pub fn pin_to_cpu0() -> io::Result<()> {
     cvt(rc).map(drop)
 }
 
+/// The calling thread's CPU affinity as it was before [`pin_to_cpu0_for`]
+/// pinned it; restored when dropped.
+pub struct Pinned(libc::cpu_set_t);
+
+/// Pins the calling thread to CPU 0 until the returned guard is dropped,
+/// which puts its former affinity back: a test that pins does not leave
+/// every later test of the run (and the threads and programs they start,
+/// which inherit it) on one CPU.
+pub fn pin_to_cpu0_for() -> io::Result<Pinned> {
+    // SAFETY: an all-zero cpu_set_t is a valid (empty) set; the call
+    // fills the one we own.
+    let mut old: libc::cpu_set_t = unsafe { zeroed() };
+    // SAFETY: `old` is a writable cpu_set_t of the size given.
+    cvt(unsafe { libc::sched_getaffinity(0, size_of::<libc::cpu_set_t>(), &mut old) })?;
+    pin_to_cpu0()?;
+    Ok(Pinned(old))
+}
+
+impl Drop for Pinned {
+    fn drop(&mut self) {
+        // SAFETY: the set we saved, of the size given. Failure leaves the
+        // thread pinned: nothing better to do in a destructor.
+        let _ = unsafe { libc::sched_setaffinity(0, size_of::<libc::cpu_set_t>(), &self.0) };
+    }
+}
+
 /// `poll` on one descriptor for `events`, up to `timeout_ms`; returns
 /// `revents` (0 on timeout).
 pub fn poll_one(

@@ -6,6 +6,21 @@
 //! (`rcan_sja1000_sim`, `rcan_i82527_sim`, `rcan_ctucanfd_sim`) run it
 //! under their bus lock from their bus timer; the host tests drive it
 //! with the same models. Pure: no allocation, no locking, no `unsafe`.
+//!
+//! A node whose model can tell which frame it sends next
+//! ([`BusNode::next_frame`]) waits while another node is not ready for
+//! it ([`BusNode::not_ready_for`]: its host has not read its receive
+//! buffers yet, and taking the frame would overwrite one or have the host
+//! read them out of bus order): the round passes over it, and if no node
+//! can go, the bus stays idle ([`Outcome::Held`]) until a host reads. A
+//! real bus has no such flow control (a receiver acknowledges a frame
+//! whatever its buffers hold, and an unread buffer is overrun), but on a
+//! real bus the pace is the bit rate and a host that reads within a frame
+//! time never loses a frame. A simulated bus runs from a timer on one
+//! virtual CPU of a guest while the receiving host may run on another
+//! that the machine below does not schedule for many frame times; the
+//! wait stands for the real host that would have kept up. Overruns are
+//! still made on request (`copies` > 1, the cards' `fault=overrun`).
 
 /// What one transmit attempt of a node did.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -52,6 +67,20 @@ pub trait BusNode {
     /// frame again is pointless (it was not taken, or the receive buffer
     /// is full): [`round`] then stops offering copies of it.
     fn deliver(&mut self, f: &Self::Frame) -> bool;
+
+    /// The frame the node's next attempt would send, if its model can
+    /// tell; such a node waits while another is not ready for the frame.
+    /// By default `None`: the node's frames never wait.
+    fn next_frame(&self) -> Option<Self::Frame> {
+        None
+    }
+
+    /// Whether receiving `f` now would overwrite a frame this node's host
+    /// has not read yet (a receive overrun), or make the host read its
+    /// frames out of bus order. By default `false`.
+    fn not_ready_for(&self, _f: &Self::Frame) -> bool {
+        false
+    }
 }
 
 /// What a [`round`] did.
@@ -63,6 +92,10 @@ pub enum Outcome<F> {
     Sent(usize, F),
     /// Node `.0` tried and failed.
     Failed(usize),
+    /// Nobody sent: node `.0` (the first in turn) and any other node with
+    /// a frame pending wait until a receiver's host has read what is in
+    /// the way of theirs ([`BusNode::not_ready_for`]).
+    Held(usize),
 }
 
 impl<F> Outcome<F> {
@@ -75,14 +108,22 @@ impl<F> Outcome<F> {
     pub fn failed(&self) -> bool {
         matches!(self, Outcome::Failed(_))
     }
+
+    /// A frame waits for a receiver's host to read (nothing else moved).
+    pub fn held(&self) -> bool {
+        matches!(self, Outcome::Held(_))
+    }
 }
 
 /// One round on the bus of `nodes`: the first node from `*next` on (in
-/// turn, wrapping) that has a frame pending and does not answer
-/// [`Attempt::Idle`] makes one attempt under `fault`. A frame that went
-/// out is offered `copies` times (1 normally, more to overrun the
-/// receivers) to every other node, in bus order; `*next` moves past the
-/// node that tried. `copies` 0 is taken as 1.
+/// turn, wrapping) that has a frame pending, whose frame every other node
+/// is ready for ([`BusNode::not_ready_for`] of its [`BusNode::next_frame`]),
+/// and that does not answer [`Attempt::Idle`] makes one attempt under
+/// `fault`. A frame that went out is offered `copies` times (1 normally,
+/// more to overrun the receivers) to every other node, in bus order;
+/// `*next` moves past the node that tried. `copies` 0 is taken as 1. If
+/// every node with a frame pending had to wait, the round is
+/// [`Outcome::Held`] and `*next` stays.
 pub fn round<N: BusNode>(
     nodes: &mut [N],
     next: &mut usize,
@@ -90,10 +131,17 @@ pub fn round<N: BusNode>(
     copies: usize,
 ) -> Outcome<N::Frame> {
     let n = nodes.len();
+    let mut held = None;
     for k in 0..n {
         let i = (*next + k) % n;
         if !nodes[i].tx_pending() {
             continue;
+        }
+        if let Some(f) = nodes[i].next_frame() {
+            if (0..n).any(|j| j != i && nodes[j].not_ready_for(&f)) {
+                held.get_or_insert(i);
+                continue;
+            }
         }
         let acked = (0..n).any(|j| j != i && nodes[j].acks());
         let outcome = match nodes[i].attempt(fault, acked) {
@@ -113,5 +161,8 @@ pub fn round<N: BusNode>(
         *next = (i + 1) % n;
         return outcome;
     }
-    Outcome::Idle
+    match held {
+        Some(i) => Outcome::Held(i),
+        None => Outcome::Idle,
+    }
 }

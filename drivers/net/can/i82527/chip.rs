@@ -749,6 +749,22 @@ impl<R: Regs> Chip<R> {
         self.restarts += 1;
     }
 
+    /// Turns the chip's interrupt output off (`on` false) or back on,
+    /// leaving everything else in the control register as it is (INIT
+    /// above all: the chip sets it by itself at bus-off). While it is off
+    /// the chip goes on receiving and sending and keeps its causes
+    /// pending (IntPnd, the status interrupt); turning it on raises the
+    /// output again if one is. A driver turns it off while it has no room
+    /// for more frames and reads the objects again once it has (mainline
+    /// `c_can`'s `c_can_irq_control` around its NAPI poll); an object it
+    /// leaves unread meanwhile is overrun (MsgLst) by the next frame for
+    /// it, which the next read reports as [`Event::Overrun`].
+    pub fn set_irq_enabled(&mut self, on: bool) {
+        let c = self.regs.read(reg::CONTROL);
+        let c = if on { c | ctrl::IE } else { c & !ctrl::IE };
+        self.regs.write(reg::CONTROL, c);
+    }
+
     /// Leaves the bus (thesis: `stop`): INIT, interrupts off, the
     /// transmit object invalid.
     pub fn stop(&mut self) {

@@ -27,7 +27,16 @@
 //! them: the queue is FIFO, and a NAPI instance is polled by one CPU at a
 //! time, whichever CPU ran the "interrupt" (the simulated card's runs on
 //! varying CPUs, where `netif_rx`'s per-CPU backlogs could reorder them).
-//! No receiver ever runs under the chip lock or with interrupts off.
+//! No receiver ever runs under the chip lock or with interrupts off. A
+//! handler that finds the queue without room for what it may add
+//! ([`RX_HEADROOM`]) leaves the frames in the chip and turns the chip's
+//! interrupt output off; the poll turns it back on once half the queue
+//! is free, and the pending causes raise the line again (mainline c_can
+//! masks its interrupts around its NAPI poll in the same way). On a real
+//! bus an object left unread meanwhile is overrun and reported (MsgLst:
+//! `rx_over_errors` and an error frame) instead of a frame being dropped
+//! from a full queue; the simulated bus holds its next frame until the
+//! object is read (`sim.rs`).
 //!
 //! The CAN device layer (`ip link set canX type can ...`, `rcan_dev`):
 //! the device's bit timing and control modes live in its [`CanDev`] (one
@@ -99,15 +108,28 @@ const RXQ_LEN: usize = 1024;
 /// NAPI weight: frames handed up per poll.
 const NAPI_WEIGHT: u32 = 64;
 
+/// Free queue slots the interrupt handler needs before it serves the
+/// chip: what one run may queue (a frame and an error frame per
+/// interrupt-register read). With less room it leaves the frames in the
+/// chip and turns the chip's interrupt output off until the poll has
+/// made [`RX_RESUME`] room.
+const RX_HEADROOM: usize = 2 * MAX_IRQ_ROUNDS;
+
+/// Free queue slots at which the poll turns the interrupt output back on.
+const RX_RESUME: usize = RXQ_LEN / 2;
+
 /// The chip and what goes with it, under the device's lock.
 pub(crate) struct ChipState<R: Regs> {
     pub(crate) chip: Chip<R>,
     /// The frame in the transmit object, kept for the echo.
     echo: Option<Skb>,
-    /// Frames for the NAPI poll.
     /// Frames taken from the chip, waiting for the NAPI poll (FIFO).
     rxq: Ring<Skb>,
     running: bool,
+    /// The handler turned the chip's interrupt output off: the queue had
+    /// no room for what the chip holds ([`RX_HEADROOM`]). The poll turns
+    /// it on again ([`RX_RESUME`]); so do open and restart.
+    rx_off: bool,
 }
 
 /// Per-device driver data.
@@ -178,6 +200,7 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
                 echo: None,
                 rxq: Ring::new(RXQ_LEN)?,
                 running: false,
+                rx_off: false,
             },
             "I82527Priv::chip"
         )?,
@@ -300,6 +323,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
             st.chip.init(&m);
             st.chip.start();
             st.running = true;
+            st.rx_off = false;
         }
         opening.up();
         Ok(())
@@ -364,50 +388,66 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
                 echo,
                 rxq,
                 running,
+                rx_off,
             } = &mut *st;
-            if !*running {
+            if !*running || *rx_off {
+                // Down; or the output is off (a shared line's other
+                // device, or a late call): the poll turns it back on.
                 return false;
             }
-            let mut bus_off = false;
-            let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| {
-                match ev {
-                    Event::Rx(f) => ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(f)),
-                    Event::TxDone => {
-                        if let Some(skb) = ctrl::echo_done(dev, echo) {
-                            ctrl::rx_enqueue(dev, rxq, skb);
+            if RXQ_LEN - rxq.len() < RX_HEADROOM {
+                // No room for what this run may queue: the frames stay in
+                // the chip and its interrupt output goes off until the
+                // poll, scheduled below (the queue is not empty), has
+                // made room (mainline c_can masks its interrupts around
+                // its NAPI poll the same way). Meanwhile a real bus
+                // overruns an unread object, reported when it is read
+                // (MsgLst); the simulated bus holds the next frame.
+                chip.set_irq_enabled(false);
+                *rx_off = true;
+                (true, true)
+            } else {
+                let mut bus_off = false;
+                let handled = chip.irq(MAX_IRQ_ROUNDS, |ev| {
+                    match ev {
+                        Event::Rx(f) => ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(f)),
+                        Event::TxDone => {
+                            if let Some(skb) = ctrl::echo_done(dev, echo) {
+                                ctrl::rx_enqueue(dev, rxq, skb);
+                            }
+                            dev.wake_queue();
                         }
-                        dev.wake_queue();
+                        Event::TxAborted => {
+                            // The frame is lost with the bus-off (mainline's
+                            // can_flush_echo_skb counts it as a TX error).
+                            // Interrupts are off: the free is deferred. The
+                            // queue stays stopped until the restart.
+                            ctrl::echo_lost(dev, echo, Stat::TxErrors);
+                        }
+                        Event::Overrun { .. } => dev.stats_err(Stat::RxOverErrors),
+                        Event::BusError { .. } => {
+                            p.can.count(CanStat::BusError);
+                            dev.stats_err(Stat::RxErrors);
+                        }
+                        Event::State(State::Warning) => p.can.count(CanStat::ErrorWarning),
+                        Event::State(State::BusOff) => {
+                            p.can.count(CanStat::BusOff);
+                            bus_off = true;
+                        }
+                        Event::State(State::Active) | Event::Restarted => {}
                     }
-                    Event::TxAborted => {
-                        // The frame is lost with the bus-off (mainline's
-                        // can_flush_echo_skb counts it as a TX error).
-                        // Interrupts are off: the free is deferred. The
-                        // queue stays stopped until the restart.
-                        ctrl::echo_lost(dev, echo, Stat::TxErrors);
+                    if let Some(ef) = error_frame(&ev) {
+                        ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(ef));
                     }
-                    Event::Overrun { .. } => dev.stats_err(Stat::RxOverErrors),
-                    Event::BusError { .. } => {
-                        p.can.count(CanStat::BusError);
-                        dev.stats_err(Stat::RxErrors);
-                    }
-                    Event::State(State::Warning) => p.can.count(CanStat::ErrorWarning),
-                    Event::State(State::BusOff) => {
-                        p.can.count(CanStat::BusOff);
-                        bus_off = true;
-                    }
-                    Event::State(State::Active) | Event::Restarted => {}
+                });
+                if bus_off {
+                    // Off the bus until restarted: carrier off, the restart
+                    // timer armed (restart-ms), the queue stopped.
+                    dev.stop_queue();
+                    p.can.bus_off(dev);
                 }
-                if let Some(ef) = error_frame(&ev) {
-                    ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(ef));
-                }
-            });
-            if bus_off {
-                // Off the bus until restarted: carrier off, the restart
-                // timer armed (restart-ms), the queue stopped.
-                dev.stop_queue();
-                p.can.bus_off(dev);
+                (handled, !rxq.is_empty())
             }
-            (handled, !rxq.is_empty())
         };
         // Outside the chip lock (the poll takes it).
         if queued {
@@ -424,7 +464,17 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     ) -> usize {
         // One frame per lock hold: the guard goes when the closure
         // returns, before the frame is handed up.
-        napi.drain(budget, || p.chip.lock().rxq.pop())
+        let done = napi.drain(budget, || p.chip.lock().rxq.pop());
+        // Room again for what the handler left in the chip: its output
+        // back on, which raises the line at once if a cause is pending.
+        let mut st = p.chip.lock();
+        if st.rx_off && RXQ_LEN - st.rxq.len() >= RX_RESUME {
+            st.rx_off = false;
+            if st.running {
+                st.chip.set_irq_enabled(true);
+            }
+        }
+        done
     }
 }
 
@@ -485,12 +535,18 @@ impl<R: Regs + Send + 'static> CanDevice for I82527<R> {
                 return Err(EINVAL);
             }
             let ChipState {
-                chip, echo, rxq, ..
+                chip,
+                echo,
+                rxq,
+                rx_off,
+                ..
             } = &mut *st;
             if let Some(ef) = error_frame(&Event::Restarted) {
                 ctrl::rx_frame(dev, rxq, &AnyFrame::Classic(ef));
             }
+            // The restart turns the interrupt output on.
             chip.restart(&m);
+            *rx_off = false;
             echo.take()
         };
         // Not expected (dropped at bus-off); freed outside the lock.

@@ -471,12 +471,11 @@ impl I82527Model {
         u64::from(frame_bits(f.can_id, f.len)) * u64::from(bit)
     }
 
-    /// The bus is free for this chip: the lowest-numbered object with a
-    /// transmission request goes out (a transmit object's data frame, or
-    /// a receive object's remote frame). Returns the frame, with the
-    /// transmission already acknowledged (the caller offers it to the
-    /// other nodes). Transmit objects under CPU update wait.
-    pub fn transmit(&mut self) -> Option<CanFrame> {
+    /// The object that goes out next and its frame: the lowest-numbered
+    /// valid object with a transmission request (a transmit object's
+    /// data frame, or a receive object's remote frame); transmit objects
+    /// under CPU update wait. `None` off the bus or with nothing to send.
+    fn next_tx(&self) -> Option<(u8, CanFrame)> {
         if self.absent || self.in_init() || self.bus_off() {
             return None;
         }
@@ -506,23 +505,77 @@ impl I82527Model {
             } else {
                 f.can_id |= CAN_RTR_FLAG;
             }
-            let answered = tx && set(c1, bits::RMTPND);
-            self.field(n, reg::CTRL1, bits::TXRQST, false);
-            self.field(n, reg::CTRL1, bits::RMTPND, false);
-            if tx {
-                self.field(n, reg::CTRL1, bits::NEWDAT, false);
-            }
-            if set(c0, bits::TXIE) {
-                self.field(n, reg::CTRL0, bits::INTPND, true);
-            }
-            self.status_event(status::TXOK, ctrl::SIE);
-            self.sent += 1;
-            if answered {
-                self.answered += 1;
-            }
-            return Some(f);
+            return Some((n, f));
         }
         None
+    }
+
+    /// The frame [`I82527Model::transmit`] would send now, without
+    /// sending it (the simulated bus asks before it lets the chip go).
+    pub fn pending_frame(&self) -> Option<CanFrame> {
+        self.next_tx().map(|(_, f)| f)
+    }
+
+    /// The bus is free for this chip: the lowest-numbered object with a
+    /// transmission request goes out (a transmit object's data frame, or
+    /// a receive object's remote frame). Returns the frame, with the
+    /// transmission already acknowledged (the caller offers it to the
+    /// other nodes). Transmit objects under CPU update wait.
+    pub fn transmit(&mut self) -> Option<CanFrame> {
+        let (n, f) = self.next_tx()?;
+        let (c0, c1) = (self.c0(n), self.c1(n));
+        let tx = self.is_tx(n);
+        let answered = tx && set(c1, bits::RMTPND);
+        self.field(n, reg::CTRL1, bits::TXRQST, false);
+        self.field(n, reg::CTRL1, bits::RMTPND, false);
+        if tx {
+            self.field(n, reg::CTRL1, bits::NEWDAT, false);
+        }
+        if set(c0, bits::TXIE) {
+            self.field(n, reg::CTRL0, bits::INTPND, true);
+        }
+        self.status_event(status::TXOK, ctrl::SIE);
+        self.sent += 1;
+        if answered {
+            self.answered += 1;
+        }
+        Some(f)
+    }
+
+    /// Whether this chip can take data frame `f` from the bus now without
+    /// losing a frame its host has not read yet, or making the host read
+    /// them out of bus order: the object [`I82527Model::receive`] would
+    /// store it in must be free (object 15: its foreground buffer, or else
+    /// its shadow buffer), and no other receive object may hold an unread
+    /// frame that the host would read after this one (the interrupt
+    /// register names object 15 first, then objects 1..14 in turn; with
+    /// two objects holding frames, only a frame in object 15 that came
+    /// first keeps its place). Remote frames, frames no object takes and
+    /// any frame while the chip is off the bus: always.
+    pub fn ready_for(&self, f: &CanFrame) -> bool {
+        if self.absent || self.in_init() || self.bus_off() {
+            return true;
+        }
+        if f.can_id & (CAN_ERR_FLAG | CAN_RTR_FLAG) != 0 {
+            return true;
+        }
+        let ext = f.can_id & CAN_EFF_FLAG != 0;
+        let id = f.can_id & if ext { CAN_EFF_MASK } else { CAN_SFF_MASK };
+        let Some(n) = (1..=15u8).find(|&n| !self.is_tx(n) && self.matches(n, id, ext)) else {
+            return true;
+        };
+        let unread = |m: u8| {
+            set(self.c0(m), bits::MSGVAL)
+                && !self.is_tx(m)
+                && (set(self.c1(m), bits::NEWDAT) || (m == 15 && set(self.c0(m), bits::INTPND)))
+        };
+        if (1..=14u8).any(unread) {
+            // Object n (1..14) would be overwritten, or would be read
+            // before an older frame of a higher-numbered object; a frame
+            // for object 15 would be read before every one of them.
+            return false;
+        }
+        !(n == 15 && unread(15) && self.shadow.is_some())
     }
 
     /// Sets the error counters (what bus errors would do) and updates
@@ -637,6 +690,16 @@ impl BusNode for I82527Model {
 
     fn attempt(&mut self, fault: Fault, _acked: bool) -> TxAttempt {
         I82527Model::attempt(self, fault)
+    }
+
+    fn next_frame(&self) -> Option<CanFrame> {
+        self.pending_frame()
+    }
+
+    /// A receive object the host has not read yet holds the frame back
+    /// ([`I82527Model::ready_for`]).
+    fn not_ready_for(&self, f: &CanFrame) -> bool {
+        !self.ready_for(f)
     }
 
     /// Every copy arrives (under [`Fault::Overrun`] the second one sets

@@ -25,8 +25,23 @@
 //! (500 kbit/s by default: some 4,000 frames/s), as on a real bus, and
 //! the simulated interrupt, which may run on a CPU other than the one
 //! that owns the device's NAPI poll, cannot queue frames faster than
-//! that. Each frame is in its receivers' queues before the next frame
-//! goes out. The callback may run on either CPU from one run to
+//! that. Each frame is in its receivers' queues (or, while a driver has
+//! no room there, still in its chip) before the next frame goes out.
+//! The bus does not overrun a receive object either: a frame
+//! whose receiver still holds an unread frame in its way (the object it
+//! would go to, or one the host would read after it:
+//! `I82527Model::ready_for`) stays pending in the sender's object, the
+//! bus idle, until that host reads (its write to the object's control
+//! register kicks the bus; see `sim_bus` and [`glue::simcard`]). A real
+//! 82527 would acknowledge it and overwrite the object (MsgLst), but a
+//! real host reads within a frame time, while this bus runs from a timer
+//! on one virtual CPU and the receiving driver's NAPI poll may be on
+//! another that the host machine does not schedule for longer than the
+//! driver's queue lasts (the driver then turns its chip's interrupt
+//! output off and leaves the frames in the chip, `i82527.rs`). So no
+//! frame is lost or reordered that a host keeping up with a real bus
+//! would have received; `fault=overrun` still overruns on purpose. The
+//! callback may run on either CPU from one run to
 //! the next; the driver keeps frame order all the same, because its
 //! interrupt handler only queues frames (under the chip lock, which is
 //! taken with interrupts off) and the device's NAPI poll hands them up in
@@ -61,7 +76,7 @@ use kernel::prelude::*;
 
 use crate::{glue, i82527};
 
-use crate::rcan_chips::i82527::{bits, reg, Config, Regs};
+use crate::rcan_chips::i82527::{bits, ctrl, reg, Config, Regs};
 use crate::rcan_chips::i82527_model::{Fault, I82527Model};
 use crate::rcan_chips::sim_bus::{self, Outcome};
 use glue::params::{Param, ParamStr};
@@ -153,6 +168,7 @@ impl SimBus for Bus {
         Round {
             moved: out.moved(),
             failed: out.failed(),
+            held: out.held(),
         }
     }
 
@@ -175,6 +191,18 @@ impl SimBus for Bus {
     fn is_tx_request(r: u8, val: u8) -> bool {
         let is_ctrl1 = r >= 0x10 && r & 0x0F == reg::CTRL1;
         is_ctrl1 && (val >> bits::TXRQST) & 0b11 == bits::SET
+    }
+
+    /// A write to a message object's control registers: the host resets
+    /// IntPnd and NewDat there when it reads a receive object.
+    fn frees_rx(r: u8, _val: u8) -> bool {
+        r >= 0x10 && (r & 0x0F == reg::CTRL0 || r & 0x0F == reg::CTRL1)
+    }
+
+    /// IE set in the control register (the driver turning its interrupt
+    /// output back on once it has room again, or starting the chip).
+    fn enables_irq(r: u8, val: u8) -> bool {
+        r == reg::CONTROL && val & ctrl::IE != 0
     }
 
     fn card_irq(c: &Channel<SimRegs>) -> bool {

@@ -153,6 +153,7 @@ impl SimBus for Bus {
         Round {
             moved: out.moved(),
             failed: out.failed(),
+            held: out.held(),
         }
     }
 

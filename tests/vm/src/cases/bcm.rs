@@ -228,6 +228,55 @@ fn collect(
     Ok(got)
 }
 
+/// Longest wait for frames or a marker a test waits for: a deadline for a
+/// loaded emulated guest, not a rate.
+const WAIT: Duration = Duration::from_secs(30);
+
+/// Frames with `id` seen on `s`, with their arrival times, until `done`
+/// says there are enough (asked before each read) or `limit` passes; the
+/// caller checks what it got.
+fn collect_until(
+    s: &socketcan::CanSocket,
+    id: u32,
+    limit: Duration,
+    mut done: impl FnMut(&[(Instant, Vec<u8>)]) -> bool,
+) -> Result<Vec<(Instant, Vec<u8>)>, String> {
+    let end = Instant::now() + limit;
+    let mut got = Vec::new();
+    while !done(&got) {
+        let Some(left) = end.checked_duration_since(Instant::now()) else {
+            break;
+        };
+        s.set_read_timeout(left.max(Duration::from_millis(1)))
+            .or_fail("SO_RCVTIMEO")?;
+        match s.read_frame() {
+            Ok(f) if f.raw_id() == id => got.push((Instant::now(), f.data().to_vec())),
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    Ok(got)
+}
+
+/// The data of the frames with `id` that `s` reads before the next frame
+/// with identifier `marker` (sent after them: it queues behind them),
+/// which must come within [`WAIT`].
+fn until_marker(s: &socketcan::CanSocket, id: u32, marker: u32) -> Result<Vec<Vec<u8>>, String> {
+    let end = Instant::now() + WAIT;
+    let mut got = Vec::new();
+    while let Some(left) = end.checked_duration_since(Instant::now()) {
+        s.set_read_timeout(left.max(Duration::from_millis(1)))
+            .or_fail("SO_RCVTIMEO")?;
+        match s.read_frame() {
+            Ok(f) if f.raw_id() == marker => return Ok(got),
+            Ok(f) if f.raw_id() == id => got.push(f.data().to_vec()),
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    Err(format!("marker {marker:#x} not seen within {WAIT:?}"))
+}
+
 fn gaps_ms(v: &[(Instant, Vec<u8>)]) -> String {
     let g: Vec<String> = v
         .windows(2)
@@ -294,22 +343,51 @@ fn bcm_tx_count_then_expired(ctx: &mut Ctx) -> TestResult {
 
 /// count=2 at 10 ms then every 50 ms: the cyclic part keeps going; a data
 /// update is sent from the next cycle; TX_DELETE stops it; a second
-/// TX_DELETE is EINVAL.
+/// TX_DELETE is EINVAL. No check depends on the guest's speed (each used
+/// to: 5 to 15 frames in a 600 ms window, at least 2 new frames in 300 ms
+/// after the update, which failed after a 1.7 s host stall, and nothing
+/// in the 300 ms after a 20 ms drain following TX_DELETE):
+/// 1. It waits for at least 5 frames (2 counted ones, then the cyclic
+///    part going on) over at least 600 ms, and the frames may not
+///    outnumber what ival2 allows over the time measured from before the
+///    TX_SETUP to the last frame read (3 + span / 50 ms; 15 for 600 ms, the
+///    old bound): a late guest only makes fewer frames, never more, since
+///    each timer is armed from the time it fired.
+/// 2. After the update: old data (queued before it, any number), then
+///    only new data, until two new frames came (within [`WAIT`]).
+/// 3. After TX_DELETE returned, a marker frame from a CAN_RAW socket
+///    queues behind every frame the job sent before (the test thread is
+///    pinned to one CPU, where the job's timer runs too, so on mainline
+///    both take that CPU's backlog; ours keep the device's FIFO order);
+///    then nothing for 300 ms (the subject: nothing happens), and a
+///    second marker arrives with no frame of the job before it.
 fn bcm_tx_ival2_and_delete(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.bcm_ifaces(1)?[0];
+    // Before TX_SETUP: the job's timer is armed on this CPU and stays.
+    let _pinned = crate::sys::pin_to_cpu0_for().or_fail("sched_setaffinity")?;
     let bcm = open(i0)?;
     let rx = canraw::open(i0)?;
+    let mark = canraw::open(i0)?;
     let h = tx_head(SETTIMER | STARTTIMER, 2, 10_000, 50_000, 0x200, 1);
+    let t0 = Instant::now();
     write(&bcm, h, &[frame_bytes(0x200, &[1])])?;
-    let got = collect(&rx, 0x200, Duration::from_millis(600))?;
+    let got = collect_until(&rx, 0x200, WAIT, |g| {
+        g.len() >= 5 && t0.elapsed() >= Duration::from_millis(600)
+    })?;
+    let span = t0.elapsed();
+    let most = 3 + (span.as_millis() / 50) as usize;
     println!(
-        "# count=2 ival1=10ms ival2=50ms over 600 ms: {} frames, gaps {}",
+        "# count=2 ival1=10ms ival2=50ms: {} frames in {:.0} ms (at most {most}), gaps {}",
         got.len(),
+        span.as_secs_f64() * 1e3,
         gaps_ms(&got)
     );
     need(
-        (5..=15).contains(&got.len()),
-        format!("{} frames in 600 ms, want about 13", got.len()),
+        (5..=most).contains(&got.len()),
+        format!(
+            "{} frames in {span:?}, want 5 to {most} (2 counted, then one per 50 ms at most)",
+            got.len()
+        ),
     )?;
     // Update the data only (no flags): the timer keeps running.
     write(
@@ -321,7 +399,9 @@ fn bcm_tx_ival2_and_delete(ctx: &mut Ctx) -> TestResult {
     // update are still queued on `rx`: under load, more than one (the
     // test may not run for hundreds of ms). So: old data, then only the
     // new data, at least twice (the timer keeps running).
-    let got = collect(&rx, 0x200, Duration::from_millis(300))?;
+    let got = collect_until(&rx, 0x200, WAIT, |g| {
+        g.iter().filter(|f| f.1 == [2]).count() >= 2
+    })?;
     let old = got.iter().take_while(|g| g.1 == [1]).count();
     let new = &got[old..];
     println!(
@@ -331,7 +411,7 @@ fn bcm_tx_ival2_and_delete(ctx: &mut Ctx) -> TestResult {
     need(
         new.len() >= 2,
         format!(
-            "{} frames after the update ({old} of them with the old data)",
+            "{} frames after the update within {WAIT:?} ({old} of them with the old data)",
             got.len()
         ),
     )?;
@@ -348,11 +428,18 @@ fn bcm_tx_ival2_and_delete(ctx: &mut Ctx) -> TestResult {
         ..Head::default()
     };
     need(write(&bcm, del, &[])? == MHSIZ, "TX_DELETE returns 56")?;
-    let _ = collect(&rx, 0x200, Duration::from_millis(20))?;
+    canraw::send(&mark, &sff(0x201, &[1]))?;
+    let in_flight = until_marker(&rx, 0x200, 0x201)?;
     let after = collect(&rx, 0x200, Duration::from_millis(300))?;
+    canraw::send(&mark, &sff(0x201, &[2]))?;
+    let later = until_marker(&rx, 0x200, 0x201)?;
+    println!(
+        "# TX_DELETE: {} frames sent before it still queued",
+        in_flight.len()
+    );
     need(
-        after.is_empty(),
-        format!("{} frames after TX_DELETE", after.len()),
+        after.is_empty() && later.is_empty(),
+        format!("{} frames after TX_DELETE", after.len() + later.len()),
     )?;
     expect_errno(&bcm, &msg(del, &[]), libc::EINVAL, "second TX_DELETE")
 }
@@ -1377,17 +1464,20 @@ fn bcm_proc_net_file(ctx: &mut Ctx) -> TestResult {
 /// Tests of rcan_bcm's teardown (our stack only: they unload our modules).
 pub static OURS: &[crate::Test] = crate::cases::test_table![teardown_bcm_cyclic_jobs];
 
-/// Cyclic jobs per socket in [`teardown_bcm_cyclic_jobs`]: 100 on the
-/// release kernel; 25 on the debug kernel, where 100 jobs (400 frames/s
-/// through KASAN and lockdep under emulation) made the test take 92-226 s
-/// late in the whole suite (20-29 s alone) and once not end in 360 s.
-/// The claims are the same for any number of jobs.
+/// Cyclic jobs per socket in [`teardown_bcm_cyclic_jobs`]
+/// (`RCAN_BCM_TEARDOWN_JOBS`): 100 on the release kernel; 25 on the debug
+/// kernel, where 100 jobs (400 frames/s through KASAN and lockdep under
+/// emulation) made the test take 92-226 s late in the whole suite (20-29 s
+/// alone) and once not end in 360 s. The likeliest cause (not proven): in
+/// a whole run, `sja1000_burst` and `sja1000_overrun` had left the
+/// runner's thread pinned to CPU 0, so this test's thread and the jobs'
+/// timers, which it arms, shared one CPU with all the frames' softirq
+/// work while the other idled (they now put the affinity back). To see
+/// it: `RCAN_BCM_TEARDOWN_JOBS=100` on the debug kernel, this test alone
+/// and after `sja1000_burst`, before and after that change. The claims
+/// are the same for any number of jobs.
 fn teardown_jobs() -> u32 {
-    if crate::ctx::debug_kernel() {
-        25
-    } else {
-        100
-    }
+    crate::ctx::sized("RCAN_BCM_TEARDOWN_JOBS", 100, 25)
 }
 
 /// A socket on `ifindex` running [`teardown_jobs`] cyclic transmissions

@@ -173,8 +173,10 @@ fn sja1000_hw_filter(ctx: &mut Ctx) -> TestResult {
 /// FIFO. On a real bus a frame takes 100+ µs, which paces the sender. With
 /// both interrupts and the sender on one CPU, the receiving interrupt is
 /// taken right after the transmit request, as bus timing would allow; a
-/// lost frame is then the driver's fault.
-fn pin_to_cpu0(devs: &[&str]) -> TestResult {
+/// lost frame is then the driver's fault. Until the returned guard is
+/// dropped (see [`Pinned`]).
+fn pin_to_cpu0(devs: &[&str]) -> Result<Pinned, String> {
+    let irqs = IrqAffinities::save(devs)?;
     let text = std::fs::read_to_string("/proc/interrupts").or_fail("/proc/interrupts")?;
     for d in devs {
         let line = text
@@ -185,8 +187,59 @@ fn pin_to_cpu0(devs: &[&str]) -> TestResult {
         std::fs::write(format!("/proc/irq/{irq}/smp_affinity"), "1")
             .or_fail(format_args!("pin irq {irq} ({d})"))?;
     }
-    crate::sys::pin_to_cpu0().or_fail("sched_setaffinity")?;
-    Ok(())
+    let cpu = crate::sys::pin_to_cpu0_for().or_fail("sched_setaffinity")?;
+    Ok(Pinned {
+        _cpu: cpu,
+        _irqs: irqs,
+    })
+}
+
+/// A test's thread pinned to CPU 0 and the interrupt lines it moved; both
+/// put back when dropped. Tests run one after another on the runner's
+/// main thread, and a pinned thread passes its affinity on to every thread
+/// and program it starts: left pinned, every later test of the run went
+/// on one CPU (with the other idle), unlike the same test run alone; and
+/// the cards' lines kept the burst's or the overrun's CPU split for every
+/// later test that loads a card driver.
+struct Pinned {
+    _cpu: crate::sys::Pinned,
+    _irqs: IrqAffinities,
+}
+
+/// The interrupt affinity masks of the lines serving some devices, as
+/// they were when saved; written back when dropped (best effort: a line
+/// whose driver went keeps what it has).
+struct IrqAffinities(Vec<(String, String)>);
+
+impl IrqAffinities {
+    /// Saves the masks of every line that serves one of `devs`.
+    fn save(devs: &[&str]) -> Result<Self, String> {
+        let text = std::fs::read_to_string("/proc/interrupts").or_fail("/proc/interrupts")?;
+        let mut saved = Vec::new();
+        for l in text.lines() {
+            let Some((irq, rest)) = l.split_once(':') else {
+                continue;
+            };
+            let serves = rest
+                .split(|c: char| c.is_whitespace() || c == ',')
+                .any(|t| devs.contains(&t));
+            let irq = irq.trim().to_string();
+            if serves && !saved.iter().any(|(i, _)| *i == irq) {
+                let mask = std::fs::read_to_string(format!("/proc/irq/{irq}/smp_affinity"))
+                    .or_fail(format_args!("affinity of irq {irq}"))?;
+                saved.push((irq, mask.trim().to_string()));
+            }
+        }
+        Ok(IrqAffinities(saved))
+    }
+}
+
+impl Drop for IrqAffinities {
+    fn drop(&mut self) {
+        for (irq, mask) in &self.0 {
+            let _ = std::fs::write(format!("/proc/irq/{irq}/smp_affinity"), mask);
+        }
+    }
 }
 
 /// Frames per direction in [`sja1000_burst`] (`RCAN_SJA_BURST`; default
@@ -237,11 +290,12 @@ fn burst_one(
 }
 
 /// Bursts both ways, each frame numbered: every one arrives, once, in
-/// order, intact; no overrun.
+/// order, intact; no overrun. The sender and both cards' interrupts are
+/// on CPU 0 for the test ([`pin_to_cpu0`]) and put back after it.
 fn sja1000_burst(ctx: &mut Ctx) -> TestResult {
     let n = burst_len();
     let (i0, i1) = kvaser2(ctx)?;
-    pin_to_cpu0(&["can0", "can1"])?;
+    let _pinned = pin_to_cpu0(&["can0", "can1"])?;
     let big = |s: &socketcan::CanSocket| -> TestResult {
         // Room for the whole burst: the reader is not paced by anything.
         crate::sys::set_rcvbufforce(s, 64 << 20).or_fail("SO_RCVBUFFORCE")
@@ -710,16 +764,19 @@ fn overrun_len() -> u32 {
 /// `CAN_ERR_CRTL_RX_OVERFLOW` error frame; lost frames imply counted
 /// overruns; afterwards frames of every kind pass both ways. Whether an
 /// overrun happens at all depends on the host's scheduling under TCG: if
-/// none does, the test reports that and checks the rest.
+/// none does, the test reports that and checks the rest. The CPU split
+/// and the sender's CPU are put back when the test ends ([`Pinned`]).
 fn sja1000_overrun(ctx: &mut Ctx) -> TestResult {
     let n = overrun_len();
     let (i0, i1) = kvaser2(ctx)?;
+    // Put back when the test ends (see [`Pinned`]).
+    let _irqs = IrqAffinities::save(&["can0", "can1"])?;
     let tx_lines = irq_affinity("can0", "1")?;
     let rx_lines = irq_affinity("can1", "2")?;
     if tx_lines.iter().any(|l| rx_lines.contains(l)) {
         ctx.note("can0 and can1 share an interrupt line: the CPU split is not effective");
     }
-    crate::sys::pin_to_cpu0().or_fail("sched_setaffinity")?;
+    let _cpu = crate::sys::pin_to_cpu0_for().or_fail("sched_setaffinity")?;
     let over0 = ctx.stat("can1", "rx_over_errors")?;
     let rx = canraw::open(i1)?;
     crate::sys::set_rcvbufforce(&rx, 64 << 20).or_fail("SO_RCVBUFFORCE")?;

@@ -5,7 +5,8 @@
 //! transmit and receive of every frame kind, automatic remote answers,
 //! the single transmit object, object 15's double buffer and overrun,
 //! the interrupt priority order, error warning and bus-off with recovery,
-//! and the masks keeping unwanted frames out.
+//! the masks keeping unwanted frames out, and a host that falls behind
+//! losing nothing on the simulated bus (`sim_bus::round`).
 
 use rcan_chips::i82527::*;
 use rcan_chips::i82527_model::{Fault, I82527Model, TxAttempt};
@@ -13,6 +14,8 @@ use rcan_chips::sja1000::Wanted;
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
 use rcan_core::frame::CanFrame;
 use rcan_core::rxtable::{CanFilterKind, Filter};
+use std::cell::RefCell;
+use std::rc::Rc;
 
 fn frame(can_id: u32, data: &[u8]) -> CanFrame {
     let mut f = CanFrame {
@@ -359,6 +362,225 @@ fn object_15_double_buffer_and_overrun() {
     );
     let e = error_frame(&Event::Overrun { obj: STD_RX }).unwrap();
     assert_eq!(e.data[1], rcan_core::candev::err::CRTL_RX_OVERFLOW);
+}
+
+/// Chip `a` sends `f` to `b` (`pending_frame` shows it first); `a`'s
+/// host handles the completion, `b`'s reads nothing.
+fn send(a: &mut C, b: &mut C, f: CanFrame) {
+    a.xmit(&f).unwrap();
+    assert_eq!(a.regs.pending_frame(), Some(f));
+    assert_eq!(run_bus(&mut [&mut *a, &mut *b]), vec![f]);
+    assert_eq!(irq(a), vec![Event::TxDone]);
+    assert_eq!(a.regs.pending_frame(), None);
+}
+
+/// `ready_for` tells beforehand whether taking a frame keeps every
+/// frame the host has not read, in bus order: not when the frame's
+/// object holds an unread one (object 1 once, object 15 once its shadow
+/// buffer is full too), nor an extended frame while object 1 holds one
+/// (the host reads object 15 first); a standard frame after unread
+/// extended ones is fine. Remote frames, and any frame while the chip is
+/// off the bus, always. Sent anyway, a frame overruns as predicted.
+#[test]
+fn ready_for_guards_frames_and_their_order() {
+    let mut a = chip(&Masks::OPEN);
+    let mut b = chip(&Masks::OPEN);
+    let s = |i: u8| frame(0x10 + u32::from(i), &[i]);
+    let e = |i: u8| frame((0x1000 + u32::from(i)) | CAN_EFF_FLAG, &[i]);
+    assert!(b.regs.ready_for(&s(0)) && b.regs.ready_for(&e(0)));
+    assert_eq!(a.regs.pending_frame(), None);
+    send(&mut a, &mut b, s(0));
+    assert!(!b.regs.ready_for(&s(1)), "object 1 holds an unread frame");
+    assert!(!b.regs.ready_for(&e(0)), "object 15 would be read first");
+    assert!(b.regs.ready_for(&remote(0x11, 1)));
+    assert_eq!(irq(&mut b), vec![Event::Rx(s(0))]);
+    // Object 15: the foreground buffer, then the shadow buffer; a
+    // standard frame after them is read after them.
+    send(&mut a, &mut b, e(0));
+    assert!(b.regs.ready_for(&e(1)), "the shadow buffer is free");
+    send(&mut a, &mut b, e(1));
+    assert!(!b.regs.ready_for(&e(2)));
+    assert!(b.regs.ready_for(&s(1)));
+    send(&mut a, &mut b, s(1));
+    assert!(!b.regs.ready_for(&s(2)) && !b.regs.ready_for(&e(2)));
+    assert_eq!(
+        irq(&mut b),
+        vec![Event::Rx(e(0)), Event::Rx(e(1)), Event::Rx(s(1))]
+    );
+    assert!(b.regs.ready_for(&s(2)) && b.regs.ready_for(&e(2)));
+    // The prediction holds: sent anyway, the frame overruns.
+    send(&mut a, &mut b, s(2));
+    assert!(!b.regs.ready_for(&s(3)));
+    send(&mut a, &mut b, s(3));
+    assert_eq!(
+        irq(&mut b),
+        vec![Event::Overrun { obj: STD_RX }, Event::Rx(s(3))]
+    );
+    // Off the bus, a chip takes nothing and so loses nothing.
+    send(&mut a, &mut b, s(4));
+    b.stop();
+    assert!(b.regs.ready_for(&s(5)));
+}
+
+/// The interrupt output off (`set_irq_enabled(false)`): the chip still
+/// receives and keeps the cause pending; on again, the output is raised
+/// and the frame read. INIT, which the chip sets by itself at bus-off,
+/// is left alone either way.
+#[test]
+fn interrupt_output_off_keeps_causes_pending() {
+    let mut a = chip(&Masks::OPEN);
+    let mut b = chip(&Masks::OPEN);
+    b.set_irq_enabled(false);
+    a.xmit(&frame(0x42, &[4, 2])).unwrap();
+    run_bus(&mut [&mut a, &mut b]);
+    irq(&mut a);
+    assert!(!b.regs.irq_line(), "output raised while off");
+    assert_ne!(b.regs.int_reg(), intid::NONE, "cause not pending");
+    assert!(!b.regs.in_init());
+    b.set_irq_enabled(true);
+    assert!(b.regs.irq_line());
+    assert_eq!(irq(&mut b), vec![Event::Rx(frame(0x42, &[4, 2]))]);
+    b.regs.set_errors(256, 0);
+    assert!(b.regs.in_init() && b.regs.bus_off());
+    b.set_irq_enabled(false);
+    b.set_irq_enabled(true);
+    assert!(b.regs.in_init(), "INIT cleared: bus-off recovery started");
+}
+
+/// Register access of chip `.1` among the models on one shared bus, so
+/// that the driver core (`Chip`) and the simulated bus's round
+/// (`sim_bus::round`, as the simulated cards run it) reach the same
+/// models.
+struct OnBus(Rc<RefCell<Vec<I82527Model>>>, usize);
+
+impl Regs for OnBus {
+    fn read(&mut self, r: u8) -> u8 {
+        self.0.borrow_mut()[self.1].read(r)
+    }
+
+    fn write(&mut self, r: u8, v: u8) {
+        self.0.borrow_mut()[self.1].write(r, v)
+    }
+}
+
+/// Two chips on a shared simulated bus, both started with open masks.
+fn shared_bus() -> (Rc<RefCell<Vec<I82527Model>>>, [Chip<OnBus>; 2]) {
+    let bus = Rc::new(RefCell::new(vec![I82527Model::new(), I82527Model::new()]));
+    let mk = |i| {
+        let mut c = Chip::new(OnBus(Rc::clone(&bus), i), Config::DEFAULT);
+        c.probe().unwrap();
+        c.init(&Masks::OPEN);
+        c.start();
+        c
+    };
+    let chips = [mk(0), mk(1)];
+    (bus, chips)
+}
+
+/// Chip 0 sends `n` numbered frames (standard and extended alternately,
+/// the next once the last completed) to chip 1 over `sim_bus::round` with
+/// `fault`; chip 1's host is `behind(round)`: then its interrupt output is
+/// off and it reads nothing (a driver whose receive queue is full), else
+/// it reads whatever its chip raised. Returns chip 1's events and how
+/// many rounds the bus held a frame back.
+fn burst_to_a_slow_host(
+    n: u32,
+    fault: Fault,
+    copies: usize,
+    behind: impl Fn(usize) -> bool,
+) -> (Vec<Event>, Vec<CanFrame>, usize) {
+    let (bus, [mut a, mut b]) = shared_bus();
+    let f = |i: u32| {
+        if i % 2 == 0 {
+            frame(0x100 + (i & 0x3FF), &i.to_le_bytes())
+        } else {
+            frame((0x0100_0000 + i) | CAN_EFF_FLAG, &i.to_le_bytes())
+        }
+    };
+    let (mut sent, mut next, mut held) = (0u32, 0usize, 0usize);
+    let (mut events, mut frames) = (Vec::new(), Vec::new());
+    for r in 0..20 * n as usize {
+        if sent < n && !a.tx_busy() {
+            a.xmit(&f(sent)).unwrap();
+            frames.push(f(sent));
+            sent += 1;
+        }
+        let out = rcan_chips::sim_bus::round(&mut bus.borrow_mut()[..], &mut next, fault, copies);
+        held += usize::from(out.held());
+        if bus.borrow()[0].irq_line() {
+            a.irq(64, |_| {});
+        }
+        if behind(r) {
+            b.set_irq_enabled(false);
+        } else {
+            b.set_irq_enabled(true);
+            if bus.borrow()[1].irq_line() {
+                b.irq(64, |e| events.push(e));
+            }
+        }
+        if sent == n && !a.tx_busy() && !behind(r) && !bus.borrow()[1].irq_line() {
+            break;
+        }
+    }
+    assert_eq!(sent, n, "the sender did not get all frames out");
+    (events, frames, held)
+}
+
+/// The simulated bus does not outrun a host that falls behind: while the
+/// host reads nothing (its interrupt output off, as the driver does when
+/// its receive queue is full), the sender's next frame waits on the bus
+/// instead of overrunning the unread object; once the host reads again,
+/// every frame arrives, once, in order, and no MsgLst is seen.
+#[test]
+fn a_host_that_falls_behind_loses_nothing_on_the_simulated_bus() {
+    let behind = |r: usize| r < 7 || (30..45).contains(&r) || r % 11 == 3;
+    let (ev, sent, held) = burst_to_a_slow_host(60, Fault::None, 1, behind);
+    assert!(held > 0, "the bus never held a frame back");
+    assert!(
+        !ev.iter().any(|e| matches!(e, Event::Overrun { .. })),
+        "overrun: {ev:?}"
+    );
+    assert_eq!(rx_frames(&ev), sent);
+}
+
+proptest::proptest! {
+    /// Whenever the host falls behind and for however long, as long as it
+    /// comes back: every frame, once, in bus order, no overrun.
+    #[test]
+    fn any_slow_host_loses_nothing(
+        pattern in proptest::collection::vec(proptest::bool::ANY, 1..40),
+        n in 1u32..40,
+    ) {
+        let behind = |r: usize| r < 10 * n as usize && pattern[r % pattern.len()];
+        let (ev, sent, _) = burst_to_a_slow_host(n, Fault::None, 1, behind);
+        let overrun = ev.iter().any(|e| matches!(e, Event::Overrun { .. }));
+        proptest::prop_assert!(!overrun, "overrun: {:?}", ev);
+        proptest::prop_assert_eq!(rx_frames(&ev), sent);
+    }
+}
+
+/// The `overrun` fault (every frame offered twice before the host can
+/// read) still overruns: the wait before a frame goes out does not hide
+/// what the fault injects. Object 1 loses the first copy of each
+/// standard frame (MsgLst); object 15 keeps both copies of an extended
+/// one (its shadow buffer).
+#[test]
+fn the_overrun_fault_still_overruns_on_the_simulated_bus() {
+    let (ev, sent, held) = burst_to_a_slow_host(10, Fault::Overrun, 2, |_| false);
+    assert_eq!(held, 0);
+    let overruns = ev
+        .iter()
+        .filter(|e| matches!(e, Event::Overrun { obj: STD_RX }))
+        .count();
+    assert_eq!(overruns, 5, "{ev:?}");
+    let want: Vec<CanFrame> = sent
+        .iter()
+        .flat_map(|f| {
+            let copies = if f.can_id & CAN_EFF_FLAG != 0 { 2 } else { 1 };
+            std::iter::repeat_n(*f, copies)
+        })
+        .collect();
+    assert_eq!(rx_frames(&ev), want);
 }
 
 #[test]

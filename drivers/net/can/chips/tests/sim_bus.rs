@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: GPL-2.0
 //! The simulated bus's round (`rcan_chips::sim_bus::round`), which the
 //! three simulated cards share: who sends, who is asked, what the others
-//! receive, fairness, acknowledgement; with toy nodes that record what
+//! receive, fairness, acknowledgement, a frame waiting while a receiver
+//! is not ready for it; with toy nodes that record what
 //! the bus did to them. (The chip models on it: the VM tests of the
 //! simulated cards.)
 
@@ -17,6 +18,9 @@ struct Toy {
     /// Attempts to fail before the next success.
     fail: usize,
     room: usize,
+    /// Its host has not read its receive buffer: a new frame would
+    /// overwrite one ([`BusNode::not_ready_for`]).
+    unread: bool,
     got: Vec<u32>,
     attempts: usize,
     /// The `acked` of each attempt.
@@ -55,6 +59,14 @@ impl BusNode for Toy {
         }
         self.got.push(*f);
         true
+    }
+
+    fn next_frame(&self) -> Option<u32> {
+        self.queue.first().copied()
+    }
+
+    fn not_ready_for(&self, _f: &u32) -> bool {
+        self.unread
     }
 }
 
@@ -141,6 +153,71 @@ fn a_lone_transmitter_is_not_acknowledged() {
     nodes[1].listen_only = false;
     assert_eq!(round(&mut nodes, &mut next, true, 1), Outcome::Sent(0, 1));
     assert_eq!(nodes[0].acked, [false, true]);
+}
+
+#[test]
+fn a_frame_waits_while_a_receiver_is_not_ready() {
+    let mut nodes = [toy(&[1, 2], 8), toy(&[], 8), toy(&[], 8)];
+    nodes[2].unread = true;
+    let mut next = 0;
+    let out = round(&mut nodes, &mut next, false, 1);
+    assert_eq!(out, Outcome::Held(0));
+    assert!(out.held() && !out.moved() && !out.failed());
+    assert_eq!(next, 0, "the held node keeps its turn");
+    assert_eq!(nodes[0].attempts, 0, "a held frame is not attempted");
+    assert!(nodes[1].got.is_empty() && nodes[2].got.is_empty());
+    // The host reads: the frame goes, then the next, in order.
+    nodes[2].unread = false;
+    assert_eq!(round(&mut nodes, &mut next, false, 1), Outcome::Sent(0, 1));
+    assert_eq!(round(&mut nodes, &mut next, false, 1), Outcome::Sent(0, 2));
+    assert_eq!(nodes[1].got, [1, 2]);
+    assert_eq!(nodes[2].got, [1, 2]);
+}
+
+#[test]
+fn a_held_node_lets_the_others_go() {
+    // Node 0's frame would be lost by node 2; node 2's own frame is lost
+    // by nobody and goes; the sender's own buffer does not hold it back.
+    let mut nodes = [toy(&[1], 8), toy(&[], 8), toy(&[3], 8)];
+    nodes[2].unread = true;
+    let mut next = 0;
+    assert_eq!(round(&mut nodes, &mut next, false, 1), Outcome::Sent(2, 3));
+    assert_eq!(next, 0);
+    assert_eq!(nodes[0].got, [3]);
+    assert_eq!(round(&mut nodes, &mut next, false, 1), Outcome::Held(0));
+    nodes[2].unread = false;
+    assert_eq!(round(&mut nodes, &mut next, false, 1), Outcome::Sent(0, 1));
+    assert_eq!(round(&mut nodes, &mut next, false, 1), Outcome::Idle);
+}
+
+#[test]
+fn nodes_that_cannot_tell_their_frame_never_wait() {
+    // A model without next_frame (the default) is never held back.
+    struct Blind(Vec<u32>, Vec<u32>);
+    impl BusNode for Blind {
+        type Frame = u32;
+        type Fault = ();
+        fn tx_pending(&self) -> bool {
+            !self.0.is_empty()
+        }
+        fn acks(&self) -> bool {
+            true
+        }
+        fn attempt(&mut self, _: (), _: bool) -> Attempt<u32> {
+            Attempt::Sent(self.0.remove(0))
+        }
+        fn deliver(&mut self, f: &u32) -> bool {
+            self.1.push(*f);
+            true
+        }
+        fn not_ready_for(&self, _f: &u32) -> bool {
+            true
+        }
+    }
+    let mut nodes = [Blind(vec![4], vec![]), Blind(vec![], vec![])];
+    let mut next = 0;
+    assert_eq!(round(&mut nodes, &mut next, (), 1), Outcome::Sent(0, 4));
+    assert_eq!(nodes[1].1, [4]);
 }
 
 proptest! {
