@@ -37,7 +37,7 @@ RCAN_CONFIG := CONFIG_RCAN=m CONFIG_RCAN_PF=m CONFIG_RCAN_PROTO_CAN=m CONFIG_RCA
 	CONFIG_RCAN_PROTO_DSOR=m CONFIG_RCAN_DSOR_NODE_ID=0x00
 BINDINGS := rust/bindings/bindings_generated.rs
 
-.PHONY: all setup kernel modules bindings userspace man demo check fuzz bench clean install uninstall
+.PHONY: all setup kernel modules bindings userspace man demo check soak fuzz bench clean install uninstall
 
 all: modules userspace man
 
@@ -76,8 +76,16 @@ uninstall:
 demo: setup modules userspace
 	bash $(T)/demo.sh
 
+# When make started: run-tests.sh counts the setup and builds before it.
+RCAN_MAKE_T0 := $(shell date +%s)
+
 check: setup modules userspace man
-	bash $(T)/run-tests.sh
+	RCAN_MAKE_T0=$(RCAN_MAKE_T0) bash $(T)/run-tests.sh
+
+# The VM stages of make check RUNS times (default 3) beside stress-ng
+# --cpu LOAD (default 2): the suite must not depend on the host's speed.
+soak: setup modules userspace
+	bash $(T)/soak.sh
 
 # A longer run of the syscall fuzzer (tests/fuzz) than make check's, on the
 # debug kernel (KASAN, lockdep, kmemleak), in one VM boot; builds the debug

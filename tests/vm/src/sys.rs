@@ -481,6 +481,31 @@ impl Drop for Pinned {
     }
 }
 
+/// The CPUs the calling thread may run on (`sched_getaffinity`).
+pub fn affinity() -> io::Result<Vec<usize>> {
+    // SAFETY: an all-zero cpu_set_t is a valid (empty) set; the call
+    // fills the one we own, of the size given.
+    let mut set: libc::cpu_set_t = unsafe { zeroed() };
+    // SAFETY: as above.
+    cvt(unsafe { libc::sched_getaffinity(0, size_of::<libc::cpu_set_t>(), &mut set) })?;
+    // SAFETY: CPU_ISSET reads the set we own, within CPU_SETSIZE.
+    Ok((0..libc::CPU_SETSIZE as usize)
+        .filter(|&c| unsafe { libc::CPU_ISSET(c, &set) })
+        .collect())
+}
+
+/// Lets the calling thread run on `cpus` (`sched_setaffinity`).
+pub fn set_affinity(cpus: &[usize]) -> io::Result<()> {
+    // SAFETY: an all-zero cpu_set_t is a valid (empty) set.
+    let mut set: libc::cpu_set_t = unsafe { zeroed() };
+    for &c in cpus.iter().filter(|&&c| c < libc::CPU_SETSIZE as usize) {
+        // SAFETY: CPU_SET writes the set we own, within CPU_SETSIZE.
+        unsafe { libc::CPU_SET(c, &mut set) };
+    }
+    // SAFETY: the set we own, of the size given.
+    cvt(unsafe { libc::sched_setaffinity(0, size_of::<libc::cpu_set_t>(), &set) }).map(drop)
+}
+
 /// `poll` on one descriptor for `events`, up to `timeout_ms`; returns
 /// `revents` (0 on timeout).
 pub fn poll_one(

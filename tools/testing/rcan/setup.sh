@@ -7,7 +7,7 @@ set -euo pipefail
 
 pkgs="linux-source-6.12 clang lld llvm libclang-dev flex bison bc libelf-dev
 libssl-dev qemu-system-x86 can-utils busybox-static cpio kmod iproute2 make
-tcpdump python3-can"
+tcpdump python3-can stress-ng"
 missing=""
 for p in $pkgs; do
 	dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" ||
