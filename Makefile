@@ -52,8 +52,13 @@ kernel: setup
 bindings:
 	bash rust/bindings/gen-bindings.sh $(kdir) $(BINDINGS)
 
+# Kbuild compiles the modules one at a time unless told otherwise (each
+# compiles the glue into itself): as many at once as there are cores,
+# unless make was given a -j of its own.
+modules_j = $(if $(filter -j%,$(MAKEFLAGS)),,-j$(shell nproc))
+
 modules: bindings
-	$(MAKE) -C $(kdir) M=$(CURDIR) LLVM=1 $(RCAN_CONFIG) modules
+	$(MAKE) -C $(kdir) M=$(CURDIR) LLVM=1 $(RCAN_CONFIG) $(modules_j) modules
 
 userspace:
 	cargo build --release --workspace --bins

@@ -14,11 +14,14 @@
 # stage fuzz-debug). Prints one closing "N passed, M failed" line over
 # all stages.
 #
-# The stages are jobs run side by side, at most RCAN_JOBS at once
-# (default 2, the machine's cores): a VM spends much of its time waiting
-# (receive timeouts, timers, program starts; rcan-vmtest prints how much
-# per test), so two VMs on two cores get through the suite sooner than one
-# after the other. Each VM suite is split into shards (rcan-vmtest
+# The stages are jobs run side by side: a VM spends much of its time
+# waiting (receive timeouts, timers, program starts; rcan-vmtest prints
+# how much per test), so several VMs on two cores get through the suite
+# sooner than one after the other. The jobs run in two lanes: the debug
+# lane (the debug modules' build, then every debug shard at once: the
+# longest chain, which no other job may hold up) and the main lane (the
+# host tests, the release shards, mainline), at most RCAN_JOBS (default
+# 2) at once. Each VM suite is split into shards (rcan-vmtest
 # --shard I/N, every N-th test), each shard a VM boot of its own with its
 # own kernel, modules and emulated CAN cards, so shards cannot disturb
 # each other: RCAN_SHARDS_RELEASE (default 2) and RCAN_SHARDS_DEBUG
@@ -46,7 +49,7 @@ log_dir=$RCAN_ROOT/target/rcan-check
 rm -rf "$log_dir"
 mkdir -p "$log_dir" || die "cannot make $log_dir"
 run_t0=$SECONDS
-jobs_max=${RCAN_JOBS:-3}
+jobs_max=${RCAN_JOBS:-2}
 shards_release=${RCAN_SHARDS_RELEASE:-2}
 shards_debug=${RCAN_SHARDS_DEBUG:-2}
 for v in jobs_max shards_release shards_debug; do
@@ -84,20 +87,24 @@ tally() {
 
 # --- the jobs ----------------------------------------------------------------
 #
-# job NAME AFTER RUN DONE: a job called NAME (one word) that starts once every job
-# named in AFTER (space-separated) has ended with status 0; RUN is the
+# job NAME AFTER RUN DONE [LANE]: a job called NAME (one word) in LANE
+# (main or debug, default main) that starts once every job named in
+# AFTER (space-separated) has ended with status 0 and its lane has room
+# (lane_max); RUN is the
 # command line (a function of this script) that does the work, its output
 # in the job's log, run in the background; DONE is the function called with
 # NAME, its exit status and its log once it and every job before it have
 # ended, which prints and counts. A job whose AFTER failed is not run: its
 # DONE gets status 127 and a log that says why.
-declare -A job_run job_after job_done job_state job_rc job_t0 job_t1 job_pid_name counts
+declare -A job_run job_after job_done job_state job_rc job_t0 job_t1 job_pid_name job_lane counts
+declare -A lane_max=([main]=$jobs_max [debug]=$shards_debug) lane_running=([main]=0 [debug]=0)
 job_names=()
 job() {
 	job_names+=("$1")
 	job_after[$1]=$2
 	job_run[$1]=$3
 	job_done[$1]=$4
+	job_lane[$1]=${5:-main}
 	job_state[$1]=pending
 }
 joblog() { echo "$log_dir/${1//[:\/]/-}.log"; }
@@ -126,7 +133,7 @@ start_ready() {
 			job_t1[$n]=${job_t0[$n]}
 			continue
 		fi
-		[ "$ready" = 1 ] && [ "$running" -lt "$jobs_max" ] || continue
+		[ "$ready" = 1 ] && [ "${lane_running[${job_lane[$n]}]}" -lt "${lane_max[${job_lane[$n]}]}" ] || continue
 		job_t0[$n]=$(now)
 		echo "rcan: [+${job_t0[$n]} s] $n: started"
 		# The job's host CPU seconds (its processes and theirs, qemu
@@ -143,6 +150,7 @@ start_ready() {
 		job_pid_name[$!]=$n
 		job_state[$n]=running
 		running=$((running + 1))
+		lane_running[${job_lane[$n]}]=$((lane_running[${job_lane[$n]}] + 1))
 	done
 }
 
@@ -175,6 +183,7 @@ run_jobs() {
 		job_rc[$n]=$rc
 		job_t1[$n]=$(now)
 		running=$((running - 1))
+		lane_running[${job_lane[$n]}]=$((lane_running[${job_lane[$n]}] - 1))
 		echo "rcan: [+${job_t1[$n]} s] $n: ended, exit $rc, $((job_t1[$n] - job_t0[$n])) s"
 	done
 }
@@ -378,7 +387,7 @@ if [ "$debug" = 1 ]; then
 	# VMs load: after them.
 	after=
 	[ "$debug_in_place" = 1 ] && after=build-release
-	job build-debug "$after" "build_run debug" build_done
+	job build-debug "$after" "build_run debug" build_done debug
 fi
 if [ "${RCAN_SKIP_HOST:-0}" != 1 ]; then
 	job host "" host_run host_done
@@ -392,18 +401,18 @@ done
 job vm-mainline "" mainline_run mainline_done
 if [ "$debug" = 1 ]; then
 	for i in $(seq 1 "$shards_debug"); do
-		job "vm-debug:$i/$shards_debug" build-debug "vm_run debug $i/$shards_debug" vm_done
+		job "vm-debug:$i/$shards_debug" build-debug "vm_run debug $i/$shards_debug" vm_done debug
 	done
 fi
-# Start order: the debug chain (its build, then its shards, which wait for
-# it) is the longest, so it goes first whenever it can; then the host
-# tests, the release shards, mainline. The print order stays the plan's.
-for n in build-debug vm-debug: build-release host vm-release: vm-mainline frontdoor unsafe dkms; do
+# Start order in the main lane: the host tests (whose compile wants both
+# cores) and the scripts of seconds, then the release shards, mainline.
+# The print order stays the plan's.
+for n in build-debug vm-debug: build-release host frontdoor unsafe dkms vm-release: vm-mainline; do
 	for m in "${job_names[@]}"; do
 		case $m in "$n"*) [[ " ${start_names[*]} " == *" $m "* ]] || start_names+=("$m") ;; esac
 	done
 done
-echo "rcan: $jobs_max jobs at once; release suite in $shards_release VMs, debug suite in $shards_debug"
+echo "rcan: $jobs_max jobs at once beside the debug lane; release suite in $shards_release VMs, debug suite in $shards_debug"
 run_jobs
 
 # Leave release modules in the tree, as `make modules` would, if the debug
