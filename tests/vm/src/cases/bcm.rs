@@ -214,18 +214,7 @@ fn collect(
     id: u32,
     t: Duration,
 ) -> Result<Vec<(Instant, Vec<u8>)>, String> {
-    let end = Instant::now() + t;
-    let mut got = Vec::new();
-    while let Some(left) = end.checked_duration_since(Instant::now()) {
-        s.set_read_timeout(left.max(Duration::from_millis(1)))
-            .or_fail("SO_RCVTIMEO")?;
-        match s.read_frame() {
-            Ok(f) if f.raw_id() == id => got.push((Instant::now(), f.data().to_vec())),
-            Ok(_) => {}
-            Err(_) => break,
-        }
-    }
-    Ok(got)
+    collect_until(s, id, t, |_| false)
 }
 
 /// Longest wait for frames or a marker a test waits for: a deadline for a
