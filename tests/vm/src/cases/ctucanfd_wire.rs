@@ -326,9 +326,16 @@ fn ctucanfd_wire_peer_mainline(ctx: &mut Ctx) -> TestResult {
     ctx.link_up(b)?;
     let (ia, ib) = (ctx.ifindex(a)?, ctx.ifindex(b)?);
 
-    // Classic frames, through classic CAN_RAW sockets.
+    // Classic frames, through classic CAN_RAW sockets. A CAN_RAW socket
+    // also gets the frames other sockets of its interface sent, once the
+    // driver reports them sent (the echo): the FD sockets opened below
+    // would see a classic frame whose echo a loaded guest delivers after
+    // the frame itself reached the other end (seen: mainline's echo of
+    // the last one, 2026-11-28). So a monitor on each end counts what
+    // the end saw, both ways, before the FD sockets open.
     {
         let (sa, sb) = (canraw::open(ia)?, canraw::open(ib)?);
+        let (ma, mb) = (canraw::open(ia)?, canraw::open(ib)?);
         let frames = classic_kinds();
         for f in &frames {
             canraw::send(&sa, f)?;
@@ -338,11 +345,20 @@ fn ctucanfd_wire_peer_mainline(ctx: &mut Ctx) -> TestResult {
             canraw::send(&sb, f)?;
             classic_expect(&sa, f, &format!("mainline {b} -> ours {a}"))?;
         }
+        for (m, d) in [(&ma, a), (&mb, b)] {
+            for i in 0..2 * frames.len() {
+                canraw::recv(m).map_err(|e| {
+                    format!("{d}: {i} of the classic frames and their echoes, then: {e}")
+                })?;
+            }
+        }
         ctx.note(format!("{} classic frames each way", frames.len()));
     }
 
-    // FD frames, every length code, BRS and ESI.
+    // FD frames, every length code, BRS and ESI; monitors as above, for
+    // the burst's sockets.
     let (fa, fb) = (fd_open(ia)?, fd_open(ib)?);
+    let (ma, mb) = (fd_open(ia)?, fd_open(ib)?);
     let n1 = fd_all(
         &fa,
         &fb,
@@ -360,6 +376,14 @@ fn ctucanfd_wire_peer_mainline(ctx: &mut Ctx) -> TestResult {
     ctx.note(format!(
         "{n1} FD frames ours -> mainline, {n2} mainline -> ours (ESI arrives only from ours)"
     ));
+    for (m, d) in [(&ma, a), (&mb, b)] {
+        for i in 0..n1 + n2 {
+            m.read_frame().map_err(|e| {
+                format!("{d}: {i} of the FD frames and their echoes, then: {e}")
+            })?;
+        }
+    }
+    drop((ma, mb));
 
     // Unpaced: count, report, do not assert on loss.
     let n = sized("RCAN_CTU_WIRE_BURST", 2000, 100);
