@@ -89,7 +89,7 @@ check: setup modules userspace man
 
 # The VM stages of make check RUNS times (default 3) beside stress-ng
 # --cpu LOAD (default 2): the suite must not depend on the host's speed.
-soak: setup modules userspace
+soak: setup modules userspace man
 	bash $(T)/soak.sh
 
 # A longer run of the syscall fuzzer (tests/fuzz) than make check's, on the
