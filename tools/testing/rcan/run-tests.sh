@@ -386,7 +386,11 @@ if [ "$debug" = 1 ]; then
 	# In place, the debug build would replace the modules the release
 	# VMs load: after them.
 	after=
-	[ "$debug_in_place" = 1 ] && after=build-release
+	if [ "$debug_in_place" = 1 ]; then
+		for i in $(seq 1 "$shards_release"); do
+			after+=" vm-release:$i/$shards_release"
+		done
+	fi
 	job build-debug "$after" "build_run debug" build_done debug
 fi
 if [ "${RCAN_SKIP_HOST:-0}" != 1 ]; then
