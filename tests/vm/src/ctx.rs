@@ -47,6 +47,30 @@ impl Stack {
     }
 }
 
+/// What a test uses of the machine, declared in its table
+/// (`test_table![own; stack: shared]` in `cases`). The runner shares what
+/// it may: loading the stack costs more than most tests on the debug
+/// kernel (some 3 s of KASAN-checked module loading and unloading under
+/// TCG, against 0.2-0.4 s of test).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Uses {
+    /// Modules of its own: the runner unloads everything before and after
+    /// it. Every test whose subject is loading, unloading, module
+    /// parameters or a driver, and every test that leaves something behind
+    /// on purpose.
+    Own,
+    /// The loaded stack: [`Module::SHARED`] (rcan_pf, rcan_can, rcan_raw,
+    /// rcan_bcm, and rcan_loop with no parameter but `count=N`), loaded
+    /// through [`Ctx::load_stack`], [`Ctx::can_ifaces`], [`Ctx::bcm_ifaces`]
+    /// or [`Ctx::insmod`]. On our stack the runner keeps those modules
+    /// loaded from one such test to the next, when the test left them as
+    /// it found them ([`Ctx::end`]); a different `count=` reloads rcan_loop
+    /// only. Such a test may not unload anything nor load anything else:
+    /// [`Ctx`] refuses, so the declaration is checked, not trusted. On
+    /// mainline every test is run as [`Uses::Own`].
+    Stack,
+}
+
 /// One of the rcan kernel modules.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub enum Module {
@@ -113,6 +137,15 @@ impl Module {
         Module::Sja1000Sim,
         Module::CtuCanFdPci,
         Module::CtuCanFdSim,
+    ];
+
+    /// The modules a [`Uses::Stack`] test may load, in load order.
+    pub const SHARED: [Module; 5] = [
+        Module::Pf,
+        Module::Can,
+        Module::Raw,
+        Module::Bcm,
+        Module::Loop,
     ];
 
     /// Name as shown by `/proc/modules` and taken by `rmmod`.
@@ -239,6 +272,17 @@ pub struct Ctx {
     ndev: usize,
     /// vcan interfaces created by [`Ctx::can_ifaces`] on mainline.
     vcans: Vec<String>,
+    /// What the running test declared ([`Ctx::begin`]).
+    uses: Uses,
+    /// The canN devices and rcan_loop's parameters as [`Ctx::load_stack`]
+    /// left them after loading rcan_loop ([`loop_state`]): what a
+    /// [`Uses::Stack`] test must leave for the next one. None while
+    /// rcan_loop is not loaded, or was loaded otherwise.
+    loop_state: Option<String>,
+    /// [`Uses::Stack`] tests run so far, and how many of them found the
+    /// shared stack loaded ([`Ctx::shared_runs`]).
+    stack_tests: usize,
+    kept: usize,
 }
 
 impl Ctx {
@@ -251,6 +295,10 @@ impl Ctx {
             kbuild,
             ndev: 0,
             vcans: Vec::new(),
+            uses: Uses::Own,
+            loop_state: None,
+            stack_tests: 0,
+            kept: 0,
         }
     }
 
@@ -289,7 +337,33 @@ impl Ctx {
     /// `insmod` module `m` with `params`. A hardware driver (SJA1000,
     /// 82527, CTU CAN FD) needs `rcan_dev` (the "can" link kind its
     /// devices use): it is loaded first if it is not, as modprobe would.
+    ///
+    /// In a [`Uses::Stack`] test, a module of [`Module::SHARED`] that is
+    /// loaded already (kept from an earlier test) is left as it is, except
+    /// rcan_loop with another `count=`, which is reloaded; any other module
+    /// or parameter is refused.
     pub fn insmod(&mut self, m: Module, params: &[&str]) -> Result<(), String> {
+        if self.uses == Uses::Stack {
+            let count_only = params.iter().all(|p| p.starts_with("count="));
+            if !Module::SHARED.contains(&m)
+                || !(params.is_empty() || m == Module::Loop && count_only)
+            {
+                return Err(format!(
+                    "insmod {} {}: a test declared Uses::Stack loads only the shared stack \
+                     (declare it Uses::Own)",
+                    m.name(),
+                    params.join(" ")
+                ));
+            }
+            if self.is_loaded(m) {
+                if m != Module::Loop || self.ndev == loop_count(params) {
+                    return Ok(());
+                }
+                rmmod_retrying(m.name())?;
+                self.ndev = 0;
+                self.loop_state = None;
+            }
+        }
         let needs_dev = [
             Module::Kvaser,
             Module::Advantech,
@@ -323,11 +397,79 @@ impl Ctx {
 
     /// `rmmod` module `m` (no retries).
     pub fn rmmod(&mut self, m: Module) -> Result<(), String> {
+        self.own("rmmod", m.name())?;
         rmmod(m.name())?;
         if m == Module::Loop {
             self.ndev = 0;
+            self.loop_state = None;
         }
         Ok(())
+    }
+
+    /// Refuses `what` in a [`Uses::Stack`] test: it unloads part of the
+    /// shared stack.
+    fn own(&self, what: &str, arg: &str) -> Result<(), String> {
+        match self.uses {
+            Uses::Own => Ok(()),
+            Uses::Stack => Err(format!(
+                "{what} {arg}: a test declared Uses::Stack may not unload the shared stack \
+                 (declare it Uses::Own)"
+            )),
+        }
+    }
+
+    /// Before a test that declared `uses`: on mainline, or for a
+    /// [`Uses::Own`] test, unloads whatever is loaded (an earlier test's
+    /// leftovers: its error). A [`Uses::Stack`] test on our stack finds
+    /// the shared stack as the last such test left it, or nothing.
+    pub fn begin(&mut self, uses: Uses) -> Result<(), String> {
+        self.uses = Uses::Own;
+        if uses == Uses::Own || self.stack == Stack::Mainline || !sharing() {
+            return self.unload_all();
+        }
+        self.uses = Uses::Stack;
+        self.stack_tests += 1;
+        if self.is_loaded(Module::Pf) {
+            self.kept += 1;
+        }
+        Ok(())
+    }
+
+    /// How many [`Uses::Stack`] tests ran, and how many of them found the
+    /// shared stack kept loaded by the test before.
+    pub fn shared_runs(&self) -> (usize, usize) {
+        (self.stack_tests, self.kept)
+    }
+
+    /// After a test (`passed` or not): unloads everything, except after a
+    /// passed [`Uses::Stack`] test that left the shared stack as it found
+    /// it, which keeps it for the next. Fails (the test's fault) if the
+    /// test left a module in use: a socket it did not close, a thread or
+    /// program still holding one, past a 10 s grace for late releases.
+    /// State a test may change on purpose (a link down, an MTU, a loaded
+    /// module outside the shared set) is not a failure: the stack is then
+    /// reloaded for the next test.
+    pub fn end(&mut self, passed: bool) -> Result<(), String> {
+        let shared = std::mem::replace(&mut self.uses, Uses::Own) == Uses::Stack;
+        if !(shared && passed) {
+            return self.unload_all();
+        }
+        let idle = wait_idle(&Module::SHARED);
+        if let Err(e) = idle {
+            return Err(match self.unload_all() {
+                Ok(()) => e,
+                Err(u) => format!("{e}; {u}"),
+            });
+        }
+        let only_shared = Module::ALL
+            .into_iter()
+            .all(|m| Module::SHARED.contains(&m) || !self.is_loaded(m));
+        let as_found = self.loop_state.is_some() && self.loop_state == loop_state(self.ndev);
+        if only_shared && as_found {
+            Ok(())
+        } else {
+            self.unload_all()
+        }
     }
 
     /// Whether module `m` is loaded (listed in `/proc/modules`).
@@ -344,8 +486,13 @@ impl Ctx {
         if self.have_raw() {
             self.insmod(Module::Raw, &[])?;
         }
+        let fresh = !self.is_loaded(Module::Loop) || self.ndev != loop_count(loop_params);
         self.insmod(Module::Loop, loop_params)?;
-        self.links_up()
+        self.links_up()?;
+        if fresh {
+            self.loop_state = loop_state(self.ndev);
+        }
+        Ok(())
     }
 
     /// Loads the stack under test with CAN_RAW and `n` interfaces can0..,
@@ -481,6 +628,7 @@ impl Ctx {
     /// sockets bound to them. Ours: rmmod rcan_loop. Mainline:
     /// `ip link del` each vcan.
     pub fn remove_can_ifaces(&mut self) -> Result<(), String> {
+        self.own("remove", "the canN interfaces")?;
         match self.stack {
             Stack::Ours => self.rmmod(Module::Loop),
             Stack::Mainline => std::mem::take(&mut self.vcans)
@@ -500,6 +648,7 @@ impl Ctx {
     /// Mainline modules and the vcan interfaces made for a test go the same
     /// way (`ip link del`, then rmmod).
     pub fn unload_all(&mut self) -> Result<(), String> {
+        self.own("unload", "every module")?;
         let mut errors = Vec::new();
         for m in Module::ALL.into_iter().rev() {
             if let Err(e) = rmmod_retrying(m.name()) {
@@ -528,6 +677,7 @@ impl Ctx {
             }
         }
         self.ndev = 0;
+        self.loop_state = None;
         if errors.is_empty() {
             Ok(())
         } else {
@@ -603,6 +753,75 @@ fn rmmod_retrying(name: &str) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// Whether [`Uses::Stack`] tests share the loaded stack: unless
+/// `RCAN_VMTEST_SHARE=0`, which runs every test on modules of its own (to
+/// tell a test that depends on another's leftovers, and to measure what
+/// sharing saves).
+fn sharing() -> bool {
+    std::env::var("RCAN_VMTEST_SHARE").map_or(true, |v| v != "0")
+}
+
+/// Waits (10 s at most) until none of the loaded `modules` is held by more
+/// than the modules that use it (`/proc/modules`: the use count against
+/// the "used by" list): no socket, device or program of a test holds one.
+fn wait_idle(modules: &[Module]) -> Result<(), String> {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let held: Vec<String> = fs::read_to_string("/proc/modules")
+            .or_fail("/proc/modules")?
+            .lines()
+            .filter_map(|l| {
+                let f: Vec<&str> = l.split(' ').collect();
+                let (name, count, users) = (f.first()?, f.get(2)?, f.get(3)?);
+                if !modules.iter().any(|m| m.name() == *name) {
+                    return None;
+                }
+                let count: usize = count.parse().ok()?;
+                let users = users
+                    .split(',')
+                    .filter(|u| !u.is_empty() && *u != "-")
+                    .count();
+                (count > users).then(|| format!("{name} (use count {count}, {users} module(s))"))
+            })
+            .collect();
+        if held.is_empty() {
+            return Ok(());
+        }
+        if Instant::now() > deadline {
+            return Err(format!(
+                "left in use after 10 s: {} (a socket, device or program of the test still holds it)",
+                held.join(", ")
+            ));
+        }
+        thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// What a [`Uses::Stack`] test must leave of rcan_loop as it found it: for
+/// each of its `n` devices (and no more), the flags, MTU and queue length,
+/// and the module's parameters. None if a device is missing.
+fn loop_state(n: usize) -> Option<String> {
+    let mut s = String::new();
+    for i in 0..n {
+        let d = Path::new("/sys/class/net").join(dev(i));
+        for attr in ["flags", "mtu", "tx_queue_len"] {
+            s += fs::read_to_string(d.join(attr)).ok()?.trim();
+            s.push(' ');
+        }
+    }
+    if Path::new("/sys/class/net").join(dev(n)).exists() {
+        return None;
+    }
+    if let Ok(dir) = fs::read_dir("/sys/module/rcan_loop/parameters") {
+        let mut params: Vec<_> = dir.flatten().map(|e| e.path()).collect();
+        params.sort();
+        for p in params {
+            s += &fs::read_to_string(&p).unwrap_or_default();
+        }
+    }
+    Some(s)
 }
 
 /// `rmmod NAME` (by syscall, see [`sys::delete_module`]).

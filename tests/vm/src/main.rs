@@ -86,6 +86,7 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use check::TestResult;
+pub use ctx::Uses;
 use ctx::{Ctx, Mainline, Module, Stack};
 use shard::Shard;
 
@@ -99,6 +100,9 @@ pub struct Test {
     /// the mainline API (CAN_RAW, can-utils, packet sockets) and sets up its
     /// interfaces with `Ctx::can_ifaces`.
     pub portable: bool,
+    /// What it uses of the machine: modules of its own, or the stack the
+    /// runner keeps loaded between such tests.
+    pub uses: Uses,
 }
 
 impl Test {
@@ -209,7 +213,7 @@ fn spawn_watchdog(progress: Arc<Mutex<Progress>>, limit: Duration) {
 /// program it starts, would inherit it (two SJA1000 tests did that once,
 /// and a BCM test late in the run took minutes instead of seconds).
 fn run_one(ctx: &mut Ctx, t: &Test) -> TestResult {
-    ctx.unload_all()
+    ctx.begin(t.uses)
         .map_err(|e| format!("leftover modules from an earlier test: {e}"))?;
     let cpus = sys::affinity().map_err(|e| format!("sched_getaffinity: {e}"))?;
     let r = panic::catch_unwind(AssertUnwindSafe(|| (t.run)(ctx))).unwrap_or_else(|p| {
@@ -220,7 +224,7 @@ fn run_one(ctx: &mut Ctx, t: &Test) -> TestResult {
             .unwrap_or_else(|| "unknown payload".into());
         Err(format!("panicked: {msg}"))
     });
-    let mut cleanup = ctx.unload_all();
+    let mut cleanup = ctx.end(r.is_ok());
     match sys::affinity() {
         Ok(now) if now == cpus => {}
         now => {
@@ -385,6 +389,12 @@ fn main() -> ExitCode {
         }
     }
     let p = lock();
+    let (stack_tests, kept) = ctx.shared_runs();
+    if stack_tests > 0 {
+        println!(
+            "# {stack_tests} tests declared Uses::Stack, {kept} of them ran on the stack kept loaded by the test before"
+        );
+    }
     report
         .lines(15, timing::online_cpus())
         .iter()
@@ -396,4 +406,3 @@ fn main() -> ExitCode {
         ExitCode::SUCCESS
     }
 }
-

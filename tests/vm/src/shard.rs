@@ -35,10 +35,7 @@ impl Shard {
     pub fn parse(s: &str) -> Result<Self, String> {
         let bad = || format!("bad --shard {s:?} (I/N with 1 <= I <= N)");
         let (i, n) = s.split_once('/').ok_or_else(bad)?;
-        let (index, count) = (
-            i.parse().map_err(|_| bad())?,
-            n.parse().map_err(|_| bad())?,
-        );
+        let (index, count) = (i.parse().map_err(|_| bad())?, n.parse().map_err(|_| bad())?);
         if index == 0 || index > count {
             return Err(bad());
         }

@@ -193,7 +193,10 @@ mod tests {
     #[test]
     fn counts_cpu_lines() {
         assert_eq!(count_cpus(STAT), 1);
-        assert_eq!(count_cpus("cpu  1 2 3 4\ncpu0 1 2 3 4\ncpu1 1 2 3 4\nctxt 5\n"), 2);
+        assert_eq!(
+            count_cpus("cpu  1 2 3 4\ncpu0 1 2 3 4\ncpu1 1 2 3 4\nctxt 5\n"),
+            2
+        );
     }
 
     #[test]
@@ -206,6 +209,10 @@ mod tests {
         assert_eq!(l.len(), 4, "{l:#?}");
         assert!(l[1].ends_with(" b") && l[1].contains(" 50 %"), "{}", l[1]);
         assert!(l[2].ends_with(" c") && l[2].contains("   0 %"), "{}", l[2]);
-        assert!(l[3].starts_with("# 3 tests in 7.0 s, CPUs busy 4.5 s of 14.0 s (32 %"), "{}", l[3]);
+        assert!(
+            l[3].starts_with("# 3 tests in 7.0 s, CPUs busy 4.5 s of 14.0 s (32 %"),
+            "{}",
+            l[3]
+        );
     }
 }

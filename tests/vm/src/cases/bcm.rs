@@ -25,6 +25,9 @@ use crate::tools;
 use super::portable_table;
 
 pub static TESTS: &[crate::Test] = portable_table![
+    bcm_rx_timeout_after_unregister,
+    ;
+    stack:
     bcm_tx_count_then_expired,
     bcm_tx_ival2_and_delete,
     bcm_tx_multi_frame_and_read,
@@ -43,7 +46,6 @@ pub static TESTS: &[crate::Test] = portable_table![
     bcm_rx_no_autotimer,
     bcm_rx_any_interface,
     bcm_rx_changed_timestamp,
-    bcm_rx_timeout_after_unregister,
     bcm_proc_net_file,
     bcm_fd_cyclic_content_filter_and_errnos,
 ];

@@ -15,6 +15,7 @@ use crate::tools::{self, TempDir, TOOL_LIMIT};
 use crate::Test;
 
 pub const TESTS: &[Test] = portable_table![
+    stack:
     canutils_cansend_candump,
     canutils_candump_filter,
     canutils_cangen_candump_log,

@@ -31,6 +31,7 @@ use crate::tools::{self, Bg, TempDir, TOOL_LIMIT};
 use crate::Test;
 
 pub const TESTS: &[Test] = portable_table![
+    stack:
     canutils_tcpdump_pcap,
     canutils_tcpdump_cansend,
     raw_packet_socket_rx,

@@ -378,9 +378,8 @@ fn ctucanfd_wire_peer_mainline(ctx: &mut Ctx) -> TestResult {
     ));
     for (m, d) in [(&ma, a), (&mb, b)] {
         for i in 0..n1 + n2 {
-            m.read_frame().map_err(|e| {
-                format!("{d}: {i} of the FD frames and their echoes, then: {e}")
-            })?;
+            m.read_frame()
+                .map_err(|e| format!("{d}: {i} of the FD frames and their echoes, then: {e}"))?;
         }
     }
     drop((ma, mb));

@@ -34,6 +34,7 @@ use crate::tools::{self, Bg, TempDir, TOOL_LIMIT};
 use crate::Test;
 
 pub const TESTS: &[Test] = portable_table![
+    stack:
     canzlogd_matches_candump_log,
     canzlogd_sigkill_loses_at_most_flush_interval,
     canzlogd_rotates_by_size_and_age,

@@ -12,6 +12,7 @@ use crate::ctx::{dev, Ctx};
 use crate::Test;
 
 pub const TESTS: &[Test] = test_table![
+    stack:
     err_addrlen_short,
     err_family,
     err_arb_unused_bit,

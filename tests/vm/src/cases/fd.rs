@@ -28,6 +28,7 @@ use crate::tools::{self, TOOL_LIMIT};
 use crate::Test;
 
 pub const TESTS: &[Test] = portable_table![
+    stack:
     raw_fd_mtu_switch,
     raw_fd_socketcan_round_trip,
     raw_fd_classic_sockets,

@@ -10,13 +10,15 @@ use crate::ctx::{dev, Ctx};
 use crate::Test;
 
 pub const TESTS: &[Test] = test_table![
+    filter_rtr_must_match,
+    filter_mask_any,
+    ;
+    stack:
     filter_exact_std,
     filter_exact_ext,
     filter_ide_dont_care,
     filter_rtr_dont_care,
-    filter_rtr_must_match,
     filter_id_range,
-    filter_mask_any,
     filter_unbound_receives_nothing,
     filter_rebind_replaces,
     ifindex_bound_interface_only,

@@ -23,7 +23,11 @@ use crate::ctx::{Ctx, Module};
 use crate::sys::{self, FILL};
 use crate::Test;
 
-pub const TESTS: &[Test] = portable_table![raw_leak_poisoned_buffers, bcm_leak_replies];
+pub const TESTS: &[Test] = portable_table![
+    stack:
+    raw_leak_poisoned_buffers,
+    bcm_leak_replies,
+];
 
 pub const OURS: &[Test] = test_table![
     leak_sja1000_frames,

@@ -14,6 +14,7 @@ use crate::ctx::Ctx;
 use crate::Test;
 
 pub const TESTS: &[Test] = test_table![
+    stack:
     mixed_thesis_to_raw,
     mixed_raw_to_thesis,
     mixed_raw_loopback_off,

@@ -55,19 +55,34 @@ use crate::ctx::{dev, Ctx, Module};
 use crate::Test;
 
 /// `test_table![a, b]`: a table of [`Test`]s named after their functions,
-/// run against our stack only.
+/// run against our stack only, each with modules of its own
+/// ([`crate::Uses::Own`]). `test_table![a; stack: b, c]` (or `test_table![stack:
+/// b, c]`) declares `b` and `c` [`crate::Uses::Stack`]: they run on the loaded
+/// stack the runner keeps from one such test to the next.
 macro_rules! test_table {
-    ($($f:ident),* $(,)?) => {
-        &[$(crate::Test { name: stringify!($f), run: $f, portable: false }),*]
+    (stack: $($s:ident),* $(,)?) => {
+        &[$(crate::Test { name: stringify!($s), run: $s, portable: false, uses: crate::Uses::Stack }),*]
+    };
+    ($($f:ident),* $(,)? $(; stack: $($s:ident),* $(,)?)?) => {
+        &[
+            $(crate::Test { name: stringify!($f), run: $f, portable: false, uses: crate::Uses::Own },)*
+            $($(crate::Test { name: stringify!($s), run: $s, portable: false, uses: crate::Uses::Stack },)*)?
+        ]
     };
 }
 pub(crate) use test_table;
 
 /// `portable_table![a, b]`: like [`test_table`], for tests that also run
-/// against mainline SocketCAN (`--stack mainline`).
+/// against mainline SocketCAN (`--stack mainline`); `stack:` likewise.
 macro_rules! portable_table {
-    ($($f:ident),* $(,)?) => {
-        &[$(crate::Test { name: stringify!($f), run: $f, portable: true }),*]
+    (stack: $($s:ident),* $(,)?) => {
+        &[$(crate::Test { name: stringify!($s), run: $s, portable: true, uses: crate::Uses::Stack }),*]
+    };
+    ($($f:ident),* $(,)? $(; stack: $($s:ident),* $(,)?)?) => {
+        &[
+            $(crate::Test { name: stringify!($f), run: $f, portable: true, uses: crate::Uses::Own },)*
+            $($(crate::Test { name: stringify!($s), run: $s, portable: true, uses: crate::Uses::Stack },)*)?
+        ]
     };
 }
 pub(crate) use portable_table;

@@ -18,15 +18,17 @@ use crate::Test;
 use rcan_uapi::raw;
 
 pub const TESTS: &[Test] = portable_table![
+    raw_bind_interface_removed,
+    raw_bind_after_interface_removed,
+    raw_close_in_every_state,
+    ;
+    stack:
     raw_bind_all_interfaces,
     raw_bind_rebind,
     raw_bind_getsockname,
     raw_bind_errors,
     raw_bind_interface_down,
-    raw_bind_interface_removed,
-    raw_bind_after_interface_removed,
     raw_socket_calls,
-    raw_close_in_every_state,
 ];
 
 const AF_CAN: u16 = libc::AF_CAN as u16;

@@ -17,7 +17,11 @@ use crate::sys;
 use crate::Test;
 use rcan_uapi::raw;
 
-pub const TESTS: &[Test] = portable_table![raw_efault_send_recv, raw_efault_sockopt_bind];
+pub const TESTS: &[Test] = portable_table![
+    stack:
+    raw_efault_send_recv,
+    raw_efault_sockopt_bind,
+];
 
 const AF_CAN: u16 = libc::AF_CAN as u16;
 

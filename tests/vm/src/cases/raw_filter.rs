@@ -21,6 +21,9 @@ use crate::ctx::Ctx;
 use crate::Test;
 
 pub const TESTS: &[Test] = portable_table![
+    raw_filter_join,
+    ;
+    stack:
     raw_filter_default_all,
     raw_filter_exact_sff,
     raw_filter_exact_eff,
@@ -28,7 +31,6 @@ pub const TESTS: &[Test] = portable_table![
     raw_filter_masked_sff_only,
     raw_filter_inverse,
     raw_filter_or,
-    raw_filter_join,
     raw_filter_none,
     raw_filter_before_bind,
     raw_filter_err_mask,

@@ -17,6 +17,7 @@ use crate::ctx::Ctx;
 use crate::Test;
 
 pub const TESTS: &[Test] = portable_table![
+    stack:
     raw_loopback_on_own_off,
     raw_loopback_on_own_on,
     raw_loopback_off_own_off,

@@ -19,6 +19,7 @@ use crate::sys::{self, FILL};
 use crate::Test;
 
 pub const TESTS: &[Test] = portable_table![
+    stack:
     raw_recv_frame_kinds,
     raw_recv_nonblocking,
     raw_recv_truncated,

@@ -18,6 +18,7 @@ use crate::Test;
 use rcan_uapi::raw;
 
 pub const TESTS: &[Test] = portable_table![
+    stack:
     raw_send_bad_size,
     raw_send_len_over_8,
     raw_send_unbound,

@@ -18,6 +18,7 @@ use crate::sys;
 use crate::Test;
 
 pub const TESTS: &[Test] = portable_table![
+    stack:
     raw_sockopt_defaults,
     raw_sockopt_roundtrip,
     raw_sockopt_fd_frames,

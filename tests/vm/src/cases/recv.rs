@@ -12,6 +12,7 @@ use crate::ctx::Ctx;
 use crate::Test;
 
 pub const TESTS: &[Test] = test_table![
+    stack:
     recv_short_buffer,
     recv_peek,
     recv_dontwait_eagain,

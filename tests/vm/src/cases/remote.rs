@@ -13,9 +13,15 @@ use crate::canraw::{self, CAN_MTU, CAN_RTR_FLAG};
 use crate::check::{ensure, expect_frame, Frame, OrFail, TestResult};
 use crate::Test;
 
-pub const TESTS: &[Test] = portable_table![raw_remote_data_passthrough];
+pub const TESTS: &[Test] = portable_table![
+    stack:
+    raw_remote_data_passthrough,
+];
 
-pub const OURS: &[Test] = test_table![canproto_remote_data_zero];
+pub const OURS: &[Test] = test_table![
+    stack:
+    canproto_remote_data_zero,
+];
 
 /// The identifier of the test frame.
 const ID: u32 = 0x123;

@@ -19,6 +19,8 @@ use crate::Test;
 
 pub const TESTS: &[Test] = test_table![
     socket_create,
+    ;
+    stack:
     sockname_peername,
     roundtrip_std_sendto,
     roundtrip_ext_sendto,
