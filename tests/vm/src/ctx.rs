@@ -283,6 +283,8 @@ pub struct Ctx {
     /// shared stack loaded ([`Ctx::shared_runs`]).
     stack_tests: usize,
     kept: usize,
+    /// The last [`Ctx::end`] failed: modules may be left loaded or in use.
+    dirty: bool,
 }
 
 impl Ctx {
@@ -299,6 +301,7 @@ impl Ctx {
             loop_state: None,
             stack_tests: 0,
             kept: 0,
+            dirty: false,
         }
     }
 
@@ -424,7 +427,8 @@ impl Ctx {
     /// the shared stack as the last such test left it, or nothing.
     pub fn begin(&mut self, uses: Uses) -> Result<(), String> {
         self.uses = Uses::Own;
-        if uses == Uses::Own || self.stack == Stack::Mainline || !sharing() {
+        let dirty = std::mem::take(&mut self.dirty);
+        if uses == Uses::Own || self.stack == Stack::Mainline || !sharing() || dirty {
             return self.unload_all();
         }
         self.uses = Uses::Stack;
@@ -450,6 +454,14 @@ impl Ctx {
     /// module outside the shared set) is not a failure: the stack is then
     /// reloaded for the next test.
     pub fn end(&mut self, passed: bool) -> Result<(), String> {
+        let r = self.end_test(passed);
+        // What is left after a failed clean-up is the next test's
+        // "leftover": it unloads first, whatever it declared.
+        self.dirty = r.is_err();
+        r
+    }
+
+    fn end_test(&mut self, passed: bool) -> Result<(), String> {
         let shared = std::mem::replace(&mut self.uses, Uses::Own) == Uses::Stack;
         if !(shared && passed) {
             return self.unload_all();
