@@ -17,7 +17,7 @@
 //! ```
 //!
 //! Usage: `rcan-vmtest [--root DIR] [--stack ours|mainline] [--kbuild DIR]
-//! [--timeout SECS] [--shard I/N] [--list] [FILTER]`
+//! [--timeout SECS] [--shard I/N] [--last-shard-busy SECS] [--list] [FILTER]`
 //!
 //! - `--root DIR`: repository root holding the built `.ko` files (default:
 //!   `$RCAN_ROOT`, else the current directory).
@@ -38,6 +38,9 @@
 //!   side by side, share the suite (`run-tests.sh` does this; each VM has
 //!   its own kernel, so the shards cannot disturb each other's modules or
 //!   devices).
+//! - `--last-shard-busy SECS`: the last shard's VM does SECS of other
+//!   work too (run-tests.sh runs the fuzzer after it on the debug kernel):
+//!   it gets that much less of the suite. Every shard must get the same.
 //! - `FILTER`: run only the tests whose name contains it, or one of its
 //!   comma-separated parts (`raw_bind,mixed_`).
 //!
@@ -116,7 +119,7 @@ impl Test {
 }
 
 const USAGE: &str = "usage: rcan-vmtest [--root DIR] [--stack ours|mainline] [--kbuild DIR] \
-                     [--timeout SECS] [--shard I/N] [--list] [FILTER]";
+                     [--timeout SECS] [--shard I/N] [--last-shard-busy SECS] [--list] [FILTER]";
 
 struct Options {
     root: Option<PathBuf>,
@@ -126,6 +129,7 @@ struct Options {
     list: bool,
     timeout: Duration,
     shard: Shard,
+    last_busy: f64,
 }
 
 fn parse_args() -> Result<Options, String> {
@@ -145,6 +149,7 @@ fn parse_args() -> Result<Options, String> {
         list: false,
         timeout: Duration::from_secs(if ctx::debug_kernel() { 360 } else { 180 }),
         shard: Shard::WHOLE,
+        last_busy: 0.0,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -159,6 +164,12 @@ fn parse_args() -> Result<Options, String> {
             }
             "--list" => o.list = true,
             "--shard" => o.shard = Shard::parse(&args.next().ok_or("--shard needs I/N")?)?,
+            "--last-shard-busy" => {
+                let s = args.next().ok_or("--last-shard-busy needs seconds")?;
+                o.last_busy = s
+                    .parse()
+                    .map_err(|_| format!("bad --last-shard-busy {s:?}"))?;
+            }
             "-h" | "--help" => return Err(USAGE.into()),
             f if !f.starts_with('-') && o.filter.is_none() => o.filter = Some(f.to_string()),
             other => return Err(format!("unexpected argument {other:?}")),
@@ -300,7 +311,7 @@ fn main() -> ExitCode {
     let names: Vec<&str> = tests.iter().map(|t| t.name).collect();
     let mine = opts
         .shard
-        .select(&names, &shard::weights(ctx::debug_kernel()));
+        .select(&names, &shard::weights(ctx::debug_kernel()), opts.last_busy);
     let tests: Vec<&Test> = mine.into_iter().map(|pos| tests[pos]).collect();
     // Said once, by the first shard.
     for t in too_slow.iter().filter(|_| opts.shard.index == 1) {

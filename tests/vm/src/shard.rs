@@ -43,14 +43,23 @@ impl Shard {
     }
 
     /// The positions (in `names`' order) of this shard's tests, balanced
-    /// by `weights` (seconds by name; unknown names weigh the median).
-    pub fn select(self, names: &[&str], weights: &HashMap<String, f64>) -> Vec<usize> {
+    /// by `weights` (seconds by name; unknown names weigh the median). The
+    /// last shard starts with `last_busy` seconds of other work (the
+    /// debug kernel's fuzzer runs in its boot): every shard must be given
+    /// the same value, or two shards could take one test.
+    pub fn select(
+        self,
+        names: &[&str],
+        weights: &HashMap<String, f64>,
+        last_busy: f64,
+    ) -> Vec<usize> {
         let median = median(weights.values().copied());
         let w = |n: &str| weights.get(n).copied().unwrap_or(median);
         let mut order: Vec<usize> = (0..names.len()).collect();
         // Longest first; equal weights in suite order (a stable sort).
         order.sort_by(|&a, &b| w(names[b]).total_cmp(&w(names[a])));
         let mut load = vec![0.0f64; self.count];
+        load[self.count - 1] = last_busy;
         let mut mine = Vec::new();
         for pos in order {
             let (shard, _) = load
@@ -113,7 +122,7 @@ mod tests {
         for count in 1..5 {
             let mut seen = vec![0; names.len()];
             for index in 1..=count {
-                let mine = Shard { index, count }.select(&names, &w);
+                let mine = Shard { index, count }.select(&names, &w, 0.0);
                 assert!(mine.windows(2).all(|p| p[0] < p[1]), "suite order");
                 mine.iter().for_each(|&p| seen[p] += 1);
             }
@@ -127,8 +136,19 @@ mod tests {
         let w = table(&[("a", 10.0), ("b", 6.0), ("c", 5.0), ("d", 4.0), ("e", 1.0)]);
         // Longest first: a -> 1, b -> 2, c -> 2 (6 < 10), d -> 1 (10 < 11),
         // e -> 2 (11 < 14): 14 and 12 seconds.
-        assert_eq!(Shard { index: 1, count: 2 }.select(&names, &w), [0, 3]);
-        assert_eq!(Shard { index: 2, count: 2 }.select(&names, &w), [1, 2, 4]);
+        assert_eq!(Shard { index: 1, count: 2 }.select(&names, &w, 0.0), [0, 3]);
+        assert_eq!(Shard { index: 2, count: 2 }.select(&names, &w, 0.0), [1, 2, 4]);
+    }
+
+    #[test]
+    fn last_shard_busy_takes_less() {
+        let names = ["a", "b", "c", "d", "e"];
+        let w = table(&[("a", 10.0), ("b", 6.0), ("c", 5.0), ("d", 4.0), ("e", 1.0)]);
+        // Shard 2 starts at 9 s: a to 1 (10), b to 2 (15), c to 1 (15),
+        // d to 1 (the tie goes to the first: 19), e to 2 (16). Without
+        // the 9 s, shard 2 would have b, c and e.
+        assert_eq!(Shard { index: 1, count: 2 }.select(&names, &w, 9.0), [0, 2, 3]);
+        assert_eq!(Shard { index: 2, count: 2 }.select(&names, &w, 9.0), [1, 4]);
     }
 
     #[test]
@@ -137,7 +157,7 @@ mod tests {
         assert_eq!(median(w.values().copied()), 2.0);
         let names = ["c", "x", "y"];
         // c alone in shard 1, the two unknown ones (2 s each) in shard 2.
-        assert_eq!(Shard { index: 1, count: 2 }.select(&names, &w), [0]);
+        assert_eq!(Shard { index: 1, count: 2 }.select(&names, &w, 0.0), [0]);
     }
 
     #[test]

@@ -292,6 +292,9 @@ vm_run() {
 		# the debug modules from target/rcan-debug (--root), whose
 		# target/ is the checkout's.
 		cmd+=(--root "$debug_root")
+		# The fuzzer's two seeds run after the last shard's tests:
+		# that shard gets their seconds' less of the suite.
+		cmd+=(--last-shard-busy $((2 * ${RCAN_FUZZ_SECONDS:-45})))
 		limit=$((3300 + 900))
 		if [ "${shard%/*}" = "${shard#*/}" ]; then
 			# The fuzzer in the last shard's boot: one boot and one
