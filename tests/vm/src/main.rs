@@ -61,8 +61,13 @@
 //! ```
 //!
 //! Every test loads the modules it needs (`Ctx::load_stack`,
-//! `Ctx::can_ifaces`) and the runner unloads everything afterwards, also
-//! after a failure or panic, so tests are independent. Receives use a 2 s
+//! `Ctx::can_ifaces`). After a test declared `Uses::Own` the runner
+//! unloads everything, also after a failure or panic; after one declared
+//! `Uses::Stack` (its set-up is the shared stack: rcan_pf, rcan_can,
+//! rcan_raw, rcan_bcm, rcan_loop `count=N`) it keeps those modules for the
+//! next such test if no module is left in use and rcan_loop's devices are
+//! as they were (`Ctx::end`), else unloads them too; the run ends with an
+//! unload. So tests are independent. Receives use a 2 s
 //! (thesis API) or 10 s (CAN_RAW) `SO_RCVTIMEO`; "nothing arrives" is
 //! checked with `MSG_DONTWAIT` after a 200 ms pause, in CAN_RAW tests also
 //! by a marker frame sent last. No test asserts on wall-clock time, except
@@ -398,6 +403,13 @@ fn main() -> ExitCode {
                 );
             }
         }
+    }
+    // The stack the last Uses::Stack test may have left loaded: a module
+    // that will not unload (a receive registration or socket leaked and
+    // not seen by the use counts) fails the run.
+    if let Err(e) = ctx.unload_all() {
+        lock().failed += 1;
+        println!("not ok - (end of run): the modules kept loaded do not unload: {e}");
     }
     let p = lock();
     let (stack_tests, kept) = ctx.shared_runs();

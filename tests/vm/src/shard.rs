@@ -137,7 +137,10 @@ mod tests {
         // Longest first: a -> 1, b -> 2, c -> 2 (6 < 10), d -> 1 (10 < 11),
         // e -> 2 (11 < 14): 14 and 12 seconds.
         assert_eq!(Shard { index: 1, count: 2 }.select(&names, &w, 0.0), [0, 3]);
-        assert_eq!(Shard { index: 2, count: 2 }.select(&names, &w, 0.0), [1, 2, 4]);
+        assert_eq!(
+            Shard { index: 2, count: 2 }.select(&names, &w, 0.0),
+            [1, 2, 4]
+        );
     }
 
     #[test]
@@ -147,7 +150,10 @@ mod tests {
         // Shard 2 starts at 9 s: a to 1 (10), b to 2 (15), c to 1 (15),
         // d to 1 (the tie goes to the first: 19), e to 2 (16). Without
         // the 9 s, shard 2 would have b, c and e.
-        assert_eq!(Shard { index: 1, count: 2 }.select(&names, &w, 9.0), [0, 2, 3]);
+        assert_eq!(
+            Shard { index: 1, count: 2 }.select(&names, &w, 9.0),
+            [0, 2, 3]
+        );
         assert_eq!(Shard { index: 2, count: 2 }.select(&names, &w, 9.0), [1, 4]);
     }
 

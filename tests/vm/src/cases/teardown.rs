@@ -38,12 +38,10 @@ use crate::Test;
 
 /// CAN_RAW: run on both stacks.
 pub const TESTS: &[Test] = portable_table![
-    raw_teardown_iface_delete_bound,
-    raw_teardown_rmmod_busy,
-    ;
-    stack:
     raw_teardown_close_during_recv,
     raw_teardown_ifdown_during_send,
+    raw_teardown_iface_delete_bound,
+    raw_teardown_rmmod_busy,
 ];
 
 /// CANPROTO_CAN and CANPROTO_DSOR, and all three protocols at once.
