@@ -33,6 +33,7 @@
 //! - `--timeout SECS`: per-test watchdog (default 180, or 360 on the debug
 //!   kernel, `RCAN_KERNEL=debug`). A test that takes longer is reported as
 //!   hung and the run ends there.
+//!   `cases::LONG_RUNNING` gives a few tests a longer one.
 //! - `--shard I/N`: run only the I-th of N parts of the selected tests,
 //!   balanced by their recorded seconds (`shard`): N runs, in N VMs booted
 //!   side by side, share the suite (`run-tests.sh` does this; each VM has
@@ -214,6 +215,10 @@ fn spawn_watchdog(progress: Arc<Mutex<Progress>>, limit: Duration) {
         thread::sleep(Duration::from_secs(1));
         let p = progress.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((name, start)) = p.current {
+            let limit = cases::LONG_RUNNING
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map_or(limit, |&(_, secs)| limit.max(Duration::from_secs(secs)));
             if start.elapsed() > limit {
                 println!("not ok - {name}: hung, no result after {limit:?}");
                 println!("{} passed, {} failed", p.passed, p.failed + 1);
