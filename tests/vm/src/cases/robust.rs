@@ -17,7 +17,6 @@
 
 use std::collections::HashMap;
 use std::fs;
-use std::thread;
 use std::time::{Duration, Instant};
 
 use rcan_uapi::dsor::{DsorAddr, DsorSocket, DSOR_ID_ANY};
@@ -161,12 +160,30 @@ fn dsor_loss_accounting(ctx: &mut Ctx) -> TestResult {
                 }
                 drain(&rx, &lens, &mut copies, &mut bad, max_len + 64)?;
             }
-            // Let every retransmission end, then collect the rest: a
-            // message whose last frame arrived while every ack of it was
-            // lost is there too.
+            // Every send has returned, so no retransmission is still to
+            // come; frames of them may still be on their way. A marker
+            // message sent now without loss queues behind them: once its
+            // send has returned (acknowledged: delivered), collect the
+            // rest (was 500 ms): a message whose last frame arrived while
+            // every ack of it was lost is there too.
             set_droprate(0)?;
-            thread::sleep(Duration::from_millis(500));
+            let marker = rate << 16 | 0xffff;
+            lens.insert(marker, 8);
+            tx.send_to(
+                &body(marker, 8),
+                &DsorAddr::Segm {
+                    prio: 0x30,
+                    node: 0,
+                    id: marker,
+                },
+            )
+            .map_err(|e| format!("droprate {rate}: the marker message: {e}"))?;
             drain(&rx, &lens, &mut copies, &mut bad, max_len + 64)?;
+            lens.remove(&marker);
+            ensure!(
+                copies.remove(&marker) == Some(1),
+                "droprate {rate}: the marker message was not delivered once"
+            );
             let mut acc = Account {
                 corrupted: bad.len(),
                 ..Default::default()
