@@ -1429,7 +1429,7 @@ fn bcm_proc_net_file(ctx: &mut Ctx) -> TestResult {
     // The three frames reach the socket soon; read until they are counted
     // (the checks below say what is wrong should they never be).
     let mut text = String::new();
-    let _ = wait_for(SETTLE, "the rx_op line", || {
+    wait_for(SETTLE, "the rx_op line", || {
         text = cat(&path)?.ok_or_else(|| format!("cat {path} failed"))?;
         Ok(text.lines().any(|l| l == want_rx).then_some(()))
     })
