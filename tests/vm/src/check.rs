@@ -304,8 +304,8 @@ pub fn wait_for<T>(
         if start.elapsed() > limit {
             return Err(format!("timed out after {limit:?} waiting for {what}"));
         }
-        // The poll interval of the suite's one polling loop, not a
-        // synchronisation: the condition is checked again after it.
+        // The poll interval, not synchronisation: the condition is
+        // checked again after it.
         thread::sleep(Duration::from_millis(20));
     }
 }
@@ -327,10 +327,11 @@ pub fn blocked_syscall(tid: i32) -> Option<i64> {
 /// (glibc's `recv` is `recvfrom`), `recvmsg`.
 pub const RECV_SYSCALLS: [i64; 3] = [libc::SYS_read, libc::SYS_recvfrom, libc::SYS_recvmsg];
 
-/// Waits until thread `tid` (see [`crate::sys::gettid`]; 0: not known yet) sleeps in
-/// one of the system calls `nrs` (e.g. `libc::SYS_read`): it has entered
-/// the kernel and blocks there, the state a test that wants "a reader
-/// blocked in recv" needs before it acts.
+/// Waits until thread `tid` (see [`crate::sys::gettid`]; 0: not known
+/// yet) sleeps in one of the system calls `nrs` (e.g. `libc::SYS_read`):
+/// it has entered the kernel and blocks there, the state a test that
+/// wants "a reader blocked in recv" needs before it acts. (A woken thread
+/// reads "running" there until it blocks again.)
 pub fn wait_blocked(tid: &std::sync::atomic::AtomicI32, nrs: &[i64], what: &str) -> TestResult {
     wait_until(SETTLE, what, || {
         let t = tid.load(std::sync::atomic::Ordering::SeqCst);
