@@ -238,6 +238,9 @@ pub fn expect_seq(s: &CanSocket, want: &[CanFrame], who: &str) -> TestResult {
 /// Waits [`QUIET`], then checks that none of `socks` (name, socket) has a
 /// frame queued.
 pub fn expect_quiet(socks: &[(&str, &CanSocket)]) -> TestResult {
+    // Not synchronisation: a negative check ("nothing arrives"), which has
+    // no event to wait for; the window only gives a wrong frame the chance
+    // to show up.
     thread::sleep(QUIET);
     for (who, s) in socks {
         s.set_nonblocking(true).or_fail("O_NONBLOCK")?;

@@ -257,6 +257,9 @@ pub fn expect_frames(sock: &ArbSocket, want: &[Frame], ifindex: u32) -> TestResu
 
 /// Waits [`QUIET`], then checks that none of `socks` has a frame queued.
 pub fn expect_none(socks: &[&ArbSocket]) -> TestResult {
+    // Not synchronisation: a negative check ("nothing arrives"), which has
+    // no event to wait for; the window only gives a wrong frame the chance
+    // to show up.
     thread::sleep(QUIET);
     for (i, s) in socks.iter().enumerate() {
         let mut buf = [0u8; 16];
@@ -280,6 +283,12 @@ pub fn expect_none(socks: &[&ArbSocket]) -> TestResult {
     Ok(())
 }
 
+/// Deadline of [`wait_for`] for conditions that come as soon as the
+/// kernel (or a helper process) has done its work: long enough for the
+/// KASAN/lockdep kernel under emulation on a loaded host; a deadline only
+/// ends a wait for something that never comes, it never paces a test.
+pub const SETTLE: Duration = Duration::from_secs(60);
+
 /// Polls `f` every 20 ms until it returns `Some`, or fails after `limit`
 /// with the last value `f` described.
 pub fn wait_for<T>(
@@ -295,8 +304,39 @@ pub fn wait_for<T>(
         if start.elapsed() > limit {
             return Err(format!("timed out after {limit:?} waiting for {what}"));
         }
+        // The poll interval, not synchronisation: the condition is
+        // checked again after it.
         thread::sleep(Duration::from_millis(20));
     }
+}
+
+/// [`wait_for`] a condition that has no value: polls `cond` until it
+/// holds, failing after `limit`.
+pub fn wait_until(limit: Duration, what: &str, mut cond: impl FnMut() -> bool) -> TestResult {
+    wait_for(limit, what, || Ok(cond().then_some(())))
+}
+
+/// The system call thread `tid` of this process is blocked in, from
+/// `/proc/self/task/TID/syscall`: `None` while it runs (or has ended).
+pub fn blocked_syscall(tid: i32) -> Option<i64> {
+    let t = std::fs::read_to_string(format!("/proc/self/task/{tid}/syscall")).ok()?;
+    t.split_whitespace().next()?.parse().ok()
+}
+
+/// The system calls a receive blocks in: `read`, `recv`/`recvfrom`
+/// (glibc's `recv` is `recvfrom`), `recvmsg`.
+pub const RECV_SYSCALLS: [i64; 3] = [libc::SYS_read, libc::SYS_recvfrom, libc::SYS_recvmsg];
+
+/// Waits until thread `tid` (see [`crate::sys::gettid`]; 0: not known
+/// yet) sleeps in one of the system calls `nrs` (e.g. `libc::SYS_read`):
+/// it has entered the kernel and blocks there, the state a test that
+/// wants "a reader blocked in recv" needs before it acts. (A woken thread
+/// reads "running" there until it blocks again.)
+pub fn wait_blocked(tid: &std::sync::atomic::AtomicI32, nrs: &[i64], what: &str) -> TestResult {
+    wait_until(SETTLE, what, || {
+        let t = tid.load(std::sync::atomic::Ordering::SeqCst);
+        t != 0 && blocked_syscall(t).is_some_and(|nr| nrs.contains(&nr))
+    })
 }
 
 /// The `i`-th frame of a reproducible test sequence: alternating standard

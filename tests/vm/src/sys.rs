@@ -551,3 +551,9 @@ mod tests {
         assert_eq!(e.raw_os_error(), Some(libc::EFAULT));
     }
 }
+
+/// The calling thread's id (what `/proc/self/task/` names it by).
+pub fn gettid() -> i32 {
+    // SAFETY: gettid(2) has no arguments and cannot fail.
+    unsafe { libc::gettid() }
+}

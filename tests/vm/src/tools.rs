@@ -131,6 +131,12 @@ impl Bg {
         Self::text(&self.stderr)
     }
 
+    /// Whether the program has exited (it is reaped then; [`Bg::finish`]
+    /// still returns its status and output).
+    pub fn exited(&mut self) -> bool {
+        !matches!(self.child.try_wait(), Ok(None))
+    }
+
     /// Fails if the program has already exited, with its output.
     fn check_alive(&mut self) -> Result<(), String> {
         if let Some(st) = self.child.try_wait().or_fail(&self.cmd)? {

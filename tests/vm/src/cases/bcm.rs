@@ -18,7 +18,7 @@ use rcan_uapi::raw;
 use socketcan::{EmbeddedFrame, Frame, Socket, SocketOptions};
 
 use crate::canraw::{self, std as sff};
-use crate::check::{OrFail, TestResult};
+use crate::check::{wait_for, wait_until, OrFail, TestResult, SETTLE};
 use crate::ctx::Ctx;
 use crate::tools;
 
@@ -622,7 +622,9 @@ fn bcm_rx_timeout_and_resume(ctx: &mut Ctx) -> TestResult {
         recv(&bcm, Duration::from_millis(1500))?.is_none(),
         "RX_TIMEOUT repeated without a frame",
     )?;
-    // Frames every 50 ms for 600 ms: one RX_CHANGED, no timeout.
+    // Frames every 50 ms for 600 ms: one RX_CHANGED, no timeout. The
+    // sleep paces the sender (frames keep the 1 s timeout from firing),
+    // it does not synchronise.
     for _ in 0..12 {
         canraw::send(&tx, &sff(0x520, &[7]))?;
         thread::sleep(Duration::from_millis(50));
@@ -661,6 +663,7 @@ fn bcm_rx_throttle(ctx: &mut Ctx) -> TestResult {
     let t0 = Instant::now();
     for i in 0..20u8 {
         canraw::send(&tx, &sff(0x530, &[i]))?;
+        // Paces the changes (the throttle's input), not synchronisation.
         std::thread::sleep(Duration::from_millis(10));
     }
     let span = t0.elapsed();
@@ -947,6 +950,10 @@ fn bcm_errno_of_bad_messages(ctx: &mut Ctx) -> TestResult {
 fn bcm_python_can_send_periodic(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.bcm_ifaces(1)?[0];
     let rx = canraw::open(i0)?;
+    // The sleeps of the script are the user's program, not
+    // synchronisation: the windows in which the tasks run. Its last frame,
+    // 0x7FE, is the marker the recorder stops at: it is queued behind
+    // every frame the tasks sent before it.
     let script = r#"
 import can, time
 bus = can.Bus(interface="socketcan", channel="can0")
@@ -960,6 +967,7 @@ task.stop()
 time.sleep(0.5)
 bus.send_periodic(can.Message(arbitration_id=0x322, data=[7], is_extended_id=False), 0.02, duration=0.3)
 time.sleep(0.8)
+bus.send(can.Message(arbitration_id=0x7FE, data=[], is_extended_id=False))
 bus.shutdown()
 print("done", flush=True)
 "#;
@@ -971,6 +979,9 @@ print("done", flush=True)
             let _ = rx.set_read_timeout(Duration::from_millis(50));
             while !stop.load(Ordering::Relaxed) {
                 if let Ok(f) = rx.read_frame() {
+                    if f.raw_id() == 0x7FE {
+                        break;
+                    }
                     got.push((Instant::now(), f.raw_id(), f.data().to_vec()));
                 }
             }
@@ -986,7 +997,11 @@ print("done", flush=True)
         tools::TOOL_LIMIT
     };
     let out = tools::spawn("/usr/bin/python3", &["-c", script], None)?.finish(limit);
-    thread::sleep(Duration::from_millis(300));
+    // The recorder ends at the marker, once every frame before it is read.
+    let marked = match &out {
+        Ok(o) if o.status.success() => wait_until(SETTLE, "the marker frame 0x7FE", || rec.is_finished()),
+        _ => Ok(()),
+    };
     stop.store(true, Ordering::Relaxed);
     let got = rec.join().map_err(|_| "recorder panicked")?;
     let out = out?;
@@ -994,6 +1009,7 @@ print("done", flush=True)
         out.status.success() && out.stdout.contains("done"),
         format!("python3: {}: {}", out.status, out.stderr.trim()),
     )?;
+    marked?;
     let a: Vec<_> = got.iter().filter(|g| g.1 == 0x321).collect();
     let b: Vec<_> = got.iter().filter(|g| g.1 == 0x322).collect();
     let first = a.iter().filter(|g| g.2 == [1, 2, 3]).count();
@@ -1233,8 +1249,11 @@ fn bcm_rx_changed_timestamp(ctx: &mut Ctx) -> TestResult {
     // deferred work after the first SO_TIMESTAMP: until then frames come
     // unstamped and recvmsg stamps them when read. Wait until a frame read
     // 20 ms after it was sent carries an earlier time.
+    // (The 20 ms are not synchronisation: they are the gap that tells a
+    // receive time from a read time. The tries are bounded by SETTLE.)
     let mut stamped = false;
-    for _ in 0..50 {
+    let t0 = Instant::now();
+    while t0.elapsed() < SETTLE {
         canraw::send(&tx, &sff(0x651, &[0]))?;
         thread::sleep(Duration::from_millis(20));
         let before_read = std::time::SystemTime::now();
@@ -1251,6 +1270,8 @@ fn bcm_rx_changed_timestamp(ctx: &mut Ctx) -> TestResult {
     for i in 0..2u8 {
         canraw::send(&tx, &sff(0x650, &[i]))?;
         let r = crate::sys::recvmsg(&rx, 16, 0).or_fail("recvmsg CAN_RAW")?;
+        // Not synchronisation: the gap that tells a message stamped when
+        // it was made or read from one stamped with the frame's time.
         thread::sleep(Duration::from_millis(50));
         let b = crate::sys::recvmsg(&bcm, MHSIZ + 16, 0).or_fail("recvmsg CAN_BCM")?;
         let m = parse(&b.data[..b.len])?;
@@ -1407,15 +1428,14 @@ fn bcm_proc_net_file(ctx: &mut Ctx) -> TestResult {
     need(m.head.opcode == RX_CHANGED, format!("{:?}", m.head))?;
     let want_rx = format!("rx_op: 321 {dev:<5} [1]  # recv 1 (3) => reduction: 67%");
     let want_tx = format!("tx_op: 123 {dev} [1] t2=100000 # sent ");
-    // The three frames reach the socket soon; read until they are counted.
-    let end = Instant::now() + Duration::from_secs(10);
-    let text = loop {
-        let t = cat(&path)?.ok_or_else(|| format!("cat {path} failed"))?;
-        if t.lines().any(|l| l == want_rx) || Instant::now() > end {
-            break t;
-        }
-        thread::sleep(Duration::from_millis(50));
-    };
+    // The three frames reach the socket soon; read until they are counted
+    // (the checks below say what is wrong should they never be).
+    let mut text = String::new();
+    wait_for(SETTLE, "the rx_op line", || {
+        text = cat(&path)?.ok_or_else(|| format!("cat {path} failed"))?;
+        Ok(text.lines().any(|l| l == want_rx).then_some(()))
+    })
+    .or_else(|e| if e.starts_with("timed out") { Ok(()) } else { Err(e) })?;
     println!("# {path}:");
     text.lines().for_each(|l| println!("#   {l}"));
     let lines: Vec<&str> = text.lines().collect();
@@ -1492,11 +1512,28 @@ fn busy_socket(ifindex: u32, base: u32, ival_us: i64) -> Result<OwnedFd, String>
     Ok(bcm)
 }
 
-/// Frames `dev` transmitted during `t` (its `tx_packets` counter).
+/// Frames `dev` transmitted during `t` (its `tx_packets` counter). The
+/// window is a measurement (are the cyclic jobs sending, or silent?), not
+/// synchronisation.
 fn sent_during(ctx: &Ctx, dev: &str, t: Duration) -> Result<u64, String> {
     let a = ctx.stat(dev, "tx_packets")?;
     thread::sleep(t);
     Ok(ctx.stat(dev, "tx_packets")? - a)
+}
+
+/// Sends the marker frame 0x7FF (the lowest priority there is) on
+/// `ifindex` and reads it back: every frame queued on the interface
+/// before it has been transmitted, and counted, by then.
+fn drain_tx(ifindex: u32) -> TestResult {
+    let rx = canraw::open(ifindex)?;
+    let exact = libc::CAN_SFF_MASK | libc::CAN_EFF_FLAG | libc::CAN_RTR_FLAG;
+    rx.set_filters(&[socketcan::CanFilter::new(0x7FF, exact)])
+        .or_fail("CAN_RAW_FILTER")?;
+    rx.set_read_timeout(SETTLE).or_fail("SO_RCVTIMEO")?;
+    let tx = canraw::open(ifindex)?;
+    canraw::send(&tx, &sff(0x7FF, &[]))?;
+    let f = canraw::recv(&rx).map_err(|e| format!("the marker frame 0x7FF: {e}"))?;
+    need(f.raw_id() == 0x7FF, format!("read {} for the marker", canraw::show(&f)))
 }
 
 /// Close, interface removal and rmmod while 100 cyclic jobs (25 on the
@@ -1531,7 +1568,8 @@ fn teardown_bcm_cyclic_jobs(ctx: &mut Ctx) -> TestResult {
     let t = Instant::now();
     drop(bcm);
     let closed = t.elapsed();
-    thread::sleep(Duration::from_millis(50));
+    // Frames the jobs queued before the close may still be on their way.
+    drain_tx(ifs[0])?;
     let after = sent_during(ctx, &dev0, window)?;
     println!(
         "# close: {before} frames sent in {window:?} before, {after} after (jobs set up at {made:?}, close took {closed:?}, at {:?})",
@@ -1553,19 +1591,29 @@ fn teardown_bcm_cyclic_jobs(ctx: &mut Ctx) -> TestResult {
     let set_up = start.elapsed();
     ctx.link_down(&dev1)?;
     let down = start.elapsed();
-    thread::sleep(Duration::from_millis(100));
+    // The socket has heard of the ifdown (its error, ENETDOWN, is set:
+    // poll reports POLLERR) before the interface goes away.
+    wait_until(SETTLE, "POLLERR on the BCM socket after ifdown", || {
+        crate::sys::poll_one(&bcm, 0, 0).is_ok_and(|r| r & libc::POLLERR != 0)
+    })?;
     ctx.remove_can_ifaces()?;
     let removed = start.elapsed();
-    thread::sleep(Duration::from_millis(100));
     let mut buf = [0u8; MHSIZ + 16];
     let mut errs = Vec::new();
     raw::set_timeout(&bcm, libc::SO_RCVTIMEO, Duration::from_millis(200)).or_fail("SO_RCVTIMEO")?;
     // The socket error (ENODEV after ENETDOWN, which it replaces unless
-    // read in between) comes before the queued RX_TIMEOUT messages.
-    for _ in 0..50 {
+    // read in between) comes before the queued RX_TIMEOUT messages. Read
+    // until the queue is empty with ENODEV seen, for up to SETTLE (a
+    // notification that comes late is waited for, not missed).
+    let t0 = Instant::now();
+    for _ in 0..1000 {
         match raw::recvfrom(&bcm, &mut buf, 0, None) {
             Ok(_) => {}
-            Err(e) if e.raw_os_error() == Some(libc::EAGAIN) => break,
+            Err(e) if e.raw_os_error() == Some(libc::EAGAIN) => {
+                if errs.last() == Some(&libc::ENODEV) || t0.elapsed() > SETTLE {
+                    break;
+                }
+            }
             Err(e) => errs.push(e.raw_os_error().unwrap_or(0)),
         }
     }
@@ -1609,14 +1657,19 @@ fn teardown_bcm_cyclic_jobs(ctx: &mut Ctx) -> TestResult {
     // grace period after close, which the loaded debug kernel can stretch
     // past a fixed pause. Retry for a generous while.
     let t0 = Instant::now();
-    while let Err(e) = ctx.rmmod(crate::ctx::Module::Bcm) {
-        need(
-            t0.elapsed() < Duration::from_secs(30),
-            format!("after close, for {:?}: {e}", t0.elapsed()),
-        )?;
-        thread::sleep(Duration::from_millis(50));
-    }
+    let mut last = String::new();
+    wait_until(SETTLE, "rmmod rcan_bcm after close", || {
+        match ctx.rmmod(crate::ctx::Module::Bcm) {
+            Ok(()) => true,
+            Err(e) => {
+                last = e;
+                false
+            }
+        }
+    })
+    .map_err(|e| format!("{e}: {last}"))?;
     let waited = t0.elapsed();
+    drain_tx(i0)?;
     let after = sent_during(ctx, &dev0, window)?;
     println!(
         "# rmmod: {before} frames before, refused while open ({}), {after} after close + rmmod (canloop back up at {up:?}, jobs set up at {made:?}, rmmod went through {waited:?} after close; at {:?})",
@@ -1962,17 +2015,28 @@ msg = can.Message(arbitration_id=0x3D0, data=list(range(64)), is_extended_id=Fal
 task = bus.send_periodic(msg, 0.02)
 time.sleep(0.5)
 task.stop()
+bus.send(can.Message(arbitration_id=0x3D1, data=[], is_extended_id=False))
 bus.shutdown()
 print("done", flush=True)
 "#;
+    // time.sleep(0.5) is the task's window, not synchronisation; the
+    // classic frame 0x3D1 after it is the marker the recorder stops at.
     let stop = Arc::new(AtomicBool::new(false));
     let rec = {
         let stop = stop.clone();
         thread::spawn(move || {
             let mut got = Vec::new();
+            let _ = fdraw.set_read_timeout(Duration::from_millis(50));
             while !stop.load(Ordering::Relaxed) {
-                if let Ok(mut v) = collect_fd(&fdraw, 0x3D0, Duration::from_millis(50)) {
-                    got.append(&mut v);
+                match fdraw.read_frame() {
+                    Ok(socketcan::CanAnyFrame::Fd(f)) => {
+                        let r: &libc::canfd_frame = f.as_ref();
+                        if r.can_id == 0x3D0 {
+                            got.push((r.len, r.flags, f.data().to_vec()));
+                        }
+                    }
+                    Ok(socketcan::CanAnyFrame::Normal(f)) if f.raw_id() == 0x3D1 => break,
+                    _ => {}
                 }
             }
             got
@@ -1985,7 +2049,10 @@ print("done", flush=True)
         tools::TOOL_LIMIT
     };
     let out = tools::spawn("/usr/bin/python3", &["-c", script], None)?.finish(limit);
-    thread::sleep(Duration::from_millis(300));
+    let marked = match &out {
+        Ok(o) if o.status.success() => wait_until(SETTLE, "the marker frame 0x3D1", || rec.is_finished()),
+        _ => Ok(()),
+    };
     stop.store(true, Ordering::Relaxed);
     let got = rec.join().map_err(|_| "recorder panicked")?;
     let out = out?;
@@ -1993,6 +2060,7 @@ print("done", flush=True)
         out.status.success() && out.stdout.contains("done"),
         format!("python3: {}: {}", out.status, out.stderr.trim()),
     )?;
+    marked?;
     println!(
         "# python-can FD send_periodic 20 ms for 0.5 s: {} frames; python ran {:.1} s",
         got.len(),

@@ -13,7 +13,7 @@
 //! (sja1000.rs) compares the whole `ip -j -d` output of both in one boot.
 
 use super::portable_table;
-use crate::check::{ensure, TestResult};
+use crate::check::{ensure, wait_for, TestResult, SETTLE};
 use crate::ctx::Ctx;
 use crate::tools::{self, Output};
 
@@ -65,19 +65,16 @@ pub(super) fn details_json(dev: &str) -> Result<String, String> {
 
 /// Waits until `/sys/class/net/DEV/operstate` reads `want` (the kernel's
 /// link watch updates it shortly after the carrier changes); fails with
-/// the last value after some 200 reads. Not a timing assertion: the bound
+/// the last value after [`SETTLE`]. Not a timing assertion: the bound
 /// only ends a wait for a state that never comes.
 fn operstate_becomes(dev: &str, want: &str) -> TestResult {
     let p = format!("/sys/class/net/{dev}/operstate");
     let mut last = String::new();
-    for _ in 0..200 {
+    wait_for(SETTLE, &format!("{p} reading {want:?}"), || {
         last = std::fs::read_to_string(&p).map_err(|e| format!("{p}: {e}"))?;
-        if last.trim() == want {
-            return Ok(());
-        }
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
-    Err(format!("{p}: {:?}, expected {want:?}", last.trim()))
+        Ok((last.trim() == want).then_some(()))
+    })
+    .map_err(|e| format!("{e}: last {:?}", last.trim()))
 }
 
 /// Checks that `text` contains every one of `want`.

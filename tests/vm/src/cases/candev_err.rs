@@ -19,7 +19,7 @@ use socketcan::{CanFrame, CanSocket, SocketOptions};
 use super::candev::{ip, ip_ok};
 use super::test_table;
 use crate::canraw::{self, CAN_ERR_MASK};
-use crate::check::{ensure, OrFail, TestResult};
+use crate::check::{ensure, wait_for, OrFail, TestResult, SETTLE};
 use crate::ctx::{Ctx, Module};
 use crate::tools;
 
@@ -150,20 +150,15 @@ pub(super) fn details_have(dev: &str, want: &[&str]) -> TestResult {
 
 /// `ip -d link show DEV` until it contains `want` (the chip retries
 /// every 2 ms, so the state moves on its own); fails with the last output
-/// after some 200 reads. Not a timing assertion: the bound only ends a
-/// wait for a state that never comes.
+/// after [`SETTLE`]. Not a timing assertion: the bound only ends a wait
+/// for a state that never comes.
 pub(super) fn details_become(dev: &str, want: &str) -> TestResult {
     let mut last = String::new();
-    for _ in 0..200 {
+    wait_for(SETTLE, &format!("{want:?} in ip -d link show {dev}"), || {
         last = ip_ok(&["-d", "link", "show", dev])?;
-        if last.contains(want) {
-            return Ok(());
-        }
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
-    Err(format!(
-        "ip -d link show {dev}: {want:?} never came: {last}"
-    ))
+        Ok(last.contains(want).then_some(()))
+    })
+    .map_err(|e| format!("{e}: {last}"))
 }
 
 /// The CAN device statistics `ip -s -d link show DEV` prints: re-started,
@@ -430,12 +425,9 @@ fn sja1000_sim_one_shot(ctx: &mut Ctx) -> TestResult {
     canraw::send(&tx, &canraw::std(0x10, &[1]))?;
     // The failed attempt frees the TX buffer: the next frame is sent
     // after it, and the first one's echo never comes.
-    let mut waited = 0;
-    while ctx.stat("can0", "tx_errors")? == 0 {
-        ensure!(waited < 100, "no tx error after the failed one-shot frame");
-        std::thread::sleep(std::time::Duration::from_millis(50));
-        waited += 1;
-    }
+    wait_for(SETTLE, "a tx error after the failed one-shot frame", || {
+        Ok((ctx.stat("can0", "tx_errors")? != 0).then_some(()))
+    })?;
     fault("none")?;
     let f = canraw::std(0x11, &[2]);
     canraw::send(&tx, &f)?;

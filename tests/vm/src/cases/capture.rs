@@ -411,6 +411,7 @@ impl PacketSocket {
 
     /// Waits [`QUIET`], then checks that no packet is queued.
     fn expect_quiet(&self, who: &str) -> TestResult {
+        // A negative check's window, not synchronisation.
         thread::sleep(QUIET);
         match self.recv(libc::MSG_DONTWAIT) {
             Ok(p) => Err(format!(

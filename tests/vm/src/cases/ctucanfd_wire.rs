@@ -245,7 +245,9 @@ fn burst_count(tx: &CanFdSocket, rx: CanFdSocket, n: u32, base: u32) -> Result<u
         let id = ExtendedId::new(base | (seq & 0xFFFF)).ok_or("bad id")?;
         let f = CanFdFrame::with_flags(id, &d, FdFlags::BRS).ok_or("bad FD frame")?;
         // A full TX queue (mainline's can-dev devices: txqueuelen 10)
-        // answers ENOBUFS: wait a little and write again, as `cangen -p`.
+        // answers ENOBUFS: wait a little and write again, as `cangen -p`
+        // (a back-off, not synchronisation: no event says the queue has
+        // room).
         loop {
             match tx.write_frame(&f) {
                 Ok(()) => break,

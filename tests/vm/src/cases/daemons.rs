@@ -19,7 +19,7 @@ use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant, SystemTime};
 
@@ -28,7 +28,7 @@ use socketcan::CanFrame;
 use super::sja1000::kvaser2;
 use super::{portable_table, raw1, test_table};
 use crate::canraw::{self, err_frame, ext, rtr_ext, rtr_std, std, CAN_ERR_CRTL};
-use crate::check::{ensure, wait_for, OrFail, TestResult};
+use crate::check::{ensure, wait_for, wait_until, OnDrop, OrFail, TestResult, SETTLE};
 use crate::ctx::{Ctx, Module};
 use crate::tools::{self, Bg, TempDir, TOOL_LIMIT};
 use crate::Test;
@@ -129,19 +129,23 @@ fn number_of(line: &str) -> Result<u32, String> {
     Ok(b.swap_bytes())
 }
 
-/// Sends a frame, retrying while the device queue is full (ENOBUFS).
+/// Sends a frame, retrying while the device queue is full (ENOBUFS),
+/// for up to [`SETTLE`].
 fn send_retry(s: &socketcan::CanSocket, f: &CanFrame) -> TestResult {
     use socketcan::Socket;
-    for _ in 0..1000 {
+    let start = Instant::now();
+    while start.elapsed() < SETTLE {
         match s.write_frame(f) {
             Ok(()) => return Ok(()),
+            // A back-off, not synchronisation: no event says the device
+            // queue has room again (POLLOUT is about the socket's buffer).
             Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) => {
                 thread::sleep(Duration::from_millis(1))
             }
             Err(e) => return Err(format!("write {}: {e}", canraw::show(f))),
         }
     }
-    Err(format!("write {}: ENOBUFS for 1 s", canraw::show(f)))
+    Err(format!("write {}: ENOBUFS for {SETTLE:?}", canraw::show(f)))
 }
 
 /// canzlogd and `candump -l can0,0:0,#FFFFFFFF` log the same frames (data, extended,
@@ -163,14 +167,20 @@ fn canzlogd_matches_candump_log(ctx: &mut Ctx) -> TestResult {
         err_frame(CAN_ERR_CRTL, &[0, 4]),
     ];
     frames.extend((0..50).map(numbered));
+    // A socket of ours sees the frames as the two programs do.
+    let seen = canraw::open(idx)?;
     let mut dump = tools::spawn("candump", &["-l", "can0,0:0,#FFFFFFFF"], Some(ddir.path()))?;
     dump.wait_listening()?;
-    let z = canzlogd(zdir.path(), &["--flush-ms", "100"])?;
+    let mut z = canzlogd(zdir.path(), &["--flush-ms", "100"])?;
     for f in &frames {
         send_retry(&tx, f)?;
     }
-    // Both read the frames as they come; give them a generous second.
-    thread::sleep(Duration::from_secs(1));
+    // Every frame has been delivered once ours has the last one; both
+    // programs have read them all once each is blocked in its receive
+    // call again (a queued frame would not let it block).
+    until_frame(&seen, 0x100, &49u32.to_le_bytes(), frames.len())?;
+    dump.wait_listening()?;
+    z.wait_listening()?;
     dump.signal("TERM")?;
     let out = dump.finish(TOOL_LIMIT)?;
     ensure!(
@@ -219,28 +229,47 @@ fn canzlogd_sigkill_loses_at_most_flush_interval(ctx: &mut Ctx) -> TestResult {
     let idx = raw1(ctx)?;
     let tx = canraw::open(idx)?;
     let dir = TempDir::new("canzlogd-kill")?;
-    let z = canzlogd(dir.path(), &["--flush-ms", &FLUSH_MS.to_string()])?;
+    let mut z = canzlogd(dir.path(), &["--flush-ms", &FLUSH_MS.to_string()])?;
     // A sender thread keeps frames coming every 2 ms while the kill
-    // happens, as on a running bus; it returns the send times.
+    // happens, as on a running bus (the 2 ms pace a bus, they do not
+    // synchronise); it returns the send times.
     let stop = Arc::new(AtomicBool::new(false));
+    let times = Arc::new(Mutex::new(Vec::new()));
     let sender = {
-        let stop = Arc::clone(&stop);
-        thread::spawn(move || -> Result<Vec<u64>, String> {
-            let mut sent_at = Vec::new();
+        let (stop, times) = (Arc::clone(&stop), Arc::clone(&times));
+        thread::spawn(move || -> TestResult {
+            let mut i = 0;
             while !stop.load(Ordering::Relaxed) {
-                sent_at.push(now_us());
-                send_retry(&tx, &numbered(sent_at.len() as u32 - 1))?;
+                times.lock().unwrap_or_else(|e| e.into_inner()).push(now_us());
+                send_retry(&tx, &numbered(i))?;
+                i += 1;
                 thread::sleep(Duration::from_millis(2));
             }
-            Ok(sent_at)
+            Ok(())
         })
     };
-    thread::sleep(Duration::from_millis(1500));
+    let _stop = OnDrop(|| stop.store(true, Ordering::Relaxed));
+    // The kill comes once 50 frames were sent more than the flush
+    // interval and its slack before it, so that the check below has
+    // frames to check however slowly the guest runs (it was 1.5 s).
+    let old = |now: u64| {
+        let t = times.lock().unwrap_or_else(|e| e.into_inner());
+        t.iter()
+            .filter(|&&s| s + (FLUSH_MS + SLACK_MS) * 1000 < now)
+            .count()
+    };
+    wait_until(SETTLE, "50 frames sent long enough before the kill", || {
+        old(now_us()) >= 50
+    })?;
     let kill_us = now_us();
     let killed = z.signal("KILL");
-    thread::sleep(Duration::from_millis(100));
+    // Frames keep coming until canzlogd is gone.
+    if killed.is_ok() {
+        wait_until(SETTLE, "canzlogd to die of SIGKILL", || z.exited())?;
+    }
     stop.store(true, Ordering::Relaxed);
-    let sent_at = sender.join().map_err(|_| "sender panicked")??;
+    sender.join().map_err(|_| "sender panicked")??;
+    let sent_at = times.lock().unwrap_or_else(|e| e.into_inner()).clone();
     killed?;
     let i = sent_at.len();
     let out = z.finish(TOOL_LIMIT)?;
@@ -292,6 +321,8 @@ fn canzlogd_rotates_by_size_and_age(ctx: &mut Ctx) -> TestResult {
         let z = canzlogd(dir.path(), &opts)?;
         for i in 0..n {
             send_retry(&tx, &numbered(i))?;
+            // Paces the frames so that the files reach their size or age
+            // limit while frames come: not synchronisation.
             thread::sleep(Duration::from_millis(gap_ms));
         }
         stop(z, "canzlogd")?;
@@ -325,19 +356,27 @@ fn canzlogd_reports_rxq_overflow(ctx: &mut Ctx) -> TestResult {
     let idx = raw1(ctx)?;
     let tx = canraw::open(idx)?;
     let dir = TempDir::new("canzlogd-ovfl")?;
-    let z = canzlogd(dir.path(), &["--rcvbuf", "1", "--flush-ms", "100"])?;
+    // A socket of ours with room for every frame sees them as canzlogd's.
+    let seen = canraw::open(idx)?;
+    socketcan::SocketOptions::set_socket_option_int(&seen, libc::SOL_SOCKET, libc::SO_RCVBUF, 1 << 20)
+        .or_fail("SO_RCVBUF")?;
+    let mut z = canzlogd(dir.path(), &["--rcvbuf", "1", "--flush-ms", "100"])?;
     z.signal("STOP")?;
     for i in 0..N {
         send_retry(&tx, &numbered(i))?;
     }
-    // The loopback device echoes in softirq; give it time to finish.
-    thread::sleep(Duration::from_millis(300));
+    // The loopback device echoes in softirq: every frame has been
+    // delivered (or dropped) once ours has the last one.
+    until_frame(&seen, 0x100, &(N - 1).to_le_bytes(), N as usize)?;
     z.signal("CONT")?;
-    thread::sleep(Duration::from_millis(500));
+    // canzlogd has drained its queue once it blocks in receive again.
+    z.wait_listening()?;
     // SO_RXQ_OVFL reports drops with the next frame queued after them:
-    // one more frame, once canzlogd has drained its queue.
+    // one more frame, read (with its drop count) once canzlogd blocks
+    // again after ours has it.
     send_retry(&tx, &numbered(N))?;
-    thread::sleep(Duration::from_millis(500));
+    until_frame(&seen, 0x100, &N.to_le_bytes(), 1)?;
+    z.wait_listening()?;
     stop(z, "canzlogd")?;
     let (lines, notes) = zcat(&log_files(dir.path())?)?;
     let mut dropped = 0u64;
@@ -445,11 +484,20 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
     let from_py = [std(0x123, &[1, 2, 3]), ext(0x1234567, &[0xAA])];
     canraw::expect_seq(&rx, &from_py, "CAN_RAW socket, frames from python-can")?;
     let from_bus = [std(0x321, &[9, 8]), ext(0x1ABCDEF, &[])];
-    for f in &from_bus {
+    for (f, line) in from_bus.iter().zip(["RX 321 0908", "RX 1ABCDEF "]) {
         canraw::send(&rx, f)?;
         // python-can 4.1's socketcand reader loses a message split across
-        // two reads: one frame at a time.
-        thread::sleep(Duration::from_millis(200));
+        // two reads: one frame at a time, the next once the client has
+        // printed this one.
+        wait_for(PY_LIMIT, &format!("the python-can client to print {line:?}"), || {
+            if py.stdout_now().contains(line) {
+                return Ok(Some(()));
+            }
+            if py.stderr_now().contains("Error") {
+                return Err(format!("python3: {}", py.stderr_now()));
+            }
+            Ok(None)
+        })?;
     }
     let out = py.finish(PY_LIMIT)?;
     ensure!(
@@ -499,7 +547,7 @@ for cmd in (None, b"< open can0 >", b"< rawmode >"):
     reply = s.recv(64)
     assert reply in (b"< hi >", b"< ok >"), reply
 print("READY", flush=True)
-time.sleep(600)
+time.sleep(600)  # idles until killed: not synchronisation
 "#;
 
 /// A client that stops reading never stalls another: with `--queue 256
@@ -571,6 +619,9 @@ fn cantcpd_slow_client_drops_alone(ctx: &mut Ctx) -> TestResult {
     });
     let mut paced = 0u32;
     for i in 0..N {
+        // Flow control, not synchronisation: at most AHEAD frames ahead
+        // of the reading client (the 1 ms is the poll of its count), and
+        // 1 ms between frames, a busy bus's pace.
         while i >= read.load(Ordering::Acquire) + AHEAD && !done.load(Ordering::Acquire) {
             paced += 1;
             thread::sleep(Duration::from_millis(1));
@@ -620,6 +671,8 @@ fn sja1000_canzlogd_two_cards(ctx: &mut Ctx) -> TestResult {
     let (i0, i1) = kvaser2(ctx)?;
     let tx = canraw::open(i0)?;
     let rx1 = canraw::open(i1)?;
+    // can0's local echo, as canzlogd's can0 socket gets it.
+    let echo0 = canraw::open(i0)?;
     let dir = TempDir::new("canzlogd-sja")?;
     let d = dir.path().to_str().ok_or("non-UTF-8 dir")?;
     let mut z = tools::spawn_own(
@@ -661,7 +714,10 @@ fn sja1000_canzlogd_two_cards(ctx: &mut Ctx) -> TestResult {
         want.push(format!("100#{:08X}", i.swap_bytes()));
         canraw::expect(&rx1, &numbered(i), "can1, before the next frame")?;
     }
-    thread::sleep(Duration::from_millis(500));
+    // The last frame has come out of can1 and been echoed on can0: once
+    // canzlogd blocks in receive again it has read both.
+    until_frame(&echo0, 0x100, &49u32.to_le_bytes(), want.len())?;
+    z.wait_listening()?;
     stop(z, "canzlogd")?;
     let (lines, _) = zcat(&log_files(dir.path())?)?;
     for iface in ["can0", "can1"] {
@@ -678,6 +734,15 @@ fn sja1000_canzlogd_two_cards(ctx: &mut Ctx) -> TestResult {
         want.len()
     );
     Ok(())
+}
+
+/// Sends the marker frame 0x7FF (lowest priority) on `ifindex` from a
+/// socket of its own and reads `rx` up to it: whatever was queued on the
+/// interface before it has been read then.
+fn drain_to_marker(rx: &socketcan::CanSocket, ifindex: u32) -> TestResult {
+    let m = canraw::open(ifindex)?;
+    canraw::send(&m, &std(0x7FF, &[0x4D]))?;
+    until_frame(rx, 0x7FF, &[0x4D], 1000)
 }
 
 /// Sends one socketcand command and, unless `reply` is None, checks the
@@ -797,9 +862,9 @@ fn cantcpd_bcm_mode_jobs_and_subscriptions(ctx: &mut Ctx) -> TestResult {
     canraw::expect(&rx, &std(0x124, &[2]), "CAN_RAW, updated job")?;
     cmd(c, p, "< delete 124 >", None)?;
     cmd(c, p, "< echo >", Some("< echo >"))?;
-    // A frame may have been on its way; then quiet.
-    thread::sleep(Duration::from_millis(200));
-    while rx.read_frame_timeout(Duration::from_millis(1)).is_ok() {}
+    // A frame may have been on its way (read up to a marker queued behind
+    // it); then quiet.
+    drain_to_marker(&rx, idx)?;
     canraw::expect_quiet(&[("CAN_RAW after < delete >", &rx)])?;
     // Bad arguments are answered with an error, the connection stays.
     let m = {
@@ -833,8 +898,7 @@ fn cantcpd_bcm_mode_jobs_and_subscriptions(ctx: &mut Ctx) -> TestResult {
     canraw::expect(&rx, &std(0x127, &[]), "CAN_RAW, job of the closing client")?;
     c.shutdown(std::net::Shutdown::Both).or_fail("shutdown")?;
     srv.wait_stderr("closed, 0 frames dropped")?;
-    thread::sleep(Duration::from_millis(200));
-    while rx.read_frame_timeout(Duration::from_millis(1)).is_ok() {}
+    drain_to_marker(&rx, idx)?;
     canraw::expect_quiet(&[("CAN_RAW after the client closed", &rx)])?;
     srv.signal("TERM")?;
     let out = srv.finish(TOOL_LIMIT)?;
@@ -969,6 +1033,8 @@ fn not_shutdown_frames() -> Vec<CanFrame> {
 fn powerd_shuts_down_on_its_frame_only(ctx: &mut Ctx) -> TestResult {
     let idx = raw1(ctx)?;
     let tx = canraw::open(idx)?;
+    // A socket of ours sees the frames as powerd's.
+    let seen = canraw::open(idx)?;
     let mut sc = PowerScene::new()?;
     // --exec's command must not inherit powerd's blocked signals.
     let args = powerd_args(&sc, &["--exec", "grep SigBlk /proc/self/status"])?;
@@ -976,12 +1042,17 @@ fn powerd_shuts_down_on_its_frame_only(ctx: &mut Ctx) -> TestResult {
     let mut pd = tools::spawn_own("powerd", &args, None)?;
     pd.wait_stderr("powerd: waiting on can0")?;
     pd.wait_listening()?;
-    for f in not_shutdown_frames() {
-        send_retry(&tx, &f)?;
+    let near = not_shutdown_frames();
+    for f in &near {
+        send_retry(&tx, f)?;
     }
     // The frames are read in order: had one of them triggered the
     // sequence, powerd would name it below instead of the right one.
-    thread::sleep(Duration::from_millis(300));
+    // They have all been delivered once ours has the last; powerd has
+    // read them all once it blocks in receive again (had one triggered
+    // it, it would be busy or gone: wait_listening fails then).
+    canraw::expect_seq(&seen, &near, "our socket, the near-miss frames")?;
+    pd.wait_listening()?;
     ensure!(
         sc.alive()? == 2 && mounted(sc.mnt.path())?,
         "before the shutdown frame: {} victims alive, mounted {}; powerd: {}",

@@ -27,7 +27,7 @@ use socketcan::SocketOptions;
 
 use super::test_table;
 use crate::canraw;
-use crate::check::{ensure, errno_of, expect_errno, wait_for, OrFail, TestResult};
+use crate::check::{ensure, errno_of, expect_errno, wait_for, wait_until, OrFail, TestResult, SETTLE};
 use crate::ctx::{debug_kernel, tool, Ctx, Module};
 use crate::Test;
 
@@ -443,8 +443,26 @@ fn dsor_droprate(ctx: &mut Ctx) -> TestResult {
             drain(&rx, &mut delivered, len, rate, libc::MSG_DONTWAIT)?;
         }
         set_droprate(0)?;
-        thread::sleep(Duration::from_millis(300));
+        // Every send has returned, so no retransmission is still to come;
+        // frames of them may still be on their way. A marker message sent
+        // now without loss queues behind them: once its send has returned
+        // (acknowledged: delivered) they have all been received (was
+        // 300 ms).
+        let marker = rate << 16 | 0xffff;
+        tx.send_to(
+            &pattern(len, u64::from(marker & 0xffff), u64::from(rate)),
+            &DsorAddr::Segm {
+                prio: 0x30,
+                node: 0,
+                id: marker,
+            },
+        )
+        .map_err(|e| format!("droprate {rate}: the marker message: {e}"))?;
         drain(&rx, &mut delivered, len, rate, 0)?;
+        ensure!(
+            delivered.remove(&marker) == Some(1),
+            "droprate {rate}: the marker message was not delivered once"
+        );
         ensure!(
             delivered.values().all(|&c| c == 1),
             "droprate {rate}: a message was delivered twice"
@@ -654,8 +672,7 @@ fn dsor_errors(ctx: &mut Ctx) -> TestResult {
     ctx.link_up("can0")?;
     ctx.rmmod(Module::Dsor).err();
     drop((s, p, q));
-    thread::sleep(Duration::from_millis(200));
-    ctx.rmmod(Module::Dsor)?;
+    rmmod_dsor_retrying(ctx, SETTLE, "after the sockets closed")?;
     ctx.insmod(Module::Dsor, &["ifname=can9"])?;
     let r = sock()?;
     expect_errno(
@@ -672,8 +689,7 @@ fn dsor_errors(ctx: &mut Ctx) -> TestResult {
     )?;
     // Bad parameters refuse the load.
     drop(r);
-    thread::sleep(Duration::from_millis(200));
-    ctx.rmmod(Module::Dsor)?;
+    rmmod_dsor_retrying(ctx, SETTLE, "after the socket closed")?;
     for bad in [
         "node=0x80",
         "ack_timeout_ms=5",
@@ -1010,14 +1026,7 @@ fn dsor_teardown(ctx: &mut Ctx) -> TestResult {
     drop(u);
     // The non-blocking transfers hold their sockets, and so the module,
     // until they time out (11 s).
-    let deadline = Instant::now() + Duration::from_secs(60);
-    loop {
-        match ctx.rmmod(Module::Dsor) {
-            Ok(()) => break,
-            Err(e) if Instant::now() > deadline => return Err(format!("rmmod after close: {e}")),
-            Err(_) => thread::sleep(Duration::from_millis(200)),
-        }
-    }
+    rmmod_dsor_retrying(ctx, SETTLE + Duration::from_secs(11), "after close")?;
     ensure!(
         !std::path::Path::new("/sys/class/net/canip0").exists(),
         "canip0 left behind"
@@ -1043,6 +1052,23 @@ fn raw_frame(s: &socketcan::CanSocket, id: u32, data: &[u8]) -> TestResult {
 
 const fn dsor_id(prio: u32, dst: u32, src: u32, ty: u32, q: u32, chan: u32) -> u32 {
     prio << 21 | dst << 14 | src << 7 | ty << 5 | q << 4 | chan
+}
+
+/// rmmod rcan_dsor until it succeeds (its sockets are freed a little after
+/// the last close, DSOR's once their transfers have ended), for up to
+/// `limit`.
+fn rmmod_dsor_retrying(ctx: &mut Ctx, limit: Duration, what: &str) -> TestResult {
+    let mut last = String::new();
+    wait_until(limit, &format!("rmmod rcan_dsor {what}"), || {
+        match ctx.rmmod(Module::Dsor) {
+            Ok(()) => true,
+            Err(e) => {
+                last = e;
+                false
+            }
+        }
+    })
+    .map_err(|e| format!("{e}: {last}"))
 }
 
 /// Malformed, truncated, out-of-order and duplicated frames from a raw
@@ -1123,6 +1149,8 @@ fn dsor_bad_input(ctx: &mut Ctx) -> TestResult {
         let len = (x >> 29) as usize + ((x >> 8) & 1) as usize;
         raw_frame(&raw, id, &x.to_be_bytes().repeat(2)[..len.min(8)])?;
     }
+    // A protocol window, not synchronisation: the partial reassemblies
+    // the garbage opened end by their timeout (reasm_timeout_ms=1500).
     thread::sleep(Duration::from_millis(2000));
     while rx.recv_from(&mut [0u8; 70000]).is_ok() {}
     // Still works.
@@ -1873,11 +1901,7 @@ fn dsor_delivery_full_queue(ctx: &mut Ctx) -> TestResult {
     // The unload line counts the refused messages by their cause.
     drop((rx, tx));
     let mut log = ctx.kmsg()?;
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while let Err(e) = ctx.rmmod(Module::Dsor) {
-        ensure!(Instant::now() < deadline, "rmmod rcan_dsor: {e}");
-        thread::sleep(Duration::from_millis(100));
-    }
+    rmmod_dsor_retrying(ctx, SETTLE, "after the last close")?;
     let lines = log.read_new()?;
     let want = format!("last frame refused {full} receive queue full");
     if !lines
@@ -1942,6 +1966,8 @@ fn stamps_on(idx: u32) -> Result<socketcan::CanSocket, String> {
     let tx = canraw::open(idx)?;
     for _ in 0..100 {
         canraw::send(&tx, &canraw::std(0x5a5, &[]))?;
+        // The gap that tells a receive time from a read time, not
+        // synchronisation.
         thread::sleep(Duration::from_millis(20));
         let before_read = SystemTime::now();
         let r = crate::sys::recvmsg(&keep, 16, 0).or_fail("recvmsg CAN_RAW")?;
@@ -1971,6 +1997,8 @@ fn last_body_time(raw: &socketcan::CanSocket, src: u32) -> Result<Option<SystemT
                 }
             }
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                // "No more frames" has no event: quiet for 200 ms counts
+                // as the end (a negative check's window).
                 idle += 1;
                 thread::sleep(Duration::from_millis(100));
             }
@@ -2088,6 +2116,8 @@ fn dsor_delivery_receiver_closes(ctx: &mut Ctx) -> TestResult {
         let rx = sock()?;
         rx.bind(&seg(id)).or_fail("bind")?;
         let h = send_in_thread(len40, r, seg(id));
+        // Not synchronisation: varies where in the transfer the close
+        // lands (each outcome is checked against what happened).
         thread::sleep(Duration::from_millis(1 + r % 5));
         // Complete before the close? Then success is right.
         let closed = close_receiver(rx);

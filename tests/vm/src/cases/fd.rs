@@ -407,6 +407,8 @@ fn raw_fd_packet_socket(ctx: &mut Ctx) -> TestResult {
         b.len(),
         &b[..b.len().min(8)]
     );
+    // A negative check's window (nothing reaches the ETH_P_CAN socket),
+    // not synchronisation.
     std::thread::sleep(QUIET);
     match packet_recv(&pcan, libc::MSG_DONTWAIT) {
         Err(e) if e.kind() == ErrorKind::WouldBlock => Ok(()),

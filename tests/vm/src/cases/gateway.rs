@@ -63,7 +63,8 @@ fn send_retrying(s: &CanSocket, f: &CanFrame) -> Result<u64, String> {
                 sys::poll_one(s, libc::POLLOUT, 10).or_fail("poll POLLOUT")?;
                 // The socket is writable as soon as its send buffer has
                 // room, which says nothing about the device queue: give it
-                // a moment before the next try.
+                // a moment before the next try (a back-off, bounded by
+                // ENOBUFS_LIMIT, not synchronisation).
                 thread::sleep(Duration::from_millis(1));
             }
             Err(e) => return Err(format!("write {}: {}", show(f), errno_text(&e))),

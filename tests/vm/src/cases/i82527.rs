@@ -18,7 +18,7 @@ use socketcan::{CanFrame, Socket};
 
 use super::test_table;
 use crate::canraw::{self, ext, rtr_ext, rtr_std, std as sff};
-use crate::check::{ensure, OrFail, TestResult};
+use crate::check::{ensure, wait_until, OrFail, TestResult, SETTLE};
 use crate::ctx::{dev, sized, Ctx, Module};
 use crate::tools;
 use rcan_uapi::{dev_ioctl, SIOCDEVPRIVATE};
@@ -266,22 +266,37 @@ fn burst_one(
         }
         (Ok(next), rx)
     });
+    // What both ends have sent so far (tx_packets + tx_dropped +
+    // tx_errors of can0 and can1), to tell when the burst has left.
+    let tx_done = || -> u64 {
+        ["can0", "can1"]
+            .iter()
+            .flat_map(|d| ["tx_packets", "tx_dropped", "tx_errors"].map(|n| (*d, n)))
+            .map(|(d, n)| ctx.stat(d, n).unwrap_or(0))
+            .sum()
+    };
+    let tx_before = tx_done();
     for seq in 0..n {
         canraw::send(tx, &frame(seq))?;
     }
     let (got, _rx) = recv.join().map_err(|_| "receiver panicked".to_string())?;
     let got = got.map_err(|e| {
-        // Let the queued frames go out while the receiver still listens.
-        thread::sleep(Duration::from_secs(3));
+        // Let the queued frames go out while the receiver still listens:
+        // until every frame sent has left a card, or SETTLE (the counts
+        // below then say where they stuck).
+        let left = wait_until(SETTLE, "the burst to leave", || {
+            tx_done() >= tx_before + u64::from(n)
+        });
         // Where a frame went missing: the counters of both ends and the
         // softnet backlog drops.
         let c = |d: &str, n: &str| ctx.stat(d, n).map_or(-1, |v| v as i64);
         let softnet = std::fs::read_to_string("/proc/net/softnet_stat").unwrap_or_default();
         format!(
-            "{e}; can0 tx {} tx_dropped {} rx {} rx_dropped {} rx_over {}; can1 tx {} tx_dropped {} rx {} rx_dropped {} rx_over {}; softnet {:?}",
+            "{e}; can0 tx {} tx_dropped {} rx {} rx_dropped {} rx_over {}; can1 tx {} tx_dropped {} rx {} rx_dropped {} rx_over {}; softnet {:?}{}",
             c("can0", "tx_packets"), c("can0", "tx_dropped"), c("can0", "rx_packets"), c("can0", "rx_dropped"), c("can0", "rx_over_errors"),
             c("can1", "tx_packets"), c("can1", "tx_dropped"), c("can1", "rx_packets"), c("can1", "rx_dropped"), c("can1", "rx_over_errors"),
-            softnet.lines().collect::<Vec<_>>()
+            softnet.lines().collect::<Vec<_>>(),
+            left.err().map(|w| format!(" ({w})")).unwrap_or_default()
         )
     })?;
     let secs = start.elapsed().as_secs_f64();

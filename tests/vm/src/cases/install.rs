@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use super::test_table;
-use crate::check::{ensure, OrFail, TestResult};
+use crate::check::{ensure, wait_for, OrFail, TestResult, SETTLE};
 use crate::ctx::Ctx;
 use crate::sys;
 use crate::tools::{spawn, Output};
@@ -79,19 +79,15 @@ fn is_can_module(m: &str) -> bool {
 /// which works without /lib/modules; a module still in use by another is
 /// retried after that one is gone) and checks none is left.
 fn unload_everything() -> TestResult {
-    for _ in 0..20 {
-        let mods: Vec<String> = loaded()?.into_iter().filter(|m| is_can_module(m)).collect();
-        if mods.is_empty() {
-            return Ok(());
-        }
-        for m in &mods {
+    let mut left = Vec::new();
+    wait_for(SETTLE, "every CAN module unloaded", || {
+        left = loaded()?.into_iter().filter(|m| is_can_module(m)).collect();
+        for m in &left {
             let _ = sys::delete_module(m);
         }
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    let left: Vec<String> = loaded()?.into_iter().filter(|m| is_can_module(m)).collect();
-    ensure!(left.is_empty(), "modules still loaded: {left:?}");
-    Ok(())
+        Ok(left.is_empty().then_some(()))
+    })
+    .map_err(|e| format!("{e}: modules still loaded: {left:?}"))
 }
 
 /// The writable `/lib/modules` and `/etc/modprobe.d`; undone on drop.

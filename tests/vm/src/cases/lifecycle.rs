@@ -4,7 +4,7 @@
 //! frames are being delivered to them.
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicUsize, Ordering};
 use std::thread;
 use std::time::Duration;
 
@@ -12,9 +12,10 @@ use rcan_uapi::{arb_std, ArbSocket, CAN_MASK_ANY, CAN_MASK_EXACT};
 
 use super::{stack1, test_table};
 use crate::check::{
-    ensure, errno_name, errno_of, errno_text, expect_errno, expect_frame, expect_none, wait_for,
-    Frame, OnDrop, OrFail, TestResult,
+    ensure, errno_name, errno_of, errno_text, expect_errno, expect_frame, expect_none, wait_blocked,
+    wait_for, wait_until, Frame, OnDrop, OrFail, TestResult, RECV_SYSCALLS, SETTLE,
 };
+use crate::sys::gettid;
 use crate::ctx::{dev, sized, Ctx, Module};
 use crate::Test;
 
@@ -44,14 +45,17 @@ fn rmmod_loop_with_bound_sockets(ctx: &mut Ctx) -> TestResult {
     let idle = ctx.bound(0, CAN_MASK_ANY, idx)?;
     let blocked = ctx.bound(0, CAN_MASK_ANY, idx)?;
     blocked
-        .set_rcvtimeo(Duration::from_secs(5))
+        .set_rcvtimeo(SETTLE)
         .or_fail("SO_RCVTIMEO")?;
 
+    let tid = AtomicI32::new(0);
     thread::scope(|sc| -> TestResult {
-        let h = sc.spawn(|| blocked.recv_from(&mut [0u8; 8]));
-        // Give the thread time to block; if it has not yet, its recv is
-        // simply "the next recv", which must fail the same way.
-        thread::sleep(Duration::from_millis(300));
+        let h = sc.spawn(|| {
+            tid.store(gettid(), Ordering::SeqCst);
+            blocked.recv_from(&mut [0u8; 8])
+        });
+        // The receiver is blocked in recvfrom before the interface goes.
+        wait_blocked(&tid, &RECV_SYSCALLS, "the receiver blocked in recvfrom")?;
         let rm = ctx.rmmod(Module::Loop);
         let r = h
             .join()
@@ -141,6 +145,8 @@ fn rmmod_loop_under_traffic(ctx: &mut Ctx) -> TestResult {
             .or_fail("SO_RCVTIMEO")?;
         let stop = AtomicBool::new(false);
         let sent_ok = AtomicUsize::new(0);
+        let sent_err = AtomicUsize::new(0);
+        let recv_ok = AtomicUsize::new(0);
         let (sent, received) = thread::scope(|sc| -> Result<(Tally, Tally), String> {
             let _stop = OnDrop(|| stop.store(true, Ordering::SeqCst));
             let sender = sc.spawn(|| {
@@ -150,6 +156,8 @@ fn rmmod_loop_under_traffic(ctx: &mut Ctx) -> TestResult {
                     let r = tx.send_to(&i.to_le_bytes(), arb_std(i & 0x7FF, false), idx);
                     if r.is_ok() {
                         sent_ok.fetch_add(1, Ordering::SeqCst);
+                    } else {
+                        sent_err.fetch_add(1, Ordering::SeqCst);
                     }
                     *t.entry(r.err().map_or(0, |e| errno_of(&e))).or_default() += 1;
                     i = i.wrapping_add(1);
@@ -160,18 +168,32 @@ fn rmmod_loop_under_traffic(ctx: &mut Ctx) -> TestResult {
                 let mut t = Tally::new();
                 while !stop.load(Ordering::SeqCst) {
                     let r = rx.recv(&mut [0u8; 8], 0);
+                    if r.is_ok() {
+                        recv_ok.fetch_add(1, Ordering::SeqCst);
+                    }
                     *t.entry(r.err().map_or(0, |e| errno_of(&e))).or_default() += 1;
                 }
                 t
             });
             // Traffic first (on a loaded debug kernel a new thread may take
             // longer than any fixed sleep to send its first frame).
-            wait_for(Duration::from_secs(30), "the first frame sent", || {
-                Ok((sent_ok.load(Ordering::SeqCst) > 0).then_some(()))
+            // Then until both ends have moved on by more: the rmmod hits
+            // traffic that is flowing.
+            let (s0, r0) = wait_for(SETTLE, "the first frame sent and received", || {
+                let c = (sent_ok.load(Ordering::SeqCst), recv_ok.load(Ordering::SeqCst));
+                Ok((c.0 > 0 && c.1 > 0).then_some(c))
             })?;
-            thread::sleep(Duration::from_millis(100));
+            wait_until(SETTLE, "traffic going on", || {
+                sent_ok.load(Ordering::SeqCst) > s0 + 16 && recv_ok.load(Ordering::SeqCst) > r0 + 16
+            })?;
             let rm = ctx.rmmod(Module::Loop);
-            thread::sleep(Duration::from_millis(100));
+            // The sender has tried the vanished interface.
+            let e0 = sent_err.load(Ordering::SeqCst);
+            if rm.is_ok() {
+                wait_until(SETTLE, "a send failing after the rmmod", || {
+                    sent_err.load(Ordering::SeqCst) > e0
+                })?;
+            }
             stop.store(true, Ordering::SeqCst);
             let sent = sender.join().map_err(|_| "sender panicked".to_string())?;
             let received = receiver

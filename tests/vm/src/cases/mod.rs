@@ -42,7 +42,7 @@ mod socket;
 mod teardown;
 mod timesvc;
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread;
 use std::time::Duration;
@@ -50,7 +50,7 @@ use std::time::Duration;
 use socketcan::Socket;
 
 use crate::canraw::{self, std as sff};
-use crate::check::{ensure, OrFail, TestResult};
+use crate::check::{ensure, wait_until, OnDrop, OrFail, TestResult, SETTLE};
 use crate::ctx::{dev, Ctx, Module};
 use crate::Test;
 
@@ -264,34 +264,43 @@ fn rmmod_card_during_traffic(ctx: &mut Ctx, m: Module, i0: u32, i1: u32) -> Test
     rx.set_read_timeout(Duration::from_millis(200))
         .or_fail("SO_RCVTIMEO")?;
     let stop = Arc::new(AtomicBool::new(false));
-    let send = {
+    let (sent, got) = (Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)));
+    // Stops both threads on every way out, the early returns included.
+    let _stop = OnDrop({
         let stop = stop.clone();
+        move || stop.store(true, Ordering::Relaxed)
+    });
+    let send = {
+        let (stop, sent) = (stop.clone(), sent.clone());
         thread::spawn(move || {
             let mut n = 0u64;
             while !stop.load(Ordering::Relaxed) && tx.write_frame(&sff(0x55, &[n as u8])).is_ok() {
                 n += 1;
+                sent.store(n, Ordering::Relaxed);
             }
-            n
         })
     };
     let recv = {
-        let stop = stop.clone();
+        let (stop, got) = (stop.clone(), got.clone());
         thread::spawn(move || {
-            let mut n = 0u64;
             while !stop.load(Ordering::Relaxed) {
                 if rx.read_frame().is_ok() {
-                    n += 1;
+                    got.fetch_add(1, Ordering::Relaxed);
                 }
             }
-            n
         })
     };
-    thread::sleep(Duration::from_millis(500));
+    // Frames moving both ways before the card goes, not a fixed time.
+    wait_until(SETTLE, "frames sent on can0 and received on can1", || {
+        sent.load(Ordering::Relaxed) >= 16 && got.load(Ordering::Relaxed) >= 16
+    })?;
     ctx.rmmod(m)?;
-    thread::sleep(Duration::from_millis(300));
+    // The sender ends at its first failed write: the card is gone.
+    wait_until(SETTLE, "a write failing after the rmmod", || send.is_finished())?;
     stop.store(true, Ordering::Relaxed);
-    let sent = send.join().map_err(|_| "sender panicked".to_string())?;
-    let got = recv.join().map_err(|_| "receiver panicked".to_string())?;
+    send.join().map_err(|_| "sender panicked".to_string())?;
+    recv.join().map_err(|_| "receiver panicked".to_string())?;
+    let (sent, got) = (sent.load(Ordering::Relaxed), got.load(Ordering::Relaxed));
     ctx.note(format!(
         "{sent} frames sent, {got} received before and during rmmod"
     ));

@@ -1,11 +1,10 @@
 // SPDX-License-Identifier: GPL-2.0
 //! Module load order and reference counting.
 
-use std::thread;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use super::{stack1, test_table};
-use crate::check::{ensure, expect_frame, Frame, TestResult};
+use crate::check::{ensure, expect_frame, wait_until, Frame, TestResult, SETTLE};
 use crate::ctx::{Ctx, Module};
 use crate::Test;
 
@@ -75,20 +74,23 @@ fn module_can_pinned_by_socket(ctx: &mut Ctx) -> TestResult {
 
 /// rmmod rcan_can right after the last socket was closed. A socket whose
 /// memory is freed after an RCU grace period may keep the module busy
-/// briefly, so retry for up to 2 s, and say so if it was needed.
+/// briefly, so retry until it goes (up to [`SETTLE`]: the debug kernel
+/// under load stretches a grace period), and say so if it was needed.
 fn rmmod_after_close(ctx: &mut Ctx, what: &str) -> TestResult {
     let start = Instant::now();
     let mut tries = 0;
-    loop {
+    let mut last = String::new();
+    wait_until(SETTLE, "rmmod rcan_can to succeed", || {
         tries += 1;
         match ctx.rmmod(Module::Can) {
-            Ok(()) => break,
-            Err(e) if start.elapsed() > Duration::from_secs(2) => {
-                return Err(format!("after closing {what}: {e}"))
+            Ok(()) => true,
+            Err(e) => {
+                last = e;
+                false
             }
-            Err(_) => thread::sleep(Duration::from_millis(20)),
         }
-    }
+    })
+    .map_err(|e| format!("after closing {what}: {e}: {last}"))?;
     if tries > 1 {
         ctx.note(format!(
             "rmmod rcan_can after closing {what} succeeded only at try {tries} ({:?})",

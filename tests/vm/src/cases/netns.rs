@@ -34,7 +34,7 @@ use rcan_uapi::ArbSocket;
 use socketcan::{CanFilter, CanSocket, Socket, SocketOptions};
 
 use crate::canraw::{self, std as sff};
-use crate::check::{ensure, OrFail, TestResult, QUIET};
+use crate::check::{ensure, wait_until, OrFail, TestResult, QUIET, SETTLE};
 use crate::ctx::{tool, Ctx, Module, Stack};
 
 use super::{portable_table, test_table};
@@ -279,6 +279,8 @@ fn raw_netns_move_under_traffic(ctx: &mut Ctx) -> TestResult {
         let stop = stop.clone();
         thread::spawn(move || {
             let mut n = 0u64;
+            // The 1 ms are a back-off after a failed send and a pace
+            // every 64 frames (the receiver keeps up), not synchronisation.
             while !stop.load(Ordering::Relaxed) {
                 if tx.write_frame(&sff(0x42, &[n as u8])).is_err() {
                     thread::sleep(Duration::from_millis(1));
@@ -350,28 +352,24 @@ fn raw_netns_delete_with_sockets(ctx: &mut Ctx) -> TestResult {
         Ok(vec![a, b, all, unbound])
     })?;
     canraw::recv(&socks[2]).map_err(|e| format!("namespace, every interface: {e}"))?;
+    // Its thread has ended (drop joins it); then the sockets close.
     drop(ns);
-    thread::sleep(Duration::from_millis(50));
     drop(socks);
     // The namespace is torn down by a kernel worker: wait for it.
-    let t0 = Instant::now();
-    let back = loop {
-        let back = in_init("can1");
-        if back || t0.elapsed() > Duration::from_secs(20) {
-            break back;
-        }
-        // Mainline's vcan is deleted, not returned: there is nothing to
-        // wait for beyond a moment for the teardown worker.
-        if ctx.stack() == Stack::Mainline && t0.elapsed() > Duration::from_secs(2) {
-            break false;
-        }
-        thread::sleep(Duration::from_millis(50));
-    };
     match ctx.stack() {
         // canloop has no link ops: like a physical device, it comes back.
-        Stack::Ours => ensure!(back, "can1 did not come back from its namespace"),
-        // vcan has link ops without netns_refund: it dies with the namespace.
-        Stack::Mainline => ensure!(!back, "vcan can1 came back from its namespace"),
+        Stack::Ours => wait_until(SETTLE, "can1 back from its namespace", || in_init("can1"))?,
+        // vcan has link ops without netns_refund: it dies with the
+        // namespace. A negative check: nothing in the initial namespace
+        // marks the end of that namespace's teardown, so 2 s are given
+        // for can1 to (wrongly) come back; not synchronisation.
+        Stack::Mainline => {
+            let t0 = Instant::now();
+            while t0.elapsed() < Duration::from_secs(2) {
+                ensure!(!in_init("can1"), "vcan can1 came back from its namespace");
+                thread::sleep(Duration::from_millis(50));
+            }
+        }
     }
     ctx.unload_all()
 }
@@ -443,14 +441,7 @@ fn candev_netns_returns(ctx: &mut Ctx) -> TestResult {
     ns.ifindex("can0")?;
     ensure!(!in_init("can0"), "can0 still in the initial namespace");
     drop(ns);
-    let t0 = Instant::now();
-    while !in_init("can0") {
-        ensure!(
-            t0.elapsed() < Duration::from_secs(20),
-            "can0 did not come back from its namespace"
-        );
-        thread::sleep(Duration::from_millis(50));
-    }
+    wait_until(SETTLE, "can0 back from its namespace", || in_init("can0"))?;
     ctx.unload_all()
 }
 
@@ -489,6 +480,7 @@ fn netns_thesis_api(ctx: &mut Ctx) -> TestResult {
         .or_fail("B: sendto ifindex 0")?;
     let (n, _) = b_rx.recv_from(&mut buf).or_fail("B: recvfrom")?;
     ensure!(n == 1 && buf[0] == 0xb, "B: got {n} bytes {:x?}", &buf[..n]);
+    // A negative check (nothing else arrives), not synchronisation.
     thread::sleep(QUIET);
     for (who, s) in [("A", &a_rx), ("B", &b_rx), ("initial namespace", &init_rx)] {
         let r = s.recv(&mut buf, libc::MSG_DONTWAIT);
@@ -550,14 +542,7 @@ fn netns_canloop_returns(ctx: &mut Ctx) -> TestResult {
     ns.take_up("can1")?;
     ensure!(!in_init("can1"), "can1 still in the initial namespace");
     drop(ns);
-    let t0 = Instant::now();
-    while !in_init("can1") {
-        ensure!(
-            t0.elapsed() < Duration::from_secs(20),
-            "can1 did not come back"
-        );
-        thread::sleep(Duration::from_millis(50));
-    }
+    wait_until(SETTLE, "can1 back from its namespace", || in_init("can1"))?;
     ctx.link_up("can1")?;
     let i = ctx.ifindex("can1")?;
     let (tx, rx) = (canraw::open(i)?, canraw::open(i)?);
@@ -627,14 +612,7 @@ fn i82527_netns_move(ctx: &mut Ctx) -> TestResult {
 
     drop((rx, ntx));
     drop(ns);
-    let t0 = Instant::now();
-    while !in_init("can1") {
-        ensure!(
-            t0.elapsed() < Duration::from_secs(20),
-            "can1 did not come back from its namespace"
-        );
-        thread::sleep(Duration::from_millis(50));
-    }
+    wait_until(SETTLE, "can1 back from its namespace", || in_init("can1"))?;
     ctx.link_up("can1")?;
     let rx1 = canraw::open(ctx.ifindex("can1")?)?;
     let f = sff(0x125, &[6]);

@@ -17,13 +17,12 @@
 
 use std::collections::HashMap;
 use std::fs;
-use std::thread;
 use std::time::{Duration, Instant};
 
 use rcan_uapi::dsor::{DsorAddr, DsorSocket, DSOR_ID_ANY};
 
 use super::test_table;
-use crate::check::{ensure, errno_of, OrFail, TestResult};
+use crate::check::{ensure, errno_of, wait_until, OrFail, TestResult, SETTLE};
 use crate::ctx::{sized, Ctx, Module};
 use crate::sys::FILL;
 use crate::Test;
@@ -161,12 +160,30 @@ fn dsor_loss_accounting(ctx: &mut Ctx) -> TestResult {
                 }
                 drain(&rx, &lens, &mut copies, &mut bad, max_len + 64)?;
             }
-            // Let every retransmission end, then collect the rest: a
-            // message whose last frame arrived while every ack of it was
-            // lost is there too.
+            // Every send has returned, so no retransmission is still to
+            // come; frames of them may still be on their way. A marker
+            // message sent now without loss queues behind them: once its
+            // send has returned (acknowledged: delivered), collect the
+            // rest (was 500 ms): a message whose last frame arrived while
+            // every ack of it was lost is there too.
             set_droprate(0)?;
-            thread::sleep(Duration::from_millis(500));
+            let marker = rate << 16 | 0xffff;
+            lens.insert(marker, 8);
+            tx.send_to(
+                &body(marker, 8),
+                &DsorAddr::Segm {
+                    prio: 0x30,
+                    node: 0,
+                    id: marker,
+                },
+            )
+            .map_err(|e| format!("droprate {rate}: the marker message: {e}"))?;
             drain(&rx, &lens, &mut copies, &mut bad, max_len + 64)?;
+            lens.remove(&marker);
+            ensure!(
+                copies.remove(&marker) == Some(1),
+                "droprate {rate}: the marker message was not delivered once"
+            );
             let mut acc = Account {
                 corrupted: bad.len(),
                 ..Default::default()
@@ -207,14 +224,15 @@ fn dsor_loss_accounting(ctx: &mut Ctx) -> TestResult {
 }
 
 fn rmmod_retrying(ctx: &mut Ctx, m: Module) -> TestResult {
-    let start = Instant::now();
-    loop {
-        match ctx.rmmod(m) {
-            Ok(()) => return Ok(()),
-            Err(e) if start.elapsed() > Duration::from_secs(10) => return Err(e),
-            Err(_) => thread::sleep(Duration::from_millis(20)),
+    let mut last = String::new();
+    wait_until(SETTLE, &format!("rmmod {} to succeed", m.name()), || match ctx.rmmod(m) {
+        Ok(()) => true,
+        Err(e) => {
+            last = e;
+            false
         }
-    }
+    })
+    .map_err(|e| format!("{e}: {last}"))
 }
 
 /// Every module (`Module::ALL`) loaded and unloaded `RCAN_MODULE_CYCLES`
@@ -234,7 +252,7 @@ fn rmmod_retrying(ctx: &mut Ctx, m: Module) -> TestResult {
 /// hundredth: a registration not undone (the next `register_netdev`,
 /// `pci_register_driver`, `sock_register` or `rtnl_link_register` fails
 /// with EEXIST/EBUSY), a reference not dropped (the next rmmod fails
-/// with EBUSY and `rmmod_retrying` gives up after 10 s), an id or name
+/// with EBUSY and `rmmod_retrying` gives up after a minute), an id or name
 /// leaked per load (canN or an IDA: a drift visible after a few loads;
 /// 20 loads of `rcan_loop count=2` cover 40 interfaces), a timer or work
 /// item left armed (it fires into freed module text within its period,

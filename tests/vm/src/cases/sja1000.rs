@@ -20,7 +20,7 @@ use socketcan::{CanFilter, CanFrame, EmbeddedFrame, Frame, Socket, SocketOptions
 
 use super::test_table;
 use crate::canraw::{self, ext, rtr_ext, rtr_std, std as sff};
-use crate::check::{ensure, OrFail, TestResult};
+use crate::check::{ensure, wait_until, OnDrop, OrFail, TestResult, SETTLE};
 use crate::ctx::{dev, sized, Ctx, Module};
 use crate::tools;
 
@@ -145,8 +145,14 @@ fn sja1000_hw_filter(ctx: &mut Ctx) -> TestResult {
         canraw::send(&tx, f)?;
     }
     canraw::expect_seq(&rx, &[sff(0x123, &[1]), sff(0x123, &[5])], "can1")?;
-    thread::sleep(Duration::from_millis(300));
-    let got = ctx.stat(&dev(1), "rx_packets")? - before;
+    // The last frame sent has arrived, so the driver has taken every frame
+    // before it; its counter may still be behind the delivery: wait until
+    // it counts the two wanted frames, then check it counts no more.
+    let mut got = 0;
+    wait_until(SETTLE, "can1's rx_packets counting the 2 wanted frames", || {
+        got = ctx.stat(&dev(1), "rx_packets").unwrap_or(before) - before;
+        got >= 2
+    })?;
     ensure!(
         got == 2,
         "can1 driver received {got} frames, the filter wants 2 of 6"
@@ -369,10 +375,22 @@ fn sja1000_ifdown_during_traffic(ctx: &mut Ctx) -> TestResult {
             }
         })
     };
-    for _ in 0..5 {
-        thread::sleep(Duration::from_millis(200));
+    // Stops the sender on every way out, the early returns included.
+    let _stop = OnDrop({
+        let stop = stop.clone();
+        move || stop.store(true, Ordering::Relaxed)
+    });
+    for round in 0..5 {
+        // Sends going through, then failing while can0 is down.
+        let n = ok.load(Ordering::Relaxed);
+        wait_until(SETTLE, &format!("round {round}: sends going through"), || {
+            ok.load(Ordering::Relaxed) > n + 8
+        })?;
         ctx.link_down(&dev(0))?;
-        thread::sleep(Duration::from_millis(200));
+        let n = failed.load(Ordering::Relaxed);
+        wait_until(SETTLE, &format!("round {round}: a send failing while can0 is down"), || {
+            failed.load(Ordering::Relaxed) > n
+        })?;
         ctx.link_up(&dev(0))?;
     }
     stop.store(true, Ordering::Relaxed);

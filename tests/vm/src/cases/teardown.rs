@@ -19,7 +19,7 @@
 use std::collections::BTreeMap;
 use std::io;
 use std::os::fd::{AsFd, AsRawFd, IntoRawFd, OwnedFd};
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, Ordering};
 use std::thread;
 use std::time::{Duration, Instant};
 
@@ -31,7 +31,11 @@ use socketcan::{Socket, SocketOptions};
 
 use super::{portable_table, raw1, test_table};
 use crate::canraw::{self, addr_bytes, std as sff, CAN_RAW, CAN_SFF_MASK};
-use crate::check::{ensure, errno_name, errno_of, wait_for, OnDrop, OrFail, TestResult, QUIET};
+use crate::check::blocked_syscall as sys_blocked;
+use crate::check::{
+    ensure, errno_name, errno_of, wait_blocked, wait_for, wait_until, OnDrop, OrFail, TestResult,
+    QUIET, RECV_SYSCALLS, SETTLE,
+};
 use crate::ctx::{debug_kernel, dev, sized, Ctx, Mainline, Module, Stack};
 use crate::sys;
 use crate::Test;
@@ -288,6 +292,7 @@ fn expect_msg(p: Proto, fd: impl AsFd, tag: u16, want: u32, what: &str) -> TestR
 
 /// Checks that nothing is queued on `fd` (after [`QUIET`]).
 fn expect_nothing(p: Proto, fd: impl AsFd, what: &str) -> TestResult {
+    // Not synchronisation: a negative check, with no event to wait for.
     thread::sleep(QUIET);
     let mut buf = vec![0u8; p.buf_len()];
     match raw::recvfrom(&fd, &mut buf, libc::MSG_DONTWAIT, None) {
@@ -333,35 +338,46 @@ fn close_during_recv(ctx: &Ctx, p: Proto, ifindex: u32, rounds: u32) -> TestResu
         let late = 1000 + round;
         let what = format!("{} round {round}", p.name());
         let fd = p.receiver(ifindex, tag, BLOCKED_RX)?.into_raw_fd();
-        let ready = AtomicUsize::new(0);
-        let (sd, cl, sent, readers) = thread::scope(|sc| {
-            let readers: Vec<_> = (0..3)
-                .map(|_| {
-                    let ready = &ready;
+        let tids = [AtomicI32::new(0), AtomicI32::new(0), AtomicI32::new(0)];
+        let done = [AtomicBool::new(false), AtomicBool::new(false), AtomicBool::new(false)];
+        let (blocked, sd, cl, sent, readers) = thread::scope(|sc| {
+            let readers: Vec<_> = tids
+                .iter()
+                .zip(&done)
+                .map(|(tid, done)| {
                     sc.spawn(move || {
                         let mut b = vec![0u8; p.buf_len()];
                         let t = Instant::now();
-                        ready.fetch_add(1, Ordering::SeqCst);
+                        tid.store(sys::gettid(), Ordering::SeqCst);
                         let r = sys::recv_fd(fd, &mut b, 0).map(|n| b[..n].to_vec());
+                        done.store(true, Ordering::SeqCst);
                         (r, t.elapsed())
                     })
                 })
                 .collect();
-            // Let them get into the kernel: all three about to call recv,
-            // then a pause (longer on the slow debug kernel). One that is
-            // late finds the descriptor closed (EBADF), which is counted.
-            while ready.load(Ordering::SeqCst) < 3 {
-                thread::yield_now();
-            }
-            thread::sleep(Duration::from_millis(if debug_kernel() { 200 } else { 50 }));
+            // All three have got into the kernel before the descriptor
+            // goes: each is blocked in recv (its /proc/self/task/TID/syscall),
+            // or already back from it (its BLOCKED_RX timeout, EAGAIN,
+            // counted below). Should one never get there, the descriptor
+            // is closed anyway (so that its recv returns) and the test
+            // fails below.
+            let blocked = wait_until(SETTLE, "the three readers blocked in recv", || {
+                tids.iter().zip(&done).all(|(tid, done)| {
+                    let t = tid.load(Ordering::SeqCst);
+                    done.load(Ordering::SeqCst)
+                        || (t != 0
+                            && sys_blocked(t).is_some_and(|nr| RECV_SYSCALLS.contains(&nr)))
+                })
+            });
             let sd = sys::shutdown_fd(fd, libc::SHUT_RDWR);
             let cl = sys::close_fd(fd);
             // No descriptor may be opened until the readers are back: one
             // that had not entered recv yet would find the number reused.
             let sent = p.send(&tx, ifindex, tag, late);
             let readers: Vec<_> = readers.into_iter().map(|h| h.join()).collect();
-            (sd, cl, sent, readers)
+            (blocked, sd, cl, sent, readers)
         });
+        blocked.map_err(|e| format!("{what}: {e}"))?;
         cl.or_fail(format_args!("{what}: close with readers blocked"))?;
         let shut = sd.is_ok();
         count(&mut shutdowns, &sd.map(|()| 0));
@@ -484,6 +500,8 @@ fn teardown_close_during_recv(ctx: &mut Ctx) -> TestResult {
 struct Flow {
     sent: AtomicU64,
     got: AtomicU64,
+    /// Sends that failed.
+    failed: AtomicU64,
 }
 
 impl Flow {
@@ -540,6 +558,8 @@ fn traffic_between<'s>(
             let r = p.send(&tx, tx_if, tag, i);
             if r.is_ok() {
                 flow.sent.fetch_add(1, Ordering::SeqCst);
+            } else {
+                flow.failed.fetch_add(1, Ordering::SeqCst);
             }
             count(&mut t, &r);
             i = i.wrapping_add(1);
@@ -593,6 +613,19 @@ fn flowing(flows: &[&Flow], what: &str) -> TestResult {
     )
 }
 
+/// Waits until in every flow a send has failed after this call: the
+/// senders have met the teardown that came before it (the interface or
+/// the driver gone), so stopping the threads now cuts nothing short.
+fn failing(flows: &[&Flow], what: &str) -> TestResult {
+    let before: Vec<u64> = flows.iter().map(|f| f.failed.load(Ordering::SeqCst)).collect();
+    wait_until(SETTLE, &format!("{what}: a send failing after the teardown"), || {
+        flows
+            .iter()
+            .zip(&before)
+            .all(|(f, &n)| f.failed.load(Ordering::SeqCst) > n)
+    })
+}
+
 /// `ip link set DEV down` while protocol `p` sends on it: sends fail with
 /// ENETDOWN while it is down (never anything undocumented, never a hang),
 /// the receiver sees at most its timeout and the reports of the link
@@ -606,9 +639,21 @@ fn ifdown_during_send(ctx: &Ctx, p: Proto, ifindex: u32) -> TestResult {
         let (tx, rx) = traffic(sc, p, ifindex, tag, &stop, &flow)?;
         flowing(&[&flow], p.name())?;
         let down = ctx.link_down(&dev(0));
-        thread::sleep(Duration::from_millis(300));
+        // A send has failed while the link was down (it must be ENETDOWN,
+        // checked below), then one has gone through after it came up.
+        let n = flow.failed.load(Ordering::SeqCst);
+        if down.is_ok() {
+            wait_until(SETTLE, &format!("{}: a send failing while can0 is down", p.name()), || {
+                flow.failed.load(Ordering::SeqCst) > n
+            })?;
+        }
         let up = ctx.link_up(&dev(0));
-        thread::sleep(Duration::from_millis(200));
+        let n = flow.sent.load(Ordering::SeqCst);
+        if up.is_ok() {
+            wait_until(SETTLE, &format!("{}: a send going through after up", p.name()), || {
+                flow.sent.load(Ordering::SeqCst) > n
+            })?;
+        }
         stop.store(true, Ordering::SeqCst);
         let sent = tx.join().map_err(|_| "sender panicked")?;
         let received = rx.join().map_err(|_| "receiver panicked")?;
@@ -680,9 +725,11 @@ fn raw_teardown_iface_delete_bound(ctx: &mut Ctx) -> TestResult {
     let tx = canraw::open(idx)?;
     raw::set_timeout(&tx, libc::SO_SNDTIMEO, TX_TIMEOUT).or_fail("SO_SNDTIMEO")?;
     let stop = AtomicBool::new(false);
+    let (tid, failed) = (AtomicI32::new(0), AtomicU64::new(0));
     let (read, sent) = thread::scope(|sc| -> Result<_, String> {
         let _stop = OnDrop(|| stop.store(true, Ordering::SeqCst));
         let reader = sc.spawn(|| {
+            tid.store(sys::gettid(), Ordering::SeqCst);
             let t = Instant::now();
             (blocked.read_frame(), t.elapsed())
         });
@@ -691,16 +738,28 @@ fn raw_teardown_iface_delete_bound(ctx: &mut Ctx) -> TestResult {
             let mut i = 0u32;
             while !stop.load(Ordering::SeqCst) {
                 let f = canraw::wire(&sff(0x123, &i.to_le_bytes()));
-                count(&mut t, &raw::write(&tx, &f));
+                let r = raw::write(&tx, &f);
+                if r.is_err() {
+                    failed.fetch_add(1, Ordering::SeqCst);
+                }
+                count(&mut t, &r);
                 i = i.wrapping_add(1);
             }
             t
         });
-        let queued = sys::poll_one(&idle, libc::POLLIN, 2000);
-        thread::sleep(Duration::from_millis(300));
+        // The delete comes with frames flowing (the idle socket has one)
+        // and the reader blocked in read.
+        let queued = sys::poll_one(&idle, libc::POLLIN, SETTLE.as_millis() as i32);
+        wait_blocked(&tid, &RECV_SYSCALLS, "the reader blocked in read")?;
         let rm = ctx.remove_can_ifaces();
         let read = reader.join().map_err(|_| "reader panicked")?;
-        thread::sleep(Duration::from_millis(100));
+        // The writer has tried the deleted interface.
+        let n = failed.load(Ordering::SeqCst);
+        if rm.is_ok() {
+            wait_until(SETTLE, "a write failing after the delete", || {
+                failed.load(Ordering::SeqCst) > n
+            })?;
+        }
         stop.store(true, Ordering::SeqCst);
         let sent = sender.join().map_err(|_| "sender panicked")?;
         rm?;
@@ -810,18 +869,17 @@ fn expect_busy(name: &str, what: &str) -> TestResult {
 /// transfers ended).
 fn rmmod_after_close(ctx: &Ctx, name: &str, limit: Duration) -> TestResult {
     let start = Instant::now();
-    loop {
+    let mut last = String::new();
+    wait_until(limit, &format!("rmmod {name} after the last close"), || {
         match sys::delete_module(name) {
-            Ok(()) => break,
-            Err(e) if start.elapsed() > limit => {
-                return Err(format!(
-                    "rmmod {name} after the last close: {} after {limit:?}",
-                    crate::check::errno_text(&e)
-                ))
+            Ok(()) => true,
+            Err(e) => {
+                last = crate::check::errno_text(&e);
+                false
             }
-            Err(_) => thread::sleep(Duration::from_millis(20)),
         }
-    }
+    })
+    .map_err(|e| format!("{e}: {last}"))?;
     if start.elapsed() > Duration::from_millis(100) {
         ctx.note(format!(
             "rmmod {name} after the last close took {:?}",
@@ -842,17 +900,25 @@ fn module_listed(name: &str) -> bool {
 /// next message); after the last close the module unloads.
 fn rmmod_busy(ctx: &Ctx, p: Proto, ifindex: u32, name: &str, core: &str) -> TestResult {
     let tag = 0x400;
-    let rx = p.receiver(ifindex, tag, Duration::from_secs(5))?;
+    let rx = p.receiver(ifindex, tag, SETTLE)?;
     let tx = p.socket(TRAFFIC_RX)?;
+    let tid = AtomicI32::new(0);
     thread::scope(|sc| -> TestResult {
-        let reader =
-            sc.spawn(|| expect_msg(p, &rx, tag, 1, "blocked reader across a refused rmmod"));
-        thread::sleep(Duration::from_millis(100));
-        let busy = expect_busy(
-            name,
-            &format!("a {} socket open and a reader blocked", p.name()),
-        )
-        .and_then(|()| expect_busy(core, &format!("{name} loaded")));
+        let reader = sc.spawn(|| {
+            tid.store(sys::gettid(), Ordering::SeqCst);
+            expect_msg(p, &rx, tag, 1, "blocked reader across a refused rmmod")
+        });
+        // The rmmod comes with the reader blocked in read; should it never
+        // block, the message below still ends its wait.
+        let blocked = wait_blocked(&tid, &RECV_SYSCALLS, "the reader blocked in read");
+        let busy = blocked
+            .and_then(|()| {
+                expect_busy(
+                    name,
+                    &format!("a {} socket open and a reader blocked", p.name()),
+                )
+            })
+            .and_then(|()| expect_busy(core, &format!("{name} loaded")));
         let sent = p.send(&tx, ifindex, tag, 1);
         let read = reader.join().map_err(|_| "reader panicked")?;
         busy?;
@@ -860,7 +926,7 @@ fn rmmod_busy(ctx: &Ctx, p: Proto, ifindex: u32, name: &str, core: &str) -> Test
         read
     })?;
     drop((rx, tx));
-    rmmod_after_close(ctx, name, Duration::from_secs(10))
+    rmmod_after_close(ctx, name, SETTLE)
 }
 
 /// rmmod of the CAN_RAW module (ours rcan_raw, mainline can_raw) and the
@@ -911,7 +977,9 @@ fn teardown_rmmod_loop_traffic(ctx: &mut Ctx) -> TestResult {
             }
             flowing(&flows.each_ref(), "all three protocols")?;
             let rm = ctx.rmmod(Module::Loop);
-            thread::sleep(Duration::from_millis(300));
+            if rm.is_ok() {
+                failing(&flows.each_ref(), "all three protocols")?;
+            }
             stop.store(true, Ordering::SeqCst);
             let mut out = Vec::new();
             for (p, (tx, rx)) in threads {
@@ -1056,7 +1124,9 @@ fn teardown_rmmod_drivers_traffic(ctx: &mut Ctx) -> TestResult {
             let t = Instant::now();
             let rm = sys::delete_module(name);
             let took = t.elapsed();
-            thread::sleep(Duration::from_millis(300));
+            if rm.is_ok() {
+                failing(&flows.each_ref(), &format!("{name}: CAN_RAW and CANPROTO_CAN"))?;
+            }
             stop.store(true, Ordering::SeqCst);
             let mut out = Vec::new();
             for (p, (tx, rx)) in threads {
@@ -1077,7 +1147,7 @@ fn teardown_rmmod_drivers_traffic(ctx: &mut Ctx) -> TestResult {
             Ok(()) => ensure!(!module_listed(name), "{name} listed after rmmod"),
             Err(e) if [libc::EBUSY, libc::EAGAIN].contains(&errno_of(e)) => {
                 ctx.note(format!("rmmod {name} under traffic: {e}"));
-                rmmod_after_close(ctx, name, Duration::from_secs(10))?;
+                rmmod_after_close(ctx, name, SETTLE)?;
             }
             Err(e) => return Err(format!("rmmod {name} under traffic: {e}")),
         }

@@ -22,7 +22,7 @@ use socketcan::{CanSocket, Socket, SocketOptions};
 
 use super::{raw1, raw2, test_table};
 use crate::canraw::{self, CAN_EFF_FLAG, CAN_RTR_FLAG, CAN_SFF_MASK};
-use crate::check::{ensure, OrFail, TestResult};
+use crate::check::{ensure, wait_until, OrFail, TestResult, SETTLE};
 use crate::ctx::{dev, sized, tool, Ctx, Kmsg, Module};
 use crate::Test;
 
@@ -188,8 +188,18 @@ impl Capture {
             if Instant::now() > end {
                 return None;
             }
+            // The poll interval of this wait, not synchronisation.
             thread::sleep(Duration::from_millis(20));
         }
+    }
+
+    /// Waits until `n` frames satisfying `pred` have been captured (from
+    /// the start), failing after [`SETTLE`]: progress counted in the
+    /// service's own ticks, not in the guest's seconds.
+    fn wait_count(&self, n: usize, what: &str, pred: impl Fn(&Rx) -> bool) -> TestResult {
+        wait_until(SETTLE, what, || {
+            self.frames().iter().filter(|f| pred(f)).count() >= n
+        })
     }
 
     /// Stops and returns everything captured.
@@ -224,7 +234,8 @@ fn capture_loop(s: &CanSocket, frames: &Mutex<Vec<Rx>>, stop: &AtomicBool) {
                 frames.lock().unwrap_or_else(|e| e.into_inner()).push(rx);
             }
             // Timeouts, and ENETDOWN/ENODEV reported once when the
-            // interface goes down or away: keep listening.
+            // interface goes down or away: keep listening (the 5 ms only
+            // keep a gone interface from spinning the loop).
             Err(_) => thread::sleep(Duration::from_millis(5)),
         }
     }
@@ -244,6 +255,27 @@ fn gaps(frames: &[Rx]) -> Vec<Duration> {
         .windows(2)
         .map(|w| w[1].mono.duration_since(w[0].mono))
         .collect()
+}
+
+/// Waits until the kernel log (from `k` on) holds at least `want[i].1`
+/// lines containing `want[i].0` each; the kernel logs asynchronously. The
+/// caller checks the exact counts.
+fn wait_log(k: &mut Kmsg, seen: &mut Vec<String>, want: &[(&str, usize)]) -> TestResult {
+    let mut err = None;
+    let r = wait_until(SETTLE, &format!("kernel log lines {want:?}"), || {
+        match k.read_new() {
+            Ok(l) => seen.extend(l),
+            Err(e) => err = Some(e),
+        }
+        err.is_some()
+            || want
+                .iter()
+                .all(|(pat, n)| seen.iter().filter(|l| l.contains(pat)).count() >= *n)
+    });
+    match err {
+        Some(e) => Err(e),
+        None => r.map_err(|e| format!("{e}: {seen:?}")),
+    }
 }
 
 /// Kernel log lines from now on that contain `pat`.
@@ -268,6 +300,7 @@ fn time_frames_1hz(ctx: &mut Ctx) -> TestResult {
     let cap = Capture::start(idx, VEHICLE)?;
     ctx.insmod(Module::Time, &[])?;
     let secs = sized("RCAN_TIME_SECS", 31, 11) as usize;
+    // The measurement window of a 1 Hz service, not synchronisation.
     thread::sleep(Duration::from_secs(secs as u64));
     let frames = cap.finish();
     ensure!(
@@ -385,12 +418,14 @@ fn time_params(ctx: &mut Ctx) -> TestResult {
         write_param("rcan_time", "vehicle", "0x60").is_err(),
         "vehicle is writable at run time"
     );
-    thread::sleep(Duration::from_millis(3500));
+    // Two ticks on can1 (was 3.5 s); a frame on can0 would have come with
+    // either.
+    c1.wait_count(2, "two time frames on can1", |_| true)?;
     ctx.rmmod(Module::Time)?;
     let f1 = c1.finish();
     let f0 = c0.finish();
     ensure!(f0.is_empty(), "time frame on can0: {}", f0[0].show());
-    ensure!(f1.len() >= 2, "{} time frames on can1 in 3.5 s", f1.len());
+    ensure!(f1.len() >= 2, "{} time frames on can1", f1.len());
     for f in &f1 {
         check_format(f, 0x50, SRC_TIME)?;
     }
@@ -424,6 +459,8 @@ fn time_dev_down_up(ctx: &mut Ctx) -> TestResult {
     // Once `ip link set down` has returned, no transmission is running
     // (dev_close waits for it), so nothing can be timestamped later.
     let down_at = unix_ns(SystemTime::now());
+    // A negative check over three of the service's ticks, not
+    // synchronisation: nothing marks a tick that sends nothing.
     thread::sleep(Duration::from_millis(3500));
     let n = cap.frames().iter().filter(|f| f.ts_ns() > down_at).count();
     ensure!(n == 0, "{n} time frames while can0 was down");
@@ -433,8 +470,15 @@ fn time_dev_down_up(ctx: &mut Ctx) -> TestResult {
         .wait_for(Duration::from_secs(4), |f| f.mono > up_at)
         .ok_or("no time frame within 4 s of can0 coming up")?;
     check_format(&f, VEHICLE, SRC_TIME)?;
-    // The kernel logs asynchronously: give it a moment.
-    thread::sleep(Duration::from_millis(300));
+    // The kernel logs asynchronously: wait for the lines.
+    wait_log(
+        &mut k,
+        &mut log,
+        &[
+            ("rcan_time: can0: device down", 1),
+            ("rcan_time: can0: sending time frames again", 1),
+        ],
+    )?;
     let downs = count_log(&mut k, &mut log, "rcan_time: can0: device down")?;
     let agains = count_log(
         &mut k,
@@ -447,9 +491,10 @@ fn time_dev_down_up(ctx: &mut Ctx) -> TestResult {
     );
     drop(cap);
 
-    // The device goes away and comes back with a new ifindex.
+    // The device goes away (until the service has noticed: its log line,
+    // was 3.5 s) and comes back with a new ifindex.
     ctx.rmmod(Module::Loop)?;
-    thread::sleep(Duration::from_millis(3500));
+    wait_log(&mut k, &mut log, &[("rcan_time: can0: no such device", 1)])?;
     ctx.insmod(Module::Loop, &[])?;
     ctx.link_up(&dev(0))?;
     let idx2 = ctx.ifindex(&dev(0))?;
@@ -458,7 +503,11 @@ fn time_dev_down_up(ctx: &mut Ctx) -> TestResult {
         .wait_for(Duration::from_secs(4), |_| true)
         .ok_or("no time frame within 4 s of can0 coming back")?;
     check_format(&f, VEHICLE, SRC_TIME)?;
-    thread::sleep(Duration::from_millis(300));
+    wait_log(
+        &mut k,
+        &mut log,
+        &[("rcan_time: can0: sending time frames again", 2)],
+    )?;
     let missing = count_log(&mut k, &mut log, "rcan_time: can0: no such device")?;
     let agains = count_log(
         &mut k,
@@ -515,7 +564,9 @@ impl Drop for ClockGuard {
     }
 }
 
-/// Sleeps until `phase` ns into a second of CLOCK_REALTIME.
+/// Sleeps until `phase` ns into a second of CLOCK_REALTIME: a position in
+/// the service's second, which the tests choose on purpose; not
+/// synchronisation.
 fn sleep_to_phase(phase: u32) {
     let sub = SystemTime::now()
         .duration_since(UNIX_EPOCH)
@@ -546,6 +597,8 @@ fn time_clock_step(ctx: &mut Ctx) -> TestResult {
     ctx.insmod(Module::Time, &[])?;
     cap.wait_for(Duration::from_secs(4), |_| true)
         .ok_or("no time frame within 4 s of loading")?;
+    // The windows below are the test's subject (seconds before and after
+    // each clock step), not synchronisation.
     thread::sleep(Duration::from_secs(3));
 
     sleep_to_phase(300_000_000);
@@ -709,7 +762,8 @@ fn time_unload(ctx: &mut Ctx) -> TestResult {
         let gone = SystemTime::now();
         // A timer left armed fires at the next boundary, at most 1 s
         // away (0.5 s at phase 500 ms, 10 and 3 ms at phases 990 and
-        // 997 ms, where 1.6 s also covers the boundary after it).
+        // 997 ms, where 1.6 s also covers the boundary after it). A
+        // negative check's window, not synchronisation.
         thread::sleep(Duration::from_millis(1600));
         let gone_ns = unix_ns(gone);
         let gone_s = (gone_ns / 1_000_000_000) as u64;
@@ -816,14 +870,19 @@ fn rtime_takeover_handback(ctx: &mut Ctx) -> TestResult {
     let mut log = Vec::new();
     let cap = Capture::start(idx, VEHICLE)?;
     let gps = Gps::start(idx)?;
-    thread::sleep(Duration::from_millis(1500));
+    // The GPS node is on the bus before rcan_rtime comes (was 1.5 s).
+    cap.wait_count(1, "the first GPS frame", |f| f.source() == SRC_GPS)?;
     ctx.insmod(Module::Rtime, &[])?;
 
-    // A: the GPS node sends; we stay silent.
-    thread::sleep(Duration::from_secs(6));
+    // A: the GPS node sends; we stay silent, for six of its frames (was
+    // 6 s, which a stalled guest could fill with fewer).
+    let gps_before = cap.frames().iter().filter(|f| f.source() == SRC_GPS).count();
+    cap.wait_count(gps_before + 6, "six GPS frames after loading rcan_rtime", |f| {
+        f.source() == SRC_GPS
+    })?;
     let fs = cap.frames();
     let gps_n = fs.iter().filter(|f| f.source() == SRC_GPS).count();
-    ensure!(gps_n >= 5, "only {gps_n} GPS frames in 7.5 s");
+    ensure!(gps_n >= 5, "only {gps_n} GPS frames");
     if let Some(f) = fs.iter().find(|f| f.source() != SRC_GPS) {
         return Err(format!(
             "frame from rcan_rtime while the GPS node sends: {}",
@@ -835,17 +894,14 @@ fn rtime_takeover_handback(ctx: &mut Ctx) -> TestResult {
     gps.set(GPS_PAUSE);
     let paused = Instant::now();
     let d1 = expect_takeover(&cap, paused, "first takeover")?;
-    thread::sleep(Duration::from_millis(4500));
+    // Four of its frames (was 4.5 s).
+    cap.wait_count(4, "four rcan_rtime frames", |f| f.source() == SRC_RTIME)?;
     let ours: Vec<Rx> = cap
         .frames()
         .into_iter()
         .filter(|f| f.source() == SRC_RTIME)
         .collect();
-    ensure!(
-        ours.len() >= 4,
-        "only {} rcan_rtime frames in 4.5 s",
-        ours.len()
-    );
+    ensure!(ours.len() >= 4, "only {} rcan_rtime frames", ours.len());
     for (w, g) in ours.windows(2).zip(gaps(&ours)) {
         check_format(&w[1], VEHICLE, SRC_RTIME)?;
         ensure!(
@@ -871,7 +927,10 @@ fn rtime_takeover_handback(ctx: &mut Ctx) -> TestResult {
             f.mono > resumed && f.source() == SRC_GPS
         })
         .ok_or("GPS frame did not come back")?;
-    thread::sleep(Duration::from_secs(5));
+    // Silent again, for five more GPS frames (was 5 s).
+    cap.wait_count(5, "five GPS frames after it came back", |f| {
+        f.mono > g1.mono && f.source() == SRC_GPS
+    })?;
     let late: Vec<Rx> = cap
         .frames()
         .into_iter()
@@ -894,7 +953,14 @@ fn rtime_takeover_handback(ctx: &mut Ctx) -> TestResult {
     let paused = Instant::now();
     let d2 = expect_takeover(&cap, paused, "second takeover")?;
     drop(gps);
-    thread::sleep(Duration::from_millis(300));
+    wait_log(
+        &mut k,
+        &mut log,
+        &[
+            ("rcan_rtime: can0: no time frame from another", 2),
+            ("rcan_rtime: can0: time frame from another source: handing back", 1),
+        ],
+    )?;
     ctx.note(format!(
         "rcan_rtime: first frame {} ms and {} ms after the last GPS frame (timeout 2500 ms); \
          {} rcan_rtime frame(s) in the second the GPS node came back",
@@ -926,11 +992,12 @@ fn rtime_silent_with_local_time(ctx: &mut Ctx) -> TestResult {
     let cap = Capture::start(idx, VEHICLE)?;
     ctx.insmod(Module::Time, &[])?;
     ctx.insmod(Module::Rtime, &["timeout_ms=1200"])?;
-    thread::sleep(Duration::from_secs(5));
+    // Five of rcan_time's frames (was 5 s), more than rcan_rtime's timeout.
+    cap.wait_count(5, "five rcan_time frames", |f| f.source() == SRC_TIME)?;
     let fs = cap.frames();
     ensure!(
         fs.iter().filter(|f| f.source() == SRC_TIME).count() >= 4,
-        "rcan_time sent {} frames in 5 s",
+        "rcan_time sent {} frames",
         fs.len()
     );
     if let Some(f) = fs.iter().find(|f| f.source() == SRC_RTIME) {

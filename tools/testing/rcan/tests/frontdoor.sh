@@ -36,7 +36,7 @@ tinyconfig:
 olddefconfig:
 	@true
 bzImage modules:
-	@[ -z "$(FAKE_WAIT_FOR)" ] || for i in $$(seq 100); do grep -qs 'waiting for' $(FAKE_WAIT_FOR) && break; sleep 0.1; done
+	@[ -z "$(FAKE_WAIT_FOR)" ] || for i in $$(seq 600); do grep -qs 'waiting for' $(FAKE_WAIT_FOR) && break; sleep 0.1; done
 	@if [ -n "$(FAKE_KERNEL_ERROR)" ]; then echo "drivers/fake.c:1:1: error: $(FAKE_KERNEL_ERROR)" >&2; exit 2; fi
 	echo $@ >>$(O)/built
 EOF
@@ -127,7 +127,7 @@ cat >"$bin/tar" <<EOF
 #!/bin/sh
 echo call >>"$work/two-extractions/tar-calls"
 # Hold on until the other run waits (or has called tar too).
-for i in \$(seq 100); do
+for i in \$(seq 600); do
 	grep -qs 'waiting for' "$work"/two-extractions/err.* && break
 	[ "\$(wc -l <"$work/two-extractions/tar-calls")" -gt 1 ] && break
 	sleep 0.1
@@ -171,7 +171,7 @@ chmod +x "$bin/tar"
 exec 3>&2 2>/dev/null # no "Killed" job notice
 PATH="$bin:$PATH" setsid bash "$bk" --source >/dev/null 2>"$work/killed/err" &
 pgid=$!
-for _ in $(seq 100); do
+for _ in $(seq 600); do
 	[ -e "$work/killed/started" ] && break
 	sleep 0.1
 done
