@@ -322,6 +322,14 @@ unsafe fn request_of<'a>(spec: &'a RxSpec, cookie: u32) -> RxRequest<'a> {
     unsafe { request(s.ifindex, s.join, s.err_mask, s.filters, s.nfilters, cookie) }
 }
 
+/// See [`crate::glue::can::abi::rcan_pf_abi`]: the ABI this `rcan_pf` was
+/// built with, which every module compares with its own before it
+/// registers anything ([`crate::glue::can::abi::check`]).
+#[no_mangle]
+extern "C" fn rcan_pf_abi() -> u64 {
+    crate::glue::can::abi::ABI
+}
+
 /// See [`crate::glue::can::abi::rcan_rx_set`].
 ///
 /// # Safety

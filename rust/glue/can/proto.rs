@@ -413,6 +413,7 @@ impl<T: CanProtocol> ProtoModule<T> {
         if !unsafe { (*self.canproto.get()).owner }.is_null() {
             return Err(code::EBUSY);
         }
+        abi::check()?;
         self.proto.register(name, bindings::PF_CAN as i32)?;
         // SAFETY: module init: nothing else sees the CanProto yet.
         unsafe { (*self.canproto.get()).owner = crate::glue::this_module() };
@@ -810,6 +811,7 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
     if filters.is_empty() {
         return Err(code::EINVAL);
     }
+    abi::check()?;
     let spec = RxSpec {
         ifindex,
         join: false,
@@ -824,6 +826,15 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
     // SAFETY: `spec` and its filters live for the call; `data` is 'static.
     let ret = unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, &spec) };
     crate::glue::to_result(ret).map(|_| KernelRxReg(rx))
+}
+
+/// Checks that the loaded `rcan_pf` speaks this module's ABI (see
+/// `abi.rs`): ENOEXEC, and a log line naming both versions, if not.
+/// [`ProtoModule::register`], [`rx_set_kernel`] and [`Listening::new`]
+/// check by themselves; a module that only sends calls this in its init.
+/// Process context.
+pub(crate) fn abi_check() -> Result {
+    abi::check()
 }
 
 /// A driver whose hardware filter follows the sockets (DESIGN decision 7).
@@ -863,6 +874,7 @@ unsafe impl<T: FilterListener> Sync for Listening<T> {}
 impl<T: FilterListener> Listening<T> {
     /// Starts listening for `reg`'s device. Process context.
     pub(crate) fn new(reg: &gnetdev::Registration<T>) -> Result<Self> {
+        abi::check()?;
         let dev = reg.dev().as_ptr();
         let ifindex = reg.dev().ifindex();
         // SAFETY: the trampoline's cookie is the registered device; the
