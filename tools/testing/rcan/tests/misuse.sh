@@ -136,8 +136,12 @@ verdict() {
 		printf '%s\n' "$errs"
 		return
 	fi
-	# The error is in the case, not in the glue it includes.
-	if ! grep -A3 "^error\[$code\]" "$log" | grep -qF -- "--> $f:"; then
+	# Every error is in the case, not in the glue it includes: the first
+	# location after each error line names the case's file.
+	if awk -v f="$f" '
+		/^error\[E[0-9]+\]:/ { want = 1; next }
+		want && /^ *--> / { if (index($0, "--> " f ":") == 0) bad = 1; want = 0 }
+		END { exit !bad }' "$log"; then
 		echo "error $code is not located in the case:"
 		grep -A8 "^error\[$code\]" "$log"
 	fi
