@@ -26,6 +26,10 @@ struct SockObj<D, S> {
     sk: bindings::sock,
     /// The sock's place on its protocol module's socket set.
     set: SetLink,
+    /// The sock's reserved receiver (`can::proto`, protocols with
+    /// `CanProtocol::RESERVE_RX`): pf_can's handle, or NULL. Kept by the
+    /// glue in the sock itself, so no two socks can share one.
+    rx: core::sync::atomic::AtomicPtr<ffi::c_void>,
     shared: S,
     data: D,
 }
@@ -187,6 +191,16 @@ impl<T: Proto> Sock<T> {
         // invariant), so it is an `ObjOf<T>` with an initialised link;
         // only its cells are written, and only by the set.
         unsafe { &(*self.sk.cast::<ObjOf<T>>()).set }
+    }
+
+    /// The sock's reserved-receiver slot, for `can::proto` only (which
+    /// reads and writes it as its functions say: under the socket lock
+    /// after `socket()`).
+    pub(in crate::glue) fn rx_slot(&self) -> &core::sync::atomic::AtomicPtr<ffi::c_void> {
+        // SAFETY: a live sock created by `create` for `T` (type
+        // invariant), so it is an `ObjOf<T>` with an initialised slot, an
+        // atomic, which may be shared.
+        unsafe { &(*self.sk.cast::<ObjOf<T>>()).rx }
     }
 
     /// The state readable without the socket lock.
@@ -682,6 +696,8 @@ impl<T: Proto> ProtoReg<T> {
                 prev: core::cell::Cell::new(0),
                 next: core::cell::Cell::new(0),
             });
+            core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).rx)
+                .write(core::sync::atomic::AtomicPtr::new(core::ptr::null_mut()));
             core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).data).write(T::new_data());
             core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).shared).write(T::new_shared());
             (*sk).sk_destruct = Some(destruct::<T>);
