@@ -23,6 +23,7 @@ DEFINE_MUTEX(rcan_pf_mutex);
 extern struct mutex rcan_rx_mutex;
 DEFINE_MUTEX(rcan_rx_mutex);
 
+void rcan_pf_abi(void);
 void rcan_proto_register(void);
 void rcan_proto_unregister(void);
 void rcan_rx_set(void);
@@ -33,6 +34,7 @@ void rcan_rx_set_kernel(void);
 void rcan_rx_listen(void);
 void rcan_rx_filters(void);
 
+EXPORT_SYMBOL_GPL(rcan_pf_abi);
 EXPORT_SYMBOL_GPL(rcan_proto_register);
 EXPORT_SYMBOL_GPL(rcan_proto_unregister);
 EXPORT_SYMBOL_GPL(rcan_rx_set);

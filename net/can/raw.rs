@@ -46,7 +46,7 @@ use glue::sock::{Msg, OptIn, OptOut, Sock, SockGuard};
 use glue::sync::Rtnl;
 use kernel::c_str;
 use rcan_api::{
-    CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, RxSlot, Sockets,
+    CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets,
     TableFilters, CAN_RAW, RX_FILTER_CAN_ID, SOCK_RAW,
 };
 use rcan_core::frame::{AnyFrame, CANFD_MTU};
@@ -152,10 +152,6 @@ struct RawShared {
     /// CAN_RAW_FD_FRAMES is on (read by sendmsg and by the receive
     /// callback, as mainline reads `ro->fd_frames`).
     fd_frames: AtomicBool,
-    /// The receiver pf_can made for the socket at `socket()`
-    /// ([`CanProtocol::rx_slot`]; the glue reads and clears it under the
-    /// socket lock).
-    rx: RxSlot,
 }
 
 impl RawSock {
@@ -197,9 +193,7 @@ impl CanProtocol for RawProto {
     /// The receiver is made at `socket()` (mainline allocates its
     /// per-socket receive state there too), so bind allocates nothing and
     /// finds it without a lookup; `release` always removes it.
-    fn rx_slot(shared: &RawShared) -> Option<&RxSlot> {
-        Some(&shared.rx)
-    }
+    const RESERVE_RX: bool = true;
 
     /// NET_RX softirq, RCU read side. Mainline `raw_rcv`: own frames only
     /// with CAN_RAW_RECV_OWN_MSGS, CAN FD frames only with
@@ -358,7 +352,6 @@ impl glue::sock::Proto for RawProto {
             ifindex: AtomicI32::new(0),
             loopback: AtomicBool::new(true),
             fd_frames: AtomicBool::new(false),
-            rx: RxSlot::new(),
         }
     }
 
@@ -381,7 +374,7 @@ impl glue::sock::Proto for RawProto {
         let mut rtnl = Rtnl::lock();
         MODULE.sockets.get(&mut rtnl).remove(sk);
         let mut s = sk.lock();
-        // Bound or not: the receiver made at socket() (rx_slot) goes too.
+        // Bound or not: the receiver made at socket() (RESERVE_RX) goes too.
         rcan_api::rx_release(&s);
         s.bound = false;
         s.ifindex = 0;

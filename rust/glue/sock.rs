@@ -26,6 +26,10 @@ struct SockObj<D, S> {
     sk: bindings::sock,
     /// The sock's place on its protocol module's socket set.
     set: SetLink,
+    /// The sock's reserved receiver (`can::proto`, protocols with
+    /// `CanProtocol::RESERVE_RX`): pf_can's handle, or NULL. Kept by the
+    /// glue in the sock itself, so no two socks can share one.
+    rx: core::sync::atomic::AtomicPtr<ffi::c_void>,
     shared: S,
     data: D,
 }
@@ -189,6 +193,16 @@ impl<T: Proto> Sock<T> {
         unsafe { &(*self.sk.cast::<ObjOf<T>>()).set }
     }
 
+    /// The sock's reserved-receiver slot, for `can::proto` only (which
+    /// reads and writes it as its functions say: under the socket lock
+    /// after `socket()`).
+    pub(in crate::glue) fn rx_slot(&self) -> &core::sync::atomic::AtomicPtr<ffi::c_void> {
+        // SAFETY: a live sock created by `create` for `T` (type
+        // invariant), so it is an `ObjOf<T>` with an initialised slot, an
+        // atomic, which may be shared.
+        unsafe { &(*self.sk.cast::<ObjOf<T>>()).rx }
+    }
+
     /// The state readable without the socket lock.
     pub(crate) fn shared(&self) -> &T::Shared {
         // SAFETY: a live sock created by `create` for `T` (type
@@ -215,9 +229,12 @@ impl<T: Proto> Sock<T> {
     pub(crate) fn to_ref(&self) -> SockRef<T> {
         // SAFETY: live sock (type invariant); SockRef drops the reference.
         unsafe { bindings::rcan_sock_hold(self.sk) };
+        // INVARIANT: one reference, taken just above, on our live sock.
         SockRef {
-            sk: self.sk,
-            _t: PhantomData,
+            sock: Sock {
+                sk: self.sk,
+                _t: PhantomData,
+            },
         }
     }
 
@@ -313,38 +330,36 @@ impl<T: Proto> Sock<T> {
 }
 
 /// A counted reference to a sock of protocol `T` (`sock_hold`); dropping
-/// it is `sock_put` (any context).
+/// it is `sock_put` (any context). The sock is reached by borrowing
+/// ([`SockRef::sock`]), so no use of it can outlive the reference.
 ///
 /// # Invariants
 ///
-/// Holds one reference on a sock created by [`create`] for `T`.
+/// Holds one reference on `sock`, a sock created by [`create`] for `T`.
 pub(crate) struct SockRef<T: Proto> {
-    sk: *mut bindings::sock,
-    _t: PhantomData<T>,
+    sock: Sock<T>,
 }
 
 // SAFETY: sock references may be dropped from any thread and context.
 unsafe impl<T: Proto> Send for SockRef<T> {}
 
-// SAFETY: shared access only hands out `Sock`s, whose methods may be called
+// SAFETY: shared access only lends `&Sock`s, whose methods may be called
 // from any thread (each names its context).
 unsafe impl<T: Proto> Sync for SockRef<T> {}
 
 impl<T: Proto> SockRef<T> {
-    /// The sock, borrowed for as long as this reference lives.
-    pub(crate) fn sock(&self) -> Sock<T> {
-        // INVARIANT: our reference keeps the sock alive while `self` does.
-        Sock {
-            sk: self.sk,
-            _t: PhantomData,
-        }
+    /// The sock, borrowed for as long as this reference is.
+    pub(crate) fn sock(&self) -> &Sock<T> {
+        // Our reference keeps the sock alive while `self` lives, and the
+        // borrow cannot outlive `self` (type invariant).
+        &self.sock
     }
 }
 
 impl<T: Proto> Drop for SockRef<T> {
     fn drop(&mut self) {
         // SAFETY: we own one reference (type invariant).
-        unsafe { bindings::rcan_sock_put(self.sk) };
+        unsafe { bindings::rcan_sock_put(self.sock.sk) };
     }
 }
 
@@ -681,6 +696,8 @@ impl<T: Proto> ProtoReg<T> {
                 prev: core::cell::Cell::new(0),
                 next: core::cell::Cell::new(0),
             });
+            core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).rx)
+                .write(core::sync::atomic::AtomicPtr::new(core::ptr::null_mut()));
             core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).data).write(T::new_data());
             core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).shared).write(T::new_shared());
             (*sk).sk_destruct = Some(destruct::<T>);

@@ -119,6 +119,11 @@ impl<T> RcuPtr<T> {
 }
 
 /// Holding the RTNL mutex. Process context; sleeps.
+///
+/// # Invariants
+///
+/// Made only by [`Rtnl::lock`]: RTNL is held by this thread until the
+/// value is dropped. Not `Send`: it must be unlocked where it was locked.
 pub(crate) struct Rtnl(PhantomData<*mut ()>);
 
 impl Rtnl {
@@ -127,14 +132,26 @@ impl Rtnl {
         // SAFETY: process context (callers' contract); unlocked in Drop.
         // Called directly (an exported function): no C helper in between.
         unsafe { bindings::rtnl_lock() };
+        // INVARIANT: locked just above.
         Rtnl(PhantomData)
     }
 
-    /// For code called by the kernel with RTNL already held (netdevice
-    /// notifiers): asserts it and returns a token that does not unlock.
-    pub(crate) fn assert_held() -> RtnlHeld {
+    /// For the glue's own trampolines that the kernel calls with RTNL
+    /// already held (netdevice notifiers): a proof, for the call, that
+    /// does not unlock. `ASSERT_RTNL` checks the claim where the kernel
+    /// can (it warns; it cannot stop a caller).
+    ///
+    /// # Safety
+    ///
+    /// RTNL is held by this thread for all of `'a`, by a caller that uses
+    /// no proof of its own meanwhile: the returned proof is then the only
+    /// one in use, so the `&mut` it gives (through [`RtnlLocked::get`])
+    /// aliases nothing. Safe code above the glue never holds RTNL but
+    /// through an [`Rtnl`] guard or a proof the glue lends it.
+    pub(in crate::glue) unsafe fn assert_held<'a>() -> RtnlHeld<'a> {
         // SAFETY: ASSERT_RTNL only reads the lock state.
         unsafe { bindings::rcan_assert_rtnl() };
+        // INVARIANT: this function's contract.
         RtnlHeld(PhantomData)
     }
 }
@@ -146,13 +163,32 @@ impl Drop for Rtnl {
     }
 }
 
-/// Proof that RTNL is held by a caller further up (see [`Rtnl::assert_held`]).
-pub(crate) struct RtnlHeld(PhantomData<*mut ()>);
+/// Proof that RTNL is held by a caller further up, for `'a` (see
+/// [`Rtnl::assert_held`]): the glue makes one where the kernel calls it
+/// with RTNL held, and lends it out; nothing else can make one.
+///
+/// # Invariants
+///
+/// RTNL is held by this thread for `'a`, and no other proof of it is in
+/// use meanwhile. Neither `Send` nor `Sync`.
+pub(crate) struct RtnlHeld<'a>(PhantomData<(&'a (), *mut ())>);
 
-/// Something that proves RTNL is held.
-pub(crate) trait RtnlProof {}
+mod private {
+    /// Seals [`super::RtnlProof`]: a supertrait nobody outside this file
+    /// can name, so no type outside it can implement the proof trait.
+    pub(crate) trait Sealed {}
+    impl Sealed for super::Rtnl {}
+    impl Sealed for super::RtnlHeld<'_> {}
+}
+
+/// Something that proves RTNL is held: an [`Rtnl`] guard or an
+/// [`RtnlHeld`] the glue lent. Sealed: no other type can implement it,
+/// so a value of it is never a forgery, and as each one is unique for
+/// its holding of RTNL, borrowing it mutably (as [`RtnlLocked::get`]
+/// does) gives one `&mut` at a time.
+pub(crate) trait RtnlProof: private::Sealed {}
 impl RtnlProof for Rtnl {}
-impl RtnlProof for RtnlHeld {}
+impl RtnlProof for RtnlHeld<'_> {}
 
 /// Data protected by RTNL.
 pub(crate) struct RtnlLocked<T> {
@@ -173,9 +209,11 @@ impl<T> RtnlLocked<T> {
     /// The data, for as long as the RTNL proof is borrowed.
     #[allow(clippy::mut_from_ref)]
     pub(crate) fn get<'a>(&'a self, _rtnl: &'a mut dyn RtnlProof) -> &'a mut T {
-        // SAFETY: RTNL is held for 'a (proof borrowed mutably, so no second
-        // `&mut T` can be made from the same proof), and RTNL excludes every
-        // other accessor.
+        // SAFETY: RTNL is held for 'a (a proof can only be an `Rtnl` or an
+        // `RtnlHeld`, sealed, whose invariants say so); the proof is
+        // borrowed mutably for 'a and is the only one in use while RTNL is
+        // held (their invariants), so no second `&mut T` exists; RTNL
+        // excludes every other thread.
         unsafe { &mut *self.data.get() }
     }
 }

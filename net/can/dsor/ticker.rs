@@ -371,6 +371,8 @@ static WATCH: HrTimer<Watch> = HrTimer::new();
 /// `rcan_rtime` (true, source 2, passive for `timeout_ms` first). Module
 /// init, process context.
 pub(crate) fn start(redundant: bool) -> Result<Params> {
+    // rcan_time only sends: nothing it registers checks the ABI for it.
+    rcan_api::abi_check()?;
     let params = params();
     let (real, mono) = (ktime_get_real_ns(), ktime_get_mono_ns());
     let (source, policy) = if redundant {

@@ -7,9 +7,15 @@
 //! `pf_can_c.c`).
 //!
 //! Nothing outside `rust/glue/can/` uses this file: protocols and drivers
-//! see the typed API of [`super::proto`] instead. All modules are built
-//! from one tree, so the ABI may change freely; it is C only because the
-//! modules are separate crates linked by the kernel's module loader.
+//! see the typed API of [`super::proto`] instead. It is C only because the
+//! modules are separate crates linked by the kernel's module loader, which
+//! checks nothing but symbol names: an installed `rcan_pf` and a module
+//! built from another tree would link and disagree on these structs. So
+//! the ABI is versioned: [`ABI`] is a version of its meaning
+//! ([`ABI_VERSION`]) and a hash of the layout of every struct that crosses
+//! ([`ABI_LAYOUT`]); `rcan_pf` exports its own ([`rcan_pf_abi`]) and every
+//! module compares it with the one it was built with before it registers
+//! anything with `rcan_pf` ([`check`]).
 #![allow(dead_code, improper_ctypes)]
 
 use crate::glue::bindings;
@@ -17,6 +23,99 @@ use kernel::ffi;
 
 /// Size of the protocol table (`CANPROTO_MAX` in `<linux/can/rcan.h>`).
 pub(crate) const CANPROTO_MAX: usize = 24;
+
+/// The version of the ABI's meaning: bump it when an entry point's
+/// contract changes while every layout stays the same (layout changes
+/// change [`ABI_LAYOUT`] by themselves).
+pub(crate) const ABI_VERSION: u32 = 1;
+
+/// FNV-1a (32 bits) over the size, alignment and field offsets of every
+/// struct that crosses between the modules, the size of their pointers
+/// and `bool`, and [`CANPROTO_MAX`]. [`TableFilter`] is an enum, whose
+/// field offsets stable Rust cannot name: its size and alignment count,
+/// and a change of its meaning bumps [`ABI_VERSION`].
+pub(crate) const ABI_LAYOUT: u32 = {
+    use core::mem::{align_of, offset_of, size_of};
+    fnv1a(&[
+        CANPROTO_MAX,
+        size_of::<bool>(),
+        size_of::<RxFn>(),
+        size_of::<ListenFn>(),
+        size_of::<CreateFn>(),
+        size_of::<CanProto>(),
+        align_of::<CanProto>(),
+        offset_of!(CanProto, protocol),
+        offset_of!(CanProto, type_),
+        offset_of!(CanProto, owner),
+        offset_of!(CanProto, create),
+        size_of::<RxFilter>(),
+        align_of::<RxFilter>(),
+        offset_of!(RxFilter, kind),
+        offset_of!(RxFilter, id),
+        offset_of!(RxFilter, mask),
+        size_of::<RxSpec>(),
+        align_of::<RxSpec>(),
+        offset_of!(RxSpec, ifindex),
+        offset_of!(RxSpec, join),
+        offset_of!(RxSpec, err_mask),
+        offset_of!(RxSpec, filters),
+        offset_of!(RxSpec, nfilters),
+        size_of::<TableFilter>(),
+        align_of::<TableFilter>(),
+        size_of::<RxTableSpec>(),
+        align_of::<RxTableSpec>(),
+        offset_of!(RxTableSpec, ifindex),
+        offset_of!(RxTableSpec, join),
+        offset_of!(RxTableSpec, err_mask),
+        offset_of!(RxTableSpec, filters),
+        offset_of!(RxTableSpec, nfilters),
+    ])
+};
+
+/// The ABI this module was built with: [`ABI_VERSION`] in the high 32
+/// bits, [`ABI_LAYOUT`] in the low 32; what [`rcan_pf_abi`] returns in
+/// `rcan_pf`.
+pub(crate) const ABI: u64 = ((ABI_VERSION as u64) << 32) | ABI_LAYOUT as u64;
+
+/// FNV-1a of `parts`, each as 8 little-endian bytes (the same on every
+/// architecture, whatever its `usize`).
+const fn fnv1a(parts: &[usize]) -> u32 {
+    let mut h: u32 = 0x811c_9dc5;
+    let mut i = 0;
+    while i < parts.len() {
+        let mut v = parts[i] as u64;
+        let mut b = 0;
+        while b < 8 {
+            h ^= (v & 0xff) as u32;
+            h = h.wrapping_mul(0x0100_0193);
+            v >>= 8;
+            b += 1;
+        }
+        i += 1;
+    }
+    h
+}
+
+/// Compares `rcan_pf`'s ABI with this module's; on a mismatch logs both
+/// (the log prefix names this module) and fails with ENOEXEC, as the
+/// module loader does for a module it cannot use. Every module calls it
+/// before it registers anything with `rcan_pf`; cheap (one call), so the
+/// registrations themselves call it. Process context.
+pub(crate) fn check() -> kernel::error::Result {
+    // SAFETY: takes nothing, returns a constant of `rcan_pf`.
+    let theirs = unsafe { rcan_pf_abi() };
+    if theirs == ABI {
+        return Ok(());
+    }
+    kernel::pr_err!(
+        "rcan ABI mismatch: this module has ABI {} (layout {:#010x}), rcan_pf has ABI {} (layout {:#010x}); build and install both from one tree\n",
+        ABI_VERSION,
+        ABI_LAYOUT,
+        theirs >> 32,
+        theirs & 0xffff_ffff
+    );
+    Err(kernel::error::code::ENOEXEC)
+}
 
 /// A CAN protocol (thesis `struct can_proto`, 5.3.1). Lives in a static of
 /// the protocol's module (inside its [`super::proto::ProtoModule`]);
@@ -118,6 +217,8 @@ pub(crate) type RxFn = unsafe extern "C" fn(
 pub(crate) type ListenFn = unsafe extern "C" fn(data: *mut ffi::c_void);
 
 extern "C" {
+    /// `rcan_pf`'s [`ABI`] (see [`check`]). Any context.
+    pub(crate) fn rcan_pf_abi() -> u64;
     /// Adds (`add`) or removes the listener (`func`, `data`), called after
     /// every change of the filters that apply to the device `data` (a
     /// registered `net_device`, until the listener is removed): changes on

@@ -322,9 +322,26 @@ unsafe fn request_of<'a>(spec: &'a RxSpec, cookie: u32) -> RxRequest<'a> {
     unsafe { request(s.ifindex, s.join, s.err_mask, s.filters, s.nfilters, cookie) }
 }
 
-/// See [`crate::glue::can::abi::rcan_rx_set`].
+/// See [`crate::glue::can::abi::rcan_pf_abi`]: the ABI this `rcan_pf` was
+/// built with, which every module compares with its own before it
+/// registers anything ([`crate::glue::can::abi::check`]).
 #[no_mangle]
-extern "C" fn rcan_rx_set(
+extern "C" fn rcan_pf_abi() -> u64 {
+    crate::glue::can::abi::ABI
+}
+
+/// See [`crate::glue::can::abi::rcan_rx_set`].
+///
+/// # Safety
+///
+/// Called by a protocol module's glue through the `abi` declaration: `sk`
+/// is NULL or a live sock of the caller's protocol that stays alive for
+/// the call, on which `func` may be called with `cookie` until the
+/// receiver is removed and a grace period has passed; `spec` is NULL or
+/// points to a valid [`RxSpec`] whose `filters` point to `nfilters`
+/// readable filters, all valid for the call.
+#[no_mangle]
+unsafe extern "C" fn rcan_rx_set(
     func: RxFn,
     sk: *mut bindings::sock,
     cookie: u32,
@@ -359,8 +376,15 @@ extern "C" fn rcan_rx_set(
 }
 
 /// See [`crate::glue::can::abi::rcan_rx_reserve`].
+///
+/// # Safety
+///
+/// As for [`rcan_rx_set`]: `sk` is NULL or a live sock of the caller's
+/// protocol, valid for the call, for which `func` may be called; the
+/// caller removes the returned receiver for good before the sock can be
+/// freed.
 #[no_mangle]
-extern "C" fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> *mut ffi::c_void {
+unsafe extern "C" fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> *mut ffi::c_void {
     let Some(owner) = NonNull::new(sk.cast::<ffi::c_void>()) else {
         return core::ptr::null_mut();
     };
@@ -382,8 +406,16 @@ extern "C" fn rcan_rx_reserve(func: RxFn, sk: *mut bindings::sock) -> *mut ffi::
 }
 
 /// See [`crate::glue::can::abi::rcan_rx_set_reserved`].
+///
+/// # Safety
+///
+/// `rcv` is NULL or what [`rcan_rx_reserve`] returned and was not yet
+/// removed for good; the caller serialises its calls for one receiver
+/// (its socket's lock); `spec` is NULL or points to a valid
+/// [`RxTableSpec`] whose `filters` point to `nfilters` table-form filters
+/// made by the glue, all valid for the call.
 #[no_mangle]
-extern "C" fn rcan_rx_set_reserved(
+unsafe extern "C" fn rcan_rx_set_reserved(
     rcv: *mut ffi::c_void,
     cookie: u32,
     spec: *const RxTableSpec,
@@ -408,8 +440,14 @@ extern "C" fn rcan_rx_set_reserved(
 }
 
 /// See [`crate::glue::can::abi::rcan_rx_set_kernel`].
+///
+/// # Safety
+///
+/// `data` is NULL or the caller's data, valid (with `func`, which may be
+/// called with it) until a call of this function removing or replacing
+/// the registration has returned; `spec` as for [`rcan_rx_set`].
 #[no_mangle]
-extern "C" fn rcan_rx_set_kernel(
+unsafe extern "C" fn rcan_rx_set_kernel(
     func: RxFn,
     data: *mut ffi::c_void,
     cookie: u32,
@@ -443,8 +481,14 @@ extern "C" fn rcan_rx_set_kernel(
 }
 
 /// See [`crate::glue::can::abi::rcan_rx_listen`].
+///
+/// # Safety
+///
+/// With `add`, `data` is a registered `net_device` that stays valid, and
+/// `func` may be called with it, until a call removing the listener has
+/// returned.
 #[no_mangle]
-extern "C" fn rcan_rx_listen(
+unsafe extern "C" fn rcan_rx_listen(
     func: ListenFn,
     data: *mut ffi::c_void,
     _ifindex: i32,
@@ -471,8 +515,14 @@ extern "C" fn rcan_rx_listen(
 }
 
 /// See [`crate::glue::can::abi::rcan_rx_filters`].
+///
+/// # Safety
+///
+/// `dev` is NULL or a valid `net_device` for the call; `out` is NULL or
+/// points to room for `cap` filters, writable and used by nothing else
+/// for the call.
 #[no_mangle]
-extern "C" fn rcan_rx_filters(
+unsafe extern "C" fn rcan_rx_filters(
     dev: *const bindings::net_device,
     out: *mut TableFilter,
     cap: usize,
@@ -496,8 +546,13 @@ extern "C" fn rcan_rx_filters(
 }
 
 /// See [`crate::glue::can::abi::rcan_proto_register`].
+///
+/// # Safety
+///
+/// `cp` points to a static [`CanProto`] of the calling module, which
+/// stays valid until [`rcan_proto_unregister`] of it has returned.
 #[no_mangle]
-extern "C" fn rcan_proto_register(cp: *const CanProto) -> ffi::c_int {
+unsafe extern "C" fn rcan_proto_register(cp: *const CanProto) -> ffi::c_int {
     // SAFETY: callers pass a static CanProto of their module.
     let proto = unsafe { (*cp).protocol };
     if proto < 0 || proto as usize >= CANPROTO_MAX {
@@ -517,8 +572,12 @@ extern "C" fn rcan_proto_register(cp: *const CanProto) -> ffi::c_int {
 }
 
 /// See [`crate::glue::can::abi::rcan_proto_unregister`].
+///
+/// # Safety
+///
+/// `cp` points to a valid [`CanProto`] (the one the caller registered).
 #[no_mangle]
-extern "C" fn rcan_proto_unregister(cp: *const CanProto) {
+unsafe extern "C" fn rcan_proto_unregister(cp: *const CanProto) {
     // SAFETY: as in register.
     let proto = unsafe { (*cp).protocol };
     if proto < 0 || proto as usize >= CANPROTO_MAX {
@@ -676,8 +735,14 @@ unsafe fn rcv_common(
 }
 
 /// See [`crate::glue::can::abi::rcan_send`].
+///
+/// # Safety
+///
+/// `skb` is NULL or an skb whose reference the caller gives away, built
+/// by the caller and not shared, whose `dev` is NULL or a device on which
+/// the caller holds a reference until this returns.
 #[no_mangle]
-extern "C" fn rcan_send(skb: *mut bindings::sk_buff, loopback: bool) -> ffi::c_int {
+unsafe extern "C" fn rcan_send(skb: *mut bindings::sk_buff, loopback: bool) -> ffi::c_int {
     // SAFETY: the caller gives us its reference (abi contract).
     let Some(skb) = (unsafe { Skb::from_raw(skb) }) else {
         return code::EINVAL.to_errno();

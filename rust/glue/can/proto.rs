@@ -16,7 +16,7 @@
 //!   unregisters everything when dropped (module exit);
 //! * subscribes a socket to frames with [`rx_set`] and unsubscribes it with
 //!   [`rx_remove`] (at the latest in `release`), or, with a
-//!   [`CanProtocol::rx_slot`], with [`rx_set_locked`] / [`rx_unset_locked`]
+//!   [`CanProtocol::RESERVE_RX`], with [`rx_set_locked`] / [`rx_unset_locked`]
 //!   and [`rx_release`] in `release`.
 //!
 //! The C entry points are generic trampolines here, one source for every
@@ -42,7 +42,7 @@ use crate::glue::sync::{CCell, RcuReadGuard, Rtnl, RtnlLocked};
 use crate::rcan_core::rxtable::CanFilterKind;
 use core::marker::PhantomData;
 use core::mem::ManuallyDrop;
-use core::sync::atomic::{AtomicPtr, Ordering};
+use core::sync::atomic::Ordering;
 use kernel::alloc::{flags::GFP_KERNEL, KVec};
 use kernel::error::{code, Result};
 use kernel::ffi;
@@ -98,22 +98,15 @@ impl RxSkb<'_> {
     }
 }
 
-/// A socket's reserved receiver ([`CanProtocol::rx_slot`]): pf_can's
-/// handle for it, stored at `socket()` (before the socket is reachable;
-/// after an ENOMEM there, at the first [`rx_set_locked`], under the socket
-/// lock) and then read and cleared only under the socket lock (the
-/// functions that use it take the lock's guard), so a handle is never
-/// used after [`rx_release`] removed its receiver. NULL: no receiver
-/// reserved (ENOMEM at `socket()` and no subscription since, or
-/// released).
-pub(crate) struct RxSlot(AtomicPtr<ffi::c_void>);
-
-impl RxSlot {
-    /// An empty slot, for the protocol's `new_shared`.
-    pub(crate) const fn new() -> Self {
-        RxSlot(AtomicPtr::new(core::ptr::null_mut()))
-    }
-}
+/// A socket's reserved receiver ([`CanProtocol::RESERVE_RX`]) is pf_can's
+/// handle for it, kept by the glue in the sock object itself
+/// (`Sock::rx_slot`), so that no two sockets can share one: stored at
+/// `socket()` (before the socket is reachable; after an ENOMEM there, at
+/// the first [`rx_set_locked`], under the socket lock) and then read and
+/// cleared only under the socket lock (the functions that use it take the
+/// lock's guard), so a handle is never used after [`rx_release`] removed
+/// its receiver. NULL: no receiver reserved (ENOMEM at `socket()` and no
+/// subscription since, or released).
 
 /// A socket's filters in the receive table's own form
 /// ([`abi::TableFilter`]), for [`rx_set_locked`]: converted once, when the
@@ -201,18 +194,15 @@ pub(crate) trait CanProtocol: Proto {
     /// type gets EPROTOTYPE.
     const SOCK_TYPE: i32;
 
-    /// Where a socket keeps its receiver made at `socket()` time (as
-    /// mainline keeps its per-socket receive state in the socket): a
-    /// protocol that returns a slot (in its `Shared` state) gets its
-    /// receiver reserved at `socket()`, so the first registration (the
-    /// bind) allocates nothing, and subscribes with [`rx_set_locked`] /
-    /// [`rx_unset_locked`], which find the receiver through the slot
-    /// without a lookup. It must call [`rx_release`] in every `release`,
-    /// bound or not (the reserved receiver holds a reference on the sock).
-    /// Default: none (receivers are made by the first [`rx_set`]).
-    fn rx_slot(_shared: &Self::Shared) -> Option<&RxSlot> {
-        None
-    }
+    /// Each socket gets its receiver made at `socket()` time (as mainline
+    /// keeps its per-socket receive state in the socket), kept by the
+    /// glue in the sock, so the first registration (the bind) allocates
+    /// nothing; the protocol subscribes with [`rx_set_locked`] /
+    /// [`rx_unset_locked`], which find the receiver without a lookup. It
+    /// must call [`rx_release`] in every `release`, bound or not (the
+    /// reserved receiver holds a reference on the sock). Default: false
+    /// (receivers are made by the first [`rx_set`]).
+    const RESERVE_RX: bool = false;
 
     /// Sockets may be created in every network namespace: the protocol
     /// keeps its state in its sockets and finds devices in the socket's
@@ -413,6 +403,7 @@ impl<T: CanProtocol> ProtoModule<T> {
         if !unsafe { (*self.canproto.get()).owner }.is_null() {
             return Err(code::EBUSY);
         }
+        abi::check()?;
         self.proto.register(name, bindings::PF_CAN as i32)?;
         // SAFETY: module init: nothing else sees the CanProto yet.
         unsafe { (*self.canproto.get()).owner = crate::glue::this_module() };
@@ -438,7 +429,7 @@ impl<T: CanProtocol> ProtoModule<T> {
     }
 
     /// `CanProto.create`: allocates the sock and lists it in `sockets`;
-    /// with a [`CanProtocol::rx_slot`], makes its receiver too. Process
+    /// with [`CanProtocol::RESERVE_RX`], makes its receiver too. Process
     /// context.
     ///
     /// # Safety
@@ -468,16 +459,16 @@ impl<T: CanProtocol> ProtoModule<T> {
         // INVARIANT: a live sock of `T`, removed by its release.
         self.sockets.get(&mut rtnl).insert(&sock);
         drop(rtnl);
-        if let Some(slot) = T::rx_slot(sock.shared()) {
+        if T::RESERVE_RX {
             // Best effort: without a reservation (ENOMEM: NULL) the first
             // rx_set_locked allocates the receiver itself. The protocol's
-            // release removes it (rx_slot contract), which drops the
+            // release removes it (RESERVE_RX contract), which drops the
             // reference it holds.
             // SAFETY: `sk` is our live new sock of `T`; rx_trampoline::<T>
             // expects exactly such an owner.
             let h = unsafe { abi::rcan_rx_reserve(rx_trampoline::<T>, sock.as_ptr()) };
             // Nobody else can reach the socket before create returns.
-            slot.0.store(h, Ordering::Relaxed);
+            sock.rx_slot().store(h, Ordering::Relaxed);
         }
         0
     }
@@ -546,7 +537,12 @@ unsafe extern "C" fn notifier_trampoline<T: CanProtocol>(
     // SAFETY: netdevice notifiers receive a netdev_notifier_info naming a
     // device that stays registered for the call.
     let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
-    let mut held = Rtnl::assert_held();
+    // SAFETY: the notifier chain runs with RTNL held (call_netdevice_
+    // notifiers asserts it) for this whole call, and the only proof made
+    // here is this one, kept in this frame: `netdev_event` only gets
+    // `&Sockets`, and it cannot make a proof of its own (`Rtnl::lock`
+    // would deadlock, not alias).
+    let mut held = unsafe { Rtnl::assert_held() };
     let net = dev.net(&RcuReadGuard::new()).as_ptr().cast_const();
     let sockets = Sockets::<T> {
         set: T::module().sockets.get(&mut held),
@@ -626,7 +622,7 @@ pub(crate) fn rx_remove<T: CanProtocol>(sk: &Sock<T>) {
     unsafe { abi::rcan_rx_set(rx_trampoline::<T>, sk.as_ptr(), 0, core::ptr::null()) };
 }
 
-/// [`rx_set`] for a socket of a protocol with an [`RxSlot`], socket lock
+/// [`rx_set`] for a socket of a protocol with [`CanProtocol::RESERVE_RX`], socket lock
 /// held (`s`), with its filters already in the table's form (`filters`,
 /// whose error classes add to `err_mask`): its reserved receiver is set
 /// without a lookup; a socket without one (ENOMEM at `socket()`) reserves
@@ -669,20 +665,22 @@ pub(crate) fn rx_set_locked<T: CanProtocol>(
 #[cold]
 fn reserve_now<T: CanProtocol>(s: &SockGuard<'_, T>) -> Result<*mut ffi::c_void> {
     let sk = s.sock();
-    let slot = T::rx_slot(sk.shared()).ok_or(code::EINVAL)?;
+    if !T::RESERVE_RX {
+        return Err(code::EINVAL);
+    }
     // SAFETY: `sk` is a live sock of `T`; rx_trampoline::<T> expects
     // exactly such an owner. The protocol's release removes the receiver
-    // (rx_slot contract).
+    // (RESERVE_RX contract).
     let h = unsafe { abi::rcan_rx_reserve(rx_trampoline::<T>, sk.as_ptr()) };
     if h.is_null() {
         return Err(code::ENOMEM);
     }
     // Under the socket lock (`s`), as every later read of the slot.
-    slot.0.store(h, Ordering::Relaxed);
+    sk.rx_slot().store(h, Ordering::Relaxed);
     Ok(h)
 }
 
-/// [`rx_remove`] for a socket of a protocol with an [`RxSlot`], socket
+/// [`rx_remove`] for a socket of a protocol with [`CanProtocol::RESERVE_RX`], socket
 /// lock held (`s`): the registration goes, the reserved receiver stays for
 /// a later [`rx_set_locked`]. `T::rx` may still run for the old
 /// registration until a grace period has passed. Never fails. Process
@@ -703,9 +701,7 @@ pub(crate) fn rx_unset_locked<T: CanProtocol>(s: &SockGuard<'_, T>) {
 pub(crate) fn rx_release<T: CanProtocol>(s: &SockGuard<'_, T>) {
     let sk = s.sock();
     if let Some(rcv) = reserved(sk) {
-        if let Some(slot) = T::rx_slot(sk.shared()) {
-            slot.0.store(core::ptr::null_mut(), Ordering::Relaxed);
-        }
+        sk.rx_slot().store(core::ptr::null_mut(), Ordering::Relaxed);
         // SAFETY: as in rx_set_locked; the slot is cleared above (socket
         // lock held), so `rcv` is never used again.
         unsafe { abi::rcan_rx_set_reserved(rcv, 0, core::ptr::null(), false) };
@@ -716,7 +712,10 @@ pub(crate) fn rx_release<T: CanProtocol>(s: &SockGuard<'_, T>) {
 /// holds one. Socket lock held by the caller (the slot changes only
 /// under it, after `socket()`).
 fn reserved<T: CanProtocol>(sk: &Sock<T>) -> Option<*mut ffi::c_void> {
-    let p = T::rx_slot(sk.shared())?.0.load(Ordering::Relaxed);
+    if !T::RESERVE_RX {
+        return None;
+    }
+    let p = sk.rx_slot().load(Ordering::Relaxed);
     (!p.is_null()).then_some(p)
 }
 
@@ -805,6 +804,7 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
     if filters.is_empty() {
         return Err(code::EINVAL);
     }
+    abi::check()?;
     let spec = RxSpec {
         ifindex,
         join: false,
@@ -819,6 +819,15 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
     // SAFETY: `spec` and its filters live for the call; `data` is 'static.
     let ret = unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, &spec) };
     crate::glue::to_result(ret).map(|_| KernelRxReg(rx))
+}
+
+/// Checks that the loaded `rcan_pf` speaks this module's ABI (see
+/// `abi.rs`): ENOEXEC, and a log line naming both versions, if not.
+/// [`ProtoModule::register`], [`rx_set_kernel`] and [`Listening::new`]
+/// check by themselves; a module that only sends calls this in its init.
+/// Process context.
+pub(crate) fn abi_check() -> Result {
+    abi::check()
 }
 
 /// A driver whose hardware filter follows the sockets (DESIGN decision 7).
@@ -858,6 +867,7 @@ unsafe impl<T: FilterListener> Sync for Listening<T> {}
 impl<T: FilterListener> Listening<T> {
     /// Starts listening for `reg`'s device. Process context.
     pub(crate) fn new(reg: &gnetdev::Registration<T>) -> Result<Self> {
+        abi::check()?;
         let dev = reg.dev().as_ptr();
         let ifindex = reg.dev().ifindex();
         // SAFETY: the trampoline's cookie is the registered device; the

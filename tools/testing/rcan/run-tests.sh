@@ -3,7 +3,8 @@
 # The test command (make check, called by .ci/run): host tests (cargo test,
 # then tests/frontdoor.sh: how the kernel build fails and shares its cache,
 # then tests/unsafe.sh: the ceiling on unsafe outside rust/glue/, then
-# tests/dkms.sh: dkms.conf names every module Kbuild builds),
+# tests/dkms.sh: dkms.conf names every module Kbuild builds, then
+# tests/misuse.sh: misuse of the glue's safe API must not compile),
 # then the VM suite on the release kernel, its CAN_RAW/can-utils subset
 # against mainline SocketCAN (can.ko, can-raw.ko, vcan.ko of the same
 # kernel) in a VM boot of its own, and the suite again on the debug kernel
@@ -206,13 +207,16 @@ host_done() {
 # small tarball of its own, never the real cache. The unsafe ratchet:
 # `unsafe` in kernel-module Rust outside rust/glue/ must not exceed the
 # ceiling recorded in tools/testing/rcan/unsafe-ceiling. dkms.conf names
-# every module the Kbuild files build (seconds).
+# every module the Kbuild files build (seconds). The misuse stage: safe
+# code that would misuse the glue must fail to compile, each case with its
+# own error (seconds: type-checking only, against the release kernel).
 script_run() { bash "$RCAN_ROOT/tools/testing/rcan/tests/$1.sh"; }
 script_done() {
 	case $1 in
 	frontdoor) echo "=== host: front door (build-kernel.sh, make modules)" ;;
 	unsafe) echo "=== host: unsafe outside rust/glue (ratchet)" ;;
 	dkms) echo "=== host: dkms.conf against the Kbuild files" ;;
+	misuse) echo "=== host: misuse of the glue must not compile (negative builds)" ;;
 	esac
 	cat "$3"
 	tally "$1" "$2" "$3"
@@ -398,7 +402,7 @@ if [ "$debug" = 1 ]; then
 fi
 if [ "${RCAN_SKIP_HOST:-0}" != 1 ]; then
 	job host "" host_run host_done
-	for s in frontdoor unsafe dkms; do
+	for s in frontdoor unsafe dkms misuse; do
 		job "$s" "" "script_run $s" script_done
 	done
 fi
@@ -414,7 +418,7 @@ fi
 # Start order in the main lane: the host tests (whose compile wants both
 # cores) and the scripts of seconds, then the release shards, mainline.
 # The print order stays the plan's.
-for n in build-debug vm-debug: build-release host frontdoor unsafe dkms vm-release: vm-mainline; do
+for n in build-debug vm-debug: build-release host frontdoor unsafe dkms misuse vm-release: vm-mainline; do
 	for m in "${job_names[@]}"; do
 		case $m in "$n"*) [[ " ${start_names[*]} " == *" $m "* ]] || start_names+=("$m") ;; esac
 	done
