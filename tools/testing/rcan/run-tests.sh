@@ -212,7 +212,7 @@ script_done() {
 	case $1 in
 	frontdoor) echo "=== host: front door (build-kernel.sh, make modules)" ;;
 	unsafe) echo "=== host: unsafe outside rust/glue (ratchet)" ;;
-	dkms) echo "=== host: dkms.conf against the Kbuild files" ;;
+	dkms) echo "=== host: dkms.conf against the Kbuild files, and a real DKMS add/build/install/remove" ;;
 	esac
 	cat "$3"
 	tally "$1" "$2" "$3"
