@@ -215,7 +215,7 @@ script_done() {
 	case $1 in
 	frontdoor) echo "=== host: front door (build-kernel.sh, make modules)" ;;
 	unsafe) echo "=== host: unsafe outside rust/glue (ratchet)" ;;
-	dkms) echo "=== host: dkms.conf against the Kbuild files" ;;
+	dkms) echo "=== host: dkms.conf against the Kbuild files, and a real DKMS add/build/install/remove" ;;
 	misuse) echo "=== host: misuse of the glue must not compile (negative builds)" ;;
 	esac
 	cat "$3"

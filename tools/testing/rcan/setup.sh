@@ -19,6 +19,15 @@ if [ -n "$missing" ]; then
 	apt-get update -qq
 	apt-get install -y -qq $missing >/dev/null
 fi
+# DKMS for make check's real DKMS build (tools/testing/rcan/tests/dkms.sh),
+# without the distribution kernel's headers it recommends: it builds
+# against the test kernel.
+if ! dpkg-query -W -f='${Status}' dkms 2>/dev/null | grep -q "ok installed"; then
+	log "installing: dkms"
+	export DEBIAN_FRONTEND=noninteractive
+	apt-get install -y -qq --no-install-recommends dkms >/dev/null ||
+		{ apt-get update -qq && apt-get install -y -qq --no-install-recommends dkms >/dev/null; }
+fi
 
 command -v rustup >/dev/null || die "rustup not found"
 rustup component list --installed 2>/dev/null | grep -q '^rust-src' ||
