@@ -300,12 +300,13 @@ printf "RCAN_HOST_ROOT='%s'\n" "${RCAN_ROOT//\'/\'\\\'\'}" >>"$out/vm-init.conf"
 # which failed a whole make check (2026-11-27). Our code is not involved.
 #
 # The RCU stall detector's threshold (21 s by default; the test kernels
-# have no soft-lockup or hung-task detector) is raised to 60 s: under TCG a loaded host can deschedule the
-# guest's vCPU threads for tens of seconds, and the guest then reports a
-# stall it did not cause ("rcu_preempt kthread starved for 12459
-# jiffies", 74 s into a debug boot before any module was loaded, host
-# load average 13, 2026-11-29: the whole VM stage failed). A real lockup
-# stall does not end and is still reported, 60 s later.
+# have no soft-lockup or hung-task detector) is raised to 60 s: under TCG
+# a loaded host can deschedule the guest's vCPU threads for tens of
+# seconds, and the guest then reports a stall it did not cause
+# ("rcu_preempt kthread starved for 12459 jiffies", 74 s into a debug boot
+# before any module was loaded, host load average 13, 2026-11-29: the
+# whole VM stage failed). A real stall does not end and is still
+# reported, 60 s later.
 cmdline="console=ttyS0 rdinit=/init panic=-1 loglevel=5 log_buf_len=4M no5lvl"
 cmdline+=" rcupdate.rcu_cpu_stall_timeout=60"
 
