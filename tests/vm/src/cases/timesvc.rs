@@ -141,16 +141,6 @@ fn check_format(f: &Rx, vehicle: u32, source: u8) -> TestResult {
     Ok(())
 }
 
-/// Gap between two frames as the capture thread got them (monotonic).
-fn mono_gap(a: &Rx, b: &Rx) -> i128 {
-    b.mono.saturating_duration_since(a.mono).as_nanos() as i128
-}
-
-/// Gap between two frames' receive timestamps (`SO_TIMESTAMPNS`).
-fn ts_gap(a: &Rx, b: &Rx) -> i128 {
-    b.ts_ns() - a.ts_ns()
-}
-
 const SEC: i128 = 1_000_000_000;
 const MSEC: i128 = 1_000_000;
 
@@ -175,31 +165,44 @@ fn jumped<'a>(pairs: impl Iterator<Item = (&'a Rx, &'a Rx)>, who: &str) -> Resul
 }
 
 /// Checks the spacing of consecutive frames of one service, `frames` in
-/// the order received, and returns the seconds jumped over ([`jumped`]).
-/// `gap` measures the time between two frames; `lo..=hi` is the test's
-/// bound for two frames naming consecutive seconds. A frame naming k > 1
-/// seconds after its predecessor comes from a timer callback that ran at
-/// least k - 1 s late: k - 1 whole seconds later than an on-time one, and
-/// anywhere in the second it names (the callback names the second it runs
-/// in), so up to one second more: its gap must lie in `lo + (k - 1) s ..=
-/// hi + k s`. Never under `lo` after the previous frame, whatever k.
-fn check_spacing(
-    frames: &[Rx],
-    gap: fn(&Rx, &Rx) -> i128,
-    lo: i128,
-    hi: i128,
-    who: &str,
-) -> Result<u64, String> {
+/// the order received, by their receive timestamps, and returns the
+/// seconds jumped over ([`jumped`]). `lo..=hi` is the test's bound for
+/// the gap between two frames naming consecutive seconds, which assumes
+/// both came near the start of their seconds. Timer callbacks that run
+/// late (a stalled guest) move a frame later in its second, or past it:
+///
+/// * A frame naming k > 1 seconds after its predecessor comes from a
+///   callback at least k - 1 s late: k - 1 whole seconds later than an
+///   on-time one, and anywhere in the second it names (the callback names
+///   the second it runs in): its gap must be at least `lo + (k - 1) s`,
+///   and at most what the next point allows.
+/// * A callback late by less than a second sends a frame late in its own
+///   second. Such a frame may come up to the end of the second it names,
+///   so the gap before it may reach `(k + 1) s` minus the predecessor's
+///   offset in its second, if that is more than the usual bound. A frame
+///   received `1 s - lo` or more into its second (but before its end) may
+///   be followed by an on-time frame less than `lo` later: then that one
+///   must not have been received before the start of the second it names
+///   (its gap is at least `k s` minus the predecessor's offset).
+///
+/// Otherwise never under `lo` after the previous frame, whatever k. Two
+/// frames for one second, a drifting service (each frame later in its
+/// second), or a catch-up burst (frames received after the second they
+/// name has ended) still fail.
+fn check_spacing(frames: &[Rx], lo: i128, hi: i128, who: &str) -> Result<u64, String> {
     let n = jumped(frames.windows(2).map(|w| (&w[0], &w[1])), who)?;
     for w in frames.windows(2) {
         let (a, b) = (&w[0], &w[1]);
         let k = (b.second() - a.second()) as i128;
-        let g = gap(a, b);
-        let (min, max) = if k == 1 {
-            (lo, hi)
+        let g = b.ts_ns() - a.ts_ns();
+        // Where in the second it names the earlier frame was received.
+        let off_a = a.ts_ns() - a.second() as i128 * SEC;
+        let min = if (SEC - lo..SEC).contains(&off_a) {
+            k * SEC - off_a
         } else {
-            (lo + (k - 1) * SEC, hi + k * SEC)
+            lo + (k - 1) * SEC
         };
+        let max = (hi + (k - 1) * SEC).max((k + 1) * SEC - off_a);
         ensure!(
             (min..=max).contains(&g),
             "{who}: frames {} ms apart, naming seconds {k} apart (want {} to {} ms): {} then {}",
@@ -448,7 +451,7 @@ fn time_frames_1hz(ctx: &mut Ctx) -> TestResult {
     for f in &frames {
         check_format(f, VEHICLE, SRC_TIME)?;
     }
-    let jumped = check_spacing(&frames, ts_gap, 250 * MSEC, 1750 * MSEC, "rcan_time")?;
+    let jumped = check_spacing(&frames, 250 * MSEC, 1750 * MSEC, "rcan_time")?;
     ensure_explained(
         jumped,
         stopped.missed,
@@ -794,7 +797,6 @@ fn time_clock_step(ctx: &mut Ctx) -> TestResult {
     // for seconds missed to a late timer (explained below).
     let jumped_back = check_spacing(
         &frames[j..],
-        mono_gap,
         500 * MSEC,
         3200 * MSEC,
         "after the backward step",
@@ -1025,7 +1027,7 @@ fn rtime_takeover_handback(ctx: &mut Ctx) -> TestResult {
         check_format(f, VEHICLE, SRC_RTIME)?;
     }
     // Explained by its count of missed seconds at the end.
-    let jumped_b = check_spacing(&ours, mono_gap, 500 * MSEC, 1500 * MSEC, "rcan_rtime")?;
+    let jumped_b = check_spacing(&ours, 500 * MSEC, 1500 * MSEC, "rcan_rtime")?;
 
     // C: the GPS node is back.
     gps.set(GPS_SEND);
@@ -1161,7 +1163,7 @@ mod tests {
         for x in &f {
             check_format(x, VEHICLE, SRC_RTIME)?;
         }
-        let j = check_spacing(&f, mono_gap, 500 * MSEC, 1500 * MSEC, "rcan_rtime")?;
+        let j = check_spacing(&f, 500 * MSEC, 1500 * MSEC, "rcan_rtime")?;
         ensure_explained(j, missed, "rcan_rtime", "test")
     }
 
@@ -1217,13 +1219,38 @@ mod tests {
         // A second named twice, or out of order.
         assert!(rtime_b(&[at(T0, 5), at(T0 + 1, 5), at(T0 + 1, 900)], 9).is_err());
         assert!(rtime_b(&[at(T0, 5), at(T0 - 1, 995)], 9).is_err());
-        // Two frames under 500 ms apart, even naming seconds far apart.
-        assert!(rtime_b(&[at(T0, 900), at(T0 + 1, 300)], 9).is_err());
-        assert!(rtime_b(&[at(T0, 900), at(T0 + 2, 100)], 9).is_err());
-        // Consecutive seconds keep the old bounds: 1.6 s apart fails.
-        assert!(rtime_b(&[at(T0, 5), at(T0 + 1, 605)], 9).is_err());
+        // Two frames under 500 ms apart, the first not late in its second.
+        let early = (T0 + 1, i128::from(T0 + 1) * SEC - 250 * MSEC);
+        assert!(rtime_b(&[at(T0, 300), early], 9).is_err());
+        // Received after the end of the second it names (2.1 s after an
+        // on-time frame), whatever the count.
+        assert!(rtime_b(&[at(T0, 5), at(T0 + 2, 1105)], 9).is_err());
+        // Drifting: 1.9 s apart, naming consecutive seconds.
+        let drift = [at(T0, 5), at(T0 + 1, 905), at(T0 + 2, 1805)];
+        assert!(rtime_b(&drift, 9).is_err());
         // On time passes with nothing missed.
         rtime_b(&[at(T0, 5), at(T0 + 1, 2), at(T0 + 2, 400)], 0).unwrap();
+    }
+
+    /// Run 2 on a loaded host: a frame 944 ms late in its own second, the
+    /// next on time 56 ms later.
+    #[test]
+    fn late_in_its_second() {
+        rtime_b(&[at(T0, 5), at(T0 + 1, 944), at(T0 + 2, 0)], 0).unwrap();
+        // But the next one not before its second begins.
+        let early = (T0 + 2, i128::from(T0 + 1) * SEC + 990 * MSEC);
+        assert!(rtime_b(&[at(T0 + 1, 944), early], 9).is_err());
+        // Only a frame late within its second excuses a short gap: after
+        // one received when its second had ended (a catch-up burst), the
+        // usual bound holds.
+        let burst = [
+            (T0 + 1, i128::from(T0 + 2) * SEC + 300 * MSEC),
+            (T0 + 2, i128::from(T0 + 2) * SEC + 301 * MSEC),
+        ];
+        assert!(rtime_b(&burst, 9).is_err());
+        // A frame early in its second gets no such excuse.
+        let early = (T0 + 1, i128::from(T0 + 1) * SEC - 150 * MSEC);
+        assert!(rtime_b(&[at(T0, 400), early], 9).is_err());
     }
 
     #[test]
