@@ -352,8 +352,8 @@ impl HrTimerCallback for Tick {
         WATCH.start(fire.next.watchdog_mono);
         if let Some(second) = fire.second {
             if st.decide(mono) {
-                // Before the frame goes out: whoever sees the frame that
-                // follows the gap can read the count that explains it.
+                // Counted before sending, so that the count at module
+                // exit covers every frame that went out after a gap.
                 MISSED.fetch_add(fire.missed, Ordering::Relaxed);
                 st.send(second);
             }
