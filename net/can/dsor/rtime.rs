@@ -97,9 +97,10 @@ impl Drop for RtimeModule {
         ticker::stop();
         let s = ticker::stats();
         pr_info!(
-            "stopped: {} frames sent, {} seconds skipped, {} takeovers, {} backward clock steps caught\n",
+            "stopped: {} frames sent, {} seconds skipped, {} seconds missed (late timer), {} takeovers, {} backward clock steps caught\n",
             s.sent,
             s.skipped,
+            s.missed,
             s.takeovers,
             s.steps_back
         );

@@ -28,7 +28,9 @@
 //!   frame from another source. Written by `rcan_rtime`'s receiver (NET_RX
 //!   softirq, `fetch_max`), read by `TICK`'s callback. An atomic.
 //! * `STOPPING`: set by module exit; a callback that sees it neither sends
-//!   nor re-arms. The counters are atomics.
+//!   nor re-arms. The counters (`SENT`, `SKIPPED`, `MISSED`, `STEPS_BACK`,
+//!   `TAKEOVERS`) are atomics, written by the timer callbacks and read by
+//!   module exit (process context) after [`stop`].
 //! * `OWN_ECHO`: the data bytes of the last frame this service sent, until
 //!   its echo comes back (0: none pending). Written by `TICK`'s callback
 //!   before each send, cleared by the receiver that recognises the echo
@@ -39,6 +41,12 @@
 //! up, and even being unregistered and registered again; a second in which
 //! the device is missing or down is skipped and counted, with one log line
 //! per change of that state.
+//!
+//! Late callbacks: `TICK`'s callback names the second that contains now.
+//! A callback that runs after the next boundary (the guest's CPUs stalled,
+//! a long softirq) therefore skips the seconds in between; `on_timer`
+//! counts them (`TimerFire::missed`) and, if the service sends at that
+//! boundary, they are added to `MISSED`, reported at module exit.
 
 #![forbid(unsafe_code)]
 // Shared by two modules, each of which uses only part of it.
@@ -103,7 +111,11 @@ pub(crate) fn take_own_echo(data: &[u8; 8]) -> bool {
 }
 
 static SENT: AtomicU64 = AtomicU64::new(0);
+/// Seconds whose frame was not sent: device missing or down, send failed.
 static SKIPPED: AtomicU64 = AtomicU64::new(0);
+/// Seconds no frame named because `TICK`'s callback ran after the next
+/// boundary (`TimerFire::missed`), counted when the service sends.
+static MISSED: AtomicU64 = AtomicU64::new(0);
 static STEPS_BACK: AtomicU64 = AtomicU64::new(0);
 static TAKEOVERS: AtomicU64 = AtomicU64::new(0);
 
@@ -233,6 +245,10 @@ pub(crate) struct TickState {
     source: u8,
     policy: Policy,
     dev_state: DevState,
+    /// When `TICK`'s expiry is due on the monotonic clock, as computed
+    /// when it was last armed here or in [`start`] (`Arm::due_mono`);
+    /// `WATCH` re-arming `TICK` leaves it stale, which `on_timer` allows.
+    due_mono: i64,
 }
 
 impl TickState {
@@ -330,11 +346,15 @@ impl HrTimerCallback for Tick {
             return;
         }
         let (real, mono) = (ktime_get_real_ns(), ktime_get_mono_ns());
-        let fire = timesvc::on_timer(real, mono, timer.armed_for());
+        let fire = timesvc::on_timer(real, mono, timer.armed_for(), st.due_mono);
         timer.start(fire.next.real);
+        st.due_mono = fire.next.due_mono;
         WATCH.start(fire.next.watchdog_mono);
         if let Some(second) = fire.second {
             if st.decide(mono) {
+                // Counted before sending, so that the count at module
+                // exit covers every frame that went out after a gap.
+                MISSED.fetch_add(fire.missed, Ordering::Relaxed);
                 st.send(second);
             }
         }
@@ -380,15 +400,16 @@ pub(crate) fn start(redundant: bool) -> Result<Params> {
     } else {
         (SOURCE_TIME, Policy::Always)
     };
+    let arm = timesvc::arm(real, mono);
     let state = TickState {
         params,
         source,
         policy,
         dev_state: DevState::Sending,
+        due_mono: arm.due_mono,
     };
     TICK.init(ClockId::RealTime, HrTimerMode::AbsoluteSoft, state)?;
     WATCH.init(ClockId::Monotonic, HrTimerMode::AbsoluteSoft, ())?;
-    let arm = timesvc::arm(real, mono);
     TICK.start(arm.real);
     WATCH.start(arm.watchdog_mono);
     Ok(params)
@@ -407,10 +428,13 @@ pub(crate) fn stop() {
     TICK.cancel();
 }
 
-/// Counters for the exit log line.
+/// Counters for the exit log line. Without clock steps, `sent + skipped +
+/// missed` is the number of seconds the service had to announce.
 pub(crate) struct Stats {
     pub(crate) sent: u64,
     pub(crate) skipped: u64,
+    /// Seconds missed because the timer callback ran late (late timer).
+    pub(crate) missed: u64,
     pub(crate) steps_back: u64,
     pub(crate) takeovers: u64,
 }
@@ -420,6 +444,7 @@ pub(crate) fn stats() -> Stats {
     Stats {
         sent: SENT.load(Ordering::Relaxed),
         skipped: SKIPPED.load(Ordering::Relaxed),
+        missed: MISSED.load(Ordering::Relaxed),
         steps_back: STEPS_BACK.load(Ordering::Relaxed),
         takeovers: TAKEOVERS.load(Ordering::Relaxed),
     }

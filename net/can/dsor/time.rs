@@ -37,9 +37,10 @@ impl Drop for TimeModule {
         ticker::stop();
         let s = ticker::stats();
         pr_info!(
-            "stopped: {} frames sent, {} seconds skipped, {} backward clock steps caught\n",
+            "stopped: {} frames sent, {} seconds skipped, {} seconds missed (late timer), {} backward clock steps caught\n",
             s.sent,
             s.skipped,
+            s.missed,
             s.steps_back
         );
     }

@@ -127,15 +127,19 @@ pub const fn next_boundary(real_ns: i64) -> i64 {
     (second_of(real_ns) + 1).saturating_mul(NSEC_PER_SEC)
 }
 
-/// The monotonic time `slack` after the realtime instant `real_at`, given
+/// The realtime instant `real_at` as seen on the monotonic clock, given
 /// that the clocks read `real_ns` and `mono_ns` now (an instant already
 /// past counts as now).
-const fn mono_deadline(real_at: i64, real_ns: i64, mono_ns: i64) -> i64 {
+const fn mono_at(real_at: i64, real_ns: i64, mono_ns: i64) -> i64 {
     let wait = real_at.saturating_sub(real_ns);
     let wait = if wait < 0 { 0 } else { wait };
-    mono_ns
-        .saturating_add(wait)
-        .saturating_add(WATCHDOG_SLACK_NS)
+    mono_ns.saturating_add(wait)
+}
+
+/// The monotonic time [`WATCHDOG_SLACK_NS`] after the realtime instant
+/// `real_at` (see [`mono_at`]).
+const fn mono_deadline(real_at: i64, real_ns: i64, mono_ns: i64) -> i64 {
+    mono_at(real_at, real_ns, mono_ns).saturating_add(WATCHDOG_SLACK_NS)
 }
 
 /// When the realtime timer and the watchdog fire next.
@@ -144,9 +148,12 @@ pub struct Arm {
     /// Arm the realtime timer for this absolute `CLOCK_REALTIME` time: the
     /// next whole second.
     pub real: i64,
-    /// Arm the watchdog for this absolute `CLOCK_MONOTONIC` time: the
-    /// realtime expiry as seen on the monotonic clock, plus
-    /// [`WATCHDOG_SLACK_NS`].
+    /// That expiry as seen on the monotonic clock when arming: when the
+    /// realtime timer is due unless the clock is stepped. The caller keeps
+    /// it for [`on_timer`], which measures the callback's lateness by it.
+    pub due_mono: i64,
+    /// Arm the watchdog for this absolute `CLOCK_MONOTONIC` time:
+    /// `due_mono` plus [`WATCHDOG_SLACK_NS`].
     pub watchdog_mono: i64,
 }
 
@@ -154,9 +161,11 @@ pub struct Arm {
 /// the start of the service and after every frame.
 pub const fn arm(real_ns: i64, mono_ns: i64) -> Arm {
     let real = next_boundary(real_ns);
+    let due_mono = mono_at(real, real_ns, mono_ns);
     Arm {
         real,
-        watchdog_mono: mono_deadline(real, real_ns, mono_ns),
+        due_mono,
+        watchdog_mono: due_mono.saturating_add(WATCHDOG_SLACK_NS),
     }
 }
 
@@ -166,12 +175,17 @@ pub struct TimerFire {
     /// The second the frame sent now names (the one that contains now), or
     /// None: send nothing.
     pub second: Option<i64>,
+    /// Seconds no frame will name because this callback ran late: from the
+    /// second the timer was armed for up to, not including, `second` (see
+    /// [`missed_late`]). 0 when on time, and when `second` is None.
+    pub missed: u64,
     /// Re-arm both timers.
     pub next: Arm,
 }
 
-/// The realtime timer, armed for `armed_real`, fired; the clocks read
-/// `real_ns` and `mono_ns`.
+/// The realtime timer, armed for `armed_real` (due at `due_mono` on the
+/// monotonic clock, [`Arm::due_mono`]), fired; the clocks read `real_ns`
+/// and `mono_ns`.
 ///
 /// The next expiry is computed from the current time, not by adding a
 /// second to the old expiry: after a forward step, or a callback delayed by
@@ -180,15 +194,46 @@ pub struct TimerFire {
 /// less than the expiry, it was stepped back between the expiry and the
 /// callback: nothing is sent (the second now current was announced
 /// already) and the timer waits for the next boundary of the new clock.
-pub const fn on_timer(real_ns: i64, mono_ns: i64, armed_real: i64) -> TimerFire {
+pub const fn on_timer(real_ns: i64, mono_ns: i64, armed_real: i64, due_mono: i64) -> TimerFire {
     TimerFire {
         second: if real_ns >= armed_real {
             Some(second_of(real_ns))
         } else {
             None
         },
+        missed: missed_late(real_ns, mono_ns, armed_real, due_mono),
         next: arm(real_ns, mono_ns),
     }
+}
+
+/// How many seconds the realtime timer's callback skips because it ran
+/// after the boundary that follows its expiry: the callback names the
+/// second that contains now, so the seconds from the one it was armed for
+/// (`armed_real`, due at `due_mono` on the monotonic clock) up to, not
+/// including, the current one get no frame. 0 for a callback within its
+/// second, 1 for one late by a second up to just under two, and so on.
+///
+/// Counted on both clocks, and the smaller count is the answer: the
+/// realtime difference `second_of(real_ns) - second_of(armed_real)` is
+/// what listeners see, but a forward clock step inflates it (the timer
+/// fires at the step, on time on the monotonic clock: those seconds were
+/// stepped over, not missed); the monotonic lateness `mono_ns - due_mono`
+/// in whole seconds is immune to steps, but `due_mono` is stale after the
+/// watchdog re-armed the timer for a backward step (it is then too early,
+/// so that count is too large, and the realtime one is right). Without a
+/// step the two agree, up to the few nanoseconds between reading the two
+/// clocks. A callback before its expiry (a backward step between expiry
+/// and callback) misses nothing.
+pub const fn missed_late(real_ns: i64, mono_ns: i64, armed_real: i64, due_mono: i64) -> u64 {
+    if real_ns < armed_real {
+        return 0;
+    }
+    let by_real = second_of(real_ns) - second_of(armed_real);
+    let late = mono_ns.saturating_sub(due_mono);
+    let by_mono = if late < 0 { 0 } else { late / NSEC_PER_SEC };
+    let n = if by_real < by_mono { by_real } else { by_mono };
+    // Both are >= 0: real_ns >= armed_real, late >= 0.
+    n as u64
 }
 
 /// What the watchdog's callback does.
@@ -429,13 +474,16 @@ mod tests {
     #[test]
     fn timer_and_watchdog() {
         let s = NSEC_PER_SEC;
-        let f = on_timer(100 * s + 3, 7 * s, 100 * s);
+        let f = on_timer(100 * s + 3, 7 * s, 100 * s, 7 * s - 3);
         assert_eq!(f.second, Some(100));
+        assert_eq!(f.missed, 0);
         assert_eq!(f.next.real, 101 * s);
+        assert_eq!(f.next.due_mono, 8 * s - 3);
         assert_eq!(f.next.watchdog_mono, 8 * s - 3 + WATCHDOG_SLACK_NS);
         // Stepped back between expiry and callback: no frame.
-        let f = on_timer(100 * s - 3, 7 * s, 100 * s);
+        let f = on_timer(100 * s - 3, 7 * s, 100 * s, 7 * s - 100);
         assert_eq!(f.second, None);
+        assert_eq!(f.missed, 0);
         assert_eq!(f.next.real, 100 * s);
         // Clock stepped back 10 s: stuck, re-armed for the next boundary.
         let w = on_watchdog(91 * s + s / 2, 8 * s, 101 * s);
@@ -445,6 +493,60 @@ mod tests {
         let w = on_watchdog(101 * s + 1, 8 * s, 101 * s);
         assert_eq!(w.rearm_real, None);
         assert_eq!(w.watchdog_mono, 8 * s + WATCHDOG_SLACK_NS);
+    }
+
+    /// The callback of a timer armed for second 100 (due at monotonic
+    /// 7 s) runs `late` ns after that, with no clock step.
+    fn late_by(late: i64) -> TimerFire {
+        let s = NSEC_PER_SEC;
+        on_timer(100 * s + late, 7 * s + late, 100 * s, 7 * s)
+    }
+
+    #[test]
+    fn late_callback() {
+        let s = NSEC_PER_SEC;
+        // Within its second: nothing missed.
+        assert_eq!((late_by(0).second, late_by(0).missed), (Some(100), 0));
+        assert_eq!(late_by(s - 1).missed, 0);
+        // Late by exactly one second: it names 101, second 100 got no
+        // frame.
+        assert_eq!((late_by(s).second, late_by(s).missed), (Some(101), 1));
+        // The failure that motivated the counter: 1.44 s late, 2 s between
+        // the seconds named by consecutive frames.
+        let f = late_by(1_437_851_531);
+        assert_eq!((f.second, f.missed), (Some(101), 1));
+        // By several seconds.
+        assert_eq!(late_by(2 * s - 1).missed, 1);
+        assert_eq!(late_by(2 * s).missed, 2);
+        let f = late_by(5 * s + s / 2);
+        assert_eq!((f.second, f.missed), (Some(105), 5));
+        // Re-armed from now: the next callback, on time, misses nothing.
+        assert_eq!(f.next.real, 106 * s);
+        let g = on_timer(106 * s, f.next.due_mono, f.next.real, f.next.due_mono);
+        assert_eq!((g.second, g.missed), (Some(106), 0));
+        // Also the pure function, and a callback "early" on the monotonic
+        // clock (not possible without a step) counts nothing.
+        assert_eq!(missed_late(103 * s, 10 * s, 100 * s, 7 * s), 3);
+        assert_eq!(missed_late(103 * s, 6 * s, 100 * s, 7 * s), 0);
+    }
+
+    #[test]
+    fn clock_steps_are_not_missed_seconds() {
+        let s = NSEC_PER_SEC;
+        // A forward step by 100 s fires the timer at the step, 300 ms
+        // before it was due on the monotonic clock: one frame for the new
+        // second, the 100 seconds stepped over are not "missed".
+        let f = on_timer(200 * s + 700_000_000, 6 * s + 700_000_000, 101 * s, 7 * s);
+        assert_eq!((f.second, f.missed), (Some(200), 0));
+        // The same step with a callback 1.5 s late on the monotonic clock:
+        // the one second it really missed.
+        let f = on_timer(201 * s + s / 2, 8 * s + s / 2, 101 * s, 7 * s);
+        assert_eq!((f.second, f.missed), (Some(201), 1));
+        // After a backward step the watchdog re-armed the timer for the
+        // next second of the new clock; the callback's saved due time is
+        // the old expiry's, 1.9 s before now: the realtime count (0) wins.
+        let f = on_timer(92 * s + 3, 8 * s + 900_000_000, 92 * s, 7 * s);
+        assert_eq!((f.second, f.missed), (Some(92), 0));
     }
 
     #[test]
