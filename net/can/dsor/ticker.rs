@@ -252,7 +252,8 @@ pub(crate) struct TickState {
 }
 
 impl TickState {
-    /// Whether to send at this boundary; runs the takeover state machine.
+    /// Whether to send at the boundary due at `mono` (`TimerFire::due`);
+    /// runs the takeover state machine.
     fn decide(&mut self, mono: i64) -> bool {
         let Policy::Redundant(t) = &mut self.policy else {
             return true;
@@ -351,7 +352,7 @@ impl HrTimerCallback for Tick {
         st.due_mono = fire.next.due_mono;
         WATCH.start(fire.next.watchdog_mono);
         if let Some(second) = fire.second {
-            if st.decide(mono) {
+            if st.decide(fire.due) {
                 // Counted before sending, so that the count at module
                 // exit covers every frame that went out after a gap.
                 MISSED.fetch_add(fire.missed, Ordering::Relaxed);

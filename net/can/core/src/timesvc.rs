@@ -179,6 +179,16 @@ pub struct TimerFire {
     /// second the timer was armed for up to, not including, `second` (see
     /// [`missed_late`]). 0 when on time, and when `second` is None.
     pub missed: u64,
+    /// When the boundary this callback serves was due on the monotonic
+    /// clock: `due_mono`, or now if that is earlier (a backward step).
+    /// The redundant service judges other sources' silence at this
+    /// instant, not at the callback's ([`Takeover::tick`]): a callback
+    /// the guest or the host delayed must not take its own lateness for
+    /// another source's silence (that source's callback was delayed too).
+    /// After the watchdog re-armed the timer `due_mono` is stale by at most
+    /// a second and some; judged that much early, a takeover comes a
+    /// boundary later, never wrongly.
+    pub due: i64,
     /// Re-arm both timers.
     pub next: Arm,
 }
@@ -202,6 +212,11 @@ pub const fn on_timer(real_ns: i64, mono_ns: i64, armed_real: i64, due_mono: i64
             None
         },
         missed: missed_late(real_ns, mono_ns, armed_real, due_mono),
+        due: if due_mono < mono_ns {
+            due_mono
+        } else {
+            mono_ns
+        },
         next: arm(real_ns, mono_ns),
     }
 }
@@ -564,6 +579,40 @@ mod tests {
         // A longer timeout set while active does not hand back.
         assert_eq!(t.tick(8 * s, Some(4 * s + 1), 60 * s), Decision::Send);
         assert!(Decision::TakeOver.sends() && !Decision::HandBack.sends());
+    }
+
+    /// The flake of `rtime_silent_with_local_time` (issue 40): the guest
+    /// stalled 1.44 s over a boundary, so both services' callbacks ran
+    /// late, ours first. Judged at the callback's time the other source
+    /// looks silent for 2.4 s (past the 1.2 s timeout); judged when the
+    /// boundary was due, for under a second, as it was.
+    #[test]
+    fn late_callback_judges_silence_when_due() {
+        let (s, ms) = (NSEC_PER_SEC, 1_000_000);
+        let to = 1200 * ms;
+        let mut t = Takeover::new(0);
+        for k in 1..=4 {
+            assert_eq!(
+                t.tick(k * s + ms, Some((k - 1) * s + 2 * ms), to),
+                Decision::Silent
+            );
+        }
+        let last_foreign = Some(4 * s + 2 * ms);
+        // Armed for real 105 s, due at mono 5 s; runs at mono 6.44 s.
+        let f = on_timer(106 * s + 440 * ms, 6 * s + 440 * ms, 105 * s, 5 * s);
+        assert_eq!((f.second, f.missed, f.due), (Some(106), 1, 5 * s));
+        let mut at_callback = t;
+        assert_eq!(
+            at_callback.tick(6 * s + 440 * ms, last_foreign, to),
+            Decision::TakeOver
+        );
+        assert_eq!(t.tick(f.due, last_foreign, to), Decision::Silent);
+        // When the other source really stopped, the takeover still comes
+        // at the first boundary due a timeout after its last frame.
+        assert_eq!(t.tick(6 * s, last_foreign, to), Decision::TakeOver);
+        // A callback that fires before its saved due time (the clock was
+        // stepped back) is judged at its own time.
+        assert_eq!(on_timer(92 * s, 7 * s, 92 * s, 8 * s).due, 7 * s);
     }
 
     #[test]
