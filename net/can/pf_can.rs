@@ -54,7 +54,8 @@ use glue::can::rx::{RcvHandle, RxTable, Spec};
 use glue::net::Net;
 use glue::netdev::NetDev;
 use glue::skb::Skb;
-use glue::sync::{rcu_barrier, RcuReadGuard};
+use glue::module::{ModuleScope, ScopedModule};
+use glue::sync::RcuReadGuard;
 use rcan_api::{RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use rcan_core::filter::ArbFilter;
 use rcan_core::frame::{AnyFrame, CANFD_FDF};
@@ -295,8 +296,8 @@ pub(crate) struct PfCan {
     reg: Option<family::FamilyReg>,
 }
 
-impl kernel::Module for PfCan {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
+impl ScopedModule for PfCan {
+    fn init(_module: &'static ThisModule, _scope: &ModuleScope) -> Result<Self> {
         let reg = family::register().inspect_err(|e| {
             if e.to_errno() == EEXIST.to_errno() {
                 pr_err!("PF_CAN is already registered (mainline can.ko loaded?): not loading\n");
@@ -315,9 +316,8 @@ impl Drop for PfCan {
         self.reg = None;
         TABLE.shutdown();
         family::shutdown();
-        // Let pending call_rcu callbacks of the table finish before our
-        // code goes.
-        rcu_barrier();
+        // The table's pending call_rcu callbacks: waited for by the glue
+        // after this (glue::module::Scoped).
         pr_info!("PF_CAN protocol family unregistered\n");
     }
 }

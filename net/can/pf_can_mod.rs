@@ -17,10 +17,12 @@ mod rcan_core;
 
 mod pf_can;
 
-use pf_can::PfCan;
+/// `module!` takes a plain name: the glue's wrapper, which owns the exit
+/// duties (rust/glue/module.rs).
+type PfCanModule = glue::module::Scoped<pf_can::PfCan>;
 
 module! {
-    type: PfCan,
+    type: PfCanModule,
     name: "rcan_pf",
     author: "rcan developers",
     description: "PF_CAN protocol family (thesis pf_can)",

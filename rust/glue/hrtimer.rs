@@ -11,9 +11,13 @@
 //! An [`HrTimer`] lives in a `static` of the module that uses it: rcan's
 //! timers belong to singleton services whose timers re-arm each other, and
 //! a static needs no pinning or reference counting. Statics are never
-//! dropped, so the module's exit must [`HrTimer::cancel`] every timer it
-//! started (after making sure that no callback starts it again); the timer
-//! then neither runs nor is queued when the module's memory goes.
+//! dropped, so the glue owns their teardown: [`HrTimer::init`] takes the
+//! module's [`ModuleScope`], which only a module whose exit the glue runs
+//! ([`Scoped`](super::module::Scoped)) has, and links the timer into the
+//! module's list; at exit [`kill_all`] makes every timer of the list
+//! refuse [`HrTimer::start`] for good, then cancels each. When the
+//! module's memory goes, no timer of it runs or is queued, whatever the
+//! module's own exit did or forgot.
 //!
 //! Callback context: only the `*_SOFT` modes are offered, so callbacks run
 //! in the `HRTIMER_SOFTIRQ` softirq (bottom halves disabled, must not
@@ -29,7 +33,9 @@ use super::bindings;
 use core::cell::UnsafeCell;
 use core::marker::PhantomData;
 use core::mem::MaybeUninit;
-use core::sync::atomic::{AtomicI64, AtomicU32, AtomicU8, Ordering};
+use super::module::ModuleScope;
+use core::ptr;
+use core::sync::atomic::{AtomicI64, AtomicPtr, AtomicU32, AtomicU8, Ordering};
 use kernel::error::{code, Result};
 use kernel::types::Opaque;
 
@@ -87,54 +93,94 @@ const UNINIT: u8 = 0;
 const INITIALISING: u8 = 1;
 const READY: u8 = 2;
 
-/// A high-resolution timer in static storage whose callback is `H::run`.
+/// `Core::gate`: set once the module's exit killed the timer.
+const DEAD: u32 = 1 << 31;
+
+/// The part of every [`HrTimer`] that does not depend on its callback, so
+/// that the module's list ([`TIMERS`]) can hold timers of any callback.
 ///
 /// # Invariants
 ///
 /// Once `phase` is `READY`: `timer` was initialised by `hrtimer_init` with
-/// `run::<H>` as its function, `mode` holds the mode it was initialised
-/// with, and `state` is initialised and used only by `run::<H>` (that is,
-/// by one callback at a time).
+/// a trampoline as its function and `mode` holds the mode it was
+/// initialised with. `gate`'s low bits count the [`HrTimer::start`] calls
+/// in progress that passed the `DEAD` check; once `DEAD` is set and that
+/// count was seen at 0, the timer is never started again.
 #[repr(C)]
-pub(crate) struct HrTimer<H: HrTimerCallback> {
+struct Core {
     /// First field: the callback finds the `HrTimer` from the C pointer.
     timer: Opaque<bindings::hrtimer>,
     phase: AtomicU8,
     mode: AtomicU32,
     /// The absolute expiry last requested with `start` (0: never started).
     armed: AtomicI64,
+    gate: AtomicU32,
+    /// The next timer in the module's list (`TIMERS`), set at `init`.
+    next: AtomicPtr<Core>,
+}
+
+/// The module's initialised timers (every one is a `'static`, linked once
+/// by its `init`), killed by [`kill_all`] at exit. Pushed with a
+/// compare-exchange; never unlinked (the list dies with the module).
+static TIMERS: AtomicPtr<Core> = AtomicPtr::new(ptr::null_mut());
+
+/// A high-resolution timer in static storage whose callback is `H::run`.
+///
+/// # Invariants
+///
+/// Once `core.phase` is `READY`: `core.timer`'s function is `run::<H>`,
+/// and `state` is initialised and used only by `run::<H>` (that is, by one
+/// callback at a time).
+#[repr(C)]
+pub(crate) struct HrTimer<H: HrTimerCallback> {
+    /// First field, and `timer` is its first: the callback finds the
+    /// `HrTimer` from the C pointer.
+    core: Core,
     state: UnsafeCell<MaybeUninit<H::State>>,
     _h: PhantomData<H>,
 }
 
 // SAFETY: the C timer is only touched through the hrtimer API, which does
-// its own locking; `state` is used by one callback at a time (type
-// invariant), possibly on different CPUs over time, hence `State: Send`.
+// its own locking; the other fields of `core` are atomics; `state` is used
+// by one callback at a time (type invariant), possibly on different CPUs
+// over time, hence `State: Send`.
 unsafe impl<H: HrTimerCallback> Sync for HrTimer<H> {}
+
+// SAFETY: as for `HrTimer`: `Core` holds the C timer (used through the
+// hrtimer API only) and atomics; `TIMERS` shares `&'static Core`s.
+unsafe impl Sync for Core {}
 
 impl<H: HrTimerCallback> HrTimer<H> {
     /// An uninitialised timer, for a `static`.
     pub(crate) const fn new() -> Self {
         HrTimer {
-            timer: Opaque::uninit(),
-            phase: AtomicU8::new(UNINIT),
-            mode: AtomicU32::new(0),
-            armed: AtomicI64::new(0),
+            core: Core {
+                timer: Opaque::uninit(),
+                phase: AtomicU8::new(UNINIT),
+                mode: AtomicU32::new(0),
+                armed: AtomicI64::new(0),
+                gate: AtomicU32::new(0),
+                next: AtomicPtr::new(ptr::null_mut()),
+            },
             state: UnsafeCell::new(MaybeUninit::uninit()),
             _h: PhantomData,
         }
     }
 
     /// Initialises the timer on `clock` in `mode`, handing `state` to the
-    /// callback. Once per timer (EBUSY after that), before any
+    /// callback, and puts it on the module's list, which the module's exit
+    /// kills (`scope`: only a [`Scoped`](super::module::Scoped) module's
+    /// `init` has one). Once per timer (EBUSY after that), before any
     /// [`HrTimer::start`]. Process context.
     pub(crate) fn init(
         &'static self,
+        _scope: &ModuleScope,
         clock: ClockId,
         mode: HrTimerMode,
         state: H::State,
     ) -> Result {
         if self
+            .core
             .phase
             .compare_exchange(UNINIT, INITIALISING, Ordering::Acquire, Ordering::Relaxed)
             .is_err()
@@ -149,62 +195,124 @@ impl<H: HrTimerCallback> HrTimer<H> {
         // SAFETY: exclusive access during INITIALISING (above).
         unsafe {
             (*self.state.get()).write(state);
-            bindings::hrtimer_init(self.timer.get(), clock.raw(), mode.raw());
-            (*self.timer.get()).function = Some(run::<H>);
+            bindings::hrtimer_init(self.core.timer.get(), clock.raw(), mode.raw());
+            (*self.core.timer.get()).function = Some(run::<H>);
         }
-        self.mode.store(mode.raw(), Ordering::Relaxed);
+        self.core.mode.store(mode.raw(), Ordering::Relaxed);
         // INVARIANT: timer, mode and state are initialised above; the
         // release store publishes them to `start` and `cancel`.
-        self.phase.store(READY, Ordering::Release);
+        self.core.phase.store(READY, Ordering::Release);
+        // On the module's list, once (the phase above is never UNINIT
+        // again), so that the exit kills it.
+        let me = ptr::from_ref(&self.core).cast_mut();
+        let mut head = TIMERS.load(Ordering::Acquire);
+        loop {
+            self.core.next.store(head, Ordering::Relaxed);
+            match TIMERS.compare_exchange(head, me, Ordering::AcqRel, Ordering::Acquire) {
+                Ok(_) => break,
+                Err(h) => head = h,
+            }
+        }
         Ok(())
-    }
-
-    fn ready(&self) -> bool {
-        self.phase.load(Ordering::Acquire) == READY
     }
 
     /// Arms the timer for `expires` nanoseconds (an absolute time of its
     /// clock, or relative to now, as its mode says), with no slack. A timer
-    /// already queued is moved. Does nothing before [`HrTimer::init`]. Any
-    /// context, including this timer's own callback.
+    /// already queued is moved. Does nothing before [`HrTimer::init`] and
+    /// once the module's exit killed the timer. Any context, including
+    /// this timer's own callback.
     pub(crate) fn start(&self, expires: i64) {
-        if !self.ready() {
-            return;
-        }
-        self.armed.store(expires, Ordering::Relaxed);
-        // READY, so the timer is initialised (type invariant) with the mode
-        // passed here, as hrtimer_start_range_ns requires (the soft bit must
-        // match). The core serialises concurrent starts and cancels with the
-        // timer base lock.
-        // SAFETY: initialised timer, matching mode (above).
-        unsafe {
-            bindings::hrtimer_start_range_ns(
-                self.timer.get(),
-                expires,
-                0,
-                self.mode.load(Ordering::Relaxed),
-            )
-        };
+        self.core.start(expires);
     }
 
     /// The expiry last requested with [`HrTimer::start`] (0: never
     /// started). A racy hint when another context re-arms concurrently.
     pub(crate) fn armed_for(&self) -> i64 {
-        self.armed.load(Ordering::Relaxed)
+        self.core.armed.load(Ordering::Relaxed)
     }
 
     /// Cancels the timer: when this returns, it is not queued and its
     /// callback is not running (`hrtimer_cancel` waits for a running one).
     /// Returns whether it was queued or running. A callback (of any timer)
-    /// may re-arm it afterwards; callers that tear down make sure none
-    /// will. Process context, or a softirq that is not this timer's own
-    /// callback (that would wait for itself).
+    /// may re-arm it afterwards; the module's exit needs no such call
+    /// ([`kill_all`]). Process context: `hrtimer_cancel` may wait, and in
+    /// this timer's own callback it would wait for itself forever.
     pub(crate) fn cancel(&self) -> bool {
+        self.core.cancel()
+    }
+}
+
+impl Core {
+    fn ready(&self) -> bool {
+        self.phase.load(Ordering::Acquire) == READY
+    }
+
+    fn start(&self, expires: i64) {
+        // Counted in progress before looking at DEAD; `kill` sets DEAD
+        // before looking at the count (both SeqCst): either `kill` waits
+        // for this start, or this start sees DEAD.
+        let gate = self.gate.fetch_add(1, Ordering::SeqCst);
+        if gate & DEAD == 0 && self.ready() {
+            self.armed.store(expires, Ordering::Relaxed);
+            // READY, so the timer is initialised (type invariant) with the
+            // mode passed here, as hrtimer_start_range_ns requires (the
+            // soft bit must match). The core serialises concurrent starts
+            // and cancels with the timer base lock.
+            // SAFETY: initialised timer, matching mode (above).
+            unsafe {
+                bindings::hrtimer_start_range_ns(
+                    self.timer.get(),
+                    expires,
+                    0,
+                    self.mode.load(Ordering::Relaxed),
+                )
+            };
+        }
+        self.gate.fetch_sub(1, Ordering::SeqCst);
+    }
+
+    fn cancel(&self) -> bool {
         if !self.ready() {
             return false;
         }
         // SAFETY: READY, so the timer is initialised (type invariant).
         unsafe { bindings::hrtimer_cancel(self.timer.get()) != 0 }
+    }
+
+    /// Makes every later `start` a no-op and waits for those in progress
+    /// (each is a few instructions and a `hrtimer_start`, which does not
+    /// sleep; one preempted in process context resumes, the kernel being
+    /// preemptible or the waiter not holding the CPU forever: it spins
+    /// with preemption enabled).
+    fn forbid_start(&self) {
+        self.gate.fetch_or(DEAD, Ordering::SeqCst);
+        while self.gate.load(Ordering::SeqCst) & !DEAD != 0 {
+            core::hint::spin_loop();
+        }
+    }
+}
+
+/// Kills every timer of the module: none can be started any more, none is
+/// queued, no callback runs. All are forbidden to start before any is
+/// cancelled, so a callback of one cannot re-arm another already cancelled.
+/// Idempotent. Module exit ([`Scoped`](super::module::Scoped)), process
+/// context: waits for running callbacks.
+pub(super) fn kill_all() {
+    let head = TIMERS.load(Ordering::Acquire);
+    for_each(head, Core::forbid_start);
+    for_each(head, |c| {
+        c.cancel();
+    });
+}
+
+fn for_each(head: *mut Core, mut f: impl FnMut(&Core)) {
+    let mut p = head;
+    while !p.is_null() {
+        // SAFETY: the list holds only `&'static Core`s (pushed by `init`
+        // from `&'static self`), never unlinked.
+        let c: &'static Core = unsafe { &*p };
+        f(c);
+        p = c.next.load(Ordering::Acquire);
     }
 }
 
@@ -218,7 +326,8 @@ impl<H: HrTimerCallback> HrTimer<H> {
 unsafe extern "C" fn run<H: HrTimerCallback>(
     t: *mut bindings::hrtimer,
 ) -> bindings::hrtimer_restart {
-    // CAST: `timer` is the first field of the `#[repr(C)]` `HrTimer<H>`.
+    // CAST: `timer` is the first field of the `#[repr(C)]` `Core`, the
+    // first field of the `#[repr(C)]` `HrTimer<H>`.
     let this = t as *const HrTimer<H>;
     // SAFETY: `init` installs `run::<H>` only on `HrTimer<H>`s, which are
     // 'static (init takes `&'static self`); shared access is all we need.

@@ -12,7 +12,8 @@
 //! One file per kernel concept: [`sync`] (RCU, RTNL, C-defined mutexes),
 //! [`lock`] (spinlocks and wait queues, each with its own lockdep class),
 //! [`skb`] (owned socket buffers), [`sock`] (socket protocols from a Rust
-//! trait), [`netdev`] (network devices from a Rust trait), [`hrtimer`]
+//! trait), [`netdev`] (network devices from a Rust trait), [`module`] (a
+//! module's exit duties, owned by the glue), [`hrtimer`]
 //! (high-resolution timers in statics), [`jobtimer`] (timers of jobs
 //! allocated at run time, cancelled when dropped), [`pci`] (PCI drivers and BARs),
 //! [`isa`] (claimed memory/port windows, interrupt autoprobe), [`percpu`]
@@ -54,6 +55,7 @@ pub(crate) mod jobtimer;
 pub(crate) mod kaddr;
 pub(crate) mod kmod;
 pub(crate) mod lock;
+pub(crate) mod module;
 pub(crate) mod net;
 pub(crate) mod netdev;
 pub(crate) mod params;

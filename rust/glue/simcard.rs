@@ -10,7 +10,7 @@
 //! A front-end describes its bus with [`SimBus`] (the models of its
 //! cards, one attempt to send, the interrupt outputs, the register file,
 //! the driver's probe of a card), keeps one [`SimCards`] in a `static`
-//! and names [`SimModule<Bus>`](SimModule) as its module type; this file
+//! and names `Scoped<SimModule<Bus>>` ([`SimModule`]) as its module type; this file
 //! does the rest:
 //!
 //! * The bus: every card's model lives in one value under one spinlock
@@ -67,6 +67,7 @@
 use super::hrtimer::ktime_get_mono_ns;
 use super::hrtimer::{ClockId, HrTimer, HrTimerCallback, HrTimerMode};
 use super::lock::StaticIrqSpinLock;
+use super::module::{ModuleScope, ScopedModule};
 use super::params::ParamStr;
 use core::marker::PhantomData;
 use core::sync::atomic::{AtomicBool, AtomicI64, Ordering};
@@ -301,6 +302,7 @@ impl<B: SimBus> SimCards<B> {
     /// [`SimCards::stop`]. Process context (module init).
     pub(crate) fn start(
         &'static self,
+        scope: &ModuleScope,
         n: usize,
         add: impl FnMut(usize) -> Result<Option<B::Card>>,
     ) -> Result {
@@ -308,7 +310,7 @@ impl<B: SimBus> SimCards<B> {
             pr_err!("{}: cards must be 1..={}\n", B::NAME, MAX_CARDS);
             return Err(EINVAL);
         }
-        let r = self.start_cards(n, add);
+        let r = self.start_cards(scope, n, add);
         if r.is_err() {
             // The cards registered so far are already unregistered (the
             // local vector is gone).
@@ -319,13 +321,14 @@ impl<B: SimBus> SimCards<B> {
 
     fn start_cards(
         &'static self,
+        scope: &ModuleScope,
         n: usize,
         mut add: impl FnMut(usize) -> Result<Option<B::Card>>,
     ) -> Result {
         let bus = B::alloc(n)?;
         *self.bus.lock() = Some(bus);
         self.timer
-            .init(ClockId::Monotonic, HrTimerMode::RelativeSoft, ())?;
+            .init(scope, ClockId::Monotonic, HrTimerMode::RelativeSoft, ())?;
         self.dying.store(false, Ordering::SeqCst);
         let mut cards = KVec::with_capacity(n, GFP_KERNEL)?;
         for i in 0..n {
@@ -447,15 +450,16 @@ pub(crate) fn param_word<'a>(p: &ParamStr, buf: &'a mut [u8; FAULT_LEN]) -> &'a 
     buf[..n].trim_ascii()
 }
 
-/// The module of a simulated-card front-end (its `module!` type, through
-/// a type alias): init puts the bus in place and registers the cards
-/// ([`SimCards::start`] with [`SimBus::cards_param`] and
-/// [`SimBus::add_card`]); exit tears it down ([`SimCards::stop`]).
+/// The module of a simulated-card front-end (its `module!` type is
+/// `Scoped<SimModule<Bus>>`, through a type alias): init puts the bus in
+/// place and registers the cards ([`SimCards::start`] with
+/// [`SimBus::cards_param`] and [`SimBus::add_card`]); exit tears it down
+/// ([`SimCards::stop`]).
 pub(crate) struct SimModule<B: SimBus>(PhantomData<fn() -> B>);
 
-impl<B: SimBus> kernel::Module for SimModule<B> {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
-        B::sim().start(B::cards_param(), B::add_card)?;
+impl<B: SimBus> ScopedModule for SimModule<B> {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
+        B::sim().start(scope, B::cards_param(), B::add_card)?;
         Ok(SimModule(PhantomData))
     }
 }

@@ -60,8 +60,9 @@ pub(crate) fn synchronize_rcu() {
 }
 
 /// Waits for all pending `call_rcu` callbacks. Process context; sleeps.
-/// Module exit calls it so no callback runs after the code is gone.
-pub(crate) fn rcu_barrier() {
+/// The glue's module exit calls it ([`super::module::Scoped`]) so that no
+/// callback runs after the code is gone.
+pub(super) fn rcu_barrier() {
     // SAFETY: callers are in process context (documented contract).
     unsafe { bindings::rcu_barrier() };
 }

@@ -58,6 +58,7 @@ use kernel::prelude::*;
 
 use crate::engine::{new_engine, now_ms, ENGINE, LOADED_MS, NODE, WAITQ};
 use crate::glue::hrtimer::{ClockId, HrTimerMode};
+use crate::glue::module::{ModuleScope, ScopedModule};
 use crate::glue::neterr;
 use crate::params::load_config;
 use crate::rcan_api::{self, KernelRxReg, ProtoRegistration, RxFilter, RX_FILTER_CAN_ID};
@@ -119,14 +120,14 @@ fn register_all(node: u8, canip: bool) -> Result<Regs> {
     })
 }
 
-impl kernel::Module for DsorModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
+impl ScopedModule for DsorModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
         let cfg = load_config()?;
         let (node, canip, ifname) = (cfg.node, cfg.canip, cfg.ifname);
         let engine = new_engine(cfg)?;
         NODE.store(u32::from(node), Ordering::Relaxed);
         LOADED_MS.store(now_ms(), Ordering::Relaxed);
-        TIMER.init(ClockId::Monotonic, HrTimerMode::AbsoluteSoft, ())?;
+        TIMER.init(scope, ClockId::Monotonic, HrTimerMode::AbsoluteSoft, ())?;
         *ENGINE.lock() = Some(engine);
         match register_all(node, canip) {
             Ok(regs) => {

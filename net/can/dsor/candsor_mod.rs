@@ -25,7 +25,9 @@ mod stats;
 mod timers;
 mod udpip;
 
-use candsor::DsorModule;
+/// `module!` takes a plain name: the glue's wrapper, which owns the exit
+/// duties (rust/glue/module.rs).
+type DsorModule = glue::module::Scoped<candsor::DsorModule>;
 
 // `alias`: what rcan_pf requests on socket(PF_CAN, ..., CANPROTO_DSOR) while
 // no module has registered protocol 17 (`request_proto_module` in

@@ -25,6 +25,7 @@
 
 use kernel::prelude::*;
 
+use crate::glue::module::{ModuleScope, ScopedModule};
 use crate::ticker;
 use crate::{glue, rcan_api, rcan_core};
 
@@ -71,8 +72,8 @@ pub(crate) struct RtimeModule {
     _rx: KernelRxReg<TimeRx>,
 }
 
-impl kernel::Module for RtimeModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
+impl ScopedModule for RtimeModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
         let p = ticker::params();
         // Exactly the standard data frame `vehicle`.
         let filter = RxFilter {
@@ -81,7 +82,7 @@ impl kernel::Module for RtimeModule {
             mask: CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG,
         };
         let rx = rcan_api::rx_set_kernel(&RX, 0, &[filter])?;
-        ticker::start(true)?;
+        ticker::start(scope, true)?;
         pr_info!(
             "{}: redundant time service for frame {:03x}: passive, takeover after {} ms of silence\n",
             p.dev.as_str(),

@@ -19,7 +19,9 @@ mod ticker_abi;
 
 mod rtime;
 
-use rtime::RtimeModule;
+/// `module!` takes a plain name: the glue's wrapper, which owns the exit
+/// duties (rust/glue/module.rs).
+type RtimeModule = glue::module::Scoped<rtime::RtimeModule>;
 
 module! {
     type: RtimeModule,

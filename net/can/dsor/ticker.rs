@@ -57,6 +57,7 @@ use kernel::prelude::*;
 use kernel::str::CStr;
 
 use crate::glue::can::skb::alloc_frame;
+use crate::glue::module::ModuleScope;
 use crate::glue::hrtimer::{
     ktime_get_mono_ns, ktime_get_real_ns, ClockId, HrTimer, HrTimerCallback, HrTimerMode,
 };
@@ -391,7 +392,7 @@ static WATCH: HrTimer<Watch> = HrTimer::new();
 /// Starts the ticker: `rcan_time` (`redundant` false, source 1) or
 /// `rcan_rtime` (true, source 2, passive for `timeout_ms` first). Module
 /// init, process context.
-pub(crate) fn start(redundant: bool) -> Result<Params> {
+pub(crate) fn start(scope: &ModuleScope, redundant: bool) -> Result<Params> {
     // rcan_time only sends: nothing it registers checks the ABI for it.
     rcan_api::abi_check()?;
     let params = params();
@@ -409,8 +410,8 @@ pub(crate) fn start(redundant: bool) -> Result<Params> {
         dev_state: DevState::Sending,
         due_mono: arm.due_mono,
     };
-    TICK.init(ClockId::RealTime, HrTimerMode::AbsoluteSoft, state)?;
-    WATCH.init(ClockId::Monotonic, HrTimerMode::AbsoluteSoft, ())?;
+    TICK.init(scope, ClockId::RealTime, HrTimerMode::AbsoluteSoft, state)?;
+    WATCH.init(scope, ClockId::Monotonic, HrTimerMode::AbsoluteSoft, ())?;
     TICK.start(arm.real);
     WATCH.start(arm.watchdog_mono);
     Ok(params)

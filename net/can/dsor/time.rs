@@ -16,13 +16,14 @@
 
 use kernel::prelude::*;
 
+use crate::glue::module::{ModuleScope, ScopedModule};
 use crate::ticker;
 
 pub(crate) struct TimeModule;
 
-impl kernel::Module for TimeModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
-        let p = ticker::start(false)?;
+impl ScopedModule for TimeModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
+        let p = ticker::start(scope, false)?;
         pr_info!(
             "{}: sending time frame {:03x} at every second\n",
             p.dev.as_str(),

@@ -19,7 +19,9 @@ mod ticker_abi;
 
 mod time;
 
-use time::TimeModule;
+/// `module!` takes a plain name: the glue's wrapper, which owns the exit
+/// duties (rust/glue/module.rs).
+type TimeModule = glue::module::Scoped<time::TimeModule>;
 
 module! {
     type: TimeModule,

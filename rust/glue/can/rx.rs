@@ -749,6 +749,8 @@ unsafe fn defer(
     head: *mut bindings::callback_head,
     func: unsafe extern "C" fn(*mut bindings::callback_head),
 ) {
+    // `func` is this module's: its exit must wait for it (rcu_barrier).
+    crate::glue::module::note_rcu_callback();
     // SAFETY: per the caller's contract.
     unsafe { bindings::call_rcu(head, Some(func)) };
 }
@@ -1620,8 +1622,8 @@ impl<R: Receiver> RxTable<R> {
     /// Module exit (or a namespace's), once every receiver is removed:
     /// frees the writer's bookkeeping and the group snapshot; false (with
     /// a warning) if receivers are left, whose registrations then leak.
-    /// Process context; sleeps. The caller runs `rcu_barrier` before its
-    /// module goes.
+    /// Process context; sleeps. The module's exit waits for the
+    /// callbacks queued here (`rcu_barrier`, [`crate::glue::module::Scoped`]).
     pub(crate) fn shutdown(&self) -> bool {
         let mut empty = true;
         let old = {

@@ -248,4 +248,4 @@ impl Regs for SimRegs {
 }
 
 /// The module: its state is in [`SIM`], set up and torn down by the glue.
-pub(crate) type SimModule = simcard::SimModule<Bus>;
+pub(crate) type SimModule = glue::module::Scoped<simcard::SimModule<Bus>>;
