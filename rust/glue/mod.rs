@@ -11,8 +11,8 @@
 //!
 //! One file per kernel concept: [`sync`] (RCU, RTNL, C-defined mutexes),
 //! [`lock`] (spinlocks and wait queues, each with its own lockdep class),
-//! [`skb`] (owned socket buffers), [`sock`] (socket protocols from a Rust
-//! trait), [`netdev`] (network devices from a Rust trait), [`hrtimer`]
+//! [`skb`] (owned socket buffers, typed by ownership: read-only, sole
+//! holder, unique), [`sock`] (socket protocols from a Rust trait), [`netdev`] (network devices from a Rust trait), [`hrtimer`]
 //! (high-resolution timers in statics), [`jobtimer`] (timers of jobs
 //! allocated at run time, cancelled when dropped), [`pci`] (PCI drivers and BARs),
 //! [`isa`] (claimed memory/port windows, interrupt autoprobe), [`percpu`]

@@ -409,6 +409,10 @@ pub(crate) trait Driver: Sized + 'static {
     fn setup() -> Setup;
     fn open(dev: &Dev<Self>, priv_: &Self::Priv) -> Result;
     fn stop(dev: &Dev<Self>, priv_: &Self::Priv) -> Result;
+    /// The transmit path of `dev` (BH off, TX lock held). The skb is a
+    /// [`Skb`], read-only: the stack may hold other references and taps
+    /// clones; [`Skb::can_xmit_start`] makes it the driver's own
+    /// ([`OwnedSkb`]) to keep for the echo.
     fn start_xmit(skb: Skb, dev: &Dev<Self>, priv_: &Self::Priv) -> Xmit;
     /// The receive mode changed (IFF_PROMISC, ...). Atomic context.
     fn set_rx_mode(_dev: &Dev<Self>, _priv: &Self::Priv) {}
@@ -841,8 +845,8 @@ impl<T: Driver> Adapter<T> {
         skb: *mut bindings::sk_buff,
         dev: *mut bindings::net_device,
     ) -> bindings::netdev_tx_t {
-        // SAFETY: the kernel hands us one skb reference and a registered
-        // device of ours.
+        // SAFETY: the kernel hands us one skb reference (a `Skb`: others
+        // may hold more) and a registered device of ours.
         let (skb, d, p) = unsafe {
             match Skb::from_raw(skb) {
                 Some(s) => (s, Dev::<T>::from_raw(dev), Self::priv_of(dev)),
