@@ -73,7 +73,7 @@ use glue::net::Net;
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::procfs::{NetProcDir, NetProcDirReg, ProcEntry, ProcShow, SeqFile};
-use glue::skb::Skb;
+use glue::skb::UniqueSkb;
 use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
 use glue::sync::Rtnl;
 use kernel::c_str;
@@ -199,7 +199,7 @@ struct RxState {
 /// received frame makes at most one per matching operation, and at most
 /// two operations of a socket match a frame (its interface's and "any"'s).
 struct Pending {
-    sends: [Option<(Skb, DevRef)>; 2],
+    sends: [Option<(UniqueSkb, DevRef)>; 2],
 }
 
 impl Pending {
@@ -209,7 +209,7 @@ impl Pending {
         }
     }
 
-    fn push(&mut self, skb: Skb, dev: DevRef) {
+    fn push(&mut self, skb: UniqueSkb, dev: DevRef) {
         if let Some(slot) = self.sends.iter_mut().find(|s| s.is_none()) {
             *slot = Some((skb, dev));
         }
@@ -234,7 +234,7 @@ impl Pending {
 
 /// An skb carrying one frame image (`bytes`, `cfsiz` long) for `dev`,
 /// owned by `sk`. Any context (GFP_ATOMIC).
-fn frame_skb(sk: &S, dev: &NetDev, bytes: &[u8]) -> Option<Skb> {
+fn frame_skb(sk: &S, dev: &NetDev, bytes: &[u8]) -> Option<UniqueSkb> {
     glue::can::skb::alloc_image_for(sk, dev, bytes, glue::GFP_ATOMIC)
 }
 
@@ -245,7 +245,7 @@ fn frame_skb(sk: &S, dev: &NetDev, bytes: &[u8]) -> Option<Skb> {
 /// `state` may be held; a full receive queue drops it, as mainline.
 fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32, tstamp: i64) {
     let len: usize = MHSIZ + frames.iter().map(|f| f.len()).sum::<usize>();
-    let Some(mut skb) = Skb::alloc(len as u32, glue::GFP_ATOMIC) else {
+    let Some(mut skb) = UniqueSkb::alloc(len as u32, glue::GFP_ATOMIC) else {
         return;
     };
     if !skb.put_data(&head.to_bytes()) || !frames.iter().all(|f| skb.put_data(f)) {
@@ -255,7 +255,7 @@ fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32, t
     if tstamp != 0 {
         skb.set_tstamp(tstamp);
     }
-    if sk.queue_rcv(skb).is_err() {
+    if sk.queue_rcv(skb.into_owned()).is_err() {
         // Mainline's dropped_usr_msgs.
         sk.shared().dropped.fetch_add(1, Ordering::Relaxed);
     }
@@ -849,7 +849,7 @@ impl CanProtocol for BcmProto {
         };
         let fd = frame.is_fd();
         let can_id = frame.can_id();
-        let ifindex = s.ifindex();
+        let ifindex = skb.ifindex();
         let tstamp = s.tstamp();
         let mut traffic = 0;
         if s.is_local() {

@@ -77,11 +77,12 @@ impl CanProtocol for CanProtoOps {
             skb.done();
             return;
         }
+        // The receiving interface may be gone by the time recvmsg runs:
+        // its index is read now, while the callback holds it.
+        let ifindex = skb.ifindex();
         let Some(mut skb) = skb.into_owned() else {
             return;
         };
-        // The receiving interface may be gone by the time recvmsg runs.
-        let ifindex = skb.ifindex();
         skb.set_cb_u32(0, ifindex as u32);
         // A full receive queue drops the frame (counted by the socket layer).
         let _ = sk.queue_rcv(skb);

@@ -53,8 +53,8 @@ use family::{Family, RxRequest, Target};
 use glue::can::rx::{RcvHandle, RxTable, Spec};
 use glue::net::Net;
 use glue::netdev::NetDev;
-use glue::skb::Skb;
 use glue::module::{ModuleScope, ScopedModule};
+use glue::skb::{Skb, UniqueSkb};
 use glue::sync::RcuReadGuard;
 use rcan_api::{RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use rcan_core::filter::ArbFilter;
@@ -199,15 +199,15 @@ impl Family for PfCan {
     /// as mainline sets it); an FD frame on a classic device (MTU 16) is
     /// EMSGSIZE here (CAN_RAW refuses it earlier, with EINVAL).
     #[inline]
-    fn send(mut skb: Skb, dev: &NetDev, loopback: bool) -> Result {
+    fn send(mut skb: UniqueSkb, dev: &NetDev, loopback: bool) -> Result {
         // Mainline can_send's checks; the frame itself is not needed here
         // (the driver reads it).
         let Some(fd) = AnyFrame::kind(skb.data()) else {
             return Err(EINVAL);
         };
         if fd {
-            // The caller built this skb and has not shared it (the
-            // rcan_send contract), so it is ours to write.
+            // The caller gave us the only reference to an uncloned skb
+            // (`UniqueSkb`), so it is ours to write.
             if let Some(flags) = skb.data_mut().get_mut(5) {
                 *flags |= CANFD_FDF;
             }
@@ -221,13 +221,16 @@ impl Family for PfCan {
         if !dev.is_up() {
             return Err(glue::neterr::ENETDOWN());
         }
-        skb.set_can_tx(dev, loopback);
+        skb.set_can_tx(loopback);
+        // From here on the data is read-only: it may be shared with the
+        // echo's clone.
+        let skb = skb.into_owned();
         // A device without IFF_ECHO cannot loop the frame back itself: local
         // receivers get a copy that still names the sending socket, marked as
         // mainline's can_send marks it (PACKET_BROADCAST), through netif_rx.
         let echo = if loopback && !dev.has_echo() {
             let mut e = skb.clone_with_owner().ok_or(ENOMEM)?;
-            e.set_can_rx(dev);
+            e.set_can_rx();
             Some(e)
         } else {
             None

@@ -220,10 +220,12 @@ impl CanProtocol for RawProto {
         if own {
             flags |= glue::msg::CONFIRM;
         }
+        // The receiving device is lent for this call only: its index is
+        // read now and kept in the cb.
+        let ifindex = skb.ifindex();
         let Some(mut skb) = skb.into_owned() else {
             return;
         };
-        let ifindex = skb.ifindex();
         glue::can::skb::set_rx_meta(&mut skb, ifindex, flags);
         // A full receive queue drops the frame (counted by the socket layer).
         let _ = sk.queue_rcv(skb);

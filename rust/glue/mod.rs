@@ -11,8 +11,9 @@
 //!
 //! One file per kernel concept: [`sync`] (RCU, RTNL, C-defined mutexes),
 //! [`lock`] (spinlocks and wait queues, each with its own lockdep class),
-//! [`skb`] (owned socket buffers), [`sock`] (socket protocols from a Rust
-//! trait), [`netdev`] (network devices from a Rust trait), [`module`] (a
+//! [`skb`] (owned socket buffers, typed by ownership: read-only, sole
+//! holder, unique), [`sock`] (socket protocols from a Rust trait),
+//! [`netdev`] (network devices from a Rust trait), [`module`] (a
 //! module's exit duties, owned by the glue), [`hrtimer`]
 //! (high-resolution timers in statics), [`jobtimer`] (timers of jobs
 //! allocated at run time, cancelled when dropped), [`pci`] (PCI drivers and BARs),

@@ -14,7 +14,7 @@
 
 use super::bindings;
 use super::net::Net;
-use super::skb::Skb;
+use super::skb::{OwnedSkb, Skb};
 use super::sync::{RcuReadGuard, Rtnl};
 use core::marker::PhantomData;
 use core::ptr::NonNull;
@@ -240,9 +240,17 @@ impl NetDev {
     /// never in process context with interrupts off (under an irqsave
     /// lock), where `netif_rx`'s `local_bh_enable` warns and may run
     /// NET_RX, and with it receivers that transmit, on the spot.
-    pub(crate) fn rx(&self, skb: Skb) {
-        let _ = self;
-        // SAFETY: netif_rx consumes the skb reference in every case.
+    ///
+    /// `skb->dev` becomes this device here, at the hand-off, so the skb
+    /// reaches the stack with a live device and never with a NULL or
+    /// stale one; from the backlog on, unregistering the device flushes
+    /// the skb before the device goes (`flush_all_backlogs`).
+    pub(crate) fn rx(&self, mut skb: OwnedSkb) {
+        // SAFETY: handed to the kernel right below, `self` borrowed
+        // meanwhile.
+        unsafe { skb.set_dev(self) };
+        // SAFETY: netif_rx consumes the skb reference in every case; its
+        // `dev` is this device, live for the call (`&self`).
         unsafe { bindings::netif_rx(skb.into_raw()) };
     }
 }
@@ -401,6 +409,10 @@ pub(crate) trait Driver: Sized + 'static {
     fn setup() -> Setup;
     fn open(dev: &Dev<Self>, priv_: &Self::Priv) -> Result;
     fn stop(dev: &Dev<Self>, priv_: &Self::Priv) -> Result;
+    /// The transmit path of `dev` (BH off, TX lock held). The skb is a
+    /// [`Skb`], read-only: the stack may hold other references and taps
+    /// clones; [`Skb::can_xmit_start`] makes it the driver's own
+    /// ([`OwnedSkb`]) to keep for the echo.
     fn start_xmit(skb: Skb, dev: &Dev<Self>, priv_: &Self::Priv) -> Xmit;
     /// The receive mode changed (IFF_PROMISC, ...). Atomic context.
     fn set_rx_mode(_dev: &Dev<Self>, _priv: &Self::Priv) {}
@@ -452,8 +464,13 @@ pub(crate) trait Driver: Sized + 'static {
 /// Proof of running inside a device's NAPI poll (NET_RX softirq,
 /// interrupts enabled), handed to [`Driver::poll`]; only the glue makes
 /// one.
+///
+/// # Invariants
+///
+/// `dev` is the polled device, live while the `Napi` is (the glue lends
+/// a `Napi` only by reference, for the poll).
 pub(crate) struct Napi {
-    _private: (),
+    dev: NonNull<NetDev>,
     _not_send: PhantomData<*mut ()>,
 }
 
@@ -461,10 +478,17 @@ impl Napi {
     /// Hands a received frame to the protocol handlers at once
     /// (`netif_receive_skb`: packet taps, tc ingress, pf_can's `can_rcv`),
     /// in this NET_RX softirq. Consumes `skb`.
-    pub(crate) fn receive(&self, skb: Skb) {
+    /// `skb->dev` becomes the polled device here, at the hand-off (as
+    /// [`NetDev::rx`] does).
+    pub(crate) fn receive(&self, mut skb: OwnedSkb) {
+        // SAFETY: `dev` is the polled device, live for the poll (type
+        // invariant), and `&self` does not outlive the poll; the skb is
+        // handed to the kernel right below.
+        unsafe { skb.set_dev(self.dev.as_ref()) };
         // SAFETY: we are in a NAPI poll (only the glue makes a `Napi`, and
         // only there): softirq context with interrupts enabled, which is
-        // what netif_receive_skb requires; it consumes the reference.
+        // what netif_receive_skb requires; it consumes the reference; its
+        // `dev` is the polled device (just set).
         unsafe { bindings::netif_receive_skb(skb.into_raw()) };
     }
 
@@ -476,7 +500,7 @@ impl Napi {
     /// the frame goes up, so the protocol handlers run unlocked, with
     /// interrupts on, and may send on the same device.
     #[inline]
-    pub(crate) fn drain(&self, budget: usize, mut pop: impl FnMut() -> Option<Skb>) -> usize {
+    pub(crate) fn drain(&self, budget: usize, mut pop: impl FnMut() -> Option<OwnedSkb>) -> usize {
         let mut done = 0;
         while done < budget {
             let Some(skb) = pop() else {
@@ -802,8 +826,10 @@ impl<T: Driver> Adapter<T> {
         // SAFETY: as above: a registered device of ours.
         let (d, p) = unsafe { (Dev::<T>::from_raw(dev), Self::priv_of(dev)) };
         let budget = usize::try_from(budget).unwrap_or(0);
+        // INVARIANT: the polled device, live for the poll; the token is
+        // lent to `T::poll` by reference only.
         let token = Napi {
-            _private: (),
+            dev: NonNull::from(&**d),
             _not_send: PhantomData,
         };
         let done = T::poll(d, p, &token, budget).min(budget);
@@ -819,8 +845,8 @@ impl<T: Driver> Adapter<T> {
         skb: *mut bindings::sk_buff,
         dev: *mut bindings::net_device,
     ) -> bindings::netdev_tx_t {
-        // SAFETY: the kernel hands us one skb reference and a registered
-        // device of ours.
+        // SAFETY: the kernel hands us one skb reference (a `Skb`: others
+        // may hold more) and a registered device of ours.
         let (skb, d, p) = unsafe {
             match Skb::from_raw(skb) {
                 Some(s) => (s, Dev::<T>::from_raw(dev), Self::priv_of(dev)),

@@ -15,7 +15,7 @@
 //! protocol is `rcan_core::slotring::SlotRing`, host-tested with two
 //! threads.
 
-use super::skb::Skb;
+use super::skb::OwnedSkb;
 use crate::rcan_core::ring::RingIndex;
 use crate::rcan_core::slotring::SlotRing;
 use core::sync::atomic::AtomicUsize;
@@ -90,7 +90,7 @@ pub(crate) struct SkbRing {
 // this says why that is right.
 const _: () = {
     const fn skb_is_send<T: Send>() {}
-    skb_is_send::<Skb>()
+    skb_is_send::<OwnedSkb>()
 };
 
 impl SkbRing {
@@ -108,22 +108,22 @@ impl SkbRing {
     /// Appends `skb` as the newest entry (producer side); gives it back if
     /// the ring is full.
     #[inline]
-    pub(crate) fn push(&self, skb: Skb) -> core::result::Result<(), Skb> {
+    pub(crate) fn push(&self, skb: OwnedSkb) -> core::result::Result<(), OwnedSkb> {
         self.ring.push(skb.into_addr()).map_err(|a| {
             // SAFETY: `a` is the address `into_addr` just gave, which the
             // ring did not take: taken back once, here.
-            unsafe { Skb::from_addr(a) }
+            unsafe { OwnedSkb::from_addr(a) }
         })
     }
 
     /// Takes the oldest entry (consumer side).
     #[inline]
-    pub(crate) fn pop(&self) -> Option<Skb> {
+    pub(crate) fn pop(&self) -> Option<OwnedSkb> {
         let a = self.ring.pop()?;
         // SAFETY: a non-zero slot holds an address from `into_addr`
         // (`push`); the swap that took it out left 0 there, so it is taken
         // back once.
-        Some(unsafe { Skb::from_addr(a) })
+        Some(unsafe { OwnedSkb::from_addr(a) })
     }
 
     /// True if the consumer's next slot is empty now (consumer side).
@@ -138,7 +138,7 @@ impl Drop for SkbRing {
     fn drop(&mut self) {
         while let Some(a) = self.ring.take_any() {
             // SAFETY: as in `pop`: an address from `into_addr`, taken once.
-            drop(unsafe { Skb::from_addr(a) });
+            drop(unsafe { OwnedSkb::from_addr(a) });
         }
     }
 }

@@ -15,7 +15,7 @@
 
 use super::bindings;
 use super::net::Net;
-use super::skb::Skb;
+use super::skb::{OwnedSkb, Shared, Skb, UniqueSkb};
 use core::marker::PhantomData;
 use kernel::error::{code, Error, Result};
 use kernel::ffi;
@@ -257,23 +257,25 @@ impl<T: Proto> Sock<T> {
 
     /// Queues `skb` on the receive queue (charging the receive buffer) and
     /// wakes readers. Softirq or process context. The skb is freed if the
-    /// queue is full.
+    /// queue is full. It must be ours alone ([`OwnedSkb`]): the queue makes
+    /// the socket its owner (`skb_set_owner_r`) and keeps its `cb`.
     #[inline(always)]
-    pub(crate) fn queue_rcv(&self, skb: Skb) -> Result {
+    pub(crate) fn queue_rcv(&self, skb: OwnedSkb) -> Result {
         let p = skb.into_raw();
         // SAFETY: live sock; on success the queue owns the skb. This is
         // the inline sock_queue_rcv_skb (no drop reason asked for).
         let ret = unsafe { bindings::sock_queue_rcv_skb_reason(self.sk, p, core::ptr::null_mut()) };
         if ret < 0 {
             // SAFETY: on failure the reference is still ours.
-            drop(unsafe { Skb::from_raw(p) });
+            drop(unsafe { Skb::<Shared>::from_raw(p) });
             return Err(Error::from_errno(ret));
         }
         Ok(())
     }
 
     /// Waits for and dequeues one skb (`skb_recv_datagram`), honouring
-    /// MSG_DONTWAIT, MSG_PEEK, SO_RCVTIMEO and pending `sk_err`.
+    /// MSG_DONTWAIT, MSG_PEEK, SO_RCVTIMEO and pending `sk_err`. A
+    /// [`Skb`], read-only: with MSG_PEEK it is still on the queue.
     #[inline(always)]
     pub(crate) fn recv_datagram(&self, flags: i32) -> Result<Skb> {
         let mut err: ffi::c_int = 0;
@@ -296,14 +298,14 @@ impl<T: Proto> Sock<T> {
     /// full unless `nonblock` (then EAGAIN); honours SO_SNDTIMEO.
     /// Inline: it is a call and an error conversion on every frame sent.
     #[inline]
-    pub(crate) fn alloc_send_skb(&self, size: u32, nonblock: bool) -> Result<Skb> {
+    pub(crate) fn alloc_send_skb(&self, size: u32, nonblock: bool) -> Result<UniqueSkb> {
         let mut err: ffi::c_int = 0;
         // SAFETY: live sock; `err` is a valid place for the error. This is
         // the body of the inline sock_alloc_send_skb (no paged part).
         let skb = unsafe {
             bindings::sock_alloc_send_pskb(self.sk, size as _, 0, nonblock as i32, &mut err, 0)
         };
-        // SAFETY: an owned skb or NULL with `err` set.
+        // SAFETY: a fresh skb (one user, not cloned) or NULL with `err` set.
         unsafe { Skb::from_raw(skb) }.ok_or_else(|| Error::from_errno(err))
     }
 

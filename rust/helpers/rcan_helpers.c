@@ -146,6 +146,28 @@ struct sk_buff *rcan_skb_clone_owned(struct sk_buff *skb, gfp_t gfp)
 	return n;
 }
 
+/* skb_unshare for a writer: @skb itself if it is neither shared nor
+ * cloned, else a private copy (keeping the sending socket, as
+ * can_skb_set_owner) with @skb released, or NULL without memory (@skb
+ * freed). Takes and returns one reference.
+ */
+struct sk_buff *rcan_skb_unshare(struct sk_buff *skb, gfp_t gfp)
+{
+	struct sk_buff *n;
+
+	if (!skb_shared(skb) && !skb_cloned(skb))
+		return skb;
+	n = skb_copy(skb, gfp);
+	if (!n) {
+		kfree_skb(skb);
+		return NULL;
+	}
+	if (skb->sk)
+		can_skb_set_owner(n, skb->sk);
+	consume_skb(skb);
+	return n;
+}
+
 int rcan_skb_copy_datagram_msg(const struct sk_buff *skb, int offset,
 			       struct msghdr *msg, int size)
 {
@@ -522,9 +544,9 @@ void *rcan_skb_push(struct sk_buff *skb, unsigned int len)
 	return skb_push(skb, len);
 }
 
-void rcan_skb_set_ipv4_rx(struct sk_buff *skb, struct net_device *dev)
+/* skb->dev is set by the hand-off to the stack (NetDev::rx). */
+void rcan_skb_set_ipv4_rx(struct sk_buff *skb)
 {
-	skb->dev = dev;
 	skb->protocol = htons(ETH_P_IP);
 	skb->pkt_type = PACKET_HOST;
 	skb->ip_summed = CHECKSUM_UNNECESSARY;

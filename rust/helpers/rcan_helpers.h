@@ -156,7 +156,8 @@ long rcan_sock_sndtimeo(const struct sock *sk, bool nonblock);
 /* skb data and IPv4 delivery */
 bool rcan_skb_put_zero(struct sk_buff *skb, unsigned int len);
 void *rcan_skb_push(struct sk_buff *skb, unsigned int len);
-void rcan_skb_set_ipv4_rx(struct sk_buff *skb, struct net_device *dev);
+void rcan_skb_set_ipv4_rx(struct sk_buff *skb);
+struct sk_buff *rcan_skb_unshare(struct sk_buff *skb, gfp_t gfp);
 unsigned long rcan_jiffies(void);
 unsigned long rcan_msecs_to_jiffies(unsigned int ms);
 

@@ -227,7 +227,7 @@ impl Driver for LoopDriver {
         // Reflect: the skb (ours to re-mark, can_xmit_start saw to it)
         // comes back as a received, locally originated frame (mainline
         // can_create_echo_skb + vcan_rx).
-        skb.set_can_rx(dev);
+        skb.set_can_rx();
         let queued = p.push(skb);
         match queued {
             Ok(()) => dev.stats_rx(bytes),

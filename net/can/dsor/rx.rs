@@ -15,7 +15,7 @@ use core::sync::atomic::Ordering;
 use crate::engine::{now_ms, Bind, ENGINE, NODE, WAITQ};
 use crate::glue;
 use crate::glue::netdev::NetDev;
-use crate::glue::skb::Skb;
+use crate::glue::skb::{OwnedSkb, Skb, UniqueSkb};
 use crate::params::Config;
 use crate::rcan_api::KernelRx;
 use crate::rcan_core::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_ERR_FLAG, CAN_RTR_FLAG};
@@ -31,7 +31,7 @@ use crate::udpip;
 const RX_HEADROOM: u32 = crate::rcan_core::dsor_udp::HDR_LEN as u32 + 2;
 
 /// A reassembly buffer: an skb with room in front for canip0's headers.
-pub(crate) struct RxBuf(Skb);
+pub(crate) struct RxBuf(UniqueSkb);
 
 impl AsMut<[u8]> for RxBuf {
     fn as_mut(&mut self) -> &mut [u8] {
@@ -72,7 +72,7 @@ pub(crate) fn deliver(
         MsgKind::Segm { id } => {
             cb[2] = 0;
             cb[4..8].copy_from_slice(&id.to_ne_bytes());
-            Ok(queue_to(binds, skb, &cb, |a| a.segm_accepts(src, id)))
+            Ok(queue_to(binds, skb.into_owned(), &cb, |a| a.segm_accepts(src, id)))
         }
         MsgKind::Port { dport, sport } => {
             cb[2] = 1;
@@ -80,7 +80,7 @@ pub(crate) fn deliver(
             let want = dsor_addr::make_port(cfg.node, dport);
             Ok(queue_to(
                 binds,
-                skb,
+                skb.into_owned(),
                 &cb,
                 |a| matches!(*a, DsorAddr::Port { port, .. } if port == want),
             ))
@@ -119,7 +119,7 @@ struct Queued {
 /// the caller holds.
 fn queue_to(
     binds: &[Bind],
-    mut skb: Skb,
+    mut skb: OwnedSkb,
     cb: &[u8; 12],
     want: impl Fn(&DsorAddr) -> bool,
 ) -> Queued {
@@ -169,7 +169,7 @@ pub(crate) fn accept(
         return Err(AckStatus::Refused);
     }
     let len = u32::from(inc.header.len);
-    let mut skb = Skb::alloc(RX_HEADROOM + len, glue::GFP_ATOMIC).ok_or(AckStatus::NoMemory)?;
+    let mut skb = UniqueSkb::alloc(RX_HEADROOM + len, glue::GFP_ATOMIC).ok_or(AckStatus::NoMemory)?;
     skb.reserve(RX_HEADROOM);
     if !skb.put_zeroed(len) {
         return Err(AckStatus::NoMemory);

@@ -27,7 +27,7 @@ use kernel::prelude::*;
 use crate::engine::{now_ms, restart_over_ms, Owner, ENGINE};
 use crate::glue::net::Net;
 use crate::glue::netdev::{Dev, DevRef, Driver, NetDev, Registration, Setup, Xmit};
-use crate::glue::skb::Skb;
+use crate::glue::skb::{Skb, UniqueSkb};
 use crate::rcan_core::dsor_addr::udp_node;
 use crate::rcan_core::dsor_udp::{self, HDR_LEN};
 use crate::rcan_core::dsor_wire::{AckStatus, Header, MsgKind};
@@ -90,7 +90,7 @@ pub(crate) fn count_tx_error(canip: Option<&NetDev>) {
 /// canip0 is gone or down, NO_MEMORY when the headers do not fit.
 pub(crate) fn deliver(
     canip: Option<&NetDev>,
-    mut skb: Skb,
+    mut skb: UniqueSkb,
     _src: u8,
     saddr: u32,
     daddr: u32,
@@ -114,9 +114,9 @@ pub(crate) fn deliver(
             return Err(AckStatus::NoMemory);
         }
     }
-    skb.set_ipv4_rx(d);
+    skb.set_ipv4_rx();
     d.stats_rx(len);
-    d.rx(skb);
+    d.rx(skb.into_owned());
     Ok(())
 }
 

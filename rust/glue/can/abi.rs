@@ -199,8 +199,10 @@ pub(crate) struct RxTableSpec {
 /// per frame and receiver.
 ///
 /// `skb` is the received frame. With `owned` false it is borrowed for the
-/// call; with `owned` true the callee owns the reference (it is then the
-/// last receiver, and the skb is not shared). `owner` and `cookie` are
+/// call; with `owned` true the callee owns the reference, the only one
+/// (`!skb_shared`: an [`OwnedSkb`](crate::glue::skb::OwnedSkb); it is then
+/// the last receiver). Either way `skb->dev` is the receiving device,
+/// alive for the call. `owner` and `cookie` are
 /// what the receiver registered: its `struct sock` ([`rcan_rx_set`]) or
 /// its data ([`rcan_rx_set_kernel`]). The typed side of this is
 /// [`super::proto::RxSkb`]: the flag never leaves the glue.
@@ -303,7 +305,9 @@ extern "C" {
     ) -> ffi::c_int;
     /// Sends one CAN frame (mainline `can_send`): `skb` holds a
     /// `struct can_frame` or a `struct canfd_frame` (then `CANFD_FDF` is
-    /// set in it: the caller built `skb` and has not shared it),
+    /// set in it: the caller gives away a
+    /// [`UniqueSkb`](crate::glue::skb::UniqueSkb), neither shared nor
+    /// cloned),
     /// `skb->dev` is the device (the caller holds a
     /// reference until this returns), `skb->sk` the sending socket. With
     /// `loopback` the frame is also delivered to local receivers (by the

@@ -9,7 +9,7 @@
 //! `can_get_echo_skb`, `can_free_echo_skb`, `can_dropped_invalid_skb`).
 //!
 //! A driver of a chip with one transmit buffer keeps the skb of the frame
-//! in it ("the echo", an `Option<Skb>` under its chip lock) and calls:
+//! in it ("the echo", an `Option<OwnedSkb>` under its chip lock) and calls:
 //!
 //! * [`setup`] from `Driver::setup`; [`btr`] for chips whose bit timing
 //!   is an SJA1000-style BTR0/BTR1 pair;
@@ -37,7 +37,7 @@ use crate::glue::can::dev::{CanDev, CanDevice, CanStat};
 use crate::glue::can::skb::alloc_rx;
 use crate::glue::netdev::{Dev, NetDev, Setup, Stat};
 use crate::glue::ring::Ring;
-use crate::glue::skb::Skb;
+use crate::glue::skb::{Access, OwnedSkb, Skb};
 use crate::rcan_core::arb::CAN_ERR_FLAG;
 use crate::rcan_core::bittiming;
 use crate::rcan_core::candev::{ctrlmode, CanStats, NetErrStats, Settings};
@@ -139,7 +139,7 @@ pub(crate) fn stop<T: CanDevice, H>(
     dev: &Dev<T>,
     p: &T::Priv,
     halt: impl FnOnce() -> H,
-    mut pop: impl FnMut() -> Option<Skb>,
+    mut pop: impl FnMut() -> Option<OwnedSkb>,
 ) {
     dev.stop_queue();
     T::can_dev(p).disarm_restart();
@@ -157,7 +157,7 @@ pub(crate) fn stop<T: CanDevice, H>(
 /// for an error frame (as mainline's drivers since 6.2), `rx_dropped`
 /// without memory (then `None`). The caller hands it up. Any context
 /// (allocates with `GFP_ATOMIC`).
-pub(crate) fn rx_skb(dev: &NetDev, frame: &AnyFrame) -> Option<Skb> {
+pub(crate) fn rx_skb(dev: &NetDev, frame: &AnyFrame) -> Option<OwnedSkb> {
     let Some(skb) = alloc_rx(dev, frame) else {
         dev.stats_rx_dropped();
         return None;
@@ -171,7 +171,7 @@ pub(crate) fn rx_skb(dev: &NetDev, frame: &AnyFrame) -> Option<Skb> {
 /// Queues `skb` for the device's NAPI poll in `rxq`; a full queue drops
 /// it (`rx_dropped`). Chip lock held, interrupts off (interrupt handler,
 /// restart): the free of a dropped skb (an echo's destructor) is deferred.
-pub(crate) fn rx_enqueue(dev: &NetDev, rxq: &mut Ring<Skb>, skb: Skb) {
+pub(crate) fn rx_enqueue(dev: &NetDev, rxq: &mut Ring<OwnedSkb>, skb: OwnedSkb) {
     if let Err(skb) = rxq.push(skb) {
         dev.stats_rx_dropped();
         skb.drop_any();
@@ -180,7 +180,7 @@ pub(crate) fn rx_enqueue(dev: &NetDev, rxq: &mut Ring<Skb>, skb: Skb) {
 
 /// The skb of `frame` ([`rx_skb`]), queued for the NAPI poll
 /// ([`rx_enqueue`]). Chip lock held, interrupts off.
-pub(crate) fn rx_frame(dev: &NetDev, rxq: &mut Ring<Skb>, frame: &AnyFrame) {
+pub(crate) fn rx_frame(dev: &NetDev, rxq: &mut Ring<OwnedSkb>, frame: &AnyFrame) {
     if let Some(skb) = rx_skb(dev, frame) {
         rx_enqueue(dev, rxq, skb);
     }
@@ -188,9 +188,9 @@ pub(crate) fn rx_frame(dev: &NetDev, rxq: &mut Ring<Skb>, frame: &AnyFrame) {
 
 /// The frame in the transmit buffer went out: its skb, taken from
 /// `echo`, comes back as the echo to hand up (`None` if there was none,
-/// or if the sender asked for no echo; see [`Skb::can_echo_done`], which
+/// or if the sender asked for no echo; see [`OwnedSkb::can_echo_done`], which
 /// counts the sent frame). Any context.
-pub(crate) fn echo_done(dev: &NetDev, echo: &mut Option<Skb>) -> Option<Skb> {
+pub(crate) fn echo_done(dev: &NetDev, echo: &mut Option<OwnedSkb>) -> Option<OwnedSkb> {
     echo.take().and_then(|s| s.can_echo_done(dev))
 }
 
@@ -198,7 +198,7 @@ pub(crate) fn echo_done(dev: &NetDev, echo: &mut Option<Skb>) -> Option<Skb> {
 /// restart): its skb, taken from `echo`, is freed (deferred: any context,
 /// interrupts off included) and counted as `stat`. Whether there was
 /// one. Any context.
-pub(crate) fn echo_lost(dev: &NetDev, echo: &mut Option<Skb>, stat: Stat) -> bool {
+pub(crate) fn echo_lost(dev: &NetDev, echo: &mut Option<OwnedSkb>, stat: Stat) -> bool {
     match echo.take() {
         Some(s) => {
             s.drop_any();
@@ -211,9 +211,9 @@ pub(crate) fn echo_lost(dev: &NetDev, echo: &mut Option<Skb>, stat: Stat) -> boo
 
 /// [`echo_done`] for a driver of CAN FD frames too: the echo of a
 /// sent CAN FD frame counts its payload in `tx_bytes` and one
-/// `tx_packets` (a classic one is counted by [`Skb::can_echo_done`]).
+/// `tx_packets` (a classic one is counted by [`OwnedSkb::can_echo_done`]).
 /// Any context.
-pub(crate) fn echo_done_any(dev: &NetDev, echo: &mut Option<Skb>) -> Option<Skb> {
+pub(crate) fn echo_done_any(dev: &NetDev, echo: &mut Option<OwnedSkb>) -> Option<OwnedSkb> {
     let skb = echo.take()?;
     if let Some(f @ AnyFrame::Fd(_)) = AnyFrame::parse(skb.data()) {
         dev.stats_tx(f.len() as u32);
@@ -226,7 +226,7 @@ pub(crate) fn echo_done_any(dev: &NetDev, echo: &mut Option<Skb>) -> Option<Skb>
 /// taken from `echo`, is freed (deferred: any context) and counted in
 /// `tx_dropped` (mainline `can_free_echo_skb` with `tx_dropped++`, and
 /// `can_flush_echo_skb`). Whether there was one. Any context.
-pub(crate) fn echo_dropped(dev: &NetDev, echo: &mut Option<Skb>) -> bool {
+pub(crate) fn echo_dropped(dev: &NetDev, echo: &mut Option<OwnedSkb>) -> bool {
     match echo.take() {
         Some(s) => {
             s.drop_any();
@@ -263,7 +263,7 @@ pub(crate) fn count_errors(dev: &NetDev, can: &CanDev, stats: &CanStats, net: &N
 /// frame the chip cannot send): counted in `tx_dropped` and freed
 /// (mainline `can_dev_dropped_skb`). The transmit path, no chip lock
 /// held.
-pub(crate) fn tx_drop(dev: &NetDev, skb: Skb) {
+pub(crate) fn tx_drop<A: Access>(dev: &NetDev, skb: Skb<A>) {
     dev.stats_tx_dropped();
     drop(skb);
 }

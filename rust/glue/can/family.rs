@@ -37,7 +37,7 @@ use crate::glue::can::abi::{
 use crate::glue::can::rx::{RcvHandle, Receiver, RxTable};
 use crate::glue::net::{Net, Pernet, PernetData, PernetReg};
 use crate::glue::netdev::NetDev;
-use crate::glue::skb::Skb;
+use crate::glue::skb::{OwnedSkb, Skb, UniqueSkb};
 use crate::glue::sync::{synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard, StaticMutex};
 use core::ptr::NonNull;
 use core::sync::atomic::{fence, AtomicUsize, Ordering};
@@ -80,7 +80,9 @@ pub(crate) trait Family: 'static {
     fn rx_filters(dev: &NetDev, out: &mut [crate::rcan_core::rxtable::Filter]) -> Option<usize>;
     /// `rcan_send` (see [`crate::glue::can::abi::rcan_send`]). Process or softirq
     /// context.
-    fn send(skb: Skb, dev: &NetDev, loopback: bool) -> Result;
+    /// The skb is the caller's alone and uncloned ([`UniqueSkb`]: pf_can
+    /// sets `CANFD_FDF` in an FD frame's data).
+    fn send(skb: UniqueSkb, dev: &NetDev, loopback: bool) -> Result;
     /// The ETH_P_CAN (`fd` false) and ETH_P_CANFD (`fd` true) packet
     /// handlers: a frame received on `dev`. NET_RX softirq, inside the
     /// core's RCU read-side section, which `rcu` stands for (the handler
@@ -151,13 +153,16 @@ impl Target {
     /// else holds one; else borrowed, then consumed. Context as
     /// [`Target::deliver`].
     pub(crate) fn deliver_last(&self, rcu: &RcuReadGuard, skb: Skb, cookie: u32) {
-        if skb.is_shared() {
-            self.deliver(rcu, &skb, cookie);
-            skb.consume();
-            return;
-        }
-        // SAFETY: as in deliver; the callee takes our (only) reference
-        // (owned = true).
+        let skb: OwnedSkb = match skb.try_into_owned() {
+            Ok(o) => o,
+            Err(skb) => {
+                self.deliver(rcu, &skb, cookie);
+                skb.consume();
+                return;
+            }
+        };
+        // SAFETY: as in deliver; the callee takes our reference, the only
+        // one (`OwnedSkb`), as `owned = true` promises (`abi::RxFn`).
         unsafe { (self.func)(skb.into_raw(), self.owner.as_ptr(), cookie, true) };
     }
 }
@@ -738,13 +743,15 @@ unsafe fn rcv_common(
 ///
 /// # Safety
 ///
-/// `skb` is NULL or an skb whose reference the caller gives away, built
-/// by the caller and not shared, whose `dev` is NULL or a device on which
-/// the caller holds a reference until this returns.
+/// `skb` is NULL or an skb whose reference the caller gives away, the
+/// only one, to an skb that is not cloned (a [`UniqueSkb`] given away:
+/// [`crate::glue::can::proto::send`] is the caller), whose `dev` is NULL
+/// or a device on which the caller holds a reference until this returns.
 #[no_mangle]
 unsafe extern "C" fn rcan_send(skb: *mut bindings::sk_buff, loopback: bool) -> ffi::c_int {
-    // SAFETY: the caller gives us its reference (abi contract).
-    let Some(skb) = (unsafe { Skb::from_raw(skb) }) else {
+    // SAFETY: the caller gives us its reference, the only one, to an
+    // uncloned skb (abi contract, kept by the caller's `UniqueSkb`).
+    let Some(skb) = (unsafe { UniqueSkb::from_raw(skb) }) else {
         return code::EINVAL.to_errno();
     };
     // SAFETY: the caller holds a reference on skb->dev until we return.
@@ -761,9 +768,10 @@ unsafe extern "C" fn rcan_send(skb: *mut bindings::sk_buff, loopback: bool) -> f
 /// consumes `skb`; congestion (`NET_XMIT_CN`) counts as sent, a drop is
 /// ENOBUFS. Process or softirq context.
 #[inline]
-pub(crate) fn queue_xmit(skb: Skb, dev: &NetDev) -> Result {
+pub(crate) fn queue_xmit(skb: OwnedSkb, dev: &NetDev) -> Result {
     let mut skb = skb;
-    skb.set_dev(dev);
+    // SAFETY: handed to the kernel right below, `dev` borrowed meanwhile.
+    unsafe { skb.set_dev(dev) };
     // SAFETY: skb->dev is `dev`, borrowed (so alive) for the call;
     // `dev_queue_xmit` (this, with no subordinate device) consumes the skb
     // in every case.

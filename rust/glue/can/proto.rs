@@ -36,7 +36,7 @@ pub(crate) use super::abi::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use crate::glue::bindings;
 use crate::glue::net::Net;
 use crate::glue::netdev::{self as gnetdev, NetDev};
-use crate::glue::skb::Skb;
+use crate::glue::skb::{OwnedSkb, Shared, Skb, UniqueSkb};
 use crate::glue::sock::{Proto, ProtoReg, SetLink, Sock, SockGuard};
 use crate::glue::sync::{CCell, RcuReadGuard, Rtnl, RtnlLocked};
 use crate::rcan_core::rxtable::CanFilterKind;
@@ -55,36 +55,71 @@ pub(crate) const CANPROTO_CAN: i32 = 16;
 pub(crate) const SOCK_RAW: i32 = bindings::sock_type_SOCK_RAW as i32;
 pub(crate) const SOCK_DGRAM: i32 = bindings::sock_type_SOCK_DGRAM as i32;
 
-/// A received frame as a receive callback gets it.
+/// A received frame as a receive callback gets it, with its receiving
+/// device: the receive context.
 ///
 /// pf_can calls each matching receiver once per frame; all but the last
 /// get the skb borrowed, the last one gets pf_can's reference when nobody
 /// else holds one, so the common single-receiver case queues the skb
-/// without cloning it.
-pub(crate) enum RxSkb<'a> {
+/// without cloning it. Either way the frame is read-only here (other
+/// receivers, packet taps and, on a device without IFF_ECHO, the driver
+/// read the same bytes); what a receiver keeps is an [`OwnedSkb`]
+/// ([`RxSkb::into_owned`]), whose own fields (`cb`, timestamp) it may
+/// write, never its data. The receiving device is lent for the callback
+/// only ([`RxSkb::dev`]): a kept skb does not carry it.
+///
+/// # Invariants
+///
+/// Made only by the glue's receive trampolines, for the callback: during
+/// `'a`, `skb->dev` is the receiving device, alive (`abi::RxFn`).
+pub(crate) struct RxSkb<'a>(RxInner<'a>);
+
+/// The two ways pf_can hands a frame over; private, so that only the glue
+/// makes an [`RxSkb`].
+enum RxInner<'a> {
     /// Borrowed for the call; clone it to keep it.
     Shared(&'a Skb),
-    /// This receiver's own, unshared reference.
-    Owned(Skb),
+    /// This receiver's own reference, the only one.
+    Owned(OwnedSkb, PhantomData<&'a ()>),
 }
 
-impl RxSkb<'_> {
+impl<'a> RxSkb<'a> {
     /// The frame, to look at.
     #[inline]
     pub(crate) fn skb(&self) -> &Skb {
-        match self {
-            RxSkb::Shared(s) => s,
-            RxSkb::Owned(s) => s,
+        match &self.0 {
+            RxInner::Shared(s) => s,
+            RxInner::Owned(s, _) => s.as_shared(),
         }
     }
 
-    /// An skb this receiver owns, to queue: the one handed over, or a
-    /// clone (GFP_ATOMIC; `None` if that fails). Any context.
+    /// The device the frame arrived on, lent for the callback (`'a`): the
+    /// receive path holds it meanwhile.
     #[inline]
-    pub(crate) fn into_owned(self) -> Option<Skb> {
-        match self {
-            RxSkb::Shared(s) => s.clone_atomic(),
-            RxSkb::Owned(s) => Some(s),
+    pub(crate) fn dev(&self) -> Option<&'a NetDev> {
+        // SAFETY: during `'a`, `skb->dev` is the receiving device, alive
+        // (type invariant: only `rx_trampoline` makes an `RxSkb`, lent to
+        // the callback for the call, `abi::RxFn`).
+        unsafe { self.skb().dev() }
+    }
+
+    /// The index of the device the frame arrived on ([`RxSkb::dev`]; 0 if
+    /// none). Read now, in the callback: the device may be gone when a
+    /// kept skb is read, so protocols keep the index (in `cb`), as
+    /// mainline does.
+    #[inline]
+    pub(crate) fn ifindex(&self) -> i32 {
+        self.dev().map_or(0, NetDev::ifindex)
+    }
+
+    /// An skb this receiver owns, to queue: the one handed over, or a
+    /// clone (GFP_ATOMIC; `None` if that fails). Its data stays read-only
+    /// (a clone shares it). Any context.
+    #[inline]
+    pub(crate) fn into_owned(self) -> Option<OwnedSkb> {
+        match self.0 {
+            RxInner::Shared(s) => s.clone_atomic(),
+            RxInner::Owned(s, _) => Some(s),
         }
     }
 
@@ -92,7 +127,7 @@ impl RxSkb<'_> {
     /// reference is freed as consumed (not counted as a drop).
     #[inline]
     pub(crate) fn done(self) {
-        if let RxSkb::Owned(s) = self {
+        if let RxInner::Owned(s, _) = self.0 {
             s.consume();
         }
     }
@@ -568,17 +603,21 @@ unsafe extern "C" fn rx_trampoline<T: CanProtocol>(
 ) {
     // SAFETY: a live sock of `T` for the call (this function's contract).
     let sk = unsafe { Sock::<T>::from_raw(owner.cast()) };
-    // SAFETY: a valid skb; ours if `owned`, else borrowed for the call
-    // (RxFn contract). A borrowed one is kept from being freed by
-    // ManuallyDrop and only lent out by reference.
-    let Some(skb) = (unsafe { Skb::from_raw(skb) }) else {
-        return;
-    };
     if owned {
-        T::rx(&sk, RxSkb::Owned(skb), cookie);
+        // SAFETY: a valid skb whose reference, the only one, is ours
+        // (RxFn contract for `owned`).
+        if let Some(skb) = unsafe { OwnedSkb::from_raw(skb) } {
+            // INVARIANT: the receive callback's context (RxFn contract).
+            T::rx(&sk, RxSkb(RxInner::Owned(skb, PhantomData)), cookie);
+        }
     } else {
-        let skb = ManuallyDrop::new(skb);
-        T::rx(&sk, RxSkb::Shared(&skb), cookie);
+        // SAFETY: a valid skb borrowed for the call (RxFn contract); kept
+        // from being freed by ManuallyDrop and only lent out by reference.
+        if let Some(skb) = unsafe { Skb::from_raw(skb) } {
+            let skb = ManuallyDrop::new(skb);
+            // INVARIANT: as above.
+            T::rx(&sk, RxSkb(RxInner::Shared(&skb)), cookie);
+        }
     }
 }
 
@@ -727,9 +766,16 @@ fn reserved<T: CanProtocol>(sk: &Sock<T>) -> Option<*mut ffi::c_void> {
 /// ([`DevRef`](gnetdev::DevRef) derefs to it) or the receiving device a
 /// [`KernelRx`] callback is lent.
 #[inline(always)]
-pub(crate) fn send(mut skb: Skb, dev: &NetDev, loopback: bool) -> Result {
-    skb.set_dev(dev);
-    // SAFETY: rcan_send consumes the skb in every case; skb->dev is `dev`,
+///
+/// The skb is the sender's alone and uncloned ([`UniqueSkb`]: pf_can may
+/// set a flag in the frame), as every allocator in
+/// [`crate::glue::can::skb`] returns it.
+pub(crate) fn send(mut skb: UniqueSkb, dev: &NetDev, loopback: bool) -> Result {
+    // SAFETY: handed to rcan_send right below, `dev` borrowed meanwhile
+    // (rcan_send reads it back for the call only).
+    unsafe { skb.set_dev(dev) };
+    // SAFETY: rcan_send consumes the skb in every case; we give it the
+    // only reference to an uncloned skb (`UniqueSkb`); skb->dev is `dev`,
     // which the borrow keeps valid until after the call returns.
     crate::glue::to_result(unsafe { abi::rcan_send(skb.into_raw(), loopback) }).map(|_| ())
 }
@@ -755,8 +801,9 @@ unsafe extern "C" fn kernel_rx<T: KernelRx>(
     owned: bool,
 ) {
     // SAFETY: a valid skb, our reference if `owned`, else borrowed for the
-    // call (RxFn contract); ManuallyDrop keeps a borrowed one unfreed.
-    let Some(skb) = (unsafe { Skb::from_raw(skb) }) else {
+    // call (RxFn contract); ManuallyDrop keeps a borrowed one unfreed. As
+    // a `Skb`, the callback only reads it.
+    let Some(skb) = (unsafe { Skb::<Shared>::from_raw(skb) }) else {
         return;
     };
     let skb = ManuallyDrop::new(skb);

@@ -8,6 +8,10 @@
 //! when the skb is marked for sending ([`Skb::set_can_tx`], by pf_can) or
 //! as received ([`Skb::set_can_rx`]), as mainline's `can_send` decides it.
 //!
+//! Every allocator returns a [`UniqueSkb`] (writable: nobody else holds or
+//! shares it) except [`alloc_rx`], whose [`OwnedSkb`] a driver only marks
+//! and hands up.
+//!
 //! Every CAN skb of rcan is made here:
 //!
 //! * a socket's send path: [`alloc_tx`] (charged to the socket's send
@@ -27,7 +31,7 @@
 
 use crate::glue::bindings;
 use crate::glue::netdev::NetDev;
-use crate::glue::skb::Skb;
+use crate::glue::skb::{Exclusive, OwnedSkb, Skb, UniqueSkb};
 use crate::glue::sock::{Proto, Sock};
 use crate::rcan_core::frame::{AnyFrame, CANFD_MTU, CAN_MTU};
 use kernel::prelude::*;
@@ -40,7 +44,7 @@ pub(crate) const SKB_PRIV_LEN: u32 = core::mem::size_of::<bindings::can_skb_priv
 /// interface it is sent by or received on, `skbcnt` 0. Inline: once a
 /// frame on every send path.
 #[inline]
-fn put_priv(skb: &mut Skb, ifindex: i32) -> bool {
+fn put_priv(skb: &mut UniqueSkb, ifindex: i32) -> bool {
     skb.reserve(SKB_PRIV_LEN);
     // By constant indices: `copy_from_slice` and iterator adapters are
     // left as calls into `core` on every frame (the kernel's `core` is not
@@ -55,7 +59,7 @@ fn put_priv(skb: &mut Skb, ifindex: i32) -> bool {
 }
 
 /// Appends the frame's image (16 or 72 bytes).
-fn put_frame(skb: &mut Skb, frame: &AnyFrame) -> bool {
+fn put_frame(skb: &mut UniqueSkb, frame: &AnyFrame) -> bool {
     match frame {
         AnyFrame::Classic(f) => skb.put_data(&f.to_bytes()),
         AnyFrame::Fd(f) => skb.put_data(&f.to_bytes()),
@@ -80,7 +84,7 @@ pub(crate) fn alloc_tx<T: Proto>(
     dev: &NetDev,
     len: usize,
     nonblock: bool,
-) -> Result<Skb> {
+) -> Result<UniqueSkb> {
     let len = u32::try_from(len).map_err(|_| EINVAL)?;
     let mut skb = sk.alloc_send_skb(SKB_PRIV_LEN + len, nonblock)?;
     if !put_priv(&mut skb, dev.ifindex()) {
@@ -97,7 +101,7 @@ pub(crate) fn alloc_tx_frame<T: Proto>(
     dev: &NetDev,
     frame: &AnyFrame,
     nonblock: bool,
-) -> Result<Skb> {
+) -> Result<UniqueSkb> {
     let mut skb = alloc_tx(sk, dev, frame.mtu(), nonblock)?;
     if !put_frame(&mut skb, frame) {
         return Err(crate::glue::neterr::ENOBUFS());
@@ -108,8 +112,8 @@ pub(crate) fn alloc_tx_frame<T: Proto>(
 /// An skb holding `frame`, to be sent by `dev` by a sender without a
 /// socket buffer to charge (timers, kernel receivers). Any context with
 /// `GFP_ATOMIC`; `None` without memory.
-pub(crate) fn alloc_frame(dev: &NetDev, frame: &AnyFrame, gfp: bindings::gfp_t) -> Option<Skb> {
-    let mut skb = Skb::alloc(SKB_PRIV_LEN + frame.mtu() as u32, gfp)?;
+pub(crate) fn alloc_frame(dev: &NetDev, frame: &AnyFrame, gfp: bindings::gfp_t) -> Option<UniqueSkb> {
+    let mut skb = UniqueSkb::alloc(SKB_PRIV_LEN + frame.mtu() as u32, gfp)?;
     (put_priv(&mut skb, dev.ifindex()) && put_frame(&mut skb, frame)).then_some(skb)
 }
 
@@ -121,11 +125,11 @@ pub(crate) fn alloc_frame(dev: &NetDev, frame: &AnyFrame, gfp: bindings::gfp_t) 
 /// the frame suits the device is pf_can's check at send time. Any context
 /// with `GFP_ATOMIC`, process context with `GFP_KERNEL`; `None` without
 /// memory or if `image` is neither size.
-pub(crate) fn alloc_image(dev: &NetDev, image: &[u8], gfp: bindings::gfp_t) -> Option<Skb> {
+pub(crate) fn alloc_image(dev: &NetDev, image: &[u8], gfp: bindings::gfp_t) -> Option<UniqueSkb> {
     if !is_frame_size(image) {
         return None;
     }
-    let mut skb = Skb::alloc(SKB_PRIV_LEN + image.len() as u32, gfp)?;
+    let mut skb = UniqueSkb::alloc(SKB_PRIV_LEN + image.len() as u32, gfp)?;
     (put_priv(&mut skb, dev.ifindex()) && skb.put_data(image)).then_some(skb)
 }
 
@@ -143,7 +147,7 @@ pub(crate) fn alloc_image_for<T: Proto>(
     dev: &NetDev,
     image: &[u8],
     gfp: bindings::gfp_t,
-) -> Option<Skb> {
+) -> Option<UniqueSkb> {
     let mut skb = alloc_image(dev, image, gfp)?;
     skb.set_owner(sk);
     Some(skb)
@@ -151,12 +155,12 @@ pub(crate) fn alloc_image_for<T: Proto>(
 
 /// An skb holding `frame` as received on `dev` (mainline `alloc_can_skb`
 /// / `alloc_canfd_skb`): marked with [`Skb::set_can_rx`], ready for the
-/// driver to hand up. Any context (allocates with `GFP_ATOMIC`); `None`
+/// driver to hand up (which sets `skb->dev`). Any context (allocates with `GFP_ATOMIC`); `None`
 /// without memory (the driver counts an `rx_dropped`).
-pub(crate) fn alloc_rx(dev: &NetDev, frame: &AnyFrame) -> Option<Skb> {
+pub(crate) fn alloc_rx(dev: &NetDev, frame: &AnyFrame) -> Option<OwnedSkb> {
     let mut skb = alloc_frame(dev, frame, crate::glue::GFP_ATOMIC)?;
-    skb.set_can_rx(dev);
-    Some(skb)
+    skb.set_can_rx();
+    Some(skb.into_owned())
 }
 
 /// Bytes of `struct sockaddr_can` that CAN_RAW and CAN_BCM return from
@@ -174,7 +178,7 @@ const CB_FLAGS: usize = MIN_NAMELEN;
 /// (`raw_rcv`, `bcm_send_to_user`). Any context; the skb is about to be
 /// queued on a socket, whose queue owns the cb from then on.
 #[inline]
-pub(crate) fn set_rx_meta(skb: &mut Skb, ifindex: i32, flags: u32) {
+pub(crate) fn set_rx_meta<A: Exclusive>(skb: &mut Skb<A>, ifindex: i32, flags: u32) {
     // Built by constant indices, not `copy_from_slice` (a call into `core`
     // and from there to `memcpy` per slice, on every frame received).
     let (fam, idx, fl) = (

@@ -83,7 +83,7 @@ use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
 use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{Dev, Driver, NetDev, Xmit};
 use crate::glue::ring::Ring;
-use crate::glue::skb::Skb;
+use crate::glue::skb::{OwnedSkb, Skb};
 use crate::rcan_chips::ctucanfd::{
     reg, Chip, Config, ErrReport, Event, Regs, CORE_SPAN, DATA_CONST, MAX_TXT_BUFFERS,
     NOMINAL_CONST,
@@ -148,10 +148,10 @@ const NAPI_WEIGHT: u32 = 64;
 pub(crate) struct ChipState<R: Regs> {
     chip: Chip<R>,
     /// The skb of the frame in each TX buffer (its echo).
-    echo: [Option<Skb>; MAX_TXT_BUFFERS],
+    echo: [Option<OwnedSkb>; MAX_TXT_BUFFERS],
     /// Frames taken from the core (and echoes, error frames) waiting for
     /// the NAPI poll (FIFO).
-    rxq: Ring<Skb>,
+    rxq: Ring<OwnedSkb>,
     running: bool,
 }
 
@@ -259,7 +259,7 @@ fn state_name(s: CanState) -> &'static str {
 /// the interface's error counters), logs a state change as mainline
 /// does, and queues the error frame for the NAPI poll. Hardirq context
 /// (the chip lock held).
-fn report_error<R: Regs>(dev: &NetDev, p: &CtuPriv<R>, rxq: &mut Ring<Skb>, r: &ErrReport) {
+fn report_error<R: Regs>(dev: &NetDev, p: &CtuPriv<R>, rxq: &mut Ring<OwnedSkb>, r: &ErrReport) {
     ctrl::count_errors(dev, &p.can, &r.stats, &r.net);
     if let Some((from, to)) = r.state {
         pr_info!(

@@ -73,7 +73,7 @@ use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
 use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::ring::Ring;
-use crate::glue::skb::Skb;
+use crate::glue::skb::{OwnedSkb, Skb};
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_chips::i82527::{
     bitrate, error_frame, masks_for, sys_clock, AnswerReq, Chip, Config, Event, I82527Error, Masks,
@@ -122,9 +122,9 @@ const RX_RESUME: usize = RXQ_LEN / 2;
 pub(crate) struct ChipState<R: Regs> {
     pub(crate) chip: Chip<R>,
     /// The frame in the transmit object, kept for the echo.
-    echo: Option<Skb>,
+    echo: Option<OwnedSkb>,
     /// Frames taken from the chip, waiting for the NAPI poll (FIFO).
-    rxq: Ring<Skb>,
+    rxq: Ring<OwnedSkb>,
     running: bool,
     /// The handler turned the chip's interrupt output off: the queue had
     /// no room for what the chip holds ([`RX_HEADROOM`]). The poll turns

@@ -96,7 +96,7 @@ use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::params::Param;
 use crate::glue::ring::Ring;
-use crate::glue::skb::Skb;
+use crate::glue::skb::{OwnedSkb, Skb};
 use crate::rcan_api::{self, FilterListener};
 use crate::rcan_chips::sja1000::{
     bitrate, hw_filter, restarted_frame, Chip, Config, Event, HwFilter, Regs, Setup, CDR_PELICAN,
@@ -215,7 +215,7 @@ const NAPI_WEIGHT: u32 = 64;
 pub(crate) struct ChipState<R: Regs> {
     pub(crate) chip: Chip<R>,
     /// The frame in the TX buffer, kept for the echo.
-    echo: Option<Skb>,
+    echo: Option<OwnedSkb>,
     /// The acceptance filter programmed (or to program at open, or once
     /// the TX buffer is free: `filter_pending`).
     filter: HwFilter,
@@ -223,7 +223,7 @@ pub(crate) struct ChipState<R: Regs> {
     filter_pending: bool,
     /// Frames read from the chip (and echoes, error frames) waiting for
     /// the NAPI poll (FIFO).
-    rxq: Ring<Skb>,
+    rxq: Ring<OwnedSkb>,
     running: bool,
 }
 

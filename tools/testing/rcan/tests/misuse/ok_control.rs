@@ -7,7 +7,7 @@
 // expect: ok
 #![forbid(unsafe_code)]
 
-use crate::glue::skb::Skb;
+use crate::glue::skb::OwnedSkb;
 use crate::glue::sock::{Proto, SockRef};
 use crate::glue::sync::{Rtnl, RtnlLocked};
 
@@ -20,7 +20,7 @@ pub(crate) fn bump() {
     *again += 1;
 }
 
-pub(crate) fn deliver<T: Proto>(r: SockRef<T>, skb: Skb) {
+pub(crate) fn deliver<T: Proto>(r: SockRef<T>, skb: OwnedSkb) {
     let _ = r.sock().queue_rcv(skb);
     drop(r);
 }

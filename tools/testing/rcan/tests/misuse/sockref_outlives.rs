@@ -7,10 +7,10 @@
 // expect: E0505 cannot move out of `r` because it is borrowed
 #![forbid(unsafe_code)]
 
-use crate::glue::skb::Skb;
+use crate::glue::skb::OwnedSkb;
 use crate::glue::sock::{Proto, SockRef};
 
-pub(crate) fn after_put<T: Proto>(r: SockRef<T>, skb: Skb) {
+pub(crate) fn after_put<T: Proto>(r: SockRef<T>, skb: OwnedSkb) {
     let s = r.sock();
     drop(r);
     let _ = s.queue_rcv(skb);
