@@ -53,12 +53,6 @@ impl Drop for RcuReadGuard {
     }
 }
 
-/// Waits for all pre-existing RCU readers. Process context; sleeps.
-pub(crate) fn synchronize_rcu() {
-    // SAFETY: callers are in process context (documented contract).
-    unsafe { bindings::synchronize_rcu() };
-}
-
 /// Waits for all pending `call_rcu` callbacks. Process context; sleeps.
 /// The glue's module exit calls it ([`super::module::Scoped`]) so that no
 /// callback runs after the code is gone.

@@ -38,12 +38,33 @@ use crate::glue::can::rx::{RcvHandle, Receiver, RxTable};
 use crate::glue::net::{Net, Pernet, PernetData, PernetReg};
 use crate::glue::netdev::NetDev;
 use crate::glue::skb::{OwnedSkb, Skb, UniqueSkb};
-use crate::glue::sync::{synchronize_rcu, CCell, CMutex, RcuPtr, RcuReadGuard, StaticMutex};
+use crate::glue::sync::{CCell, CMutex, RcuPtr, RcuReadGuard, StaticMutex};
 use core::ptr::NonNull;
 use core::sync::atomic::{fence, AtomicUsize, Ordering};
 use kernel::error::{code, Error, Result};
 use kernel::ffi;
 use kernel::prelude::*;
+
+/// Waits for all pre-existing RCU readers. Process context, outside any
+/// RCU read-side critical section; sleeps. Private to this file (issue
+/// 39): it was a safe `pub(crate)` function of `glue::sync`, which a
+/// protocol could call from its receive callback (softirq, inside
+/// pf_can's read-side section), waiting for a grace period its own caller
+/// holds off. Its callers are the entry points `rcan_rx_set_kernel` and
+/// `rcan_proto_unregister` below, which the glue of the other modules
+/// calls when a kernel receiver is registered or dropped and when a
+/// protocol is unregistered at module exit. That those run in process
+/// context is documented, not typed: safe code can still drop a
+/// `KernelRxReg` in a timer callback, as it can call any other sleeping
+/// function in atomic context (Rust-for-Linux leaves that class to static
+/// checking, klint).
+fn synchronize_rcu() {
+    // SAFETY: no memory-safety precondition of its own: a call in atomic
+    // context is a kernel bug the kernel reports (might_sleep, and
+    // lockdep's check for a call inside a read-side section), as for any
+    // sleeping function.
+    unsafe { bindings::synchronize_rcu() };
+}
 
 /// The implementation behind the entry points: `rcan_pf`'s module type.
 type Impl = crate::pf_can::PfCan;
