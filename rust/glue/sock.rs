@@ -458,7 +458,8 @@ impl Msg {
     }
 
     /// [`Msg::copy_from_user`] into raw memory (bytes that may not be
-    /// initialised yet, such as the room [`Skb::put_from_msg`] just put).
+    /// initialised yet, such as the tailroom [`UniqueSkb::put_from_msg`]
+    /// fills before it puts the bytes).
     ///
     /// This is `memcpy_from_msg`'s inline `copy_from_iter_full` written
     /// out: `check_copy_size` comes down, for a buffer whose size is
