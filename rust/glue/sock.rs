@@ -219,10 +219,22 @@ impl<T: Proto> Sock<T> {
     }
 
     /// The address of the sock's `struct socket` (`sk->sk_socket`; 0
-    /// once orphaned), for /proc files that print it with `%pK`.
-    pub(crate) fn socket_addr(&self) -> usize {
-        // SAFETY: live sock (type invariant); reads one pointer field.
-        unsafe { (*self.sk).sk_socket as usize }
+    /// once orphaned), for /proc files that print it with `%pK`. Any
+    /// context.
+    ///
+    /// `sk_socket` changes while others read the sock: `sock_orphan` (at
+    /// close, which can run while a /proc reader holds the sock) and
+    /// `sock_graft` write it with `sk_set_socket`, a `WRITE_ONCE`. It is
+    /// read here once with `READ_ONCE` semantics, never through a
+    /// reference: the value as of some moment, as mainline's `%pK` of
+    /// `sk->sk_socket` prints it.
+    pub(in crate::glue) fn socket_addr(&self) -> usize {
+        // SAFETY: live sock (type invariant), so the field is valid to
+        // read; a volatile read is READ_ONCE, paired with the WRITE_ONCE
+        // of every writer (`sk_set_socket`), so it is no data race in the
+        // kernel's memory model.
+        let p = unsafe { core::ptr::read_volatile(core::ptr::addr_of!((*self.sk).sk_socket)) };
+        p as usize
     }
 
     /// A counted reference to this sock (`sock_hold`).
