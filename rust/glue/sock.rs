@@ -109,31 +109,67 @@ impl OptIn {
 }
 
 /// The result buffer of a `getsockopt` call: `optval` and `optlen` are
-/// user pointers.
+/// user pointers (`do_sock_getsockopt` refuses kernel ones before calling
+/// a protocol's `getsockopt`).
+///
+/// `*optlen` is the size of the user's buffer. It is read once, as
+/// mainline's protocols read it into a local (`get_user(len, optlen)`),
+/// and that value bounds every [`OptOut::write`]: no safe caller writes
+/// past what the user said the buffer holds, whatever it passes (mainline
+/// protocols cut the value themselves, `if (len > sizeof(int)) len =
+/// sizeof(int)`; the glue makes that cut a refusal it checks, not a duty
+/// of each caller).
+///
+/// # Invariants
+///
+/// Made only by the `getsockopt` trampoline of this file, with `optval`
+/// and `optlen` of the call; `first`, once set, is `*optlen` as first
+/// read.
 pub(crate) struct OptOut {
     val: *mut ffi::c_char,
     len: *mut ffi::c_int,
+    first: core::cell::Cell<Option<ffi::c_int>>,
 }
 
 impl OptOut {
     /// The buffer length the caller passed in `*optlen`; EFAULT on a bad
-    /// pointer.
+    /// pointer. Read from user memory once: later calls return that first
+    /// value, which is also the bound of [`OptOut::write`].
     pub(crate) fn len(&self) -> Result<i32> {
+        if let Some(v) = self.first.get() {
+            return Ok(v);
+        }
         let mut v: ffi::c_int = 0;
         // SAFETY: `len` is a user pointer; the helper uses get_user.
         super::to_result(unsafe { bindings::rcan_get_user_int(self.len, &mut v) })?;
+        // INVARIANT: the first value read.
+        self.first.set(Some(v));
         Ok(v)
     }
 
-    /// Stores `n` in `*optlen`.
+    /// Stores `n` in `*optlen` (the length written, or the length needed,
+    /// as mainline's ERANGE for `CAN_RAW_FILTER`). The bound of
+    /// [`OptOut::write`] stays the length first read.
     pub(crate) fn set_len(&self, n: i32) -> Result {
         // SAFETY: as in len(); put_user checks the pointer.
         super::to_result(unsafe { bindings::rcan_put_user_int(self.len, n) }).map(|_| ())
     }
 
-    /// Copies `src` to `optval`.
+    /// Copies `src` to `optval`. EINVAL, nothing written, if `src` is
+    /// longer than the user's buffer (`*optlen` as first read, 0 if
+    /// negative; read here if [`OptOut::len`] was not called): the caller
+    /// cuts the value to [`OptOut::len`] first, as mainline does. EFAULT
+    /// on a bad pointer. Process context (may fault pages in).
     pub(crate) fn write(&self, src: &[u8]) -> Result {
-        // SAFETY: `src` is readable; copy_to_user checks the user pointer.
+        let room = usize::try_from(self.len()?).unwrap_or(0);
+        if src.len() > room {
+            return Err(code::EINVAL);
+        }
+        // SAFETY: `src` is readable for `src.len()` bytes; `val` is the
+        // user pointer of the call, and `src.len()` is at most the size of
+        // the user's buffer as the user gave it (`room`, checked above), so
+        // the copy stays inside that buffer; copy_to_user checks that the
+        // range is user memory (access_ok) and faults are EFAULT.
         let ret = unsafe {
             bindings::rcan_copy_to_user(self.val.cast(), src.as_ptr().cast(), src.len() as _)
         };
@@ -921,7 +957,12 @@ unsafe extern "C" fn getsockopt<T: Proto>(
     val: *mut ffi::c_char,
     len: *mut ffi::c_int,
 ) -> ffi::c_int {
-    let opt = OptOut { val, len };
+    // INVARIANT: `optval` and `optlen` of this call, `*optlen` not read yet.
+    let opt = OptOut {
+        val,
+        len,
+        first: core::cell::Cell::new(None),
+    };
     // SAFETY: socket-layer call; `val` and `len` are user pointers that
     // OptOut only passes to the uaccess helpers.
     match unsafe { sock_of::<T>(sock) } {
