@@ -65,7 +65,9 @@ pub(crate) trait Proto: Sized + 'static {
     fn release(sk: &Sock<Self>);
     fn bind(sk: &Sock<Self>, addr: &[u8]) -> Result;
     fn connect(sk: &Sock<Self>, addr: &[u8], flags: i32) -> Result;
-    /// Writes the local or peer address into `out`; returns its length.
+    /// Writes the local or peer address into `out` ([`NAME_ROOM`] bytes,
+    /// zeroed); returns its length, at most `out.len()` (a longer one is
+    /// EINVAL to the caller). Process context.
     fn getname(sk: &Sock<Self>, peer: bool, out: &mut [u8]) -> Result<usize>;
     fn sendmsg(sk: &Sock<Self>, msg: &mut Msg, len: usize) -> Result<usize>;
     fn recvmsg(sk: &Sock<Self>, msg: &mut Msg, len: usize, flags: i32) -> Result<usize>;
@@ -449,6 +451,15 @@ impl<T: Proto> Drop for SockGuard<'_, T> {
     }
 }
 
+/// The bytes of a socket address the glue writes for a protocol
+/// ([`Proto::getname`]'s buffer, [`Msg::set_name`]): `sizeof(struct
+/// sockaddr)`, the smallest buffer the kernel types a socket address with
+/// (why that bound, at those two places). Every address of ours fits
+/// (`sockaddr_can` up to `can_ifindex` 8, the thesis' `sockaddr_can` 16,
+/// DSOR's 8 and 6).
+pub(crate) const NAME_ROOM: usize = core::mem::size_of::<bindings::sockaddr>();
+const _: () = assert!(NAME_ROOM == 16);
+
 /// A `struct msghdr` of a sendmsg/recvmsg call.
 ///
 /// # Invariants
@@ -478,17 +489,29 @@ impl Msg {
         }
     }
 
-    /// Stores a source address for recvmsg (if the caller asked for one).
+    /// Stores a source address for recvmsg (if the caller asked for one):
+    /// at most [`NAME_ROOM`] bytes of `addr` (more are cut), and
+    /// `msg_namelen` says how many.
     #[inline]
     pub(crate) fn set_name(&mut self, addr: &[u8]) {
-        // SAFETY: for recvmsg, msg_name is NULL or a kernel
-        // sockaddr_storage (128 bytes) that is copied out afterwards.
+        // SAFETY: a valid msghdr of the current call, used by nobody else
+        // meanwhile (type invariant). `msg_name` is NULL or the buffer the
+        // recvmsg's caller gave for the source address, and `msg_namelen`
+        // is not its size (the socket layer sets it to 0 before calling
+        // us), so the bound comes from what every caller gives: the socket
+        // layer's recvmsg paths (`____sys_recvmsg`, io_uring) a
+        // `sockaddr_storage` ("We assume all kernel code knows the size of
+        // sockaddr_storage", net/socket.c), in-kernel `kernel_recvmsg`
+        // callers a buffer for a socket address, of which the smallest
+        // type is `struct sockaddr`. We write at most `NAME_ROOM`, that
+        // size: within any such buffer, and less than mainline's own PF_CAN
+        // protocols write there (isotp 16 bytes, j1939 24).
         unsafe {
             let m = &mut *self.0;
             if m.msg_name.is_null() {
                 return;
             }
-            let n = addr.len().min(128);
+            let n = addr.len().min(NAME_ROOM);
             core::ptr::copy_nonoverlapping(addr.as_ptr(), m.msg_name as *mut u8, n);
             m.msg_namelen = n as i32;
         }
@@ -873,17 +896,39 @@ unsafe extern "C" fn connect<T: Proto>(
     }
 }
 
+/// `proto_ops::getname`. Process context.
+///
+/// # Safety
+///
+/// Called by the socket layer: `sock` is a socket of protocol `T`, `addr`
+/// a kernel `struct sockaddr` the caller lets us fill.
 unsafe extern "C" fn getname<T: Proto>(
     sock: *mut bindings::socket,
     addr: *mut bindings::sockaddr,
     peer: ffi::c_int,
 ) -> ffi::c_int {
-    // SAFETY: `addr` is a kernel sockaddr_storage (128 bytes).
-    let out = unsafe { core::slice::from_raw_parts_mut(addr as *mut u8, 128) };
+    // `addr` is typed `struct sockaddr *`, so the caller gives at least
+    // that much: the socket layer (`__sys_getsockname`, `__sys_getpeername`,
+    // `SO_PEERNAME`) a `sockaddr_storage`, the in-kernel
+    // `kernel_getsockname`/`kernel_getpeername` an "address holder" of the
+    // caller's choice. `NAME_ROOM` bytes of it are all we rely on (every
+    // address of ours fits; mainline's PF_CAN protocols write up to 24).
+    // SAFETY: so `addr` is valid for `NAME_ROOM` bytes of writes, and
+    // nothing else uses it during the call. They may be uninitialised
+    // (a buffer on the caller's stack): zeroed first, so the slice below
+    // covers initialised bytes.
+    let out = unsafe {
+        core::ptr::write_bytes(addr.cast::<u8>(), 0, NAME_ROOM);
+        core::slice::from_raw_parts_mut(addr.cast::<u8>(), NAME_ROOM)
+    };
     // SAFETY: socket-layer call.
     match unsafe { sock_of::<T>(sock) } {
+        // The length is what the caller copies out of `addr`
+        // (`move_addr_to_user`, which BUG()s above a sockaddr_storage):
+        // never more than we let the protocol write.
         Some(sk) => match T::getname(&sk, peer != 0, out) {
-            Ok(n) => n as ffi::c_int,
+            Ok(n) if n <= NAME_ROOM => n as ffi::c_int,
+            Ok(_) => code::EINVAL.to_errno(),
             Err(e) => e.to_errno(),
         },
         None => code::EBADF.to_errno(),
