@@ -474,13 +474,22 @@ impl Msg {
         self.0
     }
 
-    /// The destination address of a sendmsg (a kernel copy), if any.
+    /// The destination address of a sendmsg (a kernel copy), if any;
+    /// `None` in a recvmsg, whose `msg_name` is the buffer for the source
+    /// address, not an address.
     pub(crate) fn name(&self) -> Option<&[u8]> {
-        // SAFETY: the socket layer passes a valid msghdr whose msg_name, if
-        // set, points to a kernel sockaddr_storage of msg_namelen bytes.
+        // SAFETY: a valid msghdr of the current call (type invariant).
+        // In a sendmsg (a source iterator) `msg_name`, if set, is an
+        // address of `msg_namelen` initialised bytes: the socket layer's
+        // copy in a sockaddr_storage (`move_addr_to_kernel` refuses a
+        // longer one), or a `kernel_sendmsg` caller's address of that
+        // length; the cap is the socket layer's. In a recvmsg it is a
+        // buffer the caller may not have initialised (with
+        // `kernel_recvmsg`, `msg_namelen` is whatever the caller left), so
+        // no slice is made over it.
         unsafe {
             let m = &*self.0;
-            if m.msg_name.is_null() {
+            if m.msg_name.is_null() || !m.msg_iter.data_source {
                 None
             } else {
                 let len = (m.msg_namelen.max(0) as usize).min(128);
