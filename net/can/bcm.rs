@@ -639,7 +639,7 @@ impl core::fmt::Display for IfName<'_> {
             return f.pad("any");
         }
         match DevRef::by_index(self.1, self.0) {
-            Some(d) => f.pad(d.name()),
+            Some(d) => f.pad(d.name().as_str()),
             None => f.pad("???"),
         }
     }

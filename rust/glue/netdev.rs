@@ -36,6 +36,36 @@ unsafe fn netdev_priv(dev: *const bindings::net_device) -> *mut ffi::c_void {
     unsafe { core::ptr::addr_of!((*dev).priv_).cast_mut().cast() }
 }
 
+/// Bytes of an interface name, its NUL included (`IFNAMSIZ`; the type of
+/// `net_device::name` in [`NetDev::name`] checks it).
+const IFNAMSIZ: usize = 16;
+
+/// An interface name as [`NetDev::name`] copied it: up to 15 bytes, no
+/// NUL. Printed with `{}`; compared with [`IfName::as_bytes`].
+#[derive(Clone, Copy)]
+pub(crate) struct IfName {
+    buf: [u8; IFNAMSIZ],
+    len: u8,
+}
+
+impl IfName {
+    /// The name's bytes, without the NUL.
+    pub(crate) fn as_bytes(&self) -> &[u8] {
+        &self.buf[..usize::from(self.len)]
+    }
+
+    /// The name as text ("?" if it is not UTF-8).
+    pub(crate) fn as_str(&self) -> &str {
+        core::str::from_utf8(self.as_bytes()).unwrap_or("?")
+    }
+}
+
+impl core::fmt::Display for IfName {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.pad(self.as_str())
+    }
+}
+
 /// A `struct net_device` borrowed for the duration of a callback.
 #[repr(transparent)]
 pub(crate) struct NetDev(kernel::types::Opaque<bindings::net_device>);
@@ -133,22 +163,42 @@ impl NetDev {
         unsafe { (*self.as_ptr()).mtu }
     }
 
-    /// The interface name ("can0").
-    pub(crate) fn name(&self) -> &str {
-        core::str::from_utf8(self.name_bytes()).unwrap_or("?")
-    }
-
-    /// The interface name's bytes before its NUL, without the UTF-8 check
-    /// of [`NetDev::name`]: for comparing names per frame.
-    pub(crate) fn name_bytes(&self) -> &[u8] {
-        // SAFETY: valid device; `name` is a NUL-terminated array that only
-        // changes under RTNL on rename (a torn read only garbles a log line
-        // or fails one comparison).
-        let name = unsafe { &(*self.as_ptr()).name };
-        // SAFETY: c_char and u8 have the same layout.
-        let bytes: &[u8] = unsafe { &*(name.as_slice() as *const [ffi::c_char] as *const [u8]) };
-        let n = bytes.iter().position(|b| *b == 0).unwrap_or(bytes.len());
-        &bytes[..n]
+    /// The interface name ("can0"), copied out of the device. Any context.
+    ///
+    /// A copy, not a borrow: a rename (`dev_change_name`, under RTNL)
+    /// rewrites `dev->name` while others read it. The kernel's readers
+    /// take `netdev_rename_lock` (`netdev_copy_name`, not exported) or
+    /// RTNL, or read it as a racy `%s`; here each byte is read once with
+    /// `READ_ONCE` semantics into the copy, so no Rust reference ever
+    /// covers bytes being written. A read concurrent with a rename may
+    /// see a mix of the two names (as a lockless `%s` may): good for a
+    /// log line or one comparison, never for memory safety.
+    pub(crate) fn name(&self) -> IfName {
+        let mut name = IfName {
+            buf: [0; IFNAMSIZ],
+            len: 0,
+        };
+        // SAFETY: valid device (`&self`): `name` is an array of IFNAMSIZ
+        // bytes inside it (the type says so); only its address is taken.
+        let src: *const [ffi::c_char; IFNAMSIZ] =
+            unsafe { core::ptr::addr_of!((*self.as_ptr()).name) };
+        // CAST: c_char and u8 have the same size and alignment.
+        let src = src.cast::<u8>();
+        // The last byte is always NUL (names are shorter than IFNAMSIZ).
+        for i in 0..IFNAMSIZ - 1 {
+            // SAFETY: `src + i` lies in the array (i < IFNAMSIZ, its
+            // length); a volatile byte read is
+            // READ_ONCE, which may race with the plain stores of a rename
+            // (the kernel's memory model, not Rust's references: no `&`
+            // to the array is made).
+            let b = unsafe { core::ptr::read_volatile(src.add(i)) };
+            if b == 0 {
+                break;
+            }
+            name.buf[i] = b;
+            name.len += 1;
+        }
+        name
     }
 
     /// Counts a transmitted frame of `bytes` data bytes. Any context.

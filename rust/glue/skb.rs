@@ -729,43 +729,57 @@ impl UniqueSkb {
     }
 
     /// Appends `len` bytes copied from the user's buffers of `msg`
-    /// (`skb_put` + `memcpy_from_msg`). EINVAL if the tailroom is too
-    /// small, EFAULT on a bad user pointer (the bytes are then put but not
-    /// all copied, as with `memcpy_from_msg(skb_put(..))`: the caller
-    /// drops the skb). Process context (the copy may fault and sleep).
+    /// (`skb_put` + `memcpy_from_msg`). EINVAL if the skb is not linear or
+    /// its tailroom is too small; EFAULT on a bad user pointer. On either
+    /// error the skb is as it was (its `len` and tail unchanged, so
+    /// [`Skb::data`] never covers bytes that were not copied) and the
+    /// message's iterator is where it was, as after mainline's failed
+    /// `memcpy_from_msg` (whose callers drop the skb; ours may keep it).
+    /// Process context (the copy may fault and sleep).
     #[inline]
     pub(crate) fn put_from_msg(
         &mut self,
         msg: &mut super::sock::Msg,
         len: usize,
     ) -> kernel::error::Result {
-        // `skb_put` written here (tail and len move by `len`), with the
-        // test that makes `skb_put` call `skb_over_panic` done first
-        // instead: a linear skb (`SKB_LINEAR_ASSERT`) whose tail stays
-        // inside the head; and `check_copy_size`'s `INT_MAX` limit. (Its
-        // object-size test is the tailroom test here; `check_object_size`
-        // is empty without CONFIG_HARDENED_USERCOPY.)
+        // `skb_put` written here, after the copy instead of before it: the
+        // bytes are copied into the tailroom first, and tail and len move
+        // by `len` only once all of them are there. The test that makes
+        // `skb_put` call `skb_over_panic` is done first instead: a linear
+        // skb (`SKB_LINEAR_ASSERT`) whose tail stays inside the head; and
+        // `check_copy_size`'s `INT_MAX` limit. (Its object-size test is
+        // the tailroom test here; `check_object_size` is empty without
+        // CONFIG_HARDENED_USERCOPY.)
         // SAFETY: a valid skb, ours alone and not cloned (`Unique`, `&mut
-        // self`: nobody else moves its tail or reads its data); the bounds
-        // are checked before anything moves, so `dst` and the `len` bytes
-        // after it lie in the head buffer (`tail` and `end` are offsets
-        // from `head`).
+        // self`: nobody else moves its tail or reads its data or
+        // tailroom); the bounds are checked before anything is written, so
+        // `dst` and the `len` bytes after it lie in the head buffer's
+        // tailroom (`tail` and `end` are offsets from `head`).
         let dst = unsafe {
-            let skb = &mut *self.as_ptr();
+            let skb = &*self.as_ptr();
             if skb.data_len != 0
                 || len > i32::MAX as usize
                 || len as u64 > u64::from(skb.end.saturating_sub(skb.tail))
             {
                 return Err(kernel::error::code::EINVAL);
             }
-            let dst = skb.head.add(skb.tail as usize);
+            skb.head.add(skb.tail as usize)
+        };
+        // SAFETY: `dst` points to `len` writable bytes of the tailroom
+        // (above), outside the data, of an skb nobody else touches
+        // (`Unique`); on a short copy the bytes it wrote stay outside the
+        // data.
+        unsafe { msg.copy_from_user_raw(dst, len) }?;
+        // SAFETY: as above, nothing moved the tail since the bounds test
+        // (`&mut self`); the `len` bytes after it are now initialised, and
+        // `len` fits an `int`, so neither `tail` nor `len` overflows (both
+        // stay below `end`, a `u32` offset).
+        unsafe {
+            let skb = &mut *self.as_ptr();
             skb.tail += len as u32;
             skb.len += len as u32;
-            dst
-        };
-        // SAFETY: `dst` points to the `len` bytes just put (above), inside
-        // the head of an skb nobody else touches (`Unique`).
-        unsafe { msg.copy_from_user_raw(dst, len) }
+        }
+        Ok(())
     }
 
     /// The linear data, writable.

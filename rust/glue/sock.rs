@@ -65,7 +65,9 @@ pub(crate) trait Proto: Sized + 'static {
     fn release(sk: &Sock<Self>);
     fn bind(sk: &Sock<Self>, addr: &[u8]) -> Result;
     fn connect(sk: &Sock<Self>, addr: &[u8], flags: i32) -> Result;
-    /// Writes the local or peer address into `out`; returns its length.
+    /// Writes the local or peer address into `out` ([`NAME_ROOM`] bytes,
+    /// zeroed); returns its length, at most `out.len()` (a longer one is
+    /// EINVAL to the caller). Process context.
     fn getname(sk: &Sock<Self>, peer: bool, out: &mut [u8]) -> Result<usize>;
     fn sendmsg(sk: &Sock<Self>, msg: &mut Msg, len: usize) -> Result<usize>;
     fn recvmsg(sk: &Sock<Self>, msg: &mut Msg, len: usize, flags: i32) -> Result<usize>;
@@ -109,31 +111,67 @@ impl OptIn {
 }
 
 /// The result buffer of a `getsockopt` call: `optval` and `optlen` are
-/// user pointers.
+/// user pointers (`do_sock_getsockopt` refuses kernel ones before calling
+/// a protocol's `getsockopt`).
+///
+/// `*optlen` is the size of the user's buffer. It is read once, as
+/// mainline's protocols read it into a local (`get_user(len, optlen)`),
+/// and that value bounds every [`OptOut::write`]: no safe caller writes
+/// past what the user said the buffer holds, whatever it passes (mainline
+/// protocols cut the value themselves, `if (len > sizeof(int)) len =
+/// sizeof(int)`; the glue makes that cut a refusal it checks, not a duty
+/// of each caller).
+///
+/// # Invariants
+///
+/// Made only by the `getsockopt` trampoline of this file, with `optval`
+/// and `optlen` of the call; `first`, once set, is `*optlen` as first
+/// read.
 pub(crate) struct OptOut {
     val: *mut ffi::c_char,
     len: *mut ffi::c_int,
+    first: core::cell::Cell<Option<ffi::c_int>>,
 }
 
 impl OptOut {
     /// The buffer length the caller passed in `*optlen`; EFAULT on a bad
-    /// pointer.
+    /// pointer. Read from user memory once: later calls return that first
+    /// value, which is also the bound of [`OptOut::write`].
     pub(crate) fn len(&self) -> Result<i32> {
+        if let Some(v) = self.first.get() {
+            return Ok(v);
+        }
         let mut v: ffi::c_int = 0;
         // SAFETY: `len` is a user pointer; the helper uses get_user.
         super::to_result(unsafe { bindings::rcan_get_user_int(self.len, &mut v) })?;
+        // INVARIANT: the first value read.
+        self.first.set(Some(v));
         Ok(v)
     }
 
-    /// Stores `n` in `*optlen`.
+    /// Stores `n` in `*optlen` (the length written, or the length needed,
+    /// as mainline's ERANGE for `CAN_RAW_FILTER`). The bound of
+    /// [`OptOut::write`] stays the length first read.
     pub(crate) fn set_len(&self, n: i32) -> Result {
         // SAFETY: as in len(); put_user checks the pointer.
         super::to_result(unsafe { bindings::rcan_put_user_int(self.len, n) }).map(|_| ())
     }
 
-    /// Copies `src` to `optval`.
+    /// Copies `src` to `optval`. EINVAL, nothing written, if `src` is
+    /// longer than the user's buffer (`*optlen` as first read, 0 if
+    /// negative; read here if [`OptOut::len`] was not called): the caller
+    /// cuts the value to [`OptOut::len`] first, as mainline does. EFAULT
+    /// on a bad pointer. Process context (may fault pages in).
     pub(crate) fn write(&self, src: &[u8]) -> Result {
-        // SAFETY: `src` is readable; copy_to_user checks the user pointer.
+        let room = usize::try_from(self.len()?).unwrap_or(0);
+        if src.len() > room {
+            return Err(code::EINVAL);
+        }
+        // SAFETY: `src` is readable for `src.len()` bytes; `val` is the
+        // user pointer of the call, and `src.len()` is at most the size of
+        // the user's buffer as the user gave it (`room`, checked above), so
+        // the copy stays inside that buffer; copy_to_user checks that the
+        // range is user memory (access_ok) and faults are EFAULT.
         let ret = unsafe {
             bindings::rcan_copy_to_user(self.val.cast(), src.as_ptr().cast(), src.len() as _)
         };
@@ -219,10 +257,22 @@ impl<T: Proto> Sock<T> {
     }
 
     /// The address of the sock's `struct socket` (`sk->sk_socket`; 0
-    /// once orphaned), for /proc files that print it with `%pK`.
-    pub(crate) fn socket_addr(&self) -> usize {
-        // SAFETY: live sock (type invariant); reads one pointer field.
-        unsafe { (*self.sk).sk_socket as usize }
+    /// once orphaned), for /proc files that print it with `%pK`. Any
+    /// context.
+    ///
+    /// `sk_socket` changes while others read the sock: `sock_orphan` (at
+    /// close, which can run while a /proc reader holds the sock) and
+    /// `sock_graft` write it with `sk_set_socket`, a `WRITE_ONCE`. It is
+    /// read here once with `READ_ONCE` semantics, never through a
+    /// reference: the value as of some moment, as mainline's `%pK` of
+    /// `sk->sk_socket` prints it.
+    pub(in crate::glue) fn socket_addr(&self) -> usize {
+        // SAFETY: live sock (type invariant), so the field is valid to
+        // read; a volatile read is READ_ONCE, paired with the WRITE_ONCE
+        // of every writer (`sk_set_socket`), so it is no data race in the
+        // kernel's memory model.
+        let p = unsafe { core::ptr::read_volatile(core::ptr::addr_of!((*self.sk).sk_socket)) };
+        p as usize
     }
 
     /// A counted reference to this sock (`sock_hold`).
@@ -401,6 +451,15 @@ impl<T: Proto> Drop for SockGuard<'_, T> {
     }
 }
 
+/// The bytes of a socket address the glue writes for a protocol
+/// ([`Proto::getname`]'s buffer, [`Msg::set_name`]): `sizeof(struct
+/// sockaddr)`, the smallest buffer the kernel types a socket address with
+/// (why that bound, at those two places). Every address of ours fits
+/// (`sockaddr_can` up to `can_ifindex` 8, the thesis' `sockaddr_can` 16,
+/// DSOR's 8 and 6).
+pub(crate) const NAME_ROOM: usize = core::mem::size_of::<bindings::sockaddr>();
+const _: () = assert!(NAME_ROOM == 16);
+
 /// A `struct msghdr` of a sendmsg/recvmsg call.
 ///
 /// # Invariants
@@ -415,13 +474,22 @@ impl Msg {
         self.0
     }
 
-    /// The destination address of a sendmsg (a kernel copy), if any.
+    /// The destination address of a sendmsg (a kernel copy), if any;
+    /// `None` in a recvmsg, whose `msg_name` is the buffer for the source
+    /// address, not an address.
     pub(crate) fn name(&self) -> Option<&[u8]> {
-        // SAFETY: the socket layer passes a valid msghdr whose msg_name, if
-        // set, points to a kernel sockaddr_storage of msg_namelen bytes.
+        // SAFETY: a valid msghdr of the current call (type invariant).
+        // In a sendmsg (a source iterator) `msg_name`, if set, is an
+        // address of `msg_namelen` initialised bytes: the socket layer's
+        // copy in a sockaddr_storage (`move_addr_to_kernel` refuses a
+        // longer one), or a `kernel_sendmsg` caller's address of that
+        // length; the cap is the socket layer's. In a recvmsg it is a
+        // buffer the caller may not have initialised (with
+        // `kernel_recvmsg`, `msg_namelen` is whatever the caller left), so
+        // no slice is made over it.
         unsafe {
             let m = &*self.0;
-            if m.msg_name.is_null() {
+            if m.msg_name.is_null() || !m.msg_iter.data_source {
                 None
             } else {
                 let len = (m.msg_namelen.max(0) as usize).min(128);
@@ -430,17 +498,29 @@ impl Msg {
         }
     }
 
-    /// Stores a source address for recvmsg (if the caller asked for one).
+    /// Stores a source address for recvmsg (if the caller asked for one):
+    /// at most [`NAME_ROOM`] bytes of `addr` (more are cut), and
+    /// `msg_namelen` says how many.
     #[inline]
     pub(crate) fn set_name(&mut self, addr: &[u8]) {
-        // SAFETY: for recvmsg, msg_name is NULL or a kernel
-        // sockaddr_storage (128 bytes) that is copied out afterwards.
+        // SAFETY: a valid msghdr of the current call, used by nobody else
+        // meanwhile (type invariant). `msg_name` is NULL or the buffer the
+        // recvmsg's caller gave for the source address, and `msg_namelen`
+        // is not its size (the socket layer sets it to 0 before calling
+        // us), so the bound comes from what every caller gives: the socket
+        // layer's recvmsg paths (`____sys_recvmsg`, io_uring) a
+        // `sockaddr_storage` ("We assume all kernel code knows the size of
+        // sockaddr_storage", net/socket.c), in-kernel `kernel_recvmsg`
+        // callers a buffer for a socket address, of which the smallest
+        // type is `struct sockaddr`. We write at most `NAME_ROOM`, that
+        // size: within any such buffer, and less than mainline's own PF_CAN
+        // protocols write there (isotp 16 bytes, j1939 24).
         unsafe {
             let m = &mut *self.0;
             if m.msg_name.is_null() {
                 return;
             }
-            let n = addr.len().min(128);
+            let n = addr.len().min(NAME_ROOM);
             core::ptr::copy_nonoverlapping(addr.as_ptr(), m.msg_name as *mut u8, n);
             m.msg_namelen = n as i32;
         }
@@ -458,7 +538,8 @@ impl Msg {
     }
 
     /// [`Msg::copy_from_user`] into raw memory (bytes that may not be
-    /// initialised yet, such as the room [`Skb::put_from_msg`] just put).
+    /// initialised yet, such as the tailroom [`UniqueSkb::put_from_msg`]
+    /// fills before it puts the bytes).
     ///
     /// This is `memcpy_from_msg`'s inline `copy_from_iter_full` written
     /// out: `check_copy_size` comes down, for a buffer whose size is
@@ -824,17 +905,39 @@ unsafe extern "C" fn connect<T: Proto>(
     }
 }
 
+/// `proto_ops::getname`. Process context.
+///
+/// # Safety
+///
+/// Called by the socket layer: `sock` is a socket of protocol `T`, `addr`
+/// a kernel `struct sockaddr` the caller lets us fill.
 unsafe extern "C" fn getname<T: Proto>(
     sock: *mut bindings::socket,
     addr: *mut bindings::sockaddr,
     peer: ffi::c_int,
 ) -> ffi::c_int {
-    // SAFETY: `addr` is a kernel sockaddr_storage (128 bytes).
-    let out = unsafe { core::slice::from_raw_parts_mut(addr as *mut u8, 128) };
+    // `addr` is typed `struct sockaddr *`, so the caller gives at least
+    // that much: the socket layer (`__sys_getsockname`, `__sys_getpeername`,
+    // `SO_PEERNAME`) a `sockaddr_storage`, the in-kernel
+    // `kernel_getsockname`/`kernel_getpeername` an "address holder" of the
+    // caller's choice. `NAME_ROOM` bytes of it are all we rely on (every
+    // address of ours fits; mainline's PF_CAN protocols write up to 24).
+    // SAFETY: so `addr` is valid for `NAME_ROOM` bytes of writes, and
+    // nothing else uses it during the call. They may be uninitialised
+    // (a buffer on the caller's stack): zeroed first, so the slice below
+    // covers initialised bytes.
+    let out = unsafe {
+        core::ptr::write_bytes(addr.cast::<u8>(), 0, NAME_ROOM);
+        core::slice::from_raw_parts_mut(addr.cast::<u8>(), NAME_ROOM)
+    };
     // SAFETY: socket-layer call.
     match unsafe { sock_of::<T>(sock) } {
+        // The length is what the caller copies out of `addr`
+        // (`move_addr_to_user`, which BUG()s above a sockaddr_storage):
+        // never more than we let the protocol write.
         Some(sk) => match T::getname(&sk, peer != 0, out) {
-            Ok(n) => n as ffi::c_int,
+            Ok(n) if n <= NAME_ROOM => n as ffi::c_int,
+            Ok(_) => code::EINVAL.to_errno(),
             Err(e) => e.to_errno(),
         },
         None => code::EBADF.to_errno(),
@@ -908,7 +1011,12 @@ unsafe extern "C" fn getsockopt<T: Proto>(
     val: *mut ffi::c_char,
     len: *mut ffi::c_int,
 ) -> ffi::c_int {
-    let opt = OptOut { val, len };
+    // INVARIANT: `optval` and `optlen` of this call, `*optlen` not read yet.
+    let opt = OptOut {
+        val,
+        len,
+        first: core::cell::Cell::new(None),
+    };
     // SAFETY: socket-layer call; `val` and `len` are user pointers that
     // OptOut only passes to the uaccess helpers.
     match unsafe { sock_of::<T>(sock) } {

@@ -208,7 +208,7 @@ impl KernelRx for DsorRx {
         let now = now_ms();
         let mut g = ENGINE.lock();
         let Some(e) = g.as_mut() else { return };
-        if dev.name_bytes() != e.cfg.ifname.bytes() {
+        if dev.name().as_bytes() != e.cfg.ifname.bytes() {
             return;
         }
         let finished_before = e.stats.tx_ok + e.stats.tx_failed;

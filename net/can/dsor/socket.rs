@@ -62,7 +62,7 @@ impl CanProtocol for DsorProto {
         {
             let mut g = ENGINE.lock();
             if let Some(e) = g.as_mut() {
-                if dev.name_bytes() == e.cfg.ifname.bytes() {
+                if dev.name().as_bytes() == e.cfg.ifname.bytes() {
                     e.fail_all(neterr::ENETDOWN().to_errno());
                 }
             }

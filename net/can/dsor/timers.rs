@@ -143,14 +143,14 @@ pub(crate) fn drain_locked(
         }
         sent += 1;
         if !core::mem::take(&mut dev_checked)
-            && dev.is_some_and(|d| d.name_bytes() != ifname.bytes())
+            && dev.is_some_and(|d| d.name().as_bytes() != ifname.bytes())
         {
             dev = None;
         }
         if dev.is_none()
             && held
                 .as_ref()
-                .is_none_or(|d| d.name_bytes() != ifname.bytes())
+                .is_none_or(|d| d.name().as_bytes() != ifname.bytes())
         {
             held = DevRef::by_name(Net::init(), ifname.as_cstr());
         }

@@ -115,7 +115,7 @@ pub(crate) fn open<'a, T: CanDevice>(
     irq: u32,
 ) -> Result<(Settings, Opening<'a, T>)> {
     let can = T::can_dev(p);
-    let set = can.open_check(dev.name())?;
+    let set = can.open_check(dev.name().as_str())?;
     can.arm_restart(dev)?;
     let opening = Opening { dev, can };
     if irq != 0 {

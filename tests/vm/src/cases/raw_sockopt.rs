@@ -246,13 +246,15 @@ fn raw_sockopt_filter_max(ctx: &mut Ctx) -> TestResult {
 }
 
 /// getsockopt CAN_RAW_FILTER into a buffer smaller than the filters fails
-/// with ERANGE and reports the length needed; zero filters read as length 0.
+/// with ERANGE, reports the length needed and writes nothing; a larger
+/// buffer gets the filters and nothing past them; zero filters read as
+/// length 0 and write nothing.
 fn raw_sockopt_filter_get_short_buffer(ctx: &mut Ctx) -> TestResult {
     let idx = raw1(ctx)?;
     let s = canraw::open(idx)?;
     let three = [(1, 0x7FF), (2, 0x7FF), (3, 0x7FF)];
     s.set_filters(&three).or_fail("set three filters")?;
-    let mut buf = [0u8; 64];
+    let mut buf = [0xAAu8; 64];
     for len in [0, 8, 16, 23] {
         let (r, got) = sys::getsockopt_len(&s, SOL_CAN_RAW, CAN_RAW_FILTER, &mut buf, len);
         expect_errno(
@@ -263,6 +265,11 @@ fn raw_sockopt_filter_get_short_buffer(ctx: &mut Ctx) -> TestResult {
         ensure!(
             got == 24,
             "getsockopt CAN_RAW_FILTER with optlen {len}: ERANGE reports optlen {got}, expected 24"
+        );
+        ensure!(
+            buf == [0xAA; 64],
+            "getsockopt CAN_RAW_FILTER with optlen {len} (ERANGE) wrote the buffer: {:02X?}",
+            &buf[..24]
         );
     }
     let (r, got) = sys::getsockopt_len(&s, SOL_CAN_RAW, CAN_RAW_FILTER, &mut buf, 64);
@@ -276,10 +283,21 @@ fn raw_sockopt_filter_get_short_buffer(ctx: &mut Ctx) -> TestResult {
         "getsockopt of 3 filters returned {:02X?}",
         &buf[..24]
     );
+    ensure!(
+        buf[24..] == [0xAA; 40],
+        "getsockopt of 3 filters with optlen 64 wrote past the filters: {:02X?}",
+        &buf[24..32]
+    );
     s.set_filter_drop_all().or_fail("set zero filters")?;
+    buf = [0xAA; 64];
     let (r, got) = sys::getsockopt_len(&s, SOL_CAN_RAW, CAN_RAW_FILTER, &mut buf, 64);
     r.or_fail("getsockopt CAN_RAW_FILTER with zero filters")?;
     ensure!(got == 0, "zero filters read back with optlen {got}");
+    ensure!(
+        buf == [0xAA; 64],
+        "zero filters read back wrote the buffer: {:02X?}",
+        &buf[..8]
+    );
     Ok(())
 }
 
@@ -352,7 +370,8 @@ fn raw_sockopt_bad_level_and_name(ctx: &mut Ctx) -> TestResult {
 }
 
 /// getsockopt of an int option: a longer optlen is cut to 4, a shorter one
-/// gets that many bytes of the value, a negative one is EINVAL.
+/// (down to 0) gets that many bytes of the value and nothing past them, a
+/// negative one is EINVAL.
 fn raw_sockopt_get_optlen(ctx: &mut Ctx) -> TestResult {
     let idx = raw1(ctx)?;
     let s = canraw::open(idx)?;
@@ -376,6 +395,17 @@ fn raw_sockopt_get_optlen(ctx: &mut Ctx) -> TestResult {
             "getsockopt {what} optlen 2: optlen {len}, buffer {:02X?}",
             &buf[..4]
         );
+        for short in [0, 1, 3] {
+            buf = [0xAA; 16];
+            let (r, len) = sys::getsockopt_len(&s, SOL_CAN_RAW, name, &mut buf, short);
+            r.or_fail(format_args!("getsockopt {what} optlen {short}"))?;
+            let n = short as usize;
+            ensure!(
+                len == short && buf[..n] == value.to_ne_bytes()[..n] && buf[n..] == [0xAA; 16][n..],
+                "getsockopt {what} optlen {short}: optlen {len}, buffer {:02X?}",
+                &buf[..4]
+            );
+        }
         let (r, _) = sys::getsockopt_len(&s, SOL_CAN_RAW, name, &mut buf, -1);
         expect_errno(r, libc::EINVAL, &format!("getsockopt {what} optlen -1"))?;
     }

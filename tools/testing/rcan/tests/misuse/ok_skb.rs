@@ -5,7 +5,8 @@
 //! `OwnedSkb` whose own fields (`cb`) are written, its device's index
 //! read in the callback; a peeked or shared skb is written only after
 //! `unshare` (a copy if need be); an skb handed up by a device gets that
-//! device at the hand-off, never a NULL or stale one.
+//! device at the hand-off, never a NULL or stale one. A device's name is
+//! a copy.
 // expect: ok
 #![forbid(unsafe_code)]
 
@@ -13,6 +14,14 @@ use crate::glue::can::proto::RxSkb;
 use crate::glue::netdev::NetDev;
 use crate::glue::skb::{OwnedSkb, UniqueSkb};
 use crate::glue::sock::{Proto, Sock};
+
+/// The device's name is read as a copy, compared and printed (the sound
+/// use of `netdev_name_borrowed`).
+pub(crate) fn name_copied(dev: &NetDev) -> bool {
+    let name = dev.name();
+    kernel::pr_info!("{}: up\n", name);
+    name.as_bytes() == b"can0"
+}
 
 pub(crate) fn build_then_clone(dev: &NetDev) {
     if let Some(mut skb) = UniqueSkb::alloc(16, crate::glue::GFP_ATOMIC) {
