@@ -27,7 +27,7 @@
 //! An in-kernel receiver without a socket (DSOR's engine, the time
 //! services) implements [`KernelRx`] and holds a [`KernelRxReg`]; a driver
 //! whose hardware filter follows the sockets implements [`FilterListener`]
-//! and holds a [`Listening`].
+//! and hands its device's registration to a [`Listening`], which owns it.
 
 use super::abi::{self, CanProto, RxSpec, RxTableSpec, TableFilter};
 // Re-exported for the protocols; not every module uses every one.
@@ -889,54 +889,74 @@ pub(crate) trait FilterListener: gnetdev::Driver {
 /// Called by pf_can as `abi::ListenFn` says, with the cookie that
 /// [`Listening::new`] registered.
 unsafe extern "C" fn listen_trampoline<T: FilterListener>(data: *mut ffi::c_void) {
-    // SAFETY: `data` is the device of a live Registration<T>: the
-    // Listening guard that registered it removes it (waiting for a running
-    // call) before that registration can be dropped.
+    // SAFETY: `data` is the device of the Registration<T> that the
+    // Listening which registered this call owns; its Drop removes the
+    // listener (waiting for a running call) before that registration is
+    // dropped, so the device is registered for the call.
     let (dev, p) = unsafe { gnetdev::from_cookie::<T>(data.cast()) };
     T::filters_changed(dev, p);
 }
 
-/// Calls `T::filters_changed` for one device whenever the receive table
-/// changes; stops when dropped. Must be dropped before the device's
-/// Registration (declare it after the registration in a struct, or drop it
-/// explicitly).
+/// A registered device whose driver follows the receive table: calls
+/// `T::filters_changed` for the device whenever the wanted filters of its
+/// interface change, until dropped.
+///
+/// The listening owns the device's [`Registration`](gnetdev::Registration)
+/// (lent through [`Listening::registration`]), so the order of the
+/// teardown is the type's, not the order of a driver's fields: its `Drop`
+/// removes the listener (waiting for a running call), then the
+/// registration is dropped (the device unregistered and freed). No
+/// listener can outlive its device; `mem::forget` leaks both, the device
+/// staying registered as when a `Registration` alone is forgotten.
+///
+/// # Invariants
+///
+/// The listener `(listen_trampoline::<T>, reg's device)` is registered
+/// with pf_can from `new` until `drop`.
 pub(crate) struct Listening<T: FilterListener> {
-    dev: *mut bindings::net_device,
-    ifindex: i32,
-    _t: PhantomData<T>,
+    /// Dropped after [`Listening`]'s `Drop` (fields are dropped after the
+    /// containing value's `Drop::drop` runs).
+    reg: gnetdev::Registration<T>,
 }
 
-// SAFETY: only used to unregister the listener, from any thread.
-unsafe impl<T: FilterListener> Send for Listening<T> {}
-// SAFETY: no shared access.
-unsafe impl<T: FilterListener> Sync for Listening<T> {}
-
 impl<T: FilterListener> Listening<T> {
-    /// Starts listening for `reg`'s device. Process context.
-    pub(crate) fn new(reg: &gnetdev::Registration<T>) -> Result<Self> {
+    /// Starts listening for `reg`'s device, which the listening keeps
+    /// registered from now on. On failure (ENOEXEC: another `rcan_pf`'s
+    /// ABI; ENOMEM) `reg` is dropped: the device is unregistered. Process
+    /// context.
+    pub(crate) fn new(reg: gnetdev::Registration<T>) -> Result<Self> {
         abi::check()?;
         let dev = reg.dev().as_ptr();
         let ifindex = reg.dev().ifindex();
-        // SAFETY: the trampoline's cookie is the registered device; the
-        // registration outlives this guard (documented contract), whose
-        // Drop removes the listener.
+        // SAFETY: the trampoline's cookie is the registered device of
+        // `reg`, which the returned Listening owns and drops only after
+        // its Drop removed the listener (type invariant); on failure
+        // nothing was registered.
         crate::glue::to_result(unsafe {
             abi::rcan_rx_listen(listen_trampoline::<T>, dev.cast(), ifindex, true)
         })?;
-        Ok(Listening {
-            dev,
-            ifindex,
-            _t: PhantomData,
-        })
+        // INVARIANT: registered just above, for `reg`'s device.
+        Ok(Listening { reg })
+    }
+
+    /// The registration of the device listened to.
+    pub(crate) fn registration(&self) -> &gnetdev::Registration<T> {
+        &self.reg
     }
 }
 
 impl<T: FilterListener> Drop for Listening<T> {
     fn drop(&mut self) {
-        // SAFETY: removal of the listener added in new(); returns after a
-        // running call finished.
+        // SAFETY: removal of the listener added in new() (type invariant);
+        // returns after a running call finished. `self.reg` is dropped
+        // only after this function returns.
         unsafe {
-            abi::rcan_rx_listen(listen_trampoline::<T>, self.dev.cast(), self.ifindex, false)
+            abi::rcan_rx_listen(
+                listen_trampoline::<T>,
+                self.reg.dev().as_ptr().cast(),
+                self.reg.dev().ifindex(),
+                false,
+            )
         };
     }
 }
