@@ -310,7 +310,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     /// `ip link set canX up`. Process context, RTNL; requests the
     /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        let (set, opening) = ctrl::open(dev, p, p.irq)?;
+        let (set, opening) = ctrl::open(dev, p.irq)?;
         let (bt0, bt1) = ctrl::btr(&set);
         let m = wanted_masks(dev);
         {
@@ -335,7 +335,6 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         ctrl::stop(
             dev,
-            p,
             || {
                 let mut st = p.chip.lock();
                 st.running = false;

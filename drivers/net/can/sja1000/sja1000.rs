@@ -485,7 +485,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     /// `ip link set canX up`. Process context, RTNL; requests the
     /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        let (set, opening) = ctrl::open(dev, p, p.irq)?;
+        let (set, opening) = ctrl::open(dev, p.irq)?;
         let (btr0, btr1) = ctrl::btr(&set);
         let f = wanted_filter(dev);
         let started = {
@@ -518,7 +518,6 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         ctrl::stop(
             dev,
-            p,
             || {
                 let mut st = p.chip.lock();
                 st.running = false;
