@@ -34,6 +34,7 @@ use super::abi::{self, CanProto, RxSpec, RxTableSpec, TableFilter};
 #[allow(unused_imports)]
 pub(crate) use super::abi::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use crate::glue::bindings;
+use crate::glue::module::ModuleScope;
 use crate::glue::net::Net;
 use crate::glue::netdev::{self as gnetdev, NetDev};
 use crate::glue::skb::{OwnedSkb, Shared, Skb, UniqueSkb};
@@ -822,28 +823,128 @@ unsafe extern "C" fn kernel_rx<T: KernelRx>(
 }
 
 /// A registered [`KernelRx`]; dropping it removes the receiver and waits
-/// for running callbacks (process context; sleeps).
+/// for running callbacks (process context; sleeps). If it is never
+/// dropped (`mem::forget`, a `static`), the module's exit removes the
+/// receiver ([`Scoped`](crate::glue::module::Scoped), step 3): no frame
+/// reaches the module's text after `rmmod`.
 pub(crate) struct KernelRxReg<T: KernelRx>(&'static T);
 
 impl<T: KernelRx> Drop for KernelRxReg<T> {
     fn drop(&mut self) {
+        let data = self.0 as *const T as *mut ffi::c_void;
         // SAFETY: removal (NULL spec) of the receiver registered with this
         // func and data; never fails.
-        unsafe {
-            abi::rcan_rx_set_kernel(
-                kernel_rx::<T>,
-                self.0 as *const T as *mut ffi::c_void,
-                0,
-                core::ptr::null(),
-            )
-        };
+        unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, core::ptr::null()) };
+        kernel_rx_forget(data);
+    }
+}
+
+/// Most kernel receivers one module has registered at a time (one each
+/// today: `rcan_dsor`, `rcan_rtime`).
+const MAX_KERNEL_RX: usize = 4;
+
+/// One registered kernel receiver of this module, as its removal names it.
+struct KernelRxSlot {
+    /// The receiver's static (`&'static T`); null: the slot is free.
+    data: core::sync::atomic::AtomicPtr<ffi::c_void>,
+    /// Its `kernel_rx::<T>`, an `abi::RxFn`; valid while `data` is not
+    /// null.
+    func: core::sync::atomic::AtomicUsize,
+}
+
+/// The kernel receivers this module registered and has not removed (the
+/// glue is compiled into each module: one table per module), swept at
+/// exit by [`kernel_rx_sweep`]. Process context only: registration and
+/// removal are; the sweep runs after the module's value is gone.
+///
+/// # Invariants
+///
+/// A slot with a non-null `data` names a receiver registered by
+/// [`rx_set_kernel`] with `func` = `kernel_rx::<T>` for that `T` and data,
+/// or one already removed (removing again does nothing).
+static KERNEL_RXS: [KernelRxSlot; MAX_KERNEL_RX] = [const {
+    KernelRxSlot {
+        data: core::sync::atomic::AtomicPtr::new(core::ptr::null_mut()),
+        func: core::sync::atomic::AtomicUsize::new(0),
+    }
+}; MAX_KERNEL_RX];
+
+/// Takes a slot for `data` (the one it has if it is registered again:
+/// pf_can replaces a receiver's registration) and stores `func`. ENOSPC
+/// when all are taken. Returns whether the slot is new.
+fn kernel_rx_note(data: *mut ffi::c_void, func: abi::RxFn) -> Result<bool> {
+    let mut new = false;
+    let slot = match KERNEL_RXS
+        .iter()
+        .find(|s| s.data.load(Ordering::Acquire) == data)
+    {
+        Some(s) => s,
+        None => {
+            new = true;
+            KERNEL_RXS
+                .iter()
+                .find(|s| {
+                    s.data
+                        .compare_exchange(
+                            core::ptr::null_mut(),
+                            data,
+                            Ordering::AcqRel,
+                            Ordering::Acquire,
+                        )
+                        .is_ok()
+                })
+                .ok_or(code::ENOSPC)?
+        }
+    };
+    slot.func
+        .store(func as *const () as usize, Ordering::Release);
+    Ok(new)
+}
+
+/// Frees the slot of `data`, removed from pf_can.
+fn kernel_rx_forget(data: *mut ffi::c_void) {
+    for s in KERNEL_RXS.iter() {
+        let _ = s.data.compare_exchange(
+            data,
+            core::ptr::null_mut(),
+            Ordering::AcqRel,
+            Ordering::Acquire,
+        );
+    }
+}
+
+/// The exit's sweep ([`crate::glue::module::Scoped`], step 3): removes
+/// every kernel receiver of this module still registered. Process
+/// context, after the module's value was dropped; sleeps (a grace period
+/// per receiver).
+fn kernel_rx_sweep() {
+    for s in KERNEL_RXS.iter() {
+        let data = s.data.swap(core::ptr::null_mut(), Ordering::AcqRel);
+        if data.is_null() {
+            continue;
+        }
+        let func = s.func.load(Ordering::Acquire);
+        // SAFETY: stored from an `abi::RxFn` by kernel_rx_note before
+        // `data` was published (Release/Acquire), a function pointer of
+        // the same size as usize.
+        let func: abi::RxFn = unsafe { core::mem::transmute::<usize, abi::RxFn>(func) };
+        // SAFETY: removal (NULL spec) of the receiver registered with this
+        // func and data (invariant of KERNEL_RXS), or of nothing if it was
+        // removed already; never fails, waits out running callbacks.
+        unsafe { abi::rcan_rx_set_kernel(func, data, 0, core::ptr::null()) };
     }
 }
 
 /// Registers `rx` for frames on `ifindex` (0: every CAN interface)
 /// passing any of `filters` (at least one). The registration lasts until
-/// the returned guard is dropped. Process context; may sleep.
+/// the returned guard is dropped, and at the latest until the module's
+/// exit, which the `scope` proves the glue runs ([`Scoped`]). ENOSPC with
+/// more than `MAX_KERNEL_RX` receivers in one module. Process context
+/// (`init`); may sleep.
+///
+/// [`Scoped`]: crate::glue::module::Scoped
 pub(crate) fn rx_set_kernel<T: KernelRx>(
+    _scope: &ModuleScope,
     rx: &'static T,
     ifindex: i32,
     filters: &[RxFilter],
@@ -859,13 +960,22 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
         filters: filters.as_ptr(),
         nfilters: filters.len(),
     };
-    // `rx` is 'static: a static of the calling module, which keeps the
-    // guard in its module object, so the registration is removed at module
-    // exit at the latest.
+    // `rx` is 'static: a static of the calling module, whose exit removes
+    // the registration at the latest (the sweep noted here).
     let data = rx as *const T as *mut ffi::c_void;
-    // SAFETY: `spec` and its filters live for the call; `data` is 'static.
+    let new = kernel_rx_note(data, kernel_rx::<T>)?;
+    crate::glue::module::note_sweep(kernel_rx_sweep);
+    // SAFETY: `spec` and its filters live for the call; `data` is 'static
+    // (module data), and the registration is removed by the guard's drop
+    // or by the module's exit, before the module's memory goes.
     let ret = unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, &spec) };
-    crate::glue::to_result(ret).map(|_| KernelRxReg(rx))
+    if let Err(e) = crate::glue::to_result(ret) {
+        if new {
+            kernel_rx_forget(data);
+        }
+        return Err(e);
+    }
+    Ok(KernelRxReg(rx))
 }
 
 /// Checks that the loaded `rcan_pf` speaks this module's ABI (see
