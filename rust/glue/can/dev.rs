@@ -291,11 +291,11 @@ impl JobCallback for RestartJob {
     /// restart takes only spinlocks.
     fn expired(job: JobRef<'_, Self>, _which: usize) {
         let d = job.data();
-        // SAFETY: `d.dev` is a device of the hook's driver (type
-        // invariant), and the reference it holds keeps its Registration's
-        // drop inside `unregister_netdev` (which waits for every
-        // reference) until this timer is dropped, after its callback
-        // finished: the private data is initialised for the call.
+        // The reference `d.dev` holds keeps its Registration's drop inside
+        // `unregister_netdev` (which waits for every reference) until this
+        // timer is dropped, after its callback finished.
+        // SAFETY: a device of the hook's driver (type invariant), whose
+        // private data is therefore initialised for the call.
         unsafe { (d.hook)(d.dev.as_ptr()) };
     }
 }

@@ -999,10 +999,10 @@ pub(crate) trait FilterListener: gnetdev::Driver {
 /// Called by pf_can as `abi::ListenFn` says, with the cookie that
 /// [`Listening::new`] registered.
 unsafe extern "C" fn listen_trampoline<T: FilterListener>(data: *mut ffi::c_void) {
-    // SAFETY: `data` is the device of the Registration<T> that the
-    // Listening which registered this call owns; its Drop removes the
-    // listener (waiting for a running call) before that registration is
-    // dropped, so the device is registered for the call.
+    // `data` is the device of the Registration<T> that the Listening
+    // which registered this call owns; its Drop removes the listener
+    // (waiting for a running call) before that registration is dropped.
+    // SAFETY: so the device is registered for the call.
     let (dev, p) = unsafe { gnetdev::from_cookie::<T>(data.cast()) };
     T::filters_changed(dev, p);
 }
@@ -1038,10 +1038,10 @@ impl<T: FilterListener> Listening<T> {
         abi::check()?;
         let dev = reg.dev().as_ptr();
         let ifindex = reg.dev().ifindex();
-        // SAFETY: the trampoline's cookie is the registered device of
-        // `reg`, which the returned Listening owns and drops only after
-        // its Drop removed the listener (type invariant); on failure
-        // nothing was registered.
+        // The returned Listening owns `reg` and drops it only after its
+        // Drop removed the listener (type invariant); on failure nothing
+        // was registered.
+        // SAFETY: the cookie is `reg`'s registered device (above).
         crate::glue::to_result(unsafe {
             abi::rcan_rx_listen(listen_trampoline::<T>, dev.cast(), ifindex, true)
         })?;
