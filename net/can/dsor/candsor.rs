@@ -112,7 +112,7 @@ fn register_all(scope: &ModuleScope, node: u8, canip: bool) -> Result<Regs> {
     } else {
         None
     };
-    let proto = MODULE.register(c_str!("CANPROTO_DSOR"))?;
+    let proto = MODULE.register(c_str!("CANPROTO_DSOR"), scope)?;
     Ok(Regs {
         _proto: proto,
         _rx: rx,

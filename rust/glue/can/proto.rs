@@ -428,11 +428,15 @@ impl<T: CanProtocol> ProtoModule<T> {
     }
 
     /// Registers the proto, the notifier and the protocol, in that order;
-    /// undoes what was done on failure. Module init (process context).
-    /// EBUSY if already registered.
+    /// undoes what was done on failure. Module init (process context):
+    /// the `scope` proves the module's exit is the glue's, which
+    /// unregisters the protocol if the returned guard was never dropped
+    /// (`mem::forget`, a `static`). EBUSY if already registered, ENOSPC
+    /// with more than `MAX_PROTOS` protocols in one module.
     pub(crate) fn register(
         &'static self,
         name: &'static kernel::str::CStr,
+        _scope: &ModuleScope,
     ) -> Result<ProtoRegistration<T>> {
         // SAFETY: reading our own static; only `register` writes `owner`,
         // and registration is serialised by module init.
@@ -440,6 +444,21 @@ impl<T: CanProtocol> ProtoModule<T> {
             return Err(code::EBUSY);
         }
         abi::check()?;
+        let me = self as *const Self as *mut ();
+        proto_note(me, Self::unregister_erased)?;
+        crate::glue::module::note_sweep(proto_sweep);
+        let r = self.register_all(name);
+        if r.is_err() {
+            proto_forget(me);
+        }
+        r
+    }
+
+    /// [`Self::register`]'s registrations. Module init.
+    fn register_all(
+        &'static self,
+        name: &'static kernel::str::CStr,
+    ) -> Result<ProtoRegistration<T>> {
         self.proto.register(name, bindings::PF_CAN as i32)?;
         // SAFETY: module init: nothing else sees the CanProto yet.
         unsafe { (*self.canproto.get()).owner = crate::glue::this_module() };
@@ -518,19 +537,125 @@ pub(crate) struct ProtoRegistration<T: CanProtocol>(&'static ProtoModule<T>);
 
 impl<T: CanProtocol> Drop for ProtoRegistration<T> {
     fn drop(&mut self) {
-        let m = self.0;
-        // SAFETY: registered by `register`; rcan_proto_unregister returns
-        // after a grace period, so no socket creation still sees it.
-        unsafe {
-            abi::rcan_proto_unregister(m.canproto.get());
-            bindings::unregister_netdevice_notifier(m.notifier.get());
+        self.0.unregister();
+        proto_forget(self.0 as *const ProtoModule<T> as *mut ());
+    }
+}
+
+impl<T: CanProtocol> ProtoModule<T> {
+    /// Undoes a successful [`Self::register`]; does nothing if it is not
+    /// registered (`owner` null). Process context; sleeps (a grace
+    /// period). Called by [`ProtoRegistration`]'s drop, and by the
+    /// module's exit for a registration never dropped ([`proto_sweep`]).
+    fn unregister(&'static self) {
+        // SAFETY: reading our own static; `owner` is written only by
+        // register (module init) and here (its guard's drop or the exit,
+        // which follow init).
+        if unsafe { (*self.canproto.get()).owner }.is_null() {
+            return;
         }
-        m.proto.unregister();
+        // SAFETY: registered by `register` (owner set); rcan_proto_unregister
+        // returns after a grace period, so no socket creation still sees it.
+        unsafe {
+            abi::rcan_proto_unregister(self.canproto.get());
+            bindings::unregister_netdevice_notifier(self.notifier.get());
+        }
+        self.proto.unregister();
         // Statics are never dropped: free the (empty) list's buffer.
         let mut rtnl = Rtnl::lock();
-        *m.sockets.get(&mut rtnl) = SockSet::new();
+        *self.sockets.get(&mut rtnl) = SockSet::new();
         // SAFETY: nothing uses the CanProto any more; allows a new register.
-        unsafe { (*m.canproto.get()).owner = core::ptr::null_mut() };
+        unsafe { (*self.canproto.get()).owner = core::ptr::null_mut() };
+    }
+
+    /// [`Self::unregister`] for [`PROTO_REGS`], which keeps the module
+    /// type-erased.
+    ///
+    /// # Safety
+    ///
+    /// `m` is a `&'static ProtoModule<T>` of this `T`.
+    unsafe fn unregister_erased(m: *const ()) {
+        // SAFETY: per the contract.
+        unsafe { &*m.cast::<Self>() }.unregister();
+    }
+}
+
+/// Most protocols one module registers (one each today).
+const MAX_PROTOS: usize = 2;
+
+/// One registered protocol of this module: its static and how to undo it.
+struct ProtoSlot {
+    /// The `&'static ProtoModule<T>`; null: the slot is free.
+    module: core::sync::atomic::AtomicPtr<()>,
+    /// Its `ProtoModule::<T>::unregister_erased`; valid while `module` is
+    /// not null.
+    undo: core::sync::atomic::AtomicUsize,
+}
+
+/// The protocols this module registered and whose guard was not dropped
+/// (the glue is compiled into each module: one table per module), swept
+/// at exit by [`proto_sweep`]. Process context only.
+///
+/// # Invariants
+///
+/// A slot with a non-null `module` holds a `&'static ProtoModule<T>` and
+/// `ProtoModule::<T>::unregister_erased` for the same `T`.
+static PROTO_REGS: [ProtoSlot; MAX_PROTOS] = [const {
+    ProtoSlot {
+        module: core::sync::atomic::AtomicPtr::new(core::ptr::null_mut()),
+        undo: core::sync::atomic::AtomicUsize::new(0),
+    }
+}; MAX_PROTOS];
+
+/// Takes a slot for `m` (a `&'static ProtoModule<T>`) with its `undo`
+/// (`ProtoModule::<T>::unregister_erased`). ENOSPC when all are taken.
+fn proto_note(m: *mut (), undo: unsafe fn(*const ())) -> Result {
+    let slot = PROTO_REGS
+        .iter()
+        .find(|s| {
+            s.module
+                .compare_exchange(
+                    core::ptr::null_mut(),
+                    m,
+                    Ordering::AcqRel,
+                    Ordering::Acquire,
+                )
+                .is_ok()
+        })
+        .ok_or(code::ENOSPC)?;
+    slot.undo
+        .store(undo as *const () as usize, Ordering::Release);
+    Ok(())
+}
+
+/// Frees the slot of `m`.
+fn proto_forget(m: *mut ()) {
+    for s in PROTO_REGS.iter() {
+        let _ = s.module.compare_exchange(
+            m,
+            core::ptr::null_mut(),
+            Ordering::AcqRel,
+            Ordering::Acquire,
+        );
+    }
+}
+
+/// The exit's sweep ([`crate::glue::module::Scoped`], step 3): unregisters
+/// every protocol of this module still registered. Process context, after
+/// the module's value was dropped; sleeps.
+fn proto_sweep() {
+    for s in PROTO_REGS.iter() {
+        let m = s.module.swap(core::ptr::null_mut(), Ordering::AcqRel);
+        if m.is_null() {
+            continue;
+        }
+        let undo = s.undo.load(Ordering::Acquire);
+        // SAFETY: stored from an `unsafe fn(*const ())` by proto_note
+        // before `module` was published (Release/Acquire).
+        let undo: unsafe fn(*const ()) =
+            unsafe { core::mem::transmute::<usize, unsafe fn(*const ())>(undo) };
+        // SAFETY: `m` and `undo` are of one `T` (invariant of PROTO_REGS).
+        unsafe { undo(m) };
     }
 }
 
