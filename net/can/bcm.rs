@@ -76,6 +76,7 @@ use glue::procfs::{NetProcDir, NetProcDirReg, ProcEntry, ProcShow, SeqFile};
 use glue::skb::UniqueSkb;
 use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
 use glue::sync::Rtnl;
+use crate::glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
 use kernel::str::CString;
 use rcan_api::{
@@ -1314,8 +1315,8 @@ pub(crate) struct BcmModule {
     _proc: Option<NetProcDirReg>,
 }
 
-impl kernel::Module for BcmModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
+impl ScopedModule for BcmModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
         // Before the protocol: a socket may connect at once.
         let proc = match PROC.register() {
             Ok(p) => Some(p),
@@ -1324,7 +1325,7 @@ impl kernel::Module for BcmModule {
                 None
             }
         };
-        let reg = MODULE.register(c_str!("CAN_BCM"))?;
+        let reg = MODULE.register(c_str!("CAN_BCM"), scope)?;
         pr_info!("CAN_BCM ({}) registered\n", CAN_BCM);
         Ok(BcmModule {
             _reg: reg,

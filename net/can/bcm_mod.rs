@@ -16,7 +16,9 @@ mod rcan_core;
 
 mod bcm;
 
-use bcm::BcmModule;
+/// `module!` takes a plain name: the glue's wrapper, which owns the exit
+/// duties (`rust/glue/module.rs`).
+type BcmModule = glue::module::Scoped<bcm::BcmModule>;
 
 // `alias`: what rcan_pf requests on socket(PF_CAN, SOCK_DGRAM, CAN_BCM)
 // while no module has registered protocol 2 (`request_proto_module` in

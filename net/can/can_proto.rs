@@ -31,6 +31,7 @@ use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::sock::{Msg, Sock};
 use glue::sync::{Rtnl, RtnlProof};
+use crate::glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
 use rcan_api::{
     CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets,
@@ -316,9 +317,9 @@ pub(crate) struct CanProtoModule {
     _reg: ProtoRegistration<CanProtoOps>,
 }
 
-impl kernel::Module for CanProtoModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
-        let reg = MODULE.register(c_str!("CANPROTO_CAN"))?;
+impl ScopedModule for CanProtoModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
+        let reg = MODULE.register(c_str!("CANPROTO_CAN"), scope)?;
         pr_info!("CANPROTO_CAN ({}) registered\n", CANPROTO_CAN);
         Ok(CanProtoModule { _reg: reg })
     }

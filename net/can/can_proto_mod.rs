@@ -15,7 +15,9 @@ mod rcan_core;
 
 mod can_proto;
 
-use can_proto::CanProtoModule;
+/// `module!` takes a plain name: the glue's wrapper, which owns the exit
+/// duties (`rust/glue/module.rs`).
+type CanProtoModule = glue::module::Scoped<can_proto::CanProtoModule>;
 
 // `alias`: what rcan_pf requests on socket(PF_CAN, ..., CANPROTO_CAN) while
 // no module has registered protocol 16 (`request_proto_module` in

@@ -44,6 +44,7 @@ use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::sock::{Msg, OptIn, OptOut, Sock, SockGuard};
 use glue::sync::Rtnl;
+use crate::glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
 use rcan_api::{
     CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets,
@@ -622,9 +623,9 @@ pub(crate) struct RawModule {
     _reg: ProtoRegistration<RawProto>,
 }
 
-impl kernel::Module for RawModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
-        let reg = MODULE.register(c_str!("CAN_RAW"))?;
+impl ScopedModule for RawModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
+        let reg = MODULE.register(c_str!("CAN_RAW"), scope)?;
         pr_info!("CAN_RAW ({}) registered\n", CAN_RAW);
         Ok(RawModule { _reg: reg })
     }

@@ -15,7 +15,9 @@ mod rcan_core;
 
 mod raw;
 
-use raw::RawModule;
+/// `module!` takes a plain name: the glue's wrapper, which owns the exit
+/// duties (`rust/glue/module.rs`).
+type RawModule = glue::module::Scoped<raw::RawModule>;
 
 // `alias`: what rcan_pf requests on socket(PF_CAN, ..., CAN_RAW) while
 // no module has registered protocol 1 (`request_proto_module` in

@@ -591,6 +591,12 @@ impl<T: Driver> Dev<T> {
         unsafe { &*netdev_priv(self.as_ptr()).cast::<PrivBox<T::Priv>>() }
     }
 
+    /// The driver's private data of this device (what the trait methods
+    /// get beside it). Any context.
+    pub(crate) fn priv_data(&self) -> &T::Priv {
+        &self.state().inner
+    }
+
     /// Requests interrupt line `irq` (shared) for this device; `T::irq`
     /// handles it until [`Dev::free_irq`] (or unregistration, as a safety
     /// net). Process context (`open`); EBUSY if one is already requested.

@@ -99,20 +99,20 @@ fn teardown_engine() {
     WAITQ.wake_all();
 }
 
-fn register_all(node: u8, canip: bool) -> Result<Regs> {
+fn register_all(scope: &ModuleScope, node: u8, canip: bool) -> Result<Regs> {
     let (fid, fmask) = dsor_wire::rx_filter(node);
     let filter = RxFilter {
         kind: RX_FILTER_CAN_ID,
         id: fid | CAN_EFF_FLAG,
         mask: fmask | CAN_EFF_FLAG | CAN_RTR_FLAG,
     };
-    let rx = rcan_api::rx_set_kernel(&RX, 0, &[filter])?;
+    let rx = rcan_api::rx_set_kernel(scope, &RX, 0, &[filter])?;
     let canip = if canip {
         Some(udpip::Canip::register()?)
     } else {
         None
     };
-    let proto = MODULE.register(c_str!("CANPROTO_DSOR"))?;
+    let proto = MODULE.register(c_str!("CANPROTO_DSOR"), scope)?;
     Ok(Regs {
         _proto: proto,
         _rx: rx,
@@ -129,7 +129,7 @@ impl ScopedModule for DsorModule {
         LOADED_MS.store(now_ms(), Ordering::Relaxed);
         TIMER.init(scope, ClockId::Monotonic, HrTimerMode::AbsoluteSoft, ())?;
         *ENGINE.lock() = Some(engine);
-        match register_all(node, canip) {
+        match register_all(scope, node, canip) {
             Ok(regs) => {
                 pr_info!(
                     "{}: CANPROTO_DSOR ({}) node 0x{:02x}\n",

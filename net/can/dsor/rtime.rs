@@ -81,7 +81,7 @@ impl ScopedModule for RtimeModule {
             id: p.vehicle,
             mask: CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG,
         };
-        let rx = rcan_api::rx_set_kernel(&RX, 0, &[filter])?;
+        let rx = rcan_api::rx_set_kernel(scope, &RX, 0, &[filter])?;
         ticker::start(scope, true)?;
         pr_info!(
             "{}: redundant time service for frame {:03x}: passive, takeover after {} ms of silence\n",

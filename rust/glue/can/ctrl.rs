@@ -106,17 +106,14 @@ impl<T: CanDevice> Drop for Opening<'_, T> {
 /// `open_candev` and `request_irq`): refuses a device without a bit
 /// timing (`EINVAL`, logged as mainline), arms the device's `restart-ms`
 /// timer and requests interrupt line `irq` (0: none, a front-end that
-/// calls the handler itself). Returns the device's settings, for the
-/// driver to program the chip with, and the [`Opening`]. Process context,
-/// RTNL; no chip lock held.
-pub(crate) fn open<'a, T: CanDevice>(
-    dev: &'a Dev<T>,
-    p: &'a T::Priv,
-    irq: u32,
-) -> Result<(Settings, Opening<'a, T>)> {
-    let can = T::can_dev(p);
-    let set = can.open_check(dev.name().as_str())?;
-    can.arm_restart(dev)?;
+/// calls the handler itself). The device's [`CanDev`] is the one in its
+/// own private data (`T::can_dev`), so the timer restarts this device and
+/// no other. Returns the device's settings, for the driver to program the
+/// chip with, and the [`Opening`]. Process context, RTNL; no chip lock
+/// held.
+pub(crate) fn open<T: CanDevice>(dev: &Dev<T>, irq: u32) -> Result<(Settings, Opening<'_, T>)> {
+    let set = T::can_dev(dev.priv_data()).open_check(dev.name().as_str())?;
+    let can = CanDev::arm_restart(dev)?;
     let opening = Opening { dev, can };
     if irq != 0 {
         // On failure the Opening's drop disarms the timer again.
@@ -137,12 +134,11 @@ pub(crate) fn open<'a, T: CanDevice>(
 /// outside it. Process context, RTNL.
 pub(crate) fn stop<T: CanDevice, H>(
     dev: &Dev<T>,
-    p: &T::Priv,
     halt: impl FnOnce() -> H,
     mut pop: impl FnMut() -> Option<OwnedSkb>,
 ) {
     dev.stop_queue();
-    T::can_dev(p).disarm_restart();
+    T::can_dev(dev.priv_data()).disarm_restart();
     drop(halt());
     dev.free_irq();
     dev.set_carrier(false);

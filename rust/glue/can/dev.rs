@@ -27,7 +27,7 @@ use crate::glue::bindings;
 use crate::glue::hrtimer::ktime_get_mono_ns;
 use crate::glue::jobtimer::{JobCallback, JobRef, JobTimers};
 use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
-use crate::glue::netdev::{Dev, Driver, NetDev};
+use crate::glue::netdev::{Dev, DevRef, Driver, NetDev};
 use crate::rcan_core::bittiming::{Bittiming, BittimingConst, Msg, BITTIMING_LEN};
 use crate::rcan_core::candev::{self, CanState, Settings};
 use crate::rcan_core::frame::{CANFD_MTU, CAN_MTU};
@@ -249,30 +249,35 @@ pub(crate) struct CanDev {
     /// `struct can_device_stats`, counted from any context.
     stats: [AtomicU32; 6],
     /// The bus-off restart timer (mainline's `restart_work`), there from
-    /// `open` ([`CanDev::arm_restart`]) to `stop`
-    /// ([`CanDev::disarm_restart`]); armed from the interrupt handler at
-    /// bus-off when `restart-ms` is not 0. The lock only guards the
-    /// `Option` (taken in any context, innermost); the timer is dropped
-    /// outside it.
+    /// `open` ([`ctrl::open`](super::ctrl::open), the only caller of
+    /// [`CanDev::arm_restart`]) to `stop` ([`CanDev::disarm_restart`]);
+    /// armed from the interrupt handler at bus-off when `restart-ms` is
+    /// not 0. The lock only guards the `Option` (taken in any context,
+    /// innermost); the timer is dropped outside it.
     restart: IrqSpinLock<Option<JobTimers<RestartJob>>>,
 }
 
-/// What the restart timer needs: the device and the driver's restart
-/// entry point ([`Adapter::restart_expired`] of its driver).
+/// What the restart timer needs: the device, held (`dev_hold`), and the
+/// driver's restart entry point ([`Adapter::restart_expired`] of its
+/// driver).
+///
+/// # Invariants
+///
+/// `dev` is a device registered by `Registration` for the driver whose
+/// `restart_expired` `hook` is.
 struct RestartData {
-    dev: *mut bindings::net_device,
+    dev: DevRef,
     /// # Safety (of calling it)
     ///
-    /// `dev` is a registered, open device of the driver whose adapter
-    /// this is.
+    /// The argument is a device registered by `Registration` for the
+    /// driver whose adapter this is, whose private data stays initialised
+    /// for the call.
     hook: unsafe fn(*mut bindings::net_device),
 }
 
-// SAFETY: the pointer is only handed to `hook`, which is sound from any
-// CPU while the device is open; the timer holding it is dropped (waiting
-// for a running callback) in `stop`, before the device can go away.
-unsafe impl Send for RestartData {}
-// SAFETY: as above; the data is never mutated.
+// SAFETY: `DevRef` is Send; `&RestartData` only reads the device pointer
+// and the function pointer, and the device's own methods are callable
+// from any CPU.
 unsafe impl Sync for RestartData {}
 
 /// The restart timer's callback.
@@ -286,12 +291,12 @@ impl JobCallback for RestartJob {
     /// restart takes only spinlocks.
     fn expired(job: JobRef<'_, Self>, _which: usize) {
         let d = job.data();
-        // The timer only runs between `arm_restart` (called by the
-        // driver's `open` for its own device, which stored this hook) and
-        // `disarm_restart` (the driver's `stop`, which waits for this
-        // callback).
-        // SAFETY: so the device is registered and open (above).
-        unsafe { (d.hook)(d.dev) };
+        // The reference `d.dev` holds keeps its Registration's drop inside
+        // `unregister_netdev` (which waits for every reference) until this
+        // timer is dropped, after its callback finished.
+        // SAFETY: a device of the hook's driver (type invariant), whose
+        // private data is therefore initialised for the call.
+        unsafe { (d.hook)(d.dev.as_ptr()) };
     }
 }
 
@@ -307,17 +312,27 @@ impl CanDev {
         })
     }
 
-    /// Prepares the bus-off restart timer of `dev` (the driver's `open`,
-    /// process context, RTNL held). Each `arm_restart` is undone by
-    /// [`CanDev::disarm_restart`] in the driver's `stop`.
-    pub(crate) fn arm_restart<T: CanDevice>(&self, dev: &Dev<T>) -> Result {
+    /// Prepares the bus-off restart timer of `dev`, in `dev`'s own
+    /// [`CanDev`] (`T::can_dev` of its private data), which it returns:
+    /// the timer restarts the device whose state it lives in, never
+    /// another. The timer holds a reference on the device, so it can
+    /// never run on a freed one: a timer left armed past the device's
+    /// `stop` would hold up its unregistration instead (a leak, not a use
+    /// after free). Only [`ctrl::open`](super::ctrl::open) calls it (the
+    /// driver's `open`, process context, RTNL held), and the
+    /// [`ctrl::Opening`](super::ctrl::Opening)'s drop or
+    /// [`ctrl::stop`](super::ctrl::stop) undoes it.
+    pub(super) fn arm_restart<T: CanDevice>(dev: &Dev<T>) -> Result<&CanDev> {
+        let can = T::can_dev(dev.priv_data());
+        // INVARIANT: `dev` is a `Dev<T>`, registered by Registration for
+        // `T`, whose adapter the hook is.
         let t = JobTimers::new(RestartData {
-            dev: dev.as_ptr(),
+            dev: dev.hold(),
             hook: Adapter::<T>::restart_expired,
         })?;
-        let old = self.restart.lock().replace(t);
+        let old = can.restart.lock().replace(t);
         drop(old);
-        Ok(())
+        Ok(can)
     }
 
     /// Cancels the restart timer and waits for a running restart (the
@@ -466,9 +481,11 @@ impl<T: CanDevice> Adapter<T> {
     ///
     /// # Safety
     ///
-    /// `dev` is a registered, open device of driver `T`.
+    /// `dev` is a device registered by `Registration` for driver `T`
+    /// whose private data stays initialised for the call.
     unsafe fn restart_expired(dev: *mut bindings::net_device) {
-        // SAFETY: per the contract.
+        // SAFETY: per the contract (what `from_cookie` needs: the device
+        // and its private data valid for the call).
         let (d, p) = unsafe { crate::glue::netdev::from_cookie::<T>(dev) };
         if let Err(e) = T::restart(d, p) {
             pr_err!("{}: restart failed: {:?}\n", d.name(), e);

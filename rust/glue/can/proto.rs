@@ -27,13 +27,14 @@
 //! An in-kernel receiver without a socket (DSOR's engine, the time
 //! services) implements [`KernelRx`] and holds a [`KernelRxReg`]; a driver
 //! whose hardware filter follows the sockets implements [`FilterListener`]
-//! and holds a [`Listening`].
+//! and hands its device's registration to a [`Listening`], which owns it.
 
 use super::abi::{self, CanProto, RxSpec, RxTableSpec, TableFilter};
 // Re-exported for the protocols; not every module uses every one.
 #[allow(unused_imports)]
 pub(crate) use super::abi::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use crate::glue::bindings;
+use crate::glue::module::ModuleScope;
 use crate::glue::net::Net;
 use crate::glue::netdev::{self as gnetdev, NetDev};
 use crate::glue::skb::{OwnedSkb, Shared, Skb, UniqueSkb};
@@ -427,11 +428,15 @@ impl<T: CanProtocol> ProtoModule<T> {
     }
 
     /// Registers the proto, the notifier and the protocol, in that order;
-    /// undoes what was done on failure. Module init (process context).
-    /// EBUSY if already registered.
+    /// undoes what was done on failure. Module init (process context):
+    /// the `scope` proves the module's exit is the glue's, which
+    /// unregisters the protocol if the returned guard was never dropped
+    /// (`mem::forget`, a `static`). EBUSY if already registered, ENOSPC
+    /// with more than `MAX_PROTOS` protocols in one module.
     pub(crate) fn register(
         &'static self,
         name: &'static kernel::str::CStr,
+        _scope: &ModuleScope,
     ) -> Result<ProtoRegistration<T>> {
         // SAFETY: reading our own static; only `register` writes `owner`,
         // and registration is serialised by module init.
@@ -439,6 +444,21 @@ impl<T: CanProtocol> ProtoModule<T> {
             return Err(code::EBUSY);
         }
         abi::check()?;
+        let me = self as *const Self as *mut ();
+        proto_note(me, Self::unregister_erased)?;
+        crate::glue::module::note_sweep(proto_sweep);
+        let r = self.register_all(name);
+        if r.is_err() {
+            proto_forget(me);
+        }
+        r
+    }
+
+    /// [`Self::register`]'s registrations. Module init.
+    fn register_all(
+        &'static self,
+        name: &'static kernel::str::CStr,
+    ) -> Result<ProtoRegistration<T>> {
         self.proto.register(name, bindings::PF_CAN as i32)?;
         // SAFETY: module init: nothing else sees the CanProto yet.
         unsafe { (*self.canproto.get()).owner = crate::glue::this_module() };
@@ -517,19 +537,125 @@ pub(crate) struct ProtoRegistration<T: CanProtocol>(&'static ProtoModule<T>);
 
 impl<T: CanProtocol> Drop for ProtoRegistration<T> {
     fn drop(&mut self) {
-        let m = self.0;
-        // SAFETY: registered by `register`; rcan_proto_unregister returns
-        // after a grace period, so no socket creation still sees it.
-        unsafe {
-            abi::rcan_proto_unregister(m.canproto.get());
-            bindings::unregister_netdevice_notifier(m.notifier.get());
+        self.0.unregister();
+        proto_forget(self.0 as *const ProtoModule<T> as *mut ());
+    }
+}
+
+impl<T: CanProtocol> ProtoModule<T> {
+    /// Undoes a successful [`Self::register`]; does nothing if it is not
+    /// registered (`owner` null). Process context; sleeps (a grace
+    /// period). Called by [`ProtoRegistration`]'s drop, and by the
+    /// module's exit for a registration never dropped ([`proto_sweep`]).
+    fn unregister(&'static self) {
+        // SAFETY: reading our own static; `owner` is written only by
+        // register (module init) and here (its guard's drop or the exit,
+        // which follow init).
+        if unsafe { (*self.canproto.get()).owner }.is_null() {
+            return;
         }
-        m.proto.unregister();
+        // SAFETY: registered by `register` (owner set); rcan_proto_unregister
+        // returns after a grace period, so no socket creation still sees it.
+        unsafe {
+            abi::rcan_proto_unregister(self.canproto.get());
+            bindings::unregister_netdevice_notifier(self.notifier.get());
+        }
+        self.proto.unregister();
         // Statics are never dropped: free the (empty) list's buffer.
         let mut rtnl = Rtnl::lock();
-        *m.sockets.get(&mut rtnl) = SockSet::new();
+        *self.sockets.get(&mut rtnl) = SockSet::new();
         // SAFETY: nothing uses the CanProto any more; allows a new register.
-        unsafe { (*m.canproto.get()).owner = core::ptr::null_mut() };
+        unsafe { (*self.canproto.get()).owner = core::ptr::null_mut() };
+    }
+
+    /// [`Self::unregister`] for [`PROTO_REGS`], which keeps the module
+    /// type-erased.
+    ///
+    /// # Safety
+    ///
+    /// `m` is a `&'static ProtoModule<T>` of this `T`.
+    unsafe fn unregister_erased(m: *const ()) {
+        // SAFETY: per the contract.
+        unsafe { &*m.cast::<Self>() }.unregister();
+    }
+}
+
+/// Most protocols one module registers (one each today).
+const MAX_PROTOS: usize = 2;
+
+/// One registered protocol of this module: its static and how to undo it.
+struct ProtoSlot {
+    /// The `&'static ProtoModule<T>`; null: the slot is free.
+    module: core::sync::atomic::AtomicPtr<()>,
+    /// Its `ProtoModule::<T>::unregister_erased`; valid while `module` is
+    /// not null.
+    undo: core::sync::atomic::AtomicUsize,
+}
+
+/// The protocols this module registered and whose guard was not dropped
+/// (the glue is compiled into each module: one table per module), swept
+/// at exit by [`proto_sweep`]. Process context only.
+///
+/// # Invariants
+///
+/// A slot with a non-null `module` holds a `&'static ProtoModule<T>` and
+/// `ProtoModule::<T>::unregister_erased` for the same `T`.
+static PROTO_REGS: [ProtoSlot; MAX_PROTOS] = [const {
+    ProtoSlot {
+        module: core::sync::atomic::AtomicPtr::new(core::ptr::null_mut()),
+        undo: core::sync::atomic::AtomicUsize::new(0),
+    }
+}; MAX_PROTOS];
+
+/// Takes a slot for `m` (a `&'static ProtoModule<T>`) with its `undo`
+/// (`ProtoModule::<T>::unregister_erased`). ENOSPC when all are taken.
+fn proto_note(m: *mut (), undo: unsafe fn(*const ())) -> Result {
+    let slot = PROTO_REGS
+        .iter()
+        .find(|s| {
+            s.module
+                .compare_exchange(
+                    core::ptr::null_mut(),
+                    m,
+                    Ordering::AcqRel,
+                    Ordering::Acquire,
+                )
+                .is_ok()
+        })
+        .ok_or(code::ENOSPC)?;
+    slot.undo
+        .store(undo as *const () as usize, Ordering::Release);
+    Ok(())
+}
+
+/// Frees the slot of `m`.
+fn proto_forget(m: *mut ()) {
+    for s in PROTO_REGS.iter() {
+        let _ = s.module.compare_exchange(
+            m,
+            core::ptr::null_mut(),
+            Ordering::AcqRel,
+            Ordering::Acquire,
+        );
+    }
+}
+
+/// The exit's sweep ([`crate::glue::module::Scoped`], step 3): unregisters
+/// every protocol of this module still registered. Process context, after
+/// the module's value was dropped; sleeps.
+fn proto_sweep() {
+    for s in PROTO_REGS.iter() {
+        let m = s.module.swap(core::ptr::null_mut(), Ordering::AcqRel);
+        if m.is_null() {
+            continue;
+        }
+        let undo = s.undo.load(Ordering::Acquire);
+        // SAFETY: stored from an `unsafe fn(*const ())` by proto_note
+        // before `module` was published (Release/Acquire).
+        let undo: unsafe fn(*const ()) =
+            unsafe { core::mem::transmute::<usize, unsafe fn(*const ())>(undo) };
+        // SAFETY: `m` and `undo` are of one `T` (invariant of PROTO_REGS).
+        unsafe { undo(m) };
     }
 }
 
@@ -822,28 +948,128 @@ unsafe extern "C" fn kernel_rx<T: KernelRx>(
 }
 
 /// A registered [`KernelRx`]; dropping it removes the receiver and waits
-/// for running callbacks (process context; sleeps).
+/// for running callbacks (process context; sleeps). If it is never
+/// dropped (`mem::forget`, a `static`), the module's exit removes the
+/// receiver ([`Scoped`](crate::glue::module::Scoped), step 3): no frame
+/// reaches the module's text after `rmmod`.
 pub(crate) struct KernelRxReg<T: KernelRx>(&'static T);
 
 impl<T: KernelRx> Drop for KernelRxReg<T> {
     fn drop(&mut self) {
+        let data = self.0 as *const T as *mut ffi::c_void;
         // SAFETY: removal (NULL spec) of the receiver registered with this
         // func and data; never fails.
-        unsafe {
-            abi::rcan_rx_set_kernel(
-                kernel_rx::<T>,
-                self.0 as *const T as *mut ffi::c_void,
-                0,
-                core::ptr::null(),
-            )
-        };
+        unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, core::ptr::null()) };
+        kernel_rx_forget(data);
+    }
+}
+
+/// Most kernel receivers one module has registered at a time (one each
+/// today: `rcan_dsor`, `rcan_rtime`).
+const MAX_KERNEL_RX: usize = 4;
+
+/// One registered kernel receiver of this module, as its removal names it.
+struct KernelRxSlot {
+    /// The receiver's static (`&'static T`); null: the slot is free.
+    data: core::sync::atomic::AtomicPtr<ffi::c_void>,
+    /// Its `kernel_rx::<T>`, an `abi::RxFn`; valid while `data` is not
+    /// null.
+    func: core::sync::atomic::AtomicUsize,
+}
+
+/// The kernel receivers this module registered and has not removed (the
+/// glue is compiled into each module: one table per module), swept at
+/// exit by [`kernel_rx_sweep`]. Process context only: registration and
+/// removal are; the sweep runs after the module's value is gone.
+///
+/// # Invariants
+///
+/// A slot with a non-null `data` names a receiver registered by
+/// [`rx_set_kernel`] with `func` = `kernel_rx::<T>` for that `T` and data,
+/// or one already removed (removing again does nothing).
+static KERNEL_RXS: [KernelRxSlot; MAX_KERNEL_RX] = [const {
+    KernelRxSlot {
+        data: core::sync::atomic::AtomicPtr::new(core::ptr::null_mut()),
+        func: core::sync::atomic::AtomicUsize::new(0),
+    }
+}; MAX_KERNEL_RX];
+
+/// Takes a slot for `data` (the one it has if it is registered again:
+/// pf_can replaces a receiver's registration) and stores `func`. ENOSPC
+/// when all are taken. Returns whether the slot is new.
+fn kernel_rx_note(data: *mut ffi::c_void, func: abi::RxFn) -> Result<bool> {
+    let mut new = false;
+    let slot = match KERNEL_RXS
+        .iter()
+        .find(|s| s.data.load(Ordering::Acquire) == data)
+    {
+        Some(s) => s,
+        None => {
+            new = true;
+            KERNEL_RXS
+                .iter()
+                .find(|s| {
+                    s.data
+                        .compare_exchange(
+                            core::ptr::null_mut(),
+                            data,
+                            Ordering::AcqRel,
+                            Ordering::Acquire,
+                        )
+                        .is_ok()
+                })
+                .ok_or(code::ENOSPC)?
+        }
+    };
+    slot.func
+        .store(func as *const () as usize, Ordering::Release);
+    Ok(new)
+}
+
+/// Frees the slot of `data`, removed from pf_can.
+fn kernel_rx_forget(data: *mut ffi::c_void) {
+    for s in KERNEL_RXS.iter() {
+        let _ = s.data.compare_exchange(
+            data,
+            core::ptr::null_mut(),
+            Ordering::AcqRel,
+            Ordering::Acquire,
+        );
+    }
+}
+
+/// The exit's sweep ([`crate::glue::module::Scoped`], step 3): removes
+/// every kernel receiver of this module still registered. Process
+/// context, after the module's value was dropped; sleeps (a grace period
+/// per receiver).
+fn kernel_rx_sweep() {
+    for s in KERNEL_RXS.iter() {
+        let data = s.data.swap(core::ptr::null_mut(), Ordering::AcqRel);
+        if data.is_null() {
+            continue;
+        }
+        let func = s.func.load(Ordering::Acquire);
+        // SAFETY: stored from an `abi::RxFn` by kernel_rx_note before
+        // `data` was published (Release/Acquire), a function pointer of
+        // the same size as usize.
+        let func: abi::RxFn = unsafe { core::mem::transmute::<usize, abi::RxFn>(func) };
+        // SAFETY: removal (NULL spec) of the receiver registered with this
+        // func and data (invariant of KERNEL_RXS), or of nothing if it was
+        // removed already; never fails, waits out running callbacks.
+        unsafe { abi::rcan_rx_set_kernel(func, data, 0, core::ptr::null()) };
     }
 }
 
 /// Registers `rx` for frames on `ifindex` (0: every CAN interface)
 /// passing any of `filters` (at least one). The registration lasts until
-/// the returned guard is dropped. Process context; may sleep.
+/// the returned guard is dropped, and at the latest until the module's
+/// exit, which the `scope` proves the glue runs ([`Scoped`]). ENOSPC with
+/// more than `MAX_KERNEL_RX` receivers in one module. Process context
+/// (`init`); may sleep.
+///
+/// [`Scoped`]: crate::glue::module::Scoped
 pub(crate) fn rx_set_kernel<T: KernelRx>(
+    _scope: &ModuleScope,
     rx: &'static T,
     ifindex: i32,
     filters: &[RxFilter],
@@ -859,13 +1085,22 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
         filters: filters.as_ptr(),
         nfilters: filters.len(),
     };
-    // `rx` is 'static: a static of the calling module, which keeps the
-    // guard in its module object, so the registration is removed at module
-    // exit at the latest.
+    // `rx` is 'static: a static of the calling module, whose exit removes
+    // the registration at the latest (the sweep noted here).
     let data = rx as *const T as *mut ffi::c_void;
-    // SAFETY: `spec` and its filters live for the call; `data` is 'static.
+    let new = kernel_rx_note(data, kernel_rx::<T>)?;
+    crate::glue::module::note_sweep(kernel_rx_sweep);
+    // SAFETY: `spec` and its filters live for the call; `data` is 'static
+    // (module data), and the registration is removed by the guard's drop
+    // or by the module's exit, before the module's memory goes.
     let ret = unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, &spec) };
-    crate::glue::to_result(ret).map(|_| KernelRxReg(rx))
+    if let Err(e) = crate::glue::to_result(ret) {
+        if new {
+            kernel_rx_forget(data);
+        }
+        return Err(e);
+    }
+    Ok(KernelRxReg(rx))
 }
 
 /// Checks that the loaded `rcan_pf` speaks this module's ABI (see
@@ -889,54 +1124,74 @@ pub(crate) trait FilterListener: gnetdev::Driver {
 /// Called by pf_can as `abi::ListenFn` says, with the cookie that
 /// [`Listening::new`] registered.
 unsafe extern "C" fn listen_trampoline<T: FilterListener>(data: *mut ffi::c_void) {
-    // SAFETY: `data` is the device of a live Registration<T>: the
-    // Listening guard that registered it removes it (waiting for a running
-    // call) before that registration can be dropped.
+    // `data` is the device of the Registration<T> that the Listening
+    // which registered this call owns; its Drop removes the listener
+    // (waiting for a running call) before that registration is dropped.
+    // SAFETY: so the device is registered for the call.
     let (dev, p) = unsafe { gnetdev::from_cookie::<T>(data.cast()) };
     T::filters_changed(dev, p);
 }
 
-/// Calls `T::filters_changed` for one device whenever the receive table
-/// changes; stops when dropped. Must be dropped before the device's
-/// Registration (declare it after the registration in a struct, or drop it
-/// explicitly).
+/// A registered device whose driver follows the receive table: calls
+/// `T::filters_changed` for the device whenever the wanted filters of its
+/// interface change, until dropped.
+///
+/// The listening owns the device's [`Registration`](gnetdev::Registration)
+/// (lent through [`Listening::registration`]), so the order of the
+/// teardown is the type's, not the order of a driver's fields: its `Drop`
+/// removes the listener (waiting for a running call), then the
+/// registration is dropped (the device unregistered and freed). No
+/// listener can outlive its device; `mem::forget` leaks both, the device
+/// staying registered as when a `Registration` alone is forgotten.
+///
+/// # Invariants
+///
+/// The listener `(listen_trampoline::<T>, reg's device)` is registered
+/// with pf_can from `new` until `drop`.
 pub(crate) struct Listening<T: FilterListener> {
-    dev: *mut bindings::net_device,
-    ifindex: i32,
-    _t: PhantomData<T>,
+    /// Dropped after [`Listening`]'s `Drop` (fields are dropped after the
+    /// containing value's `Drop::drop` runs).
+    reg: gnetdev::Registration<T>,
 }
 
-// SAFETY: only used to unregister the listener, from any thread.
-unsafe impl<T: FilterListener> Send for Listening<T> {}
-// SAFETY: no shared access.
-unsafe impl<T: FilterListener> Sync for Listening<T> {}
-
 impl<T: FilterListener> Listening<T> {
-    /// Starts listening for `reg`'s device. Process context.
-    pub(crate) fn new(reg: &gnetdev::Registration<T>) -> Result<Self> {
+    /// Starts listening for `reg`'s device, which the listening keeps
+    /// registered from now on. On failure (ENOEXEC: another `rcan_pf`'s
+    /// ABI; ENOMEM) `reg` is dropped: the device is unregistered. Process
+    /// context.
+    pub(crate) fn new(reg: gnetdev::Registration<T>) -> Result<Self> {
         abi::check()?;
         let dev = reg.dev().as_ptr();
         let ifindex = reg.dev().ifindex();
-        // SAFETY: the trampoline's cookie is the registered device; the
-        // registration outlives this guard (documented contract), whose
-        // Drop removes the listener.
+        // The returned Listening owns `reg` and drops it only after its
+        // Drop removed the listener (type invariant); on failure nothing
+        // was registered.
+        // SAFETY: the cookie is `reg`'s registered device (above).
         crate::glue::to_result(unsafe {
             abi::rcan_rx_listen(listen_trampoline::<T>, dev.cast(), ifindex, true)
         })?;
-        Ok(Listening {
-            dev,
-            ifindex,
-            _t: PhantomData,
-        })
+        // INVARIANT: registered just above, for `reg`'s device.
+        Ok(Listening { reg })
+    }
+
+    /// The registration of the device listened to.
+    pub(crate) fn registration(&self) -> &gnetdev::Registration<T> {
+        &self.reg
     }
 }
 
 impl<T: FilterListener> Drop for Listening<T> {
     fn drop(&mut self) {
-        // SAFETY: removal of the listener added in new(); returns after a
-        // running call finished.
+        // SAFETY: removal of the listener added in new() (type invariant);
+        // returns after a running call finished. `self.reg` is dropped
+        // only after this function returns.
         unsafe {
-            abi::rcan_rx_listen(listen_trampoline::<T>, self.dev.cast(), self.ifindex, false)
+            abi::rcan_rx_listen(
+                listen_trampoline::<T>,
+                self.reg.dev().as_ptr().cast(),
+                self.reg.dev().ifindex(),
+                false,
+            )
         };
     }
 }

@@ -323,7 +323,7 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
     /// (shared) interrupt line ([`ctrl::open`]), then starts the core
     /// under the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        let (set, opening) = ctrl::open(dev, p, p.irq)?;
+        let (set, opening) = ctrl::open(dev, p.irq)?;
         {
             let mut st = p.st.lock();
             st.chip.start(&config(&set));
@@ -342,7 +342,6 @@ impl<R: Regs + Send + 'static> Driver for CtuCanFd<R> {
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         ctrl::stop(
             dev,
-            p,
             || {
                 let mut st = p.st.lock();
                 st.running = false;

@@ -160,11 +160,11 @@ fn preset_settings(cfg: &Config, clock_hz: u32) -> Settings {
     candev::settings_from_btr(cfg.bt0, cfg.bt1, clock_hz)
 }
 
-/// One registered channel: its network device and the filter listener
-/// pointing into it (declared first, so it is dropped first).
+/// One registered channel: its network device, whose hardware filter
+/// follows the sockets (the listening owns the registration, and drops
+/// its listener before the device).
 pub(crate) struct Channel<R: Regs + Send + 'static> {
-    _listen: rcan_api::Listening<I82527<R>>,
-    reg: crate::glue::netdev::Registration<I82527<R>>,
+    dev: rcan_api::Listening<I82527<R>>,
 }
 
 impl<R: Regs + Send + 'static> Channel<R> {
@@ -174,7 +174,8 @@ impl<R: Regs + Send + 'static> Channel<R> {
     /// the chip lock (not under it).
     #[allow(dead_code)]
     pub(crate) fn irq(&self) -> bool {
-        <I82527<R> as Driver>::irq(self.reg.dev(), self.reg.priv_data())
+        let reg = self.dev.registration();
+        <I82527<R> as Driver>::irq(reg.dev(), reg.priv_data())
     }
 }
 
@@ -218,11 +219,8 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
         irq,
         bitrate(cfg.bt0, cfg.bt1, cfg.cpu_if, xtal_hz)
     );
-    let listen = rcan_api::Listening::new(&reg)?;
-    Ok(Some(Channel {
-        _listen: listen,
-        reg,
-    }))
+    let dev = rcan_api::Listening::new(reg)?;
+    Ok(Some(Channel { dev }))
 }
 
 /// The 82527 driver for register access `R`.
@@ -312,7 +310,7 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     /// `ip link set canX up`. Process context, RTNL; requests the
     /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        let (set, opening) = ctrl::open(dev, p, p.irq)?;
+        let (set, opening) = ctrl::open(dev, p.irq)?;
         let (bt0, bt1) = ctrl::btr(&set);
         let m = wanted_masks(dev);
         {
@@ -337,7 +335,6 @@ impl<R: Regs + Send + 'static> Driver for I82527<R> {
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         ctrl::stop(
             dev,
-            p,
             || {
                 let mut st = p.chip.lock();
                 st.running = false;

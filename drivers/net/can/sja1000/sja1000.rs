@@ -267,11 +267,11 @@ impl<R: Regs + Send + 'static> Sja1000Priv<R> {
     }
 }
 
-/// One registered channel: its network device and the filter listener
-/// pointing into it (declared first, so it is dropped first).
+/// One registered channel: its network device, whose hardware filter
+/// follows the sockets (the listening owns the registration, and drops
+/// its listener before the device).
 pub(crate) struct Channel<R: Regs + Send + 'static> {
-    _listen: rcan_api::Listening<Sja1000<R>>,
-    reg: crate::glue::netdev::Registration<Sja1000<R>>,
+    dev: rcan_api::Listening<Sja1000<R>>,
 }
 
 impl<R: Regs + Send + 'static> Channel<R> {
@@ -281,7 +281,8 @@ impl<R: Regs + Send + 'static> Channel<R> {
     /// the chip lock (not under it).
     #[allow(dead_code)]
     pub(crate) fn irq(&self) -> bool {
-        <Sja1000<R> as Driver>::irq(self.reg.dev(), self.reg.priv_data())
+        let reg = self.dev.registration();
+        <Sja1000<R> as Driver>::irq(reg.dev(), reg.priv_data())
     }
 }
 
@@ -318,11 +319,8 @@ pub(crate) fn add_probed<R: Regs + Send + 'static>(
     let reg =
         crate::glue::netdev::Registration::<Sja1000<R>>::register(kernel::c_str!("can%d"), prv)?;
     pr_info!("{}: SJA1000, {}, irq {}\n", reg.dev().name(), what, irq);
-    let listen = rcan_api::Listening::new(&reg)?;
-    Ok(Channel {
-        _listen: listen,
-        reg,
-    })
+    let dev = rcan_api::Listening::new(reg)?;
+    Ok(Channel { dev })
 }
 
 /// The SJA1000 driver for register access `R`.
@@ -487,7 +485,7 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     /// `ip link set canX up`. Process context, RTNL; requests the
     /// interrupt line ([`ctrl::open`]) before it takes the chip lock.
     fn open(dev: &Dev<Self>, p: &Self::Priv) -> Result {
-        let (set, opening) = ctrl::open(dev, p, p.irq)?;
+        let (set, opening) = ctrl::open(dev, p.irq)?;
         let (btr0, btr1) = ctrl::btr(&set);
         let f = wanted_filter(dev);
         let started = {
@@ -520,7 +518,6 @@ impl<R: Regs + Send + 'static> Driver for Sja1000<R> {
     fn stop(dev: &Dev<Self>, p: &Self::Priv) -> Result {
         ctrl::stop(
             dev,
-            p,
             || {
                 let mut st = p.chip.lock();
                 st.running = false;
