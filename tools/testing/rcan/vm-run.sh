@@ -209,7 +209,41 @@ pick_accel() {
 	else
 		# Multi-threaded TCG: one host thread per vCPU.
 		accel=(-accel "tcg,thread=multi" -cpu max)
+		tcg_tsc_khz=$(host_tsc_khz)
 	fi
+}
+
+# The host's TSC frequency in kHz, printed only when the host's kernel
+# knows it rather than measured it (CPU flag tsc_known_freq: from CPUID or
+# the hypervisor) and no cpufreq driver scales the CPUs, so that /proc/cpuinfo's
+# "cpu MHz" is that known frequency (cpu_khz), the same on every CPU.
+# Prints nothing otherwise.
+#
+# Why: under multi-threaded TCG the guest's TSC is the host's (QEMU reads
+# the host's TSC), and the guest calibrates it at boot against the
+# emulated PIT and HPET in loops of a few milliseconds. When the host is
+# loaded, the vCPU thread is descheduled inside those loops and the
+# calibration comes out wrong: "tsc: PIT calibration deviates from HPET:
+# 194272 2592796", then "Detected 194.272 MHz processor" (the truth was
+# 2593), in a debug boot beside make soak at host load average 11
+# (2026-11-29). The refined calibration a second later disagreed by more
+# than 1 % and was thrown away, so the guest's clock ran 13 times too fast
+# for the next 100 s, until the clocksource watchdog switched to the HPET;
+# timers fired 13 times early and the RCU stall detector reported
+# "rcu_preempt kthread timer wakeup didn't happen for 24050 jiffies"
+# before any module was loaded, failing the VM. tsc_early_khz= skips that
+# calibration; the refined one (against the HPET over a second, robust to
+# descheduling) still runs and corrects the value within 1 %, and the
+# clocksource watchdog still checks the TSC against the HPET.
+host_tsc_khz() {
+	grep -qw tsc_known_freq /proc/cpuinfo || return 0
+	[ ! -e /sys/devices/system/cpu/cpu0/cpufreq ] || return 0
+	awk -F': *' '/^cpu MHz/ { f[$2] = 1; n++ }
+		END {
+			k = 0
+			for (v in f) { k++; mhz = v }
+			if (n > 0 && k == 1 && mhz + 0 >= 100) printf "%d\n", mhz * 1000 + 0.5
+		}' /proc/cpuinfo
 }
 
 # --- main ----------------------------------------------------------------------
@@ -309,6 +343,8 @@ printf "RCAN_HOST_ROOT='%s'\n" "${RCAN_ROOT//\'/\'\\\'\'}" >>"$out/vm-init.conf"
 # reported, 60 s later.
 cmdline="console=ttyS0 rdinit=/init panic=-1 loglevel=5 log_buf_len=4M no5lvl"
 cmdline+=" rcupdate.rcu_cpu_stall_timeout=60"
+# The TSC's frequency under TCG, when the host knows it: host_tsc_khz.
+[ -z "${tcg_tsc_khz:-}" ] || cmdline+=" tsc_early_khz=$tcg_tsc_khz"
 
 qemu_args=(
 	-nodefaults -no-user-config -display none -no-reboot
