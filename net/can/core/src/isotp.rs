@@ -435,6 +435,100 @@ impl Config {
     }
 }
 
+/// `ENODEV`: `bind` without an interface index.
+pub const ENODEV: i32 = 19;
+/// `EADDRNOTAVAIL`: `bind` with `rx_id` equal to `tx_id`.
+pub const EADDRNOTAVAIL: i32 = 99;
+
+/// Bytes of `struct sockaddr_can` up to and including `can_addr.tp`
+/// (mainline `ISOTP_MIN_NAMELEN`): family, pad, ifindex, rx_id, tx_id.
+pub const ISOTP_MIN_NAMELEN: usize = 16;
+
+/// The address of an ISO-TP socket: `sockaddr_can` with
+/// `can_addr.tp = {rx_id, tx_id}`.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct TpAddr {
+    /// Interface index (`can_ifindex`).
+    pub ifindex: i32,
+    /// Identifier we receive SF/FF/CF on (and FCs, when sending).
+    pub rx_id: u32,
+    /// Identifier we send on.
+    pub tx_id: u32,
+}
+
+impl TpAddr {
+    /// Mainline `isotp_bind`'s checks of the address itself, in its
+    /// order: shorter than [`ISOTP_MIN_NAMELEN`] or not `AF_CAN`:
+    /// `EINVAL`; a `tx_id` (and, unless a broadcast flag is set, an
+    /// `rx_id`) with bits outside its 11- or 29-bit identifier and
+    /// `CAN_EFF_FLAG`: `EINVAL`; interface index 0: `ENODEV`. The
+    /// checks that need the socket's state or the device (already bound,
+    /// a transfer still draining, [`TpAddr::check_distinct`], device
+    /// type and MTU) are the module's.
+    pub fn parse(cfg: &Config, b: &[u8]) -> Result<TpAddr, i32> {
+        use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_SFF_MASK};
+        let b: &[u8; ISOTP_MIN_NAMELEN] = b
+            .get(..ISOTP_MIN_NAMELEN)
+            .and_then(|h| h.try_into().ok())
+            .ok_or(EINVAL)?;
+        if u16::from_ne_bytes([b[0], b[1]]) != super::sockaddr::AF_CAN {
+            return Err(EINVAL);
+        }
+        let word = |i: usize| [b[i], b[i + 1], b[i + 2], b[i + 3]];
+        let a = TpAddr {
+            ifindex: i32::from_ne_bytes(word(4)),
+            rx_id: u32::from_ne_bytes(word(8)),
+            tx_id: u32::from_ne_bytes(word(12)),
+        };
+        let clean = |id: u32| {
+            if id & CAN_EFF_FLAG != 0 {
+                id & (CAN_EFF_FLAG | CAN_EFF_MASK) == id
+            } else {
+                id & CAN_SFF_MASK == id
+            }
+        };
+        if !clean(a.tx_id) || (cfg.registers_rx_id() && !clean(a.rx_id)) {
+            return Err(EINVAL);
+        }
+        if a.ifindex == 0 {
+            return Err(ENODEV);
+        }
+        Ok(a)
+    }
+
+    /// `EADDRNOTAVAIL` when the socket receives on `rx_id` and it equals
+    /// `tx_id` (mainline checks it after "already bound" and "busy").
+    pub fn check_distinct(&self, cfg: &Config) -> Result<(), i32> {
+        if cfg.registers_rx_id() && self.rx_id == self.tx_id {
+            Err(EADDRNOTAVAIL)
+        } else {
+            Ok(())
+        }
+    }
+
+    /// The `getsockname` image (mainline `isotp_getname`: 16 bytes).
+    pub fn to_bytes(&self) -> [u8; ISOTP_MIN_NAMELEN] {
+        let mut b = [0u8; ISOTP_MIN_NAMELEN];
+        b[..2].copy_from_slice(&super::sockaddr::AF_CAN.to_ne_bytes());
+        b[4..8].copy_from_slice(&self.ifindex.to_ne_bytes());
+        b[8..12].copy_from_slice(&self.rx_id.to_ne_bytes());
+        b[12..].copy_from_slice(&self.tx_id.to_ne_bytes());
+        b
+    }
+}
+
+/// The receive filter mask for exactly one identifier (mainline's
+/// `SINGLE_MASK`): all identifier bits of its format, `CAN_EFF_FLAG` and
+/// `CAN_RTR_FLAG` (so remote frames never match).
+pub const fn single_mask(id: u32) -> u32 {
+    use super::arb::{CAN_EFF_FLAG, CAN_EFF_MASK, CAN_RTR_FLAG, CAN_SFF_MASK};
+    if id & CAN_EFF_FLAG != 0 {
+        CAN_EFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG
+    } else {
+        CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG
+    }
+}
+
 /// What to do with a state machine's one timer after an event. Times are
 /// absolute (ns, monotonic); a machine ignores an expiry reported before
 /// its deadline, so a stale callback of a timer that was re-armed in the
@@ -665,6 +759,52 @@ mod tests {
         // CF_BROADCAST has no single-frame limit.
         c.opt.flags = CAN_ISOTP_CF_BROADCAST;
         assert_eq!(c.check_send_len(4000, 8300), Ok(()));
+    }
+
+    fn addr(family: u16, ifindex: i32, rx: u32, tx: u32) -> Vec<u8> {
+        let mut v = family.to_ne_bytes().to_vec();
+        v.extend_from_slice(&[0, 0]);
+        v.extend_from_slice(&ifindex.to_ne_bytes());
+        v.extend_from_slice(&rx.to_ne_bytes());
+        v.extend_from_slice(&tx.to_ne_bytes());
+        v
+    }
+
+    #[test]
+    fn bind_address_checks() {
+        let mut c = Config::default();
+        let a = TpAddr::parse(&c, &addr(29, 3, 0x7E8, 0x7E0)).unwrap();
+        assert_eq!(
+            a,
+            TpAddr {
+                ifindex: 3,
+                rx_id: 0x7E8,
+                tx_id: 0x7E0
+            }
+        );
+        assert_eq!(&a.to_bytes()[..], &addr(29, 3, 0x7E8, 0x7E0)[..]);
+        // Longer sockaddr_can (with j1939/padding) is fine.
+        let mut long = addr(29, 3, 0x7E8, 0x7E0);
+        long.extend_from_slice(&[0; 8]);
+        assert!(TpAddr::parse(&c, &long).is_ok());
+        assert_eq!(TpAddr::parse(&c, &long[..15]), Err(EINVAL));
+        assert_eq!(TpAddr::parse(&c, &addr(2, 3, 1, 2)), Err(EINVAL));
+        assert_eq!(TpAddr::parse(&c, &addr(29, 3, 1, 0x800)), Err(EINVAL));
+        assert_eq!(TpAddr::parse(&c, &addr(29, 3, 0x800, 2)), Err(EINVAL));
+        assert_eq!(TpAddr::parse(&c, &addr(29, 3, 1, 0x4000_0002)), Err(EINVAL));
+        let eff = 0x8000_0000 | 0x18DA_F110;
+        assert!(TpAddr::parse(&c, &addr(29, 3, eff, 0x8000_0000 | 0x18DA_10F1)).is_ok());
+        assert_eq!(TpAddr::parse(&c, &addr(29, 0, 1, 2)), Err(ENODEV));
+        // Tx before ifindex: a bad tx_id wins over ifindex 0.
+        assert_eq!(TpAddr::parse(&c, &addr(29, 0, 1, 0x800)), Err(EINVAL));
+        let same = TpAddr::parse(&c, &addr(29, 3, 5, 5)).unwrap();
+        assert_eq!(same.check_distinct(&c), Err(EADDRNOTAVAIL));
+        // Broadcast sockets do not receive: rx_id unchecked.
+        c.opt.flags = CAN_ISOTP_SF_BROADCAST;
+        assert!(TpAddr::parse(&c, &addr(29, 3, 0xFFFF_FFFF, 2)).is_ok());
+        assert_eq!(same.check_distinct(&c), Ok(()));
+        assert_eq!(single_mask(0x123), 0xC000_07FF);
+        assert_eq!(single_mask(eff), 0xDFFF_FFFF);
     }
 
     #[test]
