@@ -349,6 +349,35 @@ mod tests {
     }
 
     #[test]
+    fn new_ff_or_sf_restarts_and_late_cf_is_ignored() {
+        let c = Config::default();
+        let mut rx = Rx::new();
+        let mut buf = [0u8; 100];
+        rx.on_frame(&c, &[0x10, 20, 0, 1, 2, 3, 4, 5], &mut buf, 0);
+        rx.on_frame(&c, &[0x21, 6, 7, 8, 9, 10, 11, 12], &mut buf, 0);
+        // A new FF: the old reception is gone, sequence numbers restart.
+        let s = rx.on_frame(&c, &[0x10, 9, 10, 11, 12, 13, 14, 15], &mut buf, 0);
+        assert!(s.frame.is_some());
+        let s = rx.on_frame(&c, &[0x21, 16, 17, 18], &mut buf, 0);
+        assert_eq!(s.event, Some(RxEvent::Deliver(9)));
+        assert_eq!(&buf[..9], &[10, 11, 12, 13, 14, 15, 16, 17, 18]);
+        // A CF after completion: ignored.
+        assert_eq!(rx.on_frame(&c, &[0x22, 1, 2], &mut buf, 0), RxStep::NONE);
+        // An SF in the middle of a reception ends it silently.
+        rx.on_frame(&c, &[0x10, 20, 0, 1, 2, 3, 4, 5], &mut buf, 0);
+        let s = rx.on_frame(&c, &[0x01, 0xAA], &mut buf, 0);
+        assert_eq!(
+            (s.event, s.timer),
+            (Some(RxEvent::Deliver(1)), TimerCmd::Cancel)
+        );
+        assert!(rx.is_idle());
+        assert_eq!(
+            rx.on_frame(&c, &[0x21, 6, 7, 8, 9, 10, 11, 12], &mut buf, 0),
+            RxStep::NONE
+        );
+    }
+
+    #[test]
     fn wrong_sequence_number_is_eilseq() {
         let c = Config::default();
         let mut rx = Rx::new();

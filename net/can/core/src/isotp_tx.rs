@@ -472,6 +472,31 @@ mod tests {
     }
 
     #[test]
+    fn fc_padding_checked_when_asked() {
+        use super::super::isotp::{
+            CAN_ISOTP_CHK_PAD_DATA, CAN_ISOTP_CHK_PAD_LEN, CAN_ISOTP_RX_PADDING,
+        };
+        let mut c = cfg();
+        c.opt.flags = CAN_ISOTP_RX_PADDING | CAN_ISOTP_CHK_PAD_LEN | CAN_ISOTP_CHK_PAD_DATA;
+        c.opt.rxpad_content = 0x55;
+        let pdu = [0u8; 20];
+        for (fc, ok) in [
+            (&[0x30u8, 0, 0, 0x55, 0x55, 0x55, 0x55, 0x55][..], true),
+            (&[0x30, 0, 0, 0x55, 0x55, 0x55, 0x55, 0xCC][..], false),
+            (&[0x30, 0, 0][..], false),
+        ] {
+            let mut tx = Tx::new();
+            tx.start(&c, &pdu, 0).unwrap();
+            let s = tx.on_fc(&c, fc, &pdu, 1);
+            if ok {
+                assert!(s.frame.is_some() && s.done.is_none());
+            } else {
+                assert_eq!(s.done, Some(Err(EBADMSG)), "{fc:x?}");
+            }
+        }
+    }
+
+    #[test]
     fn reserved_stmin_is_127ms_and_forced_stmin_wins() {
         let mut c = cfg();
         let pdu = [0u8; 30];
