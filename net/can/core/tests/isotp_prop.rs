@@ -143,6 +143,13 @@ struct Setup {
     gap: u64,
     /// The sender does not wait for flow control.
     cf_broadcast: bool,
+    /// Wait frames the bus inserts before each FC continue.
+    fc_waits: u8,
+    /// STmin the bus puts into every FC continue but the first.
+    later_stmin: Option<u8>,
+    /// The gap expected after such a later FC: the first FC's unless the
+    /// sender takes every FC's parameters and its STmin is not forced.
+    later_gap: u64,
 }
 
 fn setup() -> impl Strategy<Value = Setup> {
@@ -164,6 +171,10 @@ fn setup() -> impl Strategy<Value = Setup> {
             prop::option::of(0u32..3_000_000),
         ),
         (any::<[bool; 4]>(), 1u64..500, any::<bool>()),
+        (
+            prop_oneof![3 => Just(0u8), 1 => 1u8..4],
+            prop::option::of(prop_oneof![Just(0u8), Just(2), 0xF1u8..=0xF9, Just(0x90)]),
+        ),
     )
         .prop_map(
             |(
@@ -171,6 +182,7 @@ fn setup() -> impl Strategy<Value = Setup> {
                 (apad, bpad, achk, bchk),
                 (bs, stmin, txtime, dynfc, force),
                 (hd, wire, cfb),
+                (fc_waits, later_stmin),
             )| {
                 let tx_dl = if fd {
                     [8, 12, 16, 20, 24, 32, 48, 64][dl]
@@ -274,6 +286,12 @@ fn setup() -> impl Strategy<Value = Setup> {
                     buflen: usize::MAX,
                     gap,
                     cf_broadcast: cfb,
+                    fc_waits,
+                    later_stmin,
+                    later_gap: match (later_stmin, dynfc && force.is_none()) {
+                        (Some(l), true) => u64::from(txtime) + model_stmin(l),
+                        _ => gap,
+                    },
                 }
             },
         )
@@ -302,6 +320,8 @@ struct Wire {
     a_done: Option<Result<(), i32>>,
     b_events: Vec<RxEvent>,
     delivered: Option<Vec<u8>>,
+    /// When each FC continue reached the sender.
+    a_cts: Vec<u64>,
 }
 
 enum Ev {
@@ -309,8 +329,8 @@ enum Ev {
     ToB(usize),
     /// A's frame `k` echoes back to A (if A asked for it).
     EchoA(usize),
-    /// B's frame `k` reaches A.
-    ToA(usize),
+    /// A frame from B (or inserted by the bus) reaches A.
+    ToA(Vec<u8>),
 }
 
 /// Runs one transfer of `pdu` from A to B; `lose`: the index of a frame
@@ -327,7 +347,9 @@ fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
         a_done: None,
         b_events: vec![],
         delivered: None,
+        a_cts: vec![],
     };
+    let ae = usize::from(s.ma.ext.is_some());
     let mut queue: Vec<(u64, u64, Ev)> = Vec::new();
     let mut seq = 0u64;
     let mut nframes = 0usize;
@@ -374,7 +396,23 @@ fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
                 let lost = lose == Some(nframes);
                 nframes += 1;
                 if !lost {
-                    queue.push((now + s.wire, seq, Ev::ToA(k)));
+                    let mut fc = f.payload().to_vec();
+                    let mut at = now + s.wire;
+                    if fc[ae] == 0x30 {
+                        // Wait frames first (as another ECU may send),
+                        // and a later FC with another STmin.
+                        for _ in 0..s.fc_waits {
+                            let mut wt = fc.clone();
+                            wt[ae] = 0x31;
+                            queue.push((at, seq, Ev::ToA(wt)));
+                            seq += 1;
+                            at += 10 * US;
+                        }
+                        if let Some(l) = s.later_stmin.filter(|_| k > 0) {
+                            fc[ae + 2] = l;
+                        }
+                    }
+                    queue.push((at, seq, Ev::ToA(fc)));
                     seq += 1;
                 }
             }
@@ -448,11 +486,13 @@ fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
                     a_step!(tx.on_echo(&s.a, pdu, now));
                 }
             }
-            Ev::ToA(k) => {
-                let data = w.b_sent[k].1.clone();
+            Ev::ToA(data) => {
                 if s.cf_broadcast {
                     // Mainline does not even listen on rx_id then.
                     continue;
+                }
+                if data[ae] == 0x30 {
+                    w.a_cts.push(now);
                 }
                 match route(&s.a, fd, &data, tx.is_idle(), true) {
                     Route::Tx => a_step!(tx.on_fc(&s.a, &data, pdu, now)),
@@ -517,12 +557,18 @@ proptest! {
 
         // CF spacing: within a block, the next CF leaves one wire time
         // (its predecessor's echo) plus the gap after the previous one;
-        // the first CF of a block leaves when the FC arrives.
-        let fc_times: Vec<u64> = w.b_sent.iter().map(|(t, _)| t + s.wire).collect();
+        // the first CF of a block leaves when the FC continue arrives
+        // (after the wait frames). The gap is the first FC's, or the
+        // latest FC's with dynamic parameters.
+        if !s.cf_broadcast {
+            prop_assert_eq!(w.a_cts.len(), w.b_sent.len());
+        }
         for k in 2..w.a_sent.len() {
             let (t0, t1) = (w.a_sent[k - 1].0, w.a_sent[k].0);
-            if s.cf_broadcast || !fc_times.contains(&t1) {
-                prop_assert_eq!(t1 - t0, s.wire + s.gap, "CF {} spacing", k);
+            if s.cf_broadcast || !w.a_cts.contains(&t1) {
+                let fcs_before = w.a_cts.iter().filter(|&&t| t <= t0).count();
+                let gap = if fcs_before >= 2 { s.later_gap } else { s.gap };
+                prop_assert_eq!(t1 - t0, s.wire + gap, "CF {} spacing", k);
             }
         }
         if s.cf_broadcast && want.len() > 1 {
