@@ -53,6 +53,24 @@ pub fn open(ifindex: u32) -> Result<CanSocket, String> {
     Ok(s)
 }
 
+/// A CAN_RAW socket bound to `ifindex` whose filters are set before the
+/// bind, so that it never queues a frame they do not pass. With
+/// [`open`] and then `set_filters`, every frame received between the
+/// bind and the setsockopt passes the default filter (all frames) and is
+/// queued: `teardown_bcm_cyclic_jobs` read a frame of its 100 cyclic jobs
+/// (0x15C, still on its way after their close) on the socket it had set
+/// to 0x7FF alone (make soak, loaded host, 2026-11-29).
+pub fn open_filtered(
+    ifindex: u32,
+    filters: &[socketcan::CanFilter],
+) -> Result<CanSocket, String> {
+    let s = unbound()?;
+    s.set_filters(filters).or_fail("CAN_RAW_FILTER before bind")?;
+    raw::bind(&s, &addr_bytes(libc::AF_CAN as u16, ifindex))
+        .or_fail(format_args!("bind to ifindex {ifindex}"))?;
+    Ok(s)
+}
+
 /// A CAN_RAW socket that is not bound. The crate binds in every
 /// constructor, so the socket is made with socket(2) and handed to it.
 pub fn unbound() -> Result<CanSocket, String> {

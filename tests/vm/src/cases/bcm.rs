@@ -1525,10 +1525,9 @@ fn sent_during(ctx: &Ctx, dev: &str, t: Duration) -> Result<u64, String> {
 /// `ifindex` and reads it back: every frame queued on the interface
 /// before it has been transmitted, and counted, by then.
 fn drain_tx(ifindex: u32) -> TestResult {
-    let rx = canraw::open(ifindex)?;
     let exact = libc::CAN_SFF_MASK | libc::CAN_EFF_FLAG | libc::CAN_RTR_FLAG;
-    rx.set_filters(&[socketcan::CanFilter::new(0x7FF, exact)])
-        .or_fail("CAN_RAW_FILTER")?;
+    // Filtered from the start: the jobs' last frames may still arrive.
+    let rx = canraw::open_filtered(ifindex, &[socketcan::CanFilter::new(0x7FF, exact)])?;
     rx.set_read_timeout(SETTLE).or_fail("SO_RCVTIMEO")?;
     let tx = canraw::open(ifindex)?;
     canraw::send(&tx, &sff(0x7FF, &[]))?;
