@@ -95,14 +95,22 @@ static RCU_CALLBACKS: AtomicBool = AtomicBool::new(false);
 #[derive(Clone, Copy)]
 #[repr(usize)]
 pub(super) enum SweepKind {
+    /// PCI drivers (`pci::Registration::register`): first, so that no
+    /// probe adds a device behind the devices' sweep, and so that the
+    /// drivers' `remove` drops the devices they own the usual way.
+    PciDrivers,
     /// In-kernel receivers with `rcan_pf` (`can::proto::rx_set_kernel`).
     KernelRx,
-    /// CAN protocols (`can::proto::ProtoModule::register`).
+    /// CAN protocols (`can::proto::ProtoModule::register`): before the
+    /// devices, so that no notifier of the module runs while they go.
     Protocols,
+    /// Network devices (`netdev::Registration::register`), last: each
+    /// with its filter listener, if a `Listening` owned it.
+    Devices,
 }
 
 /// Slots of [`SWEEPS`]: one per [`SweepKind`].
-const NR_SWEEPS: usize = 2;
+const NR_SWEEPS: usize = 4;
 
 /// The sweeps of step 3, one slot per [`SweepKind`], each stored by the
 /// first registration of its kind (null: none), so that a module that
@@ -263,6 +271,9 @@ fn exit_duties() {
             sweep();
         }
     }
+    // Once more: a probe that ran before the PCI drivers' sweep may have
+    // initialised a timer after the first kill.
+    super::hrtimer::kill_all();
     // The store in note_rcu_callback happened before the call_rcu it
     // announces, in code that finished before the module's value was
     // dropped (its registrations are gone): no ordering beyond program
@@ -270,4 +281,191 @@ fn exit_duties() {
     if RCU_CALLBACKS.load(Ordering::Relaxed) {
         super::sync::rcu_barrier();
     }
+}
+
+/// A node of an [`ExitList`], inside the object it records (a device's
+/// private area). Its fields belong to the list's lock.
+pub(super) struct ExitNode(core::cell::UnsafeCell<NodeLinks>);
+
+struct NodeLinks {
+    prev: *mut ExitNode,
+    next: *mut ExitNode,
+    /// On the list (set by `push`, cleared by whoever unlinks it).
+    on: bool,
+    /// What `undo` is called with.
+    key: *mut (),
+    undo: Option<unsafe fn(*mut ())>,
+}
+
+// SAFETY: the links are only read or written with the owning list's lock
+// held (ExitList); the node is otherwise plain data.
+unsafe impl Sync for ExitNode {}
+// SAFETY: as above.
+unsafe impl Send for ExitNode {}
+
+impl ExitNode {
+    /// A node on no list.
+    pub(super) const fn new() -> Self {
+        ExitNode(core::cell::UnsafeCell::new(NodeLinks {
+            prev: core::ptr::null_mut(),
+            next: core::ptr::null_mut(),
+            on: false,
+            key: core::ptr::null_mut(),
+            undo: None,
+        }))
+    }
+}
+
+/// The first node of an [`ExitList`].
+struct ListHead(*mut ExitNode);
+
+// SAFETY: the nodes it points to are only touched under the list's lock.
+unsafe impl Send for ListHead {}
+
+/// A per-module list of registrations that the module's exit undoes if
+/// their owner did not (step 3), for kinds with no bound on their number
+/// (a module's network devices: `rcan_loop` makes up to 16, a PCI driver
+/// one per channel of every card): a doubly linked list through
+/// [`ExitNode`]s inside the registered objects themselves, so recording
+/// one allocates nothing, cannot fail, and costs O(1) both ways. Like
+/// [`ExitTable`], each registration is undone exactly once, by its
+/// owner ([`ExitList::remove`] true) or by the exit
+/// ([`ExitList::sweep`]), whichever unlinks it first.
+///
+/// The lock is a spinlock taken with interrupts disabled (never slept
+/// under), so `push` and `remove` work in any context.
+///
+/// # Invariants
+///
+/// Every node on the list was pushed with the contract of
+/// [`ExitList::push`] and not unlinked since; `head` and the links of the
+/// nodes on it name nodes on it, or are null.
+pub(super) struct ExitList {
+    head: super::lock::StaticIrqSpinLock<ListHead>,
+}
+
+impl ExitList {
+    /// An empty list, for a `static`; `name` is its lock's lockdep name.
+    pub(super) const fn new(name: &'static kernel::str::CStr) -> Self {
+        ExitList {
+            head: super::lock::StaticIrqSpinLock::new(ListHead(core::ptr::null_mut()), name),
+        }
+    }
+
+    /// Records `node` (not on a list), to be undone by `undo(key)` at the
+    /// module's exit unless [`ExitList::remove`] takes it off first, and
+    /// that the exit sweeps this list (`kind`, `sweep`, which calls
+    /// [`ExitList::sweep`] on it). Any context.
+    ///
+    /// # Safety
+    ///
+    /// Until `remove(node)` returns or the exit unlinks it: `node` stays
+    /// at its address, and calling `undo(key)` once, in process context at
+    /// the module's exit, is sound (it may free the node).
+    pub(super) unsafe fn push(
+        &'static self,
+        node: &ExitNode,
+        key: *mut (),
+        undo: unsafe fn(*mut ()),
+        kind: SweepKind,
+        sweep: fn(),
+    ) {
+        note_sweep(kind, sweep);
+        let me = core::ptr::from_ref(node).cast_mut();
+        let mut head = self.head.lock();
+        // SAFETY: the node is ours until published below; the old head, if
+        // any, is on the list, whose lock we hold.
+        unsafe {
+            let l = &mut *node.0.get();
+            l.prev = core::ptr::null_mut();
+            l.next = head.0;
+            l.on = true;
+            l.key = key;
+            l.undo = Some(undo);
+            if !head.0.is_null() {
+                (*(*head.0).0.get()).prev = me;
+            }
+        }
+        // INVARIANT: pushed with push's contract (the caller's), linked
+        // in front.
+        head.0 = me;
+    }
+
+    /// Takes `node` off the list: true if it was on it (the caller now
+    /// undoes the registration itself, and the exit will not), false if
+    /// it never was or the exit took it (and undoes it, or did). Any
+    /// context.
+    pub(super) fn remove(&'static self, node: &ExitNode) -> bool {
+        let mut head = self.head.lock();
+        // SAFETY: the node's links are ours under the lock; a node on the
+        // list has neighbours on it (type invariant).
+        unsafe { Self::unlink(&mut head, core::ptr::from_ref(node).cast_mut()) }
+    }
+
+    /// Unlinks `n` if it is on the list; returns whether it was.
+    ///
+    /// # Safety
+    ///
+    /// `head` is this list's, locked; `n` is a valid node.
+    unsafe fn unlink(head: &mut ListHead, n: *mut ExitNode) -> bool {
+        // SAFETY: valid node (contract), links under the held lock.
+        let l = unsafe { &mut *(*n).0.get() };
+        if !l.on {
+            return false;
+        }
+        if l.prev.is_null() {
+            head.0 = l.next;
+        } else {
+            // SAFETY: a neighbour of a node on the list is on it.
+            unsafe { (*(*l.prev).0.get()).next = l.next };
+        }
+        if !l.next.is_null() {
+            // SAFETY: as above.
+            unsafe { (*(*l.next).0.get()).prev = l.prev };
+        }
+        l.on = false;
+        l.prev = core::ptr::null_mut();
+        l.next = core::ptr::null_mut();
+        true
+    }
+
+    /// Undoes every registration still on the list, one at a time: each
+    /// is unlinked under the lock, then undone without it. The exit's
+    /// sweep of this list (step 3): process context, after the module's
+    /// value was dropped; sleeps if the undos do.
+    pub(super) fn sweep(&'static self) {
+        loop {
+            let (key, undo) = {
+                let mut head = self.head.lock();
+                let n = head.0;
+                if n.is_null() {
+                    return;
+                }
+                // SAFETY: the head is a node on the list (type invariant),
+                // valid until undone; its links are ours under the lock.
+                unsafe {
+                    let l = &*(*n).0.get();
+                    let ku = (l.key, l.undo);
+                    Self::unlink(&mut head, n);
+                    ku
+                }
+            };
+            if let Some(undo) = undo {
+                // SAFETY: the node was pushed with this key and undo, and
+                // is unlinked now (by us), so this is the one undo; we run
+                // at the module's exit in process context (push's
+                // contract). The node is not touched after.
+                unsafe { undo(key) };
+            }
+        }
+    }
+}
+
+/// Lends the module's scope to `f`, for a callback that the glue installs
+/// only for a module whose exit it owns: a PCI driver's `probe`
+/// (`pci::Registration::register` takes the scope, so its probes belong
+/// to a [`Scoped`] module, and the exit unregisters the driver before it
+/// sweeps the devices). Process context.
+pub(super) fn lend_scope<R>(f: impl FnOnce(&ModuleScope) -> R) -> R {
+    f(&ModuleScope { _private: () })
 }

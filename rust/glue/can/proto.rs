@@ -1055,6 +1055,12 @@ impl<T: FilterListener> Listening<T> {
         crate::glue::to_result(unsafe {
             abi::rcan_rx_listen(listen_trampoline::<T>, dev.cast(), ifindex, true)
         })?;
+        // If the listening is forgotten, the module's exit tears the
+        // device down (its Registration's node) and removes the listener
+        // first, through this hook.
+        // SAFETY: `unlisten::<T>` removes exactly this listener, once,
+        // in process context, before the device is unregistered.
+        unsafe { reg.set_before_teardown(unlisten::<T>) };
         // INVARIANT: registered just above, for `reg`'s device.
         Ok(Listening { reg })
     }
@@ -1065,19 +1071,33 @@ impl<T: FilterListener> Listening<T> {
     }
 }
 
+/// Removes the filter listener of device `dev` of `T` (a [`Listening`]'s,
+/// through its device's teardown hook); returns after a running call
+/// finished. Process context.
+///
+/// # Safety
+///
+/// `dev` is a registered device of `T` whose listener
+/// `(listen_trampoline::<T>, dev)` was added by [`Listening::new`] and not
+/// removed since.
+unsafe fn unlisten<T: FilterListener>(dev: *mut bindings::net_device) {
+    // SAFETY: a registered device (contract), valid for the call.
+    let ifindex = unsafe { NetDev::from_raw(dev) }.ifindex();
+    // SAFETY: removal of that listener (contract).
+    unsafe { abi::rcan_rx_listen(listen_trampoline::<T>, dev.cast(), ifindex, false) };
+}
+
 impl<T: FilterListener> Drop for Listening<T> {
     fn drop(&mut self) {
-        // SAFETY: removal of the listener added in new() (type invariant);
-        // returns after a running call finished. `self.reg` is dropped
-        // only after this function returns.
-        unsafe {
-            abi::rcan_rx_listen(
-                listen_trampoline::<T>,
-                self.reg.dev().as_ptr().cast(),
-                self.reg.dev().ifindex(),
-                false,
-            )
-        };
+        // Taken back first, so the device's teardown does not remove the
+        // listener a second time.
+        if self.reg.take_before_teardown() {
+            // SAFETY: the listener added in new() (type invariant), not
+            // removed since (the hook was still set); returns after a
+            // running call finished. `self.reg` is dropped only after
+            // this function returns.
+            unsafe { unlisten::<T>(self.reg.dev().as_ptr()) };
+        }
     }
 }
 
