@@ -16,20 +16,27 @@
 //!    callback of one timer can re-arm another behind the teardown's back;
 //! 2. the module's own value (`T`) is dropped: its registrations undo
 //!    themselves in their own `Drop`s;
-//! 3. every registration with `rcan_pf` that the module made through a
+//! 3. every registration that the module made through a
 //!    scope and that is still there (its guard forgotten, or kept in a
 //!    `static`, which is never dropped) is removed: the in-kernel
 //!    receivers ([`rx_set_kernel`](super::can::proto::rx_set_kernel)) and
 //!    the protocols
 //!    ([`ProtoModule::register`](super::can::proto::ProtoModule::register)),
-//!    each kind recorded in a table of its own ([`ExitTable`]);
+//!    the network devices
+//!    ([`Registration::register`](super::netdev::Registration::register))
+//!    and the PCI drivers
+//!    ([`pci::Registration::register`](super::pci::Registration::register)),
+//!    kind by kind in [`SweepKind`]'s order, each recorded in a table
+//!    ([`ExitTable`]) or a list ([`ExitList`]) of its own;
 //! 4. if the module's glue queued RCU callbacks (`call_rcu`, whose
 //!    functions are in the module's text), `rcu_barrier()` waits for them.
 //!
 //! The same runs when `T::init` fails, after its partial state is gone.
 //!
 //! Things that need the duties done for them take a `&ModuleScope`, which
-//! only [`Scoped`] makes, and only lends to `T::init`: a static timer can
+//! only [`Scoped`] makes, and only lends to `T::init` (and, through
+//! [`lend_scope`], the glue's PCI probe trampoline to the probes of a
+//! driver registered with the scope): a static timer can
 //! be initialised, and a kernel receiver or a protocol registered, only
 //! by a module whose exit kills or removes it, and the lifetime keeps the scope from
 //! being kept for later. `mem::forget` cannot skip steps 1, 3 or 4: the
