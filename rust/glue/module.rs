@@ -458,10 +458,11 @@ impl ExitList {
                 }
             };
             if let Some(undo) = undo {
-                // SAFETY: the node was pushed with this key and undo, and
-                // is unlinked now (by us), so this is the one undo; we run
-                // at the module's exit in process context (push's
-                // contract). The node is not touched after.
+                // The node was pushed with this key and undo, and is
+                // unlinked now (by us), so this is the one undo; we run at
+                // the module's exit in process context. The node is not
+                // touched after.
+                // SAFETY: so this is push's contract.
                 unsafe { undo(key) };
             }
         }

@@ -1003,10 +1003,11 @@ impl<T: Driver> Registration<T> {
             }
             return Err(Error::from_errno(ret));
         }
-        // SAFETY: the node is in the private area, which stays in place
-        // until `teardown::<T>` frees it; `teardown::<T>` of this
-        // registered device of `T` may run once, in process context, at
-        // any time (it is `Registration::drop`'s body).
+        // The node is in the private area, which stays in place until
+        // `teardown::<T>` frees it; `teardown::<T>` of this registered
+        // device of `T` may run once, in process context, at any time (it
+        // is `Registration::drop`'s body).
+        // SAFETY: so this is push's contract.
         unsafe {
             DEVICES.push(
                 &(*netdev_priv(dev.as_ptr()).cast::<PrivBox<T::Priv>>()).exit,

@@ -445,10 +445,10 @@ impl<T: CanProtocol> ProtoModule<T> {
         }
         abi::check()?;
         let me = self as *const Self as *mut ();
-        // SAFETY: `me` is this `&'static ProtoModule<T>`, and
-        // `unregister_erased` of this `T` undoes its registration once it
-        // is made, does nothing before (or after: `owner` is null), in
-        // process context, as the module's exit calls it.
+        // `me` is this `&'static ProtoModule<T>`, and `unregister_erased`
+        // of this `T` undoes its registration once it is made, does
+        // nothing before (or after: `owner` is null), in process context.
+        // SAFETY: so calling it at the module's exit is sound.
         unsafe {
             PROTO_REGS.note(me, Self::unregister_erased, SweepKind::Protocols, proto_sweep)?
         };
@@ -1092,10 +1092,11 @@ impl<T: FilterListener> Drop for Listening<T> {
         // Taken back first, so the device's teardown does not remove the
         // listener a second time.
         if self.reg.take_before_teardown() {
-            // SAFETY: the listener added in new() (type invariant), not
-            // removed since (the hook was still set); returns after a
-            // running call finished. `self.reg` is dropped only after
+            // The listener added in new() (type invariant), not removed
+            // since (the hook was still set); `unlisten` returns after a
+            // running call finished, and `self.reg` is dropped only after
             // this function returns.
+            // SAFETY: so this is `unlisten`'s contract.
             unsafe { unlisten::<T>(self.reg.dev().as_ptr()) };
         }
     }
