@@ -55,6 +55,24 @@ pub(crate) struct ModuleScope {
     _private: (),
 }
 
+/// Evidence that the code holding it runs in a module whose exit the glue
+/// owns ([`Scoped`]), for what registers itself for the exit's sweeps at
+/// run time, outside `init` (a job's timers): the [`ModuleScope`] itself,
+/// a socket of a protocol the module registered with it
+/// (`Sock<T: CanProtocol>`: only the glue's `create` trampoline, which
+/// `ProtoModule::register(.., scope)` installs, makes one), or a device
+/// the module registered with it (`netdev::Dev<T>`). Sealed: only the
+/// glue implements it.
+pub(crate) trait InScopedModule: sealed::Sealed {}
+
+/// The seal of [`InScopedModule`], nameable in the glue only.
+pub(super) mod sealed {
+    pub(crate) trait Sealed {}
+}
+
+impl sealed::Sealed for ModuleScope {}
+impl InScopedModule for ModuleScope {}
+
 /// A module whose exit duties the glue carries ([`Scoped`]).
 pub(crate) trait ScopedModule: Sized + Sync + Send {
     /// Loads the module: process context, may sleep. `scope` lets it set
@@ -111,13 +129,16 @@ pub(super) enum SweepKind {
     /// CAN protocols (`can::proto::ProtoModule::register`): before the
     /// devices, so that no notifier of the module runs while they go.
     Protocols,
+    /// Job timers (`jobtimer::JobTimers::new`): killed (not freed), so
+    /// that no callback of the module runs while its devices go.
+    Jobs,
     /// Network devices (`netdev::Registration::register`), last: each
     /// with its filter listener, if a `Listening` owned it.
     Devices,
 }
 
 /// Slots of [`SWEEPS`]: one per [`SweepKind`].
-const NR_SWEEPS: usize = 4;
+const NR_SWEEPS: usize = 5;
 
 /// The sweeps of step 3, one slot per [`SweepKind`], each stored by the
 /// first registration of its kind (null: none), so that a module that

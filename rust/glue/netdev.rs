@@ -575,6 +575,11 @@ impl<T: Driver> core::ops::Deref for Dev<T> {
     }
 }
 
+// Only `Registration::register`, which takes the scope, makes a device
+// of `T`.
+impl<T: Driver> super::module::sealed::Sealed for Dev<T> {}
+impl<T: Driver> super::module::InScopedModule for Dev<T> {}
+
 impl<T: Driver> Dev<T> {
     /// # Safety
     ///

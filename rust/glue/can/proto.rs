@@ -534,6 +534,11 @@ impl<T: CanProtocol> ProtoModule<T> {
     }
 }
 
+// Only the `create` trampoline that `ProtoModule::<T>::register(..,
+// scope)` installs makes a sock of `T` (`Sock::from_raw` is the glue's).
+impl<T: CanProtocol> crate::glue::module::sealed::Sealed for Sock<T> {}
+impl<T: CanProtocol> crate::glue::module::InScopedModule for Sock<T> {}
+
 /// A registered [`ProtoModule`]; dropping it (module exit) unregisters the
 /// protocol, the notifier and the proto. Every socket holds a reference on
 /// the module, so no socket is left by then. Process context; sleeps (a
