@@ -26,6 +26,8 @@
 //!    ([`Registration::register`](super::netdev::Registration::register))
 //!    and the PCI drivers
 //!    ([`pci::Registration::register`](super::pci::Registration::register)),
+//!    and the job timers still alive are killed
+//!    ([`JobTimers::new`](super::jobtimer::JobTimers::new)),
 //!    kind by kind in [`SweepKind`]'s order, each recorded in a table
 //!    ([`ExitTable`]) or a list ([`ExitList`]) of its own;
 //! 4. if the module's glue queued RCU callbacks (`call_rcu`, whose
