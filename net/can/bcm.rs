@@ -575,7 +575,7 @@ fn new_job(sk: &S, key: OpKey, state: OpState) -> Result<Job> {
         frames_abs: AtomicU64::new(0),
         frames_filtered: AtomicU64::new(0),
         state,
-    })
+    }, sk)
 }
 
 // ---------------------------------------------------------------------------

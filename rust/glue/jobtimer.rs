@@ -39,6 +39,15 @@
 //! and waits for callbacks that started later, which see the mark. Only
 //! then is the allocation, data included, freed: no timer is queued and no
 //! callback runs when the memory goes.
+//!
+//! A job never dropped (`mem::forget`, a leaked owner) is killed by its
+//! module's exit: every live job is on the module's [`JOBS`] list (a node
+//! in its allocation), and the exit's sweep
+//! ([`Scoped`](super::module::Scoped), step 3) marks each job left there
+//! dying and cancels its timers as the drop does, but frees nothing (its
+//! owner may still hold it): the memory leaks, no timer fires into the
+//! module's freed text. [`JobTimers::new`] takes the evidence that its
+//! module's exit is the glue's ([`InScopedModule`]).
 
 use super::bindings;
 use core::ptr::NonNull;
@@ -48,6 +57,7 @@ use kernel::error::{code, Result};
 use kernel::types::Opaque;
 
 use super::lock::{new_irq_spinlock, IrqSpinLock};
+use super::module::{ExitList, ExitNode, InScopedModule, SweepKind};
 
 /// Timers per job.
 pub(crate) const JOB_TIMERS: usize = 2;
@@ -87,6 +97,9 @@ struct Slot<H: JobCallback> {
 
 struct Inner<H: JobCallback> {
     slots: [Slot<H>; JOB_TIMERS],
+    /// The job on its module's [`JOBS`] list from `new` until its drop or
+    /// the module's exit takes it off.
+    exit: ExitNode,
     /// Set by Drop before the final cancellation: `start` arms nothing.
     dying: AtomicBool,
     /// Serialises `start` against the trampoline's restart (irqsave:
@@ -127,9 +140,10 @@ impl<H: JobCallback> Clone for JobRef<'_, H> {
 impl<H: JobCallback> Copy for JobRef<'_, H> {}
 
 impl<H: JobCallback> JobTimers<H> {
-    /// A job with `data` and [`JOB_TIMERS`] idle timers. Process context
-    /// (allocates with GFP_KERNEL).
-    pub(crate) fn new(data: H::Data) -> Result<Self> {
+    /// A job with `data` and [`JOB_TIMERS`] idle timers, on its module's
+    /// list of jobs, which the module's exit kills (`_in`: the module's
+    /// exit is the glue's). Process context (allocates with GFP_KERNEL).
+    pub(crate) fn new(data: H::Data, _in: &impl InScopedModule) -> Result<Self> {
         let b = KBox::new(
             Inner {
                 slots: [const {
@@ -139,6 +153,7 @@ impl<H: JobCallback> JobTimers<H> {
                         which: 0,
                     }
                 }; JOB_TIMERS],
+                exit: ExitNode::new(),
                 dying: AtomicBool::new(false),
                 rearm: new_irq_spinlock!((), "jobtimer_rearm")?,
                 data,
@@ -164,6 +179,19 @@ impl<H: JobCallback> JobTimers<H> {
                 (*t).function = Some(expired_trampoline::<H>);
             }
         }
+        // The allocation stays in place until the job's drop frees it,
+        // after taking it off the list; `kill::<H>` of it may run once, in
+        // process context, while it is on the list (it frees nothing).
+        // SAFETY: so this is push's contract.
+        unsafe {
+            JOBS.push(
+                &(*p).exit,
+                p.cast(),
+                kill::<H>,
+                SweepKind::Jobs,
+                jobs_sweep,
+            )
+        };
         // INVARIANT: from KBox::into_raw; every slot initialised above.
         // SAFETY: KBox::into_raw never returns NULL.
         Ok(JobTimers {
@@ -238,18 +266,59 @@ impl<H: JobCallback> Drop for JobTimers<H> {
     /// callbacks, which it would wait for); waits for running callbacks.
     fn drop(&mut self) {
         let inner = self.get().inner;
-        inner.dying.store(true, Ordering::SeqCst);
-        for _pass in 0..2 {
-            for slot in &inner.slots {
-                // SAFETY: an initialised timer of the job we own.
-                unsafe { bindings::hrtimer_cancel(slot.timer.get()) };
-            }
+        if !JOBS.remove(&inner.exit) {
+            // The module's exit took it (it is going away while this job
+            // is still owned): it kills the timers and the memory leaks.
+            return;
         }
+        inner.kill();
         // No timer is queued or running and none can be armed (module
         // documentation), so nothing reaches the allocation any more.
         // SAFETY: from KBox::into_raw (type invariant), freed once here.
         drop(unsafe { KBox::from_raw(self.inner.as_ptr()) });
     }
+}
+
+impl<H: JobCallback> Inner<H> {
+    /// Marks the job dying and cancels its timers twice (module
+    /// documentation): when this returns no timer is queued or running
+    /// and none can be armed again. Process context.
+    fn kill(&self) {
+        self.dying.store(true, Ordering::SeqCst);
+        for _pass in 0..2 {
+            for slot in &self.slots {
+                // SAFETY: an initialised timer of a live job (JobTimers
+                // invariant; `&self`).
+                unsafe { bindings::hrtimer_cancel(slot.timer.get()) };
+            }
+        }
+    }
+}
+
+/// The jobs of this module not dropped yet (the glue is compiled into each
+/// module: one list per module), through the nodes in their allocations;
+/// swept at exit by [`jobs_sweep`]. Unbounded (CAN_BCM has a job per
+/// operation), so a list, not a table.
+static JOBS: ExitList = ExitList::new(kernel::c_str!("rcan_glue_jobs"));
+
+/// The exit's sweep ([`Scoped`](super::module::Scoped), step 3): kills
+/// every job of this module still alive. Process context; waits for
+/// running callbacks.
+fn jobs_sweep() {
+    JOBS.sweep();
+}
+
+/// Kills the job at `inner` ([`Inner::kill`]) and leaves its memory to
+/// its owner, which never frees it now (its drop finds it off the list).
+///
+/// # Safety
+///
+/// `inner` is the allocation of a live `JobTimers<H>`, taken off [`JOBS`]
+/// by the caller (the exit's sweep).
+unsafe fn kill<H: JobCallback>(inner: *mut ()) {
+    // SAFETY: a live job's allocation (contract), which its owner no
+    // longer frees (it is off the list), so it stays valid.
+    unsafe { &*inner.cast::<Inner<H>>() }.kill();
 }
 
 /// The C callback of every job timer.

@@ -13,12 +13,13 @@
 //!   NET_RX softirq hands frames up through [`Napi::receive`].
 
 use super::bindings;
+use super::module::{ExitList, ExitNode, ModuleScope, SweepKind};
 use super::net::Net;
 use super::skb::{OwnedSkb, Skb};
 use super::sync::{RcuReadGuard, Rtnl};
 use core::marker::PhantomData;
 use core::ptr::NonNull;
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::{AtomicPtr, AtomicU32, Ordering};
 use kernel::error::{code, Result};
 use kernel::prelude::*;
 
@@ -574,6 +575,11 @@ impl<T: Driver> core::ops::Deref for Dev<T> {
     }
 }
 
+// Only `Registration::register`, which takes the scope, makes a device
+// of `T`.
+impl<T: Driver> super::module::sealed::Sealed for Dev<T> {}
+impl<T: Driver> super::module::InScopedModule for Dev<T> {}
+
 impl<T: Driver> Dev<T> {
     /// # Safety
     ///
@@ -701,6 +707,16 @@ pub(crate) fn capable_net_admin() -> bool {
 /// What the netdev private area holds: the driver's data and the glue's
 /// bookkeeping.
 struct PrivBox<P> {
+    /// The device on its module's [`DEVICES`] list from registration
+    /// until its [`Registration`] is dropped or the module's exit
+    /// unregisters it. Does not move: the private area never does.
+    exit: ExitNode,
+    /// What must be undone before the device is unregistered, set by the
+    /// glue's `Listening` (its filter listener's removal, an `unsafe
+    /// fn(*mut net_device)`), taken back by whoever undoes it first: the
+    /// listening's drop, or the teardown of a device whose listening was
+    /// forgotten. Null: nothing.
+    before_teardown: AtomicPtr<()>,
     /// Requested interrupt line, 0 = none.
     irq: AtomicU32,
     /// The NAPI instance (added at registration if `Driver::NAPI_WEIGHT`
@@ -932,9 +948,13 @@ unsafe impl<T: Driver> Send for Registration<T> {}
 unsafe impl<T: Driver> Sync for Registration<T> {}
 
 impl<T: Driver> Registration<T> {
-    /// Allocates and registers a device named after `name` ("can%d").
+    /// Allocates and registers a device named after `name` ("can%d"). The
+    /// device stays registered until the returned guard is dropped, and
+    /// at the latest until the module's exit, which the `scope` proves the
+    /// glue runs ([`Scoped`](super::module::Scoped)): a forgotten
+    /// registration cannot leave a device with ops in freed module text.
     /// Process context; takes RTNL.
-    pub(crate) fn register(name: &CStr, priv_: T::Priv) -> Result<Self> {
+    pub(crate) fn register(name: &CStr, priv_: T::Priv, _scope: &ModuleScope) -> Result<Self> {
         // SAFETY: `name` is NUL-terminated; setup is our trampoline.
         let dev = unsafe {
             bindings::alloc_netdev_mqs(
@@ -956,6 +976,8 @@ impl<T: Driver> Registration<T> {
             netdev_priv(dev.as_ptr())
                 .cast::<PrivBox<T::Priv>>()
                 .write(PrivBox {
+                    exit: ExitNode::new(),
+                    before_teardown: AtomicPtr::new(core::ptr::null_mut()),
                     irq: AtomicU32::new(0),
                     napi,
                     inner: priv_,
@@ -986,6 +1008,20 @@ impl<T: Driver> Registration<T> {
             }
             return Err(Error::from_errno(ret));
         }
+        // The node is in the private area, which stays in place until
+        // `teardown::<T>` frees it; `teardown::<T>` of this registered
+        // device of `T` may run once, in process context, at any time (it
+        // is `Registration::drop`'s body).
+        // SAFETY: so this is push's contract.
+        unsafe {
+            DEVICES.push(
+                &(*netdev_priv(dev.as_ptr()).cast::<PrivBox<T::Priv>>()).exit,
+                dev.as_ptr().cast(),
+                teardown::<T>,
+                SweepKind::Devices,
+                devices_sweep,
+            )
+        };
         // INVARIANT: registered with initialised private data.
         Ok(Registration {
             dev,
@@ -1003,21 +1039,109 @@ impl<T: Driver> Registration<T> {
         // SAFETY: type invariant.
         unsafe { Adapter::<T>::priv_of(self.dev.as_ptr()) }
     }
+
+    /// Makes the device's teardown call `f(dev)` before it unregisters
+    /// the device, unless [`Registration::take_before_teardown`] takes it
+    /// back first: the glue's `Listening` removes its filter listener so
+    /// even when it is forgotten and the module's exit tears the device
+    /// down. One hook per device (a second replaces the first). Any
+    /// context.
+    ///
+    /// # Safety
+    ///
+    /// Calling `f` once with this device, in process context, before it
+    /// is unregistered, is sound until the hook is taken back.
+    pub(super) unsafe fn set_before_teardown(&self, f: unsafe fn(*mut bindings::net_device)) {
+        self.dev()
+            .state()
+            .before_teardown
+            .store(f as *mut (), Ordering::Release);
+    }
+
+    /// Takes back the hook of [`Registration::set_before_teardown`]:
+    /// true if it was set (the caller undoes what it stood for itself),
+    /// false if not. Any context.
+    pub(super) fn take_before_teardown(&self) -> bool {
+        !self
+            .dev()
+            .state()
+            .before_teardown
+            .swap(core::ptr::null_mut(), Ordering::AcqRel)
+            .is_null()
+    }
 }
 
 impl<T: Driver> Drop for Registration<T> {
     fn drop(&mut self) {
-        // SAFETY: registered by us; unregister_netdev closes the device
-        // (`stop`) and waits until no ops run and every reference is gone.
-        unsafe { bindings::unregister_netdev(self.dev.as_ptr()) };
-        // A driver that left its interrupt requested: free it before the
-        // device goes.
-        self.dev().free_irq();
-        // SAFETY: unregistered, no handler or op can run any more: drop
-        // the private data and free the device.
-        unsafe {
-            core::ptr::drop_in_place(netdev_priv(self.dev.as_ptr()).cast::<PrivBox<T::Priv>>());
-            bindings::free_netdev(self.dev.as_ptr());
+        // SAFETY: the device is registered (type invariant), so its
+        // private area holds our `PrivBox`, with the node.
+        let node = unsafe { &(*netdev_priv(self.dev.as_ptr()).cast::<PrivBox<T::Priv>>()).exit };
+        // Off the module's list first: from here on the device is ours to
+        // tear down. If the exit's sweep took it (a registration dropped
+        // while the module goes, from a context the module forgot), the
+        // sweep tears it down: it is not touched here.
+        if DEVICES.remove(node) {
+            // SAFETY: a registered device of `T` that nobody else will
+            // tear down (taken off the list just now).
+            unsafe { teardown::<T>(self.dev.as_ptr().cast()) };
         }
+    }
+}
+
+/// The network devices this module registered and has not unregistered
+/// (the glue is compiled into each module: one list per module), through
+/// the nodes in their private areas ([`PrivBox::exit`]); swept at exit
+/// by [`devices_sweep`]. An intrusive list rather than a bounded table:
+/// a module has any number of devices (`rcan_loop` up to 16, a PCI driver
+/// one per channel of each card), and registering one must not fail for
+/// want of a slot the kernel itself does not have.
+static DEVICES: ExitList = ExitList::new(kernel::c_str!("rcan_glue_devices"));
+
+/// The exit's sweep ([`Scoped`](super::module::Scoped), step 3):
+/// unregisters and frees every device of this module still registered,
+/// as its `Registration`'s drop would have. Process context, after the
+/// module's value was dropped; takes RTNL, sleeps.
+fn devices_sweep() {
+    DEVICES.sweep();
+}
+
+/// Unregisters device `dev` of `T` and frees it: `Registration::drop`'s
+/// body, and the undo the module's exit calls for a registration never
+/// dropped. Process context; takes RTNL, sleeps.
+///
+/// # Safety
+///
+/// `dev` is a device registered by `Registration::<T>::register`, taken
+/// off [`DEVICES`] by the caller, and torn down by nobody else.
+unsafe fn teardown<T: Driver>(dev: *mut ()) {
+    let dev = dev.cast::<bindings::net_device>();
+    // SAFETY: a device of `T` with our private area, still registered.
+    let hook = unsafe { Dev::<T>::from_raw(dev) }
+        .state()
+        .before_teardown
+        .swap(core::ptr::null_mut(), Ordering::AcqRel);
+    if !hook.is_null() {
+        // SAFETY: stored by set_before_teardown from an `unsafe
+        // fn(*mut net_device)`.
+        let f = unsafe {
+            core::mem::transmute::<*mut (), unsafe fn(*mut bindings::net_device)>(hook)
+        };
+        // SAFETY: taken (swapped to null) here, so called once, before
+        // the device is unregistered, in process context (its contract).
+        unsafe { f(dev) };
+    }
+    // SAFETY: registered by us (contract); unregister_netdev closes the
+    // device (`stop`) and waits until no ops run and every reference is
+    // gone.
+    unsafe { bindings::unregister_netdev(dev) };
+    // A driver that left its interrupt requested: free it before the
+    // device goes.
+    // SAFETY: a device of `T` with our private area, still allocated.
+    unsafe { Dev::<T>::from_raw(dev) }.free_irq();
+    // SAFETY: unregistered, no handler or op can run any more: drop the
+    // private data and free the device.
+    unsafe {
+        core::ptr::drop_in_place(netdev_priv(dev).cast::<PrivBox<T::Priv>>());
+        bindings::free_netdev(dev);
     }
 }

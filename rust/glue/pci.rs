@@ -15,6 +15,7 @@
 
 use super::bindings;
 use super::iomap::IoRange;
+use super::module::{ExitTable, ModuleScope, SweepKind};
 use core::cell::UnsafeCell;
 use core::marker::PhantomData;
 use core::ops::Deref;
@@ -65,8 +66,11 @@ const fn is_end(e: &bindings::pci_device_id) -> bool {
 pub(crate) trait Driver: Sized + 'static {
     /// What a bound device keeps (freed after `remove`).
     type Data: Send + Sync;
-    /// A device matched the id table. Process context; may sleep.
-    fn probe(dev: &Device) -> Result<KBox<Self::Data>>;
+    /// A device matched the id table. Process context; may sleep. The
+    /// module's `scope` is lent for the call (the driver was registered
+    /// with it), for what the probe registers whose teardown the module's
+    /// exit owns (its network devices).
+    fn probe(dev: &Device, scope: &ModuleScope) -> Result<KBox<Self::Data>>;
     /// The device goes away (driver unload or hot unplug). Process
     /// context; may sleep.
     fn remove(data: KBox<Self::Data>);
@@ -203,11 +207,16 @@ impl<T: Driver> Registration<T> {
     }
 
     /// Registers the driver for `ids` (ending with [`ID_END`]). Module
-    /// init only; probes of present devices run before this returns.
+    /// init only: the `scope` proves the module's exit is the glue's,
+    /// which unregisters the driver if [`Registration::unregister`] was
+    /// not called, before it sweeps the module's devices; probes of
+    /// present devices run before this returns. EBUSY if registered
+    /// already, ENOSPC beyond [`MAX_PCI_DRIVERS`] drivers in one module.
     pub(crate) fn register(
-        &self,
+        &'static self,
         name: &'static kernel::str::CStr,
         ids: &'static [bindings::pci_device_id],
+        _scope: &ModuleScope,
     ) -> Result {
         // Exactly one terminator, at the end: the PCI core walks the
         // table until it finds one.
@@ -215,8 +224,18 @@ impl<T: Driver> Registration<T> {
             Some((last, rest)) if is_end(last) && !rest.iter().any(is_end) => {}
             _ => return Err(code::EINVAL),
         }
+        let me = self.drv.get().cast::<()>();
+        // SAFETY: `unregister_erased` unregisters this driver, registered
+        // from just below until the slot is taken back; before that
+        // (failure, below) the slot is taken back first.
+        let new = unsafe {
+            PCI_DRIVERS.note(me, unregister_erased, SweepKind::PciDrivers, pci_sweep)?
+        };
+        if !new {
+            return Err(code::EBUSY);
+        }
         // SAFETY: module init: nothing else references the struct yet.
-        unsafe {
+        let ret = unsafe {
             let d = &mut *self.drv.get();
             d.name = name.as_char_ptr();
             d.id_table = ids.as_ptr();
@@ -226,16 +245,49 @@ impl<T: Driver> Registration<T> {
                 d,
                 super::this_module(),
                 name.as_char_ptr(),
-            ))?;
+            ))
+        };
+        if ret.is_err() {
+            PCI_DRIVERS.take(me, unregister_erased);
         }
-        Ok(())
+        ret.map(|_| ())
     }
 
-    /// Unregisters (calls `remove` for every bound device). Module exit.
-    pub(crate) fn unregister(&self) {
-        // SAFETY: registered in `register`.
-        unsafe { bindings::pci_unregister_driver(self.drv.get()) };
+    /// Unregisters (calls `remove` for every bound device), if registered.
+    /// Module exit; the glue's exit does it for a module that does not.
+    pub(crate) fn unregister(&'static self) {
+        let me = self.drv.get().cast::<()>();
+        if PCI_DRIVERS.take(me, unregister_erased) {
+            // SAFETY: registered (the slot was ours to take).
+            unsafe { unregister_erased(me) };
+        }
     }
+}
+
+/// Most PCI drivers one module registers (one each today).
+pub(crate) const MAX_PCI_DRIVERS: usize = 2;
+
+/// The PCI drivers this module registered and has not unregistered (one
+/// table per module: the glue is compiled into each), keyed by their
+/// `struct pci_driver`; swept at exit by [`pci_sweep`], before the
+/// module's devices. Process context.
+static PCI_DRIVERS: ExitTable<MAX_PCI_DRIVERS> = ExitTable::new();
+
+/// `pci_unregister_driver` of the driver at `drv`. Process context.
+///
+/// # Safety
+///
+/// `drv` is a registered `struct pci_driver`, unregistered only here.
+unsafe fn unregister_erased(drv: *mut ()) {
+    // SAFETY: per the contract.
+    unsafe { bindings::pci_unregister_driver(drv.cast()) };
+}
+
+/// The exit's sweep ([`Scoped`](super::module::Scoped), step 3): every
+/// PCI driver of this module still registered is unregistered. Process
+/// context; sleeps.
+fn pci_sweep() {
+    PCI_DRIVERS.sweep();
 }
 
 unsafe extern "C" fn probe<T: Driver>(
@@ -246,7 +298,9 @@ unsafe extern "C" fn probe<T: Driver>(
         return code::EINVAL.to_errno();
     };
     let dev = Device(p);
-    match T::probe(&dev) {
+    // Only `Registration::register`, which takes the module's scope,
+    // installs this function: the module's exit is the glue's.
+    match super::module::lend_scope(|scope| T::probe(&dev, scope)) {
         Ok(data) => {
             // SAFETY: a live device; drvdata holds the box until remove.
             unsafe { bindings::rcan_pci_set_drvdata(pdev, KBox::into_raw(data).cast()) };

@@ -129,7 +129,7 @@ pub(crate) trait SimBus: Sized + Send + 'static {
     /// Registers a device for card `i` (the driver's probe over the
     /// card's registers): `None` if its model does not answer. Process
     /// context (module init), no lock held.
-    fn add_card(i: usize) -> Result<Option<Self::Card>>;
+    fn add_card(scope: &ModuleScope, i: usize) -> Result<Option<Self::Card>>;
     /// A bus of `cards` fresh models (1..=[`MAX_CARDS`]). Process context.
     fn new(cards: usize) -> Self;
     /// How many cards are on the bus.
@@ -304,7 +304,7 @@ impl<B: SimBus> SimCards<B> {
         &'static self,
         scope: &ModuleScope,
         n: usize,
-        add: impl FnMut(usize) -> Result<Option<B::Card>>,
+        add: impl FnMut(&ModuleScope, usize) -> Result<Option<B::Card>>,
     ) -> Result {
         if n == 0 || n > MAX_CARDS {
             pr_err!("{}: cards must be 1..={}\n", B::NAME, MAX_CARDS);
@@ -323,7 +323,7 @@ impl<B: SimBus> SimCards<B> {
         &'static self,
         scope: &ModuleScope,
         n: usize,
-        mut add: impl FnMut(usize) -> Result<Option<B::Card>>,
+        mut add: impl FnMut(&ModuleScope, usize) -> Result<Option<B::Card>>,
     ) -> Result {
         let bus = B::alloc(n)?;
         *self.bus.lock() = Some(bus);
@@ -332,7 +332,7 @@ impl<B: SimBus> SimCards<B> {
         self.dying.store(false, Ordering::SeqCst);
         let mut cards = KVec::with_capacity(n, GFP_KERNEL)?;
         for i in 0..n {
-            let Some(c) = add(i)? else {
+            let Some(c) = add(scope, i)? else {
                 pr_err!("{}: model {} does not probe\n", B::NAME, i);
                 return Err(ENODEV);
             };

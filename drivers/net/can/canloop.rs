@@ -55,6 +55,7 @@ use kernel::prelude::*;
 use crate::{glue, rcan_core};
 
 use glue::can::ctrl;
+use glue::module::{ModuleScope, ScopedModule};
 use glue::netdev::{Dev, Driver, Napi, Registration, Setup, Xmit};
 use glue::params::Param;
 use glue::ring::SkbRing;
@@ -245,13 +246,13 @@ pub(crate) struct CanLoop {
     _devs: KVec<Registration<LoopDriver>>,
 }
 
-impl kernel::Module for CanLoop {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
+impl ScopedModule for CanLoop {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
         let count = COUNT.get();
         let mut devs = KVec::new();
         for _ in 0..count {
             let reg =
-                Registration::<LoopDriver>::register(c_str!("can%d"), SkbRing::new(FIFO_LEN)?)?;
+                Registration::<LoopDriver>::register(c_str!("can%d"), SkbRing::new(FIFO_LEN)?, scope)?;
             pr_info!(
                 "{}: CAN loopback device, droprate {}%\n",
                 reg.dev().name(),

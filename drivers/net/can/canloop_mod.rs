@@ -16,7 +16,9 @@ mod glue;
 #[path = "../../../net/can/rcan_core.rs"]
 mod rcan_core;
 
-use canloop::CanLoop;
+/// The glue owns the module's exit (`Scoped`): devices and drivers it
+/// left registered are undone there.
+type CanLoop = glue::module::Scoped<canloop::CanLoop>;
 
 module! {
     type: CanLoop,

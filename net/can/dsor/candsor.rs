@@ -108,7 +108,7 @@ fn register_all(scope: &ModuleScope, node: u8, canip: bool) -> Result<Regs> {
     };
     let rx = rcan_api::rx_set_kernel(scope, &RX, 0, &[filter])?;
     let canip = if canip {
-        Some(udpip::Canip::register()?)
+        Some(udpip::Canip::register(scope)?)
     } else {
         None
     };

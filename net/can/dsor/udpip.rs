@@ -25,6 +25,7 @@ use kernel::alloc::KVec;
 use kernel::prelude::*;
 
 use crate::engine::{now_ms, restart_over_ms, Owner, ENGINE};
+use crate::glue::module::ModuleScope;
 use crate::glue::net::Net;
 use crate::glue::netdev::{Dev, DevRef, Driver, NetDev, Registration, Setup, Xmit};
 use crate::glue::skb::{Skb, UniqueSkb};
@@ -45,8 +46,8 @@ pub(crate) struct Canip {
 
 impl Canip {
     /// Registers `canip%d`. Process context.
-    pub(crate) fn register() -> Result<Canip> {
-        let reg = Registration::<CanipDriver>::register(c_str!("canip%d"), ())?;
+    pub(crate) fn register(scope: &ModuleScope) -> Result<Canip> {
+        let reg = Registration::<CanipDriver>::register(c_str!("canip%d"), (), scope)?;
         // The index names our device until we unregister it (dropping
         // `reg` on an error return does).
         let dev = DevRef::by_index(Net::init(), reg.dev().ifindex()).ok_or(ENODEV)?;

@@ -326,10 +326,13 @@ impl CanDev {
         let can = T::can_dev(dev.priv_data());
         // INVARIANT: `dev` is a `Dev<T>`, registered by Registration for
         // `T`, whose adapter the hook is.
-        let t = JobTimers::new(RestartData {
-            dev: dev.hold(),
-            hook: Adapter::<T>::restart_expired,
-        })?;
+        let t = JobTimers::new(
+            RestartData {
+                dev: dev.hold(),
+                hook: Adapter::<T>::restart_expired,
+            },
+            dev,
+        )?;
         let old = can.restart.lock().replace(t);
         drop(old);
         Ok(can)

@@ -34,7 +34,7 @@ use super::abi::{self, CanProto, RxSpec, RxTableSpec, TableFilter};
 #[allow(unused_imports)]
 pub(crate) use super::abi::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use crate::glue::bindings;
-use crate::glue::module::ModuleScope;
+use crate::glue::module::{ExitTable, ModuleScope, SweepKind};
 use crate::glue::net::Net;
 use crate::glue::netdev::{self as gnetdev, NetDev};
 use crate::glue::skb::{OwnedSkb, Shared, Skb, UniqueSkb};
@@ -445,11 +445,16 @@ impl<T: CanProtocol> ProtoModule<T> {
         }
         abi::check()?;
         let me = self as *const Self as *mut ();
-        proto_note(me, Self::unregister_erased)?;
-        crate::glue::module::note_sweep(proto_sweep);
+        // `me` is this `&'static ProtoModule<T>`, and `unregister_erased`
+        // of this `T` undoes its registration once it is made, does
+        // nothing before (or after: `owner` is null), in process context.
+        // SAFETY: so calling it at the module's exit is sound.
+        unsafe {
+            PROTO_REGS.note(me, Self::unregister_erased, SweepKind::Protocols, proto_sweep)?
+        };
         let r = self.register_all(name);
         if r.is_err() {
-            proto_forget(me);
+            PROTO_REGS.take(me, Self::unregister_erased);
         }
         r
     }
@@ -529,6 +534,11 @@ impl<T: CanProtocol> ProtoModule<T> {
     }
 }
 
+// Only the `create` trampoline that `ProtoModule::<T>::register(..,
+// scope)` installs makes a sock of `T` (`Sock::from_raw` is the glue's).
+impl<T: CanProtocol> crate::glue::module::sealed::Sealed for Sock<T> {}
+impl<T: CanProtocol> crate::glue::module::InScopedModule for Sock<T> {}
+
 /// A registered [`ProtoModule`]; dropping it (module exit) unregisters the
 /// protocol, the notifier and the proto. Every socket holds a reference on
 /// the module, so no socket is left by then. Process context; sleeps (a
@@ -537,8 +547,9 @@ pub(crate) struct ProtoRegistration<T: CanProtocol>(&'static ProtoModule<T>);
 
 impl<T: CanProtocol> Drop for ProtoRegistration<T> {
     fn drop(&mut self) {
+        let me = self.0 as *const ProtoModule<T> as *mut ();
+        PROTO_REGS.take(me, ProtoModule::<T>::unregister_erased);
         self.0.unregister();
-        proto_forget(self.0 as *const ProtoModule<T> as *mut ());
     }
 }
 
@@ -574,7 +585,7 @@ impl<T: CanProtocol> ProtoModule<T> {
     /// # Safety
     ///
     /// `m` is a `&'static ProtoModule<T>` of this `T`.
-    unsafe fn unregister_erased(m: *const ()) {
+    unsafe fn unregister_erased(m: *mut ()) {
         // SAFETY: per the contract.
         unsafe { &*m.cast::<Self>() }.unregister();
     }
@@ -583,80 +594,18 @@ impl<T: CanProtocol> ProtoModule<T> {
 /// Most protocols one module registers (one each today).
 const MAX_PROTOS: usize = 2;
 
-/// One registered protocol of this module: its static and how to undo it.
-struct ProtoSlot {
-    /// The `&'static ProtoModule<T>`; null: the slot is free.
-    module: core::sync::atomic::AtomicPtr<()>,
-    /// Its `ProtoModule::<T>::unregister_erased`; valid while `module` is
-    /// not null.
-    undo: core::sync::atomic::AtomicUsize,
-}
-
 /// The protocols this module registered and whose guard was not dropped
-/// (the glue is compiled into each module: one table per module), swept
-/// at exit by [`proto_sweep`]. Process context only.
-///
-/// # Invariants
-///
-/// A slot with a non-null `module` holds a `&'static ProtoModule<T>` and
-/// `ProtoModule::<T>::unregister_erased` for the same `T`.
-static PROTO_REGS: [ProtoSlot; MAX_PROTOS] = [const {
-    ProtoSlot {
-        module: core::sync::atomic::AtomicPtr::new(core::ptr::null_mut()),
-        undo: core::sync::atomic::AtomicUsize::new(0),
-    }
-}; MAX_PROTOS];
-
-/// Takes a slot for `m` (a `&'static ProtoModule<T>`) with its `undo`
-/// (`ProtoModule::<T>::unregister_erased`). ENOSPC when all are taken.
-fn proto_note(m: *mut (), undo: unsafe fn(*const ())) -> Result {
-    let slot = PROTO_REGS
-        .iter()
-        .find(|s| {
-            s.module
-                .compare_exchange(
-                    core::ptr::null_mut(),
-                    m,
-                    Ordering::AcqRel,
-                    Ordering::Acquire,
-                )
-                .is_ok()
-        })
-        .ok_or(code::ENOSPC)?;
-    slot.undo
-        .store(undo as *const () as usize, Ordering::Release);
-    Ok(())
-}
-
-/// Frees the slot of `m`.
-fn proto_forget(m: *mut ()) {
-    for s in PROTO_REGS.iter() {
-        let _ = s.module.compare_exchange(
-            m,
-            core::ptr::null_mut(),
-            Ordering::AcqRel,
-            Ordering::Acquire,
-        );
-    }
-}
+/// (the glue is compiled into each module: one table per module), keyed
+/// by their `&'static ProtoModule<T>` with `ProtoModule::<T>::
+/// unregister_erased`; swept at exit by [`proto_sweep`]. Process context
+/// only.
+static PROTO_REGS: ExitTable<MAX_PROTOS> = ExitTable::new();
 
 /// The exit's sweep ([`crate::glue::module::Scoped`], step 3): unregisters
 /// every protocol of this module still registered. Process context, after
 /// the module's value was dropped; sleeps.
 fn proto_sweep() {
-    for s in PROTO_REGS.iter() {
-        let m = s.module.swap(core::ptr::null_mut(), Ordering::AcqRel);
-        if m.is_null() {
-            continue;
-        }
-        let undo = s.undo.load(Ordering::Acquire);
-        // SAFETY: stored from an `unsafe fn(*const ())` by proto_note
-        // before `module` was published (Release/Acquire).
-        let undo: unsafe fn(*const ()) =
-            unsafe { core::mem::transmute::<usize, unsafe fn(*const ())>(undo) };
-        // SAFETY: `m` and `undo` are of one `T` (invariant of PROTO_REGS).
-        unsafe { undo(m) };
-    }
+    PROTO_REGS.sweep();
 }
 
 /// `CanProto.create` of protocol `T`: `socket(PF_CAN, T::SOCK_TYPE,
@@ -960,7 +909,7 @@ impl<T: KernelRx> Drop for KernelRxReg<T> {
         // SAFETY: removal (NULL spec) of the receiver registered with this
         // func and data; never fails.
         unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, core::ptr::null()) };
-        kernel_rx_forget(data);
+        KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>);
     }
 }
 
@@ -968,74 +917,26 @@ impl<T: KernelRx> Drop for KernelRxReg<T> {
 /// today: `rcan_dsor`, `rcan_rtime`).
 const MAX_KERNEL_RX: usize = 4;
 
-/// One registered kernel receiver of this module, as its removal names it.
-struct KernelRxSlot {
-    /// The receiver's static (`&'static T`); null: the slot is free.
-    data: core::sync::atomic::AtomicPtr<ffi::c_void>,
-    /// Its `kernel_rx::<T>`, an `abi::RxFn`; valid while `data` is not
-    /// null.
-    func: core::sync::atomic::AtomicUsize,
-}
-
 /// The kernel receivers this module registered and has not removed (the
-/// glue is compiled into each module: one table per module), swept at
-/// exit by [`kernel_rx_sweep`]. Process context only: registration and
-/// removal are; the sweep runs after the module's value is gone.
-///
-/// # Invariants
-///
-/// A slot with a non-null `data` names a receiver registered by
-/// [`rx_set_kernel`] with `func` = `kernel_rx::<T>` for that `T` and data,
-/// or one already removed (removing again does nothing).
-static KERNEL_RXS: [KernelRxSlot; MAX_KERNEL_RX] = [const {
-    KernelRxSlot {
-        data: core::sync::atomic::AtomicPtr::new(core::ptr::null_mut()),
-        func: core::sync::atomic::AtomicUsize::new(0),
-    }
-}; MAX_KERNEL_RX];
+/// glue is compiled into each module: one table per module), keyed by
+/// their `&'static T` with [`kernel_rx_remove::<T>`]; swept at exit by
+/// [`kernel_rx_sweep`]. Process context only: registration and removal
+/// are; the sweep runs after the module's value is gone.
+static KERNEL_RXS: ExitTable<MAX_KERNEL_RX> = ExitTable::new();
 
-/// Takes a slot for `data` (the one it has if it is registered again:
-/// pf_can replaces a receiver's registration) and stores `func`. ENOSPC
-/// when all are taken. Returns whether the slot is new.
-fn kernel_rx_note(data: *mut ffi::c_void, func: abi::RxFn) -> Result<bool> {
-    let mut new = false;
-    let slot = match KERNEL_RXS
-        .iter()
-        .find(|s| s.data.load(Ordering::Acquire) == data)
-    {
-        Some(s) => s,
-        None => {
-            new = true;
-            KERNEL_RXS
-                .iter()
-                .find(|s| {
-                    s.data
-                        .compare_exchange(
-                            core::ptr::null_mut(),
-                            data,
-                            Ordering::AcqRel,
-                            Ordering::Acquire,
-                        )
-                        .is_ok()
-                })
-                .ok_or(code::ENOSPC)?
-        }
-    };
-    slot.func
-        .store(func as *const () as usize, Ordering::Release);
-    Ok(new)
-}
-
-/// Frees the slot of `data`, removed from pf_can.
-fn kernel_rx_forget(data: *mut ffi::c_void) {
-    for s in KERNEL_RXS.iter() {
-        let _ = s.data.compare_exchange(
-            data,
-            core::ptr::null_mut(),
-            Ordering::AcqRel,
-            Ordering::Acquire,
-        );
-    }
+/// Removes the kernel receiver `kernel_rx::<T>` with data `data` from
+/// pf_can (nothing if it is not registered), waiting out running
+/// callbacks. Process context; sleeps.
+///
+/// # Safety
+///
+/// None beyond the call's: removal with a NULL spec only looks the pair
+/// up; `unsafe fn` for [`ExitTable`]'s type.
+unsafe fn kernel_rx_remove<T: KernelRx>(data: *mut ()) {
+    // SAFETY: removal (NULL spec) of the receiver registered with this
+    // func and data, or of nothing if it was removed already; never
+    // fails, waits out running callbacks.
+    unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data.cast(), 0, core::ptr::null()) };
 }
 
 /// The exit's sweep ([`crate::glue::module::Scoped`], step 3): removes
@@ -1043,21 +944,7 @@ fn kernel_rx_forget(data: *mut ffi::c_void) {
 /// context, after the module's value was dropped; sleeps (a grace period
 /// per receiver).
 fn kernel_rx_sweep() {
-    for s in KERNEL_RXS.iter() {
-        let data = s.data.swap(core::ptr::null_mut(), Ordering::AcqRel);
-        if data.is_null() {
-            continue;
-        }
-        let func = s.func.load(Ordering::Acquire);
-        // SAFETY: stored from an `abi::RxFn` by kernel_rx_note before
-        // `data` was published (Release/Acquire), a function pointer of
-        // the same size as usize.
-        let func: abi::RxFn = unsafe { core::mem::transmute::<usize, abi::RxFn>(func) };
-        // SAFETY: removal (NULL spec) of the receiver registered with this
-        // func and data (invariant of KERNEL_RXS), or of nothing if it was
-        // removed already; never fails, waits out running callbacks.
-        unsafe { abi::rcan_rx_set_kernel(func, data, 0, core::ptr::null()) };
-    }
+    KERNEL_RXS.sweep();
 }
 
 /// Registers `rx` for frames on `ifindex` (0: every CAN interface)
@@ -1088,15 +975,18 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
     // `rx` is 'static: a static of the calling module, whose exit removes
     // the registration at the latest (the sweep noted here).
     let data = rx as *const T as *mut ffi::c_void;
-    let new = kernel_rx_note(data, kernel_rx::<T>)?;
-    crate::glue::module::note_sweep(kernel_rx_sweep);
+    // SAFETY: `kernel_rx_remove::<T>` may be called with `data` at any
+    // time in process context (it removes the pair or nothing).
+    let new = unsafe {
+        KERNEL_RXS.note(data.cast(), kernel_rx_remove::<T>, SweepKind::KernelRx, kernel_rx_sweep)?
+    };
     // SAFETY: `spec` and its filters live for the call; `data` is 'static
     // (module data), and the registration is removed by the guard's drop
     // or by the module's exit, before the module's memory goes.
     let ret = unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, &spec) };
     if let Err(e) = crate::glue::to_result(ret) {
         if new {
-            kernel_rx_forget(data);
+            KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>);
         }
         return Err(e);
     }
@@ -1170,6 +1060,12 @@ impl<T: FilterListener> Listening<T> {
         crate::glue::to_result(unsafe {
             abi::rcan_rx_listen(listen_trampoline::<T>, dev.cast(), ifindex, true)
         })?;
+        // If the listening is forgotten, the module's exit tears the
+        // device down (its Registration's node) and removes the listener
+        // first, through this hook.
+        // SAFETY: `unlisten::<T>` removes exactly this listener, once,
+        // in process context, before the device is unregistered.
+        unsafe { reg.set_before_teardown(unlisten::<T>) };
         // INVARIANT: registered just above, for `reg`'s device.
         Ok(Listening { reg })
     }
@@ -1180,19 +1076,34 @@ impl<T: FilterListener> Listening<T> {
     }
 }
 
+/// Removes the filter listener of device `dev` of `T` (a [`Listening`]'s,
+/// through its device's teardown hook); returns after a running call
+/// finished. Process context.
+///
+/// # Safety
+///
+/// `dev` is a registered device of `T` whose listener
+/// `(listen_trampoline::<T>, dev)` was added by [`Listening::new`] and not
+/// removed since.
+unsafe fn unlisten<T: FilterListener>(dev: *mut bindings::net_device) {
+    // SAFETY: a registered device (contract), valid for the call.
+    let ifindex = unsafe { NetDev::from_raw(dev) }.ifindex();
+    // SAFETY: removal of that listener (contract).
+    unsafe { abi::rcan_rx_listen(listen_trampoline::<T>, dev.cast(), ifindex, false) };
+}
+
 impl<T: FilterListener> Drop for Listening<T> {
     fn drop(&mut self) {
-        // SAFETY: removal of the listener added in new() (type invariant);
-        // returns after a running call finished. `self.reg` is dropped
-        // only after this function returns.
-        unsafe {
-            abi::rcan_rx_listen(
-                listen_trampoline::<T>,
-                self.reg.dev().as_ptr().cast(),
-                self.reg.dev().ifindex(),
-                false,
-            )
-        };
+        // Taken back first, so the device's teardown does not remove the
+        // listener a second time.
+        if self.reg.take_before_teardown() {
+            // The listener added in new() (type invariant), not removed
+            // since (the hook was still set); `unlisten` returns after a
+            // running call finished, and `self.reg` is dropped only after
+            // this function returns.
+            // SAFETY: so this is `unlisten`'s contract.
+            unsafe { unlisten::<T>(self.reg.dev().as_ptr()) };
+        }
     }
 }
 

@@ -80,6 +80,7 @@
 
 use crate::glue::can::ctrl;
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
+use crate::glue::module::ModuleScope;
 use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{Dev, Driver, NetDev, Xmit};
 use crate::glue::ring::Ring;
@@ -194,6 +195,7 @@ impl<R: Regs + Send + 'static> Core<R> {
 /// `None` if there is no core. Logs the device name with `what`. Process context
 /// (front-end probe).
 pub(crate) fn add_core<R: Regs + Send + 'static>(
+    scope: &ModuleScope,
     regs: R,
     irq: u32,
     clock_hz: u32,
@@ -221,7 +223,7 @@ pub(crate) fn add_core<R: Regs + Send + 'static>(
         restart: new_bh_spinlock!((), "CtuPriv::restart")?,
     };
     let reg =
-        crate::glue::netdev::Registration::<CtuCanFd<R>>::register(kernel::c_str!("can%d"), prv)?;
+        crate::glue::netdev::Registration::<CtuCanFd<R>>::register(kernel::c_str!("can%d"), prv, scope)?;
     pr_info!(
         "{}: CTU CAN FD, {}, irq {}, {} TX buffers\n",
         reg.dev().name(),

@@ -30,6 +30,7 @@ use crate::rcan_core::candev::{Preset, PresetError, Settings};
 use ctucanfd::{add_core, Core, CtuCanFd, IoRegs};
 use glue::params::Param;
 use glue::pci::{self, IoMem};
+use glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
 
 /// Offset of the card identification word in BAR 0.
@@ -88,7 +89,7 @@ struct CtuCanFdPci;
 impl pci::Driver for CtuCanFdPci {
     type Data = Card;
 
-    fn probe(dev: &pci::Device) -> Result<KBox<Card>> {
+    fn probe(dev: &pci::Device, scope: &ModuleScope) -> Result<KBox<Card>> {
         let enabled = dev.enable()?;
         let bar0 = dev.iomap(0, BAR0_LEN)?;
         let n = cores(bar0.read32(BAR0_CARD_ID)).min(MAX_CORES);
@@ -107,6 +108,7 @@ impl pci::Driver for CtuCanFdPci {
                 cores: n,
             };
             let Some(c) = add_core(
+                scope,
                 regs,
                 dev.irq(),
                 CLOCK_HZ,
@@ -143,8 +145,8 @@ static DRIVER: pci::Registration<CtuCanFdPci> = pci::Registration::new();
 
 pub(crate) struct CtuCanFdPciModule;
 
-impl kernel::Module for CtuCanFdPciModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
+impl ScopedModule for CtuCanFdPciModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
         if let Err(e) = preset_settings() {
             pr_err!(
                 "bitrate={} dbitrate={} refused for the card's {} Hz clock: {}\n",
@@ -155,7 +157,7 @@ impl kernel::Module for CtuCanFdPciModule {
             );
             return Err(EINVAL);
         }
-        DRIVER.register(c_str!("rcan_ctucanfd_pci"), &IDS)?;
+        DRIVER.register(c_str!("rcan_ctucanfd_pci"), &IDS, scope)?;
         Ok(CtuCanFdPciModule)
     }
 }

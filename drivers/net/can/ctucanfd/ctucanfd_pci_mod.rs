@@ -22,7 +22,9 @@ mod rcan_chips;
 #[path = "../../../../net/can/rcan_core.rs"]
 mod rcan_core;
 
-use ctucanfd_pci::CtuCanFdPciModule;
+/// The glue owns the module's exit (`Scoped`): devices and drivers it
+/// left registered are undone there.
+type CtuCanFdPciModule = glue::module::Scoped<ctucanfd_pci::CtuCanFdPciModule>;
 
 /// `MODULE_DEVICE_TABLE(pci, ...)`: the driver's id table
 /// ([`ctucanfd_pci::PCI_IDS`]) under the symbol name modpost looks for. modpost

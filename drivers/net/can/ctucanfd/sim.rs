@@ -66,6 +66,7 @@ use crate::rcan_core::candev::Settings;
 use ctucanfd::{add_core, Core};
 use glue::params::{Param, ParamStr};
 use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN};
+use glue::module::ModuleScope;
 use kernel::c_str;
 
 /// Words of each simulated core's RX buffer (1 KiB: 42 classic frames
@@ -120,8 +121,9 @@ impl SimBus for Bus {
         CARDS.get() as usize
     }
 
-    fn add_card(i: usize) -> Result<Option<Core<SimRegs>>> {
+    fn add_card(scope: &ModuleScope, i: usize) -> Result<Option<Core<SimRegs>>> {
         add_core(
+            scope,
             SimRegs { idx: i },
             0,
             CLOCK_HZ,

@@ -70,6 +70,7 @@
 
 use crate::glue::can::ctrl::{self, SIOCDEVPRIVATE};
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
+use crate::glue::module::ModuleScope;
 use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::ring::Ring;
@@ -183,6 +184,7 @@ impl<R: Regs + Send + 'static> Channel<R> {
 /// device for it on interrupt line `irq` (0: none, see [`I82527Priv`]);
 /// `None` if there is no chip. Process context.
 pub(crate) fn add_channel<R: Regs + Send + 'static>(
+    scope: &ModuleScope,
     regs: R,
     cfg: Config,
     irq: u32,
@@ -211,7 +213,7 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
         restart: new_bh_spinlock!((), "I82527Priv::restart")?,
     };
     let reg =
-        crate::glue::netdev::Registration::<I82527<R>>::register(kernel::c_str!("can%d"), prv)?;
+        crate::glue::netdev::Registration::<I82527<R>>::register(kernel::c_str!("can%d"), prv, scope)?;
     pr_info!(
         "{}: Intel 82527, {}, irq {}, {} bit/s\n",
         reg.dev().name(),

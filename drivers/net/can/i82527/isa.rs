@@ -24,6 +24,7 @@ use crate::rcan_chips::i82527::{Config, Regs};
 use glue::isa::{IoWindow, Space};
 use glue::params::Param;
 use i82527::{add_channel, Channel};
+use glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
 
 /// Crystal of the cards the thesis used (16 MHz).
@@ -62,8 +63,8 @@ pub(crate) struct IsaModule {
     _channel: Channel<IsaRegs>,
 }
 
-impl kernel::Module for IsaModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
+impl ScopedModule for IsaModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
         let (iomem, irq) = (IOMEM.get(), IRQ.get());
         if iomem == 0 || irq <= 0 || irq > 0xFFFF {
             pr_err!("rcan_i82527_isa: iomem= and irq= are required\n");
@@ -83,6 +84,7 @@ impl kernel::Module for IsaModule {
             c_str!("rcan_i82527_isa"),
         )?);
         match add_channel(
+            scope,
             regs,
             cfg,
             irq as u32,

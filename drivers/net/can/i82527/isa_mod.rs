@@ -22,7 +22,9 @@ mod rcan_chips;
 #[path = "../../../../net/can/rcan_core.rs"]
 mod rcan_core;
 
-use isa::IsaModule;
+/// The glue owns the module's exit (`Scoped`): devices and drivers it
+/// left registered are undone there.
+type IsaModule = glue::module::Scoped<isa::IsaModule>;
 
 module! {
     type: IsaModule,

@@ -82,6 +82,7 @@ use crate::rcan_chips::sim_bus::{self, Outcome};
 use glue::params::{Param, ParamStr};
 use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN, MAX_CARDS};
 use i82527::{add_channel, Channel};
+use glue::module::ModuleScope;
 use kernel::c_str;
 
 /// The model's crystal (the logged bit rate, a frame's bus time).
@@ -120,8 +121,9 @@ impl SimBus for Bus {
         CARDS.get() as usize
     }
 
-    fn add_card(i: usize) -> Result<Option<Channel<SimRegs>>> {
+    fn add_card(scope: &ModuleScope, i: usize) -> Result<Option<Channel<SimRegs>>> {
         add_channel(
+            scope,
             SimRegs { idx: i },
             Config::DEFAULT,
             0,

@@ -18,6 +18,7 @@ use crate::{glue, sja1000};
 
 use crate::rcan_chips::sja1000::{Config, CDR_CBP};
 use glue::pci;
+use glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
 use sja1000::{add_channel, Channel, IoRegs};
 
@@ -53,7 +54,7 @@ struct AdvantechPci;
 impl pci::Driver for AdvantechPci {
     type Data = Card;
 
-    fn probe(dev: &pci::Device) -> Result<KBox<Card>> {
+    fn probe(dev: &pci::Device, scope: &ModuleScope) -> Result<KBox<Card>> {
         let enabled = dev.enable()?;
         let shift = shift_of(dev.device_id());
         let mut card = Card {
@@ -67,7 +68,7 @@ impl pci::Driver for AdvantechPci {
                 shift,
             };
             let what = format_args!("channel {ch} of an Advantech {:04x} card", dev.device_id());
-            if let Some(c) = add_channel(regs, config(), dev.irq(), XTAL_HZ, what)? {
+            if let Some(c) = add_channel(scope, regs, config(), dev.irq(), XTAL_HZ, what)? {
                 card.channels.push(c, GFP_KERNEL)?;
             }
         }
@@ -99,9 +100,9 @@ static DRIVER: pci::Registration<AdvantechPci> = pci::Registration::new();
 
 pub(crate) struct AdvantechPciModule;
 
-impl kernel::Module for AdvantechPciModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
-        DRIVER.register(c_str!("rcan_advantech_pci"), &IDS)?;
+impl ScopedModule for AdvantechPciModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
+        DRIVER.register(c_str!("rcan_advantech_pci"), &IDS, scope)?;
         Ok(AdvantechPciModule)
     }
 }

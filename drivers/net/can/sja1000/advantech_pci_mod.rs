@@ -22,7 +22,9 @@ mod rcan_core;
 #[path = "sja1000.rs"]
 mod sja1000;
 
-use advantech_pci::AdvantechPciModule;
+/// The glue owns the module's exit (`Scoped`): devices and drivers it
+/// left registered are undone there.
+type AdvantechPciModule = glue::module::Scoped<advantech_pci::AdvantechPciModule>;
 
 /// `MODULE_DEVICE_TABLE(pci, ...)`: the driver's id table
 /// ([`advantech_pci::PCI_IDS`]) under the symbol name modpost looks for. modpost

@@ -20,6 +20,7 @@ use crate::{glue, sja1000};
 
 use crate::rcan_chips::sja1000::{Config, CDR_CBP};
 use glue::pci::{self, IoMem};
+use glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
 use sja1000::{add_channel, Channel, IoRegs};
 
@@ -68,7 +69,7 @@ struct KvaserPci;
 impl pci::Driver for KvaserPci {
     type Data = Card;
 
-    fn probe(dev: &pci::Device) -> Result<KBox<Card>> {
+    fn probe(dev: &pci::Device, scope: &ModuleScope) -> Result<KBox<Card>> {
         let enabled = dev.enable()?;
         let conf = dev.iomap(0, 0x80)?;
         let mut card = Card {
@@ -86,6 +87,7 @@ impl pci::Driver for KvaserPci {
             // The channels are contiguous: the first empty slot ends the
             // card.
             let Some(c) = add_channel(
+                scope,
                 regs,
                 config(),
                 dev.irq(),
@@ -123,9 +125,9 @@ static DRIVER: pci::Registration<KvaserPci> = pci::Registration::new();
 
 pub(crate) struct KvaserPciModule;
 
-impl kernel::Module for KvaserPciModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
-        DRIVER.register(c_str!("rcan_kvaser_pci"), &IDS)?;
+impl ScopedModule for KvaserPciModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
+        DRIVER.register(c_str!("rcan_kvaser_pci"), &IDS, scope)?;
         Ok(KvaserPciModule)
     }
 }

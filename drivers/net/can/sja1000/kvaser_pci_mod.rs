@@ -22,7 +22,9 @@ mod rcan_core;
 #[path = "sja1000.rs"]
 mod sja1000;
 
-use kvaser_pci::KvaserPciModule;
+/// The glue owns the module's exit (`Scoped`): devices and drivers it
+/// left registered are undone there.
+type KvaserPciModule = glue::module::Scoped<kvaser_pci::KvaserPciModule>;
 
 /// `MODULE_DEVICE_TABLE(pci, ...)`: the driver's id table
 /// ([`kvaser_pci::PCI_IDS`]) under the symbol name modpost looks for. modpost

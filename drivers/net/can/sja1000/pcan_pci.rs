@@ -29,6 +29,7 @@ use crate::rcan_chips::sja1000_boards::{
     pita_ack, pita_init, pita_irq, SpacedRegs, PCAN_CHAN_SIZE, PCAN_MAX_CHANNELS,
 };
 use glue::pci::{self, IoMem};
+use glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
 use sja1000::{add_channel, Channel};
 
@@ -98,7 +99,7 @@ struct PcanPci;
 impl pci::Driver for PcanPci {
     type Data = Card;
 
-    fn probe(dev: &pci::Device) -> Result<KBox<Card>> {
+    fn probe(dev: &pci::Device, scope: &ModuleScope) -> Result<KBox<Card>> {
         let enabled = dev.enable()?;
         // PEAK's configuration register 0x44 cleared (as PEAK's and
         // mainline's drivers do) before the PITA is touched.
@@ -128,6 +129,7 @@ impl pci::Driver for PcanPci {
             // A channel the subsystem id promises but that does not
             // answer ends the card.
             let Some(c) = add_channel(
+                scope,
                 regs,
                 config(),
                 dev.irq(),
@@ -165,9 +167,9 @@ static DRIVER: pci::Registration<PcanPci> = pci::Registration::new();
 
 pub(crate) struct PcanPciModule;
 
-impl kernel::Module for PcanPciModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
-        DRIVER.register(c_str!("rcan_pcan_pci"), &IDS)?;
+impl ScopedModule for PcanPciModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
+        DRIVER.register(c_str!("rcan_pcan_pci"), &IDS, scope)?;
         Ok(PcanPciModule)
     }
 }

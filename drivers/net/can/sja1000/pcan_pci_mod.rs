@@ -22,7 +22,9 @@ mod rcan_core;
 #[path = "sja1000.rs"]
 mod sja1000;
 
-use pcan_pci::PcanPciModule;
+/// The glue owns the module's exit (`Scoped`): devices and drivers it
+/// left registered are undone there.
+type PcanPciModule = glue::module::Scoped<pcan_pci::PcanPciModule>;
 
 /// `MODULE_DEVICE_TABLE(pci, ...)`: the driver's id table
 /// ([`pcan_pci::PCI_IDS`]) under the symbol name modpost looks for. modpost

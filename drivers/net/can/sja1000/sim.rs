@@ -56,6 +56,7 @@ use crate::rcan_chips::sja1000::{cmd, reg, Regs, CDR_CBP, CDR_CLK_OFF};
 use crate::rcan_chips::sja1000_model::{ecc, Fault, Sja1000Model};
 use glue::params::{Param, ParamStr};
 use glue::simcard::{self, param_word, Round, SimBus, SimCards, FAULT_LEN, MAX_CARDS};
+use glue::module::ModuleScope;
 use kernel::c_str;
 use sja1000::{add_channel, module_config, Channel};
 
@@ -104,8 +105,9 @@ impl SimBus for Bus {
         CARDS.get() as usize
     }
 
-    fn add_card(i: usize) -> Result<Option<Channel<SimRegs>>> {
+    fn add_card(scope: &ModuleScope, i: usize) -> Result<Option<Channel<SimRegs>>> {
         add_channel(
+            scope,
             SimRegs { idx: i },
             module_config(OCR, CDR_CBP | CDR_CLK_OFF),
             0,

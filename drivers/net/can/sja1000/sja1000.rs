@@ -92,6 +92,7 @@
 
 use crate::glue::can::ctrl::{self, SIOCDEVPRIVATE};
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
+use crate::glue::module::ModuleScope;
 use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{capable_net_admin, Dev, Driver, NetDev, Stat, UserBuf, Xmit};
 use crate::glue::params::Param;
@@ -294,6 +295,7 @@ impl<R: Regs + Send + 'static> Channel<R> {
 // `add_probed`.
 #[allow(dead_code)]
 pub(crate) fn add_channel<R: Regs + Send + 'static>(
+    scope: &ModuleScope,
     regs: R,
     cfg: Config,
     irq: u32,
@@ -304,12 +306,13 @@ pub(crate) fn add_channel<R: Regs + Send + 'static>(
     if chip.probe().is_err() {
         return Ok(None);
     }
-    add_probed(chip, irq, xtal_hz, what).map(Some)
+    add_probed(scope, chip, irq, xtal_hz, what).map(Some)
 }
 
 /// Registers a `can%d` device for a chip the front-end has already
 /// probed (and, e.g., autoprobed the interrupt line of). Process context.
 pub(crate) fn add_probed<R: Regs + Send + 'static>(
+    scope: &ModuleScope,
     chip: Chip<R>,
     irq: u32,
     xtal_hz: u32,
@@ -317,7 +320,7 @@ pub(crate) fn add_probed<R: Regs + Send + 'static>(
 ) -> Result<Channel<R>> {
     let prv = Sja1000Priv::new(chip, irq, xtal_hz)?;
     let reg =
-        crate::glue::netdev::Registration::<Sja1000<R>>::register(kernel::c_str!("can%d"), prv)?;
+        crate::glue::netdev::Registration::<Sja1000<R>>::register(kernel::c_str!("can%d"), prv, scope)?;
     pr_info!("{}: SJA1000, {}, irq {}\n", reg.dev().name(), what, irq);
     let dev = rcan_api::Listening::new(reg)?;
     Ok(Channel { dev })

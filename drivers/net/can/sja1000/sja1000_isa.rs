@@ -24,6 +24,7 @@ use crate::rcan_chips::sja1000::{cmd, reg, Chip, Config, Regs, CDR_CBP};
 use crate::rcan_chips::sja1000_boards::{autoprobe_ack, autoprobe_arm, autoprobe_fire, SpacedRegs};
 use glue::isa::{self, IoWindow, Space};
 use glue::params::{Param, ParamArray};
+use glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
 use sja1000::{add_probed, Channel};
 
@@ -82,7 +83,7 @@ fn autoprobe(chip: &mut Chip<IsaRegs>, addr: usize) -> Result<u32> {
 }
 
 /// Claims, maps and probes the card at `addr`; registers its device.
-fn add_board(addr: usize, line: i32) -> Result<Channel<IsaRegs>> {
+fn add_board(scope: &ModuleScope, addr: usize, line: i32) -> Result<Channel<IsaRegs>> {
     let win = match IoWindow::request(Space::Mem, addr, WINDOW_BYTES, c_str!("rcan_sja1000_isa")) {
         Ok(w) => w,
         Err(e) => {
@@ -118,6 +119,7 @@ fn add_board(addr: usize, line: i32) -> Result<Channel<IsaRegs>> {
         autoprobe(&mut chip, addr)?
     };
     add_probed(
+        scope,
         chip,
         irq,
         XTAL_HZ,
@@ -129,8 +131,8 @@ pub(crate) struct IsaModule {
     _boards: KVec<Channel<IsaRegs>>,
 }
 
-impl kernel::Module for IsaModule {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
+impl ScopedModule for IsaModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
         let n = BOARDS.get();
         if n == 0 {
             pr_err!("no card given (iomem=ADDR[,ADDR...])\n");
@@ -140,7 +142,7 @@ impl kernel::Module for IsaModule {
         for i in 0..n {
             // Any failure unwinds the boards added so far (dropped with
             // `boards`): all cards given must be there.
-            boards.push(add_board(IOMEM.get(i), IRQ.get(i))?, GFP_KERNEL)?;
+            boards.push(add_board(scope, IOMEM.get(i), IRQ.get(i))?, GFP_KERNEL)?;
         }
         Ok(IsaModule { _boards: boards })
     }

@@ -22,7 +22,9 @@ mod sja1000;
 #[path = "sja1000_isa.rs"]
 mod sja1000_isa;
 
-use sja1000_isa::IsaModule;
+/// The glue owns the module's exit (`Scoped`): devices and drivers it
+/// left registered are undone there.
+type IsaModule = glue::module::Scoped<sja1000_isa::IsaModule>;
 
 module! {
     type: IsaModule,

@@ -27,6 +27,7 @@ use crate::rcan_chips::sja1000_boards::{
     TSCAN1_MAX_BOARDS, TSCAN1_PLD, TSCAN1_PLD_SIZE, TSCAN1_SJA1000_ADDRESSES, TSCAN1_SJA1000_SIZE,
 };
 use glue::isa::{IoWindow, Space};
+use glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
 use sja1000::{add_channel, Channel};
 
@@ -71,7 +72,7 @@ impl Drop for Board {
 }
 
 /// Probes board `n`; `Ok(None)` if there is none.
-fn probe_board(n: usize) -> Result<Option<Board>> {
+fn probe_board(scope: &ModuleScope, n: usize) -> Result<Option<Board>> {
     let port = TSCAN1_PLD + n * TSCAN1_PLD_SIZE;
     let Ok(pld) = IoWindow::request(Space::Port, port, TSCAN1_PLD_SIZE, c_str!("rcan_tscan1"))
     else {
@@ -102,7 +103,7 @@ fn probe_board(n: usize) -> Result<Option<Board>> {
             shift: 0,
         };
         let what = format_args!("TS-CAN1 at PLD {port:#x}, SJA1000 at {mapped:#x}");
-        return match add_channel(regs, config(), info.irq, XTAL_HZ, what) {
+        return match add_channel(scope, regs, config(), info.irq, XTAL_HZ, what) {
             Ok(Some(c)) => Ok(Some(Board {
                 chan: Some(c),
                 info,
@@ -127,11 +128,11 @@ pub(crate) struct Tscan1Module {
     _boards: KVec<Board>,
 }
 
-impl kernel::Module for Tscan1Module {
-    fn init(_module: &'static ThisModule) -> Result<Self> {
+impl ScopedModule for Tscan1Module {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
         let mut boards = KVec::new();
         for n in 0..TSCAN1_MAX_BOARDS {
-            if let Some(b) = probe_board(n)? {
+            if let Some(b) = probe_board(scope, n)? {
                 boards.push(b, GFP_KERNEL)?;
             }
         }

@@ -22,7 +22,9 @@ mod sja1000;
 #[path = "tscan1.rs"]
 mod tscan1;
 
-use tscan1::Tscan1Module;
+/// The glue owns the module's exit (`Scoped`): devices and drivers it
+/// left registered are undone there.
+type Tscan1Module = glue::module::Scoped<tscan1::Tscan1Module>;
 
 module! {
     type: Tscan1Module,
