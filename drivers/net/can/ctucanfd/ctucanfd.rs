@@ -80,8 +80,10 @@
 
 use crate::glue::can::ctrl;
 use crate::glue::can::dev::{link_setup, CanDev, CanDevice, CanStat, LinkSetup};
+use crate::glue::lock::{
+    new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock, StaticIrqSpinLock,
+};
 use crate::glue::module::ModuleScope;
-use crate::glue::lock::{new_bh_spinlock, new_irq_spinlock, BhLock, IrqSpinLock};
 use crate::glue::netdev::{Dev, Driver, NetDev, Xmit};
 use crate::glue::ring::Ring;
 use crate::glue::skb::{OwnedSkb, Skb};
@@ -120,7 +122,23 @@ impl Regs for IoRegs {
     /// writes change nothing. Another core's registers are read and
     /// written without its lock: INT_STAT and INT_ENA reads have no side
     /// effect and a 0 write to INT_STAT none either.
+    ///
+    /// The read and the write of another core are not atomic: between
+    /// them that core's own interrupt handler (on another CPU, under its
+    /// own lock) may acknowledge its cause, and the 0 written then drives
+    /// the line from a core with nothing pending: low, while a third
+    /// cause (this core's next TX completion) is pending. Nothing raises
+    /// it again once traffic stops on both cores: a lost TX-done
+    /// interrupt, a full TX ring, a stopped queue (`ctucanfd_burst` hung
+    /// once in about 20 runs: can1 had received four frames more than
+    /// can0 had completed, its four TX buffers). [`IRQ_SYNC`] makes the
+    /// syncs of all cores one at a time; each operation that writes a
+    /// core's registers ends with one, so the last sync runs after the
+    /// last write and sees every core as it is (QEMU's own events, a
+    /// frame delivered or sent, only raise the line). Taken inside a
+    /// core's chip lock (hardirq, or BH off), never the other way round.
     fn irq_sync(&mut self) {
+        let _one_at_a_time = IRQ_SYNC.lock();
         for c in 0..self.cores {
             let b = c * CORE_SPAN;
             if self.io.read32(b + reg::INT_STAT) & self.io.read32(b + reg::INT_ENA_SET) != 0 {
@@ -129,6 +147,12 @@ impl Regs for IoRegs {
         }
     }
 }
+
+/// Serialises [`IoRegs::irq_sync`] across every core of every card of
+/// this module (see there); protects nothing but the order of those
+/// register accesses. Any context, interrupts off while held.
+static IRQ_SYNC: StaticIrqSpinLock<()> =
+    StaticIrqSpinLock::new((), kernel::c_str!("ctucanfd_irq_sync"));
 
 /// Transmit queue length, as the SJA1000 driver's: longer than what a
 /// socket's default send buffer holds, so a fast sender blocks in
@@ -222,8 +246,11 @@ pub(crate) fn add_core<R: Regs + Send + 'static>(
         can: CanDev::new(preset)?,
         restart: new_bh_spinlock!((), "CtuPriv::restart")?,
     };
-    let reg =
-        crate::glue::netdev::Registration::<CtuCanFd<R>>::register(kernel::c_str!("can%d"), prv, scope)?;
+    let reg = crate::glue::netdev::Registration::<CtuCanFd<R>>::register(
+        kernel::c_str!("can%d"),
+        prv,
+        scope,
+    )?;
     pr_info!(
         "{}: CTU CAN FD, {}, irq {}, {} TX buffers\n",
         reg.dev().name(),

@@ -213,8 +213,12 @@ fn fd_both_ways(ctx: &mut Ctx, flag_sets: &[u8]) -> TestResult {
 /// from `tx` to `rx`; every one must arrive once, in order, intact.
 fn burst_one(ctx: &Ctx, n: u32, tx: &CanFdSocket, rx: CanFdSocket, what: &str) -> TestResult {
     let start = std::time::Instant::now();
+    // How far the receiver got, for the report of a stall.
+    let got_n = std::sync::Arc::new(std::sync::atomic::AtomicU32::new(0));
+    let progress = got_n.clone();
     let recv = std::thread::spawn(move || -> Result<u32, String> {
         for next in 0..n {
+            progress.store(next, std::sync::atomic::Ordering::Relaxed);
             let got = rx
                 .read_frame()
                 .or_fail(format_args!("waiting for frame {next}"))?;
@@ -243,16 +247,53 @@ fn burst_one(ctx: &Ctx, n: u32, tx: &CanFdSocket, rx: CanFdSocket, what: &str) -
         d[..4].copy_from_slice(&seq.to_le_bytes());
         let id = ExtendedId::new(0x0200_0000 | (seq & 0xFFFF)).ok_or("bad id")?;
         let f = CanFdFrame::with_flags(id, &d, FdFlags::BRS).ok_or("bad FD frame")?;
-        tx.write_frame(&f)
-            .or_fail(format_args!("write frame {seq}"))?;
+        if let Err(e) = tx.write_frame(&f) {
+            // A write blocks only while the socket's send buffer is full of
+            // frames the driver has not sent; past the deadline the
+            // transmit side has stalled (a lost TX-done interrupt, a
+            // stopped queue): say where both ends are.
+            let rx_at = got_n.load(std::sync::atomic::Ordering::Relaxed);
+            return Err(format!(
+                "{what}: write frame {seq}: {e} (the receiver waits for frame {rx_at}); {}",
+                burst_state()
+            ));
+        }
     }
-    let got = recv.join().map_err(|_| "receiver panicked".to_string())??;
+    let got = recv
+        .join()
+        .map_err(|_| "receiver panicked".to_string())?
+        .map_err(|e| format!("{what}: {e}; {}", burst_state()))?;
     let secs = start.elapsed().as_secs_f64();
     ctx.note(format!(
         "burst {what}: {got}/{n} FD frames in {secs:.1} s ({:.0} frames/s)",
         f64::from(got) / secs
     ));
     Ok(())
+}
+
+/// How long a burst's write may block before the test calls the
+/// transmitter stalled: far beyond any scheduling delay of a loaded host
+/// (a write waits for one frame's room in the send buffer).
+const BURST_STALL: std::time::Duration = std::time::Duration::from_secs(60);
+
+/// Both cards' counters and state, and the card's interrupt counts, for
+/// the report of a stalled burst.
+fn burst_state() -> String {
+    let mut out = Vec::new();
+    for d in ["can0", "can1"] {
+        match ip(&["-d", "-s", "link", "show", d]) {
+            Ok(o) => out.push(o.stdout.split_whitespace().collect::<Vec<_>>().join(" ")),
+            Err(e) => out.push(format!("{d}: {e}")),
+        }
+    }
+    if let Ok(irqs) = std::fs::read_to_string("/proc/interrupts") {
+        out.extend(
+            irqs.lines()
+                .filter(|l| l.contains("ctucan") || l.contains("can"))
+                .map(str::to_string),
+        );
+    }
+    out.join(" | ")
 }
 
 /// Bursts of numbered 64-byte FD frames both ways (20,000 each on the
@@ -269,9 +310,13 @@ fn ctucanfd_burst(ctx: &mut Ctx) -> TestResult {
     };
     let (rx1, tx0) = (fd_open(i1)?, fd_open(i0)?);
     big(&rx1)?;
+    // A stalled transmitter fails the test with a report instead of
+    // blocking the write until the runner's watchdog ends the whole VM.
+    tx0.set_write_timeout(BURST_STALL).or_fail("SO_SNDTIMEO")?;
     burst_one(ctx, n, &tx0, rx1, "can0->can1")?;
     let (rx0, tx1) = (fd_open(i0)?, fd_open(i1)?);
     big(&rx0)?;
+    tx1.set_write_timeout(BURST_STALL).or_fail("SO_SNDTIMEO")?;
     burst_one(ctx, n, &tx1, rx0, "can1->can0")?;
     for d in ["can0", "can1"] {
         let over = ctx.stat(d, "rx_over_errors")?;
