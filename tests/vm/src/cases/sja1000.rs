@@ -149,10 +149,14 @@ fn sja1000_hw_filter(ctx: &mut Ctx) -> TestResult {
     // before it; its counter may still be behind the delivery: wait until
     // it counts the two wanted frames, then check it counts no more.
     let mut got = 0;
-    wait_until(SETTLE, "can1's rx_packets counting the 2 wanted frames", || {
-        got = ctx.stat(&dev(1), "rx_packets").unwrap_or(before) - before;
-        got >= 2
-    })?;
+    wait_until(
+        SETTLE,
+        "can1's rx_packets counting the 2 wanted frames",
+        || {
+            got = ctx.stat(&dev(1), "rx_packets").unwrap_or(before) - before;
+            got >= 2
+        },
+    )?;
     ensure!(
         got == 2,
         "can1 driver received {got} frames, the filter wants 2 of 6"
@@ -383,14 +387,18 @@ fn sja1000_ifdown_during_traffic(ctx: &mut Ctx) -> TestResult {
     for round in 0..5 {
         // Sends going through, then failing while can0 is down.
         let n = ok.load(Ordering::Relaxed);
-        wait_until(SETTLE, &format!("round {round}: sends going through"), || {
-            ok.load(Ordering::Relaxed) > n + 8
-        })?;
+        wait_until(
+            SETTLE,
+            &format!("round {round}: sends going through"),
+            || ok.load(Ordering::Relaxed) > n + 8,
+        )?;
         ctx.link_down(&dev(0))?;
         let n = failed.load(Ordering::Relaxed);
-        wait_until(SETTLE, &format!("round {round}: a send failing while can0 is down"), || {
-            failed.load(Ordering::Relaxed) > n
-        })?;
+        wait_until(
+            SETTLE,
+            &format!("round {round}: a send failing while can0 is down"),
+            || failed.load(Ordering::Relaxed) > n,
+        )?;
         ctx.link_up(&dev(0))?;
     }
     stop.store(true, Ordering::Relaxed);
@@ -401,16 +409,53 @@ fn sja1000_ifdown_during_traffic(ctx: &mut Ctx) -> TestResult {
         failed.load(Ordering::Relaxed)
     ));
     let rx = canraw::open(i1)?;
+    let over = ctx.stat(&dev(1), "rx_over_errors")?;
     canraw::send(&tx, &sff(0x43, &[2]))?;
     // Frames the sender queued before it stopped may still be on their
     // way (the TX queue holds up to 1000): skip them, nothing else.
+    let Err((skipped, e)) = drain_until(&rx, &sff(0x43, &[2]))? else {
+        return Ok(());
+    };
+    // QEMU's SJA1000 bus hands a frame to can1's 64-byte receive FIFO the
+    // moment can0 sends it; on a loaded host can1's interrupt can come
+    // after the queued frames have filled the FIFO, and the chip drops
+    // what does not fit (counted as an overrun, as on a real bus). A loss
+    // the driver counted is not the failure this test is about; an
+    // interface that stays stalled is: then a second frame, sent on an
+    // empty queue, must arrive.
+    if ctx.stat(&dev(1), "rx_over_errors")? > over {
+        ctx.note(format!(
+            "0x43 lost to a counted RX FIFO overrun on can1 after {skipped} queued frames"
+        ));
+        canraw::send(&tx, &sff(0x44, &[3]))?;
+        if let Err((n, e)) = drain_until(&rx, &sff(0x44, &[3]))? {
+            return Err(ifdown_lost(
+                ctx,
+                &tx,
+                &rx,
+                &format!("0x44 after 0x43 was overrun: {e}"),
+                n,
+            ));
+        }
+        return Ok(());
+    }
+    Err(ifdown_lost(ctx, &tx, &rx, &e, skipped))
+}
+
+/// Reads `rx` until `want`, skipping frames 0x42 of the sender of
+/// [`sja1000_ifdown_during_traffic`]; `Ok(Err((skipped, error)))` when
+/// the read fails first.
+fn drain_until(
+    rx: &socketcan::CanSocket,
+    want: &socketcan::CanFrame,
+) -> Result<Result<(), (usize, String)>, String> {
     for skipped in 0..2000 {
-        let f = match canraw::recv(&rx) {
+        let f = match canraw::recv(rx) {
             Ok(f) => f,
-            Err(e) => return Err(ifdown_lost(ctx, &tx, &rx, &e, skipped)),
+            Err(e) => return Ok(Err((skipped, e))),
         };
-        if canraw::same(&f, &sff(0x43, &[2])) {
-            return Ok(());
+        if canraw::same(&f, want) {
+            return Ok(Ok(()));
         }
         ensure!(
             canraw::same(&f, &sff(0x42, &[1])),
@@ -418,7 +463,10 @@ fn sja1000_ifdown_during_traffic(ctx: &mut Ctx) -> TestResult {
             canraw::show(&f)
         );
     }
-    Err("0x43 never arrived after the queued frames".into())
+    Err(format!(
+        "{} never arrived after 2000 queued frames",
+        canraw::show(want)
+    ))
 }
 
 /// The failure report of [`sja1000_ifdown_during_traffic`] when 0x43 did
@@ -438,7 +486,10 @@ fn ifdown_lost(
         ("can1", &["rx_packets", "rx_dropped", "rx_over_errors"][..]),
     ] {
         for st in stats {
-            c.push(format!("{d} {st} {}", ctx.stat(d, st).map_or(-1, |v| v as i64)));
+            c.push(format!(
+                "{d} {st} {}",
+                ctx.stat(d, st).map_or(-1, |v| v as i64)
+            ));
         }
     }
     let again = match canraw::send(tx, &sff(0x44, &[3])) {
@@ -448,7 +499,10 @@ fn ifdown_lost(
             Err(e) => format!("a second frame (0x44) lost too: {e}"),
         },
     };
-    format!("0x43 lost after {skipped} queued frames: {e}; {}; {again}", c.join(", "))
+    format!(
+        "0x43 lost after {skipped} queued frames: {e}; {}; {again}",
+        c.join(", ")
+    )
 }
 
 /// rmmod of the card driver while a sender and a receiver are busy on its
