@@ -366,6 +366,24 @@ impl<T: Proto> Sock<T> {
         unsafe { bindings::rcan_sk_report_error(self.sk, errno) };
     }
 
+    /// Takes the pending error (`sock_error`): returns `sk_err` (a
+    /// positive errno; 0: none) and clears it, so that the next call,
+    /// `poll` and `SO_ERROR` do not see it again. Any context.
+    pub(crate) fn take_error(&self) -> i32 {
+        // SAFETY: live sock (type invariant), so `sk_err`, an aligned
+        // `int` of it, is valid for the sock's life, which outlives this
+        // call; the kernel reads it with READ_ONCE and clears it with
+        // `xchg` (`sock_error`), both atomic accesses, so viewing it as an
+        // `AtomicI32` for this call races with no plain access.
+        let err = unsafe {
+            core::sync::atomic::AtomicI32::from_ptr(core::ptr::addr_of_mut!((*self.sk).sk_err))
+        };
+        if err.load(core::sync::atomic::Ordering::Relaxed) == 0 {
+            return 0;
+        }
+        err.swap(0, core::sync::atomic::Ordering::SeqCst)
+    }
+
     /// Dequeues from the error queue (`sock_recv_errqueue`); EAGAIN when
     /// it is empty.
     pub(crate) fn recv_errqueue(
