@@ -19,6 +19,7 @@ mod gateway;
 mod i82527;
 mod i82527_dev;
 mod install;
+mod isotp;
 mod leak;
 mod lifecycle;
 mod loopdrv;
@@ -218,6 +219,8 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         install::TESTS,
         bcm::TESTS,
         bcm::OURS,
+        isotp::TESTS,
+        isotp::OURS,
         netns::TESTS,
         netns::OURS,
         fd::TESTS,
