@@ -46,7 +46,8 @@
 //! the sender is idle (a new transfer may start) or, with
 //! `CAN_ISOTP_WAIT_TX_DONE`, until its own transfer ended; every end of a
 //! transfer wakes the queue (all ISO-TP sockets share it; each waiter
-//! re-checks its own socket).
+//! re-checks its own socket) and the socket's pollers: `poll` reports
+//! EPOLLOUT only while the sender is idle (`Proto::writable`).
 
 #![forbid(unsafe_code)]
 
@@ -72,8 +73,9 @@ use rcan_api::{
 };
 use rcan_core::frame::AnyFrame;
 use rcan_core::isotp::{
-    clamp_max_pdu_size, route, single_mask, Config, Route, TimerCmd, TpAddr, CAN_ISOTP,
-    CAN_ISOTP_WAIT_TX_DONE, ISOTP_MIN_NAMELEN, MAX_OPTLEN,
+    clamp_max_pdu_size, route, single_mask, Config, IsotpOptions, Route, TimerCmd, TpAddr,
+    CAN_ISOTP, CAN_ISOTP_LL_OPTS, CAN_ISOTP_OPTS, CAN_ISOTP_RECV_FC, CAN_ISOTP_RX_STMIN,
+    CAN_ISOTP_TX_STMIN, CAN_ISOTP_WAIT_TX_DONE, ISOTP_MIN_NAMELEN, MAX_OPTLEN, SOL_CAN_ISOTP,
 };
 use rcan_core::isotp_pci::LlFrame;
 use rcan_core::isotp_rx::{Rx, RxEvent, RxStep};
@@ -163,6 +165,7 @@ impl After {
         }
         if self.wake {
             WAITQ.wake_all();
+            sk.wake_writers();
         }
         ret
     }
@@ -261,8 +264,8 @@ fn send_frame(sk: &S, ifindex: i32, tx_id: u32, cfg: &Config, f: &LlFrame) -> Re
         img[8..16].copy_from_slice(&f.data[..8]);
         16
     };
-    let skb = glue::can::skb::alloc_image_for(sk, &dev, &img[..n], glue::GFP_ATOMIC)
-        .ok_or(ENOMEM)?;
+    let skb =
+        glue::can::skb::alloc_image_for(sk, &dev, &img[..n], glue::GFP_ATOMIC).ok_or(ENOMEM)?;
     rcan_api::send(skb, &dev, true)
 }
 
@@ -464,6 +467,18 @@ impl glue::sock::Proto for IsotpProto {
     type Data = IsotpSock;
     type Shared = IsotpShared;
 
+    /// `poll` withholds EPOLLOUT while a transfer runs (mainline
+    /// `isotp_poll`); every end of a transfer wakes the socket's writers.
+    const HAS_WRITABLE: bool = true;
+
+    /// Process context (`poll`): whether the sender is idle.
+    fn writable(sk: &S) -> bool {
+        sk.shared()
+            .eng
+            .get()
+            .map_or(true, |e| e.lock().tx.is_idle())
+    }
+
     fn new_shared() -> IsotpShared {
         IsotpShared {
             bound: AtomicBool::new(false),
@@ -664,6 +679,7 @@ impl glue::sock::Proto for IsotpProto {
                 }
                 drop(g);
                 WAITQ.wake_all();
+                sk.wake_writers();
                 return Err(err);
             }
             if !cfg.has(CAN_ISOTP_WAIT_TX_DONE) {
@@ -681,6 +697,7 @@ impl glue::sock::Proto for IsotpProto {
                 }
                 drop(g);
                 WAITQ.wake_all();
+                sk.wake_writers();
                 return Err(err);
             }
             let res = {
@@ -739,19 +756,28 @@ impl glue::sock::Proto for IsotpProto {
         })
     }
 
-    /// Mainline `isotp_setsockopt` (checks in `rcan_core::isotp`). A
-    /// value longer than any option is passed on unread as a too long
-    /// image: the parser answers EINVAL (ENOPROTOOPT for an unknown
-    /// name), as mainline does.
+    /// Mainline `isotp_setsockopt` (checks in `rcan_core::isotp`). The
+    /// value is read from user memory (EFAULT) only where mainline reads
+    /// it: at the right level, unbound, a known option of its exact size;
+    /// otherwise the parser gets the length alone (zeros) and answers
+    /// EINVAL, EISCONN or ENOPROTOOPT as mainline does. Process context.
     fn setsockopt(sk: &S, level: i32, name: i32, opt: &OptIn) -> Result {
+        let size = match name {
+            CAN_ISOTP_OPTS => IsotpOptions::SIZE,
+            CAN_ISOTP_RECV_FC | CAN_ISOTP_LL_OPTS => 3,
+            CAN_ISOTP_TX_STMIN | CAN_ISOTP_RX_STMIN => 4,
+            _ => 0,
+        };
         let mut val = [0u8; MAX_OPTLEN + 1];
         let n = opt.len().min(MAX_OPTLEN + 1);
-        if n <= MAX_OPTLEN {
-            opt.read(&mut val[..n])?;
-        }
         let mut s = sk.lock();
         let bound = s.bound;
-        s.cfg.setsockopt(level, name, &val[..n], bound).map_err(errno)
+        if level == SOL_CAN_ISOTP && !bound && size != 0 && n == size {
+            opt.read(&mut val[..n])?;
+        }
+        s.cfg
+            .setsockopt(level, name, &val[..n], bound)
+            .map_err(errno)
     }
 
     /// Mainline `isotp_getsockopt`.

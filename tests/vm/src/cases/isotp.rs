@@ -11,7 +11,7 @@
 //! wait, frames are awaited, timeouts are the protocol's (1 s N_Bs/N_Cr).
 
 use std::os::fd::{AsFd, OwnedFd};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use std::sync::Arc;
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 use rcan_uapi::raw;
 
 use crate::canraw;
-use crate::check::{ensure, errno_name, wait_until, OrFail, TestResult, SETTLE};
+use crate::check::{ensure, errno_name, wait_blocked, wait_until, OrFail, TestResult, SETTLE};
 use crate::ctx::{dev, Ctx, Module};
 use crate::tools::{self, TOOL_LIMIT};
 
@@ -38,6 +38,7 @@ pub static OURS: &[crate::Test] = test_table![isotp_teardown];
 const CAN_ISOTP: i32 = 6;
 const SOL_CAN_ISOTP: i32 = 106;
 const CAN_ISOTP_OPTS: i32 = 1;
+const CAN_ISOTP_LL_OPTS: i32 = 5;
 const CAN_ISOTP_WAIT_TX_DONE: u32 = 0x0400;
 const SOL_CAN_RAW: i32 = 101;
 const CAN_RAW_FD_FRAMES: i32 = 5;
@@ -57,7 +58,10 @@ struct Fr {
 }
 
 fn hex(b: &[u8]) -> String {
-    b.iter().map(|x| format!("{x:02X}")).collect::<Vec<_>>().join(" ")
+    b.iter()
+        .map(|x| format!("{x:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 fn show(f: &Fr) -> String {
@@ -141,8 +145,13 @@ impl Sniffer {
     fn start(ifindex: u32) -> Result<Self, String> {
         let s = raw_open(ifindex)?;
         // Room for a few thousand frames (root: above rmem_max).
-        raw::setsockopt(&s, libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, &(8i32 << 20).to_ne_bytes())
-            .or_fail("SO_RCVBUFFORCE")?;
+        raw::setsockopt(
+            &s,
+            libc::SOL_SOCKET,
+            libc::SO_RCVBUFFORCE,
+            &(8i32 << 20).to_ne_bytes(),
+        )
+        .or_fail("SO_RCVBUFFORCE")?;
         let stop = Arc::new(AtomicBool::new(false));
         let st = Arc::clone(&stop);
         let h = thread::spawn(move || {
@@ -181,7 +190,12 @@ fn canutils_pair(send_args: &[&str], recv_args: &[&str], want: &[u8]) -> TestRes
         s.stderr.trim()
     );
     let out = r.finish(TOOL_LIMIT)?;
-    ensure!(out.status.success(), "isotprecv: {}: {}", out.status, out.stderr.trim());
+    ensure!(
+        out.status.success(),
+        "isotprecv: {}: {}",
+        out.status,
+        out.stderr.trim()
+    );
     let got = out.stdout.trim();
     let exp = hex(want);
     ensure!(
@@ -213,7 +227,10 @@ fn check_transfer(
     let ours: Vec<&Fr> = frames.iter().filter(|f| f.id == tx || f.id == rx).collect();
     let bad = |i: usize, why: &str| -> String {
         let from = i.saturating_sub(2);
-        let ctx: Vec<String> = ours[from..(i + 3).min(ours.len())].iter().map(|f| show(f)).collect();
+        let ctx: Vec<String> = ours[from..(i + 3).min(ours.len())]
+            .iter()
+            .map(|f| show(f))
+            .collect();
         format!("frame {i} of the transfer: {why}: {}", ctx.join(" | "))
     };
     ensure!(!ours.is_empty(), "no frames on {tx:03X}/{rx:03X}");
@@ -237,17 +254,29 @@ fn check_transfer(
     for (i, f) in ours.iter().enumerate().skip(1) {
         if f.id == rx {
             ensure!(want_fc, "{}", bad(i, "FC not asked for"));
-            ensure!(f.data.len() >= 3 && f.data[..3] == fc, "{}", bad(i, "FC content"));
+            ensure!(
+                f.data.len() >= 3 && f.data[..3] == fc,
+                "{}",
+                bad(i, "FC content")
+            );
             want_fc = false;
             in_block = 0;
             continue;
         }
         ensure!(!want_fc, "{}", bad(i, "CF before the FC"));
         ensure!(got < pdu.len(), "{}", bad(i, "CF after the PDU's end"));
-        ensure!(f.data.first() == Some(&(0x20 | sn)), "{}", bad(i, "CF sequence number"));
+        ensure!(
+            f.data.first() == Some(&(0x20 | sn)),
+            "{}",
+            bad(i, "CF sequence number")
+        );
         let n = (pdu.len() - got).min(dl - 1);
         ensure!(f.data.len() > n, "{}", bad(i, "CF too short"));
-        ensure!(f.data[1..1 + n] == pdu[got..got + n], "{}", bad(i, "CF data"));
+        ensure!(
+            f.data[1..1 + n] == pdu[got..got + n],
+            "{}",
+            bad(i, "CF data")
+        );
         if got + n < pdu.len() {
             ensure!(f.data.len() == dl, "{}", bad(i, "CF not of TX_DL"));
         }
@@ -259,7 +288,11 @@ fn check_transfer(
         }
         txf.push((*f).clone());
     }
-    ensure!(got == pdu.len(), "the CFs carried {got} of {} bytes", pdu.len());
+    ensure!(
+        got == pdu.len(),
+        "the CFs carried {got} of {} bytes",
+        pdu.len()
+    );
     Ok(txf)
 }
 
@@ -284,11 +317,24 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
     // 1. Single frame.
     let sn = Sniffer::start(i0)?;
     let pdu = pattern(3);
-    canutils_pair(&[&base[..], &["-D", "3", &c0]].concat(), &[&back[..], &[&c0]].concat(), &pdu)?;
+    canutils_pair(
+        &[&base[..], &["-D", "3", &c0]].concat(),
+        &[&back[..], &[&c0]].concat(),
+        &pdu,
+    )?;
     let fr = sn.stop()?;
-    let want = [Fr { id: 0x123, fd: false, flags: 0, data: vec![3, 1, 2, 3] }];
+    let want = [Fr {
+        id: 0x123,
+        fd: false,
+        flags: 0,
+        data: vec![3, 1, 2, 3],
+    }];
     ensure!(
-        fr.iter().filter(|f| f.id == 0x123 || f.id == 0x321).cloned().collect::<Vec<_>>() == want,
+        fr.iter()
+            .filter(|f| f.id == 0x123 || f.id == 0x321)
+            .cloned()
+            .collect::<Vec<_>>()
+            == want,
         "SF: frames {:?}",
         fr.iter().map(show).collect::<Vec<_>>()
     );
@@ -303,7 +349,11 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
     )?;
     let fr = sn.stop()?;
     let tx = check_transfer(&fr, 0x123, 0x321, &pdu, 8, 4, [0x30, 4, 1])?;
-    ensure!(tx.len() == 586, "4095 bytes: {} frames from the sender, want FF + 585 CFs", tx.len());
+    ensure!(
+        tx.len() == 586,
+        "4095 bytes: {} frames from the sender, want FF + 585 CFs",
+        tx.len()
+    );
     let fcs = fr.iter().filter(|f| f.id == 0x321).count();
     ensure!(fcs == 147, "4095 bytes in blocks of 4: {fcs} FCs, want 147");
 
@@ -320,7 +370,10 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
     ensure!(
         tx.iter().all(|f| f.data.len() == 8),
         "padded sender: a frame shorter than 8: {:?}",
-        tx.iter().filter(|f| f.data.len() != 8).map(show).collect::<Vec<_>>()
+        tx.iter()
+            .filter(|f| f.data.len() != 8)
+            .map(show)
+            .collect::<Vec<_>>()
     );
     let last = tx.last().ok_or("no frames")?;
     // 4999 = 2 in the FF + 713 CFs of 7 + 6 in the last (714th) CF.
@@ -344,7 +397,11 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
 fn set_mtu(ctx: &Ctx, c0: &str, mtu: &str) -> TestResult {
     ctx.link_down(c0)?;
     let out = tools::spawn("ip", &["link", "set", c0, "mtu", mtu], None)?.finish(TOOL_LIMIT)?;
-    ensure!(out.status.success(), "ip link set {c0} mtu {mtu}: {}", out.stderr.trim());
+    ensure!(
+        out.status.success(),
+        "ip link set {c0} mtu {mtu}: {}",
+        out.stderr.trim()
+    );
     ctx.link_up(c0)
 }
 
@@ -393,10 +450,17 @@ fn isotp_canutils_fd(ctx: &mut Ctx) -> TestResult {
         ensure!(
             tx.iter().all(|f| f.fd && f.flags & CANFD_BRS != 0),
             "FD transfer: a frame without FD or BRS: {:?}",
-            tx.iter().filter(|f| !f.fd || f.flags & CANFD_BRS == 0).map(show).collect::<Vec<_>>()
+            tx.iter()
+                .filter(|f| !f.fd || f.flags & CANFD_BRS == 0)
+                .map(show)
+                .collect::<Vec<_>>()
         );
         // 4095 = 62 in the FF + 64 CFs of 63 + 1.
-        ensure!(tx.len() == 66, "FD 4095 bytes: {} frames from the sender, want 66", tx.len());
+        ensure!(
+            tx.len() == 66,
+            "FD 4095 bytes: {} frames from the sender, want 66",
+            tx.len()
+        );
         ensure!(
             fr.iter().filter(|f| f.id == 0x321).all(|f| f.fd),
             "the FC of an FD receiver is not an FD frame"
@@ -412,7 +476,8 @@ fn isotp_canutils_fd(ctx: &mut Ctx) -> TestResult {
 fn tp_socket(flags: u32) -> Result<OwnedFd, String> {
     let s = raw::socket(libc::AF_CAN, libc::SOCK_DGRAM, CAN_ISOTP).or_fail("socket(CAN_ISOTP)")?;
     if flags != 0 {
-        raw::setsockopt(&s, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &opts(flags)).or_fail("CAN_ISOTP_OPTS")?;
+        raw::setsockopt(&s, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &opts(flags))
+            .or_fail("CAN_ISOTP_OPTS")?;
     }
     Ok(s)
 }
@@ -462,6 +527,20 @@ fn want_errno<T: std::fmt::Debug>(r: std::io::Result<T>, want: i32, what: &str) 
     Ok(())
 }
 
+/// `poll` for POLLOUT on `s` for at most `ms` milliseconds: the revents.
+fn poll_out(s: impl AsFd, ms: i32) -> Result<i16, String> {
+    use std::os::fd::AsRawFd;
+    let mut p = libc::pollfd {
+        fd: s.as_fd().as_raw_fd(),
+        events: libc::POLLOUT,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd, alive for the call.
+    let r = unsafe { libc::poll(&mut p, 1, ms) };
+    ensure!(r >= 0, "poll: {}", std::io::Error::last_os_error());
+    Ok(p.revents)
+}
+
 /// Writes `pdu` on `s` in a thread (it may block); the handle gives its
 /// result.
 fn write_bg(s: &Arc<OwnedFd>, pdu: Vec<u8>) -> JoinHandle<std::io::Result<usize>> {
@@ -476,7 +555,9 @@ fn joined(h: JoinHandle<std::io::Result<usize>>) -> Result<std::io::Result<usize
 /// The socket-level API and its errno, with a CAN_RAW peer playing the
 /// other end (all within one test: a bound socket costs little, the
 /// timeouts are the protocol's 1 s):
-/// 1. Unbound: write and read EADDRNOTAVAIL. bind: short address EINVAL,
+/// 1. Unbound: write and read EADDRNOTAVAIL; option errno (wrong length
+///    EINVAL, unknown name ENOPROTOOPT, bad link layer EINVAL) and the
+///    default CAN_ISOTP_OPTS. bind: short address EINVAL,
 ///    ifindex 0 ENODEV, rx_id == tx_id EADDRNOTAVAIL; bound: bind again
 ///    EINVAL, CAN_ISOTP_OPTS EISCONN, getsockname the 16-byte address.
 /// 2. write of 0 and of 8301 bytes (max_pdu_size 8300): EINVAL.
@@ -484,7 +565,9 @@ fn joined(h: JoinHandle<std::io::Result<usize>>) -> Result<std::io::Result<usize
 ///    the peer stays silent: ECOMM after N_Bs (1 s).
 /// 4. Without WAIT_TX_DONE: the write returns at once; a second one with
 ///    MSG_DONTWAIT while the first waits for FC: EAGAIN; the first's
-///    ECOMM comes as the socket error (the blocking read returns it).
+///    ECOMM comes as the socket error (the blocking read returns it);
+///    poll withholds POLLOUT while the transfer runs, and a poller
+///    waiting for POLLOUT is woken when a transfer completes.
 /// 5. Receive: an SF read into 1 byte with MSG_TRUNC returns the PDU's
 ///    length, the source address is 16 bytes with the interface; an FF
 ///    is answered with FC `30 00 00`; a CF with the wrong sequence
@@ -497,14 +580,57 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
 
     // 1. Unbound and bind errors.
     let a = tp_socket(0)?;
-    want_errno(raw::write(&a, &[1, 2, 3]), libc::EADDRNOTAVAIL, "write unbound")?;
+    want_errno(
+        raw::write(&a, &[1, 2, 3]),
+        libc::EADDRNOTAVAIL,
+        "write unbound",
+    )?;
     let mut buf = [0u8; 64];
     want_errno(raw::read(&a, &mut buf), libc::EADDRNOTAVAIL, "read unbound")?;
-    want_errno(raw::bind(&a, &tp_addr(i0, 0x7E8, 0x7E0)[..15]), libc::EINVAL, "bind 15 bytes")?;
-    want_errno(raw::bind(&a, &tp_addr(0, 0x7E8, 0x7E0)), libc::ENODEV, "bind ifindex 0")?;
-    want_errno(raw::bind(&a, &tp_addr(i0, 0x7E0, 0x7E0)), libc::EADDRNOTAVAIL, "bind rx == tx")?;
+    want_errno(
+        raw::bind(&a, &tp_addr(i0, 0x7E8, 0x7E0)[..15]),
+        libc::EINVAL,
+        "bind 15 bytes",
+    )?;
+    want_errno(
+        raw::bind(&a, &tp_addr(0, 0x7E8, 0x7E0)),
+        libc::ENODEV,
+        "bind ifindex 0",
+    )?;
+    want_errno(
+        raw::bind(&a, &tp_addr(i0, 0x7E0, 0x7E0)),
+        libc::EADDRNOTAVAIL,
+        "bind rx == tx",
+    )?;
+    want_errno(
+        raw::setsockopt(&a, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &[0u8; 11]),
+        libc::EINVAL,
+        "CAN_ISOTP_OPTS of 11 bytes",
+    )?;
+    want_errno(
+        raw::setsockopt(&a, SOL_CAN_ISOTP, 99, &[0u8; 4]),
+        libc::ENOPROTOOPT,
+        "unknown option 99",
+    )?;
+    want_errno(
+        raw::setsockopt(&a, SOL_CAN_ISOTP, CAN_ISOTP_LL_OPTS, &[72, 9, 0]),
+        libc::EINVAL,
+        "CAN_ISOTP_LL_OPTS with TX_DL 9",
+    )?;
+    let mut o = [0u8; 16];
+    let n = raw::getsockopt(&a, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &mut o).or_fail("getsockopt")?;
+    ensure!(
+        n as usize == 12 && o[..12] == opts(0),
+        "CAN_ISOTP_OPTS defaults: {} ({n} bytes), want {}",
+        hex(&o[..n as usize]),
+        hex(&opts(0))
+    );
     raw::bind(&a, &tp_addr(i0, 0x7E8, 0x7E0)).or_fail("bind")?;
-    want_errno(raw::bind(&a, &tp_addr(i0, 0x7E8, 0x7E0)), libc::EINVAL, "bind again")?;
+    want_errno(
+        raw::bind(&a, &tp_addr(i0, 0x7E8, 0x7E0)),
+        libc::EINVAL,
+        "bind again",
+    )?;
     want_errno(
         raw::setsockopt(&a, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &opts(0)),
         libc::EISCONN,
@@ -520,7 +646,11 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
 
     // 2. Lengths.
     want_errno(raw::write(&a, &[]), libc::EINVAL, "write of 0 bytes")?;
-    want_errno(raw::write(&a, &vec![0u8; 8301]), libc::EINVAL, "write of 8301 bytes")?;
+    want_errno(
+        raw::write(&a, &vec![0u8; 8301]),
+        libc::EINVAL,
+        "write of 8301 bytes",
+    )?;
 
     // 3. WAIT_TX_DONE: overflow, then no flow control at all.
     let b = Arc::new(tp_bound(CAN_ISOTP_WAIT_TX_DONE, i0, 0x7E9, 0x7E1)?);
@@ -528,7 +658,11 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
     let ff = raw_expect(&peer, 0x7E1, t, "FF of 20 bytes")?;
     ensure!(ff.data == [0x10, 20, 1, 2, 3, 4, 5, 6], "FF {}", show(&ff));
     raw_send(&peer, 0x7E9, &[0x32, 0, 0])?;
-    want_errno(joined(w)?, libc::EMSGSIZE, "WAIT_TX_DONE write answered FC overflow")?;
+    want_errno(
+        joined(w)?,
+        libc::EMSGSIZE,
+        "WAIT_TX_DONE write answered FC overflow",
+    )?;
     let w = write_bg(&b, pattern(20));
     raw_expect(&peer, 0x7E1, t, "FF of the second PDU")?;
     let start = Instant::now();
@@ -549,14 +683,54 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
         libc::EAGAIN,
         "MSG_DONTWAIT write while sending",
     )?;
+    ensure!(
+        poll_out(&a, 0)? & libc::POLLOUT == 0,
+        "poll reports POLLOUT while a transfer waits for FC"
+    );
     raw::set_timeout(&a, libc::SO_RCVTIMEO, t).or_fail("SO_RCVTIMEO")?;
-    want_errno(raw::read(&a, &mut buf), libc::ECOMM, "read after a transfer without FC")?;
+    want_errno(
+        raw::read(&a, &mut buf),
+        libc::ECOMM,
+        "read after a transfer without FC",
+    )?;
+    ensure!(
+        poll_out(&a, 0)? & libc::POLLOUT != 0,
+        "poll reports no POLLOUT after the transfer ended"
+    );
+    // A poller waiting for POLLOUT is woken when a transfer completes.
+    let a = Arc::new(a);
+    raw::write(&*a, &pattern(20)).or_fail("write 20 bytes")?;
+    raw_expect(&peer, 0x7E0, t, "FF of the polled PDU")?;
+    let tid = Arc::new(AtomicI32::new(0));
+    let poller = {
+        let (a, tid) = (Arc::clone(&a), Arc::clone(&tid));
+        thread::spawn(move || {
+            tid.store(crate::sys::gettid(), Ordering::SeqCst);
+            let start = Instant::now();
+            poll_out(&*a, 20_000).map(|r| (r, start.elapsed()))
+        })
+    };
+    wait_blocked(
+        &tid,
+        &[libc::SYS_poll, libc::SYS_ppoll],
+        "the poller blocked in poll",
+    )?;
+    raw_send(&peer, 0x7E8, &[0x30, 0, 0])?;
+    raw_expect(&peer, 0x7E0, t, "CF 1 of the polled PDU")?;
+    raw_expect(&peer, 0x7E0, t, "CF 2 of the polled PDU")?;
+    let (rev, took) = poller.join().map_err(|_| "poller panicked".to_string())??;
+    ensure!(
+        rev & libc::POLLOUT != 0 && took < Duration::from_secs(10),
+        "poll after the transfer completed: revents {rev:#x} after {took:?}, want POLLOUT at once"
+    );
+    let a = Arc::try_unwrap(a).map_err(|_| "socket still shared".to_string())?;
 
     // 5. Reception.
     raw_send(&peer, 0x7E8, &[0x02, 0xAA, 0xBB])?;
     let mut one = [0u8; 1];
     let mut src = [0u8; SOCKADDR_CAN];
-    let (n, alen) = raw::recvfrom(&a, &mut one, libc::MSG_TRUNC, Some(&mut src)).or_fail("recvfrom SF")?;
+    let (n, alen) =
+        raw::recvfrom(&a, &mut one, libc::MSG_TRUNC, Some(&mut src)).or_fail("recvfrom SF")?;
     ensure!(
         n == 2 && one[0] == 0xAA,
         "SF read into 1 byte with MSG_TRUNC: {n}, {:02X}; want 2, AA",
@@ -573,13 +747,24 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
     let fc = raw_expect(&peer, 0x7E0, t, "FC to an FF")?;
     ensure!(fc.data == [0x30, 0, 0], "FC {}, want 30 00 00", show(&fc));
     raw_send(&peer, 0x7E8, &[0x22, 7, 8, 9, 10, 11, 12, 13])?;
-    want_errno(raw::read(&a, &mut buf), libc::EILSEQ, "read after a CF with SN 2 for 1")?;
+    want_errno(
+        raw::read(&a, &mut buf),
+        libc::EILSEQ,
+        "read after a CF with SN 2 for 1",
+    )?;
     raw_send(&peer, 0x7E8, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
     raw_expect(&peer, 0x7E0, t, "FC to the second FF")?;
     let start = Instant::now();
-    want_errno(raw::read(&a, &mut buf), libc::ETIMEDOUT, "read after an FF and no CF")?;
+    want_errno(
+        raw::read(&a, &mut buf),
+        libc::ETIMEDOUT,
+        "read after an FF and no CF",
+    )?;
     let took = start.elapsed();
-    ensure!(took >= Duration::from_millis(900), "ETIMEDOUT after {took:?}, before N_Cr (1 s)");
+    ensure!(
+        took >= Duration::from_millis(900),
+        "ETIMEDOUT after {took:?}, before N_Cr (1 s)"
+    );
     raw_send(&peer, 0x7E8, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
     raw_expect(&peer, 0x7E0, t, "FC to the third FF")?;
     raw_send(&peer, 0x7E8, &[0x21, 7, 8, 9, 10, 11, 12, 13])?;
@@ -634,7 +819,10 @@ fn isotp_teardown(ctx: &mut Ctx) -> TestResult {
             cfs += 1;
         }
     }
-    ensure!(cfs == 14, "after close: {cfs} CFs of 14 on the bus (close must wait for the PDU)");
+    ensure!(
+        cfs == 14,
+        "after close: {cfs} CFs of 14 on the bus (close must wait for the PDU)"
+    );
 
     // 3. ifdown during a WAIT_TX_DONE transfer.
     let b = Arc::new(tp_bound(CAN_ISOTP_WAIT_TX_DONE, i0, 0x7E9, 0x7E1)?);
@@ -662,7 +850,11 @@ fn isotp_teardown(ctx: &mut Ctx) -> TestResult {
     raw_expect(&peer, 0x7E1, t, "first CF")?;
     drop(peer);
     ctx.remove_can_ifaces()?;
-    want_errno(joined(w)?, libc::ENODEV, "WAIT_TX_DONE write when the interface went away")?;
+    want_errno(
+        joined(w)?,
+        libc::ENODEV,
+        "WAIT_TX_DONE write when the interface went away",
+    )?;
 
     // 5. rmmod with the socket open, then after close.
     ensure!(
@@ -673,11 +865,13 @@ fn isotp_teardown(ctx: &mut Ctx) -> TestResult {
     // The socket's last reference (and the module's) goes once the
     // receive table's grace period has passed after close: retried.
     let mut last = String::new();
-    wait_until(SETTLE, "rmmod rcan_isotp after close", || match ctx.rmmod(Module::Isotp) {
-        Ok(()) => true,
-        Err(e) => {
-            last = e;
-            false
+    wait_until(SETTLE, "rmmod rcan_isotp after close", || {
+        match ctx.rmmod(Module::Isotp) {
+            Ok(()) => true,
+            Err(e) => {
+                last = e;
+                false
+            }
         }
     })
     .map_err(|e| format!("{e}: {last}"))
