@@ -410,6 +410,10 @@ impl CanProtocol for IsotpProto {
                 return;
             }
             rcan_api::rx_remove(sk);
+            // Reported before the engine is unbound: a WAIT_TX_DONE
+            // sender that wakes (also spuriously, the queue is shared)
+            // and finds it unbound takes this error.
+            sk.report_error(-ENODEV.to_errno());
             s.bound = false;
             sk.shared().bound.store(false, Ordering::Relaxed);
             let mut out = After::new();
@@ -419,7 +423,6 @@ impl CanProtocol for IsotpProto {
                 e.abort(&mut out);
             }
             drop(s);
-            out.err = Some(-ENODEV.to_errno());
             let _ = out.run(sk, 0, 0, &Config::default());
         });
     }

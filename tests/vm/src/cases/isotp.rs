@@ -308,6 +308,10 @@ fn check_transfer(
 ///    `-p CC:AA -P a`): every frame 8 bytes long, the last CF filled with
 ///    AA, the FCs with CC; the PDU intact (isotprecv reads into 5000
 ///    bytes).
+/// 4. 100 bytes with extended addressing and a separate receive address
+///    (`-x 55:AA`, `-x AA:55`): every frame of the sender starts with 55,
+///    the FC with AA, and behind that byte the transfer is as usual (FF
+///    of 5 data bytes, CFs of 6).
 fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.isotp_ifaces(1)?[0];
     let c0 = dev(0);
@@ -389,6 +393,36 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
         fcs.len() == 1 && fcs[0].data == [0x30, 0, 0, 0xCC, 0xCC, 0xCC, 0xCC, 0xCC],
         "padded FC: {:?}",
         fcs.iter().map(|f| show(f)).collect::<Vec<_>>()
+    );
+
+    // 4. Extended addressing with a separate receive address.
+    let sn = Sniffer::start(i0)?;
+    let pdu = pattern(100);
+    canutils_pair(
+        &[&base[..], &["-x", "55:AA", "-D", "100", &c0]].concat(),
+        &[&back[..], &["-x", "AA:55", &c0]].concat(),
+        &pdu,
+    )?;
+    let fr = sn.stop()?;
+    let mut stripped = Vec::new();
+    for f in fr.iter().filter(|f| f.id == 0x123 || f.id == 0x321) {
+        let want = if f.id == 0x123 { 0x55 } else { 0xAA };
+        ensure!(
+            f.data.first() == Some(&want),
+            "extended addressing: {} does not start with {want:02X}",
+            show(f)
+        );
+        stripped.push(Fr {
+            data: f.data[1..].to_vec(),
+            ..f.clone()
+        });
+    }
+    let tx = check_transfer(&stripped, 0x123, 0x321, &pdu, 7, 0, [0x30, 0, 0])?;
+    // 100 = 5 in the FF + 15 CFs of 6 + 5.
+    ensure!(
+        tx.len() == 17,
+        "extended addressing: {} frames from the sender, want 17",
+        tx.len()
     );
     Ok(())
 }
