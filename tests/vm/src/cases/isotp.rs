@@ -33,7 +33,7 @@ pub static TESTS: &[crate::Test] = portable_table![
     isotp_socket_errnos,
 ];
 
-pub static OURS: &[crate::Test] = test_table![isotp_teardown];
+pub static OURS: &[crate::Test] = test_table![teardown_isotp_transfers];
 
 const CAN_ISOTP: i32 = 6;
 const SOL_CAN_ISOTP: i32 = 106;
@@ -826,7 +826,7 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
 ///    transfer: the write fails with ENODEV at once.
 /// 5. rmmod rcan_isotp is refused while a socket is open and succeeds
 ///    after its close.
-fn isotp_teardown(ctx: &mut Ctx) -> TestResult {
+fn teardown_isotp_transfers(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.isotp_ifaces(1)?[0];
     let c0 = dev(0);
     let peer = raw_open(i0)?;
