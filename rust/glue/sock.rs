@@ -383,9 +383,11 @@ impl<T: Proto> Sock<T> {
     pub(crate) fn take_error(&self) -> i32 {
         // SAFETY: live sock (type invariant), so `sk_err`, an aligned
         // `int` of it, is valid for the sock's life, which outlives this
-        // call; the kernel reads it with READ_ONCE and clears it with
-        // `xchg` (`sock_error`), both atomic accesses, so viewing it as an
-        // `AtomicI32` for this call races with no plain access.
+        // call. The writers of a PF_CAN socket's `sk_err` are
+        // `rcan_sk_report_error` (WRITE_ONCE) and `sock_error` (`xchg`),
+        // its readers use READ_ONCE (`sock_error`, `datagram_poll`): all
+        // marked accesses, so viewing it as an `AtomicI32` for this call
+        // races with no plain access.
         let err = unsafe {
             core::sync::atomic::AtomicI32::from_ptr(core::ptr::addr_of_mut!((*self.sk).sk_err))
         };
