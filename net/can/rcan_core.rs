@@ -36,6 +36,14 @@ pub(crate) mod dsor_wire;
 pub(crate) mod filter;
 #[path = "core/src/frame.rs"]
 pub(crate) mod frame;
+#[path = "core/src/isotp.rs"]
+pub(crate) mod isotp;
+#[path = "core/src/isotp_pci.rs"]
+pub(crate) mod isotp_pci;
+#[path = "core/src/isotp_rx.rs"]
+pub(crate) mod isotp_rx;
+#[path = "core/src/isotp_tx.rs"]
+pub(crate) mod isotp_tx;
 #[path = "core/src/ring.rs"]
 pub(crate) mod ring;
 #[path = "core/src/rxtable.rs"]

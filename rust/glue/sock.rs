@@ -80,6 +80,17 @@ pub(crate) trait Proto: Sized + 'static {
     fn getsockopt(_sk: &Sock<Self>, _level: i32, _name: i32, _opt: &OptOut) -> Result {
         Err(super::neterr::ENOPROTOOPT())
     }
+    /// Whether [`Proto::writable`] is asked: `poll` then reports
+    /// `EPOLLOUT` only when the generic test (send-buffer space) and
+    /// `writable` both say so. Protocols that set it call
+    /// [`Sock::wake_writers`] when `writable` may have become true.
+    const HAS_WRITABLE: bool = false;
+    /// Whether a write would not block on the protocol's own state (a
+    /// CAN_ISOTP transfer running), for `poll`. Process context (a
+    /// `poll` call); must not sleep.
+    fn writable(_sk: &Sock<Self>) -> bool {
+        true
+    }
 }
 
 /// The value of a `setsockopt` call: user (or, for in-kernel callers,
@@ -364,6 +375,34 @@ impl<T: Proto> Sock<T> {
     pub(crate) fn report_error(&self, errno: i32) {
         // SAFETY: live sock; sk_err is written like this by every protocol.
         unsafe { bindings::rcan_sk_report_error(self.sk, errno) };
+    }
+
+    /// Takes the pending error (`sock_error`): returns `sk_err` (a
+    /// positive errno; 0: none) and clears it, so that the next call,
+    /// `poll` and `SO_ERROR` do not see it again. Any context.
+    pub(crate) fn take_error(&self) -> i32 {
+        // SAFETY: live sock (type invariant), so `sk_err`, an aligned
+        // `int` of it, is valid for the sock's life, which outlives this
+        // call. The writers of a PF_CAN socket's `sk_err` are
+        // `rcan_sk_report_error` (WRITE_ONCE) and `sock_error` (`xchg`),
+        // its readers use READ_ONCE (`sock_error`, `datagram_poll`): all
+        // marked accesses, so viewing it as an `AtomicI32` for this call
+        // races with no plain access.
+        let err = unsafe {
+            core::sync::atomic::AtomicI32::from_ptr(core::ptr::addr_of_mut!((*self.sk).sk_err))
+        };
+        if err.load(core::sync::atomic::Ordering::Relaxed) == 0 {
+            return 0;
+        }
+        err.swap(0, core::sync::atomic::Ordering::SeqCst)
+    }
+
+    /// Wakes pollers and writers waiting on the socket for `EPOLLOUT`
+    /// (a protocol's [`Proto::writable`] became true). Any context.
+    pub(crate) fn wake_writers(&self) {
+        // SAFETY: live sock (type invariant); the helper reads its wait
+        // queue under RCU, as `sk_write_space` callbacks do.
+        unsafe { bindings::rcan_sk_wake_writers(self.sk) };
     }
 
     /// Dequeues from the error queue (`sock_recv_errqueue`); EAGAIN when
@@ -811,7 +850,11 @@ pub(crate) const fn proto_ops_template<T: Proto>() -> bindings::proto_ops {
         socketpair: Some(bindings::sock_no_socketpair),
         accept: Some(bindings::sock_no_accept),
         getname: Some(getname::<T>),
-        poll: Some(bindings::datagram_poll),
+        poll: if T::HAS_WRITABLE {
+            Some(poll::<T>)
+        } else {
+            Some(bindings::datagram_poll)
+        },
         ioctl: Some(no_ioctl),
         listen: Some(bindings::sock_no_listen),
         shutdown: Some(bindings::sock_no_shutdown),
@@ -974,6 +1017,35 @@ unsafe extern "C" fn recvmsg<T: Proto>(
             Err(e) => e.to_errno(),
         },
         None => code::EBADF.to_errno(),
+    }
+}
+
+/// `proto_ops::poll` of a protocol with [`Proto::HAS_WRITABLE`]:
+/// `datagram_poll` (which registers on the socket's wait queue, where
+/// [`Sock::wake_writers`] wakes), then `EPOLLOUT` withheld while
+/// [`Proto::writable`] says no (mainline `isotp_poll`).
+///
+/// # Safety
+///
+/// Called by the socket layer with its `file`, `sock` (of protocol `T`)
+/// and `wait`.
+unsafe extern "C" fn poll<T: Proto>(
+    file: *mut bindings::file,
+    sock: *mut bindings::socket,
+    wait: *mut bindings::poll_table_struct,
+) -> bindings::__poll_t {
+    // SAFETY: the socket layer's arguments, passed on unchanged.
+    let mask = unsafe { bindings::datagram_poll(file, sock, wait) };
+    // EPOLLOUT | EPOLLWRNORM | EPOLLWRBAND (<uapi/linux/eventpoll.h>;
+    // bindgen cannot evaluate their `__poll_t` casts).
+    const OUT: bindings::__poll_t = 0x004 | 0x100 | 0x200;
+    if mask & OUT == 0 {
+        return mask;
+    }
+    // SAFETY: socket-layer call.
+    match unsafe { sock_of::<T>(sock) } {
+        Some(sk) if !T::writable(&sk) => mask & !OUT,
+        _ => mask,
     }
 }
 

@@ -299,6 +299,22 @@ void rcan_sk_report_error(struct sock *sk, int err)
 		sk_error_report(sk);
 }
 
+/*
+ * Wakes whoever polls or sleeps on the socket for EPOLLOUT: a protocol
+ * whose writability is its own state (Proto::writable), not send-buffer
+ * space, calls it when that state changes. Any context.
+ */
+void rcan_sk_wake_writers(struct sock *sk)
+{
+	struct socket_wq *wq;
+
+	rcu_read_lock();
+	wq = rcu_dereference(sk->sk_wq);
+	if (skwq_has_sleeper(wq))
+		wake_up_interruptible_poll(&wq->wait, EPOLLOUT | EPOLLWRNORM | EPOLLWRBAND);
+	rcu_read_unlock();
+}
+
 int rcan_copy_from_sockptr(void *dst, sockptr_t src, size_t size)
 {
 	return copy_from_sockptr(dst, src, size) ? -EFAULT : 0;

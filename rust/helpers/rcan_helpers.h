@@ -69,6 +69,7 @@ void *rcan_net_generic(const struct net *net, unsigned int id);
 struct net_device *rcan_netdev_notifier_dev(void *info);
 
 void rcan_sk_report_error(struct sock *sk, int err);
+void rcan_sk_wake_writers(struct sock *sk);
 
 /* user memory */
 int rcan_copy_from_sockptr(void *dst, sockptr_t src, size_t size);

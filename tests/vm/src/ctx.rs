@@ -60,7 +60,7 @@ pub enum Uses {
     /// on purpose.
     Own,
     /// The loaded stack: [`Module::SHARED`] (rcan_pf, rcan_can, rcan_raw,
-    /// rcan_bcm, and rcan_loop with no parameter but `count=N`), loaded
+    /// rcan_bcm, rcan_isotp, and rcan_loop with no parameter but `count=N`), loaded
     /// through [`Ctx::load_stack`], [`Ctx::can_ifaces`], [`Ctx::bcm_ifaces`]
     /// or [`Ctx::insmod`]. On our stack the runner keeps those modules
     /// loaded from one such test to the next, when the test left them as
@@ -82,6 +82,8 @@ pub enum Module {
     Raw,
     /// SocketCAN-compatible CAN_BCM (`net/can/rcan_bcm.ko`).
     Bcm,
+    /// SocketCAN-compatible CAN_ISOTP (`net/can/rcan_isotp.ko`).
+    Isotp,
     /// Loopback driver (`drivers/net/can/rcan_loop.ko`).
     Loop,
     /// DSOR time service (`net/can/dsor/rcan_time.ko`).
@@ -117,11 +119,12 @@ pub enum Module {
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 19] = [
+    pub const ALL: [Module; 20] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
         Module::Bcm,
+        Module::Isotp,
         Module::Loop,
         Module::Time,
         Module::Rtime,
@@ -140,11 +143,12 @@ impl Module {
     ];
 
     /// The modules a [`Uses::Stack`] test may load, in load order.
-    pub const SHARED: [Module; 5] = [
+    pub const SHARED: [Module; 6] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
         Module::Bcm,
+        Module::Isotp,
         Module::Loop,
     ];
 
@@ -155,6 +159,7 @@ impl Module {
             Module::Can => "rcan_can",
             Module::Raw => "rcan_raw",
             Module::Bcm => "rcan_bcm",
+            Module::Isotp => "rcan_isotp",
             Module::Loop => "rcan_loop",
             Module::Time => "rcan_time",
             Module::Rtime => "rcan_rtime",
@@ -180,6 +185,7 @@ impl Module {
             Module::Can => "net/can/rcan_can.ko",
             Module::Raw => "net/can/rcan_raw.ko",
             Module::Bcm => "net/can/rcan_bcm.ko",
+            Module::Isotp => "net/can/rcan_isotp.ko",
             Module::Loop => "drivers/net/can/rcan_loop.ko",
             Module::Time => "net/can/dsor/rcan_time.ko",
             Module::Rtime => "net/can/dsor/rcan_rtime.ko",
@@ -214,6 +220,9 @@ pub enum Mainline {
     /// Broadcast manager (`net/can/can-bcm.ko`): not in [`Mainline::ALL`],
     /// loaded only by [`Ctx::bcm_ifaces`].
     Bcm,
+    /// ISO-TP (`net/can/can-isotp.ko`): not in [`Mainline::ALL`], loaded
+    /// only by [`Ctx::isotp_ifaces`].
+    Isotp,
     /// SJA1000 core (`drivers/net/can/sja1000/sja1000.ko`): not in
     /// [`Mainline::ALL`], loaded only by [`Ctx::sja1000_cards`].
     Sja1000,
@@ -239,6 +248,7 @@ impl Mainline {
             Mainline::Dev => "can_dev",
             Mainline::Vcan => "vcan",
             Mainline::Bcm => "can_bcm",
+            Mainline::Isotp => "can_isotp",
             Mainline::Sja1000 => "sja1000",
             Mainline::KvaserPci => "kvaser_pci",
             Mainline::CtuCanFd => "ctucanfd",
@@ -254,6 +264,7 @@ impl Mainline {
             Mainline::Dev => "drivers/net/can/dev/can-dev.ko",
             Mainline::Vcan => "drivers/net/can/vcan.ko",
             Mainline::Bcm => "net/can/can-bcm.ko",
+            Mainline::Isotp => "net/can/can-isotp.ko",
             Mainline::Sja1000 => "drivers/net/can/sja1000/sja1000.ko",
             Mainline::KvaserPci => "drivers/net/can/sja1000/kvaser_pci.ko",
             Mainline::CtuCanFd => "drivers/net/can/ctucanfd/ctucanfd.ko",
@@ -636,6 +647,21 @@ impl Ctx {
         Ok(ifaces)
     }
 
+    /// [`Ctx::can_ifaces`] plus the CAN_ISOTP protocol. Mainline:
+    /// can-isotp.ko. Ours: rcan_isotp.
+    pub fn isotp_ifaces(&mut self, n: usize) -> Result<Vec<u32>, String> {
+        let ifaces = self.can_ifaces(n)?;
+        if self.stack == Stack::Ours {
+            self.insmod(Module::Isotp, &[])?;
+            return Ok(ifaces);
+        }
+        let ko = self
+            .mainline_ko(Mainline::Isotp)
+            .ok_or("no kernel build directory (RCAN_KBUILD or --kbuild)")?;
+        sys::finit_module(&ko, &[]).map_err(|e| format!("insmod {}: {e}", ko.display()))?;
+        Ok(ifaces)
+    }
+
     /// Unregisters the interfaces [`Ctx::can_ifaces`] made, under any
     /// sockets bound to them. Ours: rmmod rcan_loop. Mainline:
     /// `ip link del` each vcan.
@@ -676,6 +702,7 @@ impl Ctx {
         }
         for m in [
             Mainline::Bcm,
+            Mainline::Isotp,
             Mainline::KvaserPci,
             Mainline::Sja1000,
             Mainline::CtuCanFdPci,
@@ -998,6 +1025,7 @@ mod tests {
                 "rcan_can",
                 "rcan_raw",
                 "rcan_bcm",
+                "rcan_isotp",
                 "rcan_loop",
                 "rcan_time",
                 "rcan_rtime",

@@ -298,6 +298,7 @@ fn install_autoload(ctx: &mut Ctx) -> TestResult {
     for (ty, proto, module) in [
         ("SOCK_RAW", 1, "rcan_raw"),
         ("SOCK_DGRAM", 2, "rcan_bcm"),
+        ("SOCK_DGRAM", 6, "rcan_isotp"),
         ("SOCK_RAW", 16, "rcan_can"),
         ("SOCK_DGRAM", 17, "rcan_dsor"),
     ] {

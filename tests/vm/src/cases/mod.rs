@@ -19,6 +19,7 @@ mod gateway;
 mod i82527;
 mod i82527_dev;
 mod install;
+mod isotp;
 mod leak;
 mod lifecycle;
 mod loopdrv;
@@ -218,6 +219,8 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         install::TESTS,
         bcm::TESTS,
         bcm::OURS,
+        isotp::TESTS,
+        isotp::OURS,
         netns::TESTS,
         netns::OURS,
         fd::TESTS,
@@ -319,8 +322,8 @@ fn rmmod_card_during_traffic(ctx: &mut Ctx, m: Module, i0: u32, i1: u32) -> Test
 mod tests {
     #[test]
     fn portable_names() {
-        // The prefixes say what a test needs: raw_/canutils_/candev_/bcm_
-        // and the daemons' canzlogd_/cantcpd_/powerd_ run on both stacks,
+        // The prefixes say what a test needs: raw_/canutils_/candev_/bcm_/
+        // isotp_ and the daemons' canzlogd_/cantcpd_/powerd_ run on both stacks,
         // everything else (mixed_, sja1000_ included) on ours only.
         for t in super::all() {
             let portable = [
@@ -328,6 +331,7 @@ mod tests {
                 "canutils_",
                 "candev_",
                 "bcm_",
+                "isotp_",
                 "canzlogd_",
                 "cantcpd_",
                 "powerd_",

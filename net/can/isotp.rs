@@ -1,0 +1,817 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! rcan_isotp: CAN_ISOTP (ISO 15765-2), mainline SocketCAN's ISO-TP
+//! transport, on the rcan stack (issue 41, step 2).
+//!
+//! `socket(PF_CAN, SOCK_DGRAM, CAN_ISOTP)`, options at `SOL_CAN_ISOTP`,
+//! `bind()` with `sockaddr_can.can_addr.tp = {rx_id, tx_id}` and an
+//! interface; then one PDU per `write()` and per `read()`. The option ABI,
+//! the bind checks, the frame formats and both state machines (sender and
+//! receiver, with their timers as pure state) are `rcan_core::isotp*`,
+//! host-tested; this file gives them a socket, a receive subscription, two
+//! timers, a transmit path and the blocking of `sendmsg`. See
+//! Documentation/networking/rcan/isotp.rst.
+//!
+//! Objects and their locks (lock order: RTNL, socket lock, `eng`):
+//!
+//! * [`IsotpSock`] (socket lock): the options as set before `bind`, the
+//!   binding. Process context only.
+//! * [`IsotpShared::eng`], allocated by the first `bind`: the [`Engine`]
+//!   (sender and receiver state, the PDU buffers, the copy of the options
+//!   and addresses in effect, the timers) under a `BhLock`
+//!   (`spin_lock_bh`, lockdep class `isotp_engine`; mainline's
+//!   `so->rx_lock`). Taken by `bind`, `sendmsg`, `release` and the
+//!   netdevice notifier (process context), the receive callback (NET_RX
+//!   softirq) and the timer callbacks (HRTIMER_SOFTIRQ softirq); never in
+//!   hardirq context, so it disables bottom halves, not interrupts.
+//!
+//! Every event of a socket (a received frame, an echo of its own frame, a
+//! timer expiry, a send request) runs its state machine under `eng`; the
+//! frame the machine asks for is sent, the socket error reported and the
+//! waiters woken after `eng` is released (the driver's transmit path runs
+//! outside it).
+//!
+//! Timers: one [`JobTimers`] per socket (slot [`TX_TIMER`] for the sender,
+//! [`RX_TIMER`] for the receiver), made by the first `bind` and kept in
+//! the engine; its data is a counted reference on the sock, so a callback
+//! always finds the sock. `release` takes it out of the engine and drops
+//! it, which cancels both timers and waits for a running callback before
+//! the memory goes (rust/glue/jobtimer.rs); that also breaks the
+//! reference cycle sock -> engine -> job -> sock. A cancellation that
+//! loses a race with a running callback (`try_cancel` under `eng`) is
+//! harmless: the machines ignore an expiry before their recorded deadline
+//! or with none armed.
+//!
+//! Blocking: `sendmsg` sleeps on the module's wait queue [`WAITQ`] until
+//! the sender is idle (a new transfer may start) or, with
+//! `CAN_ISOTP_WAIT_TX_DONE`, until its own transfer ended; every end of a
+//! transfer wakes the queue (all ISO-TP sockets share it; each waiter
+//! re-checks its own socket) and the socket's pollers: `poll` reports
+//! EPOLLOUT only while the sender is idle (`Proto::writable`).
+
+#![forbid(unsafe_code)]
+
+use crate::{glue, rcan_api, rcan_core};
+use core::sync::atomic::{AtomicBool, Ordering};
+use kernel::prelude::*;
+
+use crate::glue::module::{ModuleScope, ScopedModule};
+use glue::hrtimer::ktime_get_mono_ns;
+use glue::jobtimer::{JobCallback, JobRef, JobTimers, OnceBox};
+use glue::lock::{new_bh_spinlock, BhLock, WaitQueue, Waited};
+use glue::netdev::DevRef;
+use glue::neterr;
+use glue::params::Param;
+use glue::skb::UniqueSkb;
+use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
+use glue::sync::Rtnl;
+use kernel::alloc::KVVec;
+use kernel::c_str;
+use rcan_api::{
+    CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets,
+    RX_FILTER_CAN_ID, SOCK_DGRAM,
+};
+use rcan_core::frame::AnyFrame;
+use rcan_core::isotp::{
+    clamp_max_pdu_size, route, single_mask, Config, IsotpOptions, Route, TimerCmd, TpAddr,
+    CAN_ISOTP, CAN_ISOTP_LL_OPTS, CAN_ISOTP_OPTS, CAN_ISOTP_RECV_FC, CAN_ISOTP_RX_STMIN,
+    CAN_ISOTP_TX_STMIN, CAN_ISOTP_WAIT_TX_DONE, ISOTP_MIN_NAMELEN, MAX_OPTLEN, SOL_CAN_ISOTP,
+};
+use rcan_core::isotp_pci::LlFrame;
+use rcan_core::isotp_rx::{Rx, RxEvent, RxStep};
+use rcan_core::isotp_tx::{Tx, TxStep};
+
+/// The sender's timer slot.
+const TX_TIMER: usize = 0;
+/// The receiver's timer slot.
+const RX_TIMER: usize = 1;
+
+/// `max_pdu_size` (C shim `isotp_c.c`): the largest PDU sent or received,
+/// read at `bind` (clamped as mainline clamps it at load).
+const MAX_PDU_SIZE: Param<u32> = Param::new(0);
+
+/// Where `sendmsg` sleeps (module documentation). Woken at every end of a
+/// transfer, by `release` and by the notifier.
+static WAITQ: WaitQueue = WaitQueue::new(c_str!("rcan_isotp::WAITQ"));
+
+fn errno(e: i32) -> Error {
+    glue::errno(e)
+}
+
+type S = Sock<IsotpProto>;
+type Job = JobTimers<IsotpJob>;
+
+/// The timers' callback marker; a job's data is its socket.
+struct IsotpJob;
+
+/// The state of one bound (or once bound) socket, under `eng`.
+struct Engine {
+    /// Options and addresses in effect (copied at `bind`; fixed while
+    /// bound, as options cannot change then).
+    cfg: Config,
+    addr: TpAddr,
+    /// Bound (false again after `release` or the device's removal):
+    /// frames and timers are only acted upon while true.
+    bound: bool,
+    tx: Tx,
+    rx: Rx,
+    /// The PDU being sent (exactly its length).
+    txbuf: KVVec<u8>,
+    /// The reassembly buffer, `max_pdu_size` bytes (the largest PDU
+    /// accepted).
+    rxbuf: KVVec<u8>,
+    /// Generation of the last transfer started, and of the last one
+    /// ended with its result (`WAIT_TX_DONE` reports its own transfer's).
+    tx_gen: u64,
+    done_gen: u64,
+    done_res: Result<(), i32>,
+    /// The two timers; taken out (and dropped, waiting for callbacks) by
+    /// `release`.
+    job: Option<Job>,
+}
+
+/// What to do after `eng` is released.
+struct After {
+    frame: Option<(LlFrame, bool)>,
+    err: Option<i32>,
+    wake: bool,
+    deliver: Option<UniqueSkb>,
+}
+
+impl After {
+    fn new() -> Self {
+        After {
+            frame: None,
+            err: None,
+            wake: false,
+            deliver: None,
+        }
+    }
+
+    /// Sends the frame (with loopback: the echo confirms it went out),
+    /// queues a delivered PDU, reports the error, wakes senders. Process
+    /// or softirq context, `eng` not held. Returns the send's result.
+    fn run(self, sk: &S, ifindex: i32, tx_id: u32, cfg: &Config) -> Result {
+        let mut ret = Ok(());
+        if let Some((f, _)) = self.frame {
+            ret = send_frame(sk, ifindex, tx_id, cfg, &f);
+        }
+        if let Some(skb) = self.deliver {
+            // A full receive queue drops the PDU, as mainline.
+            let _ = sk.queue_rcv(skb.into_owned());
+        }
+        if let Some(e) = self.err {
+            sk.report_error(e);
+        }
+        if self.wake {
+            WAITQ.wake_all();
+            sk.wake_writers();
+        }
+        ret
+    }
+}
+
+/// Applies a timer command of a machine to timer `which`. `eng` held.
+fn timer(job: &Option<Job>, which: usize, cmd: TimerCmd) {
+    let Some(job) = job else {
+        return;
+    };
+    match cmd {
+        TimerCmd::Keep => {}
+        TimerCmd::Arm(at) => job.get().start(which, at),
+        // A callback already running finds its deadline gone.
+        TimerCmd::Cancel => {
+            let _ = job.get().try_cancel(which);
+        }
+    }
+}
+
+impl Engine {
+    /// Carries out a sender step. `eng` held.
+    fn tx_step(&mut self, st: TxStep, out: &mut After) {
+        timer(&self.job, TX_TIMER, st.timer);
+        if let Some(f) = st.frame {
+            out.frame = Some((f, st.wants_echo));
+        }
+        if let Some(res) = st.done {
+            self.done_gen = self.tx_gen;
+            self.done_res = res;
+            if let Err(e) = res {
+                out.err = Some(e);
+            }
+            out.wake = true;
+        }
+    }
+
+    /// Carries out a receiver step. `eng` held; any context (GFP_ATOMIC).
+    fn rx_step(&mut self, st: RxStep, ifindex: i32, tstamp: i64, out: &mut After) {
+        timer(&self.job, RX_TIMER, st.timer);
+        if let Some(f) = st.frame {
+            out.frame = Some((f, false));
+        }
+        match st.event {
+            Some(RxEvent::Deliver(n)) => {
+                let Some(pdu) = self.rxbuf.get(..n) else {
+                    return;
+                };
+                let Some(mut skb) = UniqueSkb::alloc(n as u32, glue::GFP_ATOMIC) else {
+                    return;
+                };
+                if !skb.put_data(pdu) {
+                    return;
+                }
+                // Mainline's isotp_rcv_skb: the cb holds the source
+                // address (family and interface, the rest zero).
+                let mut name = [0u8; ISOTP_MIN_NAMELEN];
+                name[..2].copy_from_slice(&rcan_core::sockaddr::AF_CAN.to_ne_bytes());
+                name[4..8].copy_from_slice(&ifindex.to_ne_bytes());
+                skb.cb_write(0, &name);
+                if tstamp != 0 {
+                    skb.set_tstamp(tstamp);
+                }
+                out.deliver = Some(skb);
+            }
+            Some(RxEvent::Error(e)) => out.err = Some(e),
+            None => {}
+        }
+    }
+
+    /// Ends both transfers without a result and cancels the timers (the
+    /// socket closes or loses its device). `eng` held.
+    fn abort(&mut self, out: &mut After) {
+        let st = self.tx.abort();
+        timer(&self.job, TX_TIMER, st.timer);
+        let st = self.rx.abort();
+        timer(&self.job, RX_TIMER, st.timer);
+        self.done_gen = self.tx_gen;
+        out.wake = true;
+    }
+}
+
+/// Builds and sends one frame of `cfg`'s link layer with `tx_id`, owned
+/// by `sk` (so that its echo names it), with loopback. Process or softirq
+/// context, `eng` not held.
+fn send_frame(sk: &S, ifindex: i32, tx_id: u32, cfg: &Config, f: &LlFrame) -> Result {
+    let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENXIO)?;
+    let mut img = [0u8; 72];
+    img[..4].copy_from_slice(&tx_id.to_ne_bytes());
+    img[4] = f.len;
+    let n = if cfg.ll.is_fd() {
+        img[5] = cfg.ll.tx_flags;
+        img[8..72].copy_from_slice(&f.data);
+        72
+    } else {
+        img[8..16].copy_from_slice(&f.data[..8]);
+        16
+    };
+    let skb =
+        glue::can::skb::alloc_image_for(sk, &dev, &img[..n], glue::GFP_ATOMIC).ok_or(ENOMEM)?;
+    rcan_api::send(skb, &dev, true)
+}
+
+impl JobCallback for IsotpJob {
+    type Data = SockRef<IsotpProto>;
+
+    /// HRTIMER_SOFTIRQ softirq: the sender's (N_Bs, echo, STmin gap) or
+    /// the receiver's (N_Cr) timer expired. A stale expiry does nothing
+    /// (the machines check their deadline).
+    fn expired(job: JobRef<'_, Self>, which: usize) {
+        let sk = job.data().sock();
+        let Some(eng) = sk.shared().eng.get() else {
+            return;
+        };
+        let now = ktime_get_mono_ns() as u64;
+        let mut out = After::new();
+        let (ifindex, tx_id, cfg) = {
+            let mut g = eng.lock();
+            let e = &mut *g;
+            if !e.bound {
+                return;
+            }
+            if which == TX_TIMER {
+                let st = e.tx.on_timer(&e.cfg, &e.txbuf, now);
+                e.tx_step(st, &mut out);
+            } else {
+                let st = e.rx.on_timer(now);
+                e.rx_step(st, e.addr.ifindex, 0, &mut out);
+            }
+            (e.addr.ifindex, e.addr.tx_id, e.cfg)
+        };
+        // A CF that could not be sent ends in ECOMM (no echo).
+        let _ = out.run(sk, ifindex, tx_id, &cfg);
+    }
+}
+
+/// A CAN_ISOTP socket's state under the socket lock.
+struct IsotpSock {
+    /// The options as set (copied into the engine at `bind`).
+    cfg: Config,
+    /// Bound to `addr` (false again after the device's removal).
+    bound: bool,
+    addr: TpAddr,
+}
+
+/// What the receive path, the timers and the lockless checks need.
+struct IsotpShared {
+    /// Mirrors `IsotpSock::bound` (written under the socket lock): the
+    /// lockless "not bound" checks of sendmsg and recvmsg.
+    bound: AtomicBool,
+    /// The engine, allocated by the first `bind` and kept until the sock
+    /// is freed.
+    eng: OnceBox<BhLock<Engine>>,
+}
+
+struct IsotpProto;
+
+/// This module's registrations (proto, CAN protocol, notifier).
+static MODULE: ProtoModule<IsotpProto> = ProtoModule::new();
+
+impl CanProtocol for IsotpProto {
+    const PROTOCOL: i32 = CAN_ISOTP;
+    const SOCK_TYPE: i32 = SOCK_DGRAM;
+    /// All state is in the socket; devices are looked up in the socket's
+    /// namespace.
+    const ALL_NAMESPACES: bool = true;
+
+    fn module() -> &'static ProtoModule<Self> {
+        &MODULE
+    }
+
+    /// NET_RX softirq, RCU read side (mainline `isotp_rcv` and
+    /// `isotp_rcv_echo`): frames on `rx_id` go to the machines as
+    /// `route()` says; our own frames on `tx_id` coming back are the
+    /// echoes the sender waits for.
+    fn rx(sk: &S, skb: RxSkb<'_>, _cookie: u32) {
+        let s = skb.skb();
+        let own = s.sent_by(sk);
+        let tstamp = s.tstamp();
+        let ifindex = skb.ifindex();
+        let Some((can_id, data, fd)) = AnyFrame::view(s.data()) else {
+            skb.done();
+            return;
+        };
+        let Some(eng) = sk.shared().eng.get() else {
+            skb.done();
+            return;
+        };
+        let now = ktime_get_mono_ns() as u64;
+        let mut out = After::new();
+        let (tx_id, cfg) = {
+            let mut g = eng.lock();
+            let e = &mut *g;
+            if !e.bound || ifindex != e.addr.ifindex {
+                drop(g);
+                skb.done();
+                return;
+            }
+            if own {
+                if can_id == e.addr.tx_id {
+                    let st = e.tx.on_echo(&e.cfg, &e.txbuf, now);
+                    e.tx_step(st, &mut out);
+                }
+            } else if can_id == e.addr.rx_id && e.cfg.registers_rx_id() {
+                match route(&e.cfg, fd, data, e.tx.is_idle(), e.rx.is_idle()) {
+                    Route::Drop => {}
+                    Route::Tx => {
+                        let st = e.tx.on_fc(&e.cfg, data, &e.txbuf, now);
+                        e.tx_step(st, &mut out);
+                    }
+                    Route::Rx => {
+                        let st = e.rx.on_frame(&e.cfg, data, &mut e.rxbuf, now);
+                        e.rx_step(st, ifindex, tstamp, &mut out);
+                    }
+                }
+            }
+            (e.addr.tx_id, e.cfg)
+        };
+        skb.done();
+        let _ = out.run(sk, ifindex, tx_id, &cfg);
+    }
+
+    /// Mainline `isotp_notify`. Process context, RTNL held. The bound
+    /// device going away unbinds the socket (ENODEV); unlike mainline,
+    /// running transfers end at once (timers cancelled, waiting senders
+    /// woken) instead of draining into a timeout. The bound device going
+    /// down reports ENETDOWN.
+    fn netdev_event(event: NetdevEvent, dev: &glue::netdev::NetDev, sockets: &Sockets<'_, Self>) {
+        if !dev.is_can() {
+            return;
+        }
+        let ifindex = dev.ifindex();
+        sockets.for_each(|sk| {
+            let mut s = sk.lock();
+            let hit = s.bound && s.addr.ifindex == ifindex;
+            if !hit {
+                return;
+            }
+            if event == NetdevEvent::Down {
+                drop(s);
+                sk.report_error(-neterr::ENETDOWN().to_errno());
+                return;
+            }
+            rcan_api::rx_remove(sk);
+            // Reported before the engine is unbound: a WAIT_TX_DONE
+            // sender that wakes (also spuriously, the queue is shared)
+            // and finds it unbound takes this error.
+            sk.report_error(-ENODEV.to_errno());
+            s.bound = false;
+            sk.shared().bound.store(false, Ordering::Relaxed);
+            let mut out = After::new();
+            if let Some(eng) = sk.shared().eng.get() {
+                let mut e = eng.lock();
+                e.bound = false;
+                e.abort(&mut out);
+            }
+            drop(s);
+            let _ = out.run(sk, 0, 0, &Config::default());
+        });
+    }
+}
+
+/// Allocates the engine of `sk` if it has none (first `bind`). Process
+/// context, socket lock held.
+fn engine(sk: &S) -> Result<&BhLock<Engine>> {
+    if let Some(e) = sk.shared().eng.get() {
+        return Ok(e);
+    }
+    let job = JobTimers::new(sk.to_ref(), sk)?;
+    let e = Engine {
+        cfg: Config::default(),
+        addr: TpAddr {
+            ifindex: 0,
+            rx_id: 0,
+            tx_id: 0,
+        },
+        bound: false,
+        tx: Tx::new(),
+        rx: Rx::new(),
+        txbuf: KVVec::new(),
+        rxbuf: KVVec::new(),
+        tx_gen: 0,
+        done_gen: 0,
+        done_res: Ok(()),
+        job: Some(job),
+    };
+    let l = new_bh_spinlock!(e, "isotp_engine")?;
+    sk.shared().eng.set(KBox::new(l, GFP_KERNEL)?)?;
+    sk.shared().eng.get().ok_or(ENOMEM)
+}
+
+/// Sleeps until `cond` holds on `eng` (interruptibly, no timeout, as
+/// mainline's `wait_event_interruptible`). Process context.
+fn wait_for(eng: &BhLock<Engine>, cond: impl Fn(&Engine) -> bool) -> Result {
+    match WAITQ.wait(i64::MAX, &|| cond(&eng.lock())) {
+        Waited::Ready => Ok(()),
+        Waited::TimedOut | Waited::Interrupted => Err(ERESTARTSYS),
+    }
+}
+
+impl glue::sock::Proto for IsotpProto {
+    type Data = IsotpSock;
+    type Shared = IsotpShared;
+
+    /// `poll` withholds EPOLLOUT while a transfer runs (mainline
+    /// `isotp_poll`); every end of a transfer wakes the socket's writers.
+    const HAS_WRITABLE: bool = true;
+
+    /// Process context (`poll`): whether the sender is idle.
+    fn writable(sk: &S) -> bool {
+        sk.shared()
+            .eng
+            .get()
+            .map_or(true, |e| e.lock().tx.is_idle())
+    }
+
+    fn new_shared() -> IsotpShared {
+        IsotpShared {
+            bound: AtomicBool::new(false),
+            eng: OnceBox::new(),
+        }
+    }
+
+    fn new_data() -> IsotpSock {
+        IsotpSock {
+            cfg: Config::default(),
+            bound: false,
+            addr: TpAddr {
+                ifindex: 0,
+                rx_id: 0,
+                tx_id: 0,
+            },
+        }
+    }
+
+    /// Mainline `isotp_release`: waits (interruptibly) for a running
+    /// transmission to end, as mainline does (a sender that closes right
+    /// after its write, as `isotpsend` does, still gets its PDU out);
+    /// then unsubscribes, ends the reception and the timers go (cancelled
+    /// and waited for; module documentation).
+    fn release(sk: &S) {
+        if let Some(eng) = sk.shared().eng.get() {
+            // A signal ends the wait; the transfer is then cut short.
+            let _ = wait_for(eng, |e| e.tx.is_idle() || !e.bound);
+        }
+        {
+            let mut rtnl = Rtnl::lock();
+            MODULE.sockets.get(&mut rtnl).remove(sk);
+        }
+        rcan_api::rx_remove(sk);
+        let mut s = sk.lock();
+        s.bound = false;
+        sk.shared().bound.store(false, Ordering::Relaxed);
+        let mut job = None;
+        let mut out = After::new();
+        if let Some(eng) = sk.shared().eng.get() {
+            let mut e = eng.lock();
+            e.bound = false;
+            e.abort(&mut out);
+            job = e.job.take();
+        }
+        drop(s);
+        // Cancels both timers and waits for a running callback, which
+        // finds the engine unbound and does nothing.
+        drop(job);
+        if out.wake {
+            WAITQ.wake_all();
+        }
+    }
+
+    /// Mainline `isotp_bind`, in its order of checks.
+    fn bind(sk: &S, addr: &[u8]) -> Result {
+        let mut s = sk.lock();
+        let a = TpAddr::parse(&s.cfg, addr).map_err(errno)?;
+        if s.bound {
+            return Err(EINVAL);
+        }
+        let eng = engine(sk)?;
+        {
+            let e = eng.lock();
+            if !e.tx.is_idle() || !e.rx.is_idle() {
+                return Err(EAGAIN);
+            }
+        }
+        a.check_distinct(&s.cfg).map_err(errno)?;
+        let dev = DevRef::by_index(sk.net(), a.ifindex).ok_or(ENODEV)?;
+        if !dev.is_can() {
+            return Err(ENODEV);
+        }
+        if dev.mtu() < u32::from(s.cfg.ll.mtu) {
+            return Err(EINVAL);
+        }
+        let down = !dev.is_up();
+        let ifindex = dev.ifindex();
+        drop(dev);
+        let max = clamp_max_pdu_size(MAX_PDU_SIZE.get()) as usize;
+        let mut rxbuf = KVVec::from_elem(0u8, max, GFP_KERNEL)?;
+        let fs = [
+            RxFilter {
+                kind: RX_FILTER_CAN_ID,
+                id: a.tx_id,
+                mask: single_mask(a.tx_id),
+            },
+            RxFilter {
+                kind: RX_FILTER_CAN_ID,
+                id: a.rx_id,
+                mask: single_mask(a.rx_id),
+            },
+        ];
+        let n = if s.cfg.registers_rx_id() { 2 } else { 1 };
+        rcan_api::rx_set(sk, 0, ifindex, &fs[..n], false, 0)?;
+        {
+            let mut e = eng.lock();
+            e.cfg = s.cfg;
+            e.addr = TpAddr { ifindex, ..a };
+            e.tx = Tx::new();
+            e.rx = Rx::new();
+            core::mem::swap(&mut e.rxbuf, &mut rxbuf);
+            e.bound = true;
+        }
+        drop(rxbuf);
+        s.addr = TpAddr { ifindex, ..a };
+        s.bound = true;
+        sk.shared().bound.store(true, Ordering::Relaxed);
+        drop(s);
+        if down {
+            sk.report_error(-neterr::ENETDOWN().to_errno());
+        }
+        Ok(())
+    }
+
+    fn connect(_sk: &S, _addr: &[u8], _flags: i32) -> Result {
+        Err(neterr::EOPNOTSUPP())
+    }
+
+    /// Mainline `isotp_getname`: the bound address (16 bytes); the peer's
+    /// is EOPNOTSUPP.
+    fn getname(sk: &S, peer: bool, out: &mut [u8]) -> Result<usize> {
+        if peer {
+            return Err(neterr::EOPNOTSUPP());
+        }
+        let s = sk.lock();
+        let b = s.addr.to_bytes();
+        out.get_mut(..b.len()).ok_or(EINVAL)?.copy_from_slice(&b);
+        Ok(b.len())
+    }
+
+    /// Mainline `isotp_sendmsg`: waits for (or, with MSG_DONTWAIT,
+    /// refuses with EAGAIN) a running transfer, starts this one, and with
+    /// `CAN_ISOTP_WAIT_TX_DONE` waits for its end and returns its result.
+    fn sendmsg(sk: &S, msg: &mut Msg, len: usize) -> Result<usize> {
+        if !sk.shared().bound.load(Ordering::Relaxed) {
+            return Err(neterr::EADDRNOTAVAIL());
+        }
+        let eng = sk.shared().eng.get().ok_or(neterr::EADDRNOTAVAIL())?;
+        let nonblock = msg.flags() & glue::msg::DONTWAIT != 0;
+        let idle_or_unbound = |e: &Engine| e.tx.is_idle() || !e.bound;
+        if !idle_or_unbound(&eng.lock()) {
+            if nonblock {
+                return Err(EAGAIN);
+            }
+            wait_for(eng, idle_or_unbound)?;
+        }
+        let (cfg, max) = {
+            let e = eng.lock();
+            if !e.bound {
+                return Err(neterr::EADDRNOTAVAIL());
+            }
+            (e.cfg, e.rxbuf.len())
+        };
+        cfg.check_send_len(len, max as u32).map_err(errno)?;
+        let mut buf = KVVec::from_elem(0u8, len, GFP_KERNEL)?;
+        msg.copy_from_user(&mut buf)?;
+        let now = ktime_get_mono_ns() as u64;
+        loop {
+            let mut out = After::new();
+            let r = {
+                let mut g = eng.lock();
+                let e = &mut *g;
+                if !e.bound {
+                    return Err(neterr::EADDRNOTAVAIL());
+                }
+                match e.tx.start(&e.cfg, &buf, now) {
+                    Ok(st) => {
+                        core::mem::swap(&mut e.txbuf, &mut buf);
+                        e.tx_gen += 1;
+                        e.tx_step(st, &mut out);
+                        Ok((e.tx_gen, e.addr.ifindex, e.addr.tx_id))
+                    }
+                    Err(err) => Err(err),
+                }
+            };
+            let (gen, ifindex, tx_id) = match r {
+                Ok(v) => v,
+                // Another sendmsg of this socket took the sender first.
+                Err(err) if err == rcan_core::isotp::EAGAIN => {
+                    if nonblock {
+                        return Err(EAGAIN);
+                    }
+                    wait_for(eng, idle_or_unbound)?;
+                    continue;
+                }
+                Err(err) => return Err(errno(err)),
+            };
+            drop(buf);
+            if let Err(err) = out.run(sk, ifindex, tx_id, &cfg) {
+                // The first frame did not go out: no transfer.
+                let mut g = eng.lock();
+                let e = &mut *g;
+                if e.tx_gen == gen {
+                    let st = e.tx.abort();
+                    timer(&e.job, TX_TIMER, st.timer);
+                    e.done_gen = gen;
+                }
+                drop(g);
+                WAITQ.wake_all();
+                sk.wake_writers();
+                return Err(err);
+            }
+            if !cfg.has(CAN_ISOTP_WAIT_TX_DONE) {
+                return Ok(len);
+            }
+            let done = |e: &Engine| e.done_gen >= gen || !e.bound;
+            if let Err(err) = wait_for(eng, done) {
+                // Interrupted: mainline ends the transfer.
+                let mut g = eng.lock();
+                let e = &mut *g;
+                if e.tx_gen == gen && e.done_gen < gen {
+                    let st = e.tx.abort();
+                    timer(&e.job, TX_TIMER, st.timer);
+                    e.done_gen = gen;
+                }
+                drop(g);
+                WAITQ.wake_all();
+                sk.wake_writers();
+                return Err(err);
+            }
+            let res = {
+                let e = eng.lock();
+                if e.done_gen == gen && e.bound {
+                    e.done_res
+                } else {
+                    Ok(())
+                }
+            };
+            // Drained so that poll()/SO_ERROR see no stale error, as
+            // mainline.
+            let pending = sk.take_error();
+            return match res {
+                Err(e) => Err(errno(e)),
+                Ok(()) if pending != 0 && !sk.shared().bound.load(Ordering::Relaxed) => {
+                    Err(errno(pending))
+                }
+                Ok(()) => Ok(len),
+            };
+        }
+    }
+
+    /// Mainline `isotp_recvmsg`: one PDU per datagram; MSG_TRUNC when the
+    /// buffer is shorter (and, asked for, the PDU's full length returned);
+    /// the source address is 16 bytes (family and interface).
+    fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
+        let allowed = glue::msg::DONTWAIT | glue::msg::TRUNC | MSG_PEEK | MSG_CMSG_COMPAT;
+        if flags as u32 & !allowed != 0 {
+            return Err(EINVAL);
+        }
+        if !sk.shared().bound.load(Ordering::Relaxed) {
+            return Err(neterr::EADDRNOTAVAIL());
+        }
+        let skb = sk.recv_datagram(flags)?;
+        let n = skb.len() as usize;
+        let size = if len < n {
+            msg.add_flags(glue::msg::TRUNC);
+            len
+        } else {
+            n
+        };
+        if let Err(e) = msg.copy_from_skb(&skb, 0, size) {
+            sk.free_datagram(skb);
+            return Err(e);
+        }
+        msg.recv_cmsgs(sk, &skb);
+        let mut name = [0u8; ISOTP_MIN_NAMELEN];
+        skb.cb_read(0, &mut name);
+        msg.set_name(&name);
+        sk.free_datagram(skb);
+        Ok(if flags as u32 & glue::msg::TRUNC != 0 {
+            n
+        } else {
+            size
+        })
+    }
+
+    /// Mainline `isotp_setsockopt` (checks in `rcan_core::isotp`). The
+    /// value is read from user memory (EFAULT) only where mainline reads
+    /// it: at the right level, unbound, a known option of its exact size;
+    /// otherwise the parser gets the length alone (zeros) and answers
+    /// EINVAL, EISCONN or ENOPROTOOPT as mainline does. Process context.
+    fn setsockopt(sk: &S, level: i32, name: i32, opt: &OptIn) -> Result {
+        let size = match name {
+            CAN_ISOTP_OPTS => IsotpOptions::SIZE,
+            CAN_ISOTP_RECV_FC | CAN_ISOTP_LL_OPTS => 3,
+            CAN_ISOTP_TX_STMIN | CAN_ISOTP_RX_STMIN => 4,
+            _ => 0,
+        };
+        let mut val = [0u8; MAX_OPTLEN + 1];
+        let n = opt.len().min(MAX_OPTLEN + 1);
+        let mut s = sk.lock();
+        let bound = s.bound;
+        if level == SOL_CAN_ISOTP && !bound && size != 0 && n == size {
+            opt.read(&mut val[..n])?;
+        }
+        s.cfg
+            .setsockopt(level, name, &val[..n], bound)
+            .map_err(errno)
+    }
+
+    /// Mainline `isotp_getsockopt`.
+    fn getsockopt(sk: &S, level: i32, name: i32, opt: &OptOut) -> Result {
+        let len = opt.len()?;
+        let (img, n) = {
+            let s = sk.lock();
+            s.cfg.getsockopt(level, name, len).map_err(errno)?
+        };
+        opt.set_len(n as i32)?;
+        opt.write(&img[..n])
+    }
+}
+
+/// `MSG_PEEK` and `MSG_CMSG_COMPAT` of `<linux/socket.h>`.
+const MSG_PEEK: u32 = 2;
+const MSG_CMSG_COMPAT: u32 = 0x8000_0000;
+
+/// The module: its registrations, undone when it is dropped (unload).
+pub(crate) struct IsotpModule {
+    _reg: ProtoRegistration<IsotpProto>,
+}
+
+impl ScopedModule for IsotpModule {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
+        let reg = MODULE.register(c_str!("CAN_ISOTP"), scope)?;
+        pr_info!(
+            "CAN_ISOTP ({}) registered, max_pdu_size {}\n",
+            CAN_ISOTP,
+            clamp_max_pdu_size(MAX_PDU_SIZE.get())
+        );
+        Ok(IsotpModule { _reg: reg })
+    }
+}

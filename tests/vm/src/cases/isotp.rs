@@ -1,0 +1,912 @@
+// SPDX-License-Identifier: GPL-2.0
+//! CAN_ISOTP (ISO 15765-2) as a user sees it: can-utils' `isotpsend` and
+//! `isotprecv` unchanged, and `socket(PF_CAN, SOCK_DGRAM, CAN_ISOTP)`
+//! driven directly against a CAN_RAW peer that plays the other end of
+//! the bus (answers flow control, or does not). The frames on the bus are
+//! watched with a CAN_RAW sniffer and checked against ISO 15765-2 as
+//! written here, independently of rcan-core. Portable: the same tests
+//! pass against mainline's can-isotp.ko (mainline stage) and rcan_isotp
+//! (issue 41); the teardown test is ours only (it unloads our modules).
+//! No test sleeps to synchronise: tools are started once their sockets
+//! wait, frames are awaited, timeouts are the protocol's (1 s N_Bs/N_Cr).
+
+use std::os::fd::{AsFd, OwnedFd};
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+use std::sync::Arc;
+use std::thread::{self, JoinHandle};
+use std::time::{Duration, Instant};
+
+use rcan_uapi::raw;
+
+use crate::canraw;
+use crate::check::{ensure, errno_name, wait_blocked, wait_until, OrFail, TestResult, SETTLE};
+use crate::ctx::{dev, Ctx, Module};
+use crate::tools::{self, TOOL_LIMIT};
+
+use super::{portable_table, test_table};
+
+pub static TESTS: &[crate::Test] = portable_table![
+    ;
+    stack:
+    isotp_canutils_classic,
+    isotp_canutils_fd,
+    isotp_socket_errnos,
+];
+
+pub static OURS: &[crate::Test] = test_table![teardown_isotp_transfers];
+
+const CAN_ISOTP: i32 = 6;
+const SOL_CAN_ISOTP: i32 = 106;
+const CAN_ISOTP_OPTS: i32 = 1;
+const CAN_ISOTP_LL_OPTS: i32 = 5;
+const CAN_ISOTP_WAIT_TX_DONE: u32 = 0x0400;
+const SOL_CAN_RAW: i32 = 101;
+const CAN_RAW_FD_FRAMES: i32 = 5;
+const CANFD_BRS: u8 = 0x01;
+/// Bytes of the ISO-TP address (`ISOTP_MIN_NAMELEN`) and of a whole
+/// `struct sockaddr_can`.
+const TP_NAMELEN: usize = 16;
+const SOCKADDR_CAN: usize = 24;
+
+/// A frame as the sniffer saw it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct Fr {
+    id: u32,
+    fd: bool,
+    flags: u8,
+    data: Vec<u8>,
+}
+
+fn hex(b: &[u8]) -> String {
+    b.iter()
+        .map(|x| format!("{x:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn show(f: &Fr) -> String {
+    format!(
+        "{:03X}{}[{}] {}",
+        f.id,
+        if f.fd { "##" } else { "#" },
+        f.data.len(),
+        hex(&f.data)
+    )
+}
+
+/// `isotpsend -D n`'s PDU: byte i is (i mod 255) + 1.
+fn pattern(n: usize) -> Vec<u8> {
+    (0..n).map(|i| ((i % 255) + 1) as u8).collect()
+}
+
+/// A CAN_RAW socket on `ifindex` taking CAN FD frames too.
+fn raw_open(ifindex: u32) -> Result<OwnedFd, String> {
+    let s = raw::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW).or_fail("socket(CAN_RAW)")?;
+    raw::setsockopt(&s, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &1i32.to_ne_bytes())
+        .or_fail("CAN_RAW_FD_FRAMES")?;
+    raw::bind(&s, &canraw::addr_bytes(libc::AF_CAN as u16, ifindex)).or_fail("bind CAN_RAW")?;
+    Ok(s)
+}
+
+/// The next frame on `s` within `t`, or None.
+fn raw_read(s: impl AsFd, t: Duration) -> Result<Option<Fr>, String> {
+    raw::set_timeout(&s, libc::SO_RCVTIMEO, t).or_fail("SO_RCVTIMEO")?;
+    let mut b = [0u8; 72];
+    match raw::read(&s, &mut b) {
+        Ok(n) if n == 16 || n == 72 => {
+            let len = usize::from(b[4]).min(n - 8);
+            Ok(Some(Fr {
+                id: u32::from_ne_bytes([b[0], b[1], b[2], b[3]]),
+                fd: n == 72,
+                flags: b[5],
+                data: b[8..8 + len].to_vec(),
+            }))
+        }
+        Ok(n) => Err(format!("CAN_RAW read {n} bytes")),
+        Err(e) if matches!(e.raw_os_error(), Some(libc::EAGAIN)) => Ok(None),
+        Err(e) => Err(format!("CAN_RAW read: {e}")),
+    }
+}
+
+/// The next frame with identifier `id` on `s` within `t` (others are
+/// skipped).
+fn raw_expect(s: impl AsFd, id: u32, t: Duration, what: &str) -> Result<Fr, String> {
+    let end = Instant::now() + t;
+    loop {
+        let left = end.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(format!("no {what} (id {id:03X}) within {t:?}"));
+        }
+        if let Some(f) = raw_read(&s, left)? {
+            if f.id == id {
+                return Ok(f);
+            }
+        }
+    }
+}
+
+/// Sends a classic frame `id#data` on `s`.
+fn raw_send(s: impl AsFd, id: u32, data: &[u8]) -> TestResult {
+    let mut b = [0u8; 16];
+    b[..4].copy_from_slice(&id.to_ne_bytes());
+    b[4] = data.len() as u8;
+    b[8..8 + data.len()].copy_from_slice(data);
+    raw::write(s, &b).or_fail(format!("send {id:03X}#{}", hex(data)))?;
+    Ok(())
+}
+
+/// Every frame on an interface from now until [`Sniffer::stop`].
+struct Sniffer {
+    stop: Arc<AtomicBool>,
+    h: JoinHandle<Result<Vec<Fr>, String>>,
+}
+
+impl Sniffer {
+    fn start(ifindex: u32) -> Result<Self, String> {
+        let s = raw_open(ifindex)?;
+        // Room for a few thousand frames (root: above rmem_max).
+        raw::setsockopt(
+            &s,
+            libc::SOL_SOCKET,
+            libc::SO_RCVBUFFORCE,
+            &(8i32 << 20).to_ne_bytes(),
+        )
+        .or_fail("SO_RCVBUFFORCE")?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let st = Arc::clone(&stop);
+        let h = thread::spawn(move || {
+            let mut v = Vec::new();
+            loop {
+                match raw_read(&s, Duration::from_millis(100))? {
+                    Some(f) => v.push(f),
+                    // Queue drained: stop once asked to.
+                    None if st.load(Ordering::SeqCst) => return Ok(v),
+                    None => {}
+                }
+            }
+        });
+        Ok(Sniffer { stop, h })
+    }
+
+    /// The frames seen; call after the traffic ended (every frame is then
+    /// queued on the sniffer's socket).
+    fn stop(self) -> Result<Vec<Fr>, String> {
+        self.stop.store(true, Ordering::SeqCst);
+        self.h.join().map_err(|_| "sniffer panicked".to_string())?
+    }
+}
+
+/// Runs `isotprecv recv_args`, once it waits `isotpsend send_args`, and
+/// checks that the receiver printed exactly `want`.
+fn canutils_pair(send_args: &[&str], recv_args: &[&str], want: &[u8]) -> TestResult {
+    let mut r = tools::spawn("isotprecv", recv_args, None)?;
+    r.wait_listening()?;
+    let s = tools::spawn("isotpsend", send_args, None)?.finish(TOOL_LIMIT)?;
+    ensure!(
+        s.status.success(),
+        "isotpsend {}: {}: {}",
+        send_args.join(" "),
+        s.status,
+        s.stderr.trim()
+    );
+    let out = r.finish(TOOL_LIMIT)?;
+    ensure!(
+        out.status.success(),
+        "isotprecv: {}: {}",
+        out.status,
+        out.stderr.trim()
+    );
+    let got = out.stdout.trim();
+    let exp = hex(want);
+    ensure!(
+        got == exp,
+        "isotprecv {} printed {} bytes, want the {} sent: {:.120}...",
+        recv_args.join(" "),
+        got.split_whitespace().count(),
+        want.len(),
+        got
+    );
+    Ok(())
+}
+
+/// Checks the frames of one multi-frame transfer from `tx` to `rx` (ids)
+/// among `frames`: a first frame for `len` bytes (32-bit FF_DL above
+/// 4095), consecutive frames with sequence numbers 1, 2, ... mod 16
+/// carrying the PDU, of `dl` bytes each but the last, a flow control
+/// `fc` (its first three bytes) after the FF and after every `bs` CFs.
+/// Returns the frames of the transfer from `tx`.
+fn check_transfer(
+    frames: &[Fr],
+    tx: u32,
+    rx: u32,
+    pdu: &[u8],
+    dl: usize,
+    bs: usize,
+    fc: [u8; 3],
+) -> Result<Vec<Fr>, String> {
+    let ours: Vec<&Fr> = frames.iter().filter(|f| f.id == tx || f.id == rx).collect();
+    let bad = |i: usize, why: &str| -> String {
+        let from = i.saturating_sub(2);
+        let ctx: Vec<String> = ours[from..(i + 3).min(ours.len())]
+            .iter()
+            .map(|f| show(f))
+            .collect();
+        format!("frame {i} of the transfer: {why}: {}", ctx.join(" | "))
+    };
+    ensure!(!ours.is_empty(), "no frames on {tx:03X}/{rx:03X}");
+    let ff = ours[0];
+    ensure!(ff.id == tx, "{}", bad(0, "not from the sender"));
+    ensure!(ff.data.len() == dl, "{}", bad(0, "FF not of TX_DL"));
+    let (hdr, head) = if pdu.len() > 4095 {
+        let mut h = vec![0x10, 0];
+        h.extend_from_slice(&(pdu.len() as u32).to_be_bytes());
+        (h, dl - 6)
+    } else {
+        (vec![0x10 | (pdu.len() >> 8) as u8, pdu.len() as u8], dl - 2)
+    };
+    ensure!(ff.data[..hdr.len()] == hdr[..], "{}", bad(0, "FF header"));
+    ensure!(ff.data[hdr.len()..] == pdu[..head], "{}", bad(0, "FF data"));
+    let mut got = head;
+    let mut sn = 1u8;
+    let mut in_block = 0usize;
+    let mut want_fc = true;
+    let mut txf = vec![ff.clone()];
+    for (i, f) in ours.iter().enumerate().skip(1) {
+        if f.id == rx {
+            ensure!(want_fc, "{}", bad(i, "FC not asked for"));
+            ensure!(
+                f.data.len() >= 3 && f.data[..3] == fc,
+                "{}",
+                bad(i, "FC content")
+            );
+            want_fc = false;
+            in_block = 0;
+            continue;
+        }
+        ensure!(!want_fc, "{}", bad(i, "CF before the FC"));
+        ensure!(got < pdu.len(), "{}", bad(i, "CF after the PDU's end"));
+        ensure!(
+            f.data.first() == Some(&(0x20 | sn)),
+            "{}",
+            bad(i, "CF sequence number")
+        );
+        let n = (pdu.len() - got).min(dl - 1);
+        ensure!(f.data.len() > n, "{}", bad(i, "CF too short"));
+        ensure!(
+            f.data[1..1 + n] == pdu[got..got + n],
+            "{}",
+            bad(i, "CF data")
+        );
+        if got + n < pdu.len() {
+            ensure!(f.data.len() == dl, "{}", bad(i, "CF not of TX_DL"));
+        }
+        got += n;
+        sn = (sn + 1) & 0x0F;
+        in_block += 1;
+        if bs != 0 && in_block == bs && got < pdu.len() {
+            want_fc = true;
+        }
+        txf.push((*f).clone());
+    }
+    ensure!(
+        got == pdu.len(),
+        "the CFs carried {got} of {} bytes",
+        pdu.len()
+    );
+    Ok(txf)
+}
+
+/// can-utils on one classic interface (isotpsend | isotprecv, normal
+/// addressing 123 -> 321), the bus watched:
+/// 1. A 3-byte PDU: one single frame `03 01 02 03`, no flow control.
+/// 2. 4095 bytes (the largest 12-bit FF_DL) with the receiver's block
+///    size 4 and STmin 1 ms (`-b 4 -m 1`): FF, an FC `30 04 01` before
+///    every block of 4 CFs, 585 CFs with sequence numbers wrapping, the
+///    PDU intact.
+/// 3. 4999 bytes (32-bit FF_DL escape `10 00 00 00 13 87`) with padding
+///    both ways and padding checks on both sides (`-p AA:CC -P a`,
+///    `-p CC:AA -P a`): every frame 8 bytes long, the last CF filled with
+///    AA, the FCs with CC; the PDU intact (isotprecv reads into 5000
+///    bytes).
+/// 4. 100 bytes with extended addressing and a separate receive address
+///    (`-x 55:AA`, `-x AA:55`): every frame of the sender starts with 55,
+///    the FC with AA, and behind that byte the transfer is as usual (FF
+///    of 5 data bytes, CFs of 6).
+fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.isotp_ifaces(1)?[0];
+    let c0 = dev(0);
+    let base = ["-s", "123", "-d", "321"];
+    let back = ["-s", "321", "-d", "123"];
+
+    // 1. Single frame.
+    let sn = Sniffer::start(i0)?;
+    let pdu = pattern(3);
+    canutils_pair(
+        &[&base[..], &["-D", "3", &c0]].concat(),
+        &[&back[..], &[&c0]].concat(),
+        &pdu,
+    )?;
+    let fr = sn.stop()?;
+    let want = [Fr {
+        id: 0x123,
+        fd: false,
+        flags: 0,
+        data: vec![3, 1, 2, 3],
+    }];
+    ensure!(
+        fr.iter()
+            .filter(|f| f.id == 0x123 || f.id == 0x321)
+            .cloned()
+            .collect::<Vec<_>>()
+            == want,
+        "SF: frames {:?}",
+        fr.iter().map(show).collect::<Vec<_>>()
+    );
+
+    // 2. 4095 bytes, BS 4, STmin 1 ms.
+    let sn = Sniffer::start(i0)?;
+    let pdu = pattern(4095);
+    canutils_pair(
+        &[&base[..], &["-D", "4095", &c0]].concat(),
+        &[&back[..], &["-b", "4", "-m", "1", &c0]].concat(),
+        &pdu,
+    )?;
+    let fr = sn.stop()?;
+    let tx = check_transfer(&fr, 0x123, 0x321, &pdu, 8, 4, [0x30, 4, 1])?;
+    ensure!(
+        tx.len() == 586,
+        "4095 bytes: {} frames from the sender, want FF + 585 CFs",
+        tx.len()
+    );
+    let fcs = fr.iter().filter(|f| f.id == 0x321).count();
+    ensure!(fcs == 147, "4095 bytes in blocks of 4: {fcs} FCs, want 147");
+
+    // 3. 4999 bytes, padding and padding checks both ways.
+    let sn = Sniffer::start(i0)?;
+    let pdu = pattern(4999);
+    canutils_pair(
+        &[&base[..], &["-p", "AA:CC", "-P", "a", "-D", "4999", &c0]].concat(),
+        &[&back[..], &["-p", "CC:AA", "-P", "a", &c0]].concat(),
+        &pdu,
+    )?;
+    let fr = sn.stop()?;
+    let tx = check_transfer(&fr, 0x123, 0x321, &pdu, 8, 0, [0x30, 0, 0])?;
+    ensure!(
+        tx.iter().all(|f| f.data.len() == 8),
+        "padded sender: a frame shorter than 8: {:?}",
+        tx.iter()
+            .filter(|f| f.data.len() != 8)
+            .map(show)
+            .collect::<Vec<_>>()
+    );
+    let last = tx.last().ok_or("no frames")?;
+    // 4999 = 2 in the FF + 713 CFs of 7 + 6 in the last (714th) CF.
+    ensure!(
+        last.data[0] == 0x20 | (714 % 16) as u8
+            && last.data[1..7] == pdu[4993..]
+            && last.data[7] == 0xAA,
+        "last CF {}, want CF 714 with 6 data bytes padded with AA",
+        show(last)
+    );
+    let fcs: Vec<&Fr> = fr.iter().filter(|f| f.id == 0x321).collect();
+    ensure!(
+        fcs.len() == 1 && fcs[0].data == [0x30, 0, 0, 0xCC, 0xCC, 0xCC, 0xCC, 0xCC],
+        "padded FC: {:?}",
+        fcs.iter().map(|f| show(f)).collect::<Vec<_>>()
+    );
+
+    // 4. Extended addressing with a separate receive address.
+    let sn = Sniffer::start(i0)?;
+    let pdu = pattern(100);
+    canutils_pair(
+        &[&base[..], &["-x", "55:AA", "-D", "100", &c0]].concat(),
+        &[&back[..], &["-x", "AA:55", &c0]].concat(),
+        &pdu,
+    )?;
+    let fr = sn.stop()?;
+    let mut stripped = Vec::new();
+    for f in fr.iter().filter(|f| f.id == 0x123 || f.id == 0x321) {
+        let want = if f.id == 0x123 { 0x55 } else { 0xAA };
+        ensure!(
+            f.data.first() == Some(&want),
+            "extended addressing: {} does not start with {want:02X}",
+            show(f)
+        );
+        stripped.push(Fr {
+            data: f.data[1..].to_vec(),
+            ..f.clone()
+        });
+    }
+    let tx = check_transfer(&stripped, 0x123, 0x321, &pdu, 7, 0, [0x30, 0, 0])?;
+    // 100 = 5 in the FF + 15 CFs of 6 + 5.
+    ensure!(
+        tx.len() == 17,
+        "extended addressing: {} frames from the sender, want 17",
+        tx.len()
+    );
+    Ok(())
+}
+
+/// Sets `c0`'s MTU (the interface goes down for it and up again).
+fn set_mtu(ctx: &Ctx, c0: &str, mtu: &str) -> TestResult {
+    ctx.link_down(c0)?;
+    let out = tools::spawn("ip", &["link", "set", c0, "mtu", mtu], None)?.finish(TOOL_LIMIT)?;
+    ensure!(
+        out.status.success(),
+        "ip link set {c0} mtu {mtu}: {}",
+        out.stderr.trim()
+    );
+    ctx.link_up(c0)
+}
+
+/// can-utils over CAN FD (`-L 72:64:1`: TX_DL 64, BRS) on an FD
+/// interface (MTU 72):
+/// 1. 62 bytes: one FD single frame of 64 bytes with the escape
+///    `00 3E`, BRS set.
+/// 2. 4095 bytes: an FD FF and FD CFs of 64 bytes (63 data bytes each),
+///    BRS on every frame, the FC an FD frame too; the PDU intact.
+/// The interface's MTU is 16 again afterwards.
+fn isotp_canutils_fd(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.isotp_ifaces(1)?[0];
+    let c0 = dev(0);
+    set_mtu(ctx, &c0, "72")?;
+    let r = (|| {
+        let ll = ["-L", "72:64:1"];
+        let sn = Sniffer::start(i0)?;
+        let pdu = pattern(62);
+        canutils_pair(
+            &[&ll[..], &["-s", "123", "-d", "321", "-D", "62", &c0]].concat(),
+            &[&ll[..], &["-s", "321", "-d", "123", &c0]].concat(),
+            &pdu,
+        )?;
+        let fr = sn.stop()?;
+        let tx: Vec<&Fr> = fr.iter().filter(|f| f.id == 0x123).collect();
+        ensure!(
+            tx.len() == 1
+                && tx[0].fd
+                && tx[0].flags & CANFD_BRS != 0
+                && tx[0].data.len() == 64
+                && tx[0].data[..2] == [0, 62]
+                && tx[0].data[2..] == pdu[..],
+            "FD SF of 62 bytes: {:?}",
+            tx.iter().map(|f| show(f)).collect::<Vec<_>>()
+        );
+
+        let sn = Sniffer::start(i0)?;
+        let pdu = pattern(4095);
+        canutils_pair(
+            &[&ll[..], &["-s", "123", "-d", "321", "-D", "4095", &c0]].concat(),
+            &[&ll[..], &["-s", "321", "-d", "123", &c0]].concat(),
+            &pdu,
+        )?;
+        let fr = sn.stop()?;
+        let tx = check_transfer(&fr, 0x123, 0x321, &pdu, 64, 0, [0x30, 0, 0])?;
+        ensure!(
+            tx.iter().all(|f| f.fd && f.flags & CANFD_BRS != 0),
+            "FD transfer: a frame without FD or BRS: {:?}",
+            tx.iter()
+                .filter(|f| !f.fd || f.flags & CANFD_BRS == 0)
+                .map(show)
+                .collect::<Vec<_>>()
+        );
+        // 4095 = 62 in the FF + 64 CFs of 63 + 1.
+        ensure!(
+            tx.len() == 66,
+            "FD 4095 bytes: {} frames from the sender, want 66",
+            tx.len()
+        );
+        ensure!(
+            fr.iter().filter(|f| f.id == 0x321).all(|f| f.fd),
+            "the FC of an FD receiver is not an FD frame"
+        );
+        Ok(())
+    })();
+    let restore = set_mtu(ctx, &c0, "16");
+    r.and(restore)
+}
+
+/// An ISO-TP socket with `CAN_ISOTP_OPTS` flags `flags` (defaults
+/// otherwise), not bound.
+fn tp_socket(flags: u32) -> Result<OwnedFd, String> {
+    let s = raw::socket(libc::AF_CAN, libc::SOCK_DGRAM, CAN_ISOTP).or_fail("socket(CAN_ISOTP)")?;
+    if flags != 0 {
+        raw::setsockopt(&s, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &opts(flags))
+            .or_fail("CAN_ISOTP_OPTS")?;
+    }
+    Ok(s)
+}
+
+/// `struct can_isotp_options` with `flags`, mainline's other defaults.
+fn opts(flags: u32) -> [u8; 12] {
+    let mut o = [0u8; 12];
+    o[..4].copy_from_slice(&flags.to_ne_bytes());
+    o[4..8].copy_from_slice(&50_000u32.to_ne_bytes());
+    o[9] = 0xCC;
+    o[10] = 0xCC;
+    o
+}
+
+/// `struct sockaddr_can` for ISO-TP: `can_addr.tp = {rx_id, tx_id}`.
+fn tp_addr(ifindex: u32, rx: u32, tx: u32) -> [u8; SOCKADDR_CAN] {
+    let mut a = [0u8; SOCKADDR_CAN];
+    a[..2].copy_from_slice(&(libc::AF_CAN as u16).to_ne_bytes());
+    a[4..8].copy_from_slice(&ifindex.to_ne_bytes());
+    a[8..12].copy_from_slice(&rx.to_ne_bytes());
+    a[12..16].copy_from_slice(&tx.to_ne_bytes());
+    a
+}
+
+fn tp_bound(flags: u32, ifindex: u32, rx: u32, tx: u32) -> Result<OwnedFd, String> {
+    let s = tp_socket(flags)?;
+    raw::bind(&s, &tp_addr(ifindex, rx, tx)).or_fail(format!("bind rx {rx:03X} tx {tx:03X}"))?;
+    Ok(s)
+}
+
+/// The errno of `r`, or a failure naming `what` if it succeeded.
+fn errno_of<T: std::fmt::Debug>(r: std::io::Result<T>, what: &str) -> Result<i32, String> {
+    match r {
+        Ok(v) => Err(format!("{what}: succeeded ({v:?}), want an error")),
+        Err(e) => Ok(e.raw_os_error().unwrap_or(0)),
+    }
+}
+
+fn want_errno<T: std::fmt::Debug>(r: std::io::Result<T>, want: i32, what: &str) -> TestResult {
+    let got = errno_of(r, what)?;
+    ensure!(
+        got == want,
+        "{what}: {}, want {} as mainline",
+        errno_name(got),
+        errno_name(want)
+    );
+    Ok(())
+}
+
+/// `poll` for POLLOUT on `s` for at most `ms` milliseconds: the revents.
+fn poll_out(s: impl AsFd, ms: i32) -> Result<i16, String> {
+    use std::os::fd::AsRawFd;
+    let mut p = libc::pollfd {
+        fd: s.as_fd().as_raw_fd(),
+        events: libc::POLLOUT,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd, alive for the call.
+    let r = unsafe { libc::poll(&mut p, 1, ms) };
+    ensure!(r >= 0, "poll: {}", std::io::Error::last_os_error());
+    Ok(p.revents)
+}
+
+/// Writes `pdu` on `s` in a thread (it may block); the handle gives its
+/// result.
+fn write_bg(s: &Arc<OwnedFd>, pdu: Vec<u8>) -> JoinHandle<std::io::Result<usize>> {
+    let s = Arc::clone(s);
+    thread::spawn(move || raw::write(&*s, &pdu))
+}
+
+fn joined(h: JoinHandle<std::io::Result<usize>>) -> Result<std::io::Result<usize>, String> {
+    h.join().map_err(|_| "writer thread panicked".to_string())
+}
+
+/// The socket-level API and its errno, with a CAN_RAW peer playing the
+/// other end (all within one test: a bound socket costs little, the
+/// timeouts are the protocol's 1 s):
+/// 1. Unbound: write and read EADDRNOTAVAIL; option errno (wrong length
+///    EINVAL, unknown name ENOPROTOOPT, bad link layer EINVAL) and the
+///    default CAN_ISOTP_OPTS. bind: short address EINVAL,
+///    ifindex 0 ENODEV, rx_id == tx_id EADDRNOTAVAIL; bound: bind again
+///    EINVAL, CAN_ISOTP_OPTS EISCONN, getsockname the 16-byte address.
+/// 2. write of 0 and of 8301 bytes (max_pdu_size 8300): EINVAL.
+/// 3. WAIT_TX_DONE: the peer answers the FF with FC overflow: EMSGSIZE;
+///    the peer stays silent: ECOMM after N_Bs (1 s).
+/// 4. Without WAIT_TX_DONE: the write returns at once; a second one with
+///    MSG_DONTWAIT while the first waits for FC: EAGAIN; the first's
+///    ECOMM comes as the socket error (the blocking read returns it);
+///    poll withholds POLLOUT while the transfer runs, and a poller
+///    waiting for POLLOUT is woken when a transfer completes.
+/// 5. Receive: an SF read into 1 byte with MSG_TRUNC returns the PDU's
+///    length, the source address is 16 bytes with the interface; an FF
+///    is answered with FC `30 00 00`; a CF with the wrong sequence
+///    number: EILSEQ; an FF then silence: ETIMEDOUT (N_Cr, 1 s); then a
+///    whole 20-byte PDU from FF and two CFs.
+fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.isotp_ifaces(1)?[0];
+    let peer = raw_open(i0)?;
+    let t = Duration::from_secs(10);
+
+    // 1. Unbound and bind errors.
+    let a = tp_socket(0)?;
+    want_errno(
+        raw::write(&a, &[1, 2, 3]),
+        libc::EADDRNOTAVAIL,
+        "write unbound",
+    )?;
+    let mut buf = [0u8; 64];
+    want_errno(raw::read(&a, &mut buf), libc::EADDRNOTAVAIL, "read unbound")?;
+    want_errno(
+        raw::bind(&a, &tp_addr(i0, 0x7E8, 0x7E0)[..15]),
+        libc::EINVAL,
+        "bind 15 bytes",
+    )?;
+    want_errno(
+        raw::bind(&a, &tp_addr(0, 0x7E8, 0x7E0)),
+        libc::ENODEV,
+        "bind ifindex 0",
+    )?;
+    want_errno(
+        raw::bind(&a, &tp_addr(i0, 0x7E0, 0x7E0)),
+        libc::EADDRNOTAVAIL,
+        "bind rx == tx",
+    )?;
+    want_errno(
+        raw::setsockopt(&a, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &[0u8; 11]),
+        libc::EINVAL,
+        "CAN_ISOTP_OPTS of 11 bytes",
+    )?;
+    want_errno(
+        raw::setsockopt(&a, SOL_CAN_ISOTP, 99, &[0u8; 4]),
+        libc::ENOPROTOOPT,
+        "unknown option 99",
+    )?;
+    want_errno(
+        raw::setsockopt(&a, SOL_CAN_ISOTP, CAN_ISOTP_LL_OPTS, &[72, 9, 0]),
+        libc::EINVAL,
+        "CAN_ISOTP_LL_OPTS with TX_DL 9",
+    )?;
+    let mut o = [0u8; 16];
+    let n = raw::getsockopt(&a, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &mut o).or_fail("getsockopt")?;
+    ensure!(
+        n as usize == 12 && o[..12] == opts(0),
+        "CAN_ISOTP_OPTS defaults: {} ({n} bytes), want {}",
+        hex(&o[..n as usize]),
+        hex(&opts(0))
+    );
+    raw::bind(&a, &tp_addr(i0, 0x7E8, 0x7E0)).or_fail("bind")?;
+    want_errno(
+        raw::bind(&a, &tp_addr(i0, 0x7E8, 0x7E0)),
+        libc::EINVAL,
+        "bind again",
+    )?;
+    want_errno(
+        raw::setsockopt(&a, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &opts(0)),
+        libc::EISCONN,
+        "CAN_ISOTP_OPTS when bound",
+    )?;
+    let mut name = [0u8; SOCKADDR_CAN];
+    let n = raw::getsockname(&a, &mut name).or_fail("getsockname")? as usize;
+    ensure!(
+        n == TP_NAMELEN && name[..n] == tp_addr(i0, 0x7E8, 0x7E0)[..n],
+        "getsockname: {n} bytes {}, want 16 bytes of the bound address",
+        hex(&name[..n])
+    );
+
+    // 2. Lengths.
+    want_errno(raw::write(&a, &[]), libc::EINVAL, "write of 0 bytes")?;
+    want_errno(
+        raw::write(&a, &vec![0u8; 8301]),
+        libc::EINVAL,
+        "write of 8301 bytes",
+    )?;
+
+    // 3. WAIT_TX_DONE: overflow, then no flow control at all.
+    let b = Arc::new(tp_bound(CAN_ISOTP_WAIT_TX_DONE, i0, 0x7E9, 0x7E1)?);
+    let w = write_bg(&b, pattern(20));
+    let ff = raw_expect(&peer, 0x7E1, t, "FF of 20 bytes")?;
+    ensure!(ff.data == [0x10, 20, 1, 2, 3, 4, 5, 6], "FF {}", show(&ff));
+    raw_send(&peer, 0x7E9, &[0x32, 0, 0])?;
+    want_errno(
+        joined(w)?,
+        libc::EMSGSIZE,
+        "WAIT_TX_DONE write answered FC overflow",
+    )?;
+    let w = write_bg(&b, pattern(20));
+    raw_expect(&peer, 0x7E1, t, "FF of the second PDU")?;
+    let start = Instant::now();
+    want_errno(joined(w)?, libc::ECOMM, "WAIT_TX_DONE write without FC")?;
+    let took = start.elapsed();
+    ensure!(
+        took >= Duration::from_millis(900),
+        "ECOMM after {took:?}, before N_Bs (1 s)"
+    );
+    ctx.note(format!("ECOMM without FC after {took:?}"));
+
+    // 4. Busy sender, then its error on the socket.
+    let n = raw::write(&a, &pattern(20)).or_fail("write 20 bytes")?;
+    ensure!(n == 20, "write returned {n}");
+    raw_expect(&peer, 0x7E0, t, "FF of a's PDU")?;
+    want_errno(
+        raw::sendto(&a, &[1], libc::MSG_DONTWAIT, None),
+        libc::EAGAIN,
+        "MSG_DONTWAIT write while sending",
+    )?;
+    ensure!(
+        poll_out(&a, 0)? & libc::POLLOUT == 0,
+        "poll reports POLLOUT while a transfer waits for FC"
+    );
+    raw::set_timeout(&a, libc::SO_RCVTIMEO, t).or_fail("SO_RCVTIMEO")?;
+    want_errno(
+        raw::read(&a, &mut buf),
+        libc::ECOMM,
+        "read after a transfer without FC",
+    )?;
+    ensure!(
+        poll_out(&a, 0)? & libc::POLLOUT != 0,
+        "poll reports no POLLOUT after the transfer ended"
+    );
+    // A poller waiting for POLLOUT is woken when a transfer completes.
+    let a = Arc::new(a);
+    raw::write(&*a, &pattern(20)).or_fail("write 20 bytes")?;
+    raw_expect(&peer, 0x7E0, t, "FF of the polled PDU")?;
+    let tid = Arc::new(AtomicI32::new(0));
+    let poller = {
+        let (a, tid) = (Arc::clone(&a), Arc::clone(&tid));
+        thread::spawn(move || {
+            tid.store(crate::sys::gettid(), Ordering::SeqCst);
+            let start = Instant::now();
+            poll_out(&*a, 20_000).map(|r| (r, start.elapsed()))
+        })
+    };
+    wait_blocked(
+        &tid,
+        &[libc::SYS_poll, libc::SYS_ppoll],
+        "the poller blocked in poll",
+    )?;
+    raw_send(&peer, 0x7E8, &[0x30, 0, 0])?;
+    raw_expect(&peer, 0x7E0, t, "CF 1 of the polled PDU")?;
+    raw_expect(&peer, 0x7E0, t, "CF 2 of the polled PDU")?;
+    let (rev, took) = poller.join().map_err(|_| "poller panicked".to_string())??;
+    ensure!(
+        rev & libc::POLLOUT != 0 && took < Duration::from_secs(10),
+        "poll after the transfer completed: revents {rev:#x} after {took:?}, want POLLOUT at once"
+    );
+    let a = Arc::try_unwrap(a).map_err(|_| "socket still shared".to_string())?;
+
+    // 5. Reception.
+    raw_send(&peer, 0x7E8, &[0x02, 0xAA, 0xBB])?;
+    let mut one = [0u8; 1];
+    let mut src = [0u8; SOCKADDR_CAN];
+    let (n, alen) =
+        raw::recvfrom(&a, &mut one, libc::MSG_TRUNC, Some(&mut src)).or_fail("recvfrom SF")?;
+    ensure!(
+        n == 2 && one[0] == 0xAA,
+        "SF read into 1 byte with MSG_TRUNC: {n}, {:02X}; want 2, AA",
+        one[0]
+    );
+    ensure!(
+        alen as usize == TP_NAMELEN
+            && canraw::addr_ifindex(&src[..alen as usize])? == i0
+            && src[..2] == (libc::AF_CAN as u16).to_ne_bytes(),
+        "source address {} ({alen} bytes), want 16 bytes: AF_CAN, ifindex {i0}",
+        hex(&src)
+    );
+    raw_send(&peer, 0x7E8, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
+    let fc = raw_expect(&peer, 0x7E0, t, "FC to an FF")?;
+    ensure!(fc.data == [0x30, 0, 0], "FC {}, want 30 00 00", show(&fc));
+    raw_send(&peer, 0x7E8, &[0x22, 7, 8, 9, 10, 11, 12, 13])?;
+    want_errno(
+        raw::read(&a, &mut buf),
+        libc::EILSEQ,
+        "read after a CF with SN 2 for 1",
+    )?;
+    raw_send(&peer, 0x7E8, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
+    raw_expect(&peer, 0x7E0, t, "FC to the second FF")?;
+    let start = Instant::now();
+    want_errno(
+        raw::read(&a, &mut buf),
+        libc::ETIMEDOUT,
+        "read after an FF and no CF",
+    )?;
+    let took = start.elapsed();
+    ensure!(
+        took >= Duration::from_millis(900),
+        "ETIMEDOUT after {took:?}, before N_Cr (1 s)"
+    );
+    raw_send(&peer, 0x7E8, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
+    raw_expect(&peer, 0x7E0, t, "FC to the third FF")?;
+    raw_send(&peer, 0x7E8, &[0x21, 7, 8, 9, 10, 11, 12, 13])?;
+    raw_send(&peer, 0x7E8, &[0x22, 14, 15, 16, 17, 18, 19, 20])?;
+    let n = raw::read(&a, &mut buf).or_fail("read a 20-byte PDU")?;
+    ensure!(
+        buf[..n] == (1..=20).collect::<Vec<u8>>()[..],
+        "20-byte PDU read as {}",
+        hex(&buf[..n])
+    );
+    Ok(())
+}
+
+/// Teardown while transfers run (ours: it unloads our modules; run on
+/// the debug kernel, KASAN, lockdep and kmemleak watch the timers and
+/// receivers go, and the runner fails the test on any kernel report):
+/// 1. close during a reception (FF answered, N_Cr running): close
+///    returns, the CFs that follow find nobody.
+/// 2. close during a transmission (FC with STmin 127 ms, 14 CFs): close
+///    waits for the transfer, as mainline's does: every CF is on the bus
+///    when it returns, nothing after.
+/// 3. ifdown during a WAIT_TX_DONE transfer: the write fails (ECOMM: no
+///    echo, or ENETDOWN) instead of hanging; the interface comes up again.
+/// 4. The interface goes away (rmmod rcan_loop) during a WAIT_TX_DONE
+///    transfer: the write fails with ENODEV at once.
+/// 5. rmmod rcan_isotp is refused while a socket is open and succeeds
+///    after its close.
+fn teardown_isotp_transfers(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.isotp_ifaces(1)?[0];
+    let c0 = dev(0);
+    let peer = raw_open(i0)?;
+    let t = Duration::from_secs(10);
+
+    // 1. Close during reception.
+    let a = tp_bound(0, i0, 0x7E8, 0x7E0)?;
+    raw_send(&peer, 0x7E8, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
+    raw_expect(&peer, 0x7E0, t, "FC")?;
+    drop(a);
+    raw_send(&peer, 0x7E8, &[0x21, 7, 8, 9, 10, 11, 12, 13])?;
+
+    // 2. Close during transmission: waits for the whole PDU.
+    let a = tp_bound(0, i0, 0x7E8, 0x7E0)?;
+    let pdu = pattern(100);
+    raw::write(&a, &pdu).or_fail("write 100 bytes")?;
+    raw_expect(&peer, 0x7E0, t, "FF")?;
+    raw_send(&peer, 0x7E8, &[0x30, 0, 0x7F])?;
+    raw_expect(&peer, 0x7E0, t, "first CF")?;
+    drop(a);
+    let mut cfs = 1;
+    while let Some(f) = raw_read(&peer, Duration::from_millis(300))? {
+        if f.id == 0x7E0 {
+            cfs += 1;
+        }
+    }
+    ensure!(
+        cfs == 14,
+        "after close: {cfs} CFs of 14 on the bus (close must wait for the PDU)"
+    );
+
+    // 3. ifdown during a WAIT_TX_DONE transfer.
+    let b = Arc::new(tp_bound(CAN_ISOTP_WAIT_TX_DONE, i0, 0x7E9, 0x7E1)?);
+    let w = write_bg(&b, pattern(100));
+    raw_expect(&peer, 0x7E1, t, "FF")?;
+    raw_send(&peer, 0x7E9, &[0x30, 0, 0x7F])?;
+    raw_expect(&peer, 0x7E1, t, "first CF")?;
+    ctx.link_down(&c0)?;
+    let e = errno_of(joined(w)?, "WAIT_TX_DONE write across ifdown")?;
+    ensure!(
+        e == libc::ECOMM || e == libc::ENETDOWN,
+        "write across ifdown: {}, want ECOMM or ENETDOWN",
+        errno_name(e)
+    );
+    ctx.link_up(&c0)?;
+    drop(b);
+    // The peer's socket saw the ifdown (ENETDOWN once): a fresh one.
+    let peer = raw_open(i0)?;
+
+    // 4. The interface goes away during a WAIT_TX_DONE transfer.
+    let b = Arc::new(tp_bound(CAN_ISOTP_WAIT_TX_DONE, i0, 0x7E9, 0x7E1)?);
+    let w = write_bg(&b, pattern(100));
+    raw_expect(&peer, 0x7E1, t, "FF")?;
+    raw_send(&peer, 0x7E9, &[0x30, 0, 0x7F])?;
+    raw_expect(&peer, 0x7E1, t, "first CF")?;
+    drop(peer);
+    ctx.remove_can_ifaces()?;
+    want_errno(
+        joined(w)?,
+        libc::ENODEV,
+        "WAIT_TX_DONE write when the interface went away",
+    )?;
+
+    // 5. rmmod with the socket open, then after close.
+    ensure!(
+        ctx.rmmod(Module::Isotp).is_err(),
+        "rmmod rcan_isotp succeeded with a socket open"
+    );
+    drop(b);
+    // The socket's last reference (and the module's) goes once the
+    // receive table's grace period has passed after close: retried.
+    let mut last = String::new();
+    wait_until(SETTLE, "rmmod rcan_isotp after close", || {
+        match ctx.rmmod(Module::Isotp) {
+            Ok(()) => true,
+            Err(e) => {
+                last = e;
+                false
+            }
+        }
+    })
+    .map_err(|e| format!("{e}: {last}"))
+}
