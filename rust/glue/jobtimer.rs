@@ -45,9 +45,10 @@
 //! in its allocation), and the exit's sweep
 //! ([`Scoped`](super::module::Scoped), step 3) marks each job left there
 //! dying and cancels its timers as the drop does, but frees nothing (its
-//! owner may still hold it): the memory leaks, no timer fires into the
-//! module's freed text. [`JobTimers::new`] takes the evidence that its
-//! module's exit is the glue's ([`InScopedModule`]).
+//! owner may still hold it): the memory leaks (marked for kmemleak as a
+//! leak on purpose), no timer fires into the module's freed text.
+//! [`JobTimers::new`] takes the evidence that its module's exit is the
+//! glue's ([`InScopedModule`]).
 
 use super::bindings;
 use core::ptr::NonNull;
@@ -319,6 +320,10 @@ unsafe fn kill<H: JobCallback>(inner: *mut ()) {
     // SAFETY: a live job's allocation (contract), which its owner no
     // longer frees (it is off the list), so it stays valid.
     unsafe { &*inner.cast::<Inner<H>>() }.kill();
+    // The leak is the price of a forgotten job, not a bug of the kernel's:
+    // kmemleak neither reports it nor what it points to (it still scans it).
+    // SAFETY: any pointer may be passed; kmemleak looks it up.
+    unsafe { bindings::rcan_kmemleak_not_leak(inner.cast_const().cast()) };
 }
 
 /// The C callback of every job timer.

@@ -14,14 +14,18 @@
 //!    killed: first all of them refuse to be started again, then each is
 //!    cancelled (`hrtimer_cancel` waits for a running callback), so no
 //!    callback of one timer can re-arm another behind the teardown's back;
-//! 2. the module's own value (`T`) is dropped: its registrations undo
-//!    themselves in their own `Drop`s;
+//! 2. the module's protocols
+//!    ([`ProtoModule::register`](super::can::proto::ProtoModule::register))
+//!    are unregistered: only the exit does that (a `ProtoRegistration`
+//!    is a proof, not a guard: unregistering while a socket is open would
+//!    pull the protocol from under it), and no socket is left by now
+//!    (every sock pins the module); then the module's own value (`T`) is
+//!    dropped: its other registrations undo themselves in their own
+//!    `Drop`s;
 //! 3. every registration that the module made through a
 //!    scope and that is still there (its guard forgotten, or kept in a
 //!    `static`, which is never dropped) is removed: the in-kernel
-//!    receivers ([`rx_set_kernel`](super::can::proto::rx_set_kernel)) and
-//!    the protocols
-//!    ([`ProtoModule::register`](super::can::proto::ProtoModule::register)),
+//!    receivers ([`rx_set_kernel`](super::can::proto::rx_set_kernel)),
 //!    the network devices
 //!    ([`Registration::register`](super::netdev::Registration::register))
 //!    and the PCI drivers
@@ -106,8 +110,22 @@ impl<T: ScopedModule> Drop for Scoped<T> {
     fn drop(&mut self) {
         // Timers first: from here on nothing the module does can arm one.
         super::hrtimer::kill_all();
+        // The protocols next (step 2): no socket of them is left (each
+        // pins the module), and none of their calls runs while the
+        // module's value goes.
+        run_sweep(SweepKind::Protocols);
         drop(self.module.take());
         exit_duties();
+    }
+}
+
+/// Runs the sweep of `kind`, if one was noted. Process context.
+fn run_sweep(kind: SweepKind) {
+    let sweep = SWEEPS[kind as usize].load(Ordering::Acquire);
+    if !sweep.is_null() {
+        // SAFETY: only `note_sweep` stores a non-null value, a `fn()`.
+        let sweep: fn() = unsafe { core::mem::transmute::<*mut (), fn()>(sweep) };
+        sweep();
     }
 }
 
@@ -128,8 +146,11 @@ pub(super) enum SweepKind {
     PciDrivers,
     /// In-kernel receivers with `rcan_pf` (`can::proto::rx_set_kernel`).
     KernelRx,
-    /// CAN protocols (`can::proto::ProtoModule::register`): before the
-    /// devices, so that no notifier of the module runs while they go.
+    /// CAN protocols (`can::proto::ProtoModule::register`): all of them
+    /// already at step 2 (before the module's value is dropped), so the
+    /// sweep of step 3 finds none; a protocol registered by a failing
+    /// `init` is unregistered here, before the devices, so that no
+    /// notifier of the module runs while they go.
     Protocols,
     /// Job timers (`jobtimer::JobTimers::new`): killed (not freed), so
     /// that no callback of the module runs while its devices go.
@@ -137,6 +158,17 @@ pub(super) enum SweepKind {
     /// Network devices (`netdev::Registration::register`), last: each
     /// with its filter listener, if a `Listening` owned it.
     Devices,
+}
+
+impl SweepKind {
+    /// Every kind, in the order of step 3.
+    const ALL: [SweepKind; NR_SWEEPS] = [
+        SweepKind::PciDrivers,
+        SweepKind::KernelRx,
+        SweepKind::Protocols,
+        SweepKind::Jobs,
+        SweepKind::Devices,
+    ];
 }
 
 /// Slots of [`SWEEPS`]: one per [`SweepKind`].
@@ -293,13 +325,8 @@ pub(super) fn note_rcu_callback() {
 /// idempotent and cheap), 3 and 4. Process context.
 fn exit_duties() {
     super::hrtimer::kill_all();
-    for s in SWEEPS.iter() {
-        let sweep = s.load(Ordering::Acquire);
-        if !sweep.is_null() {
-            // SAFETY: only `note_sweep` stores a non-null value, a `fn()`.
-            let sweep: fn() = unsafe { core::mem::transmute::<*mut (), fn()>(sweep) };
-            sweep();
-        }
+    for kind in SweepKind::ALL {
+        run_sweep(kind);
     }
     // Once more: a probe that ran before the PCI drivers' sweep may have
     // initialised a timer after the first kill.

@@ -746,7 +746,7 @@ pub(crate) struct ProtoReg<T: Proto> {
 unsafe impl<T: Proto> Sync for ProtoReg<T> {}
 
 impl<T: Proto> ProtoReg<T> {
-    pub(crate) const fn new() -> Self {
+    pub(in crate::glue) const fn new() -> Self {
         ProtoReg {
             // SAFETY: all-zero is a valid `struct proto` / `proto_ops`
             // before registration; `register` fills in what is needed.
@@ -758,7 +758,7 @@ impl<T: Proto> ProtoReg<T> {
 
     /// Fills in and registers the proto. Module init only (process context,
     /// before any socket of `T` can exist). `name` must be static.
-    pub(crate) fn register(&self, name: &'static kernel::str::CStr, family: i32) -> Result {
+    pub(in crate::glue) fn register(&self, name: &'static kernel::str::CStr, family: i32) -> Result {
         // SAFETY: module init is single-threaded with respect to these
         // structs: nothing else references them before registration.
         unsafe {
@@ -779,8 +779,9 @@ impl<T: Proto> ProtoReg<T> {
     }
 
     /// Module exit only, after the last socket is gone (guaranteed by the
-    /// module reference each socket holds).
-    pub(crate) fn unregister(&self) {
+    /// module reference each socket holds): glue-private, so only
+    /// `can::proto`'s exit sweep calls it.
+    pub(in crate::glue) fn unregister(&self) {
         // SAFETY: registered in `register`.
         unsafe { bindings::proto_unregister(self.proto.get()) };
     }
@@ -792,7 +793,7 @@ impl<T: Proto> ProtoReg<T> {
     ///
     /// `net` and `sock` come from the socket layer's `create` call;
     /// `register` succeeded.
-    pub(crate) unsafe fn create(
+    pub(in crate::glue) unsafe fn create(
         &self,
         net: *mut bindings::net,
         sock: *mut bindings::socket,

@@ -12,6 +12,7 @@
 #include <linux/delay.h>
 #include <linux/interrupt.h>
 #include <linux/io.h>
+#include <linux/kmemleak.h>
 #include <linux/kmod.h>
 #include <linux/ioport.h>
 #include <linux/module.h>
@@ -280,6 +281,11 @@ bool rcan_try_module_get(struct module *mod)
 void rcan_module_put(struct module *mod)
 {
 	module_put(mod);
+}
+
+void rcan_kmemleak_not_leak(const void *ptr)
+{
+	kmemleak_not_leak(ptr);
 }
 
 int rcan_request_module(const char *name)

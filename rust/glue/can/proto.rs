@@ -12,8 +12,8 @@
 //!   callback, its reaction to devices going down or away);
 //! * keeps a `static` [`ProtoModule`] (sock allocator, entry in pf_can's
 //!   protocol table, netdevice notifier, list of open sockets) and
-//!   registers it in module init; the returned [`ProtoRegistration`]
-//!   unregisters everything when dropped (module exit);
+//!   registers it in module init; the module's exit (the glue's) unregisters
+//!   everything, whatever becomes of the returned [`ProtoRegistration`];
 //! * subscribes a socket to frames with [`rx_set`] and unsubscribes it with
 //!   [`rx_remove`] (at the latest in `release`), or, with a
 //!   [`CanProtocol::RESERVE_RX`], with [`rx_set_locked`] / [`rx_unset_locked`]
@@ -390,8 +390,8 @@ impl<T: CanProtocol> Sockets<'_, T> {
 /// Everything a CAN protocol module registers, in one static: its
 /// `struct proto` (sock allocator), its entry in pf_can's protocol table
 /// and its netdevice notifier, plus the list of its open sockets.
-/// [`ProtoModule::register`] in module init; the registration's drop in
-/// module exit.
+/// [`ProtoModule::register`] in module init; unregistered by the module's
+/// exit only.
 pub(crate) struct ProtoModule<T: CanProtocol> {
     proto: ProtoReg<T>,
     /// Every open socket, for the netdevice notifier. Protected by RTNL;
@@ -429,10 +429,10 @@ impl<T: CanProtocol> ProtoModule<T> {
 
     /// Registers the proto, the notifier and the protocol, in that order;
     /// undoes what was done on failure. Module init (process context):
-    /// the `scope` proves the module's exit is the glue's, which
-    /// unregisters the protocol if the returned guard was never dropped
-    /// (`mem::forget`, a `static`). EBUSY if already registered, ENOSPC
-    /// with more than `MAX_PROTOS` protocols in one module.
+    /// the `scope` proves the module's exit is the glue's, which alone
+    /// unregisters the protocol (the returned [`ProtoRegistration`] is a
+    /// proof, not a guard). EBUSY if already registered, ENOSPC with more
+    /// than `MAX_PROTOS` protocols in one module.
     pub(crate) fn register(
         &'static self,
         name: &'static kernel::str::CStr,
@@ -485,7 +485,7 @@ impl<T: CanProtocol> ProtoModule<T> {
             unsafe { (*self.canproto.get()).owner = core::ptr::null_mut() };
             return Err(e);
         }
-        Ok(ProtoRegistration(self))
+        Ok(ProtoRegistration(PhantomData))
     }
 
     /// `CanProto.create`: allocates the sock and lists it in `sockets`;
@@ -539,25 +539,27 @@ impl<T: CanProtocol> ProtoModule<T> {
 impl<T: CanProtocol> crate::glue::module::sealed::Sealed for Sock<T> {}
 impl<T: CanProtocol> crate::glue::module::InScopedModule for Sock<T> {}
 
-/// A registered [`ProtoModule`]; dropping it (module exit) unregisters the
-/// protocol, the notifier and the proto. Every socket holds a reference on
-/// the module, so no socket is left by then. Process context; sleeps (a
-/// grace period).
-pub(crate) struct ProtoRegistration<T: CanProtocol>(&'static ProtoModule<T>);
-
-impl<T: CanProtocol> Drop for ProtoRegistration<T> {
-    fn drop(&mut self) {
-        let me = self.0 as *const ProtoModule<T> as *mut ();
-        PROTO_REGS.take(me, ProtoModule::<T>::unregister_erased);
-        self.0.unregister();
-    }
-}
+/// Proof that protocol `T` is registered, for as long as its module is
+/// loaded: dropping it (or forgetting it) does nothing. Only the module's
+/// exit unregisters the protocol ([`proto_sweep`], before the module's
+/// value is dropped, as this guard's drop in that value did), when no
+/// socket of it can be left: every sock holds a reference on the module
+/// (`struct proto.owner`) from `sk_alloc` until it is freed, so `rmmod`
+/// cannot run while one exists.
+///
+/// An unregistration that safe code could trigger earlier (this guard's
+/// drop did until issue 39's fix) pulled the protocol from under its open
+/// sockets: no new socket, no netdevice events for the open ones, and
+/// their socket set emptied under them, after which closing them in some
+/// orders wrote into a freed sock ([`SockSet::remove`] following a
+/// neighbour link; seen with KASAN).
+pub(crate) struct ProtoRegistration<T: CanProtocol>(PhantomData<&'static ProtoModule<T>>);
 
 impl<T: CanProtocol> ProtoModule<T> {
     /// Undoes a successful [`Self::register`]; does nothing if it is not
     /// registered (`owner` null). Process context; sleeps (a grace
-    /// period). Called by [`ProtoRegistration`]'s drop, and by the
-    /// module's exit for a registration never dropped ([`proto_sweep`]).
+    /// period). Called only by the module's exit ([`proto_sweep`]), when
+    /// no sock of `T` is left ([`ProtoRegistration`]).
     fn unregister(&'static self) {
         // SAFETY: reading our own static; `owner` is written only by
         // register (module init) and here (its guard's drop or the exit,
@@ -594,16 +596,16 @@ impl<T: CanProtocol> ProtoModule<T> {
 /// Most protocols one module registers (one each today).
 const MAX_PROTOS: usize = 2;
 
-/// The protocols this module registered and whose guard was not dropped
-/// (the glue is compiled into each module: one table per module), keyed
+/// The protocols this module registered (the glue is compiled into each
+/// module: one table per module), keyed
 /// by their `&'static ProtoModule<T>` with `ProtoModule::<T>::
 /// unregister_erased`; swept at exit by [`proto_sweep`]. Process context
 /// only.
 static PROTO_REGS: ExitTable<MAX_PROTOS> = ExitTable::new();
 
-/// The exit's sweep ([`crate::glue::module::Scoped`], step 3): unregisters
-/// every protocol of this module still registered. Process context, after
-/// the module's value was dropped; sleeps.
+/// The exit's sweep ([`crate::glue::module::Scoped`], step 2, before the
+/// module's value is dropped; step 3 after a failed `init`): unregisters
+/// every protocol of this module. Process context; sleeps.
 fn proto_sweep() {
     PROTO_REGS.sweep();
 }

@@ -273,6 +273,16 @@ impl Mainline {
     }
 }
 
+/// The test-only module `rcan_exittest` (`tools/testing/rcan/exitmod`,
+/// which `make modules` builds in a Kbuild run of its own and `make
+/// install` never installs): it forgets one registration of each kind the
+/// glue's module exit sweeps (issue 39). Not a [`Module`]: only
+/// `teardown_exit_sweeps` loads it ([`Ctx::insmod_exittest`]), and
+/// [`Ctx::unload_all`] unloads it first.
+pub const EXITTEST: &str = "rcan_exittest";
+/// Its `.ko`, relative to the repository root.
+pub const EXITTEST_KO: &str = "tools/testing/rcan/exitmod/rcan_exittest.ko";
+
 /// Test context: where the modules are and the state of the loaded stack.
 pub struct Ctx {
     root: PathBuf,
@@ -407,6 +417,19 @@ impl Ctx {
             self.ndev = loop_count(params);
         }
         Ok(())
+    }
+
+    /// `insmod` the test-only module [`EXITTEST`] (after rcan_pf).
+    pub fn insmod_exittest(&mut self) -> Result<(), String> {
+        self.own("insmod", EXITTEST)?;
+        let ko = self.root.join(EXITTEST_KO);
+        sys::finit_module(&ko, &[]).map_err(|e| format!("insmod {}: {e}", ko.display()))
+    }
+
+    /// `rmmod` the test-only module [`EXITTEST`] (no retries).
+    pub fn rmmod_exittest(&mut self) -> Result<(), String> {
+        self.own("rmmod", EXITTEST)?;
+        rmmod(EXITTEST)
     }
 
     /// `rmmod` module `m` (no retries).
@@ -688,6 +711,10 @@ impl Ctx {
     pub fn unload_all(&mut self) -> Result<(), String> {
         self.own("unload", "every module")?;
         let mut errors = Vec::new();
+        // It uses rcan_pf: first.
+        if let Err(e) = rmmod_retrying(EXITTEST) {
+            errors.push(e);
+        }
         for m in Module::ALL.into_iter().rev() {
             if let Err(e) = rmmod_retrying(m.name()) {
                 errors.push(e);

@@ -33,10 +33,10 @@ use super::{portable_table, raw1, test_table};
 use crate::canraw::{self, addr_bytes, std as sff, CAN_RAW, CAN_SFF_MASK};
 use crate::check::blocked_syscall as sys_blocked;
 use crate::check::{
-    ensure, errno_name, errno_of, wait_blocked, wait_for, wait_until, OnDrop, OrFail, TestResult,
-    QUIET, RECV_SYSCALLS, SETTLE,
+    ensure, errno_name, errno_of, expect_errno, wait_blocked, wait_for, wait_until, OnDrop, OrFail,
+    TestResult, QUIET, RECV_SYSCALLS, SETTLE,
 };
-use crate::ctx::{debug_kernel, dev, sized, Ctx, Mainline, Module, Stack};
+use crate::ctx::{debug_kernel, dev, sized, Ctx, Mainline, Module, Stack, EXITTEST};
 use crate::sys;
 use crate::Test;
 
@@ -55,6 +55,7 @@ pub const OURS: &[Test] = test_table![
     teardown_rmmod_loop_traffic,
     teardown_rmmod_proto_busy,
     teardown_rmmod_drivers_traffic,
+    teardown_exit_sweeps,
 ];
 
 /// Receive timeout of a socket whose readers are meant to be blocked when
@@ -1017,6 +1018,84 @@ fn teardown_rmmod_loop_traffic(ctx: &mut Ctx) -> TestResult {
             expect_msg(p, &rx, 0x600, 42, &what)?;
         }
     }
+    Ok(())
+}
+
+/// `rcan_exittest`'s protocol number (`tools/testing/rcan/exitmod`).
+const CANPROTO_EXITTEST: i32 = 23;
+/// The CAN identifier of its forgotten kernel receiver.
+const EXITTEST_RX_ID: u16 = 0x7e5;
+/// Its forgotten device.
+const EXITTEST_DEV: &str = "rcanexit0";
+
+/// The module exit owns what a module forgot (issue 39): `rcan_exittest`
+/// registers a protocol, a kernel receiver (CAN identifier 0x7E5), a
+/// network device (`rcanexit0`) and a self-re-arming job timer, forgets
+/// all of them, and drops its protocol registration in the first `bind`
+/// of one of its sockets, with two sockets open. While it is loaded: the
+/// protocol keeps working after that drop (a third socket opens, the two
+/// close; before the fix the drop unregistered the protocol under the
+/// open sockets: the third `socket()` failed with EPROTONOSUPPORT, and
+/// the emptied socket set made the first socket's close write into the
+/// second one's freed sock, a use after free KASAN reports), an open
+/// socket keeps the module from unloading, and the device sends. After
+/// `rmmod`:
+/// the device is gone, the protocol is gone (EPROTONOSUPPORT), and what
+/// would call into the freed module if the exit had left it behind
+/// happens without a kernel report (the runner fails the test on one):
+/// a 0x7E5 frame on can0, can0 going down and up (netdevice notifiers),
+/// `/proc/net/protocols`, and the job's next ticks (every 50 ms).
+fn teardown_exit_sweeps(ctx: &mut Ctx) -> TestResult {
+    ctx.load_stack(&[])?;
+    ensure!(ctx.is_loaded(Module::Raw), "rcan_raw not built");
+    let can0 = ctx.ifindex("can0")?;
+    ctx.insmod_exittest()?;
+    let loaded = std::path::Path::new("/sys/class/net").join(EXITTEST_DEV);
+    ensure!(loaded.exists(), "{EXITTEST_DEV} missing after insmod {EXITTEST}");
+    sys::set_link_up(EXITTEST_DEV, true).or_fail(format_args!("{EXITTEST_DEV} up"))?;
+    let sink = canraw::open(ctx.ifindex(EXITTEST_DEV)?)?;
+    canraw::send(&sink, &sff(0x123, &[1])).map_err(|e| format!("{EXITTEST_DEV}: {e}"))?;
+    drop(sink);
+
+    let open = || raw::socket(PF_CAN, libc::SOCK_DGRAM, CANPROTO_EXITTEST);
+    let first = open().or_fail("socket(CANPROTO_EXITTEST)")?;
+    let second = open().or_fail("second socket(CANPROTO_EXITTEST)")?;
+    raw::bind(&first, &addr_bytes(PF_CAN as u16, 0))
+        .or_fail("bind (drops the protocol registration)")?;
+    // The newer socket first: before the fix, the drop had emptied the
+    // protocol's socket set under both, and the first one's close then
+    // wrote into this one's freed sock (KASAN: use after free).
+    drop(second);
+    let third = open().or_fail(
+        "socket(CANPROTO_EXITTEST) after the protocol's registration was dropped with a socket open",
+    );
+    drop(first);
+    let third = third?;
+    match ctx.rmmod_exittest() {
+        Ok(()) => return Err(format!("rmmod {EXITTEST} succeeded with a socket of it open")),
+        Err(e) => ctx.note(format!("with a socket open: {e}")),
+    }
+    drop(third);
+    wait_for(HANG, &format!("rmmod {EXITTEST} after the last close"), || {
+        match ctx.rmmod_exittest() {
+            Ok(()) => Ok(Some(())),
+            Err(_) if module_listed(EXITTEST) => Ok(None),
+            Err(e) => Err(e),
+        }
+    })?;
+
+    ensure!(!loaded.exists(), "{EXITTEST_DEV} still there after rmmod {EXITTEST}");
+    expect_errno(open(), libc::EPROTONOSUPPORT, "socket(CANPROTO_EXITTEST) after rmmod")?;
+    let rx = canraw::open(can0)?;
+    let tx = canraw::open(can0)?;
+    let f = sff(EXITTEST_RX_ID, &[0xe5]);
+    canraw::send(&tx, &f)?;
+    canraw::expect(&rx, &f, "can0 after rmmod")?;
+    sys::set_link_up("can0", false).or_fail("can0 down")?;
+    sys::set_link_up("can0", true).or_fail("can0 up")?;
+    std::fs::read_to_string("/proc/net/protocols").or_fail("/proc/net/protocols")?;
+    // The job ticked every 50 ms: a few ticks' time for one left behind.
+    thread::sleep(Duration::from_millis(300));
     Ok(())
 }
 

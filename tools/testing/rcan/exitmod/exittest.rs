@@ -1,0 +1,197 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! `rcan_exittest`: a test-only module for the VM test
+//! `teardown_exit_sweeps` (`tests/vm/src/cases/teardown.rs`, issue 39).
+//! Safe code, as every protocol and driver file, that registers one of
+//! each thing whose teardown the glue's module exit owns
+//! (`rust/glue/module.rs`) and never undoes any of it itself:
+//!
+//! * a protocol, [`CANPROTO_EXITTEST`] (`SOCK_DGRAM`), whose registration
+//!   sits in a `static` (never dropped) until the first `bind` of one of
+//!   its sockets takes it out and drops it, while that socket is open: a
+//!   protocol module dropping its `ProtoRegistration` early. The protocol
+//!   must keep working (more sockets, the open one closing) and its
+//!   sockets pin the module as before;
+//! * an in-kernel receiver for CAN identifier [`RX_ID`] on every device,
+//!   forgotten (`mem::forget`): after `rmmod`, a frame with that
+//!   identifier must not call into the freed module;
+//! * a network device (`rcanexit%d`, a CAN device that drops what it is
+//!   given), forgotten: it must be gone after `rmmod`;
+//! * a job whose timer re-arms itself every [`TICK_NS`], forgotten: it
+//!   must not fire after `rmmod`.
+//!
+//! Each of these, left behind by a glue that does not sweep it, was seen
+//! to crash the kernel (architecture.rst, "Registrations forgotten at
+//! rmmod"); the test checks that none does.
+#![forbid(unsafe_code)]
+
+use crate::glue::can::ctrl;
+use crate::glue::can::proto::{
+    rx_set_kernel, CanProtocol, KernelRx, ProtoModule, ProtoRegistration, RxFilter,
+    RX_FILTER_CAN_ID, SOCK_DGRAM,
+};
+use crate::glue::hrtimer::ktime_get_mono_ns;
+use crate::glue::neterr::EOPNOTSUPP;
+use crate::glue::jobtimer::{JobCallback, JobRef, JobTimers};
+use crate::glue::module::{ModuleScope, ScopedModule};
+use crate::glue::netdev::{Dev, Driver, NetDev, Registration, Setup, Xmit};
+use crate::glue::skb::Skb;
+use crate::glue::sock::{Msg, Proto, Sock};
+use crate::glue::sync::{Rtnl, RtnlLocked};
+use crate::rcan_core::frame::CAN_MTU;
+use core::sync::atomic::{AtomicU64, Ordering};
+use kernel::c_str;
+use kernel::prelude::*;
+
+/// The protocol number, the highest of the table (`CANPROTO_MAX - 1`):
+/// no real protocol uses it.
+pub(crate) const CANPROTO_EXITTEST: i32 = 23;
+/// The CAN identifier the forgotten kernel receiver listens to.
+pub(crate) const RX_ID: u32 = 0x7e5;
+/// The period of the forgotten job's timer: 50 ms.
+const TICK_NS: u64 = 50_000_000;
+
+/// The protocol: sockets that can be created, bound (which drops the
+/// protocol's registration) and closed; nothing else.
+pub(crate) struct ExitProto;
+
+/// The protocol's sockets and registrations.
+static MODULE: ProtoModule<ExitProto> = ProtoModule::new();
+
+/// The protocol's registration until the first `bind` drops it.
+/// Protected by RTNL.
+static REG: RtnlLocked<Option<ProtoRegistration<ExitProto>>> = RtnlLocked::new(None);
+
+impl Proto for ExitProto {
+    type Data = ();
+    type Shared = ();
+
+    fn new_data() {}
+    fn new_shared() {}
+
+    /// Process context.
+    fn release(sk: &Sock<Self>) {
+        MODULE.sockets.get(&mut Rtnl::lock()).remove(sk);
+    }
+
+    /// Drops the protocol's registration, if it is still in [`REG`], while
+    /// this socket is open: what a protocol may do from safe code. Process
+    /// context (the registration's drop may sleep), RTNL not held.
+    fn bind(_sk: &Sock<Self>, _addr: &[u8]) -> Result {
+        let reg = REG.get(&mut Rtnl::lock()).take();
+        let dropped = reg.is_some();
+        drop(reg);
+        if dropped {
+            pr_info!("dropped the protocol registration with a socket open\n");
+        }
+        Ok(())
+    }
+
+    fn connect(_sk: &Sock<Self>, _addr: &[u8], _flags: i32) -> Result {
+        Err(EOPNOTSUPP())
+    }
+
+    fn getname(_sk: &Sock<Self>, _peer: bool, _out: &mut [u8]) -> Result<usize> {
+        Err(EOPNOTSUPP())
+    }
+
+    fn sendmsg(_sk: &Sock<Self>, _msg: &mut Msg, _len: usize) -> Result<usize> {
+        Err(EOPNOTSUPP())
+    }
+
+    fn recvmsg(_sk: &Sock<Self>, _msg: &mut Msg, _len: usize, _flags: i32) -> Result<usize> {
+        Err(EAGAIN)
+    }
+}
+
+impl CanProtocol for ExitProto {
+    const PROTOCOL: i32 = CANPROTO_EXITTEST;
+    const SOCK_TYPE: i32 = SOCK_DGRAM;
+
+    fn module() -> &'static ProtoModule<Self> {
+        &MODULE
+    }
+}
+
+/// The in-kernel receiver: counts frames.
+struct CountRx(AtomicU64);
+
+impl KernelRx for CountRx {
+    /// NET_RX softirq.
+    fn rx(&self, _skb: &Skb, _dev: &NetDev) {
+        self.0.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+static RX: CountRx = CountRx(AtomicU64::new(0));
+
+/// The network device: a CAN device that drops every frame.
+struct SinkDev;
+
+impl Driver for SinkDev {
+    type Priv = ();
+
+    fn setup() -> Setup {
+        ctrl::setup(CAN_MTU, 0)
+    }
+
+    /// Process context, RTNL.
+    fn open(dev: &Dev<Self>, _p: &()) -> Result {
+        dev.start_queue();
+        Ok(())
+    }
+
+    /// Process context, RTNL.
+    fn stop(dev: &Dev<Self>, _p: &()) -> Result {
+        dev.stop_queue();
+        Ok(())
+    }
+
+    /// BH disabled.
+    fn start_xmit(skb: Skb, dev: &Dev<Self>, _p: &()) -> Xmit {
+        dev.stats_tx_dropped();
+        drop(skb);
+        Xmit::Ok
+    }
+}
+
+/// The job: its timer 0 re-arms itself every [`TICK_NS`], counting.
+struct Ticker;
+
+impl JobCallback for Ticker {
+    type Data = AtomicU64;
+
+    /// HRTIMER_SOFTIRQ.
+    fn expired(job: JobRef<'_, Self>, which: usize) {
+        job.data().fetch_add(1, Ordering::Relaxed);
+        job.start(which, ktime_get_mono_ns() as u64 + TICK_NS);
+    }
+}
+
+/// The module's value: nothing; everything it registered is forgotten.
+pub(crate) struct ExitTest;
+
+impl ScopedModule for ExitTest {
+    /// Process context (`insmod`).
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
+        let reg = MODULE.register(c_str!("CANPROTO_EXITTEST"), scope)?;
+        *REG.get(&mut Rtnl::lock()) = Some(reg);
+
+        let f = RxFilter {
+            kind: RX_FILTER_CAN_ID,
+            id: RX_ID,
+            mask: 0x7ff,
+        };
+        core::mem::forget(rx_set_kernel(scope, &RX, 0, &[f])?);
+
+        let dev = Registration::<SinkDev>::register(c_str!("rcanexit%d"), (), scope)?;
+        pr_info!("{}: registered, to be forgotten\n", dev.dev().name());
+        core::mem::forget(dev);
+
+        let job = JobTimers::<Ticker>::new(AtomicU64::new(0), scope)?;
+        job.get().start(0, ktime_get_mono_ns() as u64 + TICK_NS);
+        core::mem::forget(job);
+
+        Ok(ExitTest)
+    }
+}
