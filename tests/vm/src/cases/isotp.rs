@@ -610,6 +610,7 @@ print("done", flush=True)
 ///    written), ReadDataByIdentifier F191 answered `7F 22 31`, which
 ///    udsoncan raises as a negative response with code 0x31; each seen as
 ///    frames on the bus.
+///
 /// The packages come from setup.sh (exact versions, `$RCAN_CACHE/python3`).
 fn isotp_python_uds(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.isotp_ifaces(1)?[0];
