@@ -7,7 +7,7 @@ set -euo pipefail
 
 pkgs="linux-source-6.12 clang lld llvm libclang-dev flex bison bc libelf-dev
 libssl-dev qemu-system-x86 can-utils busybox-static cpio kmod iproute2 make
-tcpdump python3-can stress-ng"
+tcpdump python3-can python3-pip stress-ng"
 missing=""
 for p in $pkgs; do
 	dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" ||
@@ -27,6 +27,28 @@ if ! dpkg-query -W -f='${Status}' dkms 2>/dev/null | grep -q "ok installed"; the
 	export DEBIAN_FRONTEND=noninteractive
 	apt-get install -y -qq --no-install-recommends dkms >/dev/null ||
 		{ apt-get update -qq && apt-get install -y -qq --no-install-recommends dkms >/dev/null; }
+fi
+
+# can-isotp and udsoncan (PyPI only, pure python) for the VM test
+# isotp_python_uds, for the guest's /usr/bin/python3 (Debian's 3.11, whose
+# python3-can comes from apt). Installed with Debian's pip (python3-pip;
+# the pip on PATH may be another interpreter's) into a directory of the
+# cache that the guest sees at the same path (vm-run.sh passes RCAN_CACHE
+# in), not into the system's site-packages: nothing of Debian's is
+# replaced and nothing needs --break-system-packages. The test puts it on
+# sys.path. Exact versions; skipped when both are there.
+pydir="$RCAN_CACHE/python3"
+pypkgs="can_isotp-2.0.7 udsoncan-1.26.1"
+pyok=1
+for p in $pypkgs; do
+	[ -d "$pydir/$p.dist-info" ] || pyok=0
+done
+if [ "$pyok" = 0 ]; then
+	log "installing can-isotp 2.0.7, udsoncan 1.26.1 into $pydir"
+	rm -rf "$pydir"
+	/usr/bin/python3 -m pip install -q --disable-pip-version-check \
+		--root-user-action=ignore --no-deps --only-binary=:all: \
+		--target "$pydir" can-isotp==2.0.7 udsoncan==1.26.1
 fi
 
 command -v rustup >/dev/null || die "rustup not found"

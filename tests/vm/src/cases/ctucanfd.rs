@@ -61,11 +61,11 @@ const CANFD_FDF: u8 = 0x04;
 /// The `ip link set canX type can ...` arguments of a classic setup.
 const CLASSIC: &[&str] = &["bitrate", "500000"];
 /// ... and of a CAN FD one, as users type it.
-const FD_ON: &[&str] = &["bitrate", "500000", "dbitrate", "2000000", "fd", "on"];
+pub(super) const FD_ON: &[&str] = &["bitrate", "500000", "dbitrate", "2000000", "fd", "on"];
 
 /// Loads the stack and its CTU CAN FD driver, sets `args` (`CLASSIC` or
 /// `FD_ON`) on both cores and brings them up; returns their ifindexes.
-fn ctucan2(ctx: &mut Ctx, args: &[&str]) -> Result<(u32, u32), String> {
+pub(super) fn ctucan2(ctx: &mut Ctx, args: &[&str]) -> Result<(u32, u32), String> {
     ctx.ctucan_cards()?;
     for i in 0..2 {
         let d = dev(i);

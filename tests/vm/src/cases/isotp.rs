@@ -30,10 +30,15 @@ pub static TESTS: &[crate::Test] = portable_table![
     stack:
     isotp_canutils_classic,
     isotp_canutils_fd,
+    isotp_python_uds,
     isotp_socket_errnos,
 ];
 
-pub static OURS: &[crate::Test] = test_table![teardown_isotp_transfers];
+pub static OURS: &[crate::Test] = test_table![
+    teardown_isotp_transfers,
+    sja1000_isotp_both_ways,
+    ctucanfd_isotp_fd_both_ways,
+];
 
 const CAN_ISOTP: i32 = 6;
 const SOL_CAN_ISOTP: i32 = 106;
@@ -503,6 +508,324 @@ fn isotp_canutils_fd(ctx: &mut Ctx) -> TestResult {
     })();
     let restore = set_mtu(ctx, &c0, "16");
     r.and(restore)
+}
+
+/// How long python3 may take for the whole script: starting it and
+/// importing can-isotp and udsoncan over 9p takes seconds on the release
+/// kernel and far more on the debug kernel.
+fn python_limit() -> Duration {
+    if crate::ctx::debug_kernel() {
+        TOOL_LIMIT * 5
+    } else {
+        TOOL_LIMIT * 2
+    }
+}
+
+/// The python side of [`isotp_python_uds`]: one process, as python
+/// start-up is the expensive part. argv: the interface, the directory
+/// setup.sh installed can-isotp and udsoncan into.
+const PY_UDS: &str = r#"
+import sys, threading, time
+t = [time.monotonic()]
+sys.path.insert(0, sys.argv[2])
+# Both packages import python-can if they find it, and use it only for
+# their user-space ISO-TP stack; keeping it out halves their import time.
+sys.modules["can"] = None
+import isotp, udsoncan
+from udsoncan.client import Client
+from udsoncan.connections import IsoTPSocketConnection
+from udsoncan.exceptions import NegativeResponseException
+t.append(time.monotonic())
+iface = sys.argv[1]
+N = isotp.AddressingMode.Normal_11bits
+def addr(tx, rx): return isotp.Address(N, txid=tx, rxid=rx)
+def pat(n): return bytes(i % 255 + 1 for i in range(n))
+# 1. To isotprecv (321 <- 123), which waits already.
+s = isotp.socket(timeout=60)
+s.bind(iface, addr(0x123, 0x321))
+s.send(pat(300))
+# 2. Two python sockets; the receiver asks for blocks of 4.
+a = isotp.socket(timeout=60)
+b = isotp.socket(timeout=60)
+b.set_fc_opts(bs=4, stmin=0)
+b.bind(iface, addr(0x654, 0x456))
+a.bind(iface, addr(0x456, 0x654))
+a.send(pat(200))
+print("pair", b.recv() == pat(200), flush=True)
+t.append(time.monotonic())
+# 3. UDS: a udsoncan client against a server on a second ISO-TP socket.
+srv = isotp.socket(timeout=60)
+srv.bind(iface, addr(0x7E8, 0x7E0))
+store = {0xF190: b"WVWZZZ1JZXW000001"}
+def serve():
+    while True:
+        q = srv.recv()
+        did = int.from_bytes(q[1:3], "big")
+        if q[0] == 0x22 and len(q) == 3 and did in store:
+            srv.send(b"\x62" + q[1:3] + store[did])
+        elif q[0] == 0x22:
+            srv.send(b"\x7f\x22\x31")
+        elif q[0] == 0x2E and len(q) > 3:
+            store[did] = q[3:]
+            srv.send(b"\x6e" + q[1:3])
+        else:
+            srv.send(b"\x7f" + q[:1] + b"\x11")
+threading.Thread(target=serve, daemon=True).start()
+cfg = dict(udsoncan.configs.default_client_config)
+cfg["data_identifiers"] = {0xF190: udsoncan.AsciiCodec(17),
+                           0xF191: udsoncan.AsciiCodec(4),
+                           0x0100: udsoncan.AsciiCodec(60)}
+cfg["p2_timeout"] = 60
+cfg["p2_star_timeout"] = 60
+cfg["request_timeout"] = 120
+text = "".join(chr(0x41 + i % 26) for i in range(60))
+with Client(IsoTPSocketConnection(iface, addr(0x7E0, 0x7E8)), config=cfg) as c:
+    print("vin", c.read_data_by_identifier(0xF190).service_data.values[0xF190], flush=True)
+    c.write_data_by_identifier(0x0100, text)
+    print("did0100", c.read_data_by_identifier(0x0100).service_data.values[0x0100] == text, flush=True)
+    try:
+        c.read_data_by_identifier(0xF191)
+        print("negative none", flush=True)
+    except NegativeResponseException as e:
+        print("negative", hex(e.response.code), flush=True)
+t.append(time.monotonic())
+print("seconds: imports %.1f, can-isotp %.1f, udsoncan %.1f" % tuple(b - a for a, b in zip(t, t[1:])))
+print("done", flush=True)
+"#;
+
+/// The diagnostics libraries unchanged (issue 41): python's `can-isotp`
+/// (`isotp.socket()`, which is `socket(PF_CAN, SOCK_DGRAM, CAN_ISOTP)`)
+/// and `udsoncan` on top of it, one python process on one classic
+/// interface, the bus watched:
+/// 1. a python socket sends 300 bytes to can-utils' `isotprecv`: FF, the
+///    FC, 42 CFs; isotprecv prints the PDU;
+/// 2. 200 bytes between two python sockets, the receiver's flow control
+///    set with `set_fc_opts(bs=4)`: an FC `30 04 00` every 4 CFs; the PDU
+///    intact;
+/// 3. a udsoncan client (`IsoTPSocketConnection`, which polls its socket)
+///    against a small UDS server on a second ISO-TP socket:
+///    ReadDataByIdentifier F190 (a 20-byte answer: FF and CFs),
+///    WriteDataByIdentifier 0100 with 60 bytes (a multi-frame request),
+///    ReadDataByIdentifier 0100 (its 63-byte answer equal to what was
+///    written), ReadDataByIdentifier F191 answered `7F 22 31`, which
+///    udsoncan raises as a negative response with code 0x31; each seen as
+///    frames on the bus.
+///
+/// The packages come from setup.sh (exact versions, `$RCAN_CACHE/python3`).
+fn isotp_python_uds(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.isotp_ifaces(1)?[0];
+    let c0 = dev(0);
+    let cache = std::env::var("RCAN_CACHE").map_err(|_| "RCAN_CACHE is not set (vm-run.sh passes it)")?;
+    let pydir = format!("{cache}/python3");
+    ensure!(
+        std::path::Path::new(&format!("{pydir}/udsoncan")).is_dir()
+            && std::path::Path::new(&format!("{pydir}/isotp")).is_dir(),
+        "{pydir}: no can-isotp/udsoncan (run tools/testing/rcan/setup.sh)"
+    );
+    let sn = Sniffer::start(i0)?;
+    let mut r = tools::spawn("isotprecv", &["-s", "321", "-d", "123", &c0], None)?;
+    r.wait_listening()?;
+    let start = Instant::now();
+    let py = tools::spawn("/usr/bin/python3", &["-c", PY_UDS, &c0, &pydir], None)?
+        .finish(python_limit())?;
+    let took = start.elapsed();
+    let rcv = r.finish(TOOL_LIMIT)?;
+    let fr = sn.stop()?;
+    ensure!(
+        py.status.success() && py.stdout.contains("done"),
+        "python3: {}: stdout {:?}, stderr {}",
+        py.status,
+        py.stdout,
+        py.stderr.trim()
+    );
+    println!(
+        "# python3 ran {:.1} s; {}",
+        took.as_secs_f64(),
+        py.stdout.lines().find(|l| l.starts_with("seconds:")).unwrap_or("")
+    );
+
+    // 1. python -> isotprecv.
+    let pdu = pattern(300);
+    ensure!(
+        rcv.status.success() && rcv.stdout.trim() == hex(&pdu),
+        "isotprecv: {}: {:.120}... {}",
+        rcv.status,
+        rcv.stdout.trim(),
+        rcv.stderr.trim()
+    );
+    let tx = check_transfer(&fr, 0x123, 0x321, &pdu, 8, 0, [0x30, 0, 0])?;
+    // 300 = 6 in the FF + 42 CFs of 7.
+    ensure!(tx.len() == 43, "300 bytes: {} frames from python, want 43", tx.len());
+
+    // 2. python -> python, blocks of 4.
+    let lines: Vec<&str> = py.stdout.lines().collect();
+    ensure!(lines.contains(&"pair True"), "python pair: {:?}", lines);
+    let pdu = pattern(200);
+    let tx = check_transfer(&fr, 0x456, 0x654, &pdu, 8, 4, [0x30, 4, 0])?;
+    // 200 = 6 + 27 CFs of 7 + 5: FF + 28 CFs, an FC after the FF and
+    // after CFs 4, 8, ..., 28 but the last block's.
+    ensure!(tx.len() == 29, "200 bytes: {} frames, want 29", tx.len());
+    let fcs = fr.iter().filter(|f| f.id == 0x654).count();
+    ensure!(fcs == 7, "200 bytes in blocks of 4: {fcs} FCs, want 7");
+
+    // 3. UDS, as the client saw it...
+    for want in ["vin WVWZZZ1JZXW000001", "did0100 True", "negative 0x31"] {
+        ensure!(lines.contains(&want), "udsoncan: no {want:?} in {:?}", lines);
+    }
+    // ... and on the bus: requests on 7E0, answers on 7E8, in order.
+    let uds: Vec<&Fr> = fr
+        .iter()
+        .filter(|f| f.id == 0x7E0 || f.id == 0x7E8)
+        .collect();
+    let heads: Vec<(u32, Vec<u8>)> = uds
+        .iter()
+        .filter(|f| f.data.first().is_some_and(|b| b >> 4 != 2 && b >> 4 != 3))
+        .map(|f| (f.id, f.data[..f.data.len().min(5)].to_vec()))
+        .collect();
+    let want: Vec<(u32, Vec<u8>)> = vec![
+        (0x7E0, vec![0x03, 0x22, 0xF1, 0x90]),
+        (0x7E8, vec![0x10, 20, 0x62, 0xF1, 0x90]),
+        (0x7E0, vec![0x10, 63, 0x2E, 0x01, 0x00]),
+        (0x7E8, vec![0x03, 0x6E, 0x01, 0x00]),
+        (0x7E0, vec![0x03, 0x22, 0x01, 0x00]),
+        (0x7E8, vec![0x10, 63, 0x62, 0x01, 0x00]),
+        (0x7E0, vec![0x03, 0x22, 0xF1, 0x91]),
+        (0x7E8, vec![0x03, 0x7F, 0x22, 0x31]),
+    ];
+    ensure!(
+        heads == want,
+        "UDS single and first frames: {:?}",
+        uds.iter().map(|f| show(f)).collect::<Vec<_>>()
+    );
+    // Every multi-frame UDS transfer complete: 20 bytes = 6 + 2 CFs,
+    // 63 = 6 + 9 CFs, twice; one FC each.
+    let cfs = uds.iter().filter(|f| f.data[0] >> 4 == 2).count();
+    let fcs = uds.iter().filter(|f| f.data[0] >> 4 == 3).count();
+    ensure!(
+        cfs == 2 + 9 + 9 && fcs == 3,
+        "UDS: {cfs} CFs and {fcs} FCs, want 20 and 3: {:?}",
+        uds.iter().map(|f| show(f)).collect::<Vec<_>>()
+    );
+    Ok(())
+}
+
+/// ISO-TP across a real-hardware path: QEMU's emulated SJA1000 cards
+/// (`rcan_kvaser_pci`, two Kvaser PCIcan on one virtual bus, 500 kbit/s),
+/// `isotpsend` on one card's interface and `isotprecv` on the other's, a
+/// CAN_RAW sniffer on the receiving side seeing the bus. The receivers
+/// ask for small blocks: the SJA1000's 64-byte receive FIFO holds about
+/// five frames, and QEMU delivers a frame the moment it is sent, so a
+/// sender with BS 0 and STmin 0 overruns it (seen: `isotprecv` failing
+/// with EILSEQ, the interface's rx errors counting the overruns); with
+/// BS 4 at most four CFs are on their way before the receiver's next FC,
+/// whatever the host's timing:
+/// 1. 1000 bytes can0 -> can1, BS 4 (`-b 4`): FF, 142 CFs through the
+///    chips, an FC `30 04 00` back through the other chip every 4 CFs,
+///    the PDU intact;
+/// 2. 2000 bytes can1 -> can0 with BS 3 and STmin 1 ms (`-b 3 -m 1`): an
+///    FC `30 03 01` every 3 CFs, the PDU intact.
+fn sja1000_isotp_both_ways(ctx: &mut Ctx) -> TestResult {
+    let (i0, i1) = super::sja1000::kvaser2(ctx)?;
+    ctx.insmod(Module::Isotp, &[])?;
+    let (c0, c1) = (dev(0), dev(1));
+
+    let sn = Sniffer::start(i1)?;
+    let pdu = pattern(1000);
+    canutils_pair(
+        &["-s", "123", "-d", "321", "-D", "1000", &c0],
+        &["-s", "321", "-d", "123", "-b", "4", &c1],
+        &pdu,
+    )?;
+    let fr = sn.stop()?;
+    let tx = check_transfer(&fr, 0x123, 0x321, &pdu, 8, 4, [0x30, 4, 0])?;
+    // 1000 = 6 in the FF + 142 CFs of 7; FCs after the FF and after CFs
+    // 4, 8, ..., 140.
+    ensure!(
+        tx.len() == 143,
+        "1000 bytes over the SJA1000s: {} frames from can0, want 143",
+        tx.len()
+    );
+    let fcs = fr.iter().filter(|f| f.id == 0x321).count();
+    ensure!(fcs == 36, "1000 bytes in blocks of 4: {fcs} FCs, want 36");
+
+    let sn = Sniffer::start(i0)?;
+    let pdu = pattern(2000);
+    canutils_pair(
+        &["-s", "456", "-d", "654", "-D", "2000", &c1],
+        &["-s", "654", "-d", "456", "-b", "3", "-m", "1", &c0],
+        &pdu,
+    )?;
+    let fr = sn.stop()?;
+    let tx = check_transfer(&fr, 0x456, 0x654, &pdu, 8, 3, [0x30, 3, 1])?;
+    // 2000 = 6 in the FF + 284 CFs of 7 + 6: FF + 285 CFs; FCs after the
+    // FF and after CFs 3, 6, ..., 282.
+    ensure!(
+        tx.len() == 286,
+        "2000 bytes over the SJA1000s: {} frames from can1, want 286",
+        tx.len()
+    );
+    let fcs = fr.iter().filter(|f| f.id == 0x654).count();
+    ensure!(fcs == 95, "2000 bytes in blocks of 3: {fcs} FCs, want 95");
+    Ok(())
+}
+
+/// ISO-TP over CAN FD across QEMU's CTU CAN FD cores (`rcan_ctucanfd_pci`,
+/// `bitrate 500000 dbitrate 2000000 fd on`, one virtual bus), can-utils
+/// with `-L 72:64:1` (TX_DL 64, BRS), a sniffer on the receiving side.
+/// Small blocks as with the SJA1000, as a precaution: QEMU delivers each
+/// frame at once and the receive buffer is finite (BS 0 passed the one
+/// time it was tried; the size of QEMU's buffer was not looked up).
+/// 1. 4095 bytes can0 -> can1, BS 2: FD FF and 65 FD CFs with BRS, an
+///    FD FC `30 02 00` every 2 CFs;
+/// 2. 1000 bytes can1 -> can0, BS 2 and STmin 1 ms: FF and 15 CFs.
+fn ctucanfd_isotp_fd_both_ways(ctx: &mut Ctx) -> TestResult {
+    let (i0, i1) = super::ctucanfd::ctucan2(ctx, super::ctucanfd::FD_ON)?;
+    ctx.insmod(Module::Isotp, &[])?;
+    let (c0, c1) = (dev(0), dev(1));
+    let ll = ["-L", "72:64:1"];
+
+    let sn = Sniffer::start(i1)?;
+    let pdu = pattern(4095);
+    canutils_pair(
+        &[&ll[..], &["-s", "123", "-d", "321", "-D", "4095", &c0]].concat(),
+        &[&ll[..], &["-s", "321", "-d", "123", "-b", "2", &c1]].concat(),
+        &pdu,
+    )?;
+    let fr = sn.stop()?;
+    let tx = check_transfer(&fr, 0x123, 0x321, &pdu, 64, 2, [0x30, 2, 0])?;
+    // 4095 = 62 in the FF + 64 CFs of 63 + 1; FCs after the FF and after
+    // CFs 2, 4, ..., 64.
+    ensure!(
+        tx.len() == 66 && tx.iter().all(|f| f.fd && f.flags & CANFD_BRS != 0),
+        "FD 4095 bytes over CTU CAN FD: {} frames, want 66 FD frames with BRS",
+        tx.len()
+    );
+    let fcs: Vec<&Fr> = fr.iter().filter(|f| f.id == 0x321).collect();
+    ensure!(
+        fcs.len() == 33 && fcs.iter().all(|f| f.fd),
+        "FD 4095 bytes in blocks of 2: {} FCs, want 33 FD frames",
+        fcs.len()
+    );
+
+    let sn = Sniffer::start(i0)?;
+    let pdu = pattern(1000);
+    canutils_pair(
+        &[&ll[..], &["-s", "456", "-d", "654", "-D", "1000", &c1]].concat(),
+        &[&ll[..], &["-s", "654", "-d", "456", "-b", "2", "-m", "1", &c0]].concat(),
+        &pdu,
+    )?;
+    let fr = sn.stop()?;
+    let tx = check_transfer(&fr, 0x456, 0x654, &pdu, 64, 2, [0x30, 2, 1])?;
+    // 1000 = 62 in the FF + 14 CFs of 63 + 56; FCs after the FF and after
+    // CFs 2, 4, ..., 14.
+    ensure!(
+        tx.len() == 16,
+        "FD 1000 bytes over CTU CAN FD: {} frames, want 16",
+        tx.len()
+    );
+    let fcs = fr.iter().filter(|f| f.id == 0x654).count();
+    ensure!(fcs == 8, "FD 1000 bytes in blocks of 2: {fcs} FCs, want 8");
+    Ok(())
 }
 
 /// An ISO-TP socket with `CAN_ISOTP_OPTS` flags `flags` (defaults
