@@ -801,12 +801,15 @@ impl<T: Proto> ProtoReg<T> {
 }
 
 /// `sk_destruct`: the last reference is gone. Any context: the final
-/// `sock_put` can come from an skb destructor or a timer in softirq. The
-/// `Proto::Data` and `Proto::Shared` of `T` are dropped here in process
-/// context; elsewhere they are moved out of the sock (which the socket
-/// layer frees when this returns) and dropped by the module's deferred-drop
-/// work ([`defer_drop`]), in process context, since their `Drop` may sleep
-/// (a device registration, a job's timers, anything a protocol keeps).
+/// `sock_put` can come from an skb destructor or a timer in softirq, or
+/// from process context under a spinlock or an RCU read lock. The
+/// `Proto::Data` and `Proto::Shared` of `T` are dropped here where the
+/// caller may sleep (preemptible, outside RCU read-side sections; a kernel
+/// without `CONFIG_PREEMPT_COUNT` cannot tell, so never here); elsewhere
+/// they are moved out of the sock (which the socket layer frees when this
+/// returns) and dropped by the module's deferred-drop work
+/// ([`defer_drop`]), in process context, since their `Drop` may sleep (a
+/// device registration, a job's timers, anything a protocol keeps).
 unsafe extern "C" fn destruct<T: Proto>(sk: *mut bindings::sock) {
     let obj = sk.cast::<ObjOf<T>>();
     // SAFETY: the sock was created by `ProtoReg::create` for `T` with
@@ -818,7 +821,7 @@ unsafe extern "C" fn destruct<T: Proto>(sk: *mut bindings::sock) {
         let shared = core::ptr::addr_of_mut!((*obj).shared);
         let needs_drop =
             core::mem::needs_drop::<T::Data>() || core::mem::needs_drop::<T::Shared>();
-        if !needs_drop || bindings::rcan_in_task() {
+        if !needs_drop || bindings::rcan_may_sleep() {
             core::ptr::drop_in_place(data);
             core::ptr::drop_in_place(shared);
         } else {

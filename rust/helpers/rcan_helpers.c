@@ -304,9 +304,11 @@ bool rcan_flush_work(struct work_struct *work)
 	return flush_work(work);
 }
 
-bool rcan_in_task(void)
+bool rcan_may_sleep(void)
 {
-	return in_task();
+	/* Without CONFIG_PREEMPT_COUNT preemptible() is always false: the
+	 * caller then takes the path that never sleeps. */
+	return preemptible() && !rcu_preempt_depth();
 }
 
 int rcan_request_module(const char *name)

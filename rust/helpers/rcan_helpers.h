@@ -141,8 +141,9 @@ void rcan_kmemleak_not_leak(const void *ptr);
 void rcan_init_work(struct work_struct *work, work_func_t func);
 bool rcan_schedule_work(struct work_struct *work);
 bool rcan_flush_work(struct work_struct *work);
-/* in_task(): process context, not in an interrupt or softirq */
-bool rcan_in_task(void);
+/* the caller may sleep: preemptible, not in an RCU read-side section
+ * (false on kernels that cannot tell, without CONFIG_PREEMPT_COUNT) */
+bool rcan_may_sleep(void);
 /* request_module("%s", name): the name is never used as a format */
 int rcan_request_module(const char *name);
 
