@@ -10,6 +10,8 @@
 //! otherwise have to remember, in the order the kernel needs, whatever
 //! the module's own fields and `Drop` do:
 //!
+//! 0. the drops of freed socks' data that the glue deferred to process
+//!    context (`sock::destruct` outside process context) are waited for;
 //! 1. every static [`HrTimer`](super::hrtimer::HrTimer) of the module is
 //!    killed: first all of them refuse to be started again, then each is
 //!    cancelled (`hrtimer_cancel` waits for a running callback), so no
@@ -108,7 +110,10 @@ impl<T: ScopedModule> kernel::Module for Scoped<T> {
 
 impl<T: ScopedModule> Drop for Scoped<T> {
     fn drop(&mut self) {
-        // Timers first: from here on nothing the module does can arm one.
+        // The drops of freed socks' data deferred to process context
+        // first: they may drop anything a protocol kept (module text runs).
+        super::sock::flush_deferred_drops();
+        // Timers next: from here on nothing the module does can arm one.
         super::hrtimer::kill_all();
         // The protocols next (step 2): no socket of them is left (each
         // pins the module), and none of their calls runs while the
@@ -324,6 +329,7 @@ pub(super) fn note_rcu_callback() {
 /// Steps 1 (again: nothing may have armed a timer since, but it is
 /// idempotent and cheap), 3 and 4. Process context.
 fn exit_duties() {
+    super::sock::flush_deferred_drops();
     super::hrtimer::kill_all();
     for kind in SweepKind::ALL {
         run_sweep(kind);

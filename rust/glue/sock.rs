@@ -6,7 +6,9 @@
 //! `struct proto_ops`, [`ProtoReg`] registers its `struct proto` (whose
 //! objects are a `struct sock` followed by `Proto::Data`), and [`create`]
 //! makes a new socket of it. `Proto::Data` is constructed in `create` and
-//! dropped in `sk_destruct`, when the last reference to the sock goes.
+//! dropped when the last reference to the sock goes, in process context:
+//! in `sk_destruct` when that runs in process context, else by the
+//! module's deferred-drop work ([`destruct`]).
 //!
 //! Locking: `Proto::Data` is protected by the socket lock (`lock_sock`),
 //! reached through [`Sock::lock`]; only process context takes it. The
@@ -16,7 +18,12 @@
 use super::bindings;
 use super::net::Net;
 use super::skb::{OwnedSkb, Shared, Skb, UniqueSkb};
+use super::lock::StaticIrqSpinLock;
+use super::sync::CCell;
+use kernel::alloc::flags::GFP_ATOMIC;
 use core::marker::PhantomData;
+use core::sync::atomic::{AtomicBool, Ordering};
+use kernel::alloc::KBox;
 use kernel::error::{code, Error, Result};
 use kernel::ffi;
 
@@ -759,6 +766,9 @@ impl<T: Proto> ProtoReg<T> {
     /// Fills in and registers the proto. Module init only (process context,
     /// before any socket of `T` can exist). `name` must be static.
     pub(in crate::glue) fn register(&self, name: &'static kernel::str::CStr, family: i32) -> Result {
+        // Before any sock of the module can exist (their `destruct` may
+        // need it).
+        defer_init();
         // SAFETY: module init is single-threaded with respect to these
         // structs: nothing else references them before registration.
         unsafe {
@@ -829,15 +839,167 @@ impl<T: Proto> ProtoReg<T> {
     }
 }
 
-/// `sk_destruct`: the last reference is gone. Any context (the final
-/// `sock_put` can come from an skb destructor in softirq).
+/// `sk_destruct`: the last reference is gone. Any context: the final
+/// `sock_put` can come from an skb destructor or a timer in softirq, or
+/// from process context under a spinlock or an RCU read lock. The
+/// `Proto::Data` and `Proto::Shared` of `T` are dropped here where the
+/// caller may sleep (preemptible, outside RCU read-side sections; a kernel
+/// without `CONFIG_PREEMPT_COUNT` cannot tell, so never here); elsewhere
+/// they are moved out of the sock (which the socket layer frees when this
+/// returns) and dropped by the module's deferred-drop work
+/// ([`defer_drop`]), in process context, since their `Drop` may sleep (a
+/// device registration, a job's timers, anything a protocol keeps).
 unsafe extern "C" fn destruct<T: Proto>(sk: *mut bindings::sock) {
+    let obj = sk.cast::<ObjOf<T>>();
     // SAFETY: the sock was created by `ProtoReg::create` for `T` with
-    // initialised data; nothing can reach it any more.
+    // initialised data; nothing can reach it any more, so its data may be
+    // dropped, or moved out (read) and never used in the sock again.
     unsafe {
         bindings::rcan_sk_purge_queues(sk);
-        core::ptr::drop_in_place(core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).data));
-        core::ptr::drop_in_place(core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).shared));
+        let data = core::ptr::addr_of_mut!((*obj).data);
+        let shared = core::ptr::addr_of_mut!((*obj).shared);
+        let needs_drop =
+            core::mem::needs_drop::<T::Data>() || core::mem::needs_drop::<T::Shared>();
+        if !needs_drop || bindings::rcan_may_sleep() {
+            core::ptr::drop_in_place(data);
+            core::ptr::drop_in_place(shared);
+        } else {
+            defer_drop(data.read(), shared.read());
+        }
+    }
+}
+
+/// A sock's `Proto::Data` and `Proto::Shared`, moved out of it when it was
+/// freed outside process context, on this module's [`DEFERRED`] list until
+/// the deferred-drop work drops them. `hdr` first (`repr(C)`): the list
+/// links headers.
+#[repr(C)]
+struct Deferred<D, S> {
+    hdr: DeferHdr,
+    data: D,
+    shared: S,
+}
+
+/// The type-erased head of a [`Deferred`].
+#[repr(C)]
+struct DeferHdr {
+    next: *mut DeferHdr,
+    /// `drop_deferred::<D, S>` of this node's `D` and `S`.
+    drop_fn: unsafe fn(*mut DeferHdr),
+}
+
+/// The [`Deferred`] nodes not dropped yet, newest first (null: none).
+///
+/// # Invariants
+///
+/// Every node is a `Deferred<D, S>` from `KBox::into_raw` whose `hdr.drop_fn`
+/// is `drop_deferred::<D, S>`, owned by the list.
+struct DeferList(*mut DeferHdr);
+
+// SAFETY: the list owns its nodes, whose data is `Send` (`Proto::Data:
+// Send`, `Proto::Shared: Send + Sync`), and is only used under its lock.
+unsafe impl Send for DeferList {}
+
+/// This module's deferred drops (the glue is compiled into each module: one
+/// list per module). Irqsave: `destruct` may run in any context.
+static DEFERRED: StaticIrqSpinLock<DeferList> =
+    StaticIrqSpinLock::new(DeferList(core::ptr::null_mut()), kernel::c_str!("rcan_glue_deferred"));
+
+/// The work item that empties [`DEFERRED`]; initialised once by
+/// [`defer_init`] (module init) before any sock of the module exists.
+static DEFER_WORK: CCell<bindings::work_struct> =
+    // SAFETY: all-zero is a valid (not yet initialised) work_struct.
+    CCell::new(unsafe { core::mem::zeroed() });
+
+/// [`DEFER_WORK`] is initialised. Set once, in module init.
+static DEFER_READY: AtomicBool = AtomicBool::new(false);
+
+/// Initialises [`DEFER_WORK`] if it is not. Module init (process context;
+/// module init is serialised), before the module's first sock.
+fn defer_init() {
+    if DEFER_READY.load(Ordering::Acquire) {
+        return;
+    }
+    // SAFETY: a static work_struct, initialised once here before anything
+    // can queue it (no sock of this module exists yet); its function is in
+    // this module's text, and the module's exit flushes it
+    // ([`flush_deferred_drops`]).
+    unsafe { bindings::rcan_init_work(DEFER_WORK.get(), Some(defer_work)) };
+    DEFER_READY.store(true, Ordering::Release);
+}
+
+/// Hands `data` and `shared` to process context: onto [`DEFERRED`], and the
+/// work scheduled. Any context. Without memory for the node (GFP_ATOMIC)
+/// they leak: dropping them here is what must not happen.
+fn defer_drop<D: Send, S: Send>(data: D, shared: S) {
+    let node = match KBox::<Deferred<D, S>>::new_uninit(GFP_ATOMIC) {
+        Ok(b) if DEFER_READY.load(Ordering::Acquire) => KBox::write(
+            b,
+            Deferred {
+                hdr: DeferHdr {
+                    next: core::ptr::null_mut(),
+                    drop_fn: drop_deferred::<D, S>,
+                },
+                data,
+                shared,
+            },
+        ),
+        _ => {
+            core::mem::forget((data, shared));
+            return;
+        }
+    };
+    // CAST: `hdr` is the first field of the `repr(C)` `Deferred`.
+    let p = KBox::into_raw(node).cast::<DeferHdr>();
+    {
+        let mut l = DEFERRED.lock();
+        // SAFETY: `p` is our new node, not on the list yet.
+        unsafe { (*p).next = l.0 };
+        // INVARIANT: from KBox::into_raw, with its own drop_fn.
+        l.0 = p;
+    }
+    // SAFETY: DEFER_WORK was initialised (DEFER_READY, checked above).
+    unsafe { bindings::rcan_schedule_work(DEFER_WORK.get()) };
+}
+
+/// Drops one [`Deferred`] node.
+///
+/// # Safety
+///
+/// `h` is a node taken off [`DEFERRED`], a `Deferred<D, S>` of these `D`
+/// and `S` (its `drop_fn`), owned by the caller.
+unsafe fn drop_deferred<D, S>(h: *mut DeferHdr) {
+    // SAFETY: per the contract (DeferList invariant).
+    drop(unsafe { KBox::from_raw(h.cast::<Deferred<D, S>>()) });
+}
+
+/// [`DEFER_WORK`]'s function: drops every deferred node. Process context
+/// (the system workqueue); sleeps if the drops do.
+unsafe extern "C" fn defer_work(_work: *mut bindings::work_struct) {
+    loop {
+        let mut p = core::mem::replace(&mut DEFERRED.lock().0, core::ptr::null_mut());
+        if p.is_null() {
+            return;
+        }
+        while !p.is_null() {
+            // SAFETY: a node we took off the list, so ours (DeferList
+            // invariant); read before it is freed.
+            let (next, drop_fn) = unsafe { ((*p).next, (*p).drop_fn) };
+            // SAFETY: as above; `drop_fn` is the node's own.
+            unsafe { drop_fn(p) };
+            p = next;
+        }
+    }
+}
+
+/// Waits until every deferred drop queued so far has run (module exit,
+/// process context). After the module's last sock is freed (each pins the
+/// module until then, after its `destruct` queued what it had), nothing
+/// queues more, so afterwards nothing of the work runs in module text.
+pub(super) fn flush_deferred_drops() {
+    if DEFER_READY.load(Ordering::Acquire) {
+        // SAFETY: initialised (DEFER_READY); a static.
+        unsafe { bindings::rcan_flush_work(DEFER_WORK.get()) };
     }
 }
 

@@ -29,6 +29,7 @@
 #include <linux/sockptr.h>
 #include <linux/uaccess.h>
 #include <linux/wait.h>
+#include <linux/workqueue.h>
 #include <net/net_namespace.h>
 #include <net/netns/generic.h>
 #include <net/sock.h>
@@ -286,6 +287,28 @@ void rcan_module_put(struct module *mod)
 void rcan_kmemleak_not_leak(const void *ptr)
 {
 	kmemleak_not_leak(ptr);
+}
+
+void rcan_init_work(struct work_struct *work, work_func_t func)
+{
+	INIT_WORK(work, func);
+}
+
+bool rcan_schedule_work(struct work_struct *work)
+{
+	return schedule_work(work);
+}
+
+bool rcan_flush_work(struct work_struct *work)
+{
+	return flush_work(work);
+}
+
+bool rcan_may_sleep(void)
+{
+	/* Without CONFIG_PREEMPT_COUNT preemptible() is always false: the
+	 * caller then takes the path that never sleeps. */
+	return preemptible() && !rcu_preempt_depth();
 }
 
 int rcan_request_module(const char *name)

@@ -12,6 +12,7 @@
 #include <linux/types.h>
 #include <linux/sockptr.h>
 #include <linux/spinlock_types.h>
+#include <linux/workqueue.h>
 
 struct sk_buff;
 struct sock;
@@ -137,6 +138,13 @@ bool rcan_try_module_get(struct module *mod);
 void rcan_module_put(struct module *mod);
 /* an allocation leaked on purpose (kmemleak: not reported, still scanned) */
 void rcan_kmemleak_not_leak(const void *ptr);
+/* work items (INIT_WORK with its lockdep key; schedule_work, flush_work) */
+void rcan_init_work(struct work_struct *work, work_func_t func);
+bool rcan_schedule_work(struct work_struct *work);
+bool rcan_flush_work(struct work_struct *work);
+/* the caller may sleep: preemptible, not in an RCU read-side section
+ * (false on kernels that cannot tell, without CONFIG_PREEMPT_COUNT) */
+bool rcan_may_sleep(void);
 /* request_module("%s", name): the name is never used as a format */
 int rcan_request_module(const char *name);
 

@@ -1027,6 +1027,8 @@ const CANPROTO_EXITTEST: i32 = 23;
 const EXITTEST_RX_ID: u16 = 0x7e5;
 /// Its forgotten device.
 const EXITTEST_DEV: &str = "rcanexit0";
+/// Its device that a socket's `connect` moves into the socket's data.
+const EXITTEST_HELD_DEV: &str = "rcanexit1";
 
 /// The module exit owns what a module forgot (issue 39): `rcan_exittest`
 /// registers a protocol, a kernel receiver (CAN identifier 0x7E5), a
@@ -1038,8 +1040,15 @@ const EXITTEST_DEV: &str = "rcanexit0";
 /// open sockets: the third `socket()` failed with EPROTONOSUPPORT, and
 /// the emptied socket set made the first socket's close write into the
 /// second one's freed sock, a use after free KASAN reports), an open
-/// socket keeps the module from unloading, and the device sends. After
-/// `rmmod`:
+/// socket keeps the module from unloading, and the device sends. A
+/// fourth socket's `connect` moves the module's second device
+/// (`rcanexit1`) into the socket's data and arms a job that drops a
+/// reference to the socket 100 ms later from the timer softirq; the
+/// socket is closed at once, so the sock is freed in softirq: the device
+/// must go (its registration's drop sleeps, so the glue must drop the
+/// data in process context; before it did, the drop ran in softirq:
+/// "BUG: scheduling while atomic" or "sleeping function called from
+/// invalid context"). After `rmmod`:
 /// the device is gone, the protocol is gone (EPROTONOSUPPORT), and what
 /// would call into the freed module if the exit had left it behind
 /// happens without a kernel report (the runner fails the test on one):
@@ -1071,6 +1080,19 @@ fn teardown_exit_sweeps(ctx: &mut Ctx) -> TestResult {
     );
     drop(first);
     let third = third?;
+    // A sock freed outside process context: its data, rcanexit1's
+    // registration, must still be dropped in process context.
+    let held = std::path::Path::new("/sys/class/net").join(EXITTEST_HELD_DEV);
+    ensure!(held.exists(), "{EXITTEST_HELD_DEV} missing after insmod {EXITTEST}");
+    let fourth = open().or_fail("fourth socket(CANPROTO_EXITTEST)")?;
+    raw::connect(&fourth, &addr_bytes(PF_CAN as u16, 0))
+        .or_fail("connect (moves the device into the socket, arms the job)")?;
+    drop(fourth);
+    wait_until(
+        HANG,
+        &format!("{EXITTEST_HELD_DEV} gone after its socket's last reference went in softirq"),
+        || !held.exists(),
+    )?;
     match ctx.rmmod_exittest() {
         Ok(()) => return Err(format!("rmmod {EXITTEST} succeeded with a socket of it open")),
         Err(e) => ctx.note(format!("with a socket open: {e}")),

@@ -18,7 +18,15 @@
 //! * a network device (`rcanexit%d`, a CAN device that drops what it is
 //!   given), forgotten: it must be gone after `rmmod`;
 //! * a job whose timer re-arms itself every [`TICK_NS`], forgotten: it
-//!   must not fire after `rmmod`.
+//!   must not fire after `rmmod`;
+//! * a second network device (`rcanexit1`), kept in a `static` until a
+//!   socket's `connect` moves it into that socket's `Proto::Data` and
+//!   arms a job that holds a reference to the socket and drops it
+//!   [`PUT_AFTER_NS`] later, from the timer softirq: after the socket's
+//!   close, that is the last reference, so the socket's data (the device
+//!   registration, whose drop sleeps) goes when the sock is freed outside
+//!   process context. The glue must drop it in process context: the
+//!   device must go, without a kernel report.
 //!
 //! Each of these, left behind by a glue that does not sweep it, was seen
 //! to crash the kernel (architecture.rst, "Registrations forgotten at
@@ -36,7 +44,8 @@ use crate::glue::jobtimer::{JobCallback, JobRef, JobTimers};
 use crate::glue::module::{ModuleScope, ScopedModule};
 use crate::glue::netdev::{Dev, Driver, NetDev, Registration, Setup, Xmit};
 use crate::glue::skb::Skb;
-use crate::glue::sock::{Msg, Proto, Sock};
+use crate::glue::lock::{new_irq_spinlock, IrqSpinLock};
+use crate::glue::sock::{Msg, Proto, Sock, SockRef};
 use crate::glue::sync::{Rtnl, RtnlLocked};
 use crate::rcan_core::frame::CAN_MTU;
 use core::sync::atomic::{AtomicU64, Ordering};
@@ -50,6 +59,9 @@ pub(crate) const CANPROTO_EXITTEST: i32 = 23;
 pub(crate) const RX_ID: u32 = 0x7e5;
 /// The period of the forgotten job's timer: 50 ms.
 const TICK_NS: u64 = 50_000_000;
+/// How long after `connect` the putter job drops its socket reference:
+/// 100 ms, after the test's close.
+const PUT_AFTER_NS: u64 = 100_000_000;
 
 /// The protocol: sockets that can be created, bound (which drops the
 /// protocol's registration) and closed; nothing else.
@@ -62,11 +74,18 @@ static MODULE: ProtoModule<ExitProto> = ProtoModule::new();
 /// Protected by RTNL.
 static REG: RtnlLocked<Option<ProtoRegistration<ExitProto>>> = RtnlLocked::new(None);
 
+/// The second device until a `connect` moves it into its socket's data.
+/// Protected by RTNL.
+static HELD: RtnlLocked<Option<Registration<SinkDev>>> = RtnlLocked::new(None);
+
 impl Proto for ExitProto {
-    type Data = ();
+    /// The device `connect` moved here, if any: dropped with the sock.
+    type Data = Option<Registration<SinkDev>>;
     type Shared = ();
 
-    fn new_data() {}
+    fn new_data() -> Self::Data {
+        None
+    }
     fn new_shared() {}
 
     /// Process context.
@@ -87,8 +106,18 @@ impl Proto for ExitProto {
         Ok(())
     }
 
-    fn connect(_sk: &Sock<Self>, _addr: &[u8], _flags: i32) -> Result {
-        Err(EOPNOTSUPP())
+    /// Moves the held device into this socket's data and arms a job that
+    /// drops a reference to the socket [`PUT_AFTER_NS`] from now, in the
+    /// timer softirq (module documentation). Process context. EBUSY once
+    /// the device was moved.
+    fn connect(sk: &Sock<Self>, _addr: &[u8], _flags: i32) -> Result {
+        let dev = HELD.get(&mut Rtnl::lock()).take().ok_or(EBUSY)?;
+        *sk.lock() = Some(dev);
+        let job = JobTimers::<Putter>::new(new_irq_spinlock!(Some(sk.to_ref()), "exittest_put")?, sk)?;
+        job.get().start(0, ktime_get_mono_ns() as u64 + PUT_AFTER_NS);
+        // Forgotten: the module's exit kills it (its memory leaks).
+        core::mem::forget(job);
+        Ok(())
     }
 
     fn getname(_sk: &Sock<Self>, _peer: bool, _out: &mut [u8]) -> Result<usize> {
@@ -126,7 +155,7 @@ impl KernelRx for CountRx {
 static RX: CountRx = CountRx(AtomicU64::new(0));
 
 /// The network device: a CAN device that drops every frame.
-struct SinkDev;
+pub(crate) struct SinkDev;
 
 impl Driver for SinkDev {
     type Priv = ();
@@ -168,6 +197,19 @@ impl JobCallback for Ticker {
     }
 }
 
+/// The job that drops a socket reference from the timer softirq.
+struct Putter;
+
+impl JobCallback for Putter {
+    type Data = IrqSpinLock<Option<SockRef<ExitProto>>>;
+
+    /// HRTIMER_SOFTIRQ.
+    fn expired(job: JobRef<'_, Self>, _which: usize) {
+        let r = job.data().lock().take();
+        drop(r);
+    }
+}
+
 /// The module's value: nothing; everything it registered is forgotten.
 pub(crate) struct ExitTest;
 
@@ -187,6 +229,10 @@ impl ScopedModule for ExitTest {
         let dev = Registration::<SinkDev>::register(c_str!("rcanexit%d"), (), scope)?;
         pr_info!("{}: registered, to be forgotten\n", dev.dev().name());
         core::mem::forget(dev);
+
+        let held = Registration::<SinkDev>::register(c_str!("rcanexit%d"), (), scope)?;
+        pr_info!("{}: registered, held for a socket\n", held.dev().name());
+        *HELD.get(&mut Rtnl::lock()) = Some(held);
 
         let job = JobTimers::<Ticker>::new(AtomicU64::new(0), scope)?;
         job.get().start(0, ktime_get_mono_ns() as u64 + TICK_NS);
