@@ -339,7 +339,6 @@ impl<T: CanProtocol> SockSet<T> {
     /// netdevice events for it from then on); otherwise the glue does
     /// it when `release` returns.
     pub(crate) fn remove(&mut self, sk: &Sock<T>) {
-        let me = sk.as_ptr() as usize;
         let l = sk.set_link();
         if !l.listed.load(Ordering::Relaxed) {
             return;

@@ -890,7 +890,7 @@ fn rmmod_after_close(ctx: &Ctx, name: &str, limit: Duration) -> TestResult {
     Ok(())
 }
 
-fn module_listed(name: &str) -> bool {
+pub(super) fn module_listed(name: &str) -> bool {
     std::fs::read_to_string("/proc/modules")
         .is_ok_and(|s| s.lines().any(|l| l.split(' ').next() == Some(name)))
 }
@@ -1022,7 +1022,7 @@ fn teardown_rmmod_loop_traffic(ctx: &mut Ctx) -> TestResult {
 }
 
 /// `rcan_exittest`'s protocol number (`tools/testing/rcan/exitmod`).
-const CANPROTO_EXITTEST: i32 = 23;
+pub(super) const CANPROTO_EXITTEST: i32 = 23;
 /// The CAN identifier of its forgotten kernel receiver.
 const EXITTEST_RX_ID: u16 = 0x7e5;
 /// Its forgotten device.
