@@ -58,15 +58,15 @@ bindings:
 # unless make was given a -j of its own.
 modules_j = $(if $(filter -j%,$(MAKEFLAGS)),,-j$(shell nproc))
 
-# The test-only module rcan_exittest (tools/testing/rcan/exitmod, issue 39's
-# exit sweeps) in a Kbuild run of its own: its own modules.order, so that
+# The test-only modules rcan_exittest and rcan_abiskew (tools/testing/rcan/
+# exitmod, issue 39's exit sweeps and ABI check) in a Kbuild run of their own: its own modules.order, so that
 # `make install` (which installs modules.order) never installs it; it links
 # against rcan_pf through this build's Module.symvers.
 EXITMOD := $(T)/exitmod
 
 modules: bindings
 	$(MAKE) -C $(kdir) M=$(CURDIR) LLVM=1 $(RCAN_CONFIG) $(modules_j) modules
-	$(MAKE) -C $(kdir) M=$(CURDIR)/$(EXITMOD) LLVM=1 KBUILD_EXTRA_SYMBOLS=$(CURDIR)/Module.symvers modules
+	$(MAKE) -C $(kdir) M=$(CURDIR)/$(EXITMOD) LLVM=1 KBUILD_EXTRA_SYMBOLS=$(CURDIR)/Module.symvers $(modules_j) modules
 
 userspace:
 	cargo build --release --workspace --bins

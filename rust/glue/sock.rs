@@ -48,6 +48,10 @@ struct SockObj<D, S> {
 pub(in crate::glue) struct SetLink {
     pub(in crate::glue) prev: core::cell::Cell<usize>,
     pub(in crate::glue) next: core::cell::Cell<usize>,
+    /// On the set. Written by the set only, under RTNL; true from the
+    /// sock's creation until its removal, never again afterwards, so the
+    /// release trampoline may read it without RTNL: `false` is final.
+    pub(in crate::glue) listed: core::sync::atomic::AtomicBool,
 }
 
 /// The sock object of protocol `T`.
@@ -68,7 +72,12 @@ pub(crate) trait Proto: Sized + 'static {
     /// Initial shared state of a new socket.
     fn new_shared() -> Self::Shared;
     /// The socket is being closed. Undo everything that makes other code
-    /// reach the sock (receivers, lists) before returning.
+    /// reach the sock (receivers, lists) before returning. A CAN
+    /// protocol's socket set is the glue's: the glue takes the sock off
+    /// it after `release` returns if the protocol did not do it earlier
+    /// (`can::proto::SockSet::remove`, for a protocol that wants it off
+    /// before its own teardown). A receiver left subscribed holds its
+    /// reference on the sock: leaked, never freed under the subscription.
     fn release(sk: &Sock<Self>);
     fn bind(sk: &Sock<Self>, addr: &[u8]) -> Result;
     fn connect(sk: &Sock<Self>, addr: &[u8], flags: i32) -> Result;
@@ -763,9 +772,16 @@ impl<T: Proto> ProtoReg<T> {
         }
     }
 
-    /// Fills in and registers the proto. Module init only (process context,
-    /// before any socket of `T` can exist). `name` must be static.
-    pub(in crate::glue) fn register(&self, name: &'static kernel::str::CStr, family: i32) -> Result {
+    /// Fills in and registers the proto, with `release` as its
+    /// `proto_ops::release` (a trampoline that ends in [`release_then`]
+    /// for `T`). Module init only (process context, before any socket of
+    /// `T` can exist). `name` must be static.
+    pub(in crate::glue) fn register(
+        &self,
+        name: &'static kernel::str::CStr,
+        family: i32,
+        release: unsafe extern "C" fn(*mut bindings::socket) -> ffi::c_int,
+    ) -> Result {
         // Before any sock of the module can exist (their `destruct` may
         // need it).
         defer_init();
@@ -781,6 +797,7 @@ impl<T: Proto> ProtoReg<T> {
             p.obj_size = core::mem::size_of::<ObjOf<T>>() as u32;
             let o = &mut *self.ops.get();
             *o = proto_ops_template::<T>();
+            o.release = Some(release);
             o.family = family;
             o.owner = super::this_module();
             super::to_result(bindings::proto_register(p, 0))?;
@@ -828,6 +845,7 @@ impl<T: Proto> ProtoReg<T> {
             core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).set).write(SetLink {
                 prev: core::cell::Cell::new(0),
                 next: core::cell::Cell::new(0),
+                listed: core::sync::atomic::AtomicBool::new(false),
             });
             core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).rx)
                 .write(core::sync::atomic::AtomicPtr::new(core::ptr::null_mut()));
@@ -1056,11 +1074,30 @@ unsafe fn sock_of<T: Proto>(sock: *mut bindings::socket) -> Option<Sock<T>> {
 }
 
 unsafe extern "C" fn release<T: Proto>(sock: *mut bindings::socket) -> ffi::c_int {
-    // SAFETY: called by the socket layer on close, once.
+    // SAFETY: our contract (the socket layer's release call) is
+    // `release_then`'s.
+    unsafe { release_then::<T>(sock, |_| ()) }
+}
+
+/// `proto_ops::release` of protocol `T` with the glue's own teardown:
+/// `after` runs on the sock once `T::release` has returned, before the
+/// sock is orphaned and the socket's reference dropped (`can::proto`
+/// takes the sock off its protocol's socket set there). Process context.
+///
+/// # Safety
+///
+/// `sock` is a socket of protocol `T` being closed: the socket layer's
+/// `release` call through `T`'s proto_ops, once.
+pub(in crate::glue) unsafe fn release_then<T: Proto>(
+    sock: *mut bindings::socket,
+    after: impl FnOnce(&Sock<T>),
+) -> ffi::c_int {
+    // SAFETY: called by the socket layer on close, once (our contract).
     let Some(sk) = (unsafe { sock_of::<T>(sock) }) else {
         return 0;
     };
     T::release(&sk);
+    after(&sk);
     // SAFETY: the protocol removed every path to the sock in release();
     // orphan it, detach it from the socket and drop the socket's reference.
     unsafe {

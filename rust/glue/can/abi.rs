@@ -26,8 +26,12 @@ pub(crate) const CANPROTO_MAX: usize = 24;
 
 /// The version of the ABI's meaning: bump it when an entry point's
 /// contract changes while every layout stays the same (layout changes
-/// change [`ABI_LAYOUT`] by themselves).
-pub(crate) const ABI_VERSION: u32 = 1;
+/// change [`ABI_LAYOUT`] by themselves). `--cfg rcan_abi_skew` (the
+/// test-only module `rcan_abiskew`, never installed) claims the next
+/// version, as a module built from another tree would.
+pub(crate) const ABI_VERSION: u32 = if cfg!(rcan_abi_skew) { BASE_ABI_VERSION + 1 } else { BASE_ABI_VERSION };
+/// This tree's [`ABI_VERSION`].
+const BASE_ABI_VERSION: u32 = 1;
 
 /// FNV-1a (32 bits) over the size, alignment and field offsets of every
 /// struct that crosses between the modules, the size of their pointers

@@ -281,9 +281,12 @@ pub(crate) trait CanProtocol: Proto {
 /// # Invariants
 ///
 /// Only [`ProtoModule`] inserts, and only live socks of its protocol;
-/// each is removed by the protocol's `release` (under RTNL) before the
-/// sock can be freed. `head` and the links of the socks on the set are
-/// the addresses of socks on the set, or 0.
+/// each is removed (under RTNL) before the sock can be freed: by the
+/// protocol's `release` if it wants it off early, else by the glue's
+/// release trampoline ([`release_trampoline`]) right after it, before
+/// the socket's reference goes; the protocol has no duty here. `head`
+/// and the links of the socks on the set are the addresses of socks on
+/// the set, or 0; a sock's `listed` flag says whether it is on it.
 pub(crate) struct SockSet<T: CanProtocol> {
     /// The first sock's address; 0 for an empty set.
     head: usize,
@@ -323,21 +326,24 @@ impl<T: CanProtocol> SockSet<T> {
             // invariant); RTNL is held (`&mut self`).
             unsafe { Self::with_link(self.head, |h| h.prev.set(me)) };
         }
+        l.listed.store(true, Ordering::Relaxed);
         // INVARIANT: `sk` is live and stays so until its release removes
         // it; every link above names a sock on the set.
         self.head = me;
     }
 
     /// Removes socket `sk` if it is on the set (a socket whose creation
-    /// failed before it was inserted is not). The protocol's `release`
-    /// calls this under RTNL. O(1).
+    /// failed before it was inserted is not, nor one removed before).
+    /// Under RTNL (`&mut self`). O(1). A protocol's `release` may call it
+    /// to take its socket off the set before its own teardown (no more
+    /// netdevice events for it from then on); otherwise the glue does
+    /// it when `release` returns.
     pub(crate) fn remove(&mut self, sk: &Sock<T>) {
-        let me = sk.as_ptr() as usize;
         let l = sk.set_link();
-        let (prev, next) = (l.prev.get(), l.next.get());
-        if prev == 0 && self.head != me {
+        if !l.listed.load(Ordering::Relaxed) {
             return;
         }
+        let (prev, next) = (l.prev.get(), l.next.get());
         if prev != 0 {
             // SAFETY: `sk` is on the set (checked above), so its non-zero
             // neighbours are too (type invariant); RTNL is held (`&mut
@@ -352,6 +358,7 @@ impl<T: CanProtocol> SockSet<T> {
         }
         l.prev.set(0);
         l.next.set(0);
+        l.listed.store(false, Ordering::Relaxed);
     }
 }
 
@@ -464,7 +471,7 @@ impl<T: CanProtocol> ProtoModule<T> {
         &'static self,
         name: &'static kernel::str::CStr,
     ) -> Result<ProtoRegistration<T>> {
-        self.proto.register(name, bindings::PF_CAN as i32)?;
+        self.proto.register(name, bindings::PF_CAN as i32, release_trampoline::<T>)?;
         // SAFETY: module init: nothing else sees the CanProto yet.
         unsafe { (*self.canproto.get()).owner = crate::glue::this_module() };
         // SAFETY: a static notifier, unregistered in `unregister`.
@@ -625,6 +632,25 @@ unsafe extern "C" fn create_trampoline<T: CanProtocol>(
 ) -> ffi::c_int {
     // SAFETY: the socket layer's arguments (this function's contract).
     unsafe { T::module().create_socket(net, sock, protocol, kern) }
+}
+
+/// `proto_ops::release` of protocol `T`: its `release`, then the sock
+/// off the socket set if `release` left it on. Process context.
+///
+/// # Safety
+///
+/// The socket layer's release call for a socket of `T` (installed by
+/// [`ProtoModule::register`] as `T`'s proto_ops).
+unsafe extern "C" fn release_trampoline<T: CanProtocol>(sock: *mut bindings::socket) -> ffi::c_int {
+    let forget = |sk: &Sock<T>| {
+        // `listed` only goes from true to false (insert runs once, at
+        // creation): false needs no RTNL; true is checked again under it.
+        if sk.set_link().listed.load(Ordering::Relaxed) {
+            T::module().sockets.get(&mut Rtnl::lock()).remove(sk);
+        }
+    };
+    // SAFETY: our contract is `release_then`'s for `T`.
+    unsafe { crate::glue::sock::release_then::<T>(sock, forget) }
 }
 
 /// The netdevice notifier of protocol `T`. Process context, RTNL held

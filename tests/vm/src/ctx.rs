@@ -283,6 +283,13 @@ pub const EXITTEST: &str = "rcan_exittest";
 /// Its `.ko`, relative to the repository root.
 pub const EXITTEST_KO: &str = "tools/testing/rcan/exitmod/rcan_exittest.ko";
 
+/// The test-only module `rcan_abiskew` (built beside [`EXITTEST`]):
+/// `rcan_exittest` built for another ABI version; only
+/// `module_abi_mismatch` tries to load it ([`Ctx::insmod_abiskew`]).
+pub const ABISKEW: &str = "rcan_abiskew";
+/// Its `.ko`, relative to the repository root.
+pub const ABISKEW_KO: &str = "tools/testing/rcan/exitmod/rcan_abiskew.ko";
+
 /// Test context: where the modules are and the state of the loaded stack.
 pub struct Ctx {
     root: PathBuf,
@@ -424,6 +431,13 @@ impl Ctx {
         self.own("insmod", EXITTEST)?;
         let ko = self.root.join(EXITTEST_KO);
         sys::finit_module(&ko, &[]).map_err(|e| format!("insmod {}: {e}", ko.display()))
+    }
+
+    /// Tries to `insmod` the test-only module [`ABISKEW`] (after
+    /// rcan_pf): the loader's error, as the caller expects one.
+    pub fn insmod_abiskew(&mut self) -> Result<std::io::Result<()>, String> {
+        self.own("insmod", ABISKEW)?;
+        Ok(sys::finit_module(&self.root.join(ABISKEW_KO), &[]))
     }
 
     /// `rmmod` the test-only module [`EXITTEST`] (no retries).

@@ -3,15 +3,20 @@
 
 use std::time::Instant;
 
+use rcan_uapi::{raw, PF_CAN};
+
+use super::teardown::{module_listed, CANPROTO_EXITTEST};
 use super::{stack1, test_table};
-use crate::check::{ensure, expect_frame, wait_until, Frame, TestResult, SETTLE};
-use crate::ctx::{Ctx, Module};
+use crate::canraw::{self, std as sff};
+use crate::check::{ensure, expect_errno, expect_frame, wait_until, Frame, TestResult, SETTLE};
+use crate::ctx::{Ctx, Module, ABISKEW};
 use crate::Test;
 
 pub const TESTS: &[Test] = test_table![
     module_can_needs_pf,
     module_pf_pinned_by_can,
     module_can_pinned_by_socket,
+    module_abi_mismatch,
 ];
 
 /// rcan_can cannot be loaded before rcan_pf.
@@ -98,4 +103,44 @@ fn rmmod_after_close(ctx: &mut Ctx, what: &str) -> TestResult {
         ));
     }
     Ok(())
+}
+
+/// A protocol module built for another ABI than the loaded rcan_pf's
+/// (issue 39, "a versioned module ABI"; `rcan_abiskew`, `rcan_exittest`'s
+/// code built to claim the next ABI version, as a module from another
+/// tree would) fails to load cleanly: ENOEXEC, a kernel log line from
+/// that module naming both ABIs, nothing left registered (it is not
+/// listed, its protocol number says EPROTONOSUPPORT, its devices do not
+/// exist), and the stack keeps working (CAN_RAW frames on can0).
+fn module_abi_mismatch(ctx: &mut Ctx) -> TestResult {
+    ctx.load_stack(&[])?;
+    let can0 = ctx.ifindex("can0")?;
+    let mut kmsg = ctx.kmsg()?;
+    match ctx.insmod_abiskew()? {
+        Ok(()) => return Err(format!("insmod {ABISKEW} succeeded against another ABI")),
+        Err(e) => ensure!(
+            e.raw_os_error() == Some(libc::ENOEXEC),
+            "insmod {ABISKEW}: {e}, expected ENOEXEC (Exec format error)"
+        ),
+    }
+    let log = kmsg.read_new()?;
+    ensure!(
+        log.iter().any(|l| l.contains(ABISKEW)
+            && l.contains("rcan ABI mismatch")
+            && l.contains("this module has ABI 2")
+            && l.contains("rcan_pf has ABI 1")),
+        "no ABI-mismatch line from {ABISKEW} naming both ABIs in the kernel log: {log:?}"
+    );
+    ensure!(!module_listed(ABISKEW), "{ABISKEW} listed in /proc/modules after the failed insmod");
+    ensure!(
+        !std::path::Path::new("/sys/class/net/rcanexit0").exists(),
+        "{ABISKEW} registered a device before failing"
+    );
+    let s = raw::socket(PF_CAN, libc::SOCK_DGRAM, CANPROTO_EXITTEST);
+    expect_errno(s, libc::EPROTONOSUPPORT, "socket(CANPROTO_EXITTEST) after the failed insmod")?;
+    let rx = canraw::open(can0)?;
+    let tx = canraw::open(can0)?;
+    let f = sff(0x2a5, &[0xab, 0x1]);
+    canraw::send(&tx, &f)?;
+    canraw::expect(&rx, &f, "can0 after the failed insmod")
 }

@@ -890,7 +890,7 @@ fn rmmod_after_close(ctx: &Ctx, name: &str, limit: Duration) -> TestResult {
     Ok(())
 }
 
-fn module_listed(name: &str) -> bool {
+pub(super) fn module_listed(name: &str) -> bool {
     std::fs::read_to_string("/proc/modules")
         .is_ok_and(|s| s.lines().any(|l| l.split(' ').next() == Some(name)))
 }
@@ -1022,7 +1022,7 @@ fn teardown_rmmod_loop_traffic(ctx: &mut Ctx) -> TestResult {
 }
 
 /// `rcan_exittest`'s protocol number (`tools/testing/rcan/exitmod`).
-const CANPROTO_EXITTEST: i32 = 23;
+pub(super) const CANPROTO_EXITTEST: i32 = 23;
 /// The CAN identifier of its forgotten kernel receiver.
 const EXITTEST_RX_ID: u16 = 0x7e5;
 /// Its forgotten device.
@@ -1039,7 +1039,11 @@ const EXITTEST_HELD_DEV: &str = "rcanexit1";
 /// close; before the fix the drop unregistered the protocol under the
 /// open sockets: the third `socket()` failed with EPROTONOSUPPORT, and
 /// the emptied socket set made the first socket's close write into the
-/// second one's freed sock, a use after free KASAN reports), an open
+/// second one's freed sock, a use after free KASAN reports); the
+/// protocol's `release` does nothing, and its netdevice notifier, when
+/// `rcanexit0` goes down, is shown exactly the one socket still open
+/// (the glue takes closed sockets off the protocol's socket set; before,
+/// a protocol that forgot to left freed socks on it). An open
 /// socket keeps the module from unloading, and the device sends. A
 /// fourth socket's `connect` moves the module's second device
 /// (`rcanexit1`) into the socket's data and arms a job that drops a
@@ -1080,6 +1084,18 @@ fn teardown_exit_sweeps(ctx: &mut Ctx) -> TestResult {
     );
     drop(first);
     let third = third?;
+    // The protocol's release does nothing: the glue must have taken the
+    // two closed sockets off the protocol's socket set, so its notifier
+    // is shown the one still open (before, a closed socket stayed listed
+    // after its sock was freed: a use after free in the walk).
+    let mut kmsg = ctx.kmsg()?;
+    sys::set_link_up(EXITTEST_DEV, false).or_fail(format_args!("{EXITTEST_DEV} down"))?;
+    let log = kmsg.read_new()?;
+    let want = format!("{EXITTEST_DEV}: down, 1 sockets open");
+    ensure!(
+        log.iter().any(|l| l.contains(&want)),
+        "no '{want}' line in the kernel log (the protocol's notifier counts the sockets it is shown): {log:?}"
+    );
     // A sock freed outside process context: its data, rcanexit1's
     // registration, must still be dropped in process context.
     let held = std::path::Path::new("/sys/class/net").join(EXITTEST_HELD_DEV);

@@ -11,7 +11,10 @@
 //!   its sockets takes it out and drops it, while that socket is open: a
 //!   protocol module dropping its `ProtoRegistration` early. The protocol
 //!   must keep working (more sockets, the open one closing) and its
-//!   sockets pin the module as before;
+//!   sockets pin the module as before. Its `release` does nothing: the
+//!   glue takes each closed socket off the protocol's socket set (a
+//!   protocol has no such duty), and its netdevice notifier, which
+//!   counts the open sockets it is shown, logs the count for the test;
 //! * an in-kernel receiver for CAN identifier [`RX_ID`] on every device,
 //!   forgotten (`mem::forget`): after `rmmod`, a frame with that
 //!   identifier must not call into the freed module;
@@ -35,8 +38,8 @@
 
 use crate::glue::can::ctrl;
 use crate::glue::can::proto::{
-    rx_set_kernel, CanProtocol, KernelRx, ProtoModule, ProtoRegistration, RxFilter,
-    RX_FILTER_CAN_ID, SOCK_DGRAM,
+    rx_set_kernel, CanProtocol, KernelRx, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter,
+    Sockets, RX_FILTER_CAN_ID, SOCK_DGRAM,
 };
 use crate::glue::hrtimer::ktime_get_mono_ns;
 use crate::glue::neterr::EOPNOTSUPP;
@@ -88,10 +91,9 @@ impl Proto for ExitProto {
     }
     fn new_shared() {}
 
-    /// Process context.
-    fn release(sk: &Sock<Self>) {
-        MODULE.sockets.get(&mut Rtnl::lock()).remove(sk);
-    }
+    /// Process context. Nothing to undo: the glue takes the sock off
+    /// the protocol's socket set when this returns.
+    fn release(_sk: &Sock<Self>) {}
 
     /// Drops the protocol's registration, if it is still in [`REG`], while
     /// this socket is open: what a protocol may do from safe code. Process
@@ -139,6 +141,18 @@ impl CanProtocol for ExitProto {
 
     fn module() -> &'static ProtoModule<Self> {
         &MODULE
+    }
+
+    /// Logs how many open sockets the notifier is shown when a device
+    /// goes down (the test compares it with the sockets it holds open).
+    /// Process context, RTNL held.
+    fn netdev_event(event: NetdevEvent, dev: &NetDev, sockets: &Sockets<'_, Self>) {
+        if event != NetdevEvent::Down {
+            return;
+        }
+        let mut n = 0u32;
+        sockets.for_each(|_| n += 1);
+        pr_info!("{}: down, {} sockets open\n", dev.name(), n);
     }
 }
 
