@@ -40,7 +40,11 @@
 //! reference cycle sock -> engine -> job -> sock. A cancellation that
 //! loses a race with a running callback (`try_cancel` under `eng`) is
 //! harmless: the machines ignore an expiry before their recorded deadline
-//! or with none armed.
+//! or with none armed. Timers follow the machines' deadlines lazily
+//! ([`sync_timer`]): a deadline that moves later leaves the timer queued
+//! for the earlier expiry, whose callback starts it again for the new
+//! deadline; so a burst transfer starts each timer about once per PDU,
+//! not once per frame.
 //!
 //! Blocking: `sendmsg` sleeps on the module's wait queue [`WAITQ`] until
 //! the sender is idle (a new transfer may start) or, with
@@ -73,7 +77,7 @@ use rcan_api::{
 };
 use rcan_core::frame::AnyFrame;
 use rcan_core::isotp::{
-    clamp_max_pdu_size, route, single_mask, Config, IsotpOptions, Route, TimerCmd, TpAddr,
+    clamp_max_pdu_size, route, single_mask, Config, IsotpOptions, LlOptions, Route, TpAddr,
     CAN_ISOTP, CAN_ISOTP_LL_OPTS, CAN_ISOTP_OPTS, CAN_ISOTP_RECV_FC, CAN_ISOTP_RX_STMIN,
     CAN_ISOTP_TX_STMIN, CAN_ISOTP_WAIT_TX_DONE, ISOTP_MIN_NAMELEN, MAX_OPTLEN, SOL_CAN_ISOTP,
 };
@@ -128,11 +132,19 @@ struct Engine {
     /// The two timers; taken out (and dropped, waiting for callbacks) by
     /// `release`.
     job: Option<Job>,
+    /// Per timer slot, the expiry it was last started for while it may
+    /// still be queued (`None`: not queued, or its callback is about to
+    /// clear this). Timers are started lazily ([`sync_timer`]): a
+    /// deadline that moves later (every frame moves the echo and N_Cr
+    /// deadlines) leaves the timer queued for the earlier expiry, whose
+    /// callback then starts it again for the machine's deadline.
+    armed: [Option<u64>; 2],
 }
 
-/// What to do after `eng` is released.
+/// What to do after `eng` is released (filled under `eng`, run after).
+/// The frame to send stays in the machine's step, a local of the caller
+/// (copying it here cost a copy per frame).
 struct After {
-    frame: Option<(LlFrame, bool)>,
     err: Option<i32>,
     wake: bool,
     deliver: Option<UniqueSkb>,
@@ -141,22 +153,29 @@ struct After {
 impl After {
     fn new() -> Self {
         After {
-            frame: None,
             err: None,
             wake: false,
             deliver: None,
         }
     }
 
-    /// Sends the frame (with loopback: the echo confirms it went out),
-    /// queues a delivered PDU, reports the error, wakes senders. Process
-    /// or softirq context, `eng` not held. Returns the send's result.
-    fn run(self, sk: &S, ifindex: i32, tx_id: u32, cfg: &Config) -> Result {
+    /// Sends `frame` (the step's; with loopback: the echo confirms it
+    /// went out), queues a delivered PDU, reports the error, wakes
+    /// senders. Process or softirq context, `eng` not held. Returns the
+    /// send's result.
+    fn run(
+        &mut self,
+        sk: &S,
+        ifindex: i32,
+        tx_id: u32,
+        ll: LlOptions,
+        frame: Option<&LlFrame>,
+    ) -> Result {
         let mut ret = Ok(());
-        if let Some((f, _)) = self.frame {
-            ret = send_frame(sk, ifindex, tx_id, cfg, &f);
+        if let Some(f) = frame {
+            ret = send_frame(sk, ifindex, tx_id, ll, f);
         }
-        if let Some(skb) = self.deliver {
+        if let Some(skb) = self.deliver.take() {
             // A full receive queue drops the PDU, as mainline.
             let _ = sk.queue_rcv(skb.into_owned());
         }
@@ -171,28 +190,50 @@ impl After {
     }
 }
 
-/// Applies a timer command of a machine to timer `which`. `eng` held.
-fn timer(job: &Option<Job>, which: usize, cmd: TimerCmd) {
+/// Brings timer `which` in line with its machine's deadline `want`
+/// (`Tx::deadline`, `Rx::deadline`), lazily. `armed` is the expiry the
+/// timer was last started for ([`Engine::armed`]). A deadline at or after
+/// that expiry leaves the timer alone: it fires early, and its callback
+/// (the machine ignores an expiry before its deadline) starts it again
+/// for the deadline then in force. So a transfer starts each timer about
+/// once, instead of once per frame (mainline restarts its echo and N_Cr
+/// timers on every consecutive frame). No deadline: the timer is
+/// cancelled (a callback already running finds nothing to do). `eng`
+/// held.
+fn sync_timer(job: &Option<Job>, armed: &mut Option<u64>, which: usize, want: Option<u64>) {
     let Some(job) = job else {
         return;
     };
-    match cmd {
-        TimerCmd::Keep => {}
-        TimerCmd::Arm(at) => job.get().start(which, at),
-        // A callback already running finds its deadline gone.
-        TimerCmd::Cancel => {
+    match (want, *armed) {
+        (None, None) => {}
+        (None, Some(_)) => {
             let _ = job.get().try_cancel(which);
+            *armed = None;
+        }
+        (Some(d), Some(a)) if a <= d => {}
+        (Some(d), _) => {
+            job.get().start(which, d);
+            *armed = Some(d);
         }
     }
 }
 
 impl Engine {
-    /// Carries out a sender step. `eng` held.
-    fn tx_step(&mut self, st: TxStep, out: &mut After) {
-        timer(&self.job, TX_TIMER, st.timer);
-        if let Some(f) = st.frame {
-            out.frame = Some((f, st.wants_echo));
-        }
+    /// Makes the sender's timer follow its deadline. `eng` held.
+    fn sync_tx_timer(&mut self) {
+        sync_timer(&self.job, &mut self.armed[TX_TIMER], TX_TIMER, self.tx.deadline());
+    }
+
+    /// Makes the receiver's timer follow its deadline. `eng` held.
+    fn sync_rx_timer(&mut self) {
+        sync_timer(&self.job, &mut self.armed[RX_TIMER], RX_TIMER, self.rx.deadline());
+    }
+
+    /// Carries out a sender step (its timer command is the sender's
+    /// deadline, which [`sync_timer`] follows). `eng` held.
+    /// Its frame is sent by the caller from `st` after `eng` is released.
+    fn tx_step(&mut self, st: &TxStep, out: &mut After) {
+        self.sync_tx_timer();
         if let Some(res) = st.done {
             self.done_gen = self.tx_gen;
             self.done_res = res;
@@ -204,11 +245,9 @@ impl Engine {
     }
 
     /// Carries out a receiver step. `eng` held; any context (GFP_ATOMIC).
-    fn rx_step(&mut self, st: RxStep, ifindex: i32, tstamp: i64, out: &mut After) {
-        timer(&self.job, RX_TIMER, st.timer);
-        if let Some(f) = st.frame {
-            out.frame = Some((f, false));
-        }
+    /// Its frame is sent by the caller from `st` after `eng` is released.
+    fn rx_step(&mut self, st: &RxStep, ifindex: i32, tstamp: i64, out: &mut After) {
+        self.sync_rx_timer();
         match st.event {
             Some(RxEvent::Deliver(n)) => {
                 let Some(pdu) = self.rxbuf.get(..n) else {
@@ -239,33 +278,39 @@ impl Engine {
     /// Ends both transfers without a result and cancels the timers (the
     /// socket closes or loses its device). `eng` held.
     fn abort(&mut self, out: &mut After) {
-        let st = self.tx.abort();
-        timer(&self.job, TX_TIMER, st.timer);
-        let st = self.rx.abort();
-        timer(&self.job, RX_TIMER, st.timer);
+        let _ = self.tx.abort();
+        self.sync_tx_timer();
+        let _ = self.rx.abort();
+        self.sync_rx_timer();
         self.done_gen = self.tx_gen;
         out.wake = true;
     }
 }
 
-/// Builds and sends one frame of `cfg`'s link layer with `tx_id`, owned
+/// Builds and sends one frame of the link layer `ll` with `tx_id`, owned
 /// by `sk` (so that its echo names it), with loopback. Process or softirq
 /// context, `eng` not held.
-fn send_frame(sk: &S, ifindex: i32, tx_id: u32, cfg: &Config, f: &LlFrame) -> Result {
+fn send_frame(sk: &S, ifindex: i32, tx_id: u32, ll: LlOptions, f: &LlFrame) -> Result {
     let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENXIO)?;
-    let mut img = [0u8; 72];
-    img[..4].copy_from_slice(&tx_id.to_ne_bytes());
-    img[4] = f.len;
-    let n = if cfg.ll.is_fd() {
-        img[5] = cfg.ll.tx_flags;
+    let id = tx_id.to_ne_bytes();
+    // A classic frame's 16-byte image is built alone: the 72-byte one
+    // cost a memset and a copy per frame.
+    let skb = if ll.is_fd() {
+        let mut img = [0u8; 72];
+        img[..4].copy_from_slice(&id);
+        img[4] = f.len;
+        img[5] = ll.tx_flags;
         img[8..72].copy_from_slice(&f.data);
-        72
+        glue::can::skb::alloc_image_for(sk, &dev, &img, glue::GFP_ATOMIC)
     } else {
-        img[8..16].copy_from_slice(&f.data[..8]);
-        16
-    };
-    let skb =
-        glue::can::skb::alloc_image_for(sk, &dev, &img[..n], glue::GFP_ATOMIC).ok_or(ENOMEM)?;
+        let d = &f.data;
+        let img: [u8; 16] = [
+            id[0], id[1], id[2], id[3], f.len, 0, 0, 0, d[0], d[1], d[2], d[3], d[4], d[5], d[6],
+            d[7],
+        ];
+        glue::can::skb::alloc_image_for(sk, &dev, &img, glue::GFP_ATOMIC)
+    }
+    .ok_or(ENOMEM)?;
     rcan_api::send(skb, &dev, true)
 }
 
@@ -282,23 +327,34 @@ impl JobCallback for IsotpJob {
         };
         let now = ktime_get_mono_ns() as u64;
         let mut out = After::new();
-        let (ifindex, tx_id, cfg) = {
+        let tst: TxStep;
+        let rst: RxStep;
+        let (ifindex, tx_id, ll, frame) = {
             let mut g = eng.lock();
             let e = &mut *g;
+            // This expiry dequeued the timer (a later start queued it
+            // again, which a second start only moves).
+            if let Some(a) = e.armed.get_mut(which) {
+                *a = None;
+            }
             if !e.bound {
                 return;
             }
-            if which == TX_TIMER {
-                let st = e.tx.on_timer(&e.cfg, &e.txbuf, now);
-                e.tx_step(st, &mut out);
+            // An early expiry (the deadline moved later, Engine::armed)
+            // changes no state; the step starts the timer again.
+            let frame = if which == TX_TIMER {
+                tst = e.tx.on_timer(&e.cfg, &e.txbuf, now);
+                e.tx_step(&tst, &mut out);
+                tst.frame.as_ref()
             } else {
-                let st = e.rx.on_timer(now);
-                e.rx_step(st, e.addr.ifindex, 0, &mut out);
-            }
-            (e.addr.ifindex, e.addr.tx_id, e.cfg)
+                rst = e.rx.on_timer(now);
+                e.rx_step(&rst, e.addr.ifindex, 0, &mut out);
+                rst.frame.as_ref()
+            };
+            (e.addr.ifindex, e.addr.tx_id, e.cfg.ll, frame)
         };
         // A CF that could not be sent ends in ECOMM (no echo).
-        let _ = out.run(sk, ifindex, tx_id, &cfg);
+        let _ = out.run(sk, ifindex, tx_id, ll, frame);
     }
 }
 
@@ -356,7 +412,11 @@ impl CanProtocol for IsotpProto {
         };
         let now = ktime_get_mono_ns() as u64;
         let mut out = After::new();
-        let (tx_id, cfg) = {
+        // The steps live here, so that their frame is sent from where
+        // the machine wrote it.
+        let tst: TxStep;
+        let rst: RxStep;
+        let (tx_id, ll, frame) = {
             let mut g = eng.lock();
             let e = &mut *g;
             if !e.bound || ifindex != e.addr.ifindex {
@@ -364,28 +424,32 @@ impl CanProtocol for IsotpProto {
                 skb.done();
                 return;
             }
+            let mut frame = None;
             if own {
                 if can_id == e.addr.tx_id {
-                    let st = e.tx.on_echo(&e.cfg, &e.txbuf, now);
-                    e.tx_step(st, &mut out);
+                    tst = e.tx.on_echo(&e.cfg, &e.txbuf, now);
+                    e.tx_step(&tst, &mut out);
+                    frame = tst.frame.as_ref();
                 }
             } else if can_id == e.addr.rx_id && e.cfg.registers_rx_id() {
                 match route(&e.cfg, fd, data, e.tx.is_idle(), e.rx.is_idle()) {
                     Route::Drop => {}
                     Route::Tx => {
-                        let st = e.tx.on_fc(&e.cfg, data, &e.txbuf, now);
-                        e.tx_step(st, &mut out);
+                        tst = e.tx.on_fc(&e.cfg, data, &e.txbuf, now);
+                        e.tx_step(&tst, &mut out);
+                        frame = tst.frame.as_ref();
                     }
                     Route::Rx => {
-                        let st = e.rx.on_frame(&e.cfg, data, &mut e.rxbuf, now);
-                        e.rx_step(st, ifindex, tstamp, &mut out);
+                        rst = e.rx.on_frame(&e.cfg, data, &mut e.rxbuf, now);
+                        e.rx_step(&rst, ifindex, tstamp, &mut out);
+                        frame = rst.frame.as_ref();
                     }
                 }
             }
-            (e.addr.tx_id, e.cfg)
+            (e.addr.tx_id, e.cfg.ll, frame)
         };
         skb.done();
-        let _ = out.run(sk, ifindex, tx_id, &cfg);
+        let _ = out.run(sk, ifindex, tx_id, ll, frame);
     }
 
     /// Mainline `isotp_notify`. Process context, RTNL held. The bound
@@ -423,7 +487,7 @@ impl CanProtocol for IsotpProto {
                 e.abort(&mut out);
             }
             drop(s);
-            let _ = out.run(sk, 0, 0, &Config::default());
+            let _ = out.run(sk, 0, 0, LlOptions::default(), None);
         });
     }
 }
@@ -451,6 +515,7 @@ fn engine(sk: &S) -> Result<&BhLock<Engine>> {
         done_gen: 0,
         done_res: Ok(()),
         job: Some(job),
+        armed: [None; 2],
     };
     let l = new_bh_spinlock!(e, "isotp_engine")?;
     sk.shared().eng.set(KBox::new(l, GFP_KERNEL)?)?;
@@ -642,6 +707,7 @@ impl glue::sock::Proto for IsotpProto {
         let now = ktime_get_mono_ns() as u64;
         loop {
             let mut out = After::new();
+            let st: TxStep;
             let r = {
                 let mut g = eng.lock();
                 let e = &mut *g;
@@ -649,16 +715,17 @@ impl glue::sock::Proto for IsotpProto {
                     return Err(neterr::EADDRNOTAVAIL());
                 }
                 match e.tx.start(&e.cfg, &buf, now) {
-                    Ok(st) => {
+                    Ok(s) => {
+                        st = s;
                         core::mem::swap(&mut e.txbuf, &mut buf);
                         e.tx_gen += 1;
-                        e.tx_step(st, &mut out);
-                        Ok((e.tx_gen, e.addr.ifindex, e.addr.tx_id))
+                        e.tx_step(&st, &mut out);
+                        Ok((e.tx_gen, e.addr.ifindex, e.addr.tx_id, st.frame.as_ref()))
                     }
                     Err(err) => Err(err),
                 }
             };
-            let (gen, ifindex, tx_id) = match r {
+            let (gen, ifindex, tx_id, frame) = match r {
                 Ok(v) => v,
                 // Another sendmsg of this socket took the sender first.
                 Err(err) if err == rcan_core::isotp::EAGAIN => {
@@ -671,13 +738,13 @@ impl glue::sock::Proto for IsotpProto {
                 Err(err) => return Err(errno(err)),
             };
             drop(buf);
-            if let Err(err) = out.run(sk, ifindex, tx_id, &cfg) {
+            if let Err(err) = out.run(sk, ifindex, tx_id, cfg.ll, frame) {
                 // The first frame did not go out: no transfer.
                 let mut g = eng.lock();
                 let e = &mut *g;
                 if e.tx_gen == gen {
-                    let st = e.tx.abort();
-                    timer(&e.job, TX_TIMER, st.timer);
+                    let _ = e.tx.abort();
+                    e.sync_tx_timer();
                     e.done_gen = gen;
                 }
                 drop(g);
@@ -694,8 +761,8 @@ impl glue::sock::Proto for IsotpProto {
                 let mut g = eng.lock();
                 let e = &mut *g;
                 if e.tx_gen == gen && e.done_gen < gen {
-                    let st = e.tx.abort();
-                    timer(&e.job, TX_TIMER, st.timer);
+                    let _ = e.tx.abort();
+                    e.sync_tx_timer();
                     e.done_gen = gen;
                 }
                 drop(g);

@@ -14,13 +14,16 @@
 # kernel CPU per cyclic frame, 1,000 jobs at 10 ms, rcan_bcm against
 # can-bcm.ko; on request (--part fd) CAN FD: 64-byte FD frames with BRS
 # and classic frames on rcan_loop vs vcan at MTU 72, then a second boot
-# with QEMU's CTU CAN FD card (the CTU CAN FD section below). Never fails
-# on a missed target.
+# with QEMU's CTU CAN FD card (the CTU CAN FD section below); on request
+# (--part isotp) CAN_ISOTP: rcan_isotp over rcan_loop against mainline's
+# can-isotp.ko over vcan, goodput and CPU per KiB of 4 KiB and 64 KiB
+# PDUs (classic and CAN FD) and the frame spacing with STmin 1 ms. Never
+# fails on a missed target.
 # See Documentation/networking/rcan/benchmarks.rst.
 #
 #   bench.sh [rcan-bench options]     e.g. --stack mainline, --quick,
 #                                     --part table, --part dsor, --part bcm,
-#                                     --part fd
+#                                     --part fd, --part isotp
 #                                     (make bench BENCH_ARGS=...)
 #
 # Expects the modules and target/release/rcan-bench to be built (make bench
@@ -70,8 +73,12 @@ fi
 # rcan-bench-sja runs mainline sja1000+kvaser_pci and rcan_kvaser_pci in
 # alternating rounds, and sja-count.awk counts each driver's register
 # accesses in the trace (the same emulator code counts both).
-# Not when only the CAN FD part is asked for.
-if [ "${RCAN_BENCH_SJA:-1}" != 0 ] && [ "${parts// /}" != fd ]; then
+# Not when only the CAN FD and/or ISO-TP parts are asked for.
+only_fd_isotp=1
+for p in ${parts//,/ }; do
+	case $p in fd | isotp) ;; *) only_fd_isotp=0 ;; esac
+done
+if [ "${RCAN_BENCH_SJA:-1}" != 0 ] && [ "$only_fd_isotp" = 0 ]; then
 	[ -x target/release/rcan-bench-sja ] || die "target/release/rcan-bench-sja missing; run make bench (or make userspace)"
 	sja="$out/sja1000"
 	mkdir -p "$sja"

@@ -928,8 +928,10 @@ fn joined(h: JoinHandle<std::io::Result<usize>>) -> Result<std::io::Result<usize
 /// 5. Receive: an SF read into 1 byte with MSG_TRUNC returns the PDU's
 ///    length, the source address is 16 bytes with the interface; an FF
 ///    is answered with FC `30 00 00`; a CF with the wrong sequence
-///    number: EILSEQ; an FF then silence: ETIMEDOUT (N_Cr, 1 s); then a
-///    whole 20-byte PDU from FF and two CFs.
+///    number: EILSEQ; an FF then silence: ETIMEDOUT (N_Cr, 1 s); an FF,
+///    a CF 0.6 s later, then silence: ETIMEDOUT 1 s after the CF (the
+///    timer's deadline moved by a CF); then a whole 20-byte PDU from FF
+///    and two CFs.
 fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.isotp_ifaces(1)?[0];
     let peer = raw_open(i0)?;
@@ -1121,6 +1123,26 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
     ensure!(
         took >= Duration::from_millis(900),
         "ETIMEDOUT after {took:?}, before N_Cr (1 s)"
+    );
+    // N_Cr runs from the last CF, not from the FF. rcan_isotp starts its
+    // timer once, for FF + 1 s, and lets the CF move the deadline only:
+    // the early expiry must start it again for CF + 1 s (a lost restart
+    // leaves the read to SO_RCVTIMEO, 10 s: EAGAIN).
+    raw_send(&peer, 0x7E8, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
+    raw_expect(&peer, 0x7E0, t, "FC to an FF before a late CF")?;
+    let ff = Instant::now();
+    std::thread::sleep(Duration::from_millis(600));
+    raw_send(&peer, 0x7E8, &[0x21, 7, 8, 9, 10, 11, 12, 13])?;
+    let cf = Instant::now();
+    want_errno(
+        raw::read(&a, &mut buf),
+        libc::ETIMEDOUT,
+        "read after an FF, a CF 0.6 s later and no more",
+    )?;
+    let (after_cf, after_ff) = (cf.elapsed(), ff.elapsed());
+    ensure!(
+        after_cf >= Duration::from_millis(900),
+        "ETIMEDOUT {after_cf:?} after the CF ({after_ff:?} after the FF), before N_Cr (1 s) from the CF"
     );
     raw_send(&peer, 0x7E8, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
     raw_expect(&peer, 0x7E0, t, "FC to the third FF")?;

@@ -369,6 +369,50 @@ impl RawSocket {
         self.setsockopt(SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &c_int::from(on))
     }
 
+    /// `SO_TIMESTAMPNS`: every frame read with
+    /// [`RawSocket::recv_stamped`] carries its receive time.
+    pub fn set_timestampns(&self, on: bool) -> io::Result<()> {
+        self.setsockopt(libc::SOL_SOCKET, libc::SO_TIMESTAMPNS, &c_int::from(on))
+    }
+
+    /// Receives one frame with `recvmsg(2)` and its `SCM_TIMESTAMPNS`
+    /// (ns of `CLOCK_REALTIME`; `None` if the kernel sent none); blocking
+    /// (subject to `SO_RCVTIMEO`) unless `dontwait`.
+    pub fn recv_stamped(&self, dontwait: bool) -> io::Result<(Frame, Option<i64>)> {
+        let mut buf = [0u8; CANFD_MTU];
+        // u64 words: aligned for `struct cmsghdr`.
+        let mut ctl = [0u64; 16];
+        let mut iov = libc::iovec {
+            iov_base: buf.as_mut_ptr().cast(),
+            iov_len: buf.len(),
+        };
+        // SAFETY: all-zero is a valid `struct msghdr` (null name, no iov).
+        let mut mh: libc::msghdr = unsafe { mem::zeroed() };
+        mh.msg_iov = &mut iov;
+        mh.msg_iovlen = 1;
+        mh.msg_control = ctl.as_mut_ptr().cast();
+        mh.msg_controllen = mem::size_of_val(&ctl) as _;
+        let flags = if dontwait { libc::MSG_DONTWAIT } else { 0 };
+        // SAFETY: `mh` points to `iov` (and it to `buf`) and to `ctl`, all
+        // writable for the lengths given and alive during the call.
+        let n = cvt(unsafe { libc::recvmsg(self.fd.as_raw_fd(), &mut mh, flags) })?;
+        let frame = Frame::decode(&buf, n)?;
+        let mut stamp = None;
+        // SAFETY: `mh` was filled by recvmsg; the CMSG_* walk stays inside
+        // `msg_controllen` bytes of `ctl`.
+        unsafe {
+            let mut c = libc::CMSG_FIRSTHDR(&mh);
+            while !c.is_null() {
+                if (*c).cmsg_level == libc::SOL_SOCKET && (*c).cmsg_type == libc::SCM_TIMESTAMPNS {
+                    let ts: libc::timespec = std::ptr::read_unaligned(libc::CMSG_DATA(c).cast());
+                    stamp = Some(ts.tv_sec as i64 * 1_000_000_000 + ts.tv_nsec as i64);
+                }
+                c = libc::CMSG_NXTHDR(&mh, c);
+            }
+        }
+        Ok((frame, stamp))
+    }
+
     /// Sends one frame with `send(2)` on the bound interface (an FD frame
     /// needs [`RawSocket::set_fd_frames`]).
     pub fn send(&self, frame: &Frame) -> io::Result<()> {
@@ -413,6 +457,10 @@ impl RawSocket {
 const CAN_ISOTP: c_int = 6;
 /// `CAN_ISOTP_OPTS` at level `SOL_CAN_ISOTP`.
 const CAN_ISOTP_OPTS: c_int = 1;
+/// `CAN_ISOTP_RECV_FC` at level `SOL_CAN_ISOTP`.
+const CAN_ISOTP_RECV_FC: c_int = 2;
+/// `CAN_ISOTP_LL_OPTS` at level `SOL_CAN_ISOTP`.
+const CAN_ISOTP_LL_OPTS: c_int = 5;
 /// `frame_txtime` value meaning "no gap" (0 means "default").
 const CAN_ISOTP_FRAME_TXTIME_ZERO: u32 = 0xffff_ffff;
 
@@ -510,6 +558,35 @@ impl IsotpSocket {
             )
         };
         cvt(ret as isize).map(drop)
+    }
+
+    /// `setsockopt(SOL_CAN_ISOTP, name, bytes)`.
+    fn set_isotp_opt(&self, name: c_int, bytes: &[u8]) -> io::Result<()> {
+        // SAFETY: `bytes` is readable for its full length during the call;
+        // the kernel copies it.
+        let ret = unsafe {
+            libc::setsockopt(
+                self.fd.as_raw_fd(),
+                SOL_CAN_BASE + CAN_ISOTP,
+                name,
+                bytes.as_ptr().cast(),
+                bytes.len() as socklen_t,
+            )
+        };
+        cvt(ret as isize).map(drop)
+    }
+
+    /// `CAN_ISOTP_RECV_FC` (`struct can_isotp_fc_options {bs, stmin,
+    /// wftmax}`): the block size and STmin this socket's flow control
+    /// frames ask the sender for.
+    pub fn set_recv_fc(&self, bs: u8, stmin: u8) -> io::Result<()> {
+        self.set_isotp_opt(CAN_ISOTP_RECV_FC, &[bs, stmin, 0])
+    }
+
+    /// `CAN_ISOTP_LL_OPTS` (`struct can_isotp_ll_options {mtu, tx_dl,
+    /// tx_flags}`): 72, 64, 0 is CAN FD with 64-byte frames (no BRS).
+    pub fn set_ll_opts(&self, mtu: u8, tx_dl: u8, tx_flags: u8) -> io::Result<()> {
+        self.set_isotp_opt(CAN_ISOTP_LL_OPTS, &[mtu, tx_dl, tx_flags])
     }
 
     /// `SO_RCVTIMEO` and `SO_SNDTIMEO`.

@@ -12,7 +12,7 @@ use clap::error::{ContextKind, ContextValue, ErrorKind};
 use clap::{CommandFactory, Parser};
 
 use crate::stack::{Paths, Proto, Stack};
-use crate::{table, workload};
+use crate::{isotp, table, workload};
 
 /// Benchmark rcan against mainline SocketCAN inside the test VM (run as
 /// root; `make bench` or tools/testing/rcan/bench.sh): the CAN_RAW receive
@@ -25,9 +25,9 @@ use crate::{table, workload};
     after_help = "Environment: RCAN_KBUILD (test kernel build directory: mainline modules),\nRCAN_ROOT (project tree with our modules; default the current directory),\nRCAN_OUT (directory for the summary)."
 )]
 pub struct Cli {
-    /// Parts to run, comma-separated: raw (CAN_RAW, mainline vs ours), table (many sockets, mainline vs ours), dsor (DSOR vs mainline ISO-TP), bcm (CAN_BCM cyclic jobs, mainline vs ours; not in the default), fd (CAN FD frames at MTU 72, mainline vcan vs rcan_loop; not in the default) (default raw,table,dsor)
+    /// Parts to run, comma-separated: raw (CAN_RAW, mainline vs ours), table (many sockets, mainline vs ours), dsor (DSOR vs mainline ISO-TP), bcm (CAN_BCM cyclic jobs, mainline vs ours; not in the default), fd (CAN FD frames at MTU 72, mainline vcan vs rcan_loop; not in the default), isotp (CAN_ISOTP, mainline can-isotp vs rcan_isotp; not in the default) (default raw,table,dsor)
     #[arg(long, value_name = "LIST", allow_hyphen_values = true, value_parser = parts)]
-    part: Option<[bool; 5]>,
+    part: Option<[bool; 6]>,
     /// Raw and table parts: mainline, ours or both (default both)
     #[arg(long, value_name = "S", allow_hyphen_values = true, value_parser = stacks)]
     stack: Option<List<Stack>>,
@@ -91,6 +91,15 @@ pub struct Cli {
     /// DSOR part: messages per warm-up run (default 5)
     #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = num::<u64>)]
     msg_warmup: Option<u64>,
+    /// ISO-TP part: PDU sizes in bytes, 8 to 1048576, comma-separated (default 4096,65536); both ISO-TP modules get max_pdu_size = the largest (at least 8300)
+    #[arg(long, value_name = "L", allow_hyphen_values = true, value_parser = nums)]
+    isotp_sizes: Option<List<usize>>,
+    /// ISO-TP part: link layers, comma-separated: classic, fd (default classic,fd)
+    #[arg(long, value_name = "LIST", allow_hyphen_values = true, value_parser = links)]
+    isotp_links: Option<List<isotp::Link>>,
+    /// ISO-TP part: PDUs per spacing run (BS 8, STmin 1 ms) and round, 0 for none (default 2)
+    #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = num::<usize>)]
+    isotp_spacing_pdus: Option<usize>,
     /// BCM part: cyclic jobs, 1 to 1536 (default 1000)
     #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = bcm_jobs)]
     bcm_jobs: Option<u32>,
@@ -167,9 +176,9 @@ fn set<T: PartialEq>(v: &str, item: impl Fn(&str) -> Result<T, String>) -> Resul
     Ok(List(out))
 }
 
-/// `--part`: which of raw, table, dsor, bcm, fd.
-fn parts(v: &str) -> Result<[bool; 5], String> {
-    let mut on = [false; 5];
+/// `--part`: which of raw, table, dsor, bcm, fd, isotp.
+fn parts(v: &str) -> Result<[bool; 6], String> {
+    let mut on = [false; 6];
     for w in items(v, |w| Ok(w.to_string()))? {
         match w.as_str() {
             "raw" => on[0] = true,
@@ -177,6 +186,7 @@ fn parts(v: &str) -> Result<[bool; 5], String> {
             "dsor" => on[2] = true,
             "bcm" => on[3] = true,
             "fd" => on[4] = true,
+            "isotp" => on[5] = true,
             other => return Err(format!("unknown part '{other}'")),
         }
     }
@@ -227,6 +237,14 @@ fn protos(v: &str) -> Result<List<Proto>, String> {
         "dsor" => Ok(Proto::Dsor),
         "dsorfd" => Ok(Proto::DsorFd),
         other => Err(format!("unknown protocol '{other}'")),
+    })
+}
+
+fn links(v: &str) -> Result<List<isotp::Link>, String> {
+    set(v, |w| match w {
+        "classic" => Ok(isotp::Link::Classic),
+        "fd" => Ok(isotp::Link::Fd),
+        other => Err(format!("unknown link layer '{other}'")),
     })
 }
 
@@ -358,6 +376,10 @@ pub struct Config {
     pub run_dsor: bool,
     pub run_bcm: bool,
     pub run_fd: bool,
+    pub run_isotp: bool,
+    pub isotp_sizes: Vec<usize>,
+    pub isotp_links: Vec<isotp::Link>,
+    pub isotp_spacing_pdus: usize,
     pub bcm_jobs: u32,
     pub bcm_ival_ms: u64,
     pub bcm_secs: f64,
@@ -398,6 +420,10 @@ impl Config {
             run_dsor: true,
             run_bcm: false,
             run_fd: false,
+            run_isotp: false,
+            isotp_sizes: vec![4096, 65536],
+            isotp_links: vec![isotp::Link::Classic, isotp::Link::Fd],
+            isotp_spacing_pdus: 2,
             bcm_jobs: 1000,
             bcm_ival_ms: 10,
             bcm_secs: 3.0,
@@ -453,7 +479,14 @@ impl Config {
             }
         }
         if let Some(p) = cli.part {
-            [c.run_raw, c.run_table, c.run_dsor, c.run_bcm, c.run_fd] = p;
+            [
+                c.run_raw,
+                c.run_table,
+                c.run_dsor,
+                c.run_bcm,
+                c.run_fd,
+                c.run_isotp,
+            ] = p;
         }
         set(&mut c.stacks, cli.stack.map(|l| l.0));
         if let Some(w) = cli.only {
@@ -478,6 +511,9 @@ impl Config {
         set(&mut c.msg_secs, cli.msg_secs);
         set(&mut c.msg_min, cli.msg_min);
         set(&mut c.msg_warmup, cli.msg_warmup);
+        set(&mut c.isotp_sizes, cli.isotp_sizes.map(|l| l.0));
+        set(&mut c.isotp_links, cli.isotp_links.map(|l| l.0));
+        set(&mut c.isotp_spacing_pdus, cli.isotp_spacing_pdus);
         set(&mut c.bcm_jobs, cli.bcm_jobs);
         set(&mut c.bcm_ival_ms, cli.bcm_ival_ms);
         set(&mut c.bcm_secs, cli.bcm_secs);
@@ -521,6 +557,13 @@ impl Config {
                 "--msg-sizes: sizes from 8 to 8300 bytes",
             ));
         }
+        // Mainline clamps max_pdu_size to 1025 KiB.
+        if c.isotp_sizes.is_empty() || c.isotp_sizes.iter().any(|&n| !(8..=1 << 20).contains(&n)) {
+            return Err(usage_error(
+                ErrorKind::ValueValidation,
+                "--isotp-sizes: sizes from 8 to 1048576 bytes",
+            ));
+        }
         if c.rounds == 0
             || c.reps == 0
             || c.window == 0
@@ -539,6 +582,12 @@ impl Config {
             ));
         }
         if !c.load && c.run_raw && c.stacks.len() != 1 {
+            return Err(usage_error(
+                ErrorKind::ArgumentConflict,
+                "--no-load measures one stack: say which with --stack",
+            ));
+        }
+        if !c.load && c.run_isotp && c.stacks.len() != 1 {
             return Err(usage_error(
                 ErrorKind::ArgumentConflict,
                 "--no-load measures one stack: say which with --stack",
@@ -603,6 +652,10 @@ mod tests {
             run_dsor: true,
             run_bcm: false,
             run_fd: false,
+            run_isotp: false,
+            isotp_sizes: vec![4096, 65536],
+            isotp_links: vec![isotp::Link::Classic, isotp::Link::Fd],
+            isotp_spacing_pdus: 2,
             bcm_jobs: 1000,
             bcm_ival_ms: 10,
             bcm_secs: 3.0,
@@ -698,6 +751,31 @@ mod tests {
         parts(&mut e, false, false, true, false);
         e.rounds = 3;
         assert_eq!(parse(&["--part", "dsor", "--rounds", "3"]), Ok(e));
+
+        // The ISO-TP part, as benchmarks.rst runs it.
+        let mut e = defaults();
+        parts(&mut e, false, false, false, false);
+        (e.run_isotp, e.rounds) = (true, 3);
+        assert_eq!(parse(&["--part", "isotp", "--rounds", "3"]), Ok(e));
+        let mut e = defaults();
+        parts(&mut e, false, false, false, false);
+        e.run_isotp = true;
+        e.isotp_sizes = vec![4096];
+        e.isotp_links = vec![isotp::Link::Fd];
+        e.isotp_spacing_pdus = 0;
+        assert_eq!(
+            parse(&[
+                "--part",
+                "isotp",
+                "--isotp-sizes",
+                "4096",
+                "--isotp-links",
+                "fd",
+                "--isotp-spacing-pdus",
+                "0"
+            ]),
+            Ok(e)
+        );
 
         // The CAN FD part, as benchmarks.rst runs it.
         let mut e = defaults();
@@ -973,6 +1051,10 @@ mod tests {
             &["--table-unwanted-id", "xyz"],
             &["--msg-sizes", "7"],
             &["--msg-sizes", "8301"],
+            &["--isotp-sizes", "7"],
+            &["--isotp-sizes", "1048577"],
+            &["--isotp-links", "lin"],
+            &["--no-load", "--part", "isotp"],
             &["--msg-sizes", "1024,,4096"],
             &["--rounds", "0"],
             &["--reps", "0"],

@@ -272,7 +272,7 @@ impl MsgRun {
 }
 
 /// A sender and a receiver socket of one protocol.
-enum Pair {
+pub(crate) enum Pair {
     Isotp { tx: IsotpSocket, rx: IsotpSocket },
     Dsor { tx: DsorSocket, rx: DsorSocket },
 }
@@ -310,7 +310,7 @@ impl Pair {
         }
     }
 
-    fn send(&self, msg: &[u8]) -> io::Result<usize> {
+    pub(crate) fn send(&self, msg: &[u8]) -> io::Result<usize> {
         match self {
             Pair::Isotp { tx, .. } => tx.send(msg),
             Pair::Dsor { tx, .. } => tx.send_to(
@@ -324,7 +324,7 @@ impl Pair {
         }
     }
 
-    fn recv(&self, buf: &mut [u8]) -> io::Result<usize> {
+    pub(crate) fn recv(&self, buf: &mut [u8]) -> io::Result<usize> {
         match self {
             Pair::Isotp { rx, .. } => rx.recv(buf),
             Pair::Dsor { rx, .. } => rx.recv_from(buf).map(|(n, _)| n),
@@ -334,7 +334,7 @@ impl Pair {
 
 /// `msgs` messages of `size` bytes (at least `secs` seconds' worth), one
 /// in flight, each checked byte for byte.
-fn run(
+pub(crate) fn run(
     p: &Pair,
     iface: &str,
     size: usize,

@@ -38,12 +38,18 @@
 //! FD frames: workload (a) with 64-byte FD frames (BRS) and with classic
 //! frames on rcan_loop and vcan at MTU 72, frames/s and kernel CPU per
 //! frame.
+//!
+//! A sixth part, only on request (`--part isotp`, see `isotp.rs`),
+//! measures CAN_ISOTP: rcan_isotp against mainline's can-isotp.ko,
+//! goodput and CPU per KiB of 4 KiB and 64 KiB PDUs over classic CAN and
+//! CAN FD, and the consecutive-frame spacing with STmin 1 ms (issue 41).
 
 mod bcm;
 mod can;
 mod cli;
 mod dsor;
 mod fd;
+mod isotp;
 mod report;
 mod stack;
 mod table;
@@ -601,6 +607,39 @@ fn main() -> ExitCode {
         println!();
         print!("{}", fd::summary(&fc, &fs.runs, &fs.errors, &hdr1));
         failed |= !fs.errors.is_empty();
+    }
+    if c.run_isotp {
+        let ic = isotp::Config {
+            stacks: c.stacks.clone(),
+            links: c.isotp_links.clone(),
+            sizes: c.isotp_sizes.clone(),
+            rounds: c.rounds,
+            secs: c.msg_secs,
+            min_msgs: c.msg_min,
+            warmup: c.msg_warmup,
+            spacing_pdus: c.isotp_spacing_pdus,
+            iface: c.iface.clone(),
+            cpu: c.cpu,
+            load: c.load,
+        };
+        // Appended to what the other parts wrote.
+        let before = c
+            .summary
+            .as_ref()
+            .map(|p| std::fs::read_to_string(p).unwrap_or_default())
+            .unwrap_or_default();
+        let write = |s: &isotp::Samples| {
+            if let Some(p) = &c.summary {
+                let text = before.clone() + &isotp::summary(&ic, s, &hdr1);
+                if let Err(e) = std::fs::write(p, text) {
+                    eprintln!("rcan-bench: {}: {e}", p.display());
+                }
+            }
+        };
+        let is = isotp::bench(&ic, &c.paths, &write);
+        println!();
+        print!("{}", isotp::summary(&ic, &is, &hdr1));
+        failed |= !is.errors.is_empty();
     }
     println!("rcan-bench: done in {:.0} s", t0.elapsed().as_secs_f64());
     if let Some(p) = &c.summary {

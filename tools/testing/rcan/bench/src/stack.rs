@@ -324,6 +324,79 @@ pub fn load_proto(proto: Proto, paths: &Paths, iface: &str) -> Result<(), String
     }
 }
 
+/// Module files of the ISO-TP part (`--part isotp`) for `stack`, under
+/// the kernel build directory (mainline) or the tree (ours).
+fn isotp_files(stack: Stack) -> &'static [&'static str] {
+    match stack {
+        Stack::Mainline => &[
+            "net/can/can.ko",
+            "net/can/can-raw.ko",
+            "net/can/can-isotp.ko",
+            "drivers/net/can/vcan.ko",
+        ],
+        Stack::Ours => &[
+            "net/can/rcan_pf.ko",
+            "net/can/rcan_can.ko",
+            "net/can/rcan_raw.ko",
+            "drivers/net/can/rcan_loop.ko",
+            "net/can/rcan_isotp.ko",
+        ],
+    }
+}
+
+/// The first module file of the ISO-TP part's `stack` that does not exist.
+pub fn missing_isotp_module(stack: Stack, paths: &Paths) -> Option<PathBuf> {
+    let dir = match stack {
+        Stack::Mainline => match &paths.kbuild {
+            Some(kb) => kb.as_path(),
+            None => return Some(PathBuf::from("$RCAN_KBUILD/net/can/can-isotp.ko")),
+        },
+        Stack::Ours => &paths.root,
+    };
+    isotp_files(stack)
+        .iter()
+        .map(|f| dir.join(f))
+        .find(|f| !f.is_file())
+}
+
+/// Loads the ISO-TP part's `stack` on `iface` at MTU 72 (CAN FD, which
+/// also carries classic frames) and brings it up; both ISO-TP modules get
+/// `max_pdu_size=MAX_PDU`. Mainline: can, can-raw, `can-isotp
+/// max_pdu_size=N`, (can-dev,) `vcan echo=1`, `ip link add IFACE type
+/// vcan`. Ours: rcan_pf, rcan_can, rcan_raw, rcan_loop (creates can0),
+/// `rcan_isotp max_pdu_size=N`. The CAN_RAW modules serve the bus
+/// listener of the spacing measurement. Call `unload_all` first.
+pub fn load_isotp(stack: Stack, paths: &Paths, iface: &str, max_pdu: u32) -> Result<(), String> {
+    let param = format!("max_pdu_size={max_pdu}");
+    match stack {
+        Stack::Mainline => {
+            let kb = paths
+                .kbuild
+                .as_ref()
+                .ok_or("RCAN_KBUILD is not set: cannot find can-isotp.ko")?;
+            insmod(&kb.join("net/can/can.ko"), &[])?;
+            insmod(&kb.join("net/can/can-raw.ko"), &[])?;
+            insmod(&kb.join("net/can/can-isotp.ko"), &[&param])?;
+            let vcan = kb.join("drivers/net/can/vcan.ko");
+            if vcan_needs_can_dev(&vcan) {
+                insmod(&kb.join("drivers/net/can/dev/can-dev.ko"), &[])?;
+            }
+            insmod(&vcan, &["echo=1"])?;
+            run("ip", &["link", "add", "dev", iface, "type", "vcan"])?;
+        }
+        Stack::Ours => {
+            let r = &paths.root;
+            insmod(&r.join("net/can/rcan_pf.ko"), &[])?;
+            insmod(&r.join("net/can/rcan_can.ko"), &[])?;
+            insmod(&r.join("net/can/rcan_raw.ko"), &[])?;
+            insmod(&r.join("drivers/net/can/rcan_loop.ko"), &[])?;
+            insmod(&r.join("net/can/rcan_isotp.ko"), &[&param])?;
+        }
+    }
+    run("ip", &["link", "set", iface, "mtu", "72"])?;
+    run("ip", &["link", "set", iface, "up"])
+}
+
 /// Whether `vcan.ko`'s `depends=` names `can-dev` (it does when vcan uses
 /// the shared skb helpers of the CAN device layer).
 fn vcan_needs_can_dev(vcan: &Path) -> bool {
