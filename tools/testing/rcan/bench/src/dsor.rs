@@ -140,6 +140,15 @@ pub struct Soaker {
 const CALIBRATE: Duration = Duration::from_millis(400);
 
 impl Soaker {
+    /// A soaker when the part runs pinned to one CPU (`cpu`), where it is
+    /// meaningful; none otherwise or if it cannot start (said on stdout).
+    pub fn for_cpu(cpu: Option<usize>) -> Option<Soaker> {
+        cpu?;
+        Soaker::start()
+            .map_err(|e| println!("rcan-bench: no CPU soaker: {e}"))
+            .ok()
+    }
+
     /// Starts the soaker on the caller's CPU (it inherits the affinity).
     pub fn start() -> io::Result<Soaker> {
         let count = Arc::new(AtomicU64::new(0));
@@ -510,17 +519,7 @@ fn round(
 pub fn bench(c: &Config, paths: &Paths, write_summary: &dyn Fn(&Samples)) -> Samples {
     let mut s = Samples::default();
     let mut broken = vec![false; c.protos.len()];
-    // Only meaningful when everything runs on one CPU.
-    let soaker = match c.cpu {
-        Some(_) => match Soaker::start() {
-            Ok(k) => Some(k),
-            Err(e) => {
-                println!("rcan-bench: no CPU soaker: {e}");
-                None
-            }
-        },
-        None => None,
-    };
+    let soaker = Soaker::for_cpu(c.cpu);
     for r in 1..=c.rounds {
         let mut order: Vec<usize> = (0..c.protos.len()).collect();
         if r % 2 == 0 {

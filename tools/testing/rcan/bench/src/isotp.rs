@@ -349,16 +349,7 @@ fn round(
 pub fn bench(c: &Config, paths: &Paths, write_summary: &dyn Fn(&Samples)) -> Samples {
     let mut s = Samples::default();
     let mut broken = vec![false; c.stacks.len()];
-    let soaker = match c.cpu {
-        Some(_) => match Soaker::start() {
-            Ok(k) => Some(k),
-            Err(e) => {
-                println!("rcan-bench: no CPU soaker: {e}");
-                None
-            }
-        },
-        None => None,
-    };
+    let soaker = Soaker::for_cpu(c.cpu);
     let t0 = Instant::now();
     for r in 1..=c.rounds {
         let mut order: Vec<usize> = (0..c.stacks.len()).collect();
