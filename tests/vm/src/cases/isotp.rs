@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 use rcan_uapi::raw;
 
 use crate::canraw;
-use crate::check::{ensure, errno_name, wait_blocked, wait_until, OrFail, TestResult, SETTLE};
+use crate::check::{ensure, errno_name, wait_blocked, wait_for, wait_until, OrFail, TestResult, SETTLE};
 use crate::ctx::{dev, Ctx, Module};
 use crate::tools::{self, TOOL_LIMIT};
 
@@ -46,6 +46,7 @@ const CAN_ISOTP_OPTS: i32 = 1;
 const CAN_ISOTP_LL_OPTS: i32 = 5;
 const CAN_ISOTP_WAIT_TX_DONE: u32 = 0x0400;
 const SOL_CAN_RAW: i32 = 101;
+const CAN_RAW_FILTER: i32 = 1;
 const CAN_RAW_FD_FRAMES: i32 = 5;
 const CANFD_BRS: u8 = 0x01;
 /// Bytes of the ISO-TP address (`ISOTP_MIN_NAMELEN`) and of a whole
@@ -86,9 +87,21 @@ fn pattern(n: usize) -> Vec<u8> {
 
 /// A CAN_RAW socket on `ifindex` taking CAN FD frames too.
 fn raw_open(ifindex: u32) -> Result<OwnedFd, String> {
+    raw_open_ids(ifindex, &[])
+}
+
+/// [`raw_open`] receiving only the standard identifiers `ids` (all
+/// frames if empty).
+fn raw_open_ids(ifindex: u32, ids: &[u32]) -> Result<OwnedFd, String> {
     let s = raw::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW).or_fail("socket(CAN_RAW)")?;
     raw::setsockopt(&s, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &1i32.to_ne_bytes())
         .or_fail("CAN_RAW_FD_FRAMES")?;
+    if !ids.is_empty() {
+        let mask = libc::CAN_SFF_MASK | libc::CAN_EFF_FLAG | libc::CAN_RTR_FLAG;
+        let f: Vec<(u32, u32)> = ids.iter().map(|&id| (id, mask)).collect();
+        raw::setsockopt(&s, SOL_CAN_RAW, CAN_RAW_FILTER, &canraw::filter_bytes(&f))
+            .or_fail("CAN_RAW_FILTER")?;
+    }
     raw::bind(&s, &canraw::addr_bytes(libc::AF_CAN as u16, ifindex)).or_fail("bind CAN_RAW")?;
     Ok(s)
 }
@@ -148,7 +161,12 @@ struct Sniffer {
 
 impl Sniffer {
     fn start(ifindex: u32) -> Result<Self, String> {
-        let s = raw_open(ifindex)?;
+        Self::start_ids(ifindex, &[])
+    }
+
+    /// Frames with the standard identifiers `ids` only (all if empty).
+    fn start_ids(ifindex: u32, ids: &[u32]) -> Result<Self, String> {
+        let s = raw_open_ids(ifindex, ids)?;
         // Room for a few thousand frames (root: above rmem_max).
         raw::setsockopt(
             &s,
@@ -322,6 +340,9 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
     let c0 = dev(0);
     let base = ["-s", "123", "-d", "321"];
     let back = ["-s", "321", "-d", "123"];
+    // isotpperf watches the stream of parts 1-3 (CAN_RAW).
+    let mut perf = tools::spawn("isotpperf", &[&base[..], &[&c0]].concat(), None)?;
+    perf.wait_listening()?;
 
     // 1. Single frame.
     let sn = Sniffer::start(i0)?;
@@ -400,6 +421,32 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
         fcs.iter().map(|f| show(f)).collect::<Vec<_>>()
     );
 
+    // isotpperf: a line per PDU of parts 1-3 with the link layer, the
+    // receiver's BS and STmin, the length, the time from the first to the
+    // last frame and the byte rate.
+    let mut recs = Vec::new();
+    wait_for(TOOL_LIMIT, "isotpperf to report 3 PDUs", || {
+        recs = perf_records(&perf.stdout_now());
+        Ok((recs.len() >= 3).then_some(()))
+    })?;
+    perf.signal("TERM")?;
+    drop(perf.finish(TOOL_LIMIT));
+    check_perf(&recs[0], "CAN2.0 08 (BS: 0 # STmin: 0 msec) : 3 byte in", None)?;
+    let t = check_perf(
+        &recs[1],
+        "CAN2.0 08 (BS: 4 # STmin: 1 msec) : 4095 byte in",
+        Some(4095),
+    )?;
+    // 585 CFs in blocks of 4: at least 3 gaps of 1 ms in each of the 146
+    // full blocks.
+    ensure!(
+        t >= Duration::from_millis(438),
+        "isotpperf: 4095 bytes with STmin 1 ms in {t:?}, want >= 438 ms: {}",
+        recs[1]
+    );
+    check_perf(&recs[2], "CAN2.0 08 (BS: 0 # STmin: 0 msec) : 4999 byte in", Some(4999))?;
+    ensure!(recs.len() == 3, "isotpperf: {} PDUs, want 3: {recs:?}", recs.len());
+
     // 4. Extended addressing with a separate receive address.
     let sn = Sniffer::start(i0)?;
     let pdu = pattern(100);
@@ -430,6 +477,39 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
         tx.len()
     );
     Ok(())
+}
+
+/// isotpperf's closing line of each PDU (its progress bar is redrawn
+/// with `\r`), whitespace collapsed.
+fn perf_records(out: &str) -> Vec<String> {
+    out.split(['\r', '\n'])
+        .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+        .filter(|l| (l.starts_with("CAN2.0") || l.starts_with("CAN-FD")) && l.contains(" byte"))
+        .collect()
+}
+
+/// Checks an isotpperf record: it starts with `head`; for a multi-frame
+/// PDU of `len` bytes it gives a time and the byte rate isotpperf
+/// derives from it (len * 1000 / ms). Returns the time.
+fn check_perf(rec: &str, head: &str, len: Option<u64>) -> Result<Duration, String> {
+    ensure!(rec.starts_with(head), "isotpperf: {rec:?}, want {head:?}...");
+    let Some(len) = len else {
+        return Ok(Duration::ZERO);
+    };
+    let rest = rec[head.len()..].trim();
+    let parse = || -> Option<(u64, u64, u64)> {
+        let (time, rate) = rest.split_once("s => ")?;
+        let (sec, usec) = time.split_once('.')?;
+        let rate = rate.strip_suffix(" byte/s")?;
+        Some((sec.parse().ok()?, usec.parse().ok()?, rate.parse().ok()?))
+    };
+    let (sec, usec, rate) = parse().ok_or_else(|| format!("isotpperf: {rec:?}: no time and rate"))?;
+    let ms = sec * 1000 + usec / 1000;
+    ensure!(
+        ms > 0 && rate == len * 1000 / ms,
+        "isotpperf: {rec:?}: rate {rate}, want {len} bytes / {ms} ms"
+    );
+    Ok(Duration::from_micros(sec * 1_000_000 + usec))
 }
 
 /// Sets `c0`'s MTU (the interface goes down for it and up again).
@@ -522,24 +602,36 @@ fn python_limit() -> Duration {
 }
 
 /// The python side of [`isotp_python_uds`]: one process, as python
-/// start-up is the expensive part. argv: the interface, the directory
-/// setup.sh installed can-isotp and udsoncan into.
+/// start-up is the expensive part. argv: the interface (MTU 72), the
+/// directory setup.sh installed can-isotp and udsoncan into, the size of
+/// the UDS download, its link layer (`classic` or `fd`).
 const PY_UDS: &str = r#"
-import sys, threading, time
+import sys, threading, time, random, zlib
 t = [time.monotonic()]
 sys.path.insert(0, sys.argv[2])
-# Both packages import python-can if they find it, and use it only for
-# their user-space ISO-TP stack; keeping it out halves their import time.
-sys.modules["can"] = None
+# python-can first, timed on its own: can-isotp's pure-python stack
+# (part 4) runs on it, and both packages import it if present. At import
+# it looks up plugins (entry points) in every installed distribution's
+# metadata, through importlib.metadata and pkg_resources: over 9p, most
+# of its import time. No plugin is used here: both lookups find none.
+import types, importlib.metadata
+importlib.metadata.entry_points = lambda **kw: {}
+sys.modules["pkg_resources"] = types.SimpleNamespace(iter_entry_points=lambda *a, **kw: iter(()))
+import can
+t.append(time.monotonic())
 import isotp, udsoncan
 from udsoncan.client import Client
 from udsoncan.connections import IsoTPSocketConnection
 from udsoncan.exceptions import NegativeResponseException
+from udsoncan import MemoryLocation
 t.append(time.monotonic())
 iface = sys.argv[1]
+dl_size = int(sys.argv[3])
+dl_fd = sys.argv[4] == "fd"
 N = isotp.AddressingMode.Normal_11bits
 def addr(tx, rx): return isotp.Address(N, txid=tx, rxid=rx)
 def pat(n): return bytes(i % 255 + 1 for i in range(n))
+def fd_sock(s): s.set_ll_opts(mtu=72, tx_dl=64, tx_flags=1); return s
 # 1. To isotprecv (321 <- 123), which waits already.
 s = isotp.socket(timeout=60)
 s.bind(iface, addr(0x123, 0x321))
@@ -554,7 +646,7 @@ a.send(pat(200))
 print("pair", b.recv() == pat(200), flush=True)
 t.append(time.monotonic())
 # 3. UDS: a udsoncan client against a server on a second ISO-TP socket.
-srv = isotp.socket(timeout=60)
+srv = isotp.socket()
 srv.bind(iface, addr(0x7E8, 0x7E0))
 store = {0xF190: b"WVWZZZ1JZXW000001"}
 def serve():
@@ -589,14 +681,184 @@ with Client(IsoTPSocketConnection(iface, addr(0x7E0, 0x7E8)), config=cfg) as c:
     except NegativeResponseException as e:
         print("negative", hex(e.response.code), flush=True)
 t.append(time.monotonic())
-print("seconds: imports %.1f, can-isotp %.1f, udsoncan %.1f" % tuple(b - a for a, b in zip(t, t[1:])))
+# 4. can-isotp's own ISO-TP stack in python (NotifierBasedCanStack over a
+# python-can socketcan bus, i.e. CAN_RAW) as the peer of a kernel ISO-TP
+# socket, both ways, classic (ids 3E1/3E9) and CAN FD with BRS (3E2/3EA),
+# the python side with its default flow control (BS 8, STmin 0).
+bus = can.Bus(interface="socketcan", channel=iface, fd=True)
+notifier = can.Notifier(bus, [], timeout=0.1)
+def pystack(tx, rx, fd):
+    # Its own timeouts 10 s, not 1 s: a stalled host (seen: 1.07 s under
+    # TCG on a loaded machine) must not end a transfer on this side.
+    p = {"blocksize": 8, "stmin": 0, "rx_flowcontrol_timeout": 10000,
+         "rx_consecutive_frame_timeout": 10000}
+    if fd:
+        p.update(can_fd=True, tx_data_length=64, bitrate_switch=True)
+    st = isotp.NotifierBasedCanStack(bus, notifier, address=addr(tx, rx), params=p)
+    st.start()
+    return st
+for fd, ptx, ktx, n_in, n_out in ((False, 0x3E1, 0x3E9, 1000, 900),
+                                  (True, 0x3E2, 0x3EA, 3000, 2500)):
+    st = pystack(ptx, ktx, fd)
+    k = isotp.socket(timeout=60)
+    if fd:
+        fd_sock(k)
+    k.bind(iface, addr(ktx, ptx))
+    k.send(pat(n_in))
+    got = st.recv(block=True, timeout=60)
+    st.send(pat(n_out))
+    back = k.recv()
+    print("pystack", "fd" if fd else "classic", got == pat(n_in), back == pat(n_out), flush=True)
+    st.stop()
+    k.close()
+notifier.stop()
+bus.shutdown()
+t.append(time.monotonic())
+# 5. A download through udsoncan (RequestDownload, TransferData blocks of
+# 4096 bytes, RequestTransferExit) to a server on ids 7E1/7E9 that checks
+# every byte against what the client was to send and answers the exit
+# with the CRC-32 of what it received.
+blob = random.Random(41).randbytes(dl_size)
+BLOCK = 4096
+srv2 = isotp.socket()
+if dl_fd:
+    fd_sock(srv2)
+srv2.bind(iface, addr(0x7E9, 0x7E1))
+def serve_download():
+    st = None
+    while True:
+        q = srv2.recv(1 << 16)
+        if q[0] == 0x34:
+            na, ns = q[2] & 0xF, q[2] >> 4
+            size = int.from_bytes(q[3 + na:3 + na + ns], "big")
+            st = {"size": size, "got": bytearray(), "seq": 1}
+            srv2.send(b"\x74\x20" + (BLOCK + 2).to_bytes(2, "big"))
+        elif q[0] == 0x36 and st is None:
+            srv2.send(b"\x7f\x36\x24")
+        elif q[0] == 0x36:
+            if q[1] != st["seq"]:
+                srv2.send(b"\x7f\x36\x73")
+                continue
+            st["got"] += q[2:]
+            st["seq"] = (st["seq"] + 1) & 0xFF
+            if len(st["got"]) > st["size"] or len(q) - 2 > BLOCK:
+                srv2.send(b"\x7f\x36\x71")
+            else:
+                srv2.send(b"\x76" + q[1:2])
+        elif q[0] == 0x37 and st is not None:
+            if st["got"] != blob:
+                srv2.send(b"\x7f\x37\x72")
+            else:
+                srv2.send(b"\x77" + zlib.crc32(st["got"]).to_bytes(4, "big"))
+            st = None
+        else:
+            srv2.send(b"\x7f" + q[:1] + b"\x11")
+threading.Thread(target=serve_download, daemon=True).start()
+csock = isotp.socket(timeout=0.1)
+if dl_fd:
+    fd_sock(csock)
+with Client(IsoTPSocketConnection(iface, addr(0x7E1, 0x7E9), tpsock=csock), config=cfg) as c:
+    r = c.request_download(MemoryLocation(address=0x08000000, memorysize=dl_size,
+                                          address_format=32, memorysize_format=32))
+    block = r.service_data.max_length - 2
+    seq = 1
+    for off in range(0, dl_size, block):
+        r = c.transfer_data(seq, blob[off:off + block])
+        assert r.service_data.sequence_number_echo == seq
+        seq = (seq + 1) & 0xFF
+    r = c.request_transfer_exit()
+    crc = int.from_bytes(r.service_data.parameter_records, "big")
+    print("download", dl_size, "blocks", -(-dl_size // block), "crc", crc == zlib.crc32(blob), flush=True)
+t.append(time.monotonic())
+print("seconds: python-can %.1f, can-isotp+udsoncan imports %.1f, sockets %.1f, udsoncan %.1f, "
+      "pure-python stack %.1f, download %.1f" % tuple(b - a for a, b in zip(t, t[1:])))
 print("done", flush=True)
 "#;
 
-/// The diagnostics libraries unchanged (issue 41): python's `can-isotp`
-/// (`isotp.socket()`, which is `socket(PF_CAN, SOCK_DGRAM, CAN_ISOTP)`)
-/// and `udsoncan` on top of it, one python process on one classic
-/// interface, the bus watched:
+/// The size and link layer of [`isotp_python_uds`]'s UDS download.
+fn download_size() -> (usize, &'static str) {
+    (1 << 20, "fd")
+}
+
+/// `isotpdump -u`'s line for frame `f` on `c0` (whitespace collapsed),
+/// with the UDS note `uds` behind a single or first frame: written from
+/// ISO 15765-2 as the test reads the frame, not from isotpdump's code.
+fn isotpdump_line(c0: &str, f: &Fr, uds: Option<&str>) -> String {
+    let d = &f.data;
+    let mut out = vec![c0.to_string(), format!("{:X}", f.id), format!("[{}]", d.len())];
+    let pci = d[0];
+    let mut data_from = 0;
+    match pci >> 4 {
+        0 if pci & 0xF != 0 => {
+            out.push(format!("[SF] ln: {} data:", pci & 0xF));
+            data_from = 1;
+        }
+        0 => {
+            out.push(format!("[SF] ln: {} data:", d[1]));
+            data_from = 2;
+        }
+        1 => {
+            let (len, from) = match ((usize::from(pci & 0xF) << 8) | usize::from(d[1]), d) {
+                (0, d) => (u32::from_be_bytes([d[2], d[3], d[4], d[5]]) as usize, 6),
+                (n, _) => (n, 2),
+            };
+            out.push(format!("[FF] ln: {len} data:"));
+            data_from = from;
+        }
+        2 => {
+            out.push(format!("[CF] sn: {:X} data:", pci & 0xF));
+            data_from = 1;
+        }
+        3 => {
+            let st = match d[2] {
+                s @ 0..=0x7F => format!("{s} ms"),
+                s @ 0xF1..=0xF9 => format!("{} us", (s & 0xF) * 100),
+                _ => "reserved".into(),
+            };
+            let what = ["CTS", "WT", "OVFLW", "reserved"][usize::from(pci & 0xF).min(3)];
+            let bs = if d[1] == 0 { "0 = off".to_string() } else { d[1].to_string() };
+            out.push(format!(
+                "[FC] FC: {} = {what} # BS: {bs} # STmin: 0x{:02X} = {st}",
+                pci & 0xF,
+                d[2]
+            ));
+        }
+        _ => out.push("[??]".into()),
+    }
+    if data_from != 0 && d.len() > data_from {
+        out.push(hex(&d[data_from..]));
+        if let Some(u) = uds {
+            out.push(format!("- {u}"));
+        }
+    }
+    out.join(" ").split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// The frames of `fr` with identifier `a` or `b`, split where the first
+/// first frame from `second` starts a transfer the other way.
+fn split_ways(fr: &[Fr], a: u32, b: u32, second: u32) -> (Vec<Fr>, Vec<Fr>) {
+    let ours: Vec<Fr> = fr.iter().filter(|f| f.id == a || f.id == b).cloned().collect();
+    let at = ours
+        .iter()
+        .position(|f| f.id == second && f.data.first().is_some_and(|x| x >> 4 == 1))
+        .unwrap_or(ours.len());
+    let (x, y) = ours.split_at(at);
+    (x.to_vec(), y.to_vec())
+}
+
+/// The frames of a transfer of `n` bytes with TX_DL `dl` (normal
+/// addressing): the FF and the CFs.
+fn frames_for(n: usize, dl: usize) -> usize {
+    let head = if n > 4095 { dl - 6 } else { dl - 2 };
+    1 + (n - head).div_ceil(dl - 1)
+}
+
+/// The diagnostics libraries and tools unchanged (issue 41): python's
+/// `can-isotp` (`isotp.socket()`, which is `socket(PF_CAN, SOCK_DGRAM,
+/// CAN_ISOTP)`, and its own ISO-TP stack in python over CAN_RAW) and
+/// `udsoncan` on top of it, one python process on one interface (MTU 72:
+/// classic and CAN FD sockets), can-utils' `isotpdump` and `isotpsniffer`
+/// watching the UDS ids, the bus watched too:
 /// 1. a python socket sends 300 bytes to can-utils' `isotprecv`: FF, the
 ///    FC, 42 CFs; isotprecv prints the PDU;
 /// 2. 200 bytes between two python sockets, the receiver's flow control
@@ -609,9 +871,25 @@ print("done", flush=True)
 ///    ReadDataByIdentifier 0100 (its 63-byte answer equal to what was
 ///    written), ReadDataByIdentifier F191 answered `7F 22 31`, which
 ///    udsoncan raises as a negative response with code 0x31; each seen as
-///    frames on the bus.
+///    frames on the bus. `isotpdump -u` prints every one of those frames
+///    decoded (SF/FF length, CF sequence number, FC status, BS, STmin,
+///    data) with the UDS service of each request and answer;
+///    `isotpsniffer`, whose two listen-mode ISO-TP sockets reassemble both
+///    directions without sending flow control, prints the eight PDUs;
+/// 4. can-isotp's pure-python stack (`NotifierBasedCanStack` on a
+///    python-can socketcan bus, BS 8) as the independent peer of a kernel
+///    socket: 1000 bytes kernel -> python and 900 back on classic CAN,
+///    3000 and 2500 over CAN FD (TX_DL 64, BRS); each PDU intact, each
+///    transfer's frames checked on the bus (the python side's FC every 8
+///    CFs);
+/// 5. a UDS download through udsoncan (RequestDownload, TransferData
+///    blocks of 4096 bytes, 32-bit FF_DL escape, the block counter
+///    wrapping at 255, RequestTransferExit) of 1 MiB to a server that
+///    checks every byte and answers with their CRC-32, which the client
+///    compares with its own.
 ///
-/// The packages come from setup.sh (exact versions, `$RCAN_CACHE/python3`).
+/// The packages come from setup.sh (exact versions, `$RCAN_CACHE/python3`);
+/// python-can is Debian's python3-can.
 fn isotp_python_uds(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.isotp_ifaces(1)?[0];
     let c0 = dev(0);
@@ -622,12 +900,32 @@ fn isotp_python_uds(ctx: &mut Ctx) -> TestResult {
             && std::path::Path::new(&format!("{pydir}/isotp")).is_dir(),
         "{pydir}: no can-isotp/udsoncan (run tools/testing/rcan/setup.sh)"
     );
-    let sn = Sniffer::start(i0)?;
-    let mut r = tools::spawn("isotprecv", &["-s", "321", "-d", "123", &c0], None)?;
+    set_mtu(ctx, &c0, "72")?;
+    let r = python_uds_on(&c0, i0, &pydir);
+    let restore = set_mtu(ctx, &c0, "16");
+    r.and(restore)
+}
+
+fn python_uds_on(c0: &str, i0: u32, pydir: &str) -> TestResult {
+    let ids = [
+        0x123, 0x321, 0x456, 0x654, 0x7E0, 0x7E8, 0x3E1, 0x3E9, 0x3E2, 0x3EA,
+    ];
+    let sn = Sniffer::start_ids(i0, &ids)?;
+    let mut r = tools::spawn("isotprecv", &["-s", "321", "-d", "123", c0], None)?;
     r.wait_listening()?;
+    let mut dump = tools::spawn("isotpdump", &["-u", "-s", "7E0", "-d", "7E8", c0], None)?;
+    dump.wait_listening()?;
+    let mut sniff =
+        tools::spawn_stdin_open("isotpsniffer", &["-f", "1", "-s", "7E0", "-d", "7E8", c0])?;
+    sniff.wait_listening()?;
+    let (dl_size, dl_ll) = download_size();
     let start = Instant::now();
-    let py = tools::spawn("/usr/bin/python3", &["-c", PY_UDS, &c0, &pydir], None)?
-        .finish(python_limit())?;
+    let py = tools::spawn(
+        "/usr/bin/python3",
+        &["-c", PY_UDS, c0, pydir, &dl_size.to_string(), dl_ll],
+        None,
+    )?
+    .finish(python_limit())?;
     let took = start.elapsed();
     let rcv = r.finish(TOOL_LIMIT)?;
     let fr = sn.stop()?;
@@ -698,7 +996,8 @@ fn isotp_python_uds(ctx: &mut Ctx) -> TestResult {
         uds.iter().map(|f| show(f)).collect::<Vec<_>>()
     );
     // Every multi-frame UDS transfer complete: 20 bytes = 6 + 2 CFs,
-    // 63 = 6 + 9 CFs, twice; one FC each.
+    // 63 = 6 + 9 CFs, twice; one FC each (none from isotpsniffer's
+    // listening sockets).
     let cfs = uds.iter().filter(|f| f.data[0] >> 4 == 2).count();
     let fcs = uds.iter().filter(|f| f.data[0] >> 4 == 3).count();
     ensure!(
@@ -706,6 +1005,124 @@ fn isotp_python_uds(ctx: &mut Ctx) -> TestResult {
         "UDS: {cfs} CFs and {fcs} FCs, want 20 and 3: {:?}",
         uds.iter().map(|f| show(f)).collect::<Vec<_>>()
     );
+    // isotpdump: every UDS frame, decoded, the service of each message.
+    dump.wait_lines(uds.len())?;
+    dump.signal("TERM")?;
+    let dumped = dump.finish(TOOL_LIMIT)?.stdout;
+    let services = [
+        "[SRQ] ReadDataByIdentifier",
+        "[PSR] ReadDataByIdentifier",
+        "[SRQ] WriteDataByIdentifier",
+        "[PSR] WriteDataByIdentifier",
+        "[SRQ] ReadDataByIdentifier",
+        "[PSR] ReadDataByIdentifier",
+        "[SRQ] ReadDataByIdentifier",
+        "[NRC] requestOutOfRange",
+    ];
+    let mut svc = services.iter();
+    let want: Vec<String> = uds
+        .iter()
+        .map(|f| {
+            let first = f.data[0] >> 4 <= 1;
+            isotpdump_line(c0, f, if first { svc.next().copied() } else { None })
+        })
+        .collect();
+    let got: Vec<String> = dumped
+        .lines()
+        .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+        .collect();
+    if let Some(i) = (0..want.len().max(got.len())).find(|&i| want.get(i) != got.get(i)) {
+        return Err(format!(
+            "isotpdump line {i}: {:?}, want {:?} ({} lines, want {})",
+            got.get(i),
+            want.get(i),
+            got.len(),
+            want.len()
+        ));
+    }
+    // isotpsniffer: the eight PDUs, in order each way (it reads its two
+    // sockets in turn, so the two directions may interleave).
+    sniff.wait_lines(8)?;
+    sniff.close_stdin();
+    let sniffed = sniff.finish(TOOL_LIMIT)?;
+    ensure!(
+        sniffed.status.success(),
+        "isotpsniffer: {}: {}",
+        sniffed.status,
+        sniffed.stderr.trim()
+    );
+    let text: Vec<u8> = (0..60u8).map(|i| 0x41 + i % 26).collect();
+    let vin = b"WVWZZZ1JZXW000001";
+    let pdus: [(u32, Vec<u8>); 8] = [
+        (0x7E0, vec![0x22, 0xF1, 0x90]),
+        (0x7E8, [&[0x62, 0xF1, 0x90][..], vin].concat()),
+        (0x7E0, [&[0x2E, 0x01, 0x00][..], &text].concat()),
+        (0x7E8, vec![0x6E, 0x01, 0x00]),
+        (0x7E0, vec![0x22, 0x01, 0x00]),
+        (0x7E8, [&[0x62, 0x01, 0x00][..], &text].concat()),
+        (0x7E0, vec![0x22, 0xF1, 0x91]),
+        (0x7E8, vec![0x7F, 0x22, 0x31]),
+    ];
+    for id in [0x7E0, 0x7E8] {
+        let tag = format!("{c0} {id:03X} ");
+        let got: Vec<String> = sniffed
+            .stdout
+            .lines()
+            .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+            .filter(|l| l.starts_with(&tag))
+            .collect();
+        let want: Vec<String> = pdus
+            .iter()
+            .filter(|(i, _)| *i == id)
+            .map(|(_, p)| format!("{tag}[{}] {}", p.len(), hex(p)))
+            .collect();
+        ensure!(
+            got == want,
+            "isotpsniffer, PDUs from {id:03X}: {got:?}, want {want:?}"
+        );
+    }
+
+    // 4. The pure-python ISO-TP stack against the kernel's, both ways.
+    for (ll, ptx, ktx, n_in, n_out, dl) in [
+        ("classic", 0x3E1, 0x3E9, 1000, 900, 8),
+        ("fd", 0x3E2, 0x3EA, 3000, 2500, 64),
+    ] {
+        let line = format!("pystack {ll} True True");
+        ensure!(lines.contains(&line.as_str()), "no {line:?} in {lines:?}");
+        let (k2p, p2k) = split_ways(&fr, ptx, ktx, ptx);
+        let tx = check_transfer(&k2p, ktx, ptx, &pattern(n_in), dl, 8, [0x30, 8, 0])
+            .map_err(|e| format!("{ll}, kernel -> python: {e}"))?;
+        ensure!(
+            tx.len() == frames_for(n_in, dl),
+            "{ll}, kernel -> python: {} frames, want {}",
+            tx.len(),
+            frames_for(n_in, dl)
+        );
+        let rx = check_transfer(&p2k, ptx, ktx, &pattern(n_out), dl, 0, [0x30, 0, 0])
+            .map_err(|e| format!("{ll}, python -> kernel: {e}"))?;
+        ensure!(
+            rx.len() == frames_for(n_out, dl),
+            "{ll}, python -> kernel: {} frames, want {}",
+            rx.len(),
+            frames_for(n_out, dl)
+        );
+        let fd = dl > 8;
+        ensure!(
+            k2p.iter()
+                .chain(&p2k)
+                .all(|f| f.fd == fd && (!fd || f.flags & CANFD_BRS != 0)),
+            "{ll}: a frame of the other link layer or without BRS: {:?}",
+            k2p.iter()
+                .chain(&p2k)
+                .filter(|f| f.fd != fd || (fd && f.flags & CANFD_BRS == 0))
+                .map(show)
+                .collect::<Vec<_>>()
+        );
+    }
+
+    // 5. The download, checked byte by byte by the server.
+    let line = format!("download {dl_size} blocks {} crc True", dl_size.div_ceil(4096));
+    ensure!(lines.contains(&line.as_str()), "no {line:?} in {lines:?}");
     Ok(())
 }
 
