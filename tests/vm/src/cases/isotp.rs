@@ -32,7 +32,7 @@ pub static TESTS: &[crate::Test] = portable_table![
     isotp_canutils_fd,
     isotp_python_uds,
     isotp_socket_errnos,
-    isotp_tunnel_ip,
+    // isotp_tunnel_ip: not registered yet, see its comment.
 ];
 
 pub static OURS: &[crate::Test] = test_table![
@@ -1193,6 +1193,12 @@ const TUN_PORT: u16 = 4141;
 /// each is an ISO-TP transfer each way whose first frame announces the
 /// IPv4 packet (FF_DL = 28 + payload, the PDU starting 45, IPv4 with a
 /// 20-byte header).
+///
+/// NOT ENABLED: not in [`TESTS`] until the test kernels have
+/// `CONFIG_TUN=y` (tools/testing/rcan/config/base.config); on today's it
+/// fails at once with "no /dev/net/tun" (seen on release, debug and in
+/// the mainline stage). It has not run on a kernel with tun yet.
+#[allow(dead_code)]
 fn isotp_tunnel_ip(ctx: &mut Ctx) -> TestResult {
     ensure!(
         std::path::Path::new("/dev/net/tun").exists(),
