@@ -6,7 +6,7 @@
 use std::fs;
 use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Child, ChildStdin, Command, ExitStatus, Stdio};
 use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
 use std::time::Duration;
@@ -37,6 +37,9 @@ pub struct Output {
 pub struct Bg {
     cmd: String,
     child: Child,
+    /// Its stdin, held open (a pipe nobody writes to) when started with
+    /// [`spawn_stdin_open`]; dropping it is EOF for the program.
+    stdin: Option<ChildStdin>,
     stdout: Arc<Mutex<Vec<u8>>>,
     stderr: Arc<Mutex<Vec<u8>>>,
     readers: Vec<JoinHandle<()>>,
@@ -60,16 +63,37 @@ fn collect(mut pipe: impl Read + Send + 'static, buf: Arc<Mutex<Vec<u8>>>) -> Jo
 /// Starts `name args...` in `dir` (default: the current directory) with
 /// stdin from /dev/null and stdout, stderr collected.
 pub fn spawn(name: &str, args: &[&str], dir: Option<&Path>) -> Result<Bg, String> {
+    spawn_with(name, args, dir, false)
+}
+
+/// [`spawn`] with stdin a pipe held open until [`Bg::close_stdin`]: for
+/// programs that quit at EOF on stdin (`isotpsniffer` watches it for a
+/// key press).
+pub fn spawn_stdin_open(name: &str, args: &[&str]) -> Result<Bg, String> {
+    spawn_with(name, args, None, true)
+}
+
+fn spawn_with(
+    name: &str,
+    args: &[&str],
+    dir: Option<&Path>,
+    hold_stdin: bool,
+) -> Result<Bg, String> {
     let cmd = format!("{name} {}", args.join(" "));
     let mut c = Command::new(tool(name));
     c.args(args)
-        .stdin(Stdio::null())
+        .stdin(if hold_stdin {
+            Stdio::piped()
+        } else {
+            Stdio::null()
+        })
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     if let Some(d) = dir {
         c.current_dir(d);
     }
     let mut child = c.spawn().or_fail(&cmd)?;
+    let stdin = child.stdin.take();
     let stdout = Arc::new(Mutex::new(Vec::new()));
     let stderr = Arc::new(Mutex::new(Vec::new()));
     let readers = vec![
@@ -79,6 +103,7 @@ pub fn spawn(name: &str, args: &[&str], dir: Option<&Path>) -> Result<Bg, String
     Ok(Bg {
         cmd,
         child,
+        stdin,
         stdout,
         stderr,
         readers,
@@ -119,6 +144,23 @@ impl Bg {
     /// CONT) with kill(1).
     pub fn signal(&self, sig: &str) -> Result<(), String> {
         run_ok("kill", &["-s", sig, &self.child.id().to_string()]).map(drop)
+    }
+
+    /// Closes its stdin (EOF) if [`spawn_stdin_open`] held it open.
+    pub fn close_stdin(&mut self) {
+        self.stdin = None;
+    }
+
+    /// Waits until its stdout holds `n` lines (or more).
+    pub fn wait_lines(&mut self, n: usize) -> Result<(), String> {
+        let what = format!("{} to print {n} lines", self.cmd);
+        wait_for(TOOL_LIMIT, &what, || {
+            if self.stdout_now().lines().count() >= n {
+                return Ok(Some(()));
+            }
+            self.check_alive()?;
+            Ok(None)
+        })
     }
 
     /// What the program wrote to stdout so far.

@@ -53,15 +53,15 @@ pub const OURS: &[crate::Test] =
 type Job = Box<dyn FnOnce() + Send>;
 
 /// A network namespace of this test: a thread that made it and runs jobs
-/// in it until dropped.
-struct Ns {
+/// in it until dropped. Also used by `isotp.rs` (the isotptun test).
+pub(super) struct Ns {
     tid: i32,
     jobs: Option<mpsc::Sender<Job>>,
     thread: Option<thread::JoinHandle<()>>,
 }
 
 impl Ns {
-    fn new() -> Result<Ns, String> {
+    pub(super) fn new() -> Result<Ns, String> {
         let (jobs, rx) = mpsc::channel::<Job>();
         let (ttx, trx) = mpsc::channel::<Result<i32, String>>();
         let thread = thread::spawn(move || {
@@ -92,7 +92,7 @@ impl Ns {
 
     /// Runs `f` on the namespace's thread: sockets it opens are the
     /// namespace's, programs it starts run there.
-    fn run<T: Send + 'static>(&self, f: impl FnOnce() -> T + Send + 'static) -> T {
+    pub(super) fn run<T: Send + 'static>(&self, f: impl FnOnce() -> T + Send + 'static) -> T {
         let (tx, rx) = mpsc::channel();
         self.jobs
             .as_ref()
@@ -105,12 +105,12 @@ impl Ns {
     }
 
     /// `ip link set DEV netns TID` from the initial namespace.
-    fn take(&self, dev: &str) -> TestResult {
+    pub(super) fn take(&self, dev: &str) -> TestResult {
         ip(&["link", "set", "dev", dev, "netns", &self.tid.to_string()])
     }
 
     /// `ip ARGS` inside the namespace.
-    fn ip(&self, args: &[&str]) -> TestResult {
+    pub(super) fn ip(&self, args: &[&str]) -> TestResult {
         let args: Vec<String> = args.iter().map(|s| s.to_string()).collect();
         self.run(move || ip(&args.iter().map(String::as_str).collect::<Vec<_>>()))
     }
@@ -146,7 +146,7 @@ impl Drop for Ns {
 }
 
 /// Runs `ip ARGS` in the calling thread's namespace.
-fn ip(args: &[&str]) -> TestResult {
+pub(super) fn ip(args: &[&str]) -> TestResult {
     let out = Command::new(tool("ip"))
         .args(args)
         .output()
