@@ -84,9 +84,14 @@ const PATIENT_PEER_ARGS: [&str; 6] = [
 /// = 10.1 s of guest time before its message fails, instead of the
 /// default 1.1 s. On a loaded host the guest's vCPUs stop for seconds
 /// (the soak run that failed logged "clocksource: Long readout interval
-/// ... cs_nsec: 3056449497" during the test) while guest time runs on: the
-/// acks wait in the backlog, every sender's retransmission budget runs out
-/// at once, and the senders get ETIMEDOUT as the protocol says they must.
+/// ... cs_nsec: 3056449497" during the test) while guest time runs on:
+/// every sender's retransmission budget runs out at once, and the senders get ETIMEDOUT as the protocol says they must.
+/// It takes a stall of one vCPU, not of the whole VM (a stopped VM costs
+/// one timer expiry): the other vCPU's timer keeps counting expiries while
+/// the stalled one may hold the ack in its backlog or be the drainer (its
+/// retransmissions then wait in the send queue; which one it was is not
+/// established). Reproduced by making one QEMU vCPU thread SCHED_IDLE
+/// beside a busy host task for 3 s in every 7.
 /// T_reasm (15 s) must exceed the budget (dsor-wire.rst, "Timers and
 /// limits"). The default budget's give-up is checked by `dsor_errors`
 /// (absent node, default `max_retx`) and rcan-core's tests.
