@@ -74,7 +74,7 @@ use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::procfs::{NetProcDir, NetProcDirReg, ProcEntry, ProcShow, SeqFile};
 use glue::skb::UniqueSkb;
-use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
+use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef, SockView};
 use glue::sync::Rtnl;
 use crate::glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
@@ -235,7 +235,7 @@ impl Pending {
 
 /// An skb carrying one frame image (`bytes`, `cfsiz` long) for `dev`,
 /// owned by `sk`. Any context (GFP_ATOMIC).
-fn frame_skb(sk: &S, dev: &NetDev, bytes: &[u8]) -> Option<UniqueSkb> {
+fn frame_skb(sk: &V, dev: &NetDev, bytes: &[u8]) -> Option<UniqueSkb> {
     glue::can::skb::alloc_image_for(sk, dev, bytes, glue::GFP_ATOMIC)
 }
 
@@ -244,7 +244,7 @@ fn frame_skb(sk: &S, dev: &NetDev, bytes: &[u8]) -> Option<UniqueSkb> {
 /// `tstamp` (ns, 0: none) becomes the skb's timestamp, which recvmsg
 /// reports (SO_TIMESTAMP...). Process or softirq context (GFP_ATOMIC),
 /// `state` may be held; a full receive queue drops it, as mainline.
-fn to_user(sk: &S, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32, tstamp: i64) {
+fn to_user(sk: &V, head: &MsgHead, frames: &[&[u8]], ifindex: i32, flags: u32, tstamp: i64) {
     let len: usize = MHSIZ + frames.iter().map(|f| f.len()).sum::<usize>();
     let Some(mut skb) = UniqueSkb::alloc(len as u32, glue::GFP_ATOMIC) else {
         return;
@@ -278,7 +278,7 @@ impl TxFrame {
     /// mainline's BCM always does; errors are dropped as mainline's
     /// `bcm_can_tx` drops them. Process or softirq context, no spinlock
     /// held. Returns whether the driver took the frame.
-    fn send(self, sk: &S) -> bool {
+    fn send(self, sk: &V) -> bool {
         let Some(image) = self.image.get(..self.len) else {
             return false;
         };
@@ -292,7 +292,7 @@ impl TxFrame {
 /// The effects of a transmit operation's state machine.
 struct TxEffects<'a, 'p> {
     job: JobRef<'a, BcmOp>,
-    sk: &'a S,
+    sk: &'a V,
     ifindex: i32,
     cfsiz: usize,
     frames: &'a [u8],
@@ -358,7 +358,7 @@ impl TxOut for TxEffects<'_, '_> {
 /// The effects of a receive operation's state machine.
 struct RxEffects<'a, 'p> {
     job: JobRef<'a, BcmOp>,
-    sk: &'a S,
+    sk: &'a V,
     raw: &'a [u8],
     cfsiz: usize,
     /// The operation's `rx_stamp`, for RX_CHANGED.
@@ -662,7 +662,7 @@ impl ProcShow for ProcView {
     /// takes the socket lock, the receive list's and each operation's
     /// `state` lock.
     fn show(&self, m: &mut SeqFile<'_>) {
-        let sk = self.sk.sock();
+        let sk = self.sk.in_process(m.process());
         let s = sk.lock();
         let _ = m.write_str(">>> socket ");
         m.write_kaddr(sk.socket_kaddr());
@@ -745,6 +745,9 @@ impl ProcShow for ProcView {
 }
 
 type S = Sock<BcmProto>;
+/// A BCM socket in any context (the receive callback, the operations'
+/// timers): no socket lock.
+type V = SockView<BcmProto>;
 
 /// Finds the position of the operation named `key` in `ops`.
 fn find(ops: &[Job], key: &OpKey) -> Option<usize> {
@@ -840,7 +843,7 @@ impl CanProtocol for BcmProto {
 
     /// NET_RX softirq, RCU read side (mainline `bcm_rx_handler`, for every
     /// operation of the socket the frame is for).
-    fn rx(sk: &S, skb: RxSkb<'_>, _cookie: u32) {
+    fn rx(sk: &SockView<Self>, skb: RxSkb<'_>, _cookie: u32) {
         let s = skb.skb();
         // A classic or a CAN FD frame (mainline: can_is_can_skb,
         // can_is_canfd_skb); each operation takes its own kind.

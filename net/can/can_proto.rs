@@ -29,7 +29,7 @@ use kernel::prelude::*;
 
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
-use glue::sock::{Msg, Sock};
+use glue::sock::{Msg, Sock, SockView};
 use glue::sync::{Rtnl, RtnlProof};
 use crate::glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
@@ -71,7 +71,7 @@ impl CanProtocol for CanProtoOps {
     /// NET_RX softirq, RCU read side. Every classic frame is delivered,
     /// the socket's own ones included (on canloop the sender sees its frames
     /// come back, thesis 5.3.5).
-    fn rx(sk: &S, skb: RxSkb<'_>, _cookie: u32) {
+    fn rx(sk: &SockView<Self>, skb: RxSkb<'_>, _cookie: u32) {
         // The thesis API is CAN 2.0 only: CAN FD frames (72 bytes) from an
         // FD-capable device are not for it (can-fd.rst).
         if skb.skb().len() as usize != CAN_FRAME_LEN {

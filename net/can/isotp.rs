@@ -67,7 +67,7 @@ use glue::netdev::DevRef;
 use glue::neterr;
 use glue::params::Param;
 use glue::skb::UniqueSkb;
-use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
+use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef, SockView};
 use glue::sync::Rtnl;
 use kernel::alloc::KVVec;
 use kernel::c_str;
@@ -165,7 +165,7 @@ impl After {
     /// send's result.
     fn run(
         &mut self,
-        sk: &S,
+        sk: &SockView<IsotpProto>,
         ifindex: i32,
         tx_id: u32,
         ll: LlOptions,
@@ -290,7 +290,13 @@ impl Engine {
 /// Builds and sends one frame of the link layer `ll` with `tx_id`, owned
 /// by `sk` (so that its echo names it), with loopback. Process or softirq
 /// context, `eng` not held.
-fn send_frame(sk: &S, ifindex: i32, tx_id: u32, ll: LlOptions, f: &LlFrame) -> Result {
+fn send_frame(
+    sk: &SockView<IsotpProto>,
+    ifindex: i32,
+    tx_id: u32,
+    ll: LlOptions,
+    f: &LlFrame,
+) -> Result {
     let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENXIO)?;
     let id = tx_id.to_ne_bytes();
     // A classic frame's 16-byte image is built alone: the 72-byte one
@@ -397,7 +403,7 @@ impl CanProtocol for IsotpProto {
     /// `isotp_rcv_echo`): frames on `rx_id` go to the machines as
     /// `route()` says; our own frames on `tx_id` coming back are the
     /// echoes the sender waits for.
-    fn rx(sk: &S, skb: RxSkb<'_>, _cookie: u32) {
+    fn rx(sk: &SockView<Self>, skb: RxSkb<'_>, _cookie: u32) {
         let s = skb.skb();
         let own = s.sent_by(sk);
         let tstamp = s.tstamp();

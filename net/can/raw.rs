@@ -42,7 +42,7 @@ use kernel::prelude::*;
 
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
-use glue::sock::{Msg, OptIn, OptOut, Sock, SockGuard};
+use glue::sock::{Msg, OptIn, OptOut, Sock, SockGuard, SockView};
 use glue::sync::Rtnl;
 use crate::glue::module::{ModuleScope, ScopedModule};
 use kernel::c_str;
@@ -203,7 +203,7 @@ impl CanProtocol for RawProto {
     /// for frames sent by this socket. Always inlined into the glue's
     /// receive trampoline (one function a frame, as `raw_rcv`).
     #[inline(always)]
-    fn rx(sk: &S, skb: RxSkb<'_>, cookie: u32) {
+    fn rx(sk: &SockView<Self>, skb: RxSkb<'_>, cookie: u32) {
         let local = skb.skb().is_local();
         let own = skb.skb().sent_by(sk);
         if own && cookie & COOKIE_RECV_OWN == 0 {

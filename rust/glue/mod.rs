@@ -49,6 +49,7 @@ pub(crate) mod bindings {
 }
 
 pub(crate) mod can;
+pub(crate) mod ctx;
 pub(crate) mod hrtimer;
 pub(crate) mod iomap;
 pub(crate) mod isa;

@@ -237,6 +237,14 @@ pub(crate) struct SeqFile<'a> {
     _call: PhantomData<&'a mut bindings::seq_file>,
 }
 
+impl<'a> SeqFile<'a> {
+    /// Proof of process context: a `show` runs in the reading task's
+    /// process context (`seq_read`), for the whole call (`'a`).
+    pub(crate) fn process(&self) -> &'a super::ctx::Process {
+        super::ctx::Process::PROOF
+    }
+}
+
 impl SeqFile<'_> {
     /// Writes `addr` as `%pK` does (hashed, or zeros when kptr_restrict
     /// hides it): the address is printed, never dereferenced.

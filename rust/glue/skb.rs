@@ -305,7 +305,7 @@ impl<A: Access> Skb<A> {
     /// Whether socket `sk` sent this frame (`skb->sk == sk`), by identity;
     /// the socket is not dereferenced. Any context.
     #[inline]
-    pub(crate) fn sent_by<T: super::sock::Proto>(&self, sk: &super::sock::Sock<T>) -> bool {
+    pub(crate) fn sent_by<T: super::sock::Proto>(&self, sk: &super::sock::SockView<T>) -> bool {
         core::ptr::eq(self.sk_ptr(), sk.as_ptr())
     }
 
@@ -559,7 +559,7 @@ impl<A: Exclusive> Skb<A> {
     /// Copies the socket's priority and mark into the skb, as every
     /// protocol's sendmsg does for the qdisc layer.
     #[inline]
-    pub(crate) fn set_sock_params<T: super::sock::Proto>(&mut self, sk: &super::sock::Sock<T>) {
+    pub(crate) fn set_sock_params<T: super::sock::Proto>(&mut self, sk: &super::sock::SockView<T>) {
         // READ_ONCE of the two socket fields (setsockopt writes them
         // without the caller's knowledge), as the kernel's sendmsg paths
         // read them; written here rather than by a C helper, once a frame.
@@ -581,7 +581,7 @@ impl<A: Exclusive> Skb<A> {
     /// is freed; no send-buffer accounting), so that receivers see which
     /// socket sent the frame. For frames sent outside a system call (timer
     /// callbacks); an skb that has an owner keeps it. Any context.
-    pub(crate) fn set_owner<T: super::sock::Proto>(&mut self, sk: &super::sock::Sock<T>) {
+    pub(crate) fn set_owner<T: super::sock::Proto>(&mut self, sk: &super::sock::SockView<T>) {
         // SAFETY: valid skb, ours alone (`Exclusive`, `&mut self`); `sk` is
         // a live sock (Sock invariant), on which we take the reference that
         // sock_efree drops.

@@ -11,9 +11,11 @@
 //! module's deferred-drop work ([`destruct`]).
 //!
 //! Locking: `Proto::Data` is protected by the socket lock (`lock_sock`),
-//! reached through [`Sock::lock`]; only process context takes it. The
-//! receive path (softirq) never touches `Data`: it queues skbs with
-//! [`Sock::queue_rcv`], which uses the receive queue's own spinlock.
+//! reached through [`Sock::lock`]; only process context takes it, and
+//! only process context gets a [`Sock`]. The receive path (softirq) and
+//! timers get a [`SockView`], which has no `lock()`: they never touch
+//! `Data`, and queue skbs with [`SockView::queue_rcv`], which uses the
+//! receive queue's own spinlock.
 
 use super::bindings;
 use super::net::Net;
@@ -206,19 +208,66 @@ impl OptOut {
     }
 }
 
-/// A `struct sock` of protocol `T`, borrowed.
-pub(crate) struct Sock<T: Proto> {
+/// A `struct sock` of protocol `T`, borrowed, in any context: what may
+/// be done with a socket without its lock and without sleeping. The
+/// receive callback (`can::proto::CanProtocol::rx`, NET_RX softirq) and
+/// everything that reaches a sock through a counted reference
+/// ([`SockRef::sock`]: timer and job callbacks, softirq or hardirq) get
+/// this view only, so `lock()`, which sleeps, cannot be called there: it
+/// is not a method of this type. [`Sock`] adds what process context may
+/// do.
+///
+/// # Invariants
+///
+/// `sk` is a live sock created by [`create`] for `T` while the value is
+/// borrowed (the glue lends it only by reference, for a call or for the
+/// life of a counted reference).
+pub(crate) struct SockView<T: Proto> {
     sk: *mut bindings::sock,
     _t: PhantomData<T>,
+}
+
+/// A `struct sock` of protocol `T`, borrowed by process context: a
+/// system call on the socket (the protocol's `proto_ops` methods), its
+/// release, a netdevice event (RTNL held), a /proc read. Adds to
+/// [`SockView`] (which it derefs to) what may sleep: the socket lock,
+/// blocking allocation and receive.
+///
+/// # Invariants
+///
+/// Those of [`SockView`], and every borrow of it runs in process context.
+pub(crate) struct Sock<T: Proto> {
+    view: SockView<T>,
+}
+
+impl<T: Proto> core::ops::Deref for Sock<T> {
+    type Target = SockView<T>;
+    fn deref(&self) -> &SockView<T> {
+        &self.view
+    }
 }
 
 impl<T: Proto> Sock<T> {
     /// # Safety
     ///
     /// `sk` is a live sock created by [`create`] for `T`, and stays alive
-    /// while the returned value is used.
+    /// while the returned value is used; it is used in process context
+    /// only.
     pub(crate) unsafe fn from_raw(sk: *mut bindings::sock) -> Sock<T> {
         Sock {
+            // SAFETY: our own contract includes `SockView::from_raw`'s.
+            view: unsafe { SockView::from_raw(sk) },
+        }
+    }
+}
+
+impl<T: Proto> SockView<T> {
+    /// # Safety
+    ///
+    /// `sk` is a live sock created by [`create`] for `T`, and stays alive
+    /// while the returned value is used.
+    pub(crate) unsafe fn from_raw(sk: *mut bindings::sock) -> SockView<T> {
+        SockView {
             sk,
             _t: PhantomData,
         }
@@ -232,7 +281,7 @@ impl<T: Proto> Sock<T> {
 
     /// Whether `self` and `other` are the same socket (identity, not
     /// contents). Any context.
-    pub(crate) fn same(&self, other: &Sock<T>) -> bool {
+    pub(crate) fn same(&self, other: &SockView<T>) -> bool {
         core::ptr::eq(self.sk, other.sk)
     }
 
@@ -302,33 +351,17 @@ impl<T: Proto> Sock<T> {
         p as usize
     }
 
-    /// A counted reference to this sock (`sock_hold`).
+    /// A counted reference to this sock (`sock_hold`). Any context.
     pub(crate) fn to_ref(&self) -> SockRef<T> {
         // SAFETY: live sock (type invariant); SockRef drops the reference.
         unsafe { bindings::rcan_sock_hold(self.sk) };
-        // INVARIANT: one reference, taken just above, on our live sock.
+        // INVARIANT: one reference, taken just above, on our live sock;
+        // the `Sock` inside is lent out as a `Sock` only with a proof of
+        // process context (`SockRef::in_process`).
         SockRef {
-            sock: Sock {
-                sk: self.sk,
-                _t: PhantomData,
-            },
-        }
-    }
-
-    /// The send timeout in jiffies (`sock_sndtimeo`): 0 if `nonblock`,
-    /// else SO_SNDTIMEO (`MAX_SCHEDULE_TIMEOUT` when unset).
-    pub(crate) fn sndtimeo(&self, nonblock: bool) -> i64 {
-        // SAFETY: live sock.
-        unsafe { bindings::rcan_sock_sndtimeo(self.sk, nonblock) as i64 }
-    }
-
-    /// Takes the socket lock (`lock_sock`). Process context; sleeps.
-    pub(crate) fn lock(&self) -> SockGuard<'_, T> {
-        // SAFETY: live sock (type invariant); released in the guard's Drop.
-        unsafe { bindings::rcan_lock_sock(self.sk) };
-        SockGuard {
-            sock: self,
-            _not_send: PhantomData,
+            // SAFETY: our live sock, kept alive by the reference taken
+            // above for as long as the `SockRef` holds it.
+            sock: unsafe { Sock::from_raw(self.sk) },
         }
     }
 
@@ -348,6 +381,62 @@ impl<T: Proto> Sock<T> {
             return Err(Error::from_errno(ret));
         }
         Ok(())
+    }
+
+    /// Sets `sk_err` and reports it to waiters (recv/poll see it once);
+    /// a socket already closed (SOCK_DEAD) is not woken.
+    pub(crate) fn report_error(&self, errno: i32) {
+        // SAFETY: live sock; sk_err is written like this by every protocol.
+        unsafe { bindings::rcan_sk_report_error(self.sk, errno) };
+    }
+
+    /// Takes the pending error (`sock_error`): returns `sk_err` (a
+    /// positive errno; 0: none) and clears it, so that the next call,
+    /// `poll` and `SO_ERROR` do not see it again. Any context.
+    pub(crate) fn take_error(&self) -> i32 {
+        // SAFETY: live sock (type invariant), so `sk_err`, an aligned
+        // `int` of it, is valid for the sock's life, which outlives this
+        // call. The writers of a PF_CAN socket's `sk_err` are
+        // `rcan_sk_report_error` (WRITE_ONCE) and `sock_error` (`xchg`),
+        // its readers use READ_ONCE (`sock_error`, `datagram_poll`): all
+        // marked accesses, so viewing it as an `AtomicI32` for this call
+        // races with no plain access.
+        let err = unsafe {
+            core::sync::atomic::AtomicI32::from_ptr(core::ptr::addr_of_mut!((*self.sk).sk_err))
+        };
+        if err.load(core::sync::atomic::Ordering::Relaxed) == 0 {
+            return 0;
+        }
+        err.swap(0, core::sync::atomic::Ordering::SeqCst)
+    }
+
+    /// Wakes pollers and writers waiting on the socket for `EPOLLOUT`
+    /// (a protocol's [`Proto::writable`] became true). Any context.
+    pub(crate) fn wake_writers(&self) {
+        // SAFETY: live sock (type invariant); the helper reads its wait
+        // queue under RCU, as `sk_write_space` callbacks do.
+        unsafe { bindings::rcan_sk_wake_writers(self.sk) };
+    }
+
+}
+
+impl<T: Proto> Sock<T> {
+    /// The send timeout in jiffies (`sock_sndtimeo`): 0 if `nonblock`,
+    /// else SO_SNDTIMEO (`MAX_SCHEDULE_TIMEOUT` when unset).
+    pub(crate) fn sndtimeo(&self, nonblock: bool) -> i64 {
+        // SAFETY: live sock.
+        unsafe { bindings::rcan_sock_sndtimeo(self.sk, nonblock) as i64 }
+    }
+
+    /// Takes the socket lock (`lock_sock`). Process context (the type's
+    /// invariant); sleeps.
+    pub(crate) fn lock(&self) -> SockGuard<'_, T> {
+        // SAFETY: live sock (type invariant); released in the guard's Drop.
+        unsafe { bindings::rcan_lock_sock(self.sk) };
+        SockGuard {
+            sock: self,
+            _not_send: PhantomData,
+        }
     }
 
     /// Waits for and dequeues one skb (`skb_recv_datagram`), honouring
@@ -386,41 +475,6 @@ impl<T: Proto> Sock<T> {
         unsafe { Skb::from_raw(skb) }.ok_or_else(|| Error::from_errno(err))
     }
 
-    /// Sets `sk_err` and reports it to waiters (recv/poll see it once);
-    /// a socket already closed (SOCK_DEAD) is not woken.
-    pub(crate) fn report_error(&self, errno: i32) {
-        // SAFETY: live sock; sk_err is written like this by every protocol.
-        unsafe { bindings::rcan_sk_report_error(self.sk, errno) };
-    }
-
-    /// Takes the pending error (`sock_error`): returns `sk_err` (a
-    /// positive errno; 0: none) and clears it, so that the next call,
-    /// `poll` and `SO_ERROR` do not see it again. Any context.
-    pub(crate) fn take_error(&self) -> i32 {
-        // SAFETY: live sock (type invariant), so `sk_err`, an aligned
-        // `int` of it, is valid for the sock's life, which outlives this
-        // call. The writers of a PF_CAN socket's `sk_err` are
-        // `rcan_sk_report_error` (WRITE_ONCE) and `sock_error` (`xchg`),
-        // its readers use READ_ONCE (`sock_error`, `datagram_poll`): all
-        // marked accesses, so viewing it as an `AtomicI32` for this call
-        // races with no plain access.
-        let err = unsafe {
-            core::sync::atomic::AtomicI32::from_ptr(core::ptr::addr_of_mut!((*self.sk).sk_err))
-        };
-        if err.load(core::sync::atomic::Ordering::Relaxed) == 0 {
-            return 0;
-        }
-        err.swap(0, core::sync::atomic::Ordering::SeqCst)
-    }
-
-    /// Wakes pollers and writers waiting on the socket for `EPOLLOUT`
-    /// (a protocol's [`Proto::writable`] became true). Any context.
-    pub(crate) fn wake_writers(&self) {
-        // SAFETY: live sock (type invariant); the helper reads its wait
-        // queue under RCU, as `sk_write_space` callbacks do.
-        unsafe { bindings::rcan_sk_wake_writers(self.sk) };
-    }
-
     /// Dequeues from the error queue (`sock_recv_errqueue`); EAGAIN when
     /// it is empty.
     pub(crate) fn recv_errqueue(
@@ -455,10 +509,21 @@ unsafe impl<T: Proto> Send for SockRef<T> {}
 unsafe impl<T: Proto> Sync for SockRef<T> {}
 
 impl<T: Proto> SockRef<T> {
-    /// The sock, borrowed for as long as this reference is.
-    pub(crate) fn sock(&self) -> &Sock<T> {
+    /// The sock, borrowed for as long as this reference is, as a
+    /// [`SockView`]: a counted reference is held by timers and jobs whose
+    /// callbacks run in softirq or hardirq context, where the socket lock
+    /// must not be taken. Any context.
+    pub(crate) fn sock(&self) -> &SockView<T> {
         // Our reference keeps the sock alive while `self` lives, and the
         // borrow cannot outlive `self` (type invariant).
+        &self.sock
+    }
+
+    /// The sock with its process-context methods (the socket lock), for
+    /// a caller that proves it runs in process context.
+    pub(crate) fn in_process<'a>(&'a self, _ctx: &'a super::ctx::Process) -> &'a Sock<T> {
+        // INVARIANT: the borrow is as long as the proof's, which is lent
+        // only to process context and cannot leave it (`ctx::Process`).
         &self.sock
     }
 }

@@ -38,7 +38,7 @@ use crate::glue::module::{ExitTable, ModuleScope, SweepKind};
 use crate::glue::net::Net;
 use crate::glue::netdev::{self as gnetdev, NetDev};
 use crate::glue::skb::{OwnedSkb, Shared, Skb, UniqueSkb};
-use crate::glue::sock::{Proto, ProtoReg, SetLink, Sock, SockGuard};
+use crate::glue::sock::{Proto, ProtoReg, SetLink, Sock, SockGuard, SockView};
 use crate::glue::sync::{CCell, RcuReadGuard, Rtnl, RtnlLocked};
 use crate::rcan_core::rxtable::CanFilterKind;
 use core::marker::PhantomData;
@@ -252,11 +252,12 @@ pub(crate) trait CanProtocol: Proto {
 
     /// A frame for socket `sk`, which subscribed with [`rx_set`] (with
     /// `cookie`). NET_RX softirq context, inside pf_can's RCU read-side
-    /// section; must not sleep and must not take the socket lock. `sk` is
+    /// section; must not sleep and must not take the socket lock (`sk`
+    /// is a [`SockView`], which has no `lock()`). `sk` is
     /// alive for the call (the subscription holds a reference on it), even
     /// if the socket is being closed. May transmit ([`send`]). The default
     /// ignores the frame.
-    fn rx(_sk: &Sock<Self>, skb: RxSkb<'_>, _cookie: u32) {
+    fn rx(_sk: &SockView<Self>, skb: RxSkb<'_>, _cookie: u32) {
         skb.done();
     }
 
@@ -545,6 +546,8 @@ impl<T: CanProtocol> ProtoModule<T> {
 // scope)` installs makes a sock of `T` (`Sock::from_raw` is the glue's).
 impl<T: CanProtocol> crate::glue::module::sealed::Sealed for Sock<T> {}
 impl<T: CanProtocol> crate::glue::module::InScopedModule for Sock<T> {}
+impl<T: CanProtocol> crate::glue::module::sealed::Sealed for SockView<T> {}
+impl<T: CanProtocol> crate::glue::module::InScopedModule for SockView<T> {}
 
 /// Proof that protocol `T` is registered, for as long as its module is
 /// loaded: dropping it (or forgetting it) does nothing. Only the module's
@@ -705,7 +708,8 @@ unsafe extern "C" fn rx_trampoline<T: CanProtocol>(
     owned: bool,
 ) {
     // SAFETY: a live sock of `T` for the call (this function's contract).
-    let sk = unsafe { Sock::<T>::from_raw(owner.cast()) };
+    // A view: NET_RX softirq, where the socket lock must not be taken.
+    let sk = unsafe { SockView::<T>::from_raw(owner.cast()) };
     if owned {
         // SAFETY: a valid skb whose reference, the only one, is ours
         // (RxFn contract for `owned`).

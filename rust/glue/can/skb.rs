@@ -32,7 +32,7 @@
 use crate::glue::bindings;
 use crate::glue::netdev::NetDev;
 use crate::glue::skb::{Exclusive, OwnedSkb, Skb, UniqueSkb};
-use crate::glue::sock::{Proto, Sock};
+use crate::glue::sock::{Proto, Sock, SockView};
 use crate::rcan_core::frame::{AnyFrame, CANFD_MTU, CAN_MTU};
 use kernel::prelude::*;
 
@@ -143,7 +143,7 @@ pub(crate) fn alloc_image(dev: &NetDev, image: &[u8], gfp: bindings::gfp_t) -> O
 /// `GFP_ATOMIC`, process context with `GFP_KERNEL`; `None` as
 /// [`alloc_image`].
 pub(crate) fn alloc_image_for<T: Proto>(
-    sk: &Sock<T>,
+    sk: &SockView<T>,
     dev: &NetDev,
     image: &[u8],
     gfp: bindings::gfp_t,

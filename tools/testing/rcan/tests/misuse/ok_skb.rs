@@ -13,7 +13,7 @@
 use crate::glue::can::proto::RxSkb;
 use crate::glue::netdev::NetDev;
 use crate::glue::skb::{OwnedSkb, UniqueSkb};
-use crate::glue::sock::{Proto, Sock};
+use crate::glue::sock::{Proto, Sock, SockView};
 
 /// The device's name is read as a copy, compared and printed (the sound
 /// use of `netdev_name_borrowed`).
@@ -34,7 +34,7 @@ pub(crate) fn build_then_clone(dev: &NetDev) {
     }
 }
 
-pub(crate) fn rx<T: Proto>(sk: &Sock<T>, skb: RxSkb<'_>) {
+pub(crate) fn rx<T: Proto>(sk: &SockView<T>, skb: RxSkb<'_>) {
     let ifindex = skb.ifindex();
     if let Some(mut skb) = skb.into_owned() {
         skb.set_cb_u32(0, ifindex as u32);
