@@ -84,11 +84,20 @@ impl Device {
         self.0.as_ptr()
     }
 
+    /// A counted reference to this device (`pci_dev_get`).
+    fn to_ref(&self) -> PciRef {
+        // SAFETY: a live device during probe; the reference taken here is
+        // dropped by `PciRef`'s Drop.
+        unsafe { bindings::pci_dev_get(self.as_ptr()) };
+        // INVARIANT: one reference, taken above.
+        PciRef(self.0)
+    }
+
     /// `pci_enable_device`; disabled again when the guard is dropped.
     pub(crate) fn enable(&self) -> Result<Enabled> {
         // SAFETY: a live device during probe.
         super::to_result(unsafe { bindings::pci_enable_device(self.as_ptr()) })?;
-        Ok(Enabled(self.0))
+        Ok(Enabled(self.to_ref()))
     }
 
     /// Maps the first `len` bytes of BAR `bar` (`pci_iomap`), or the
@@ -109,7 +118,7 @@ impl Device {
             // SAFETY: `addr` maps `len` bytes until IoMem's Drop unmaps it,
             // after the IoRange is last used.
             io: unsafe { IoRange::new(addr, len) },
-            pdev: self.0,
+            pdev: self.to_ref(),
         })
     }
 
@@ -139,19 +148,38 @@ impl Device {
     }
 }
 
-/// Keeps a PCI device enabled.
-pub(crate) struct Enabled(NonNull<bindings::pci_dev>);
+/// A counted reference to a `struct pci_dev` (`pci_dev_get`), dropped
+/// with `pci_dev_put` (any context): what [`Enabled`] and [`IoMem`] hold,
+/// so that the device struct outlives them wherever a driver keeps them
+/// (its driver data is dropped in `remove`, but a driver may move them
+/// elsewhere; a forgotten one leaks the reference, never frees early).
+///
+/// # Invariants
+///
+/// Holds one reference on the device.
+struct PciRef(NonNull<bindings::pci_dev>);
 
-// SAFETY: only used to disable the device in Drop, from any thread.
-unsafe impl Send for Enabled {}
-// SAFETY: no shared access at all.
-unsafe impl Sync for Enabled {}
+// SAFETY: a reference count may be dropped from any thread and context.
+unsafe impl Send for PciRef {}
+// SAFETY: no access through a shared reference.
+unsafe impl Sync for PciRef {}
+
+impl Drop for PciRef {
+    fn drop(&mut self) {
+        // SAFETY: we hold one reference (type invariant).
+        unsafe { bindings::pci_dev_put(self.0.as_ptr()) };
+    }
+}
+
+/// Keeps a PCI device enabled.
+pub(crate) struct Enabled(PciRef);
 
 impl Drop for Enabled {
     fn drop(&mut self) {
-        // SAFETY: enabled by Device::enable; the device outlives its
-        // driver data (dropped in remove at the latest).
-        unsafe { bindings::pci_disable_device(self.0.as_ptr()) };
+        // SAFETY: enabled by Device::enable; our reference keeps the
+        // device struct alive until after this call (the field drops
+        // after this body).
+        unsafe { bindings::pci_disable_device(self.0 .0.as_ptr()) };
     }
 }
 
@@ -160,14 +188,14 @@ impl Drop for Enabled {
 /// # Invariants
 ///
 /// `io` holds a `pci_iomap` cookie for its length of `pdev`, valid until
-/// Drop.
+/// Drop; `pdev` keeps the device struct alive until after the unmap.
 pub(crate) struct IoMem {
     io: IoRange,
-    pdev: NonNull<bindings::pci_dev>,
+    pdev: PciRef,
 }
 
 // SAFETY: the accessors are IoRange's (any thread and context); `pdev` is
-// only used to unmap in Drop.
+// only used to unmap in Drop, and dropped from any thread.
 unsafe impl Send for IoMem {}
 // SAFETY: as above.
 unsafe impl Sync for IoMem {}
@@ -182,8 +210,9 @@ impl Deref for IoMem {
 
 impl Drop for IoMem {
     fn drop(&mut self) {
-        // SAFETY: mapped by pci_iomap for this device (invariant).
-        unsafe { bindings::pci_iounmap(self.pdev.as_ptr(), self.io.cookie()) };
+        // SAFETY: mapped by pci_iomap for this device (invariant), whose
+        // struct our reference keeps alive (dropped after this body).
+        unsafe { bindings::pci_iounmap(self.pdev.0.as_ptr(), self.io.cookie()) };
     }
 }
 
