@@ -300,18 +300,26 @@ impl Worker<'_> {
         self.end_with(call, r, extra)
     }
 
-    /// [`Self::end`] for a receive on `fd`, a socket of `p` when the
-    /// slot was read: an ISO-TP socket's protocol errors
-    /// ([`table::ISOTP_ERRS`]) are its pending error, which the next
-    /// receive returns; if `p` is not ISO-TP the descriptor may have been
-    /// reused for an ISO-TP socket meanwhile (as in [`Self::end_send`]).
-    fn end_recv<T>(&mut self, call: Call, r: &sys::Res<T>, fd: c_int, p: &Proto) -> bool {
-        let extra = match r {
-            Err(e) if table::ISOTP_ERRS.contains(e) => {
+    /// [`Self::end`] for a call on `fd`, a socket of `p` when the slot
+    /// was read, that may give `set` if it is an ISO-TP socket: its
+    /// protocol errors from a receive ([`table::ISOTP_ERRS`], its pending
+    /// error), `EISCONN` from a setsockopt ([`table::ISOTP_OPT_ERRS`]).
+    /// If `p` is not ISO-TP the descriptor may have been reused for an
+    /// ISO-TP socket meanwhile (as in [`Self::end_send`]).
+    fn end_isotp<T>(
+        &mut self,
+        call: Call,
+        r: &sys::Res<T>,
+        fd: c_int,
+        p: &Proto,
+        set: &'static [c_int],
+    ) -> bool {
+        let extra: &[c_int] = match r {
+            Err(e) if set.contains(e) => {
                 if p.msg == table::Msg::Isotp
                     || Self::ident(fd).and_then(|(_, k)| k) == Some(leak::Kind::Isotp)
                 {
-                    table::ISOTP_ERRS
+                    set
                 } else {
                     &[]
                 }
@@ -492,7 +500,7 @@ impl Worker<'_> {
                             hex(&v)
                         ));
                         let r = sys::setsockopt(fd, o.level, o.name, &v, v.len() as u32);
-                        self.end(Call::Setsockopt, &r);
+                        self.end_isotp(Call::Setsockopt, &r, fd, &PROTOS[pi], table::ISOTP_OPT_ERRS);
                     }
                 }
                 // Half the new sockets get a well-formed bind at once, so
@@ -725,7 +733,7 @@ impl Worker<'_> {
             hex(&val)
         ));
         let res = sys::setsockopt(fd, level, name, &val, len);
-        self.end(Call::Setsockopt, &res);
+        self.end_isotp(Call::Setsockopt, &res, fd, p, table::ISOTP_OPT_ERRS);
     }
 
     fn op_getsockopt(&mut self) {
@@ -1089,7 +1097,7 @@ impl Worker<'_> {
                 } else {
                     Call::Recv
                 };
-                if !self.end_recv(call, &res, fd, p) {
+                if !self.end_isotp(call, &res, fd, p, table::ISOTP_ERRS) {
                     return;
                 }
                 if let Ok((k, al)) = res {
@@ -1116,7 +1124,7 @@ impl Worker<'_> {
                 ));
                 let before = sys::ino(fd).ok();
                 let res = sys::recvmsg(fd, &mut buf, &mut name, &mut c, clen, flags);
-                if !self.end_recv(Call::Recvmsg, &res, fd, p) {
+                if !self.end_isotp(Call::Recvmsg, &res, fd, p, table::ISOTP_ERRS) {
                     return;
                 }
                 if let Ok(m) = &res {

@@ -411,8 +411,15 @@ pub const PROTOS: &[Proto] = &[
     },
 ];
 
-/// The ISO-TP protocol errors a send or receive may report (above).
-pub const ISOTP_ERRS: &[c_int] = &[libc::ECOMM, libc::EILSEQ, libc::EBADMSG];
+/// The ISO-TP protocol errors a send or receive may report (above), and
+/// `EADDRNOTAVAIL` from a receive on an unbound socket (mainline "isotp:
+/// return -EADDRNOTAVAIL when reading from unbound socket"; found by
+/// seed 1 on the first run).
+pub const ISOTP_ERRS: &[c_int] = &[libc::ECOMM, libc::EILSEQ, libc::EBADMSG, libc::EADDRNOTAVAIL];
+/// What an ISO-TP `setsockopt` may give besides the common set:
+/// `EISCONN` on a bound socket, for any name (mainline checks it before
+/// the name and length; found by seed 1 on the second run).
+pub const ISOTP_OPT_ERRS: &[c_int] = &[libc::EISCONN];
 
 /// SOL_SOCKET options tried on every socket. Left out on purpose:
 /// `SO_RCVTIMEO`/`SO_SNDTIMEO` (the fuzzer sets them so no call blocks
