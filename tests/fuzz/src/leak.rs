@@ -52,6 +52,9 @@ pub enum Kind {
     /// CAN_BCM: `struct sockaddr_can` (mainline reports 16 bytes), and
     /// replies that start with a `struct bcm_msg_head`.
     Bcm,
+    /// CAN_ISOTP: `struct sockaddr_can` of 16 bytes (family, ifindex and,
+    /// from getsockname, `can_addr.tp`; zeros from recvmsg).
+    Isotp,
 }
 
 /// Offsets of the padding bytes in an address of `kind` that the kernel
@@ -62,6 +65,8 @@ pub enum Kind {
 ///   (4..8), and the 16-byte union of transport addresses, which CAN_RAW
 ///   does not use (mainline reports 8 bytes; if more are reported they
 ///   must be zero);
+/// * `sockaddr_can` (CAN_ISOTP): family, two bytes of padding, ifindex,
+///   `rx_id`, `tx_id` (16 bytes reported; more must be zero);
 /// * `sockaddr_canarb`: family, two bytes of padding, arb, mask, ifindex;
 /// * `sockaddr_cansegm` (8 bytes): family, priority, node, id: no padding;
 /// * `sockaddr_canport` (6 bytes): family, port, priority, one byte of
@@ -70,6 +75,7 @@ pub fn addr_padding(kind: Kind, len: usize) -> Vec<usize> {
     match (kind, len) {
         (Kind::Raw | Kind::Bcm, _) => [2, 3].into_iter().chain(8..len.max(8)).collect(),
         (Kind::Arb, _) => vec![2, 3],
+        (Kind::Isotp, _) => [2, 3].into_iter().chain(16..len.max(16)).collect(),
         (Kind::Dsor, 6) => vec![5],
         (Kind::Dsor, _) => vec![],
     }

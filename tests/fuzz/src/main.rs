@@ -291,10 +291,40 @@ impl Worker<'_> {
                         .iter()
                         .find(|q| q.msg == table::Msg::Bcm)
                         .map_or(p.extra_send, |q| q.extra_send),
+                    Some(leak::Kind::Isotp) => table::ISOTP_ERRS,
                     _ => p.extra_send,
                 }
             }
             _ => p.extra_send,
+        };
+        self.end_with(call, r, extra)
+    }
+
+    /// [`Self::end`] for a call on `fd`, a socket of `p` when the slot
+    /// was read, that may give `set` if it is an ISO-TP socket: its
+    /// protocol errors from a receive ([`table::ISOTP_ERRS`], its pending
+    /// error), `EISCONN` from a setsockopt ([`table::ISOTP_OPT_ERRS`]).
+    /// If `p` is not ISO-TP the descriptor may have been reused for an
+    /// ISO-TP socket meanwhile (as in [`Self::end_send`]).
+    fn end_isotp<T>(
+        &mut self,
+        call: Call,
+        r: &sys::Res<T>,
+        fd: c_int,
+        p: &Proto,
+        set: &'static [c_int],
+    ) -> bool {
+        let extra: &[c_int] = match r {
+            Err(e) if set.contains(e) => {
+                if p.msg == table::Msg::Isotp
+                    || Self::ident(fd).and_then(|(_, k)| k) == Some(leak::Kind::Isotp)
+                {
+                    set
+                } else {
+                    &[]
+                }
+            }
+            _ => &[],
         };
         self.end_with(call, r, extra)
     }
@@ -326,11 +356,12 @@ impl Worker<'_> {
             int(libc::SOL_SOCKET, libc::SO_DOMAIN),
             int(libc::SOL_SOCKET, libc::SO_TYPE),
         ) {
-            // Both DSOR and BCM are datagram sockets; rcan sets
-            // SO_PROTOCOL (CAN_BCM 2).
+            // DSOR, BCM and ISO-TP are datagram sockets; rcan sets
+            // SO_PROTOCOL (CAN_BCM 2, CAN_ISOTP 6).
             (Some(PF_CAN), Some(libc::SOCK_DGRAM)) => {
                 Some(match int(libc::SOL_SOCKET, libc::SO_PROTOCOL) {
                     Some(2) => leak::Kind::Bcm,
+                    Some(6) => leak::Kind::Isotp,
                     _ => leak::Kind::Dsor,
                 })
             }
@@ -454,6 +485,24 @@ impl Worker<'_> {
                     .position(|p| p.protocol == proto)
                     .unwrap_or(pi);
                 self.store(s, fd, pi);
+                // ISO-TP options can only be set before bind (EISCONN
+                // after): most new ISO-TP sockets get a few first, drawn
+                // within the fuzzer's bounds, so that every flag, link
+                // layer and flow-control parameter meets the bound paths.
+                if valid && PROTOS[pi].msg == table::Msg::Isotp && self.rng.chance(3, 4) {
+                    for _ in 0..1 + self.rng.below(4) {
+                        let o = self.rng.pick(PROTOS[pi].opts);
+                        let Val::Isotp(name) = o.val else { continue };
+                        let v = isotp_value(&mut self.rng, name);
+                        self.begin(format!(
+                            "setsockopt(CAN_ISOTP fd {fd}, {} [{}]) before bind",
+                            o.label,
+                            hex(&v)
+                        ));
+                        let r = sys::setsockopt(fd, o.level, o.name, &v, v.len() as u32);
+                        self.end_isotp(Call::Setsockopt, &r, fd, &PROTOS[pi], table::ISOTP_OPT_ERRS);
+                    }
+                }
                 // Half the new sockets get a well-formed bind at once, so
                 // that frames and messages flow and the receive paths run.
                 // (BCM has no bind: its sockets are connect()-ed.)
@@ -505,6 +554,7 @@ impl Worker<'_> {
                     *r.pick(&[0xffff_ffff, small])
                 }
                 Field::Any => r.next_u32() & 0xff,
+                Field::IsotpId => isotp_id(r),
             };
             b[off..off + size].copy_from_slice(&v.to_ne_bytes()[..size]);
         }
@@ -558,6 +608,17 @@ impl Worker<'_> {
                 }
                 Field::MsgId => r.pick_or_rand(&[0, 1, 2, 7, 0xffff_ffff]),
                 Field::Any => r.next_u32(),
+                Field::IsotpId => match r.below(4) {
+                    0 => r.pick_or_rand(&[
+                        0x800,       // beyond 11 bits
+                        0x8000_0000, // CAN_EFF_FLAG, id 0
+                        0xA000_0700, // EFF with CAN_ERR_FLAG
+                        0x4000_0700, // CAN_RTR_FLAG
+                        0x3fff_ffff, // beyond 29 bits, no EFF
+                        0x9fff_ffff, // 29 bits + EFF
+                    ]),
+                    _ => isotp_id(r),
+                },
             };
             b[off..off + size].copy_from_slice(&v.to_ne_bytes()[..size]);
         }
@@ -617,6 +678,7 @@ impl Worker<'_> {
                     r.fill(&mut b);
                     b
                 }
+                Val::Isotp(name) => isotp_value(r, name),
             }
         };
         match r.below(10) {
@@ -660,13 +722,18 @@ impl Worker<'_> {
             val.resize(len as usize, 0);
             r.fill(&mut val[old..]);
         }
+        if level == table::SOL_CAN_ISOTP {
+            // Whatever made the value (a random name may be a real one).
+            let n = (len as usize).min(val.len());
+            table::isotp_bound(name, &mut val[..n]);
+        }
         self.begin(format!(
             "setsockopt({} fd {fd}, {label}: level {level}, name {name}, [{}], len {len})",
             p.name,
             hex(&val)
         ));
         let res = sys::setsockopt(fd, level, name, &val, len);
-        self.end(Call::Setsockopt, &res);
+        self.end_isotp(Call::Setsockopt, &res, fd, p, table::ISOTP_OPT_ERRS);
     }
 
     fn op_getsockopt(&mut self) {
@@ -845,7 +912,10 @@ impl Worker<'_> {
         let data = if p.msg == table::Msg::Bcm && self.rng.chance(9, 10) {
             self.bcm_msg()
         } else {
-            let n = self.send_len(p);
+            let mut n = self.send_len(p);
+            if p.msg == table::Msg::Isotp {
+                n = self.isotp_send_len(fd, n);
+            }
             let mut data = vec![0u8; n];
             self.rng.fill(&mut data);
             data
@@ -894,6 +964,29 @@ impl Worker<'_> {
                     self.check_sent(&r, n);
                 }
             }
+        }
+    }
+
+    /// `n` bounded for an ISO-TP send on `fd` ([`table::ISOTP_MAX_GAP_MS`]):
+    /// a length the kernel accepts is at most [`table::isotp_max_send`] of
+    /// the socket's TX_DL. The link layer of a bound socket cannot change
+    /// (setsockopt answers EISCONN), and an unbound one refuses the send;
+    /// only a descriptor closed and reused by another thread between the
+    /// query and the send (for a socket with a smaller TX_DL) escapes the
+    /// bound, and then only a transfer whose every gap is 127 ms would be
+    /// long. Not counted as a call.
+    fn isotp_send_len(&mut self, fd: c_int, n: usize) -> usize {
+        let mut ll = [0u8; 3];
+        let tx_dl =
+            match sys::getsockopt(fd, table::SOL_CAN_ISOTP, table::CAN_ISOTP_LL_OPTS, &mut ll) {
+                Ok(3) => ll[1],
+                _ => 8,
+            };
+        let cap = table::isotp_max_send(tx_dl);
+        if n > cap && n <= table::ISOTP_MAX_PDU {
+            1 + self.rng.below(cap)
+        } else {
+            n
         }
     }
 
@@ -1004,7 +1097,7 @@ impl Worker<'_> {
                 } else {
                     Call::Recv
                 };
-                if !self.end(call, &res) {
+                if !self.end_isotp(call, &res, fd, p, table::ISOTP_ERRS) {
                     return;
                 }
                 if let Ok((k, al)) = res {
@@ -1031,7 +1124,7 @@ impl Worker<'_> {
                 ));
                 let before = sys::ino(fd).ok();
                 let res = sys::recvmsg(fd, &mut buf, &mut name, &mut c, clen, flags);
-                if !self.end(Call::Recvmsg, &res) {
+                if !self.end_isotp(Call::Recvmsg, &res, fd, p, table::ISOTP_ERRS) {
                     return;
                 }
                 if let Ok(m) = &res {
@@ -1238,6 +1331,107 @@ impl Worker<'_> {
     }
 }
 
+/// ISO-TP identifiers the fuzzer binds to: few, so that sockets often
+/// pair up (one's `tx_id` the other's `rx_id`) on one interface and
+/// multi-frame transfers with flow control run between them; two
+/// extended ones for 29-bit addressing.
+const ISOTP_IDS: &[u32] = &[0x700, 0x701, 0x702, 0x8000_0700, 0x8000_0701];
+
+/// A well-formed ISO-TP identifier (mostly standard).
+fn isotp_id(r: &mut Rng) -> u32 {
+    if r.chance(1, 6) {
+        *r.pick(&ISOTP_IDS[3..])
+    } else {
+        *r.pick(&ISOTP_IDS[..3])
+    }
+}
+
+/// A value for the ISO-TP option `name`, of the size mainline takes,
+/// every field drawn so that all flags and link layers are reached but a
+/// transfer stays short ([`table::ISOTP_MAX_GAP_MS`]).
+fn isotp_value(r: &mut Rng, name: c_int) -> Vec<u8> {
+    match name {
+        table::CAN_ISOTP_OPTS => {
+            // Each flag one time in five; unknown bits sometimes (taken
+            // as given, as mainline).
+            let mut flags = 0u32;
+            for &f in table::ISOTP_FLAGS {
+                if r.chance(1, 5) {
+                    flags |= f;
+                }
+            }
+            if r.chance(1, 20) {
+                flags |= r.next_u32() & !0x3fff;
+            }
+            // frame_txtime: default (0), "zero" or up to 1 ms (the bound).
+            let txtime = match r.below(4) {
+                0 => 0,
+                1 => table::ISOTP_TXTIME_ZERO,
+                2 => r.below(table::ISOTP_MAX_TXTIME_NS as usize + 1) as u32,
+                _ => *r.pick(&[1_000, 50_000, 100_000]),
+            };
+            // Addresses 0 or 1 so that extended-addressing sockets pair
+            // up too; pad bytes the default 0xCC, 0 or random.
+            let pad = |r: &mut Rng| r.pick_or_rand(&[0xCC, 0xCC, 0]) as u8;
+            let mut b = Vec::with_capacity(12);
+            b.extend_from_slice(&flags.to_ne_bytes());
+            b.extend_from_slice(&txtime.to_ne_bytes());
+            b.push(r.pick_or_rand(&[0, 1]) as u8);
+            b.push(pad(r));
+            b.push(pad(r));
+            b.push(r.pick_or_rand(&[0, 1]) as u8);
+            b
+        }
+        table::CAN_ISOTP_RECV_FC => {
+            // BS 0 (no further FC), small, or any; STmin any byte (at most
+            // 127 ms: reserved values mean 127 ms) but mostly short ones
+            // (0, 1 ms, 0xF1..0xF9 = 100..900 us); wftmax any (stored).
+            let bs = r.pick_or_rand(&[0, 0, 1, 2, 4, 8]) as u8;
+            let stmin = match r.below(8) {
+                0 => r.next_u32() as u8,
+                1 => 0xF1 + r.below(9) as u8,
+                2 => *r.pick(&[0x7F, 0x80, 0xF0, 0xFA, 0xFF, 5, 10]),
+                3 => 1,
+                _ => 0,
+            };
+            vec![bs, stmin, r.next_u32() as u8]
+        }
+        table::CAN_ISOTP_TX_STMIN => {
+            let ns = match r.below(4) {
+                0 => r.below(table::ISOTP_MAX_TX_STMIN_NS as usize + 1) as u32,
+                1 => *r.pick(&[100_000, 1_000_000, table::ISOTP_MAX_TX_STMIN_NS]),
+                _ => r.below(200_000) as u32,
+            };
+            ns.to_ne_bytes().to_vec()
+        }
+        table::CAN_ISOTP_RX_STMIN => {
+            // Only makes the receiver drop CFs (the transfer then times
+            // out in 1 s): any value.
+            r.pick_or_rand(&[0, 100_000, 1_000_000, 50_000_000])
+                .to_ne_bytes()
+                .to_vec()
+        }
+        _ => {
+            // CAN_ISOTP_LL_OPTS: classic (16, TX_DL 8) or FD (72, every
+            // TX_DL, BRS or not), sometimes invalid combinations (EINVAL).
+            let (mtu, dl, fl) = match r.below(6) {
+                0 | 1 => (16u8, 8u8, 0u8),
+                2..=4 => (
+                    72,
+                    *r.pick(&[8u8, 12, 16, 20, 24, 32, 48, 64, 64, 64]),
+                    r.below(2) as u8,
+                ),
+                _ => (
+                    r.pick_or_rand(&[16, 72, 0]) as u8,
+                    r.pick_or_rand(&[8, 9, 64, 65]) as u8,
+                    r.pick_or_rand(&[0, 1, 2]) as u8,
+                ),
+            };
+            vec![mtu, dl, fl]
+        }
+    }
+}
+
 /// Reads the ifindex of `dev` (0 if it does not exist).
 fn ifindex(dev: &str) -> u32 {
     std::fs::read_to_string(format!("/sys/class/net/{dev}/ifindex"))
@@ -1260,6 +1454,7 @@ const MODULES: &[(&str, &str, &str)] = &[
     ("rcan_loop", "drivers/net/can/rcan_loop.ko", "count=2"),
     ("rcan_dsor", "net/can/dsor/rcan_dsor.ko", "ifname=can0"),
     ("rcan_bcm", "net/can/rcan_bcm.ko", ""),
+    ("rcan_isotp", "net/can/rcan_isotp.ko", ""),
 ];
 
 fn rmmod_retrying(name: &str, secs: u64) -> Result<(), String> {

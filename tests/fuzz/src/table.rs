@@ -13,6 +13,94 @@ pub const PF_CAN: c_int = 29;
 pub const AF_CAN: u16 = 29;
 /// `SOL_CAN_RAW` (`SOL_CAN_BASE` 100 + `CAN_RAW`).
 pub const SOL_CAN_RAW: c_int = 101;
+/// `SOL_CAN_ISOTP` (`SOL_CAN_BASE` 100 + `CAN_ISOTP`).
+pub const SOL_CAN_ISOTP: c_int = 106;
+/// `CAN_ISOTP` option names (isotp.rst, "Options").
+pub const CAN_ISOTP_OPTS: c_int = 1;
+pub const CAN_ISOTP_RECV_FC: c_int = 2;
+pub const CAN_ISOTP_TX_STMIN: c_int = 3;
+pub const CAN_ISOTP_RX_STMIN: c_int = 4;
+pub const CAN_ISOTP_LL_OPTS: c_int = 5;
+/// Every `CAN_ISOTP_OPTS` flag, LISTEN_MODE (0x1) to DYN_FC_PARMS
+/// (0x2000).
+pub const ISOTP_FLAGS: &[u32] = &[
+    0x1, 0x2, 0x4, 0x8, 0x10, 0x20, 0x40, 0x80, 0x100, 0x200, 0x400, 0x800, 0x1000, 0x2000,
+];
+/// `CAN_ISOTP_FRAME_TXTIME_ZERO`: `frame_txtime` 0 ns.
+pub const ISOTP_TXTIME_ZERO: u32 = 0xFFFF_FFFF;
+
+/// How long an ISO-TP transfer started by the fuzzer may take, and why it
+/// must be bounded. An ISO-TP `sendmsg` waits (without timeout, ignoring
+/// `SO_SNDTIMEO`, as mainline) for the socket's running transfer, a
+/// `CAN_ISOTP_WAIT_TX_DONE` sender and `close` wait for their own, and a
+/// transfer runs as long as its consecutive frames (CFs) times the gap
+/// between them. Unbounded, one 8300-byte PDU with STmin 127 ms is about
+/// 150 s, beyond the watchdog. The gap is the larger of
+///
+/// * the STmin of the receiver's flow control plus `frame_txtime`: every
+///   STmin byte means at most 127 ms (0x7F, and the reserved values the
+///   sender reads as 0x7F), so the fuzzer draws `CAN_ISOTP_RECV_FC`'s
+///   STmin from all 256 values, but `frame_txtime` only up to
+///   [`ISOTP_MAX_TXTIME_NS`] (1 ms);
+/// * a forced STmin (`CAN_ISOTP_TX_STMIN` with `CAN_ISOTP_FORCE_TXSTMIN`),
+///   which the fuzzer draws up to [`ISOTP_MAX_TX_STMIN_NS`] (127 ms, the
+///   longest STmin the wire can ask for).
+///
+/// So a gap is at most [`ISOTP_MAX_GAP_MS`], and [`isotp_max_send`] keeps
+/// a PDU the kernel accepts to at most [`ISOTP_MAX_CFS`] CFs: at most
+/// 12.8 s per transfer (plus 1 s per flow-control wait and 2 s for a lost
+/// echo). Four workers queued behind one socket's transfers then wait at
+/// most about 4 x 15 s, inside the 120-s watchdog with room to spare for
+/// the debug kernel under load. Flow control frames with wait status come
+/// only from random CAN_RAW frames (our sockets never send them), each
+/// adds 1 s: rare enough not to matter.
+pub const ISOTP_MAX_GAP_MS: u64 = 128;
+// The worst transfer (every gap the longest) stays far inside the
+// watchdog: 12.8 s.
+const _: () = assert!(ISOTP_MAX_CFS as u64 * ISOTP_MAX_GAP_MS <= 15_000);
+
+/// Longest `frame_txtime` the fuzzer sets (ns): 1 ms ([`ISOTP_MAX_GAP_MS`]).
+pub const ISOTP_MAX_TXTIME_NS: u32 = 1_000_000;
+/// Longest forced STmin the fuzzer sets (ns): 127 ms.
+pub const ISOTP_MAX_TX_STMIN_NS: u32 = 127_000_000;
+/// Most CFs of one transfer the fuzzer starts ([`ISOTP_MAX_GAP_MS`]).
+pub const ISOTP_MAX_CFS: usize = 100;
+/// The module's `max_pdu_size` (default 8300): longer sends are EINVAL
+/// before any transfer starts, so the fuzzer tries them unbounded.
+pub const ISOTP_MAX_PDU: usize = 8300;
+
+/// Longest PDU the fuzzer sends on an ISO-TP socket whose link layer has
+/// TX_DL `tx_dl` ([`ISOTP_MAX_GAP_MS`]): [`ISOTP_MAX_CFS`] CFs of
+/// `tx_dl - 2` bytes (an extended address byte and the N_PCI byte) and a
+/// first frame. Classic CAN (TX_DL 8): 606 bytes; CAN FD with TX_DL 64:
+/// 6262 bytes, so the 32-bit FF_DL (PDUs over 4095 bytes) is reached.
+pub fn isotp_max_send(tx_dl: u8) -> usize {
+    let dl = match tx_dl {
+        8 | 12 | 16 | 20 | 24 | 32 | 48 | 64 => tx_dl as usize,
+        _ => 8,
+    };
+    (ISOTP_MAX_CFS + 1) * (dl - 2)
+}
+
+/// Bounds an ISO-TP option value about to be set, whatever produced it
+/// (the generator, a random name that happens to be a real one): the
+/// `frame_txtime` of `CAN_ISOTP_OPTS` to [`ISOTP_MAX_TXTIME_NS`] (0 and
+/// [`ISOTP_TXTIME_ZERO`] kept) and `CAN_ISOTP_TX_STMIN` to
+/// [`ISOTP_MAX_TX_STMIN_NS`]. Values of another size are left alone (the
+/// kernel refuses them: the sizes must be exact).
+pub fn isotp_bound(name: c_int, val: &mut [u8]) {
+    let clamp = |v: &mut [u8], max: u32, keep: &[u32]| {
+        let x = u32::from_ne_bytes(v[..4].try_into().unwrap());
+        if x > max && !keep.contains(&x) {
+            v[..4].copy_from_slice(&(x % (max + 1)).to_ne_bytes());
+        }
+    };
+    match (name, val.len()) {
+        (CAN_ISOTP_OPTS, 12) => clamp(&mut val[4..8], ISOTP_MAX_TXTIME_NS, &[ISOTP_TXTIME_ZERO]),
+        (CAN_ISOTP_TX_STMIN, 4) => clamp(val, ISOTP_MAX_TX_STMIN_NS, &[]),
+        _ => {}
+    }
+}
 
 /// What a field of an address holds, so the generator can choose
 /// interesting values for it.
@@ -36,6 +124,10 @@ pub enum Field {
     MsgId,
     /// Anything (a priority, padding): random bytes.
     Any,
+    /// An ISO-TP identifier (`can_addr.tp.rx_id`/`tx_id`, u32): mostly
+    /// one of a few (so that sockets pair up and talk), sometimes
+    /// extended, RTR/ERR flags or bits beyond the identifier.
+    IsotpId,
 }
 
 /// One address layout: its length and fields (offset, size, kind). Bytes
@@ -57,6 +149,9 @@ pub enum Val {
     Array { elem: usize, max: usize },
     /// `size` random bytes.
     Bytes(usize),
+    /// An ISO-TP option of `SOL_CAN_ISOTP` (its name), built field by
+    /// field within the bounds of [`ISOTP_MAX_GAP_MS`].
+    Isotp(c_int),
 }
 
 /// A socket option: level, name, value.
@@ -104,6 +199,10 @@ pub enum Msg {
     /// `struct bcm_msg_head` and frames ([`BCM_HEAD`] bytes, then 16- or
     /// 72-byte frames).
     Bcm,
+    /// An ISO-TP PDU: random bytes, of a length bounded by the socket's
+    /// link layer ([`isotp_max_send`]) unless the kernel refuses it
+    /// before any transfer starts.
+    Isotp,
 }
 
 /// `sizeof(struct bcm_msg_head)` on x86_64.
@@ -157,6 +256,55 @@ const SOCKADDR_CANPORT: Layout = Layout {
         (4, 1, Field::Any),
     ],
 };
+
+/// `struct sockaddr_can` as ISO-TP reads it (24 bytes, mainline's
+/// `ISOTP_MIN_NAMELEN` 16): family, ifindex, `can_addr.tp.rx_id`,
+/// `tx_id`.
+const SOCKADDR_CAN_TP: Layout = Layout {
+    name: "sockaddr_can (tp)",
+    len: 24,
+    fields: &[
+        (0, 2, Field::Family),
+        (4, 4, Field::Ifindex),
+        (8, 4, Field::IsotpId),
+        (12, 4, Field::IsotpId),
+    ],
+};
+
+/// CAN_ISOTP options (isotp.rst, "Options"), each of the size mainline
+/// takes and nothing else.
+const ISOTP_OPTS: &[Opt] = &[
+    Opt {
+        level: SOL_CAN_ISOTP,
+        name: CAN_ISOTP_OPTS,
+        label: "CAN_ISOTP_OPTS",
+        val: Val::Isotp(CAN_ISOTP_OPTS),
+    },
+    Opt {
+        level: SOL_CAN_ISOTP,
+        name: CAN_ISOTP_RECV_FC,
+        label: "CAN_ISOTP_RECV_FC",
+        val: Val::Isotp(CAN_ISOTP_RECV_FC),
+    },
+    Opt {
+        level: SOL_CAN_ISOTP,
+        name: CAN_ISOTP_TX_STMIN,
+        label: "CAN_ISOTP_TX_STMIN",
+        val: Val::Isotp(CAN_ISOTP_TX_STMIN),
+    },
+    Opt {
+        level: SOL_CAN_ISOTP,
+        name: CAN_ISOTP_RX_STMIN,
+        label: "CAN_ISOTP_RX_STMIN",
+        val: Val::Isotp(CAN_ISOTP_RX_STMIN),
+    },
+    Opt {
+        level: SOL_CAN_ISOTP,
+        name: CAN_ISOTP_LL_OPTS,
+        label: "CAN_ISOTP_LL_OPTS",
+        val: Val::Isotp(CAN_ISOTP_LL_OPTS),
+    },
+];
 
 const fn int(level: c_int, name: c_int, label: &'static str) -> Opt {
     Opt {
@@ -242,7 +390,36 @@ pub const PROTOS: &[Proto] = &[
         msg: Msg::Bcm,
         extra_send: &[libc::EFAULT, libc::ENOTCONN, libc::E2BIG],
     },
+    // CAN_ISOTP (isotp.rst): bound to {rx_id, tx_id} on an interface,
+    // SOL_CAN_ISOTP options, one PDU per datagram (max_pdu_size 8300).
+    // Its protocol errors come back as the socket's pending error from
+    // the next send or receive ("Errno"): ECOMM, EILSEQ, EBADMSG (the
+    // rest, ETIMEDOUT, EMSGSIZE, ENETDOWN, ENODEV, are in every set).
+    Proto {
+        name: "CAN_ISOTP",
+        sock_type: libc::SOCK_DGRAM,
+        protocol: 6,
+        addrs: &[SOCKADDR_CAN_TP],
+        opts: ISOTP_OPTS,
+        level: Some(SOL_CAN_ISOTP),
+        max_msg: ISOTP_MAX_PDU,
+        send_lens: &[
+            0, 1, 6, 7, 8, 62, 63, 64, 100, 606, 4095, 4096, 6262, 8300, 8301, 70_000,
+        ],
+        msg: Msg::Isotp,
+        extra_send: ISOTP_ERRS,
+    },
 ];
+
+/// The ISO-TP protocol errors a send or receive may report (above), and
+/// `EADDRNOTAVAIL` from a receive on an unbound socket (mainline "isotp:
+/// return -EADDRNOTAVAIL when reading from unbound socket"; found by
+/// seed 1 on the first run).
+pub const ISOTP_ERRS: &[c_int] = &[libc::ECOMM, libc::EILSEQ, libc::EBADMSG, libc::EADDRNOTAVAIL];
+/// What an ISO-TP `setsockopt` may give besides the common set:
+/// `EISCONN` on a bound socket, for any name (mainline checks it before
+/// the name and length; found by seed 1 on the second run).
+pub const ISOTP_OPT_ERRS: &[c_int] = &[libc::EISCONN];
 
 /// SOL_SOCKET options tried on every socket. Left out on purpose:
 /// `SO_RCVTIMEO`/`SO_SNDTIMEO` (the fuzzer sets them so no call blocks
@@ -553,6 +730,9 @@ pub fn errno_name(e: c_int) -> String {
         ENOBUFS => "ENOBUFS",
         EISCONN => "EISCONN",
         ENOTCONN => "ENOTCONN",
+        ECOMM => "ECOMM",
+        EILSEQ => "EILSEQ",
+        EBADMSG => "EBADMSG",
         ETIMEDOUT => "ETIMEDOUT",
         ECONNREFUSED => "ECONNREFUSED",
         _ => return format!("errno{e}"),
@@ -595,6 +775,35 @@ mod tests {
         assert_eq!(len("sockaddr_canarb"), 16);
         assert_eq!(len("sockaddr_cansegm"), 8);
         assert_eq!(len("sockaddr_canport"), 6);
+        assert_eq!(len("sockaddr_can (tp)"), 24);
+    }
+
+    #[test]
+    fn isotp_bounds() {
+        // Classic: 101 frames' worth of 6 bytes; FD 64 reaches the
+        // 32-bit FF_DL; junk TX_DL counts as classic.
+        assert_eq!(isotp_max_send(8), 606);
+        assert_eq!(isotp_max_send(64), 6262);
+        assert!(isotp_max_send(64) > 4095);
+        assert_eq!(isotp_max_send(9), 606);
+        // Worst transfer: ISOTP_MAX_CFS gaps of ISOTP_MAX_GAP_MS, well
+        // inside the 120-s watchdog even four deep.
+        assert!(4 * (ISOTP_MAX_CFS as u64 * ISOTP_MAX_GAP_MS + 3000) < 120_000);
+        assert!(u64::from(ISOTP_MAX_TX_STMIN_NS) <= ISOTP_MAX_GAP_MS * 1_000_000);
+        assert!(127 + u64::from(ISOTP_MAX_TXTIME_NS) / 1_000_000 <= ISOTP_MAX_GAP_MS);
+        let mut o = [0u8; 12];
+        o[4..8].copy_from_slice(&u32::MAX.to_ne_bytes());
+        isotp_bound(CAN_ISOTP_OPTS, &mut o);
+        assert_eq!(u32::from_ne_bytes(o[4..8].try_into().unwrap()), u32::MAX);
+        o[4..8].copy_from_slice(&0x7fff_ffffu32.to_ne_bytes());
+        isotp_bound(CAN_ISOTP_OPTS, &mut o);
+        assert!(u32::from_ne_bytes(o[4..8].try_into().unwrap()) <= ISOTP_MAX_TXTIME_NS);
+        let mut t = 4_000_000_000u32.to_ne_bytes();
+        isotp_bound(CAN_ISOTP_TX_STMIN, &mut t);
+        assert!(u32::from_ne_bytes(t) <= ISOTP_MAX_TX_STMIN_NS);
+        let mut t = 5u32.to_ne_bytes();
+        isotp_bound(CAN_ISOTP_TX_STMIN, &mut t);
+        assert_eq!(u32::from_ne_bytes(t), 5);
     }
 
     #[test]

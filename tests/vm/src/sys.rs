@@ -557,3 +557,29 @@ pub fn gettid() -> i32 {
     // SAFETY: gettid(2) has no arguments and cannot fail.
     unsafe { libc::gettid() }
 }
+
+extern "C" fn on_sigusr1(_: c_int) {}
+
+/// Installs an empty `SIGUSR1` handler without `SA_RESTART`, so that the
+/// signal ends a blocking call with `EINTR` instead of restarting it (what
+/// a program that handles signals sees), and nothing else happens.
+pub fn catch_sigusr1() -> io::Result<()> {
+    // SAFETY: a zeroed sigaction is valid (empty mask, no flags); the
+    // handler is a plain `extern "C" fn(c_int)` that touches nothing, so
+    // it is async-signal-safe; the old action is not asked for.
+    let rc = unsafe {
+        let mut sa: libc::sigaction = zeroed();
+        sa.sa_sigaction = on_sigusr1 as extern "C" fn(c_int) as libc::sighandler_t;
+        libc::sigemptyset(&mut sa.sa_mask);
+        libc::sigaction(libc::SIGUSR1, &sa, std::ptr::null_mut())
+    };
+    cvt(rc).map(drop)
+}
+
+/// Sends `SIGUSR1` to thread `tid` of this process (`tgkill`); see
+/// [`catch_sigusr1`].
+pub fn sigusr1_to(tid: i32) -> io::Result<()> {
+    // SAFETY: no memory is passed; a thread id that is gone gives ESRCH.
+    cvt(unsafe { libc::syscall(libc::SYS_tgkill, libc::getpid(), tid, libc::SIGUSR1) } as c_int)
+        .map(drop)
+}

@@ -19,7 +19,9 @@ use std::time::{Duration, Instant};
 use rcan_uapi::raw;
 
 use crate::canraw;
-use crate::check::{ensure, errno_name, wait_blocked, wait_for, wait_until, OrFail, TestResult, SETTLE};
+use crate::check::{
+    ensure, errno_name, wait_blocked, wait_for, wait_until, OrFail, TestResult, SETTLE,
+};
 use crate::ctx::{dev, Ctx, Module};
 use crate::tools::{self, TOOL_LIMIT};
 
@@ -46,6 +48,7 @@ const SOL_CAN_ISOTP: i32 = 106;
 const CAN_ISOTP_OPTS: i32 = 1;
 const CAN_ISOTP_LL_OPTS: i32 = 5;
 const CAN_ISOTP_WAIT_TX_DONE: u32 = 0x0400;
+const CAN_ISOTP_SF_BROADCAST: u32 = 0x0800;
 const SOL_CAN_RAW: i32 = 101;
 const CAN_RAW_FILTER: i32 = 1;
 const CAN_RAW_FD_FRAMES: i32 = 5;
@@ -510,7 +513,10 @@ fn perf_records(out: &str) -> Vec<String> {
 /// PDU of `len` bytes it gives a time and the byte rate isotpperf
 /// derives from it (len * 1000 / ms). Returns the time.
 fn check_perf(rec: &str, head: &str, len: Option<u64>) -> Result<Duration, String> {
-    ensure!(rec.starts_with(head), "isotpperf: {rec:?}, want {head:?}...");
+    ensure!(
+        rec.starts_with(head),
+        "isotpperf: {rec:?}, want {head:?}..."
+    );
     let Some(len) = len else {
         return Ok(Duration::ZERO);
     };
@@ -521,7 +527,8 @@ fn check_perf(rec: &str, head: &str, len: Option<u64>) -> Result<Duration, Strin
         let rate = rate.strip_suffix(" byte/s")?;
         Some((sec.parse().ok()?, usec.parse().ok()?, rate.parse().ok()?))
     };
-    let (sec, usec, rate) = parse().ok_or_else(|| format!("isotpperf: {rec:?}: no time and rate"))?;
+    let (sec, usec, rate) =
+        parse().ok_or_else(|| format!("isotpperf: {rec:?}: no time and rate"))?;
     let ms = sec * 1000 + usec / 1000;
     ensure!(
         ms > 0 && rate == len * 1000 / ms,
@@ -832,7 +839,11 @@ fn download_plan() -> (usize, &'static str, bool) {
 /// ISO 15765-2 as the test reads the frame, not from isotpdump's code.
 fn isotpdump_line(c0: &str, f: &Fr, uds: Option<&str>) -> String {
     let d = &f.data;
-    let mut out = vec![c0.to_string(), format!("{:X}", f.id), format!("[{}]", d.len())];
+    let mut out = vec![
+        c0.to_string(),
+        format!("{:X}", f.id),
+        format!("[{}]", d.len()),
+    ];
     let pci = d[0];
     let mut data_from = 0;
     match pci >> 4 {
@@ -863,7 +874,11 @@ fn isotpdump_line(c0: &str, f: &Fr, uds: Option<&str>) -> String {
                 _ => "reserved".into(),
             };
             let what = ["CTS", "WT", "OVFLW", "reserved"][usize::from(pci & 0xF).min(3)];
-            let bs = if d[1] == 0 { "0 = off".to_string() } else { d[1].to_string() };
+            let bs = if d[1] == 0 {
+                "0 = off".to_string()
+            } else {
+                d[1].to_string()
+            };
             out.push(format!(
                 "[FC] FC: {} = {what} # BS: {bs} # STmin: 0x{:02X} = {st}",
                 pci & 0xF,
@@ -878,13 +893,20 @@ fn isotpdump_line(c0: &str, f: &Fr, uds: Option<&str>) -> String {
             out.push(format!("- {u}"));
         }
     }
-    out.join(" ").split_whitespace().collect::<Vec<_>>().join(" ")
+    out.join(" ")
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// The frames of `fr` with identifier `a` or `b`, split where the first
 /// first frame from `second` starts a transfer the other way.
 fn split_ways(fr: &[Fr], a: u32, b: u32, second: u32) -> (Vec<Fr>, Vec<Fr>) {
-    let ours: Vec<Fr> = fr.iter().filter(|f| f.id == a || f.id == b).cloned().collect();
+    let ours: Vec<Fr> = fr
+        .iter()
+        .filter(|f| f.id == a || f.id == b)
+        .cloned()
+        .collect();
     let at = ours
         .iter()
         .position(|f| f.id == second && f.data.first().is_some_and(|x| x >> 4 == 1))
@@ -940,7 +962,8 @@ fn frames_for(n: usize, dl: usize) -> usize {
 fn isotp_python_uds(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.isotp_ifaces(1)?[0];
     let c0 = dev(0);
-    let cache = std::env::var("RCAN_CACHE").map_err(|_| "RCAN_CACHE is not set (vm-run.sh passes it)")?;
+    let cache =
+        std::env::var("RCAN_CACHE").map_err(|_| "RCAN_CACHE is not set (vm-run.sh passes it)")?;
     let pydir = format!("{cache}/python3");
     ensure!(
         std::path::Path::new(&format!("{pydir}/udsoncan")).is_dir()
@@ -994,7 +1017,10 @@ fn python_uds_on(c0: &str, i0: u32, pydir: &str) -> TestResult {
     println!(
         "# python3 ran {:.1} s; {}",
         took.as_secs_f64(),
-        py.stdout.lines().find(|l| l.starts_with("seconds:")).unwrap_or("")
+        py.stdout
+            .lines()
+            .find(|l| l.starts_with("seconds:"))
+            .unwrap_or("")
     );
 
     // 1. python -> isotprecv.
@@ -1008,7 +1034,11 @@ fn python_uds_on(c0: &str, i0: u32, pydir: &str) -> TestResult {
     );
     let tx = check_transfer(&fr, 0x123, 0x321, &pdu, 8, 0, [0x30, 0, 0])?;
     // 300 = 6 in the FF + 42 CFs of 7.
-    ensure!(tx.len() == 43, "300 bytes: {} frames from python, want 43", tx.len());
+    ensure!(
+        tx.len() == 43,
+        "300 bytes: {} frames from python, want 43",
+        tx.len()
+    );
 
     // 2. python -> python, blocks of 4.
     let lines: Vec<&str> = py.stdout.lines().collect();
@@ -1023,7 +1053,11 @@ fn python_uds_on(c0: &str, i0: u32, pydir: &str) -> TestResult {
 
     // 3. UDS, as the client saw it...
     for want in ["vin WVWZZZ1JZXW000001", "did0100 True", "negative 0x31"] {
-        ensure!(lines.contains(&want), "udsoncan: no {want:?} in {:?}", lines);
+        ensure!(
+            lines.contains(&want),
+            "udsoncan: no {want:?} in {:?}",
+            lines
+        );
     }
     // ... and on the bus: requests on 7E0, answers on 7E8, in order.
     let uds: Vec<&Fr> = fr
@@ -1180,7 +1214,10 @@ fn python_uds_on(c0: &str, i0: u32, pydir: &str) -> TestResult {
     }
 
     // 5. The download, checked byte by byte by the server.
-    let line = format!("download {dl_size} blocks {} crc True", dl_size.div_ceil(4096));
+    let line = format!(
+        "download {dl_size} blocks {} crc True",
+        dl_size.div_ceil(4096)
+    );
     ensure!(lines.contains(&line.as_str()), "no {line:?} in {lines:?}");
     Ok(())
 }
@@ -1210,22 +1247,47 @@ fn isotp_tunnel_ip(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.isotp_ifaces(1)?[0];
     let c0 = dev(0);
     let sn = Sniffer::start_ids(i0, &[0x123, 0x321])?;
-    let mut a = tools::spawn("isotptun", &["-s", "123", "-d", "321", "-n", "rctun0", &c0], None)?;
+    let mut a = tools::spawn(
+        "isotptun",
+        &["-s", "123", "-d", "321", "-n", "rctun0", &c0],
+        None,
+    )?;
     a.wait_listening()?;
-    let mut b = tools::spawn("isotptun", &["-s", "321", "-d", "123", "-n", "rctun1", &c0], None)?;
+    let mut b = tools::spawn(
+        "isotptun",
+        &["-s", "321", "-d", "123", "-n", "rctun1", &c0],
+        None,
+    )?;
     b.wait_listening()?;
     let ns = super::netns::Ns::new()?;
     let r = (|| {
         ns.take("rctun1")?;
-        ns.ip(&["addr", "add", "10.41.0.2", "peer", "10.41.0.1", "dev", "rctun1"])?;
+        ns.ip(&[
+            "addr",
+            "add",
+            "10.41.0.2",
+            "peer",
+            "10.41.0.1",
+            "dev",
+            "rctun1",
+        ])?;
         ns.ip(&["link", "set", "dev", "rctun1", "up"])?;
-        super::netns::ip(&["addr", "add", "10.41.0.1", "peer", "10.41.0.2", "dev", "rctun0"])?;
+        super::netns::ip(&[
+            "addr",
+            "add",
+            "10.41.0.1",
+            "peer",
+            "10.41.0.2",
+            "dev",
+            "rctun0",
+        ])?;
         super::netns::ip(&["link", "set", "dev", "rctun0", "up"])?;
         let sizes = [1000usize, 100, 1400];
         let srv = ns
             .run(|| std::net::UdpSocket::bind(("10.41.0.2", TUN_PORT)))
             .or_fail("bind 10.41.0.2 in the namespace")?;
-        srv.set_read_timeout(Some(TOOL_LIMIT)).or_fail("SO_RCVTIMEO")?;
+        srv.set_read_timeout(Some(TOOL_LIMIT))
+            .or_fail("SO_RCVTIMEO")?;
         let echo = thread::spawn(move || -> Result<(), String> {
             let mut buf = [0u8; 2048];
             for _ in sizes {
@@ -1235,7 +1297,8 @@ fn isotp_tunnel_ip(ctx: &mut Ctx) -> TestResult {
             Ok(())
         });
         let cl = std::net::UdpSocket::bind(("10.41.0.1", 0)).or_fail("bind 10.41.0.1")?;
-        cl.set_read_timeout(Some(TOOL_LIMIT)).or_fail("SO_RCVTIMEO")?;
+        cl.set_read_timeout(Some(TOOL_LIMIT))
+            .or_fail("SO_RCVTIMEO")?;
         for n in sizes {
             let msg: Vec<u8> = (0..n).map(|i| (i * 7 + n) as u8).collect();
             cl.send_to(&msg, ("10.41.0.2", TUN_PORT))
@@ -1249,7 +1312,8 @@ fn isotp_tunnel_ip(ctx: &mut Ctx) -> TestResult {
                 "echo of {n} bytes: {m} bytes from {from}, not what was sent"
             );
         }
-        echo.join().map_err(|_| "echo server panicked".to_string())??;
+        echo.join()
+            .map_err(|_| "echo server panicked".to_string())??;
         Ok(())
     })();
     a.signal("TERM")?;
@@ -1278,7 +1342,10 @@ fn isotp_tunnel_ip(ctx: &mut Ctx) -> TestResult {
                 .iter()
                 .position(|f| f.data.len() == 8 && f.data[..3] == ff)
                 .ok_or_else(|| {
-                    format!("{id:03X}: no first frame {} for the {n}-byte datagram", hex(&ff))
+                    format!(
+                        "{id:03X}: no first frame {} for the {n}-byte datagram",
+                        hex(&ff)
+                    )
                 })?;
             let cfs: Vec<&&Fr> = tx[at + 1..]
                 .iter()
@@ -1401,7 +1468,11 @@ fn ctucanfd_isotp_fd_both_ways(ctx: &mut Ctx) -> TestResult {
     let pdu = pattern(1000);
     canutils_pair(
         &[&ll[..], &["-s", "456", "-d", "654", "-D", "1000", &c1]].concat(),
-        &[&ll[..], &["-s", "654", "-d", "456", "-b", "2", "-m", "1", &c0]].concat(),
+        &[
+            &ll[..],
+            &["-s", "654", "-d", "456", "-b", "2", "-m", "1", &c0],
+        ]
+        .concat(),
         &pdu,
     )?;
     let fr = sn.stop()?;
@@ -1499,6 +1570,112 @@ fn joined(h: JoinHandle<std::io::Result<usize>>) -> Result<std::io::Result<usize
     h.join().map_err(|_| "writer thread panicked".to_string())
 }
 
+/// [`joined`], but a writer still blocked after `t` is a failure (a
+/// transfer that never ends), not a hung test.
+fn joined_within(
+    h: JoinHandle<std::io::Result<usize>>,
+    t: Duration,
+    what: &str,
+) -> Result<std::io::Result<usize>, String> {
+    wait_until(t, what, || h.is_finished())?;
+    joined(h)
+}
+
+/// Waits until thread `tid` is blocked in `write` while the transfer it
+/// waits for (or behind) waits for flow control: the peer sends an FC
+/// with status wait on `fc` every 300 ms meanwhile, each restarting the
+/// sender's N_Bs (1 s), so that a slow start of the thread cannot let
+/// the transfer time out first.
+fn blocked_while_fc_wait(peer: impl AsFd, fc: u32, tid: &AtomicI32, what: &str) -> TestResult {
+    raw_send(&peer, fc, &[0x31, 0, 0])?;
+    let mut last = Instant::now();
+    let mut err = Ok(());
+    wait_until(SETTLE, what, || {
+        let t = tid.load(Ordering::SeqCst);
+        if t != 0 && crate::check::blocked_syscall(t) == Some(libc::SYS_write) {
+            return true;
+        }
+        if last.elapsed() >= Duration::from_millis(300) {
+            err = raw_send(&peer, fc, &[0x31, 0, 0]);
+            last = Instant::now();
+        }
+        err.is_err()
+    })?;
+    err
+}
+
+/// A PDU of `n` bytes that tells sender `k`'s PDUs from the others'.
+fn tagged(k: usize, n: usize) -> Vec<u8> {
+    (0..n).map(|i| (i * 7 + k * 50 + n) as u8).collect()
+}
+
+/// Plays the receiver of `n` classic ISO-TP PDUs (normal addressing,
+/// 12-bit FF_DL) sent on `tx`, on the CAN_RAW peer `s`: each FF answered
+/// with FC `30 00 00` on `fc`, each CF's sequence number checked, an SF
+/// or FF inside a running PDU a failure. The PDUs in bus order.
+fn peer_collect(
+    s: impl AsFd,
+    tx: u32,
+    fc: u32,
+    n: usize,
+    t: Duration,
+) -> Result<Vec<Vec<u8>>, String> {
+    let end = Instant::now() + t;
+    let mut out = Vec::new();
+    // (length, bytes so far, next sequence number)
+    let mut cur: Option<(usize, Vec<u8>, u8)> = None;
+    while out.len() < n {
+        let left = end.saturating_duration_since(Instant::now());
+        ensure!(
+            !left.is_zero(),
+            "{} of {n} PDUs on {tx:03X} within {t:?}",
+            out.len()
+        );
+        let Some(f) = raw_read(&s, left)? else {
+            continue;
+        };
+        if f.id != tx || f.data.is_empty() {
+            continue;
+        }
+        let pci = f.data[0];
+        match pci >> 4 {
+            0 | 1 if cur.is_some() => {
+                return Err(format!(
+                    "{} while PDU {} was incomplete: frames of two PDUs interleaved",
+                    show(&f),
+                    out.len() + 1
+                ))
+            }
+            0 => {
+                let l = usize::from(pci & 0xF).min(f.data.len() - 1);
+                out.push(f.data[1..1 + l].to_vec());
+            }
+            1 => {
+                ensure!(f.data.len() == 8, "FF {}", show(&f));
+                let l = usize::from(pci & 0xF) << 8 | usize::from(f.data[1]);
+                cur = Some((l, f.data[2..].to_vec(), 1));
+                raw_send(&s, fc, &[0x30, 0, 0])?;
+            }
+            2 => {
+                let (l, buf, sn) = cur.as_mut().ok_or(format!("CF {} without FF", show(&f)))?;
+                ensure!(
+                    pci & 0xF == *sn,
+                    "CF {}: sequence number, want {sn}",
+                    show(&f)
+                );
+                *sn = (*sn + 1) & 0xF;
+                let take = (*l - buf.len()).min(f.data.len() - 1);
+                buf.extend_from_slice(&f.data[1..1 + take]);
+                if buf.len() == *l {
+                    out.push(cur.take().map(|c| c.1).unwrap_or_default());
+                }
+            }
+            _ => return Err(format!("unexpected frame {}", show(&f))),
+        }
+    }
+    Ok(out)
+}
+
 /// The socket-level API and its errno, with a CAN_RAW peer playing the
 /// other end (all within one test: a bound socket costs little, the
 /// timeouts are the protocol's 1 s):
@@ -1522,6 +1699,15 @@ fn joined(h: JoinHandle<std::io::Result<usize>>) -> Result<std::io::Result<usize
 ///    a CF 0.6 s later, then silence: ETIMEDOUT 1 s after the CF (the
 ///    timer's deadline moved by a CF); then a whole 20-byte PDU from FF
 ///    and two CFs.
+///
+/// Regression checks of mainline's isotp bug classes (isotp.rst, "Mainline
+/// bug classes"), folded into the same sockets: bind with another family
+/// or malformed identifiers (EINVAL), LL_OPTS with BRS on classic CAN
+/// (EINVAL), SF_BROADCAST (an SF, EINVAL beyond one frame); a signal
+/// ending a WAIT_TX_DONE write (EINTR, the socket idle, the next write
+/// whole); the sender's N_Bs running out while the same socket receives
+/// a PDU (both results kept apart); three threads writing on one socket
+/// (each PDU whole, in turn); MSG_PEEK; and [`rx_two_cpus`].
 fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.isotp_ifaces(1)?[0];
     let peer = raw_open(i0)?;
@@ -1566,6 +1752,42 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
         libc::EINVAL,
         "CAN_ISOTP_LL_OPTS with TX_DL 9",
     )?;
+    // Mainline "isotp_setsockopt(): only allow to set low level TX flags
+    // for CAN-FD".
+    want_errno(
+        raw::setsockopt(&a, SOL_CAN_ISOTP, CAN_ISOTP_LL_OPTS, &[16, 8, CANFD_BRS]),
+        libc::EINVAL,
+        "CAN_ISOTP_LL_OPTS classic with BRS",
+    )?;
+    // Mainline "check CAN address family in isotp_bind()" and
+    // "isotp_bind(): return -EINVAL on incorrect CAN ID formatting".
+    let mut inet = tp_addr(i0, 0x7E8, 0x7E0);
+    inet[..2].copy_from_slice(&(libc::AF_INET as u16).to_ne_bytes());
+    want_errno(raw::bind(&a, &inet), libc::EINVAL, "bind family AF_INET")?;
+    for (rx, tx, what) in [
+        (0x800, 0x7E0, "rx_id 0x800 without CAN_EFF_FLAG"),
+        (
+            0x7E8,
+            0x2000_07E0,
+            "tx_id with bits beyond 11 without CAN_EFF_FLAG",
+        ),
+        (
+            0x7E8,
+            0xC000_07E0,
+            "tx_id with CAN_EFF_FLAG and CAN_RTR_FLAG",
+        ),
+        (
+            0xA000_07E8,
+            0x7E0,
+            "rx_id with CAN_EFF_FLAG and CAN_ERR_FLAG",
+        ),
+    ] {
+        want_errno(
+            raw::bind(&a, &tp_addr(i0, rx, tx)),
+            libc::EINVAL,
+            &format!("bind {what}"),
+        )?;
+    }
     let mut o = [0u8; 16];
     let n = raw::getsockopt(&a, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &mut o).or_fail("getsockopt")?;
     ensure!(
@@ -1601,6 +1823,24 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
         "write of 8301 bytes",
     )?;
 
+    // Mainline "fix support for transmission of SF without flow control":
+    // with CAN_ISOTP_SF_BROADCAST rx_id is not used (nor checked), a PDU
+    // that fits one frame goes out as an SF, a longer one is EINVAL.
+    let sf = tp_bound(CAN_ISOTP_SF_BROADCAST, i0, 0x800, 0x7E2)?;
+    raw::write(&sf, &[9, 8, 7, 6, 5, 4, 3]).or_fail("SF_BROADCAST write of 7 bytes")?;
+    let f = raw_expect(&peer, 0x7E2, t, "SF_BROADCAST single frame")?;
+    ensure!(
+        f.data == [0x07, 9, 8, 7, 6, 5, 4, 3],
+        "SF_BROADCAST frame {}",
+        show(&f)
+    );
+    want_errno(
+        raw::write(&sf, &pattern(8)),
+        libc::EINVAL,
+        "SF_BROADCAST write of 8 bytes",
+    )?;
+    drop(sf);
+
     // 3. WAIT_TX_DONE: overflow, then no flow control at all.
     let b = Arc::new(tp_bound(CAN_ISOTP_WAIT_TX_DONE, i0, 0x7E9, 0x7E1)?);
     let w = write_bg(&b, pattern(20));
@@ -1622,6 +1862,77 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
         "ECOMM after {took:?}, before N_Bs (1 s)"
     );
     ctx.note(format!("ECOMM without FC after {took:?}"));
+
+    // A signal ends a WAIT_TX_DONE write (EINTR: the handler has no
+    // SA_RESTART) and its transfer; the next write starts a new transfer
+    // at once and completes (mainline "handle wait_event_interruptible()
+    // return values", "isotp_sendmsg(): add result check for
+    // wait_event_interruptible()").
+    crate::sys::catch_sigusr1().or_fail("sigaction(SIGUSR1)")?;
+    let tid = Arc::new(AtomicI32::new(0));
+    let w = {
+        let (b, tid) = (Arc::clone(&b), Arc::clone(&tid));
+        thread::spawn(move || {
+            tid.store(crate::sys::gettid(), Ordering::SeqCst);
+            raw::write(&*b, &pattern(20))
+        })
+    };
+    raw_expect(&peer, 0x7E1, t, "FF of the PDU to interrupt")?;
+    blocked_while_fc_wait(
+        &peer,
+        0x7E9,
+        &tid,
+        "the WAIT_TX_DONE writer blocked in write",
+    )?;
+    crate::sys::sigusr1_to(tid.load(Ordering::SeqCst)).or_fail("tgkill SIGUSR1")?;
+    want_errno(
+        joined_within(w, t, "the interrupted writer to return")?,
+        libc::EINTR,
+        "WAIT_TX_DONE write interrupted by a signal",
+    )?;
+    ensure!(
+        poll_out(&*b, 0)? & libc::POLLOUT != 0,
+        "no POLLOUT right after the interrupted write: its transfer still runs"
+    );
+    let w = write_bg(&b, pattern(20));
+    raw_expect(&peer, 0x7E1, t, "FF of the write after the signal")?;
+    raw_send(&peer, 0x7E9, &[0x30, 0, 0])?;
+    raw_expect(&peer, 0x7E1, t, "CF 1 after the signal")?;
+    raw_expect(&peer, 0x7E1, t, "CF 2 after the signal")?;
+    let r = joined_within(w, t, "the write after the signal to return")?;
+    ensure!(
+        matches!(r, Ok(20)),
+        "WAIT_TX_DONE write after an interrupted one: {r:?}, want 20"
+    );
+
+    // Full duplex, the sender's and the receiver's timeouts apart
+    // (mainline "split session timer into transmission and reception
+    // timer"): b receives a PDU whose CFs come 0.3 s apart while its own
+    // transfer waits for an FC that never comes: the transfer still ends
+    // in ECOMM (N_Bs, 1 s, not restarted by the received CFs), and the
+    // reception still completes.
+    raw_send(&peer, 0x7E9, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
+    let fc = raw_expect(&peer, 0x7E1, t, "b's FC to an FF")?;
+    ensure!(fc.data == [0x30, 0, 0], "FC {}, want 30 00 00", show(&fc));
+    let w = write_bg(&b, pattern(20));
+    let ff = raw_expect(&peer, 0x7E1, t, "FF of b's PDU while b receives")?;
+    ensure!(ff.data[0] == 0x10, "b sent {}, want its FF", show(&ff));
+    thread::sleep(Duration::from_millis(300));
+    raw_send(&peer, 0x7E9, &[0x21, 7, 8, 9, 10, 11, 12, 13])?;
+    thread::sleep(Duration::from_millis(300));
+    raw_send(&peer, 0x7E9, &[0x22, 14, 15, 16, 17, 18, 19, 20])?;
+    want_errno(
+        joined_within(w, t, "b's writer without FC to return")?,
+        libc::ECOMM,
+        "WAIT_TX_DONE write without FC while receiving",
+    )?;
+    raw::set_timeout(&*b, libc::SO_RCVTIMEO, t).or_fail("SO_RCVTIMEO")?;
+    let n = raw::read(&*b, &mut buf).or_fail("read the PDU received while sending")?;
+    ensure!(
+        buf[..n] == (1..=20).collect::<Vec<u8>>()[..],
+        "PDU received while sending: {}",
+        hex(&buf[..n])
+    );
 
     // 4. Busy sender, then its error on the socket.
     let n = raw::write(&a, &pattern(20)).or_fail("write 20 bytes")?;
@@ -1672,6 +1983,35 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
         rev & libc::POLLOUT != 0 && took < Duration::from_secs(10),
         "poll after the transfer completed: revents {rev:#x} after {took:?}, want POLLOUT at once"
     );
+    // Three threads write on one socket at once (mainline
+    // "isotp_sendmsg(): fix TX buffer concurrent access", "fix TX state
+    // detection and wait behavior", "serialize TX state transitions under
+    // so->rx_lock", "fix tx.buf use-after-free in isotp_sendmsg()"): one
+    // transfer at a time, each PDU whole and intact on the bus, none
+    // lost, none twice.
+    let sent: Vec<Vec<u8>> = [30, 1000, 200]
+        .iter()
+        .enumerate()
+        .map(|(k, &n)| tagged(k, n))
+        .collect();
+    let ws: Vec<_> = sent.iter().map(|p| write_bg(&a, p.clone())).collect();
+    let mut got = peer_collect(&peer, 0x7E0, 0x7E8, 3, t)?;
+    for w in ws {
+        let r = joined_within(w, t, "the concurrent writers to return")?;
+        ensure!(
+            matches!(r, Ok(n) if n == 30 || n == 1000 || n == 200),
+            "concurrent write: {r:?}"
+        );
+    }
+    let mut want = sent.clone();
+    got.sort();
+    want.sort();
+    ensure!(
+        got == want,
+        "concurrent writers: PDUs on the bus of {:?} bytes, want {:?} as written",
+        got.iter().map(Vec::len).collect::<Vec<_>>(),
+        want.iter().map(Vec::len).collect::<Vec<_>>()
+    );
     let a = Arc::try_unwrap(a).map_err(|_| "socket still shared".to_string())?;
 
     // 5. Reception.
@@ -1691,6 +2031,22 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
             && src[..2] == (libc::AF_CAN as u16).to_ne_bytes(),
         "source address {} ({alen} bytes), want 16 bytes: AF_CAN, ifindex {i0}",
         hex(&src)
+    );
+    // MSG_PEEK leaves the PDU queued (mainline "isotp: restore
+    // accidentally removed MSG_PEEK feature").
+    raw_send(&peer, 0x7E8, &[0x03, 0xC1, 0xC2, 0xC3])?;
+    let (n, _) = raw::recvfrom(&a, &mut buf, libc::MSG_PEEK, None).or_fail("recv MSG_PEEK")?;
+    ensure!(
+        buf[..n] == [0xC1, 0xC2, 0xC3],
+        "MSG_PEEK read {}",
+        hex(&buf[..n])
+    );
+    buf[..3].fill(0);
+    let n = raw::read(&a, &mut buf).or_fail("read after MSG_PEEK")?;
+    ensure!(
+        buf[..n] == [0xC1, 0xC2, 0xC3],
+        "read after MSG_PEEK: {}, want the peeked PDU again",
+        hex(&buf[..n])
     );
     raw_send(&peer, 0x7E8, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
     let fc = raw_expect(&peer, 0x7E0, t, "FC to an FF")?;
@@ -1744,6 +2100,68 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
         "20-byte PDU read as {}",
         hex(&buf[..n])
     );
+    drop(a);
+    rx_two_cpus(ctx, i0)
+}
+
+/// Frames for one socket received on two CPUs at once (mainline "fix
+/// potential CAN frame reception race in isotp_rcv()"): one thread per
+/// CPU sends on its own CAN_RAW socket (the frame's echo is received in
+/// the sending CPU's NET_RX softirq), one 100 SFs, the other 50 PDUs of
+/// FF and two CFs sent without waiting for flow control. Every SF must
+/// be read once, and any other PDU read must be a whole 20-byte one
+/// (an SF between an FF and its CFs ends that reception silently, as
+/// ISO 15765-2 says).
+fn rx_two_cpus(ctx: &mut Ctx, i0: u32) -> TestResult {
+    let t = Duration::from_secs(10);
+    let cpus = crate::sys::affinity().or_fail("sched_getaffinity")?;
+    if cpus.len() < 2 {
+        ctx.note("one CPU: the two senders take turns");
+    }
+    let c = tp_bound(0, i0, 0x7EA, 0x7E2)?;
+    raw::set_timeout(&c, libc::SO_RCVTIMEO, t).or_fail("SO_RCVTIMEO")?;
+    let senders: Vec<JoinHandle<TestResult>> = (0..2)
+        .map(|k| {
+            let cpu = cpus[k % cpus.len()];
+            thread::spawn(move || {
+                crate::sys::set_affinity(&[cpu]).or_fail("sched_setaffinity")?;
+                let s = raw_open_ids(i0, &[0x7FF])?;
+                for i in 0..100u8 {
+                    if k == 0 {
+                        raw_send(&s, 0x7EA, &[0x02, 0xA0, i])?;
+                    } else if i < 50 {
+                        raw_send(&s, 0x7EA, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
+                        raw_send(&s, 0x7EA, &[0x21, 7, 8, 9, 10, 11, 12, 13])?;
+                        raw_send(&s, 0x7EA, &[0x22, 14, 15, 16, 17, 18, 19, 20])?;
+                    }
+                }
+                Ok(())
+            })
+        })
+        .collect();
+    let mut seen = [false; 100];
+    let (mut sfs, mut pdus) = (0, 0);
+    let whole: Vec<u8> = (1..=20).collect();
+    let mut buf = [0u8; 64];
+    while sfs < 100 {
+        let n = raw::read(&c, &mut buf)
+            .map_err(|e| format!("read after {sfs} of 100 SFs and {pdus} PDUs: {e}"))?;
+        match &buf[..n] {
+            [0xA0, i] if usize::from(*i) < 100 && !seen[usize::from(*i)] => {
+                seen[usize::from(*i)] = true;
+                sfs += 1;
+            }
+            p if p == &whole[..] => pdus += 1,
+            p => return Err(format!("read {}: neither a new SF nor a whole PDU", hex(p))),
+        }
+    }
+    for s in senders {
+        s.join().map_err(|_| "sender panicked".to_string())??;
+    }
+    ensure!(pdus <= 50, "{pdus} 20-byte PDUs read, 50 sent");
+    ctx.note(format!(
+        "two CPUs: 100 SFs and {pdus} of 50 multi-frame PDUs read"
+    ));
     Ok(())
 }
 
@@ -1755,10 +2173,24 @@ fn isotp_socket_errnos(ctx: &mut Ctx) -> TestResult {
 /// 2. close during a transmission (FC with STmin 127 ms, 14 CFs): close
 ///    waits for the transfer, as mainline's does: every CF is on the bus
 ///    when it returns, nothing after.
+///    Then a thread blocks in write behind a running transfer and the
+///    descriptor is closed meanwhile (mainline "fix race between
+///    isotp_sendsmg() and isotp_release()"): the blocked write still
+///    starts its PDU once the first ends, and the release that follows
+///    waits for that PDU too: both whole on the bus.
 /// 3. ifdown during a WAIT_TX_DONE transfer: the write fails (ECOMM: no
-///    echo, or ENETDOWN) instead of hanging; the interface comes up again.
+///    echo, or ENETDOWN) instead of hanging. A write while the interface
+///    is down fails with the send error and leaves the socket idle
+///    (POLLOUT; mainline "stop timeout monitoring when no first frame was
+///    sent", "fix error path in isotp_sendmsg() to unlock wait queue");
+///    the interface comes up again and the same socket sends a PDU.
 /// 4. The interface goes away (rmmod rcan_loop) during a WAIT_TX_DONE
-///    transfer: the write fails with ENODEV at once.
+///    transfer of 5000 bytes (32-bit FF_DL) and while another socket
+///    reassembles a PDU (N_Cr armed): the write fails with ENODEV at once,
+///    the receiver gets ENODEV, and its N_Cr timer is gone with the
+///    binding: no ETIMEDOUT 1 s later (mainline "fix use-after-free race
+///    with concurrent NETDEV_UNREGISTER", the 2026 fixes of the RX/TX
+///    timers against NETDEV_UNREGISTER).
 /// 5. rmmod rcan_isotp is refused while a socket is open and succeeds
 ///    after its close.
 fn teardown_isotp_transfers(ctx: &mut Ctx) -> TestResult {
@@ -1793,6 +2225,84 @@ fn teardown_isotp_transfers(ctx: &mut Ctx) -> TestResult {
         "after close: {cfs} CFs of 14 on the bus (close must wait for the PDU)"
     );
 
+    // 2b. A writer blocked behind a running transfer, its descriptor
+    // closed meanwhile (the release runs when the write returns).
+    use std::os::fd::IntoRawFd;
+    let a = tp_bound(0, i0, 0x7E8, 0x7E0)?;
+    raw::write(&a, &tagged(0, 100)).or_fail("write the first 100 bytes")?;
+    raw_expect(&peer, 0x7E0, t, "FF of the first PDU")?;
+    let fd = a.into_raw_fd();
+    let tid = Arc::new(AtomicI32::new(0));
+    let w = {
+        let tid = Arc::clone(&tid);
+        thread::spawn(move || {
+            tid.store(crate::sys::gettid(), Ordering::SeqCst);
+            let pdu = tagged(1, 100);
+            // SAFETY: `pdu` is valid for reads of its length for the whole
+            // call; `fd` is only a number here (the main thread closes it
+            // while this call runs: the kernel keeps the file until the
+            // call returns; a number already closed is EBADF).
+            let n = unsafe { libc::write(fd, pdu.as_ptr().cast(), pdu.len()) };
+            if n < 0 {
+                Err(std::io::Error::last_os_error())
+            } else {
+                Ok(n as usize)
+            }
+        })
+    };
+    blocked_while_fc_wait(
+        &peer,
+        0x7E8,
+        &tid,
+        "the second writer blocked behind the first PDU",
+    )?;
+    crate::sys::close_fd(fd).or_fail("close while a write is blocked")?;
+    // The first PDU: FC with STmin 20 ms, its 14 CFs; then the blocked
+    // write's PDU, whose FF the peer answers too (the release waits for
+    // it).
+    raw_send(&peer, 0x7E8, &[0x30, 0, 20])?;
+    let mut cfs = 0;
+    let ff2 = loop {
+        let f = raw_expect(
+            &peer,
+            0x7E0,
+            t,
+            "the first PDU's CFs, then the blocked write's FF",
+        )?;
+        if f.data.first().map(|b| b >> 4) == Some(2) {
+            cfs += 1;
+            continue;
+        }
+        break f;
+    };
+    ensure!(
+        cfs == 14 && ff2.data.len() == 8 && ff2.data[..2] == [0x10, 100],
+        "{cfs} CFs of 14, then {}, want the blocked write's FF 10 64",
+        show(&ff2)
+    );
+    raw_send(&peer, 0x7E8, &[0x30, 0, 0])?;
+    let mut pdu = ff2.data[2..].to_vec();
+    while pdu.len() < 100 {
+        let f = raw_expect(&peer, 0x7E0, t, "the blocked write's CFs")?;
+        ensure!(
+            f.data.first().map(|b| b >> 4) == Some(2),
+            "{} inside the PDU",
+            show(&f)
+        );
+        pdu.extend_from_slice(&f.data[1..]);
+    }
+    pdu.truncate(100);
+    ensure!(
+        pdu == tagged(1, 100),
+        "the blocked write's PDU: {}",
+        hex(&pdu)
+    );
+    let r = joined_within(w, t, "the blocked writer to return")?;
+    ensure!(
+        matches!(r, Ok(100)),
+        "blocked write across close: {r:?}, want 100"
+    );
+
     // 3. ifdown during a WAIT_TX_DONE transfer.
     let b = Arc::new(tp_bound(CAN_ISOTP_WAIT_TX_DONE, i0, 0x7E9, 0x7E1)?);
     let w = write_bg(&b, pattern(100));
@@ -1806,17 +2316,47 @@ fn teardown_isotp_transfers(ctx: &mut Ctx) -> TestResult {
         "write across ifdown: {}, want ECOMM or ENETDOWN",
         errno_name(e)
     );
+    // A write while down: its first frame cannot go out; the socket
+    // stays usable.
+    let _ = raw::getsockopt(&*b, libc::SOL_SOCKET, libc::SO_ERROR, &mut [0u8; 4]);
+    want_errno(
+        raw::write(&*b, &pattern(20)),
+        libc::ENETDOWN,
+        "write while the interface is down",
+    )?;
+    ensure!(
+        poll_out(&*b, 0)? & libc::POLLOUT != 0,
+        "no POLLOUT after a write whose first frame failed"
+    );
     ctx.link_up(&c0)?;
-    drop(b);
     // The peer's socket saw the ifdown (ENETDOWN once): a fresh one.
     let peer = raw_open(i0)?;
+    let w = write_bg(&b, pattern(20));
+    raw_expect(&peer, 0x7E1, t, "FF after the interface came up")?;
+    raw_send(&peer, 0x7E9, &[0x30, 0, 0])?;
+    raw_expect(&peer, 0x7E1, t, "CF 1 after the interface came up")?;
+    raw_expect(&peer, 0x7E1, t, "CF 2 after the interface came up")?;
+    let r = joined_within(w, t, "the write after ifup to return")?;
+    ensure!(
+        matches!(r, Ok(20)),
+        "WAIT_TX_DONE write after ifup: {r:?}, want 20"
+    );
+    drop(b);
 
     // 4. The interface goes away during a WAIT_TX_DONE transfer.
     let b = Arc::new(tp_bound(CAN_ISOTP_WAIT_TX_DONE, i0, 0x7E9, 0x7E1)?);
-    let w = write_bg(&b, pattern(100));
-    raw_expect(&peer, 0x7E1, t, "FF")?;
+    let c = tp_bound(0, i0, 0x7EA, 0x7E2)?;
+    let w = write_bg(&b, pattern(5000));
+    let ff = raw_expect(&peer, 0x7E1, t, "FF")?;
+    ensure!(
+        ff.data[..2] == [0x10, 0],
+        "FF {}, want the 32-bit FF_DL escape",
+        show(&ff)
+    );
     raw_send(&peer, 0x7E9, &[0x30, 0, 0x7F])?;
     raw_expect(&peer, 0x7E1, t, "first CF")?;
+    raw_send(&peer, 0x7EA, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
+    raw_expect(&peer, 0x7E2, t, "the receiver's FC")?;
     drop(peer);
     ctx.remove_can_ifaces()?;
     want_errno(
@@ -1824,6 +2364,21 @@ fn teardown_isotp_transfers(ctx: &mut Ctx) -> TestResult {
         libc::ENODEV,
         "WAIT_TX_DONE write when the interface went away",
     )?;
+    let mut e = [0u8; 4];
+    raw::getsockopt(&c, libc::SOL_SOCKET, libc::SO_ERROR, &mut e).or_fail("SO_ERROR")?;
+    ensure!(
+        i32::from_ne_bytes(e) == libc::ENODEV,
+        "receiver's error when the interface went away: {}, want ENODEV",
+        errno_name(i32::from_ne_bytes(e))
+    );
+    // N_Cr (1 s) would have run out by now: nothing more may come.
+    let rev = crate::sys::poll_one(&c, libc::POLLIN, 1500).or_fail("poll")?;
+    ensure!(
+        rev == 0,
+        "receiver after the interface went away: revents {rev:#x} within 1.5 s, want none \
+         (a reception timer left running?)"
+    );
+    drop(c);
 
     // 5. rmmod with the socket open, then after close.
     ensure!(
