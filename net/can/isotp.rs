@@ -70,7 +70,7 @@ use glue::lock::{new_bh_spinlock, BhLock, WaitQueue, Waited};
 use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::params::Param;
-use glue::skb::UniqueSkb;
+use glue::skb::{Skb, UniqueSkb};
 use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
 use glue::sync::Rtnl;
 use kernel::alloc::KVVec;
@@ -274,6 +274,7 @@ fn send_frame_by_index(sk: &S, ifindex: i32, img: &Image) -> Result {
 /// timers on every consecutive frame). No deadline: the timer is
 /// cancelled (a callback already running finds nothing to do). `eng`
 /// held.
+#[inline]
 fn sync_timer(job: &Option<Job>, armed: &mut Option<u64>, which: usize, want: Option<u64>) {
     let Some(job) = job else {
         return;
@@ -306,6 +307,7 @@ impl Engine {
     /// Carries out a sender step whose result is `done` (its timer
     /// command is the sender's deadline, which [`sync_timer`] follows).
     /// `eng` held. Its frame, in [`Engine::frame`], is the caller's.
+    #[inline]
     fn tx_step(&mut self, done: Option<Result<(), i32>>, out: &mut After) {
         self.sync_tx_timer();
         if let Some(res) = done {
@@ -318,35 +320,51 @@ impl Engine {
         }
     }
 
-    /// Carries out a receiver step with `event`. `eng` held; any context
-    /// (GFP_ATOMIC). Its frame, in [`Engine::frame`], is the caller's.
-    fn rx_step(&mut self, event: Option<RxEvent>, ifindex: i32, tstamp: i64, out: &mut After) {
+    /// Carries out a receiver step with `event`; `rcvd` is the frame
+    /// received (its timestamp goes to a delivered PDU), if any. `eng`
+    /// held; any context (GFP_ATOMIC). Its frame, in [`Engine::frame`], is
+    /// the caller's.
+    #[inline]
+    fn rx_step(
+        &mut self,
+        event: Option<RxEvent>,
+        ifindex: i32,
+        rcvd: Option<&Skb>,
+        out: &mut After,
+    ) {
         self.sync_rx_timer();
         match event {
-            Some(RxEvent::Deliver(n)) => {
-                let Some(pdu) = self.rxbuf.get(..n) else {
-                    return;
-                };
-                let Some(mut skb) = UniqueSkb::alloc(n as u32, glue::GFP_ATOMIC) else {
-                    return;
-                };
-                if !skb.put_data(pdu) {
-                    return;
-                }
-                // Mainline's isotp_rcv_skb: the cb holds the source
-                // address (family and interface, the rest zero).
-                let mut name = [0u8; ISOTP_MIN_NAMELEN];
-                name[..2].copy_from_slice(&rcan_core::sockaddr::AF_CAN.to_ne_bytes());
-                name[4..8].copy_from_slice(&ifindex.to_ne_bytes());
-                skb.cb_write(0, &name);
-                if tstamp != 0 {
-                    skb.set_tstamp(tstamp);
-                }
-                out.deliver = Some(skb);
-            }
+            Some(RxEvent::Deliver(n)) => self.deliver(n, ifindex, rcvd, out),
             Some(RxEvent::Error(e)) => out.err = Some(e),
             None => {}
         }
+    }
+
+    /// Makes the skb of a whole PDU of `n` bytes for the receive queue.
+    /// Once per PDU, kept out of the per-frame path. `eng` held; any
+    /// context (GFP_ATOMIC).
+    #[inline(never)]
+    fn deliver(&mut self, n: usize, ifindex: i32, rcvd: Option<&Skb>, out: &mut After) {
+        let Some(pdu) = self.rxbuf.get(..n) else {
+            return;
+        };
+        let Some(mut skb) = UniqueSkb::alloc(n as u32, glue::GFP_ATOMIC) else {
+            return;
+        };
+        if !skb.put_data(pdu) {
+            return;
+        }
+        // Mainline's isotp_rcv_skb: the cb holds the source address
+        // (family and interface, the rest zero).
+        let mut name = [0u8; ISOTP_MIN_NAMELEN];
+        name[..2].copy_from_slice(&rcan_core::sockaddr::AF_CAN.to_ne_bytes());
+        name[4..8].copy_from_slice(&ifindex.to_ne_bytes());
+        skb.cb_write(0, &name);
+        let tstamp = rcvd.map_or(0, Skb::tstamp);
+        if tstamp != 0 {
+            skb.set_tstamp(tstamp);
+        }
+        out.deliver = Some(skb);
     }
 
     /// Ends both transfers without a result and cancels the timers (the
@@ -393,7 +411,7 @@ impl JobCallback for IsotpJob {
                 a.frame
             } else {
                 let st = e.rx.on_timer(now);
-                e.rx_step(st.event, e.addr.ifindex, 0, &mut out);
+                e.rx_step(st.event, e.addr.ifindex, None, &mut out);
                 false
             };
             (e.addr.ifindex, Image::of(e, frame))
@@ -446,7 +464,6 @@ impl CanProtocol for IsotpProto {
     fn rx(sk: &S, skb: RxSkb<'_>, _cookie: u32) {
         let s = skb.skb();
         let own = s.sent_by(sk);
-        let tstamp = s.tstamp();
         let ifindex = skb.ifindex();
         let Some((can_id, data, fd)) = AnyFrame::view(s.data()) else {
             skb.done();
@@ -483,7 +500,7 @@ impl CanProtocol for IsotpProto {
                     }
                     Route::Rx => {
                         let a = e.rx.on_frame_into(&e.cfg, data, &mut e.rxbuf, now, &mut e.frame);
-                        e.rx_step(a.event, ifindex, tstamp, &mut out);
+                        e.rx_step(a.event, ifindex, Some(s), &mut out);
                         frame = a.frame;
                     }
                 }

@@ -73,6 +73,7 @@ impl LlFrame {
     /// The first 8 bytes of the payload with the bytes from `len` on
     /// zeroed: the data of a classic `can_frame`, whatever the buffer held
     /// before (see above). Built without a variable-length copy.
+    #[inline]
     pub fn classic_data(&self) -> [u8; 8] {
         let mut d = [0u8; 8];
         d.copy_from_slice(&self.data[..8]);
