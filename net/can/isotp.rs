@@ -168,6 +168,7 @@ impl After {
     /// Queues a delivered PDU, reports the error, wakes senders. Process
     /// or softirq context, `eng` not held; after the step's frame was
     /// sent ([`send_frame`]).
+    #[inline]
     fn run(&mut self, sk: &S) {
         if let Some(skb) = self.deliver.take() {
             // A full receive queue drops the PDU, as mainline.
