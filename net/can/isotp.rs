@@ -27,9 +27,13 @@
 //!
 //! Every event of a socket (a received frame, an echo of its own frame, a
 //! timer expiry, a send request) runs its state machine under `eng`; the
-//! frame the machine asks for is sent, the socket error reported and the
-//! waiters woken after `eng` is released (the driver's transmit path runs
-//! outside it).
+//! machine writes the frame it asks for into the engine's one frame
+//! buffer ([`Engine::frame`]), from which the frame's image (16 or 72
+//! bytes) is made before `eng` is released; the frame is sent, the socket
+//! error reported and the waiters woken after that (the driver's transmit
+//! path runs outside it). A frame sent from the receive callback goes out
+//! on the device the received frame came in on (the bound one), which
+//! the receive path holds for the callback: no lookup by index per frame.
 //!
 //! Timers: one [`JobTimers`] per socket (slot [`TX_TIMER`] for the sender,
 //! [`RX_TIMER`] for the receiver), made by the first `bind` and kept in
@@ -63,10 +67,10 @@ use crate::glue::module::{ModuleScope, ScopedModule};
 use glue::hrtimer::ktime_get_mono_ns;
 use glue::jobtimer::{JobCallback, JobRef, JobTimers, OnceBox};
 use glue::lock::{new_bh_spinlock, BhLock, WaitQueue, Waited};
-use glue::netdev::DevRef;
+use glue::netdev::{DevRef, NetDev};
 use glue::neterr;
 use glue::params::Param;
-use glue::skb::UniqueSkb;
+use glue::skb::{Skb, UniqueSkb};
 use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef, SockView};
 use glue::sync::Rtnl;
 use kernel::alloc::KVVec;
@@ -82,8 +86,8 @@ use rcan_core::isotp::{
     CAN_ISOTP_TX_STMIN, CAN_ISOTP_WAIT_TX_DONE, ISOTP_MIN_NAMELEN, MAX_OPTLEN, SOL_CAN_ISOTP,
 };
 use rcan_core::isotp_pci::LlFrame;
-use rcan_core::isotp_rx::{Rx, RxEvent, RxStep};
-use rcan_core::isotp_tx::{Tx, TxStep};
+use rcan_core::isotp_rx::{Rx, RxEvent};
+use rcan_core::isotp_tx::Tx;
 
 /// The sender's timer slot.
 const TX_TIMER: usize = 0;
@@ -132,6 +136,10 @@ struct Engine {
     /// The two timers; taken out (and dropped, waiting for callbacks) by
     /// `release`.
     job: Option<Job>,
+    /// Where both machines write the frame they ask for (`*_into`); only
+    /// `len` and the bytes before it are meaningful, [`Image::new`] reads
+    /// them right after the machine, under `eng`.
+    frame: LlFrame,
     /// Per timer slot, the expiry it was last started for while it may
     /// still be queued (`None`: not queued, or its callback is about to
     /// clear this). Timers are started lazily ([`sync_timer`]): a
@@ -142,8 +150,6 @@ struct Engine {
 }
 
 /// What to do after `eng` is released (filled under `eng`, run after).
-/// The frame to send stays in the machine's step, a local of the caller
-/// (copying it here cost a copy per frame).
 struct After {
     err: Option<i32>,
     wake: bool,
@@ -159,22 +165,11 @@ impl After {
         }
     }
 
-    /// Sends `frame` (the step's; with loopback: the echo confirms it
-    /// went out), queues a delivered PDU, reports the error, wakes
-    /// senders. Process or softirq context, `eng` not held. Returns the
-    /// send's result.
-    fn run(
-        &mut self,
-        sk: &SockView<IsotpProto>,
-        ifindex: i32,
-        tx_id: u32,
-        ll: LlOptions,
-        frame: Option<&LlFrame>,
-    ) -> Result {
-        let mut ret = Ok(());
-        if let Some(f) = frame {
-            ret = send_frame(sk, ifindex, tx_id, ll, f);
-        }
+    /// Queues a delivered PDU, reports the error, wakes senders. Process
+    /// or softirq context, `eng` not held; after the step's frame was
+    /// sent ([`send_frame`]).
+    #[inline]
+    fn run(&mut self, sk: &SockView<IsotpProto>) {
         if let Some(skb) = self.deliver.take() {
             // A full receive queue drops the PDU, as mainline.
             let _ = sk.queue_rcv(skb.into_owned());
@@ -186,8 +181,88 @@ impl After {
             WAITQ.wake_all();
             sk.wake_writers();
         }
-        ret
     }
+}
+
+/// A frame's image as pf_can sends it, `struct can_frame` (16 bytes) or
+/// `struct canfd_frame` (72), with the socket's `tx_id` and `tx_flags`;
+/// made under `eng` from [`Engine::frame`], sent after.
+enum Image {
+    None,
+    Classic([u8; 16]),
+    Fd([u8; 72]),
+}
+
+impl Image {
+    /// The image of the machine's frame `f` on the link layer `ll`. A
+    /// classic frame's 16 bytes are built from registers (no copy of
+    /// variable length, no 72-byte image): this runs once per frame.
+    #[inline(always)]
+    fn new(tx_id: u32, ll: LlOptions, f: &LlFrame) -> Image {
+        let id = tx_id.to_ne_bytes();
+        if ll.is_fd() {
+            let mut img = [0u8; 72];
+            img[..4].copy_from_slice(&id);
+            img[4] = f.len;
+            img[5] = ll.tx_flags;
+            let n = usize::from(f.len).min(64);
+            img[8..8 + n].copy_from_slice(&f.data[..n]);
+            Image::Fd(img)
+        } else {
+            let d = f.classic_data();
+            Image::Classic([
+                id[0],
+                id[1],
+                id[2],
+                id[3],
+                f.len.min(8),
+                0,
+                0,
+                0,
+                d[0],
+                d[1],
+                d[2],
+                d[3],
+                d[4],
+                d[5],
+                d[6],
+                d[7],
+            ])
+        }
+    }
+
+    /// The image made from the engine's frame if the machine wrote one.
+    #[inline(always)]
+    fn of(e: &Engine, frame: bool) -> Image {
+        if frame {
+            Image::new(e.addr.tx_id, e.cfg.ll, &e.frame)
+        } else {
+            Image::None
+        }
+    }
+}
+
+/// Sends `img` (if any) on `dev`, owned by `sk` (so that its echo names
+/// it), with loopback. Process or softirq context, `eng` not held.
+fn send_frame(sk: &SockView<IsotpProto>, dev: &NetDev, img: &Image) -> Result {
+    let bytes: &[u8] = match img {
+        Image::None => return Ok(()),
+        Image::Classic(b) => b,
+        Image::Fd(b) => b,
+    };
+    let skb = glue::can::skb::alloc_image_for(sk, dev, bytes, glue::GFP_ATOMIC).ok_or(ENOMEM)?;
+    rcan_api::send(skb, dev, true)
+}
+
+/// [`send_frame`] on the device with index `ifindex` (looked up: from a
+/// timer or a system call, which have no device at hand). ENXIO if it is
+/// gone.
+fn send_frame_by_index(sk: &SockView<IsotpProto>, ifindex: i32, img: &Image) -> Result {
+    if let Image::None = img {
+        return Ok(());
+    }
+    let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENXIO)?;
+    send_frame(sk, &dev, img)
 }
 
 /// Brings timer `which` in line with its machine's deadline `want`
@@ -200,6 +275,7 @@ impl After {
 /// timers on every consecutive frame). No deadline: the timer is
 /// cancelled (a callback already running finds nothing to do). `eng`
 /// held.
+#[inline]
 fn sync_timer(job: &Option<Job>, armed: &mut Option<u64>, which: usize, want: Option<u64>) {
     let Some(job) = job else {
         return;
@@ -229,12 +305,13 @@ impl Engine {
         sync_timer(&self.job, &mut self.armed[RX_TIMER], RX_TIMER, self.rx.deadline());
     }
 
-    /// Carries out a sender step (its timer command is the sender's
-    /// deadline, which [`sync_timer`] follows). `eng` held.
-    /// Its frame is sent by the caller from `st` after `eng` is released.
-    fn tx_step(&mut self, st: &TxStep, out: &mut After) {
+    /// Carries out a sender step whose result is `done` (its timer
+    /// command is the sender's deadline, which [`sync_timer`] follows).
+    /// `eng` held. Its frame, in [`Engine::frame`], is the caller's.
+    #[inline]
+    fn tx_step(&mut self, done: Option<Result<(), i32>>, out: &mut After) {
         self.sync_tx_timer();
-        if let Some(res) = st.done {
+        if let Some(res) = done {
             self.done_gen = self.tx_gen;
             self.done_res = res;
             if let Err(e) = res {
@@ -244,35 +321,51 @@ impl Engine {
         }
     }
 
-    /// Carries out a receiver step. `eng` held; any context (GFP_ATOMIC).
-    /// Its frame is sent by the caller from `st` after `eng` is released.
-    fn rx_step(&mut self, st: &RxStep, ifindex: i32, tstamp: i64, out: &mut After) {
+    /// Carries out a receiver step with `event`; `rcvd` is the frame
+    /// received (its timestamp goes to a delivered PDU), if any. `eng`
+    /// held; any context (GFP_ATOMIC). Its frame, in [`Engine::frame`], is
+    /// the caller's.
+    #[inline]
+    fn rx_step(
+        &mut self,
+        event: Option<RxEvent>,
+        ifindex: i32,
+        rcvd: Option<&Skb>,
+        out: &mut After,
+    ) {
         self.sync_rx_timer();
-        match st.event {
-            Some(RxEvent::Deliver(n)) => {
-                let Some(pdu) = self.rxbuf.get(..n) else {
-                    return;
-                };
-                let Some(mut skb) = UniqueSkb::alloc(n as u32, glue::GFP_ATOMIC) else {
-                    return;
-                };
-                if !skb.put_data(pdu) {
-                    return;
-                }
-                // Mainline's isotp_rcv_skb: the cb holds the source
-                // address (family and interface, the rest zero).
-                let mut name = [0u8; ISOTP_MIN_NAMELEN];
-                name[..2].copy_from_slice(&rcan_core::sockaddr::AF_CAN.to_ne_bytes());
-                name[4..8].copy_from_slice(&ifindex.to_ne_bytes());
-                skb.cb_write(0, &name);
-                if tstamp != 0 {
-                    skb.set_tstamp(tstamp);
-                }
-                out.deliver = Some(skb);
-            }
+        match event {
+            Some(RxEvent::Deliver(n)) => self.deliver(n, ifindex, rcvd, out),
             Some(RxEvent::Error(e)) => out.err = Some(e),
             None => {}
         }
+    }
+
+    /// Makes the skb of a whole PDU of `n` bytes for the receive queue.
+    /// Once per PDU, kept out of the per-frame path. `eng` held; any
+    /// context (GFP_ATOMIC).
+    #[inline(never)]
+    fn deliver(&mut self, n: usize, ifindex: i32, rcvd: Option<&Skb>, out: &mut After) {
+        let Some(pdu) = self.rxbuf.get(..n) else {
+            return;
+        };
+        let Some(mut skb) = UniqueSkb::alloc(n as u32, glue::GFP_ATOMIC) else {
+            return;
+        };
+        if !skb.put_data(pdu) {
+            return;
+        }
+        // Mainline's isotp_rcv_skb: the cb holds the source address
+        // (family and interface, the rest zero).
+        let mut name = [0u8; ISOTP_MIN_NAMELEN];
+        name[..2].copy_from_slice(&rcan_core::sockaddr::AF_CAN.to_ne_bytes());
+        name[4..8].copy_from_slice(&ifindex.to_ne_bytes());
+        skb.cb_write(0, &name);
+        let tstamp = rcvd.map_or(0, Skb::tstamp);
+        if tstamp != 0 {
+            skb.set_tstamp(tstamp);
+        }
+        out.deliver = Some(skb);
     }
 
     /// Ends both transfers without a result and cancels the timers (the
@@ -285,39 +378,6 @@ impl Engine {
         self.done_gen = self.tx_gen;
         out.wake = true;
     }
-}
-
-/// Builds and sends one frame of the link layer `ll` with `tx_id`, owned
-/// by `sk` (so that its echo names it), with loopback. Process or softirq
-/// context, `eng` not held.
-fn send_frame(
-    sk: &SockView<IsotpProto>,
-    ifindex: i32,
-    tx_id: u32,
-    ll: LlOptions,
-    f: &LlFrame,
-) -> Result {
-    let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENXIO)?;
-    let id = tx_id.to_ne_bytes();
-    // A classic frame's 16-byte image is built alone: the 72-byte one
-    // cost a memset and a copy per frame.
-    let skb = if ll.is_fd() {
-        let mut img = [0u8; 72];
-        img[..4].copy_from_slice(&id);
-        img[4] = f.len;
-        img[5] = ll.tx_flags;
-        img[8..72].copy_from_slice(&f.data);
-        glue::can::skb::alloc_image_for(sk, &dev, &img, glue::GFP_ATOMIC)
-    } else {
-        let d = &f.data;
-        let img: [u8; 16] = [
-            id[0], id[1], id[2], id[3], f.len, 0, 0, 0, d[0], d[1], d[2], d[3], d[4], d[5], d[6],
-            d[7],
-        ];
-        glue::can::skb::alloc_image_for(sk, &dev, &img, glue::GFP_ATOMIC)
-    }
-    .ok_or(ENOMEM)?;
-    rcan_api::send(skb, &dev, true)
 }
 
 impl JobCallback for IsotpJob {
@@ -333,9 +393,7 @@ impl JobCallback for IsotpJob {
         };
         let now = ktime_get_mono_ns() as u64;
         let mut out = After::new();
-        let tst: TxStep;
-        let rst: RxStep;
-        let (ifindex, tx_id, ll, frame) = {
+        let (ifindex, img) = {
             let mut g = eng.lock();
             let e = &mut *g;
             // This expiry dequeued the timer (a later start queued it
@@ -349,18 +407,19 @@ impl JobCallback for IsotpJob {
             // An early expiry (the deadline moved later, Engine::armed)
             // changes no state; the step starts the timer again.
             let frame = if which == TX_TIMER {
-                tst = e.tx.on_timer(&e.cfg, &e.txbuf, now);
-                e.tx_step(&tst, &mut out);
-                tst.frame.as_ref()
+                let a = e.tx.on_timer_into(&e.cfg, &e.txbuf, now, &mut e.frame);
+                e.tx_step(a.done, &mut out);
+                a.frame
             } else {
-                rst = e.rx.on_timer(now);
-                e.rx_step(&rst, e.addr.ifindex, 0, &mut out);
-                rst.frame.as_ref()
+                let st = e.rx.on_timer(now);
+                e.rx_step(st.event, e.addr.ifindex, None, &mut out);
+                false
             };
-            (e.addr.ifindex, e.addr.tx_id, e.cfg.ll, frame)
+            (e.addr.ifindex, Image::of(e, frame))
         };
         // A CF that could not be sent ends in ECOMM (no echo).
-        let _ = out.run(sk, ifindex, tx_id, ll, frame);
+        let _ = send_frame_by_index(sk, ifindex, &img);
+        out.run(sk);
     }
 }
 
@@ -406,7 +465,6 @@ impl CanProtocol for IsotpProto {
     fn rx(sk: &SockView<Self>, skb: RxSkb<'_>, _cookie: u32) {
         let s = skb.skb();
         let own = s.sent_by(sk);
-        let tstamp = s.tstamp();
         let ifindex = skb.ifindex();
         let Some((can_id, data, fd)) = AnyFrame::view(s.data()) else {
             skb.done();
@@ -418,11 +476,7 @@ impl CanProtocol for IsotpProto {
         };
         let now = ktime_get_mono_ns() as u64;
         let mut out = After::new();
-        // The steps live here, so that their frame is sent from where
-        // the machine wrote it.
-        let tst: TxStep;
-        let rst: RxStep;
-        let (tx_id, ll, frame) = {
+        let img = {
             let mut g = eng.lock();
             let e = &mut *g;
             if !e.bound || ifindex != e.addr.ifindex {
@@ -430,32 +484,38 @@ impl CanProtocol for IsotpProto {
                 skb.done();
                 return;
             }
-            let mut frame = None;
+            let mut frame = false;
             if own {
                 if can_id == e.addr.tx_id {
-                    tst = e.tx.on_echo(&e.cfg, &e.txbuf, now);
-                    e.tx_step(&tst, &mut out);
-                    frame = tst.frame.as_ref();
+                    let a = e.tx.on_echo_into(&e.cfg, &e.txbuf, now, &mut e.frame);
+                    e.tx_step(a.done, &mut out);
+                    frame = a.frame;
                 }
             } else if can_id == e.addr.rx_id && e.cfg.registers_rx_id() {
                 match route(&e.cfg, fd, data, e.tx.is_idle(), e.rx.is_idle()) {
                     Route::Drop => {}
                     Route::Tx => {
-                        tst = e.tx.on_fc(&e.cfg, data, &e.txbuf, now);
-                        e.tx_step(&tst, &mut out);
-                        frame = tst.frame.as_ref();
+                        let a = e.tx.on_fc_into(&e.cfg, data, &e.txbuf, now, &mut e.frame);
+                        e.tx_step(a.done, &mut out);
+                        frame = a.frame;
                     }
                     Route::Rx => {
-                        rst = e.rx.on_frame(&e.cfg, data, &mut e.rxbuf, now);
-                        e.rx_step(&rst, ifindex, tstamp, &mut out);
-                        frame = rst.frame.as_ref();
+                        let a = e.rx.on_frame_into(&e.cfg, data, &mut e.rxbuf, now, &mut e.frame);
+                        e.rx_step(a.event, ifindex, Some(s), &mut out);
+                        frame = a.frame;
                     }
                 }
             }
-            (e.addr.tx_id, e.cfg.ll, frame)
+            Image::of(e, frame)
         };
+        // The frame goes out on the device it answers, the bound one
+        // (checked above), which the receive path holds for this call.
+        let dev = skb.dev();
         skb.done();
-        let _ = out.run(sk, ifindex, tx_id, ll, frame);
+        if let Some(dev) = dev {
+            let _ = send_frame(sk, dev, &img);
+        }
+        out.run(sk);
     }
 
     /// Mainline `isotp_notify`. Process context, RTNL held. The bound
@@ -493,7 +553,7 @@ impl CanProtocol for IsotpProto {
                 e.abort(&mut out);
             }
             drop(s);
-            let _ = out.run(sk, 0, 0, LlOptions::default(), None);
+            out.run(sk);
         });
     }
 }
@@ -521,6 +581,7 @@ fn engine(sk: &S) -> Result<&BhLock<Engine>> {
         done_gen: 0,
         done_res: Ok(()),
         job: Some(job),
+        frame: LlFrame::default(),
         armed: [None; 2],
     };
     let l = new_bh_spinlock!(e, "isotp_engine")?;
@@ -713,25 +774,23 @@ impl glue::sock::Proto for IsotpProto {
         let now = ktime_get_mono_ns() as u64;
         loop {
             let mut out = After::new();
-            let st: TxStep;
             let r = {
                 let mut g = eng.lock();
                 let e = &mut *g;
                 if !e.bound {
                     return Err(neterr::EADDRNOTAVAIL());
                 }
-                match e.tx.start(&e.cfg, &buf, now) {
-                    Ok(s) => {
-                        st = s;
+                match e.tx.start_into(&e.cfg, &buf, now, &mut e.frame) {
+                    Ok(a) => {
                         core::mem::swap(&mut e.txbuf, &mut buf);
                         e.tx_gen += 1;
-                        e.tx_step(&st, &mut out);
-                        Ok((e.tx_gen, e.addr.ifindex, e.addr.tx_id, st.frame.as_ref()))
+                        e.tx_step(a.done, &mut out);
+                        Ok((e.tx_gen, e.addr.ifindex, Image::of(e, a.frame)))
                     }
                     Err(err) => Err(err),
                 }
             };
-            let (gen, ifindex, tx_id, frame) = match r {
+            let (gen, ifindex, img) = match r {
                 Ok(v) => v,
                 // Another sendmsg of this socket took the sender first.
                 Err(err) if err == rcan_core::isotp::EAGAIN => {
@@ -744,7 +803,9 @@ impl glue::sock::Proto for IsotpProto {
                 Err(err) => return Err(errno(err)),
             };
             drop(buf);
-            if let Err(err) = out.run(sk, ifindex, tx_id, cfg.ll, frame) {
+            let sent = send_frame_by_index(sk, ifindex, &img);
+            out.run(sk);
+            if let Err(err) = sent {
                 // The first frame did not go out: no transfer.
                 let mut g = eng.lock();
                 let e = &mut *g;

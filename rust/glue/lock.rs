@@ -233,14 +233,24 @@ pub(crate) struct Bh;
 unsafe impl Backend for Bh {
     type State = ();
 
+    // As for `Irq`: `spin_lock_bh(lock)` and `spin_unlock_bh(lock)` are,
+    // without PREEMPT_RT, `_raw_spin_lock_bh(&lock->rlock)` and
+    // `_raw_spin_unlock_bh(&lock->rlock)` (out of line in both our
+    // kernels: no CONFIG_INLINE_SPIN_*_BH on x86), with `rlock` at offset
+    // 0: called directly, one call less per lock and unlock (CAN_ISOTP
+    // takes its engine lock twice per frame). Lockdep sees the same lock.
+    #[inline]
     unsafe fn lock(lock: *mut bindings::spinlock_t) {
-        // SAFETY: an initialised spinlock (the function's contract).
-        unsafe { bindings::rcan_spin_lock_bh(lock) };
+        // SAFETY: an initialised spinlock (the function's contract), whose
+        // first member (offset 0) is its raw_spinlock.
+        unsafe { bindings::_raw_spin_lock_bh(lock.cast::<bindings::raw_spinlock>()) };
     }
 
+    #[inline]
     unsafe fn unlock(lock: *mut bindings::spinlock_t, _: ()) {
-        // SAFETY: taken with spin_lock_bh on this CPU (the contract).
-        unsafe { bindings::rcan_spin_unlock_bh(lock) };
+        // SAFETY: taken with spin_lock_bh on this CPU (the contract); the
+        // raw_spinlock at offset 0, as in `lock`.
+        unsafe { bindings::_raw_spin_unlock_bh(lock.cast::<bindings::raw_spinlock>()) };
     }
 }
 

@@ -38,11 +38,20 @@ pub const FC_CONTENT_SZ: usize = 3;
 pub const LL_MAX_DLEN: usize = 64;
 
 /// The payload of one CAN frame as ISO-TP builds and reads it.
+///
+/// The state machines write the frames they send into a buffer of this
+/// type that the caller owns and reuses (`Tx::*_into`, `Rx::*_into`, the
+/// `write_*` functions here): they write `len` and every byte of
+/// `data[..len]` and leave the bytes from `len` on as they were, so that
+/// no frame is zeroed, built and then moved by value (65 bytes each time)
+/// on the per-frame path. The `build_*` functions and the machines'
+/// by-value steps start from a zeroed frame, so there the bytes from
+/// `len` on are zero.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct LlFrame {
     /// Payload length (`can_dlc`/`len`): at most 8 classic, 64 FD.
     pub len: u8,
-    /// Payload; bytes from `len` on are zero.
+    /// Payload; bytes from `len` on: see above.
     pub data: [u8; LL_MAX_DLEN],
 }
 
@@ -59,6 +68,38 @@ impl LlFrame {
     /// `data[..len]`.
     pub fn payload(&self) -> &[u8] {
         &self.data[..usize::from(self.len).min(LL_MAX_DLEN)]
+    }
+
+    /// The first 8 bytes of the payload with the bytes from `len` on
+    /// zeroed: the data of a classic `can_frame`, whatever the buffer held
+    /// before (see above). Built without a variable-length copy.
+    #[inline]
+    pub fn classic_data(&self) -> [u8; 8] {
+        let mut d = [0u8; 8];
+        d.copy_from_slice(&self.data[..8]);
+        let w = u64::from_le_bytes(d);
+        let keep = match self.len {
+            0 => 0,
+            n @ 1..=7 => (1u64 << (8 * u32::from(n))) - 1,
+            _ => u64::MAX,
+        };
+        (w & keep).to_le_bytes()
+    }
+}
+
+/// `dst.copy_from_slice(src)` (equal lengths), with the 7 data bytes of a
+/// full classic consecutive frame (or single frame) copied by a
+/// fixed-size move: a copy of variable length is a call of the kernel's
+/// `memcpy`, and this one runs twice per frame (the sender's build, the
+/// receiver's reassembly).
+#[inline(always)]
+pub fn copy_payload(dst: &mut [u8], src: &[u8]) {
+    match (
+        <&mut [u8; 7]>::try_from(&mut *dst),
+        <&[u8; 7]>::try_from(src),
+    ) {
+        (Ok(d), Ok(s)) => *d = *s,
+        _ => dst.copy_from_slice(src),
     }
 }
 
@@ -123,14 +164,17 @@ pub fn sf_max(cfg: &Config) -> usize {
 /// Puts `src` (as much as fits) into `f` behind `pcilen` N_PCI bytes,
 /// with the frame length TX_DL if full, else the shortest length, padded
 /// to a valid length with `txpad_content` ([`CAN_ISOTP_TX_PADDING`]) or,
-/// for CAN FD lengths above 8, with 0xCC; writes the address byte.
-/// Returns how many bytes of `src` went in (mainline
-/// `isotp_fill_dataframe`).
+/// for CAN FD lengths above 8, with 0xCC; writes the address byte. The
+/// caller writes the N_PCI bytes (`data[ae..pcilen]`); with them every
+/// byte of `data[..len]` is written. Returns how many bytes of `src` went
+/// in (mainline `isotp_fill_dataframe`).
 fn fill(cfg: &Config, f: &mut LlFrame, pcilen: usize, src: &[u8]) -> usize {
     let dl = usize::from(cfg.ll.tx_dl).min(LL_MAX_DLEN);
-    let space = dl.saturating_sub(pcilen);
+    let pcilen = pcilen.min(dl);
+    let space = dl - pcilen;
     let num = src.len().min(space);
     let mut len = num + pcilen;
+    copy_payload(&mut f.data[pcilen..len], &src[..num]);
     if num < space {
         let pad = if cfg.has(CAN_ISOTP_TX_PADDING) {
             Some(cfg.opt.txpad_content)
@@ -141,11 +185,11 @@ fn fill(cfg: &Config, f: &mut LlFrame, pcilen: usize, src: &[u8]) -> usize {
         };
         if let Some(p) = pad {
             // len <= dl <= 64 here.
-            len = usize::from(padlen(len as u8));
-            f.data[..len].fill(p);
+            let end = usize::from(padlen(len as u8));
+            f.data[len..end].fill(p);
+            len = end;
         }
     }
-    f.data[pcilen..pcilen + num].copy_from_slice(&src[..num]);
     if cfg.ae() == 1 {
         f.data[0] = cfg.opt.ext_address;
     }
@@ -153,16 +197,23 @@ fn fill(cfg: &Config, f: &mut LlFrame, pcilen: usize, src: &[u8]) -> usize {
     num
 }
 
-/// The single frame of `pdu`, which must fit ([`sf_max`]; longer PDUs are
-/// cut). The SF_DL escape (N_PCI 0x00, length in the next byte) is used
-/// only when the PDU does not fit a frame of 8 bytes, so that a short
-/// PDU on CAN FD stays an 8-byte frame, as in mainline.
+/// [`write_sf`] into a zeroed frame.
 pub fn build_sf(cfg: &Config, pdu: &[u8]) -> LlFrame {
+    let mut f = LlFrame::default();
+    write_sf(cfg, pdu, &mut f);
+    f
+}
+
+/// Writes the single frame of `pdu` into `f` (see [`LlFrame`]), which
+/// must fit ([`sf_max`]; longer PDUs are cut). The SF_DL escape (N_PCI
+/// 0x00, length in the next byte) is used only when the PDU does not fit
+/// a frame of 8 bytes, so that a short PDU on CAN FD stays an 8-byte
+/// frame, as in mainline.
+pub fn write_sf(cfg: &Config, pdu: &[u8], f: &mut LlFrame) {
     let ae = cfg.ae();
     let pdu = &pdu[..pdu.len().min(sf_max(cfg))];
     let esc = cfg.ll.tx_dl > 8 && pdu.len() > 8 - 1 - ae;
-    let mut f = LlFrame::default();
-    fill(cfg, &mut f, 1 + ae + usize::from(esc), pdu);
+    fill(cfg, f, 1 + ae + usize::from(esc), pdu);
     // sf_max() <= 62, so the length fits a byte (and 4 bits without esc).
     if esc {
         f.data[ae] = N_PCI_SF;
@@ -170,18 +221,24 @@ pub fn build_sf(cfg: &Config, pdu: &[u8]) -> LlFrame {
     } else {
         f.data[ae] = N_PCI_SF | pdu.len() as u8;
     }
-    f
 }
 
-/// The first frame of a `pdu_len`-byte PDU starting with `head` (at least
-/// TX_DL bytes of it are needed to fill the frame): FF_DL in 12 bits, or
-/// for PDUs over 4095 bytes the escape (12-bit 0, then 32 bits). Returns
-/// the frame and how many bytes of `head` it carries. `pdu_len` over
+/// [`write_ff`] into a zeroed frame.
+pub fn build_ff(cfg: &Config, pdu_len: usize, head: &[u8]) -> (LlFrame, usize) {
+    let mut f = LlFrame::default();
+    let n = write_ff(cfg, pdu_len, head, &mut f);
+    (f, n)
+}
+
+/// Writes the first frame of a `pdu_len`-byte PDU starting with `head`
+/// into `f` (see [`LlFrame`]; at least TX_DL bytes of `head` are needed to
+/// fill the frame, the rest of a full-length frame is zero): FF_DL in 12
+/// bits, or for PDUs over 4095 bytes the escape (12-bit 0, then 32 bits).
+/// Returns how many bytes of `head` it carries. `pdu_len` over
 /// `u32::MAX` is the caller's error ([`super::isotp_tx::Tx::start`]
 /// refuses it).
-pub fn build_ff(cfg: &Config, pdu_len: usize, head: &[u8]) -> (LlFrame, usize) {
+pub fn write_ff(cfg: &Config, pdu_len: usize, head: &[u8], f: &mut LlFrame) -> usize {
     let ae = cfg.ae();
-    let mut f = LlFrame::default();
     let pci = if pdu_len > MAX_12BIT_PDU_SIZE as usize {
         let l = (pdu_len as u32).to_be_bytes();
         f.data[ae] = N_PCI_FF;
@@ -193,33 +250,47 @@ pub fn build_ff(cfg: &Config, pdu_len: usize, head: &[u8]) -> (LlFrame, usize) {
         f.data[ae + 1] = pdu_len as u8;
         2
     };
-    let dl = usize::from(cfg.ll.tx_dl).min(LL_MAX_DLEN);
-    let num = dl.saturating_sub(ae + pci).min(head.len());
+    let dl = usize::from(cfg.ll.tx_dl).min(LL_MAX_DLEN).max(ae + pci);
+    let num = (dl - ae - pci).min(head.len());
     f.data[ae + pci..ae + pci + num].copy_from_slice(&head[..num]);
+    f.data[ae + pci + num..dl].fill(0);
     if ae == 1 {
         f.data[0] = cfg.opt.ext_address;
     }
     f.len = dl as u8;
-    (f, num)
+    num
 }
 
-/// A consecutive frame with sequence number `sn` (low 4 bits) carrying
-/// the start of `rest`; returns it and how many bytes it carries.
+/// [`write_cf`] into a zeroed frame.
 pub fn build_cf(cfg: &Config, sn: u8, rest: &[u8]) -> (LlFrame, usize) {
-    let ae = cfg.ae();
     let mut f = LlFrame::default();
-    let n = fill(cfg, &mut f, 1 + ae, rest);
-    f.data[ae] = N_PCI_CF | (sn & 0x0F);
+    let n = write_cf(cfg, sn, rest, &mut f);
     (f, n)
 }
 
-/// A flow control frame with flow status `fs` and the socket's
-/// `CAN_ISOTP_RECV_FC` block size and STmin: 3 bytes (plus address) or,
-/// with [`CAN_ISOTP_TX_PADDING`], 8 bytes padded with `txpad_content`
-/// (also on CAN FD, as mainline).
-pub fn build_fc(cfg: &Config, fs: u8) -> LlFrame {
+/// Writes a consecutive frame with sequence number `sn` (low 4 bits)
+/// carrying the start of `rest` into `f` (see [`LlFrame`]); returns how
+/// many bytes it carries.
+pub fn write_cf(cfg: &Config, sn: u8, rest: &[u8], f: &mut LlFrame) -> usize {
     let ae = cfg.ae();
+    let n = fill(cfg, f, 1 + ae, rest);
+    f.data[ae] = N_PCI_CF | (sn & 0x0F);
+    n
+}
+
+/// [`write_fc`] into a zeroed frame.
+pub fn build_fc(cfg: &Config, fs: u8) -> LlFrame {
     let mut f = LlFrame::default();
+    write_fc(cfg, fs, &mut f);
+    f
+}
+
+/// Writes a flow control frame with flow status `fs` and the socket's
+/// `CAN_ISOTP_RECV_FC` block size and STmin into `f` (see [`LlFrame`]):
+/// 3 bytes (plus address) or, with [`CAN_ISOTP_TX_PADDING`], 8 bytes
+/// padded with `txpad_content` (also on CAN FD, as mainline).
+pub fn write_fc(cfg: &Config, fs: u8, f: &mut LlFrame) {
+    let ae = cfg.ae();
     if cfg.has(CAN_ISOTP_TX_PADDING) {
         f.data[..8].fill(cfg.opt.txpad_content);
         f.len = 8;
@@ -232,7 +303,6 @@ pub fn build_fc(cfg: &Config, fs: u8) -> LlFrame {
     if ae == 1 {
         f.data[0] = cfg.opt.ext_address;
     }
-    f
 }
 
 /// The padding check of a received frame whose protocol bytes end at

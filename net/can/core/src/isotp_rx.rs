@@ -20,7 +20,8 @@ use super::isotp::{
     FC_TIMEOUT_NS,
 };
 use super::isotp_pci::{
-    build_fc, pad_ok, parse_ff, parse_sf, LlFrame, FS_CTS, FS_OVFLW, N_PCI_CF, N_PCI_FF, N_PCI_SF,
+    copy_payload, pad_ok, parse_ff, parse_sf, write_fc, LlFrame, FS_CTS, FS_OVFLW, N_PCI_CF,
+    N_PCI_FF, N_PCI_SF,
 };
 
 /// What the receiver reports to the socket.
@@ -50,6 +51,37 @@ impl RxStep {
         timer: TimerCmd::Keep,
         event: None,
     };
+}
+
+/// What the caller does after [`Rx::on_frame_into`]: an [`RxStep`] whose
+/// flow control frame the machine wrote into the caller's buffer (see
+/// [`LlFrame`]) instead of returning it. The module uses it;
+/// [`Rx::on_frame`] wraps it.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct RxAction {
+    /// The caller's buffer holds a frame to send now ([`RxStep::frame`]).
+    pub frame: bool,
+    /// See [`RxStep::timer`].
+    pub timer: TimerCmd,
+    /// See [`RxStep::event`].
+    pub event: Option<RxEvent>,
+}
+
+impl RxAction {
+    const NONE: RxAction = RxAction {
+        frame: false,
+        timer: TimerCmd::Keep,
+        event: None,
+    };
+
+    /// The by-value step, with the frame `f` the action wrote.
+    pub fn step(&self, f: &LlFrame) -> RxStep {
+        RxStep {
+            frame: self.frame.then_some(*f),
+            timer: self.timer,
+            event: self.event,
+        }
+    }
 }
 
 /// The receiver of one socket; owned by the socket, protected by its
@@ -115,30 +147,26 @@ impl Rx {
         self.deadline
     }
 
-    fn step(&mut self, frame: Option<LlFrame>, timer: TimerCmd, event: Option<RxEvent>) -> RxStep {
+    fn step(&mut self, frame: bool, timer: TimerCmd, event: Option<RxEvent>) -> RxAction {
         self.deadline = match timer {
             TimerCmd::Arm(at) => Some(at),
             TimerCmd::Cancel => None,
             TimerCmd::Keep => self.deadline,
         };
-        RxStep {
+        RxAction {
             frame,
             timer,
             event,
         }
     }
 
-    /// Our flow control frame with status `fs`; restarts the block count
-    /// and the N_Cr timeout.
-    fn send_fc(&mut self, cfg: &Config, fs: u8, now: u64) -> RxStep {
+    /// Our flow control frame with status `fs` into `out`; restarts the
+    /// block count and the N_Cr timeout.
+    fn send_fc(&mut self, cfg: &Config, fs: u8, now: u64, out: &mut LlFrame) -> RxAction {
         self.bs = 0;
         self.last_cf = 0;
-        let f = build_fc(cfg, fs);
-        self.step(
-            Some(f),
-            TimerCmd::Arm(now.saturating_add(FC_TIMEOUT_NS)),
-            None,
-        )
+        write_fc(cfg, fs, out);
+        self.step(true, TimerCmd::Arm(now.saturating_add(FC_TIMEOUT_NS)), None)
     }
 
     /// A single, first or consecutive frame for this socket arrived at
@@ -150,46 +178,67 @@ impl Rx {
     /// and on the last CF (`EBADMSG`), sequence numbers on every CF
     /// (`EILSEQ`).
     pub fn on_frame(&mut self, cfg: &Config, data: &[u8], buf: &mut [u8], now: u64) -> RxStep {
+        let mut f = LlFrame::default();
+        self.on_frame_into(cfg, data, buf, now, &mut f).step(&f)
+    }
+
+    /// [`Rx::on_frame`], the flow control frame written into `out`
+    /// ([`RxAction`]).
+    pub fn on_frame_into(
+        &mut self,
+        cfg: &Config,
+        data: &[u8],
+        buf: &mut [u8],
+        now: u64,
+        out: &mut LlFrame,
+    ) -> RxAction {
         let Some(&pci) = data.get(cfg.ae()) else {
-            return RxStep::NONE;
+            return RxAction::NONE;
         };
         match pci & 0xF0 {
             N_PCI_SF => self.on_sf(cfg, data, buf),
-            N_PCI_FF => self.on_ff(cfg, data, buf, now),
-            N_PCI_CF => self.on_cf(cfg, data, buf, now),
-            _ => RxStep::NONE,
+            N_PCI_FF => self.on_ff(cfg, data, buf, now, out),
+            N_PCI_CF => self.on_cf(cfg, data, buf, now, out),
+            _ => RxAction::NONE,
         }
     }
 
-    fn on_sf(&mut self, cfg: &Config, data: &[u8], buf: &mut [u8]) -> RxStep {
+    fn on_sf(&mut self, cfg: &Config, data: &[u8], buf: &mut [u8]) -> RxAction {
         self.active = false;
         let Some((pcilen, len)) = parse_sf(cfg, data) else {
-            return self.step(None, TimerCmd::Cancel, None);
+            return self.step(false, TimerCmd::Cancel, None);
         };
         if !pad_ok(cfg, data, pcilen + len) {
-            return self.step(None, TimerCmd::Cancel, Some(RxEvent::Error(EBADMSG)));
+            return self.step(false, TimerCmd::Cancel, Some(RxEvent::Error(EBADMSG)));
         }
         let Some(dst) = buf.get_mut(..len) else {
-            return self.step(None, TimerCmd::Cancel, None);
+            return self.step(false, TimerCmd::Cancel, None);
         };
-        dst.copy_from_slice(&data[pcilen..pcilen + len]);
-        self.step(None, TimerCmd::Cancel, Some(RxEvent::Deliver(len)))
+        copy_payload(dst, &data[pcilen..pcilen + len]);
+        self.step(false, TimerCmd::Cancel, Some(RxEvent::Deliver(len)))
     }
 
-    fn on_ff(&mut self, cfg: &Config, data: &[u8], buf: &mut [u8], now: u64) -> RxStep {
+    fn on_ff(
+        &mut self,
+        cfg: &Config,
+        data: &[u8],
+        buf: &mut [u8],
+        now: u64,
+        out: &mut LlFrame,
+    ) -> RxAction {
         self.active = false;
         let Some(h) = parse_ff(cfg, data) else {
-            return self.step(None, TimerCmd::Cancel, None);
+            return self.step(false, TimerCmd::Cancel, None);
         };
         let listen = cfg.has(CAN_ISOTP_LISTEN_MODE);
         let len = h.len as usize;
         if len > buf.len() {
             // Differs from mainline: a listener sends no overflow FC.
             if listen {
-                return self.step(None, TimerCmd::Cancel, None);
+                return self.step(false, TimerCmd::Cancel, None);
             }
-            let f = build_fc(cfg, FS_OVFLW);
-            return self.step(Some(f), TimerCmd::Cancel, None);
+            write_fc(cfg, FS_OVFLW, out);
+            return self.step(true, TimerCmd::Cancel, None);
         }
         // parse_ff() guarantees pcilen < ll_dl == data.len() and that
         // the FF carries fewer bytes than FF_DL.
@@ -202,18 +251,25 @@ impl Rx {
         self.active = true;
         if listen {
             // As mainline: no FC, and no timeout until the first CF.
-            return self.step(None, TimerCmd::Cancel, None);
+            return self.step(false, TimerCmd::Cancel, None);
         }
-        self.send_fc(cfg, FS_CTS, now)
+        self.send_fc(cfg, FS_CTS, now, out)
     }
 
-    fn on_cf(&mut self, cfg: &Config, data: &[u8], buf: &mut [u8], now: u64) -> RxStep {
+    fn on_cf(
+        &mut self,
+        cfg: &Config,
+        data: &[u8],
+        buf: &mut [u8],
+        now: u64,
+        out: &mut LlFrame,
+    ) -> RxAction {
         if !self.active {
-            return RxStep::NONE;
+            return RxAction::NONE;
         }
         if cfg.has(CAN_ISOTP_FORCE_RXSTMIN) {
             if now.saturating_sub(self.last_cf) < u64::from(cfg.force_rx_stmin) {
-                return RxStep::NONE;
+                return RxAction::NONE;
             }
             self.last_cf = now;
         }
@@ -224,11 +280,11 @@ impl Rx {
         // without stopping the N_Cr timer (mainline cancels it and the
         // reception hangs until the next SF or FF).
         if data.len() > ll_dl || (data.len() < ll_dl && rest > ll_dl - ae - 1) {
-            return RxStep::NONE;
+            return RxAction::NONE;
         }
         if data[ae] & 0x0F != self.sn {
             self.active = false;
-            return self.step(None, TimerCmd::Cancel, Some(RxEvent::Error(EILSEQ)));
+            return self.step(false, TimerCmd::Cancel, Some(RxEvent::Error(EILSEQ)));
         }
         self.sn = (self.sn + 1) & 0x0F;
         let src = &data[ae + 1..];
@@ -236,28 +292,28 @@ impl Rx {
         let Some(dst) = buf.get_mut(self.idx..self.idx + n) else {
             // The caller passed a shorter buffer than at the FF.
             self.active = false;
-            return self.step(None, TimerCmd::Cancel, None);
+            return self.step(false, TimerCmd::Cancel, None);
         };
-        dst.copy_from_slice(&src[..n]);
+        copy_payload(dst, &src[..n]);
         self.idx += n;
         if self.idx >= self.len {
             self.active = false;
             if !pad_ok(cfg, data, ae + 1 + n) {
-                return self.step(None, TimerCmd::Cancel, Some(RxEvent::Error(EBADMSG)));
+                return self.step(false, TimerCmd::Cancel, Some(RxEvent::Error(EBADMSG)));
             }
-            return self.step(None, TimerCmd::Cancel, Some(RxEvent::Deliver(self.len)));
+            return self.step(false, TimerCmd::Cancel, Some(RxEvent::Deliver(self.len)));
         }
         let bs = cfg.rxfc.bs;
         if bs == 0 || {
             self.bs = self.bs.wrapping_add(1);
             self.bs < bs
         } {
-            return self.step(None, TimerCmd::Arm(now.saturating_add(FC_TIMEOUT_NS)), None);
+            return self.step(false, TimerCmd::Arm(now.saturating_add(FC_TIMEOUT_NS)), None);
         }
         if cfg.has(CAN_ISOTP_LISTEN_MODE) {
-            return self.step(None, TimerCmd::Cancel, None);
+            return self.step(false, TimerCmd::Cancel, None);
         }
-        self.send_fc(cfg, FS_CTS, now)
+        self.send_fc(cfg, FS_CTS, now, out)
     }
 
     /// The receive timer fired at `now`. Before the deadline (a stale
@@ -282,7 +338,8 @@ impl Rx {
     /// Abandons a running reception silently (close, device gone).
     pub fn abort(&mut self) -> RxStep {
         self.active = false;
-        self.step(None, TimerCmd::Cancel, None)
+        self.step(false, TimerCmd::Cancel, None)
+            .step(&LlFrame::default())
     }
 }
 

@@ -28,7 +28,7 @@ use super::isotp::{
     EAGAIN, EBADMSG, ECHO_TIMEOUT_NS, ECOMM, EMSGSIZE, FC_TIMEOUT_NS,
 };
 use super::isotp_pci::{
-    build_cf, build_ff, build_sf, parse_fc, sf_max, stmin_ns, stmin_valid, LlFrame, FS_CTS,
+    parse_fc, sf_max, stmin_ns, stmin_valid, write_cf, write_ff, write_sf, LlFrame, FS_CTS,
     FS_OVFLW, FS_WAIT,
 };
 
@@ -47,6 +47,43 @@ pub struct TxStep {
     /// the errno (`ECOMM`, `EBADMSG`, `EMSGSIZE`, `EINVAL`) that the
     /// socket reports as its error.
     pub done: Option<Result<(), i32>>,
+}
+
+/// What the caller does after a sender event of the `_into` methods
+/// ([`Tx::start_into`], [`Tx::on_fc_into`], [`Tx::on_echo_into`],
+/// [`Tx::on_timer_into`]): a [`TxStep`] whose frame the machine wrote
+/// into the caller's buffer (see [`LlFrame`]) instead of returning it, so
+/// that the per-frame path moves no frame by value. The module uses
+/// these; the by-value methods wrap them.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct TxAction {
+    /// The caller's buffer holds a frame to send now ([`TxStep::frame`]).
+    pub frame: bool,
+    /// See [`TxStep::wants_echo`].
+    pub wants_echo: bool,
+    /// See [`TxStep::timer`].
+    pub timer: TimerCmd,
+    /// See [`TxStep::done`].
+    pub done: Option<Result<(), i32>>,
+}
+
+impl TxAction {
+    const NONE: TxAction = TxAction {
+        frame: false,
+        wants_echo: false,
+        timer: TimerCmd::Keep,
+        done: None,
+    };
+
+    /// The by-value step, with the frame `f` the action wrote.
+    pub fn step(&self, f: &LlFrame) -> TxStep {
+        TxStep {
+            frame: self.frame.then_some(*f),
+            wants_echo: self.wants_echo,
+            timer: self.timer,
+            done: self.done,
+        }
+    }
 }
 
 impl TxStep {
@@ -145,13 +182,13 @@ impl Tx {
         cmd
     }
 
-    fn finish(&mut self, res: Result<(), i32>) -> TxStep {
+    fn finish(&mut self, res: Result<(), i32>) -> TxAction {
         self.st = St::Idle;
         self.echo_pending = false;
-        TxStep {
+        TxAction {
             done: Some(res),
             timer: self.timer(TimerCmd::Cancel),
-            ..TxStep::NONE
+            ..TxAction::NONE
         }
     }
 
@@ -163,6 +200,19 @@ impl Tx {
     /// single frame with only `CAN_ISOTP_SF_BROADCAST`. The caller checks
     /// `max_pdu_size` first ([`Config::check_send_len`]).
     pub fn start(&mut self, cfg: &Config, pdu: &[u8], now: u64) -> Result<TxStep, i32> {
+        let mut f = LlFrame::default();
+        let a = self.start_into(cfg, pdu, now, &mut f)?;
+        Ok(a.step(&f))
+    }
+
+    /// [`Tx::start`], the frame written into `out` ([`TxAction`]).
+    pub fn start_into(
+        &mut self,
+        cfg: &Config,
+        pdu: &[u8],
+        now: u64,
+        out: &mut LlFrame,
+    ) -> Result<TxAction, i32> {
         if !self.is_idle() {
             return Err(EAGAIN);
         }
@@ -172,17 +222,15 @@ impl Tx {
         cfg.check_send_len(pdu.len(), u32::MAX)?;
         self.len = pdu.len();
         self.bs = 0;
-        let (frame, wants_echo, timeout);
+        let (wants_echo, timeout);
         if pdu.len() <= sf_max(cfg) {
-            frame = build_sf(cfg, pdu);
+            write_sf(cfg, pdu, out);
             self.idx = pdu.len();
             self.st = St::Sending;
             wants_echo = true;
             timeout = ECHO_TIMEOUT_NS;
         } else {
-            let (f, n) = build_ff(cfg, pdu.len(), pdu);
-            frame = f;
-            self.idx = n;
+            self.idx = write_ff(cfg, pdu.len(), pdu, out);
             self.sn = 1;
             if cfg.bc_flags() == CAN_ISOTP_CF_BROADCAST {
                 // No flow control: STmin 0 (or forced), no blocks.
@@ -202,8 +250,8 @@ impl Tx {
             }
         }
         self.echo_pending = wants_echo;
-        Ok(TxStep {
-            frame: Some(frame),
+        Ok(TxAction {
+            frame: true,
             wants_echo,
             timer: self.timer(TimerCmd::Arm(now.saturating_add(timeout))),
             done: None,
@@ -212,18 +260,18 @@ impl Tx {
 
     /// Sends the next consecutive frame of `pdu` and arms the echo
     /// timeout.
-    fn send_cf(&mut self, cfg: &Config, pdu: &[u8], now: u64) -> TxStep {
+    fn send_cf(&mut self, cfg: &Config, pdu: &[u8], now: u64, out: &mut LlFrame) -> TxAction {
         let Some(rest) = pdu.get(self.idx..self.len).filter(|r| !r.is_empty()) else {
             // The caller passed another PDU than the one it started.
             return self.finish(Err(EINVAL));
         };
-        let (f, n) = build_cf(cfg, self.sn, rest);
+        let n = write_cf(cfg, self.sn, rest, out);
         self.idx += n;
         self.sn = (self.sn + 1) & 0x0F;
         self.bs = self.bs.wrapping_add(1);
         self.echo_pending = true;
-        TxStep {
-            frame: Some(f),
+        TxAction {
+            frame: true,
             wants_echo: true,
             timer: self.timer(TimerCmd::Arm(now.saturating_add(ECHO_TIMEOUT_NS))),
             done: None,
@@ -240,8 +288,21 @@ impl Tx {
     /// more; any number of wait frames is accepted, as in mainline),
     /// overflow (`EMSGSIZE`), anything else (`EBADMSG`).
     pub fn on_fc(&mut self, cfg: &Config, data: &[u8], pdu: &[u8], now: u64) -> TxStep {
+        let mut f = LlFrame::default();
+        self.on_fc_into(cfg, data, pdu, now, &mut f).step(&f)
+    }
+
+    /// [`Tx::on_fc`], the frame written into `out` ([`TxAction`]).
+    pub fn on_fc_into(
+        &mut self,
+        cfg: &Config,
+        data: &[u8],
+        pdu: &[u8],
+        now: u64,
+        out: &mut LlFrame,
+    ) -> TxAction {
         if self.st != St::WaitFirstFc && self.st != St::WaitFc {
-            return TxStep::NONE;
+            return TxAction::NONE;
         }
         let Ok(fc) = parse_fc(cfg, data) else {
             return self.finish(Err(EBADMSG));
@@ -265,11 +326,11 @@ impl Tx {
             FS_CTS => {
                 self.bs = 0;
                 self.st = St::Sending;
-                self.send_cf(cfg, pdu, now)
+                self.send_cf(cfg, pdu, now, out)
             }
-            FS_WAIT => TxStep {
+            FS_WAIT => TxAction {
                 timer: self.timer(TimerCmd::Arm(now.saturating_add(FC_TIMEOUT_NS))),
-                ..TxStep::NONE
+                ..TxAction::NONE
             },
             FS_OVFLW => self.finish(Err(EMSGSIZE)),
             _ => self.finish(Err(EBADMSG)),
@@ -282,8 +343,20 @@ impl Tx {
     /// goes out (at once with a zero gap, else when the timer expires).
     /// Ignored when no such echo is awaited.
     pub fn on_echo(&mut self, cfg: &Config, pdu: &[u8], now: u64) -> TxStep {
+        let mut f = LlFrame::default();
+        self.on_echo_into(cfg, pdu, now, &mut f).step(&f)
+    }
+
+    /// [`Tx::on_echo`], the frame written into `out` ([`TxAction`]).
+    pub fn on_echo_into(
+        &mut self,
+        cfg: &Config,
+        pdu: &[u8],
+        now: u64,
+        out: &mut LlFrame,
+    ) -> TxAction {
         if self.st != St::Sending || !self.echo_pending {
-            return TxStep::NONE;
+            return TxAction::NONE;
         }
         self.echo_pending = false;
         if self.idx >= self.len {
@@ -291,17 +364,17 @@ impl Tx {
         }
         if self.fc_bs != 0 && self.bs >= self.fc_bs {
             self.st = St::WaitFc;
-            return TxStep {
+            return TxAction {
                 timer: self.timer(TimerCmd::Arm(now.saturating_add(FC_TIMEOUT_NS))),
-                ..TxStep::NONE
+                ..TxAction::NONE
             };
         }
         if self.gap == 0 {
-            return self.send_cf(cfg, pdu, now);
+            return self.send_cf(cfg, pdu, now, out);
         }
-        TxStep {
+        TxAction {
             timer: self.timer(TimerCmd::Arm(now.saturating_add(self.gap))),
-            ..TxStep::NONE
+            ..TxAction::NONE
         }
     }
 
@@ -310,14 +383,26 @@ impl Tx {
     /// next consecutive frame goes out; while waiting for flow control or
     /// an echo the transfer ends with `ECOMM`.
     pub fn on_timer(&mut self, cfg: &Config, pdu: &[u8], now: u64) -> TxStep {
+        let mut f = LlFrame::default();
+        self.on_timer_into(cfg, pdu, now, &mut f).step(&f)
+    }
+
+    /// [`Tx::on_timer`], the frame written into `out` ([`TxAction`]).
+    pub fn on_timer_into(
+        &mut self,
+        cfg: &Config,
+        pdu: &[u8],
+        now: u64,
+        out: &mut LlFrame,
+    ) -> TxAction {
         match self.deadline {
             Some(d) if now >= d => {}
-            _ => return TxStep::NONE,
+            _ => return TxAction::NONE,
         }
         self.deadline = None;
         match self.st {
-            St::Idle => TxStep::NONE,
-            St::Sending if !self.echo_pending => self.send_cf(cfg, pdu, now),
+            St::Idle => TxAction::NONE,
+            St::Sending if !self.echo_pending => self.send_cf(cfg, pdu, now, out),
             _ => self.finish(Err(ECOMM)),
         }
     }

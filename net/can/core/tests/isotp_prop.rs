@@ -18,8 +18,9 @@
 
 use proptest::prelude::*;
 use rcan_core::isotp::*;
-use rcan_core::isotp_rx::{Rx, RxEvent, RxStep};
-use rcan_core::isotp_tx::{Tx, TxStep};
+use rcan_core::isotp_pci::LlFrame;
+use rcan_core::isotp_rx::{Rx, RxAction, RxEvent};
+use rcan_core::isotp_tx::{Tx, TxAction, TxStep};
 
 const US: u64 = 1_000;
 
@@ -335,7 +336,10 @@ enum Ev {
 
 /// Runs one transfer of `pdu` from A to B; `lose`: the index of a frame
 /// (A's and B's counted together, in sending order) the bus loses;
-/// `stale`: also call each armed timer once early.
+/// `stale`: also call each armed timer once early. Both sides write their
+/// frames into one buffer each, reused from frame to frame and never
+/// cleared (the `_into` methods, as the module calls them), so a byte a
+/// machine forgets to write shows up as a stale one.
 fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
     let fd = s.a.ll.is_fd();
     let mut tx = Tx::new();
@@ -355,12 +359,32 @@ fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
     let mut nframes = 0usize;
     let mut a_echo = vec![];
     let mut now = 0u64;
+    let mut fa = LlFrame {
+        len: 0,
+        data: [0xA7; 64],
+    };
+    let mut fb = LlFrame {
+        len: 0,
+        data: [0x5B; 64],
+    };
+    // A classic frame's data as the module sends it: the bytes behind
+    // `len` zeroed, whatever the buffer held.
+    fn classic_ok(f: &LlFrame) {
+        if f.len <= 8 {
+            let d = f.classic_data();
+            let n = usize::from(f.len);
+            assert_eq!(&d[..n], f.payload());
+            assert!(d[n..].iter().all(|&b| b == 0));
+        }
+    }
 
     // The effects of one step, common to both sides.
     macro_rules! a_step {
         ($st:expr) => {{
-            let st: TxStep = $st;
-            if let Some(f) = st.frame {
+            let st: TxAction = $st;
+            if st.frame {
+                let f = fa;
+                classic_ok(&f);
                 let k = w.a_sent.len();
                 w.a_sent.push((now, f.payload().to_vec()));
                 a_echo.push(st.wants_echo);
@@ -389,8 +413,10 @@ fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
     }
     macro_rules! b_step {
         ($st:expr) => {{
-            let st: RxStep = $st;
-            if let Some(f) = st.frame {
+            let st: RxAction = $st;
+            if st.frame {
+                let f = fb;
+                classic_ok(&f);
                 let k = w.b_sent.len();
                 w.b_sent.push((now, f.payload().to_vec()));
                 let lost = lose == Some(nframes);
@@ -428,7 +454,7 @@ fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
         }};
     }
 
-    a_step!(tx.start(&s.a, pdu, 0).unwrap());
+    a_step!(tx.start_into(&s.a, pdu, 0, &mut fa).unwrap());
     for _ in 0..1_000_000 {
         // The next thing to happen: a frame or a timer.
         let next_q = queue.iter().map(|e| (e.0, e.1)).min();
@@ -460,11 +486,17 @@ fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
         assert!(t >= now, "time went back");
         now = t;
         if ta == Some(t) {
-            a_step!(tx.on_timer(&s.a, pdu, now));
+            a_step!(tx.on_timer_into(&s.a, pdu, now, &mut fa));
             continue;
         }
         if tb == Some(t) {
-            b_step!(rx.on_timer(now));
+            let st = rx.on_timer(now);
+            assert_eq!(st.frame, None);
+            b_step!(RxAction {
+                frame: false,
+                timer: st.timer,
+                event: st.event
+            });
             continue;
         }
         let i = queue
@@ -476,14 +508,14 @@ fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
             Ev::ToB(k) => {
                 let data = w.a_sent[k].1.clone();
                 match route(&s.b, fd, &data, true, rx.is_idle()) {
-                    Route::Rx => b_step!(rx.on_frame(&s.b, &data, &mut buf, now)),
+                    Route::Rx => b_step!(rx.on_frame_into(&s.b, &data, &mut buf, now, &mut fb)),
                     Route::Tx => panic!("receiver got an FC"),
                     Route::Drop => panic!("receiver dropped {data:x?}"),
                 }
             }
             Ev::EchoA(k) => {
                 if a_echo[k] {
-                    a_step!(tx.on_echo(&s.a, pdu, now));
+                    a_step!(tx.on_echo_into(&s.a, pdu, now, &mut fa));
                 }
             }
             Ev::ToA(data) => {
@@ -495,7 +527,7 @@ fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
                     w.a_cts.push(now);
                 }
                 match route(&s.a, fd, &data, tx.is_idle(), true) {
-                    Route::Tx => a_step!(tx.on_fc(&s.a, &data, pdu, now)),
+                    Route::Tx => a_step!(tx.on_fc_into(&s.a, &data, pdu, now, &mut fa)),
                     r => panic!("sender routed an FC to {r:?}"),
                 }
             }
