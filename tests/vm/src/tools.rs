@@ -18,51 +18,6 @@ use crate::ctx::tool;
 /// a software-emulated VM loads the binaries over 9p.
 pub const TOOL_LIMIT: Duration = Duration::from_secs(60);
 
-/// What [`python_can`] puts before a script on the debug kernel.
-const PYTHON_CAN_DEBUG_PRELUDE: &str = r#"
-import sys, types, importlib.metadata
-_ep = importlib.metadata.entry_points
-importlib.metadata.entry_points = lambda **kw: {}
-_pr = sys.modules.get("pkg_resources")
-sys.modules["pkg_resources"] = types.SimpleNamespace(iter_entry_points=lambda *a, **kw: iter(()))
-import can
-importlib.metadata.entry_points = _ep
-if _pr is None:
-    del sys.modules["pkg_resources"]
-else:
-    sys.modules["pkg_resources"] = _pr
-"#;
-
-/// A python3 script that uses python-can, as it is run on this kernel.
-///
-/// On the release kernel and on mainline: `script` itself, what a user
-/// types. On the debug kernel: `script` after a prelude that imports
-/// python-can with its two plugin lookups answered "none" (the
-/// prelude's `import can` is the one that loads it; the script's own
-/// `import can` then finds it loaded). At import, python-can looks up
-/// third-party interface plugins (`can.interface` entry points) in
-/// every installed distribution's metadata, once through
-/// `importlib.metadata` and once by importing `pkg_resources`, which
-/// scans them all: some 80 directories read over 9p, the larger part
-/// of the import, which the debug kernel's KASAN-checked 9p and page
-/// cache paths make cost tens of CPU seconds per start
-/// (`bcm_python_can_send_periodic` 48 s there against 13 s on release).
-/// No plugin is installed on these machines, so the lookups find none
-/// either way; the interfaces the tests use (`socketcan`, `socketcand`)
-/// are python-can's own, in its built-in table, and the library is
-/// then imported and used exactly as a user's program uses it. Only
-/// the lookups' file reads are skipped, none of which reaches CAN code,
-/// and the real functions are put back after the import. The release
-/// and mainline stages run the scripts unchanged, plugin lookup
-/// included. (`isotp_python_uds` does the same on every kernel.)
-pub fn python_can(script: &str) -> String {
-    if crate::ctx::debug_kernel() {
-        format!("{PYTHON_CAN_DEBUG_PRELUDE}{script}")
-    } else {
-        script.to_string()
-    }
-}
-
 /// System calls a receiving program blocks in once its socket is set up
 /// (x86_64 numbers): read, poll, select, recvfrom, recvmsg, epoll_wait,
 /// pselect6, ppoll, epoll_pwait, recvmmsg, epoll_pwait2.

@@ -996,8 +996,7 @@ print("done", flush=True)
     } else {
         tools::TOOL_LIMIT
     };
-    let script = tools::python_can(script);
-    let out = tools::spawn("/usr/bin/python3", &["-c", &script], None)?.finish(limit);
+    let out = tools::spawn("/usr/bin/python3", &["-c", script], None)?.finish(limit);
     // The recorder ends at the marker, once every frame before it is read.
     let marked = match &out {
         Ok(o) if o.status.success() => wait_until(SETTLE, "the marker frame 0x7FE", || rec.is_finished()),

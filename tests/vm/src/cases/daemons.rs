@@ -469,10 +469,9 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
     c2.write_all(b"< rawmode >").or_fail("write")?;
     expect(&mut c2, &mut pend, "< ok >")?;
 
-    let py = tools::spawn("python3", &["-c", &tools::python_can(PY_CLIENT)], None)?;
-    // Importing python-can over 9p took over a minute on the debug
-    // kernel under TCG before its plugin lookups were skipped there
-    // (tools::python_can).
+    let py = tools::spawn("python3", &["-c", PY_CLIENT], None)?;
+    // Importing python-can over 9p takes over a minute on the debug
+    // kernel under TCG.
     wait_for(PY_LIMIT, "python-can client to send", || {
         if py.stdout_now().contains("SENT") {
             return Ok(Some(()));
