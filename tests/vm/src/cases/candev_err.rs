@@ -76,12 +76,14 @@ pub(super) fn sim2(
             && !std::path::Path::new("/sys/class/net/can2").exists(),
         "rcan_sja1000_sim cards=2 did not make exactly can0 and can1"
     );
+    let mut lines = Vec::new();
     for (dev, extra) in [("can0", can0_args), ("can1", can1_args)] {
         let mut a = vec!["link", "set", dev, "type", "can", "bitrate", "500000"];
         a.extend_from_slice(extra);
-        ip_ok(&a)?;
-        ip_ok(&["link", "set", dev, "up"])?;
+        lines.push(a);
+        lines.push(vec!["link", "set", dev, "up"]);
     }
+    super::candev::ip_batch_ok(&lines)?;
     Ok((ctx.ifindex("can0")?, ctx.ifindex("can1")?))
 }
 

@@ -67,14 +67,16 @@ pub(super) const FD_ON: &[&str] = &["bitrate", "500000", "dbitrate", "2000000", 
 /// `FD_ON`) on both cores and brings them up; returns their ifindexes.
 pub(super) fn ctucan2(ctx: &mut Ctx, args: &[&str]) -> Result<(u32, u32), String> {
     ctx.ctucan_cards()?;
-    for i in 0..2 {
-        let d = dev(i);
-        let mut a = vec!["link", "set", &d, "type", "can"];
+    let (d0, d1) = (dev(0), dev(1));
+    let set = |d| {
+        let mut a = vec!["link", "set", d, "type", "can"];
         a.extend_from_slice(args);
-        ip_ok(&a)?;
-        ctx.link_up(&d)?;
-    }
-    Ok((ctx.ifindex(&dev(0))?, ctx.ifindex(&dev(1))?))
+        a
+    };
+    super::candev::ip_batch_ok(&[set(d0.as_str()), set(d1.as_str())])?;
+    ctx.link_up(&d0)?;
+    ctx.link_up(&d1)?;
+    Ok((ctx.ifindex(&d0)?, ctx.ifindex(&d1)?))
 }
 
 /// Standard, extended and remote frames, DLC 0..8.

@@ -19,7 +19,6 @@
 //! at most 32 failed attempts 2 ms apart, 64 copies for the overrun), so
 //! the debug kernel runs them as they are.
 
-use super::candev::ip_ok;
 use super::candev_err::{
     check_same, details_have, err_socket, restarted_by_hand, send_one, shows, stats_are, until,
     BUSERROR, BUSOFF, CNT, CRTL, CRTL_RX_OVERFLOW, CRTL_TX_PASSIVE, CRTL_TX_WARNING, LOSTARB, PROT,
@@ -62,12 +61,14 @@ fn ctu2(ctx: &mut Ctx, can0_args: &[&str]) -> Result<(u32, u32), String> {
             && !std::path::Path::new("/sys/class/net/can2").exists(),
         "rcan_ctucanfd_sim cards=2 did not make exactly can0 and can1"
     );
+    let mut lines = Vec::new();
     for (dev, extra) in [("can0", can0_args), ("can1", &[][..])] {
         let mut a = vec!["link", "set", dev, "type", "can", "bitrate", "500000"];
         a.extend_from_slice(extra);
-        ip_ok(&a)?;
-        ip_ok(&["link", "set", dev, "up"])?;
+        lines.push(a);
+        lines.push(vec!["link", "set", dev, "up"]);
     }
+    super::candev::ip_batch_ok(&lines)?;
     Ok((ctx.ifindex("can0")?, ctx.ifindex("can1")?))
 }
 

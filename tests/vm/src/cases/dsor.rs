@@ -78,8 +78,9 @@ const PATIENT_PEER_ARGS: [&str; 6] = [
     "15000",
 ];
 
-/// Timers of [`dsor_concurrent_senders`]: T_ack stays the default 100 ms
-/// (so a late ack still causes retransmissions, which the test is there to
+/// Timers of [`dsor_concurrent_senders`] and of the multi-frame part of
+/// [`dsor_segm_all_lengths`]: T_ack stays the default 100 ms
+/// (so a late ack still causes retransmissions, which the tests are there to
 /// catch mishandled), but a frame may go unanswered for 100 ms x (100 + 1)
 /// = 10.1 s of guest time before its message fails, instead of the
 /// default 1.1 s. On a loaded host the guest's vCPUs stop for seconds
@@ -95,7 +96,7 @@ const PATIENT_PEER_ARGS: [&str; 6] = [
 /// T_reasm (15 s) must exceed the budget (dsor-wire.rst, "Timers and
 /// limits"). The default budget's give-up is checked by `dsor_errors`
 /// (absent node, default `max_retx`) and rcan-core's tests.
-const CONCURRENT_TIMERS: [&str; 2] = ["max_retx=100", "reasm_timeout_ms=15000"];
+const STALL_TIMERS: [&str; 2] = ["max_retx=100", "reasm_timeout_ms=15000"];
 
 /// Loads the stack with one canloop interface and rcan_dsor on it.
 fn dsor_stack(ctx: &mut Ctx, params: &[&str]) -> Result<u32, String> {
@@ -182,8 +183,45 @@ fn recv_msg(s: &DsorSocket) -> Result<(Vec<u8>, Option<DsorAddr>), String> {
 /// Segmented messages of every length class, 0 to 65535 bytes, checked
 /// byte for byte, with the source address; also send/write after
 /// connect, and MSG_TRUNC on a short buffer.
+///
+/// Two loads of rcan_dsor. The zero-length message goes first, at the
+/// default timers: a zero-length send waits until T_reasm after the
+/// module's load (the restart rule, dsor-wire.rst), 2 s by default.
+/// Then rcan_dsor is loaded again with [`STALL_TIMERS`] for every other
+/// length: each of those messages is many frames, and one stalled vCPU
+/// exhausted the default budget of 1.1 s per frame in a soak run on the
+/// debug kernel (ETIMEDOUT, as in `dsor_concurrent_senders`); with
+/// T_reasm at 15 s, the zero-length message would have waited 15 s.
 fn dsor_segm_all_lengths(ctx: &mut Ctx) -> TestResult {
-    dsor_stack(ctx, &[])?;
+    let to = DsorAddr::Segm {
+        prio: 0x40,
+        node: 0,
+        id: 0x1234_5678,
+    };
+    {
+        dsor_stack(ctx, &[])?;
+        let rx = sock()?;
+        rx.bind(&DsorAddr::Segm {
+            prio: 0,
+            node: DSOR_NODE_ANY,
+            id: 0x1234_5678,
+        })
+        .or_fail("bind")?;
+        let tx = sock()?;
+        let n = tx.send_to(&[], &to).or_fail("sendto 0 bytes")?;
+        ensure!(n == 0, "sendto returned {n} for 0 bytes");
+        let (got, from) = recv_msg(&rx)?;
+        ensure!(got.is_empty(), "0-byte message arrived as {} bytes", got.len());
+        ensure!(from == Some(to), "source address {from:?}");
+    }
+    // The sockets are closed: rcan_dsor unloads once their last
+    // reference is gone.
+    wait_for(SETTLE, "rcan_dsor to unload after the zero-length step", || {
+        Ok(ctx.rmmod(Module::Dsor).ok())
+    })?;
+    let mut p = vec!["ifname=can0"];
+    p.extend_from_slice(&STALL_TIMERS);
+    ctx.insmod(Module::Dsor, &p)?;
     let rx = sock()?;
     rx.bind(&DsorAddr::Segm {
         prio: 0,
@@ -192,13 +230,8 @@ fn dsor_segm_all_lengths(ctx: &mut Ctx) -> TestResult {
     })
     .or_fail("bind")?;
     let tx = sock()?;
-    let to = DsorAddr::Segm {
-        prio: 0x40,
-        node: 0,
-        id: 0x1234_5678,
-    };
     let mut lens = vec![
-        0usize, 1, 7, 8, 9, 15, 16, 17, 63, 64, 65, 1000, 4096, 65535,
+        1usize, 7, 8, 9, 15, 16, 17, 63, 64, 65, 1000, 4096, 65535,
     ];
     if debug_kernel() {
         // KASAN and lockdep make each frame ~10x slower: the longest
@@ -334,7 +367,7 @@ fn dsor_port_both_ways(ctx: &mut Ctx) -> TestResult {
 /// (`taskset -c 0 bash tools/testing/rcan/vm-run.sh ...`), which makes
 /// late acks, retransmissions and a late CPU backlog likely.
 fn dsor_concurrent_senders(ctx: &mut Ctx) -> TestResult {
-    dsor_stack(ctx, &CONCURRENT_TIMERS)?;
+    dsor_stack(ctx, &STALL_TIMERS)?;
     let rx = sock()?;
     rx.bind(&DsorAddr::Segm {
         prio: 0,

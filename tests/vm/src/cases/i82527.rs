@@ -322,11 +322,13 @@ fn burst_one(
 fn i82527_burst(ctx: &mut Ctx) -> TestResult {
     let n = burst_len();
     let (i0, i1) = sim2(ctx)?;
+    let mut lines = Vec::new();
     for d in ["can0", "can1"] {
-        super::candev::ip_ok(&["link", "set", d, "down"])?;
-        super::candev::ip_ok(&["link", "set", d, "type", "can", "bitrate", "1000000"])?;
-        super::candev::ip_ok(&["link", "set", d, "up"])?;
+        lines.push(vec!["link", "set", d, "down"]);
+        lines.push(vec!["link", "set", d, "type", "can", "bitrate", "1000000"]);
+        lines.push(vec!["link", "set", d, "up"]);
     }
+    super::candev::ip_batch_ok(&lines)?;
     let big = |s: &socketcan::CanSocket| -> TestResult {
         crate::sys::set_rcvbufforce(s, 64 << 20).or_fail("SO_RCVBUFFORCE")
     };

@@ -94,12 +94,14 @@ fn load(ctx: &mut Ctx) -> TestResult {
 /// Gives can0 `bitrate 500000` and `can0_args`, can1 `bitrate 500000`,
 /// brings both up, and returns their ifindexes.
 fn up2(ctx: &mut Ctx, can0_args: &[&str]) -> Result<(u32, u32), String> {
+    let mut lines = Vec::new();
     for (dev, extra) in [("can0", can0_args), ("can1", &[][..])] {
-        let mut a = vec!["bitrate", "500000"];
+        let mut a = vec!["link", "set", dev, "type", "can", "bitrate", "500000"];
         a.extend_from_slice(extra);
-        set_can(dev, &a)?;
-        ip_ok(&["link", "set", dev, "up"])?;
+        lines.push(a);
+        lines.push(vec!["link", "set", dev, "up"]);
     }
+    super::candev::ip_batch_ok(&lines)?;
     Ok((ctx.ifindex("can0")?, ctx.ifindex("can1")?))
 }
 
