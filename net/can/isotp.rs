@@ -460,8 +460,9 @@ impl CanProtocol for IsotpProto {
 
     /// NET_RX softirq, RCU read side (mainline `isotp_rcv` and
     /// `isotp_rcv_echo`): frames on `rx_id` go to the machines as
-    /// `route()` says; our own frames on `tx_id` coming back are the
-    /// echoes the sender waits for.
+    /// `route()` says; of our own frames on `tx_id` coming back, the
+    /// sender takes the echo it waits for (not those of the receiver's
+    /// flow control frames).
     fn rx(sk: &SockView<Self>, skb: RxSkb<'_>, _cookie: u32) {
         let s = skb.skb();
         let own = s.sent_by(sk);
@@ -486,8 +487,12 @@ impl CanProtocol for IsotpProto {
             }
             let mut frame = false;
             if own {
+                // Our own frame on tx_id: the echo the sender waits for,
+                // or one of the receiver's flow control frames (the
+                // machine tells them apart by their first bytes, as
+                // mainline's `cfecho`).
                 if can_id == e.addr.tx_id {
-                    let a = e.tx.on_echo_into(&e.cfg, &e.txbuf, now, &mut e.frame);
+                    let a = e.tx.on_own_frame_into(&e.cfg, data, &e.txbuf, now, &mut e.frame);
                     e.tx_step(a.done, &mut out);
                     frame = a.frame;
                 }

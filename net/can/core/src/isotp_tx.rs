@@ -127,6 +127,12 @@ pub struct Tx {
     gap: u64,
     /// A frame whose echo we wait for is out.
     echo_pending: bool,
+    /// The first bytes of that frame (at most 4, `echo_tag_len`), which
+    /// its echo must repeat: the socket's own flow control frames go out
+    /// on the same identifier (the receiver's, for the other direction)
+    /// and their echoes are not this one's (mainline's `cfecho`).
+    echo_tag: [u8; 4],
+    echo_tag_len: u8,
     /// When the timer expires, if armed.
     deadline: Option<u64>,
 }
@@ -149,8 +155,28 @@ impl Tx {
             fc_bs: 0,
             gap: 0,
             echo_pending: false,
+            echo_tag: [0; 4],
+            echo_tag_len: 0,
             deadline: None,
         }
+    }
+
+    /// Records that `f`, just written, goes out and its echo is awaited.
+    fn await_echo(&mut self, f: &LlFrame) {
+        let n = usize::from(f.len).min(4);
+        self.echo_tag[..n].copy_from_slice(&f.data[..n]);
+        self.echo_tag_len = n as u8;
+        self.echo_pending = true;
+    }
+
+    /// Whether `echo`, the payload of one of this socket's own frames on
+    /// its transmit identifier coming back, is the echo of the frame we
+    /// wait for (not, say, of a flow control frame our receiver sent for
+    /// the other direction, nor a late one of an earlier transfer's
+    /// frame: its first bytes, the PCI with the sequence number, differ).
+    pub fn echo_matches(&self, echo: &[u8]) -> bool {
+        let n = usize::from(self.echo_tag_len);
+        self.echo_pending && echo.get(..n) == Some(&self.echo_tag[..n])
     }
 
     /// Whether no transfer is running (a new `sendmsg` may start one;
@@ -249,7 +275,11 @@ impl Tx {
                 timeout = FC_TIMEOUT_NS;
             }
         }
-        self.echo_pending = wants_echo;
+        if wants_echo {
+            self.await_echo(out);
+        } else {
+            self.echo_pending = false;
+        }
         Ok(TxAction {
             frame: true,
             wants_echo,
@@ -269,7 +299,7 @@ impl Tx {
         self.idx += n;
         self.sn = (self.sn + 1) & 0x0F;
         self.bs = self.bs.wrapping_add(1);
-        self.echo_pending = true;
+        self.await_echo(out);
         TxAction {
             frame: true,
             wants_echo: true,
@@ -376,6 +406,33 @@ impl Tx {
             timer: self.timer(TimerCmd::Arm(now.saturating_add(self.gap))),
             ..TxAction::NONE
         }
+    }
+
+    /// One of this socket's own frames on its transmit identifier came
+    /// back (payload `echo`, address byte included) at `now`: the echo
+    /// [`Tx::on_echo`] waits for if it is that frame's
+    /// ([`Tx::echo_matches`]), else nothing (the echo of a flow control
+    /// frame the socket's receiver sent). What the module calls for
+    /// every own frame.
+    pub fn on_own_frame(&mut self, cfg: &Config, echo: &[u8], pdu: &[u8], now: u64) -> TxStep {
+        let mut f = LlFrame::default();
+        self.on_own_frame_into(cfg, echo, pdu, now, &mut f).step(&f)
+    }
+
+    /// [`Tx::on_own_frame`], the frame written into `out` ([`TxAction`]).
+    #[inline]
+    pub fn on_own_frame_into(
+        &mut self,
+        cfg: &Config,
+        echo: &[u8],
+        pdu: &[u8],
+        now: u64,
+        out: &mut LlFrame,
+    ) -> TxAction {
+        if !self.echo_matches(echo) {
+            return TxAction::NONE;
+        }
+        self.on_echo_into(cfg, pdu, now, out)
     }
 
     /// The transmit timer fired at `now`. Before the deadline (a stale
@@ -512,6 +569,53 @@ mod tests {
         let f = s.frame.unwrap();
         assert_eq!(f.payload(), &[0x23, 20, 21, 22]);
         let s = tx.on_echo(&c, &pdu, 12 * MS);
+        assert_eq!(s.done, Some(Ok(())));
+    }
+
+    /// The socket's own flow control frame (its receiver, for the other
+    /// direction, sends on the same identifier) comes back while a CF's
+    /// echo is awaited: not that echo. Before, any own frame on the
+    /// identifier was taken as it, and the next CF went out early (the
+    /// STmin gap started from the FC's echo).
+    #[test]
+    fn own_fc_echo_is_not_the_cf_echo() {
+        let c = cfg();
+        let pdu: Vec<u8> = (0..23u8).collect();
+        let mut tx = Tx::new();
+        tx.start(&c, &pdu, 0).unwrap();
+        // The FF's echo (not awaited) is no echo either.
+        assert!(!tx.echo_matches(&[0x10, 23, 0, 1, 2, 3, 4, 5]));
+        let s = tx.on_fc(&c, &[0x30, 0, 5], &pdu, MS);
+        let cf = s.frame.unwrap();
+        assert_eq!(cf.payload()[0], 0x21);
+        // Our receiver's FC (continue, BS 4) echoed: ignored, still waiting.
+        let fc = [0x30, 4, 0, 0, 0, 0, 0, 0];
+        assert!(!tx.echo_matches(&fc));
+        assert_eq!(tx.on_own_frame(&c, &fc, &pdu, 2 * MS), TxStep::NONE);
+        // The CF's own echo: the 5 ms gap starts from it.
+        assert!(tx.echo_matches(cf.payload()));
+        let s = tx.on_own_frame(&c, cf.payload(), &pdu, 3 * MS);
+        assert_eq!((s.frame, s.timer), (None, TimerCmd::Arm(8 * MS)));
+        // Its late duplicate is no echo of the next CF.
+        let s = tx.on_timer(&c, &pdu, 8 * MS);
+        let cf2 = s.frame.unwrap();
+        assert_eq!(cf2.payload()[0], 0x22);
+        assert_eq!(tx.on_own_frame(&c, cf.payload(), &pdu, 9 * MS), TxStep::NONE);
+        let s = tx.on_own_frame(&c, cf2.payload(), &pdu, 10 * MS);
+        assert_eq!((s.frame, s.timer), (None, TimerCmd::Arm(15 * MS)));
+    }
+
+    /// A single frame's echo is matched too (short frames: the tag is the
+    /// frame's whole payload).
+    #[test]
+    fn single_frame_echo_matched() {
+        let c = cfg();
+        let mut tx = Tx::new();
+        let s = tx.start(&c, &[7], 0).unwrap();
+        let sf = s.frame.unwrap();
+        assert!(!tx.echo_matches(&[0x30, 0, 0]));
+        assert!(!tx.echo_matches(&[]));
+        let s = tx.on_own_frame(&c, sf.payload(), &[7], 1);
         assert_eq!(s.done, Some(Ok(())));
     }
 

@@ -514,9 +514,15 @@ fn run(s: &Setup, pdu: &[u8], lose: Option<usize>, stale: bool) -> Wire {
                 }
             }
             Ev::EchoA(k) => {
-                if a_echo[k] {
-                    a_step!(tx.on_echo_into(&s.a, pdu, now, &mut fa));
+                // Every frame of A comes back to it, as in the module; the
+                // machine takes only the echo it waits for.
+                let echo = w.a_sent[k].1.clone();
+                let before = tx;
+                let a = tx.on_own_frame_into(&s.a, &echo, pdu, now, &mut fa);
+                if !a_echo[k] {
+                    assert_eq!(tx, before, "an echo not asked for moved the sender");
                 }
+                a_step!(a);
             }
             Ev::ToA(data) => {
                 if s.cf_broadcast {
