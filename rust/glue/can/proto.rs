@@ -462,7 +462,9 @@ impl<T: CanProtocol> ProtoModule<T> {
         };
         let r = self.register_all(name);
         if r.is_err() {
-            PROTO_REGS.take(me, Self::unregister_erased);
+            // SAFETY: `register_all` failed and undid what it had made, so
+            // nothing is left for the exit to undo.
+            unsafe { PROTO_REGS.take(me, Self::unregister_erased) };
         }
         r
     }
@@ -941,7 +943,8 @@ impl<T: KernelRx> Drop for KernelRxReg<T> {
         // SAFETY: removal (NULL spec) of the receiver registered with this
         // func and data; never fails.
         unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, core::ptr::null()) };
-        KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>);
+        // SAFETY: the registration was removed just above.
+        unsafe { KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>) };
     }
 }
 
@@ -1018,7 +1021,8 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
     let ret = unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, &spec) };
     if let Err(e) = crate::glue::to_result(ret) {
         if new {
-            KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>);
+            // SAFETY: the registration failed: there is nothing to undo.
+            unsafe { KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>) };
         }
         return Err(e);
     }
