@@ -1163,8 +1163,14 @@ pub(in crate::glue) unsafe fn release_then<T: Proto>(
     };
     T::release(&sk);
     after(&sk);
-    // SAFETY: the protocol removed every path to the sock in release();
-    // orphan it, detach it from the socket and drop the socket's reference.
+    // Orphan the sock, detach it from the socket and drop the socket's
+    // reference. This does not rest on what `T::release` did: every other
+    // holder of the sock has a reference of its own (a subscription's
+    // `sock_hold`, a `SockRef`), and the borrows lent to `T::release` and
+    // `after` have ended; an orphaned sock stays valid for those holders,
+    // as for mainline's.
+    // SAFETY: the socket layer's release call, once (our contract): the
+    // socket's own reference on `sk` is the one dropped here.
     unsafe {
         bindings::rcan_sock_orphan(sk.as_ptr());
         (*sock).sk = core::ptr::null_mut();
