@@ -680,11 +680,11 @@ unsafe extern "C" fn notifier_trampoline<T: CanProtocol>(
     // SAFETY: netdevice notifiers receive a netdev_notifier_info naming a
     // device that stays registered for the call.
     let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
-    // SAFETY: the notifier chain runs with RTNL held (call_netdevice_
-    // notifiers asserts it) for this whole call, and the only proof made
-    // here is this one, kept in this frame: `netdev_event` only gets
-    // `&Sockets`, and it cannot make a proof of its own (`Rtnl::lock`
-    // would deadlock, not alias).
+    // The only proof made here is this one, kept in this frame:
+    // `netdev_event` only gets `&Sockets`, and it cannot make a proof of
+    // its own (`Rtnl::lock` would deadlock, not alias).
+    // SAFETY: the notifier chain runs with RTNL held for this whole call
+    // (call_netdevice_notifiers asserts it); one proof (above).
     let mut held = unsafe { Rtnl::assert_held() };
     let net = dev.net(&RcuReadGuard::new()).as_ptr().cast_const();
     let sockets = Sockets::<T> {
