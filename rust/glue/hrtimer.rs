@@ -298,21 +298,28 @@ impl Core {
 /// Idempotent. Module exit ([`Scoped`](super::module::Scoped)), process
 /// context: waits for running callbacks.
 pub(super) fn kill_all() {
-    let head = TIMERS.load(Ordering::Acquire);
+    let head = first(&TIMERS);
     for_each(head, Core::forbid_start);
     for_each(head, |c| {
         c.cancel();
     });
 }
 
-fn for_each(head: *mut Core, mut f: impl FnMut(&Core)) {
-    let mut p = head;
-    while !p.is_null() {
-        // SAFETY: the list holds only `&'static Core`s (pushed by `init`
-        // from `&'static self`), never unlinked.
-        let c: &'static Core = unsafe { &*p };
-        f(c);
-        p = c.next.load(Ordering::Acquire);
+/// The timer a link of the module's list (`TIMERS` or a `Core::next`)
+/// points at, if any.
+fn first(link: &AtomicPtr<Core>) -> Option<&'static Core> {
+    let p = link.load(Ordering::Acquire);
+    // SAFETY: the list's links hold only null or `&'static Core`s (pushed
+    // by `init` from `&'static self`), never unlinked.
+    unsafe { p.as_ref() }
+}
+
+/// Calls `f` on `head` and every timer after it on the module's list.
+fn for_each(head: Option<&'static Core>, mut f: impl FnMut(&Core)) {
+    let mut c = head;
+    while let Some(t) = c {
+        f(t);
+        c = first(&t.next);
     }
 }
 

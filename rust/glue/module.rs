@@ -255,7 +255,7 @@ impl<const N: usize> ExitTable<N> {
         sweep: fn(),
     ) -> Result<bool> {
         let undo = undo as *mut ();
-        if self.find(key, undo).is_some() {
+        if self.find(key as usize, undo as usize).is_some() {
             return Ok(false);
         }
         let slot = self
@@ -279,17 +279,25 @@ impl<const N: usize> ExitTable<N> {
         Ok(true)
     }
 
-    fn find(&self, key: *mut (), undo: *mut ()) -> Option<&ExitSlot> {
+    /// The slot recording `(key, undo)`, both compared as addresses only.
+    fn find(&self, key: usize, undo: usize) -> Option<&ExitSlot> {
         self.slots.iter().find(|s| {
-            s.key.load(Ordering::Acquire) == key && s.undo.load(Ordering::Acquire) == undo
+            s.key.load(Ordering::Acquire) as usize == key
+                && s.undo.load(Ordering::Acquire) as usize == undo
         })
     }
 
     /// Takes back the slot of `(key, undo)`: true if it was recorded (the
     /// caller now undoes the registration itself, and the exit will not),
     /// false if it was not or the exit took it. Any context.
-    pub(super) fn take(&self, key: *mut (), undo: unsafe fn(*mut ())) -> bool {
-        match self.find(key, undo as *mut ()) {
+    ///
+    /// # Safety
+    ///
+    /// Taking the slot takes the exit's duty: when this returns true, the
+    /// registration `(key, undo)` is undone by the caller (or was never
+    /// made), before the module's memory goes.
+    pub(super) unsafe fn take(&self, key: *mut (), undo: unsafe fn(*mut ())) -> bool {
+        match self.find(key as usize, undo as usize) {
             Some(s) => s
                 .key
                 .compare_exchange(key, core::ptr::null_mut(), Ordering::AcqRel, Ordering::Acquire)

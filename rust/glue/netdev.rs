@@ -187,11 +187,11 @@ impl NetDev {
         let src = src.cast::<u8>();
         // The last byte is always NUL (names are shorter than IFNAMSIZ).
         for i in 0..IFNAMSIZ - 1 {
+            // A volatile byte read is READ_ONCE, which may race with the
+            // plain stores of a rename (the kernel's memory model, not
+            // Rust's references: no `&` to the array is made).
             // SAFETY: `src + i` lies in the array (i < IFNAMSIZ, its
-            // length); a volatile byte read is
-            // READ_ONCE, which may race with the plain stores of a rename
-            // (the kernel's memory model, not Rust's references: no `&`
-            // to the array is made).
+            // length).
             let b = unsafe { core::ptr::read_volatile(src.add(i)) };
             if b == 0 {
                 break;
@@ -536,9 +536,10 @@ impl Napi {
         // invariant), and `&self` does not outlive the poll; the skb is
         // handed to the kernel right below.
         unsafe { skb.set_dev(self.dev.as_ref()) };
-        // SAFETY: we are in a NAPI poll (only the glue makes a `Napi`, and
-        // only there): softirq context with interrupts enabled, which is
-        // what netif_receive_skb requires; it consumes the reference; its
+        // We are in a NAPI poll (only the glue makes a `Napi`, and only
+        // there): softirq context with interrupts enabled, which is what
+        // netif_receive_skb requires.
+        // SAFETY: so the call may be made; it consumes the reference; its
         // `dev` is the polled device (just set).
         unsafe { bindings::netif_receive_skb(skb.into_raw()) };
     }

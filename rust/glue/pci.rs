@@ -277,7 +277,8 @@ impl<T: Driver> Registration<T> {
             ))
         };
         if ret.is_err() {
-            PCI_DRIVERS.take(me, unregister_erased);
+            // SAFETY: the registration failed: there is nothing to undo.
+            unsafe { PCI_DRIVERS.take(me, unregister_erased) };
         }
         ret.map(|_| ())
     }
@@ -286,7 +287,8 @@ impl<T: Driver> Registration<T> {
     /// Module exit; the glue's exit does it for a module that does not.
     pub(crate) fn unregister(&'static self) {
         let me = self.drv.get().cast::<()>();
-        if PCI_DRIVERS.take(me, unregister_erased) {
+        // SAFETY: a true result is followed by the unregistration below.
+        if unsafe { PCI_DRIVERS.take(me, unregister_erased) } {
             // SAFETY: registered (the slot was ours to take).
             unsafe { unregister_erased(me) };
         }

@@ -187,12 +187,12 @@ impl<A: Access> Skb<A> {
     /// The linear data (the whole skb for the linear skbs CAN uses).
     #[inline]
     pub(crate) fn data(&self) -> &[u8] {
+        // Nobody writes these bytes meanwhile: a writer needs a
+        // `UniqueSkb`, the only reference to an uncloned skb, so while we
+        // hold ours there is none (and if we are that one, `&self` excludes
+        // `&mut self`).
         // SAFETY: `data` points to `len - data_len` readable bytes (the
-        // linear part), valid as long as we hold the reference; `&self`
-        // ties the slice to that. Nobody writes them meanwhile: a writer
-        // needs a `UniqueSkb`, the only reference to an uncloned skb, so
-        // while we hold ours there is none (and if we are that one, `&self`
-        // excludes `&mut self`).
+        // linear part), valid while we hold the reference (`&self`).
         unsafe {
             let skb = &*self.as_ptr();
             let head_len = (skb.len - skb.data_len) as usize;
@@ -516,11 +516,11 @@ impl<A: Exclusive> Skb<A> {
     fn mark_can(&mut self, pkt_type: u8) {
         let eth_p = self.can_eth_p();
         let skb = self.as_ptr();
+        // `data` and `head` point into the same buffer, `data` at most 64
+        // KiB past `head` (the kernel's own `u16` header offsets rely on
+        // that).
         // SAFETY: the skb is valid and ours alone (type invariant,
-        // `Exclusive`; `&mut self`), so nobody else reads or writes these
-        // header fields meanwhile; `data` and `head` point into the same
-        // buffer, `data` at most 64 KiB past `head` (the kernel's own `u16`
-        // header offsets rely on that).
+        // `Exclusive`; `&mut self`): nobody else touches these fields.
         unsafe {
             let off = (*skb).data.offset_from((*skb).head) as u16;
             let h = (*skb).__bindgen_anon_4.__bindgen_anon_1.as_mut();
@@ -750,11 +750,11 @@ impl UniqueSkb {
         // `check_copy_size`'s `INT_MAX` limit. (Its object-size test is
         // the tailroom test here; `check_object_size` is empty without
         // CONFIG_HARDENED_USERCOPY.)
+        // The bounds are checked before anything is written, so `dst` and
+        // the `len` bytes after it lie in the head buffer's tailroom
+        // (`tail` and `end` are offsets from `head`).
         // SAFETY: a valid skb, ours alone and not cloned (`Unique`, `&mut
-        // self`: nobody else moves its tail or reads its data or
-        // tailroom); the bounds are checked before anything is written, so
-        // `dst` and the `len` bytes after it lie in the head buffer's
-        // tailroom (`tail` and `end` are offsets from `head`).
+        // self`: nobody else moves its tail or reads its data or tailroom).
         let dst = unsafe {
             let skb = &*self.as_ptr();
             if skb.data_len != 0
@@ -765,15 +765,14 @@ impl UniqueSkb {
             }
             skb.head.add(skb.tail as usize)
         };
+        // On a short copy the bytes it wrote stay outside the data.
         // SAFETY: `dst` points to `len` writable bytes of the tailroom
-        // (above), outside the data, of an skb nobody else touches
-        // (`Unique`); on a short copy the bytes it wrote stay outside the
-        // data.
+        // (above), outside the data, of an skb nobody else touches.
         unsafe { msg.copy_from_user_raw(dst, len) }?;
-        // SAFETY: as above, nothing moved the tail since the bounds test
-        // (`&mut self`); the `len` bytes after it are now initialised, and
         // `len` fits an `int`, so neither `tail` nor `len` overflows (both
         // stay below `end`, a `u32` offset).
+        // SAFETY: as above, nothing moved the tail since the bounds test
+        // (`&mut self`); the `len` bytes after it are now initialised.
         unsafe {
             let skb = &mut *self.as_ptr();
             skb.tail += len as u32;
@@ -785,10 +784,10 @@ impl UniqueSkb {
     /// The linear data, writable.
     #[inline]
     pub(crate) fn data_mut(&mut self) -> &mut [u8] {
+        // `&mut self` lends the slice for as long as no other use of this
+        // skb; the head holds `len - data_len` initialised bytes from `data`.
         // SAFETY: we own the only reference and no clone shares the data
-        // (`Unique`), and `&mut self` lends the slice for as long as no
-        // other use of this skb; the head holds `len - data_len`
-        // initialised bytes from `data`.
+        // (`Unique`).
         unsafe {
             let skb = &*self.as_ptr();
             let head_len = (skb.len - skb.data_len) as usize;
@@ -860,10 +859,10 @@ impl Skb {
             return Some(self);
         }
         let u = self.unshare()?;
+        // The helper checks the headroom before writing; `dev` is the
+        // transmitting device, live for the call.
         // SAFETY: a valid skb, ours alone and not cloned (`Unique`), so the
-        // helper may write its headroom and header fields; it
-        // checks the headroom before writing; `dev` is the transmitting
-        // device, live for the call.
+        // helper may write its headroom and header fields.
         let ok = unsafe { bindings::rcan_can_skb_tx_prepare(u.as_ptr(), dev.as_ptr()) };
         ok.then(|| u.into_shared())
     }

@@ -196,11 +196,12 @@ impl OptOut {
         if src.len() > room {
             return Err(code::EINVAL);
         }
+        // `src.len()` is at most the size of the user's buffer as the user
+        // gave it (`room`, checked above), so the copy stays inside that
+        // buffer; copy_to_user checks that the range is user memory
+        // (access_ok) and faults are EFAULT.
         // SAFETY: `src` is readable for `src.len()` bytes; `val` is the
-        // user pointer of the call, and `src.len()` is at most the size of
-        // the user's buffer as the user gave it (`room`, checked above), so
-        // the copy stays inside that buffer; copy_to_user checks that the
-        // range is user memory (access_ok) and faults are EFAULT.
+        // user pointer of the call.
         let ret = unsafe {
             bindings::rcan_copy_to_user(self.val.cast(), src.as_ptr().cast(), src.len() as _)
         };
@@ -343,10 +344,10 @@ impl<T: Proto> SockView<T> {
     /// reference: the value as of some moment, as mainline's `%pK` of
     /// `sk->sk_socket` prints it.
     pub(in crate::glue) fn socket_addr(&self) -> usize {
+        // A volatile read is READ_ONCE, paired with the WRITE_ONCE of every
+        // writer (`sk_set_socket`): no data race in the kernel's model.
         // SAFETY: live sock (type invariant), so the field is valid to
-        // read; a volatile read is READ_ONCE, paired with the WRITE_ONCE
-        // of every writer (`sk_set_socket`), so it is no data race in the
-        // kernel's memory model.
+        // read.
         let p = unsafe { core::ptr::read_volatile(core::ptr::addr_of!((*self.sk).sk_socket)) };
         p as usize
     }
@@ -394,13 +395,13 @@ impl<T: Proto> SockView<T> {
     /// positive errno; 0: none) and clears it, so that the next call,
     /// `poll` and `SO_ERROR` do not see it again. Any context.
     pub(crate) fn take_error(&self) -> i32 {
-        // SAFETY: live sock (type invariant), so `sk_err`, an aligned
-        // `int` of it, is valid for the sock's life, which outlives this
-        // call. The writers of a PF_CAN socket's `sk_err` are
+        // The writers of a PF_CAN socket's `sk_err` are
         // `rcan_sk_report_error` (WRITE_ONCE) and `sock_error` (`xchg`),
         // its readers use READ_ONCE (`sock_error`, `datagram_poll`): all
         // marked accesses, so viewing it as an `AtomicI32` for this call
         // races with no plain access.
+        // SAFETY: live sock (type invariant), so `sk_err`, an aligned `int`
+        // of it, is valid for the sock's life, which outlives this call.
         let err = unsafe {
             core::sync::atomic::AtomicI32::from_ptr(core::ptr::addr_of_mut!((*self.sk).sk_err))
         };
@@ -598,15 +599,15 @@ impl Msg {
     /// `None` in a recvmsg, whose `msg_name` is the buffer for the source
     /// address, not an address.
     pub(crate) fn name(&self) -> Option<&[u8]> {
-        // SAFETY: a valid msghdr of the current call (type invariant).
         // In a sendmsg (a source iterator) `msg_name`, if set, is an
         // address of `msg_namelen` initialised bytes: the socket layer's
         // copy in a sockaddr_storage (`move_addr_to_kernel` refuses a
         // longer one), or a `kernel_sendmsg` caller's address of that
         // length; the cap is the socket layer's. In a recvmsg it is a
         // buffer the caller may not have initialised (with
-        // `kernel_recvmsg`, `msg_namelen` is whatever the caller left), so
-        // no slice is made over it.
+        // `kernel_recvmsg`, `msg_namelen` is whatever the caller left).
+        // SAFETY: a valid msghdr of the current call (type invariant); a
+        // slice only over a sendmsg's name (above).
         unsafe {
             let m = &*self.0;
             if m.msg_name.is_null() || !m.msg_iter.data_source {
@@ -623,10 +624,8 @@ impl Msg {
     /// `msg_namelen` says how many.
     #[inline]
     pub(crate) fn set_name(&mut self, addr: &[u8]) {
-        // SAFETY: a valid msghdr of the current call, used by nobody else
-        // meanwhile (type invariant). `msg_name` is NULL or the buffer the
-        // recvmsg's caller gave for the source address, and `msg_namelen`
-        // is not its size (the socket layer sets it to 0 before calling
+        // `msg_name` is NULL or the buffer the recvmsg's caller gave for
+        // the source address, and `msg_namelen` is not its size (the socket layer sets it to 0 before calling
         // us), so the bound comes from what every caller gives: the socket
         // layer's recvmsg paths (`____sys_recvmsg`, io_uring) a
         // `sockaddr_storage` ("We assume all kernel code knows the size of
@@ -635,6 +634,9 @@ impl Msg {
         // type is `struct sockaddr`. We write at most `NAME_ROOM`, that
         // size: within any such buffer, and less than mainline's own PF_CAN
         // protocols write there (isotp 16 bytes, j1939 24).
+        // SAFETY: a valid msghdr of the current call, used by nobody else
+        // meanwhile (type invariant); `msg_name`, when set, has room for
+        // `NAME_ROOM` bytes (above).
         unsafe {
             let m = &mut *self.0;
             if m.msg_name.is_null() {
@@ -1003,10 +1005,10 @@ fn defer_init() {
     if DEFER_READY.load(Ordering::Acquire) {
         return;
     }
+    // Its function is in this module's text, and the module's exit
+    // flushes it ([`flush_deferred_drops`]).
     // SAFETY: a static work_struct, initialised once here before anything
-    // can queue it (no sock of this module exists yet); its function is in
-    // this module's text, and the module's exit flushes it
-    // ([`flush_deferred_drops`]).
+    // can queue it (no sock of this module exists yet).
     unsafe { bindings::rcan_init_work(DEFER_WORK.get(), Some(defer_work)) };
     DEFER_READY.store(true, Ordering::Release);
 }
@@ -1163,8 +1165,14 @@ pub(in crate::glue) unsafe fn release_then<T: Proto>(
     };
     T::release(&sk);
     after(&sk);
-    // SAFETY: the protocol removed every path to the sock in release();
-    // orphan it, detach it from the socket and drop the socket's reference.
+    // Orphan the sock, detach it from the socket and drop the socket's
+    // reference. This does not rest on what `T::release` did: every other
+    // holder of the sock has a reference of its own (a subscription's
+    // `sock_hold`, a `SockRef`), and the borrows lent to `T::release` and
+    // `after` have ended; an orphaned sock stays valid for those holders,
+    // as for mainline's.
+    // SAFETY: the socket layer's release call, once (our contract): the
+    // socket's own reference on `sk` is the one dropped here.
     unsafe {
         bindings::rcan_sock_orphan(sk.as_ptr());
         (*sock).sk = core::ptr::null_mut();
@@ -1230,10 +1238,10 @@ unsafe extern "C" fn getname<T: Proto>(
     // `kernel_getsockname`/`kernel_getpeername` an "address holder" of the
     // caller's choice. `NAME_ROOM` bytes of it are all we rely on (every
     // address of ours fits; mainline's PF_CAN protocols write up to 24).
+    // They may be uninitialised (a buffer on the caller's stack): zeroed
+    // first, so the slice below covers initialised bytes.
     // SAFETY: so `addr` is valid for `NAME_ROOM` bytes of writes, and
-    // nothing else uses it during the call. They may be uninitialised
-    // (a buffer on the caller's stack): zeroed first, so the slice below
-    // covers initialised bytes.
+    // nothing else uses it during the call.
     let out = unsafe {
         core::ptr::write_bytes(addr.cast::<u8>(), 0, NAME_ROOM);
         core::slice::from_raw_parts_mut(addr.cast::<u8>(), NAME_ROOM)

@@ -204,10 +204,10 @@ impl<T> RtnlLocked<T> {
     /// The data, for as long as the RTNL proof is borrowed.
     #[allow(clippy::mut_from_ref)]
     pub(crate) fn get<'a>(&'a self, _rtnl: &'a mut dyn RtnlProof) -> &'a mut T {
-        // SAFETY: RTNL is held for 'a (a proof can only be an `Rtnl` or an
-        // `RtnlHeld`, sealed, whose invariants say so); the proof is
+        // A proof can only be an `Rtnl` or an `RtnlHeld` (sealed); it is
         // borrowed mutably for 'a and is the only one in use while RTNL is
-        // held (their invariants), so no second `&mut T` exists; RTNL
+        // held (their invariants), so no second `&mut T` exists.
+        // SAFETY: RTNL is held for 'a (the proof's invariant), which
         // excludes every other thread.
         unsafe { &mut *self.data.get() }
     }

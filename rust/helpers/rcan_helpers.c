@@ -548,16 +548,6 @@ void rcan_dev_stats_err(struct net_device *dev, int which)
 	}
 }
 
-void rcan_spin_lock_bh(spinlock_t *lock)
-{
-	spin_lock_bh(lock);
-}
-
-void rcan_spin_unlock_bh(spinlock_t *lock)
-{
-	spin_unlock_bh(lock);
-}
-
 long rcan_wait_event_timeout(struct wait_queue_head *wq,
 			     bool (*cond)(void *arg), void *arg, long timeo)
 {

@@ -151,12 +151,6 @@ int rcan_request_module(const char *name);
 /* random */
 u32 rcan_get_random_u32(void);
 
-#endif /* _RCAN_HELPERS_H */
-
-/* bottom-half spinlocks (statics of the glue's BhSpinLock) */
-void rcan_spin_lock_bh(spinlock_t *lock);
-void rcan_spin_unlock_bh(spinlock_t *lock);
-
 /* wait queues (statics of the glue's WaitQueue) */
 struct wait_queue_head;
 long rcan_wait_event_timeout(struct wait_queue_head *wq,
@@ -196,3 +190,5 @@ void rcan_proc_remove(struct proc_dir_entry *pde);
 void *rcan_seq_private(struct seq_file *m);
 void rcan_seq_write(struct seq_file *m, const char *s, size_t len);
 void rcan_seq_kptr(struct seq_file *m, unsigned long addr);
+
+#endif /* _RCAN_HELPERS_H */

@@ -59,10 +59,10 @@ use kernel::prelude::*;
 /// function in atomic context (Rust-for-Linux leaves that class to static
 /// checking, klint).
 fn synchronize_rcu() {
-    // SAFETY: no memory-safety precondition of its own: a call in atomic
-    // context is a kernel bug the kernel reports (might_sleep, and
-    // lockdep's check for a call inside a read-side section), as for any
-    // sleeping function.
+    // A call in atomic context is a kernel bug the kernel reports
+    // (might_sleep, and lockdep's check for a call inside a read-side
+    // section), as for any sleeping function.
+    // SAFETY: no memory-safety precondition of its own.
     unsafe { bindings::synchronize_rcu() };
 }
 

@@ -462,7 +462,9 @@ impl<T: CanProtocol> ProtoModule<T> {
         };
         let r = self.register_all(name);
         if r.is_err() {
-            PROTO_REGS.take(me, Self::unregister_erased);
+            // SAFETY: `register_all` failed and undid what it had made, so
+            // nothing is left for the exit to undo.
+            unsafe { PROTO_REGS.take(me, Self::unregister_erased) };
         }
         r
     }
@@ -678,11 +680,11 @@ unsafe extern "C" fn notifier_trampoline<T: CanProtocol>(
     // SAFETY: netdevice notifiers receive a netdev_notifier_info naming a
     // device that stays registered for the call.
     let dev = unsafe { NetDev::from_raw(bindings::rcan_netdev_notifier_dev(info)) };
-    // SAFETY: the notifier chain runs with RTNL held (call_netdevice_
-    // notifiers asserts it) for this whole call, and the only proof made
-    // here is this one, kept in this frame: `netdev_event` only gets
-    // `&Sockets`, and it cannot make a proof of its own (`Rtnl::lock`
-    // would deadlock, not alias).
+    // The only proof made here is this one, kept in this frame:
+    // `netdev_event` only gets `&Sockets`, and it cannot make a proof of
+    // its own (`Rtnl::lock` would deadlock, not alias).
+    // SAFETY: the notifier chain runs with RTNL held for this whole call
+    // (call_netdevice_notifiers asserts it); one proof (above).
     let mut held = unsafe { Rtnl::assert_held() };
     let net = dev.net(&RcuReadGuard::new()).as_ptr().cast_const();
     let sockets = Sockets::<T> {
@@ -941,7 +943,8 @@ impl<T: KernelRx> Drop for KernelRxReg<T> {
         // SAFETY: removal (NULL spec) of the receiver registered with this
         // func and data; never fails.
         unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, core::ptr::null()) };
-        KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>);
+        // SAFETY: the registration was removed just above.
+        unsafe { KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>) };
     }
 }
 
@@ -1018,7 +1021,8 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
     let ret = unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, &spec) };
     if let Err(e) = crate::glue::to_result(ret) {
         if new {
-            KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>);
+            // SAFETY: the registration failed: there is nothing to undo.
+            unsafe { KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>) };
         }
         return Err(e);
     }

@@ -244,17 +244,17 @@ impl<R: Receiver> Linked for Node<R> {
 }
 
 impl<R: Receiver> Node<R> {
-    /// An unlinked node of registration `reg` (NULL until the
-    /// registration is placed, [`Reg::place`]): for the general path and
-    /// the common bind's alike.
-    fn new(kind: Kind, ifindex: i32, mask: u32, value: u32, reg: *const Reg<R>) -> Self {
+    /// An unlinked node of no registration yet (`reg` NULL until the
+    /// registration is placed, [`Reg::place`], or the common bind sets
+    /// it): for the general path and the common bind's alike.
+    fn new(kind: Kind, ifindex: i32, mask: u32, value: u32) -> Self {
         Node {
             link: Link::new(),
             kind,
             ifindex,
             mask,
             value,
-            reg,
+            reg: ptr::null(),
             key: Cell::new(ptr::null()),
         }
     }
@@ -498,7 +498,8 @@ impl<R: Receiver> Rcv<R> {
         // SAFETY: the caller's contract.
         let f = unsafe { self.first_slot() };
         *f = reg;
-        f.place(NonNull::from(self));
+        // SAFETY: `f` is our own first slot, freed with us.
+        unsafe { f.place(NonNull::from(self)) };
         self.first_used.set(true);
         f
     }
@@ -514,7 +515,8 @@ impl<R: Receiver> Rcv<R> {
         // SAFETY: the caller's contract.
         let f = unsafe { self.first_slot() };
         RxTable::<R>::make_reg_into(spec, f)?;
-        f.place(NonNull::from(self));
+        // SAFETY: `f` is our own first slot, freed with us.
+        unsafe { f.place(NonNull::from(self)) };
         self.first_used.set(true);
         Ok(f)
     }
@@ -634,7 +636,13 @@ impl<R: Receiver> Reg<R> {
     /// Points the registration at its receiver and its nodes at the
     /// registration, once it is at its final address (boxed, or inside its
     /// receiver). Before it is linked.
-    fn place(&mut self, rcv: NonNull<Rcv<R>>) {
+    ///
+    /// # Safety
+    ///
+    /// `rcv` is the receiver this registration belongs to (it sits in its
+    /// first slot, or is boxed for it), which is freed only with or after
+    /// its last registration: [`Reg::rcv`] dereferences it.
+    unsafe fn place(&mut self, rcv: NonNull<Rcv<R>>) {
         self.rcv = rcv;
         let me: *const Reg<R> = self;
         for n in self.nodes.iter_mut() {
@@ -1109,8 +1117,14 @@ impl<R: Receiver> RxTable<R> {
         slot.cookie = spec.cookie;
         slot.ifindex = ifindex;
         slot.filters.one = Some(f);
-        slot.nodes.inline[0] = Some(Node::new(Kind::Hashed, ifindex, mask, value, me));
-        slot.nodes.inline[1] = Some(Node::new(Kind::ByIf, ifindex, 0, 0, me));
+        slot.nodes.inline[0] = Some(Node {
+            reg: me,
+            ..Node::new(Kind::Hashed, ifindex, mask, value)
+        });
+        slot.nodes.inline[1] = Some(Node {
+            reg: me,
+            ..Node::new(Kind::ByIf, ifindex, 0, 0)
+        });
         r.first_used.set(true);
         let reg: &Reg<R> = slot;
         let e: &KeyEntry<R> = match key {
@@ -1208,7 +1222,9 @@ impl<R: Receiver> RxTable<R> {
         self.grow_groups(w, home.reg())?;
         let (rcv, reg): (&Rcv<R>, &Reg<R>) = match home {
             Home::Boxed(r, mut b) => {
-                b.place(NonNull::from(r));
+                // SAFETY: `b` is a registration of `r`, which is freed only
+                // after its last registration.
+                unsafe { b.place(NonNull::from(r)) };
                 (r, KBox::leak(b))
             }
             // SAFETY: writer mutex held; a reserved receiver without a
@@ -1343,7 +1359,7 @@ impl<R: Receiver> RxTable<R> {
         reg.scanned = scanned;
         reg.join = join;
         reg.nodes.more = more;
-        let node = |kind, mask, value| Node::new(kind, ifindex, mask, value, ptr::null());
+        let node = |kind, mask, value| Node::new(kind, ifindex, mask, value);
         // All nodes are added before any is linked.
         let mut res = Ok(());
         if !join {

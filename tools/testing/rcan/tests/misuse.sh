@@ -16,10 +16,11 @@
 # everything cannot pass. Each case opens with the finding of issue 39 it
 # encodes. Takes seconds: no code generation, no link.
 #
-# Besides the cases, one source check: no safe `extern "C" fn` in
-# rust/glue/ takes a raw pointer (issue 39: such entry points must be
-# `unsafe extern "C" fn` with a `# Safety` doc; they are private to the
-# glue, so no case outside it could call them).
+# Besides the cases, one source check: no safe function in rust/glue/
+# (subfolders included) takes a raw pointer (issue 39; rawptr-fns.sh,
+# which says what a text-level check sees and what it does not). The
+# checker is first run on a small tree of its own with planted
+# violations, so a checker that finds nothing cannot pass.
 #
 # Prints "ok"/"not ok" lines and a closing "N passed, M failed".
 set -uo pipefail
@@ -162,18 +163,48 @@ for f in "$cases_dir"/*.rs; do
 	fi
 done
 
-# The source check: a safe `extern "C" fn` definition in rust/glue/ with
-# a raw pointer among its parameters (signatures may span lines).
-safe_ptr_fns=$(cd "$RCAN_ROOT" && find rust/glue -name '*.rs' -print0 | sort -z |
-	xargs -0 perl -0777 -ne '
-		while (/^([^\n]*?)\bextern\s+"C"\s+fn\s+(\w+)\s*(<[^>]*>)?\s*\(([^)]*)\)/mg) {
-			my ($at, $pre, $fn, $args) = ($-[0], $1, $2, $4);
-			next if $pre =~ /\bunsafe\b/ || $pre =~ /\btype\b/;
-			next unless $args =~ /\*\s*(mut|const)\b/;
-			my $line = 1 + (() = substr($_, 0, $at) =~ /\n/g);
-			print "$ARGV:$line: $fn\n";
-		}')
-check "no safe extern \"C\" fn in rust/glue/ takes a raw pointer" \
+# The source check, first on a planted tree: each `bad_*` function below
+# must be listed, none of the `good_*` ones.
+rawptr="$RCAN_ROOT/tools/testing/rcan/rawptr-fns.sh"
+mkdir -p "$work/planted/rust/glue/sub"
+cat > "$work/planted/rust/glue/a.rs" <<'RS'
+type Raw = *mut u8;
+pub(crate) fn bad_mut(p: *mut u8) {}
+fn bad_const<T>(x: u32,
+    p: *const T) -> u32 { x }
+pub(crate) extern "C" fn bad_entry(sk: *mut bindings::sock) {}
+fn bad_nonnull(p: NonNull<u8>) {}
+fn bad_alias(p: Raw) {}
+fn bad_in_tuple(p: (usize, *mut u8)) {}
+unsafe extern "C" {
+    safe fn bad_foreign(p: *mut u8);
+}
+// fn good_comment(p: *mut u8) {}
+/// fn good_doc(p: *mut u8) {}
+pub(crate) unsafe fn good_unsafe(p: *mut u8) {}
+unsafe extern "C" fn good_entry(sk: *mut bindings::sock) {}
+fn good_fnptr(f: unsafe extern "C" fn(*mut u8) -> *mut u8, n: usize) {}
+fn good_closure(f: impl FnMut(*mut u8)) {}
+fn good_returns(&self) -> *mut u8 { self.0 }
+extern "C" {
+    fn good_foreign(p: *mut u8);
+}
+fn good_string() -> &'static str { "fn x(p: *mut u8) // not code" }
+RS
+cat > "$work/planted/rust/glue/sub/b.rs" <<'RS'
+impl X {
+    pub(in crate::glue) fn bad_method(&self, p: *const u8) -> bool { true }
+    const unsafe fn good_const_unsafe(p: *const u8) {}
+}
+RS
+got=$(bash "$rawptr" "$work/planted" 2>&1 | sed 's/^[^ ]* //' | sort | tr '\n' ' ')
+want="bad_alias bad_const bad_entry bad_foreign (safe foreign fn) bad_in_tuple bad_method bad_mut bad_nonnull "
+check "rawptr-fns.sh finds the planted safe functions taking raw pointers, and only those" \
+	"$([ "$got" = "$want" ]; echo $?)" "found: $got
+wanted: $want"
+
+safe_ptr_fns=$(bash "$rawptr" "$RCAN_ROOT" 2>&1)
+check "no safe function in rust/glue/ takes a raw pointer (rawptr-fns.sh)" \
 	"$([ -z "$safe_ptr_fns" ]; echo $?)" "$safe_ptr_fns"
 
 echo "misuse: $(( $(date +%s) - t0 )) s for the cases and the source check"
