@@ -356,6 +356,7 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
     // socket's queue (the PDU never completed for it).
     let mut perf = tools::spawn("isotpperf", &[&base[..], &[&c0]].concat(), None)?;
     perf.wait_listening()?;
+    let perf_sock = perf.socket()?;
 
     // 1. Single frame.
     let sn = Sniffer::start(i0)?;
@@ -410,7 +411,13 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
     });
     perf.signal("TERM")?;
     let out = perf.finish(TOOL_LIMIT)?;
-    waited.map_err(|e| format!("{e}: it printed {:?}", out.stdout.replace('\r', "\n")))?;
+    waited.map_err(|e| {
+        format!(
+            "{e} ({}): it printed {:?}",
+            queue_drops(&perf_sock),
+            out.stdout.replace('\r', "\n")
+        )
+    })?;
     check_perf(
         &recs[0],
         "CAN2.0 08 (BS: 0 # STmin: 0 msec) : 3 byte in",
@@ -498,6 +505,26 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
         tx.len()
     );
     Ok(())
+}
+
+/// What a socket's receive queue dropped (`SO_MEMINFO`), for a failure
+/// message: a reader that fell behind loses the frames that found its
+/// queue full, which is the reader's problem, not the sender's.
+fn queue_drops(s: impl AsFd) -> String {
+    const SO_MEMINFO: i32 = 55;
+    const RCVBUF: usize = 1;
+    const DROPS: usize = 8;
+    let mut m = [0u8; 9 * 4];
+    let r = raw::getsockopt(&s, libc::SOL_SOCKET, SO_MEMINFO, &mut m);
+    let word = |i: usize| u32::from_ne_bytes([m[4 * i], m[4 * i + 1], m[4 * i + 2], m[4 * i + 3]]);
+    match r {
+        Ok(_) => format!(
+            "its socket dropped {} frames, receive buffer {} bytes",
+            word(DROPS),
+            word(RCVBUF)
+        ),
+        Err(e) => format!("SO_MEMINFO of its socket: {e}"),
+    }
 }
 
 /// isotpperf's closing line of each PDU (its progress bar is redrawn
