@@ -157,10 +157,37 @@ fn raw_send(s: impl AsFd, id: u32, data: &[u8]) -> TestResult {
     Ok(())
 }
 
-/// Every frame on an interface from now until [`Sniffer::stop`].
+/// Every frame on an interface from now until [`Sniffer::stop`], with
+/// its receive timestamp (`SO_TIMESTAMPNS`, guest real time).
 struct Sniffer {
     stop: Arc<AtomicBool>,
-    h: JoinHandle<Result<Vec<Fr>, String>>,
+    h: JoinHandle<Result<Vec<(Fr, Duration)>, String>>,
+}
+
+/// The next frame on `s` within `t` and its timestamp, or None.
+fn raw_read_timed(s: impl AsFd, t: Duration) -> Result<Option<(Fr, Duration)>, String> {
+    raw::set_timeout(&s, libc::SO_RCVTIMEO, t).or_fail("SO_RCVTIMEO")?;
+    match crate::sys::recvmsg(&s, 72, 0) {
+        Ok(r) if r.len == 16 || r.len == 72 => {
+            let b = &r.data;
+            let len = usize::from(b[4]).min(r.len - 8);
+            let ts = r
+                .timespec
+                .ok_or("a sniffed frame without SCM_TIMESTAMPNS")?;
+            Ok(Some((
+                Fr {
+                    id: u32::from_ne_bytes([b[0], b[1], b[2], b[3]]),
+                    fd: r.len == 72,
+                    flags: b[5],
+                    data: b[8..8 + len].to_vec(),
+                },
+                Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32),
+            )))
+        }
+        Ok(r) => Err(format!("CAN_RAW read {} bytes", r.len)),
+        Err(e) if matches!(e.raw_os_error(), Some(libc::EAGAIN)) => Ok(None),
+        Err(e) => Err(format!("CAN_RAW read: {e}")),
+    }
 }
 
 impl Sniffer {
@@ -179,12 +206,19 @@ impl Sniffer {
             &(8i32 << 20).to_ne_bytes(),
         )
         .or_fail("SO_RCVBUFFORCE")?;
+        raw::setsockopt(
+            &s,
+            libc::SOL_SOCKET,
+            libc::SO_TIMESTAMPNS,
+            &1i32.to_ne_bytes(),
+        )
+        .or_fail("SO_TIMESTAMPNS")?;
         let stop = Arc::new(AtomicBool::new(false));
         let st = Arc::clone(&stop);
         let h = thread::spawn(move || {
             let mut v = Vec::new();
             loop {
-                match raw_read(&s, Duration::from_millis(100))? {
+                match raw_read_timed(&s, Duration::from_millis(100))? {
                     Some(f) => v.push(f),
                     // Queue drained: stop once asked to.
                     None if st.load(Ordering::SeqCst) => return Ok(v),
@@ -198,6 +232,11 @@ impl Sniffer {
     /// The frames seen; call after the traffic ended (every frame is then
     /// queued on the sniffer's socket).
     fn stop(self) -> Result<Vec<Fr>, String> {
+        Ok(self.stop_timed()?.into_iter().map(|(f, _)| f).collect())
+    }
+
+    /// [`Sniffer::stop`] with each frame's timestamp.
+    fn stop_timed(self) -> Result<Vec<(Fr, Duration)>, String> {
         self.stop.store(true, Ordering::SeqCst);
         self.h.join().map_err(|_| "sniffer panicked".to_string())?
     }
@@ -448,7 +487,20 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
         &[&back[..], &["-b", "4", "-m", "1", &c0]].concat(),
         &pdu,
     )?;
-    let fr = sn.stop()?;
+    let timed = sn.stop_timed()?;
+    // The longest silence on the bus inside the transfer: isotpperf gives
+    // a PDU up after 1 s without a frame.
+    let at: Vec<Duration> = timed
+        .iter()
+        .filter(|(f, _)| f.id == 0x123 || f.id == 0x321)
+        .map(|&(_, t)| t)
+        .collect();
+    let silence = at
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]))
+        .max()
+        .unwrap_or_default();
+    let fr: Vec<Fr> = timed.into_iter().map(|(f, _)| f).collect();
     let tx = check_transfer(&fr, 0x123, 0x321, &pdu, 8, 4, [0x30, 4, 1])?;
     ensure!(
         tx.len() == 586,
@@ -470,7 +522,8 @@ fn isotp_canutils_classic(ctx: &mut Ctx) -> TestResult {
     let out = perf.finish(TOOL_LIMIT)?;
     waited.map_err(|e| {
         format!(
-            "{e} ({}): it printed {:?}",
+            "{e} ({}; the bus was silent for at most {silence:?} inside the 4095 bytes, \
+             isotpperf gives up after 1 s): it printed {:?}",
             queue_drops(&perf_sock),
             out.stdout.replace('\r', "\n")
         )
