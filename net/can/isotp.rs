@@ -81,8 +81,8 @@ use rcan_api::{
 };
 use rcan_core::frame::AnyFrame;
 use rcan_core::isotp::{
-    clamp_max_pdu_size, route, single_mask, Config, IsotpOptions, LlOptions, Route, TpAddr,
-    CAN_ISOTP, CAN_ISOTP_LL_OPTS, CAN_ISOTP_OPTS, CAN_ISOTP_RECV_FC, CAN_ISOTP_RX_STMIN,
+    clamp_max_pdu_size, route, single_mask, Config, IsotpOptions, LlOptions, Route, Timeouts,
+    TpAddr, CAN_ISOTP, CAN_ISOTP_LL_OPTS, CAN_ISOTP_OPTS, CAN_ISOTP_RECV_FC, CAN_ISOTP_RX_STMIN,
     CAN_ISOTP_TX_STMIN, CAN_ISOTP_WAIT_TX_DONE, ISOTP_MIN_NAMELEN, MAX_OPTLEN, SOL_CAN_ISOTP,
 };
 use rcan_core::isotp_pci::LlFrame;
@@ -97,6 +97,11 @@ const RX_TIMER: usize = 1;
 /// `max_pdu_size` (C shim `isotp_c.c`): the largest PDU sent or received,
 /// read at `bind` (clamped as mainline clamps it at load).
 const MAX_PDU_SIZE: Param<u32> = Param::new(0);
+/// `fc_timeout_ms` and `echo_timeout_ms` (C shim; test-only, not
+/// mainline's): the timeouts of a socket, read at `bind`
+/// ([`Timeouts::from_ms`]).
+const FC_TIMEOUT_MS: Param<u32> = Param::new(1);
+const ECHO_TIMEOUT_MS: Param<u32> = Param::new(2);
 
 /// Where `sendmsg` sleeps (module documentation). Woken at every end of a
 /// transfer, by `release` and by the notifier.
@@ -717,6 +722,7 @@ impl glue::sock::Proto for IsotpProto {
         {
             let mut e = eng.lock();
             e.cfg = s.cfg;
+            e.cfg.timeouts = Timeouts::from_ms(FC_TIMEOUT_MS.get(), ECHO_TIMEOUT_MS.get());
             e.addr = TpAddr { ifindex, ..a };
             e.tx = Tx::new();
             e.rx = Rx::new();

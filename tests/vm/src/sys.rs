@@ -8,7 +8,7 @@
 //! kernel under TCG cost a fraction of an `insmod`/`rmmod`/`ip` process
 //! each; CPU pinning and a one-descriptor `poll`; `recv`, `shutdown` and
 //! `close` on a descriptor number several threads share (the teardown
-//! races). Every `unsafe` block of
+//! races); another process's socket (`pidfd_getfd`). Every `unsafe` block of
 //! the test suite is here.
 
 use std::ffi::CString;
@@ -339,6 +339,23 @@ pub fn set_rcvbufforce(fd: impl AsFd, bytes: c_int) -> io::Result<()> {
     } else {
         Ok(())
     }
+}
+
+/// A duplicate of descriptor `fd` of process `pid` (`pidfd_open` and
+/// `pidfd_getfd`, root): the same open file, so a socket option set on
+/// it is set on the other process's socket.
+pub fn fd_of_process(pid: u32, fd: RawFd) -> io::Result<OwnedFd> {
+    let pid = libc::pid_t::try_from(pid).map_err(|_| io::Error::from_raw_os_error(libc::ESRCH))?;
+    // SAFETY: pidfd_open(2) takes a number and flags, no memory.
+    let pidfd = cvt(unsafe { libc::syscall(libc::SYS_pidfd_open, pid, 0) } as c_int)?;
+    // SAFETY: the kernel just returned `pidfd`, a new descriptor nobody
+    // else owns.
+    let pidfd = unsafe { OwnedFd::from_raw_fd(pidfd) };
+    // SAFETY: pidfd_getfd(2) takes numbers and flags, no memory.
+    let dup =
+        cvt(unsafe { libc::syscall(libc::SYS_pidfd_getfd, pidfd.as_raw_fd(), fd, 0) } as c_int)?;
+    // SAFETY: as above, a new descriptor owned by nobody else.
+    Ok(unsafe { OwnedFd::from_raw_fd(dup) })
 }
 
 fn cstring(s: &str) -> io::Result<CString> {

@@ -209,6 +209,31 @@ impl Bg {
         })
     }
 
+    /// Its one socket, shared (a duplicate of its descriptor,
+    /// [`crate::sys::fd_of_process`]): for setting or reading that
+    /// socket's options from the test, e.g. the receive buffer of an
+    /// observer whose queue must not decide a result. Fails unless it has
+    /// exactly one socket open.
+    pub fn socket(&self) -> Result<std::os::fd::OwnedFd, String> {
+        let dir = PathBuf::from(format!("/proc/{}/fd", self.child.id()));
+        let mut socks = Vec::new();
+        for e in fs::read_dir(&dir).or_fail(dir.display())? {
+            let e = e.or_fail(dir.display())?;
+            let to = fs::read_link(e.path()).or_fail(e.path().display())?;
+            if to.to_string_lossy().starts_with("socket:") {
+                socks.push(e.file_name().to_string_lossy().into_owned());
+            }
+        }
+        let [fd] = &socks[..] else {
+            return Err(format!("{}: sockets {socks:?}, want one", self.cmd));
+        };
+        let n = fd
+            .parse()
+            .map_err(|e| format!("{}: fd {fd}: {e}", self.cmd))?;
+        crate::sys::fd_of_process(self.child.id(), n)
+            .or_fail(format!("pidfd_getfd of {}'s fd {n}", self.cmd))
+    }
+
     /// Waits until stderr contains `text`.
     pub fn wait_stderr(&mut self, text: &str) -> Result<(), String> {
         let what = format!("{} to print {text:?}", self.cmd);

@@ -96,6 +96,55 @@ pub const FC_TIMEOUT_NS: u64 = 1_000_000_000;
 /// (`ISOTP_ECHO_TIMEOUT`, 2 s), in ns.
 pub const ECHO_TIMEOUT_NS: u64 = 2_000_000_000;
 
+/// The protocol's timeouts in ns, read by both machines from
+/// [`Config::timeouts`]: mainline's fixed values by default. rcan_isotp
+/// takes others from its test-only module parameters `fc_timeout_ms` and
+/// `echo_timeout_ms` (not mainline's; isotp.rst, "Module parameters"), so
+/// that tests whose subject is not the timers survive a guest vCPU that
+/// waits seconds for its host.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Timeouts {
+    /// N_Bs and N_Cr ([`FC_TIMEOUT_NS`] by default).
+    pub fc_ns: u64,
+    /// N_As, the wait for an echo ([`ECHO_TIMEOUT_NS`] by default).
+    pub echo_ns: u64,
+}
+
+/// Bounds of the timeout parameters, ms: 1 ms to 10 minutes.
+pub const TIMEOUT_MS_MIN: u32 = 1;
+/// See [`TIMEOUT_MS_MIN`].
+pub const TIMEOUT_MS_MAX: u32 = 600_000;
+
+impl Default for Timeouts {
+    fn default() -> Self {
+        Timeouts {
+            fc_ns: FC_TIMEOUT_NS,
+            echo_ns: ECHO_TIMEOUT_NS,
+        }
+    }
+}
+
+impl Timeouts {
+    /// The timeouts of the parameters `fc_ms` and `echo_ms`, each clamped
+    /// to [`TIMEOUT_MS_MIN`]..=[`TIMEOUT_MS_MAX`].
+    pub const fn from_ms(fc_ms: u32, echo_ms: u32) -> Self {
+        const fn ns(ms: u32) -> u64 {
+            let ms = if ms < TIMEOUT_MS_MIN {
+                TIMEOUT_MS_MIN
+            } else if ms > TIMEOUT_MS_MAX {
+                TIMEOUT_MS_MAX
+            } else {
+                ms
+            };
+            ms as u64 * 1_000_000
+        }
+        Timeouts {
+            fc_ns: ns(fc_ms),
+            echo_ns: ns(echo_ms),
+        }
+    }
+}
+
 /// `EAGAIN`: a transfer is running (the caller blocks or returns it).
 pub const EAGAIN: i32 = 11;
 /// `EFAULT`: an option buffer could not be read.
@@ -252,6 +301,9 @@ pub struct Config {
     pub force_rx_stmin: u32,
     /// `CAN_ISOTP_LL_OPTS`.
     pub ll: LlOptions,
+    /// The timeouts (not an option: rcan_isotp sets them at bind from
+    /// its module parameters).
+    pub timeouts: Timeouts,
 }
 
 impl Default for Config {
@@ -270,6 +322,7 @@ impl Default for Config {
             force_tx_stmin: 0,
             force_rx_stmin: 0,
             ll: LlOptions::default(),
+            timeouts: Timeouts::default(),
         }
     }
 }

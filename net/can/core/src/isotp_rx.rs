@@ -17,7 +17,6 @@
 
 use super::isotp::{
     Config, TimerCmd, CAN_ISOTP_FORCE_RXSTMIN, CAN_ISOTP_LISTEN_MODE, EBADMSG, EILSEQ, ETIMEDOUT,
-    FC_TIMEOUT_NS,
 };
 use super::isotp_pci::{
     copy_payload, pad_ok, parse_ff, parse_sf, write_fc, LlFrame, FS_CTS, FS_OVFLW, N_PCI_CF,
@@ -166,7 +165,7 @@ impl Rx {
         self.bs = 0;
         self.last_cf = 0;
         write_fc(cfg, fs, out);
-        self.step(true, TimerCmd::Arm(now.saturating_add(FC_TIMEOUT_NS)), None)
+        self.step(true, TimerCmd::Arm(now.saturating_add(cfg.timeouts.fc_ns)), None)
     }
 
     /// A single, first or consecutive frame for this socket arrived at
@@ -308,7 +307,7 @@ impl Rx {
             self.bs = self.bs.wrapping_add(1);
             self.bs < bs
         } {
-            return self.step(false, TimerCmd::Arm(now.saturating_add(FC_TIMEOUT_NS)), None);
+            return self.step(false, TimerCmd::Arm(now.saturating_add(cfg.timeouts.fc_ns)), None);
         }
         if cfg.has(CAN_ISOTP_LISTEN_MODE) {
             return self.step(false, TimerCmd::Cancel, None);
@@ -348,8 +347,8 @@ impl Rx {
 #[allow(clippy::field_reassign_with_default)]
 mod tests {
     use super::super::isotp::{
-        LlOptions, CAN_ISOTP_CHK_PAD_DATA, CAN_ISOTP_CHK_PAD_LEN, CAN_ISOTP_EXTEND_ADDR,
-        CAN_ISOTP_RX_PADDING, CAN_ISOTP_TX_PADDING,
+        LlOptions, Timeouts, CAN_ISOTP_CHK_PAD_DATA, CAN_ISOTP_CHK_PAD_LEN, CAN_ISOTP_EXTEND_ADDR,
+        CAN_ISOTP_RX_PADDING, CAN_ISOTP_TX_PADDING, FC_TIMEOUT_NS,
     };
     use super::*;
 
@@ -472,6 +471,24 @@ mod tests {
         let s = rx.on_timer(500 * MS + FC_TIMEOUT_NS);
         assert_eq!(s.event, Some(RxEvent::Error(ETIMEDOUT)));
         assert!(rx.is_idle());
+    }
+
+    /// Another N_Cr (rcan_isotp's test-only parameter): the receiver
+    /// waits that long after the FC and after each CF.
+    #[test]
+    fn configured_n_cr() {
+        let mut c = Config::default();
+        c.timeouts = Timeouts::from_ms(15_000, 2_000);
+        let mut rx = Rx::new();
+        let mut buf = [0u8; 100];
+        let s = rx.on_frame(&c, &[0x10, 20, 0, 1, 2, 3, 4, 5], &mut buf, 0);
+        assert_eq!(s.timer, TimerCmd::Arm(15_000 * MS));
+        let s = rx.on_frame(&c, &[0x21, 6, 7, 8, 9, 10, 11, 12], &mut buf, 2_000 * MS);
+        assert_eq!(s.timer, TimerCmd::Arm(17_000 * MS));
+        assert_eq!(rx.on_timer(15_000 * MS), RxStep::NONE);
+        assert_eq!(rx.on_timer(17_000 * MS - 1), RxStep::NONE);
+        let s = rx.on_timer(17_000 * MS);
+        assert_eq!(s.event, Some(RxEvent::Error(ETIMEDOUT)));
     }
 
     #[test]

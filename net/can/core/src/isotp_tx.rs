@@ -16,8 +16,8 @@
 //! in softirq context (frame reception, echo, hrtimer).
 //!
 //! The timer serves one purpose at a time, told by the state: waiting for
-//! a flow control frame (N_Bs, 1 s, `ECOMM`), for the echo of a sent
-//! frame (2 s, `ECOMM`), or for the STmin gap before the next
+//! a flow control frame (N_Bs, 1 s by default, `ECOMM`), for the echo
+//! of a sent frame (2 s by default, `ECOMM`; both [`Config::timeouts`]), or for the STmin gap before the next
 //! consecutive frame. As in mainline one frame is in flight at a time:
 //! the next consecutive frame goes out when the previous one's echo came
 //! back (at once, or after the gap).
@@ -25,7 +25,7 @@
 use super::arb::EINVAL;
 use super::isotp::{
     Config, TimerCmd, CAN_ISOTP_CF_BROADCAST, CAN_ISOTP_DYN_FC_PARMS, CAN_ISOTP_FORCE_TXSTMIN,
-    EAGAIN, EBADMSG, ECHO_TIMEOUT_NS, ECOMM, EMSGSIZE, FC_TIMEOUT_NS,
+    EAGAIN, EBADMSG, ECOMM, EMSGSIZE,
 };
 use super::isotp_pci::{
     parse_fc, sf_max, stmin_ns, stmin_valid, write_cf, write_ff, write_sf, LlFrame, FS_CTS,
@@ -254,7 +254,7 @@ impl Tx {
             self.idx = pdu.len();
             self.st = St::Sending;
             wants_echo = true;
-            timeout = ECHO_TIMEOUT_NS;
+            timeout = cfg.timeouts.echo_ns;
         } else {
             self.idx = write_ff(cfg, pdu.len(), pdu, out);
             self.sn = 1;
@@ -268,11 +268,11 @@ impl Tx {
                 self.fc_bs = 0;
                 self.st = St::Sending;
                 wants_echo = true;
-                timeout = ECHO_TIMEOUT_NS;
+                timeout = cfg.timeouts.echo_ns;
             } else {
                 self.st = St::WaitFirstFc;
                 wants_echo = false;
-                timeout = FC_TIMEOUT_NS;
+                timeout = cfg.timeouts.fc_ns;
             }
         }
         if wants_echo {
@@ -303,7 +303,7 @@ impl Tx {
         TxAction {
             frame: true,
             wants_echo: true,
-            timer: self.timer(TimerCmd::Arm(now.saturating_add(ECHO_TIMEOUT_NS))),
+            timer: self.timer(TimerCmd::Arm(now.saturating_add(cfg.timeouts.echo_ns))),
             done: None,
         }
     }
@@ -359,7 +359,7 @@ impl Tx {
                 self.send_cf(cfg, pdu, now, out)
             }
             FS_WAIT => TxAction {
-                timer: self.timer(TimerCmd::Arm(now.saturating_add(FC_TIMEOUT_NS))),
+                timer: self.timer(TimerCmd::Arm(now.saturating_add(cfg.timeouts.fc_ns))),
                 ..TxAction::NONE
             },
             FS_OVFLW => self.finish(Err(EMSGSIZE)),
@@ -395,7 +395,7 @@ impl Tx {
         if self.fc_bs != 0 && self.bs >= self.fc_bs {
             self.st = St::WaitFc;
             return TxAction {
-                timer: self.timer(TimerCmd::Arm(now.saturating_add(FC_TIMEOUT_NS))),
+                timer: self.timer(TimerCmd::Arm(now.saturating_add(cfg.timeouts.fc_ns))),
                 ..TxAction::NONE
             };
         }
@@ -480,7 +480,9 @@ impl Tx {
 // Tests start from the defaults and change what they exercise.
 #[allow(clippy::field_reassign_with_default)]
 mod tests {
-    use super::super::isotp::{LlOptions, CAN_ISOTP_SF_BROADCAST};
+    use super::super::isotp::{
+        LlOptions, Timeouts, CAN_ISOTP_SF_BROADCAST, ECHO_TIMEOUT_NS, FC_TIMEOUT_NS,
+    };
     use super::*;
 
     const MS: u64 = 1_000_000;
@@ -531,6 +533,43 @@ mod tests {
         assert!(tx.is_idle());
         // A late echo changes nothing.
         assert_eq!(tx.on_echo(&c, &[1], ECHO_TIMEOUT_NS + 1), TxStep::NONE);
+    }
+
+    /// Other timeouts (rcan_isotp's test-only parameters): N_Bs and the
+    /// echo wait run for them, not for mainline's 1 s and 2 s.
+    #[test]
+    fn configured_timeouts() {
+        let mut c = cfg();
+        c.timeouts = Timeouts::from_ms(15_000, 20_000);
+        let pdu: Vec<u8> = (0..20u8).collect();
+        let mut tx = Tx::new();
+        let s = tx.start(&c, &pdu, 0).unwrap();
+        assert_eq!(s.timer, TimerCmd::Arm(15_000 * MS));
+        assert_eq!(tx.on_timer(&c, &pdu, 15_000 * MS - 1), TxStep::NONE);
+        let s = tx.on_fc(&c, &[0x30, 0, 0], &pdu, 15_000 * MS - 1);
+        assert_eq!(s.timer, TimerCmd::Arm(35_000 * MS - 1));
+        assert_eq!(tx.on_timer(&c, &pdu, 35_000 * MS - 2), TxStep::NONE);
+        let s = tx.on_timer(&c, &pdu, 35_000 * MS - 1);
+        assert_eq!(s.done, Some(Err(ECOMM)));
+        // SF: the echo wait.
+        let s = tx.start(&c, &[1], 0).unwrap();
+        assert_eq!(s.timer, TimerCmd::Arm(20_000 * MS));
+        // The default is mainline's, and the parameters are clamped.
+        assert_eq!(
+            Timeouts::default(),
+            Timeouts {
+                fc_ns: FC_TIMEOUT_NS,
+                echo_ns: ECHO_TIMEOUT_NS
+            }
+        );
+        assert_eq!(Timeouts::from_ms(1000, 2000), Timeouts::default());
+        assert_eq!(
+            Timeouts::from_ms(0, u32::MAX),
+            Timeouts {
+                fc_ns: MS,
+                echo_ns: 600_000 * MS
+            }
+        );
     }
 
     /// FF, FC(CTS, BS 2, STmin 5 ms), 2 CFs, wait FC, FC, last CF.
