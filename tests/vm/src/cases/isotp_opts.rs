@@ -358,9 +358,12 @@ fn isotp_opts_sender(ctx: &mut Ctx) -> TestResult {
     frame_txtime(i0, &peer)?;
     frame_txtime_zero(i0, &peer)?;
     dyn_fc_parms(ctx, i0, &peer)?;
+    // The half-duplex socket's timeouts (1 s) run out while the wait
+    // frames are paced (1.2 s).
+    let hd = half_duplex(i0, &peer)?;
     wait_frames(ctx, i0, &peer)?;
+    half_duplex_end(hd, &peer)?;
     sender_ebadmsg(i0, &peer)?;
-    half_duplex(i0, &peer)?;
     nonblocking_send(i0, &peer)
 }
 
@@ -641,7 +644,18 @@ fn sender_ebadmsg(i0: u32, peer: &OwnedFd) -> TestResult {
     Ok(())
 }
 
-fn half_duplex(i0: u32, peer: &OwnedFd) -> TestResult {
+/// The half-duplex socket of [`half_duplex`] whose two transfers block
+/// each other, and its writer.
+struct HalfDuplex {
+    s: Arc<OwnedFd>,
+    w: thread::JoinHandle<std::io::Result<usize>>,
+}
+
+const HALF_DUPLEX_BOTH: &str = "HALF_DUPLEX, an overflow FC and CFs while receiving and sending";
+
+/// Checks the first half-duplex rule, and starts the second (checked by
+/// [`half_duplex_end`] once the timeouts have run out).
+fn half_duplex(i0: u32, peer: &OwnedFd) -> Result<HalfDuplex, String> {
     let s = Arc::new(tp_on(
         opts(CAN_ISOTP_HALF_DUPLEX | CAN_ISOTP_WAIT_TX_DONE),
         &[],
@@ -665,7 +679,7 @@ fn half_duplex(i0: u32, peer: &OwnedFd) -> TestResult {
     // receives is dropped, and so are the CFs that come while it sends:
     // neither transfer can go on, both run into their timeouts (N_Cr,
     // then N_Bs, 1 s each; mainline's rule, checked at this cost).
-    let what = "HALF_DUPLEX, an overflow FC and CFs while receiving and sending";
+    let what = HALF_DUPLEX_BOTH;
     raw_send(peer, 0x71A, &[0x10, 20, 1, 2, 3, 4, 5, 6])?;
     let fc = peer_expect(peer, 0x712, "the socket's FC")?;
     ensure!(fc.f.data == [0x30, 0, 0], "{what}: FC {}", show(&fc.f));
@@ -675,6 +689,15 @@ fn half_duplex(i0: u32, peer: &OwnedFd) -> TestResult {
     raw_send(peer, 0x71A, &[0x32, 0, 0])?;
     raw_send(peer, 0x71A, &[0x21, 7, 8, 9, 10, 11, 12, 13])?;
     raw_send(peer, 0x71A, &[0x22, 14, 15, 16, 17, 18, 19, 20])?;
+    Ok(HalfDuplex { s, w })
+}
+
+/// The end of [`half_duplex`]: the write ends in ECOMM (N_Bs), not
+/// EMSGSIZE (the overflow FC was dropped), and no PDU came (the CFs were
+/// dropped); nothing else went out.
+fn half_duplex_end(hd: HalfDuplex, peer: &OwnedFd) -> TestResult {
+    let what = HALF_DUPLEX_BOTH;
+    let HalfDuplex { s, w } = hd;
     want_write_errno(w, libc::ECOMM, what)?;
     let mut e = [0u8; 4];
     raw::getsockopt(&*s, libc::SOL_SOCKET, libc::SO_ERROR, &mut e).or_fail("SO_ERROR")?;
@@ -768,17 +791,18 @@ fn nonblocking_receive_and_pollin(i0: u32, peer: &OwnedFd) -> TestResult {
         0x720,
     )?);
     let mut buf = [0u8; 64];
-    want_errno(
-        raw::recvfrom(&*s, &mut buf, libc::MSG_DONTWAIT, None),
-        libc::EAGAIN,
+    // SO_RCVTIMEO beyond the deadline below: a read that blocked would
+    // neither return EAGAIN in time nor hang the test (an SF frees it).
+    raw::set_timeout(&*s, libc::SO_RCVTIMEO, 6 * T).or_fail("SO_RCVTIMEO")?;
+    nonblocking_read(
+        &s,
+        peer,
+        0x728,
+        false,
         "MSG_DONTWAIT read on an empty socket",
     )?;
     raw::set_nonblocking(&*s, true).or_fail("O_NONBLOCK")?;
-    want_errno(
-        raw::read(&*s, &mut buf),
-        libc::EAGAIN,
-        "O_NONBLOCK read on an empty socket",
-    )?;
+    nonblocking_read(&s, peer, 0x728, true, "O_NONBLOCK read on an empty socket")?;
     let rev = crate::sys::poll_one(&*s, libc::POLLIN, 0).or_fail("poll")?;
     ensure!(rev == 0, "poll on an empty socket: revents {rev:#x}");
 
@@ -819,6 +843,37 @@ fn nonblocking_receive_and_pollin(i0: u32, peer: &OwnedFd) -> TestResult {
         hex(&buf[..n])
     );
     Ok(())
+}
+
+/// A read on the empty socket `s` with `MSG_DONTWAIT` (or, `o_nonblock`,
+/// a plain read on its `O_NONBLOCK` descriptor), in a thread: EAGAIN, and
+/// at once: not after an SF the peer sends to `rx` once [`T`] has passed.
+fn nonblocking_read(
+    s: &Arc<OwnedFd>,
+    peer: &OwnedFd,
+    rx: u32,
+    o_nonblock: bool,
+    what: &str,
+) -> TestResult {
+    let h = {
+        let s = Arc::clone(s);
+        thread::spawn(move || {
+            let mut buf = [0u8; 64];
+            if o_nonblock {
+                raw::read(&*s, &mut buf)
+            } else {
+                raw::recvfrom(&*s, &mut buf, libc::MSG_DONTWAIT, None).map(|(n, _)| n)
+            }
+        })
+    };
+    if crate::check::wait_until(T, what, || h.is_finished()).is_err() {
+        raw_send(peer, rx, &[0x01, 0x99])?;
+        let r = joined_within(h, T, what)?;
+        return Err(format!(
+            "{what}: blocked until a PDU came ({r:?}), want EAGAIN at once"
+        ));
+    }
+    want_errno(joined_within(h, T, what)?, libc::EAGAIN, what)
 }
 
 fn joined_poll(h: thread::JoinHandle<std::io::Result<libc::c_short>>) -> TestResult {
