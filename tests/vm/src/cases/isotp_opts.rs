@@ -570,17 +570,21 @@ fn wait_frames(ctx: &Ctx, i0: u32, peer: &OwnedFd) -> TestResult {
         let start = Instant::now();
         let w = write_bg(&s, pdu.clone());
         let ff = peer_expect(peer, 0x706, "FF")?;
-        let mut sent = Vec::new();
+        // (before, after) each frame's send: a gap is measured from before
+        // one send (or the write) to after the next, an upper bound of
+        // the time the sender's timer saw.
+        let mut sent: Vec<(Instant, Instant)> = Vec::new();
         for fc in [[0x31u8, 0, 0], [0x31, 0, 0], [0x30, 0, 0]] {
-            thread::sleep(pace.saturating_sub(sent.last().unwrap_or(&start).elapsed()));
+            let base = sent.last().map_or(start, |p| p.0);
+            thread::sleep(pace.saturating_sub(base.elapsed()));
             let before = Instant::now();
             raw_send(peer, 0x70E, &fc)?;
-            sent.push(before);
+            sent.push((before, Instant::now()));
         }
         let r = writer_result(w, what)?;
         if let Err(e) = &r {
-            let mut gaps = vec![sent[0] - start];
-            gaps.extend(sent.windows(2).map(|p| p[1] - p[0]));
+            let mut gaps = vec![sent[0].1 - start];
+            gaps.extend(sent.windows(2).map(|p| p[1].1 - p[0].0));
             let stalled = gaps.iter().any(|g| *g >= Duration::from_millis(950));
             if e.raw_os_error() == Some(libc::ECOMM) && stalled && attempt < 3 {
                 ctx.note(format!(
