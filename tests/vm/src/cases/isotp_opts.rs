@@ -12,7 +12,8 @@
 //! gap that `CAN_ISOTP_FRAME_TXTIME_ZERO` must not leave at 4 s) is
 //! generous. No sleep synchronises: frames and conditions are awaited;
 //! the sleeps that remain pace a peer that must send a frame after a
-//! given time (wait frames against N_Bs, CFs against a forced STmin).
+//! given time (wait frames against N_Bs, a CF after the receiver's
+//! forced STmin).
 //!
 //! The test thread is pinned to one CPU (its writer and poller threads
 //! inherit that) so that the peer's frames, each received in the NET_RX
