@@ -79,6 +79,9 @@ pub fn errno_name(e: i32) -> String {
         libc::ENOTCONN => "ENOTCONN",
         libc::ETIMEDOUT => "ETIMEDOUT",
         libc::ECONNREFUSED => "ECONNREFUSED",
+        libc::EBADMSG => "EBADMSG",
+        libc::ECOMM => "ECOMM",
+        libc::EILSEQ => "EILSEQ",
         _ => return format!("errno {e}"),
     };
     name.to_string()

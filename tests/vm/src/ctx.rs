@@ -687,15 +687,22 @@ impl Ctx {
     /// [`Ctx::can_ifaces`] plus the CAN_ISOTP protocol. Mainline:
     /// can-isotp.ko. Ours: rcan_isotp.
     pub fn isotp_ifaces(&mut self, n: usize) -> Result<Vec<u32>, String> {
+        self.isotp_ifaces_with(n, &[])
+    }
+
+    /// [`Ctx::isotp_ifaces`] with the ISO-TP module loaded with `params`
+    /// (both stacks' modules take `max_pdu_size=`): a [`Uses::Own`] test.
+    pub fn isotp_ifaces_with(&mut self, n: usize, params: &[&str]) -> Result<Vec<u32>, String> {
         let ifaces = self.can_ifaces(n)?;
         if self.stack == Stack::Ours {
-            self.insmod(Module::Isotp, &[])?;
+            self.insmod(Module::Isotp, params)?;
             return Ok(ifaces);
         }
         let ko = self
             .mainline_ko(Mainline::Isotp)
             .ok_or("no kernel build directory (RCAN_KBUILD or --kbuild)")?;
-        sys::finit_module(&ko, &[]).map_err(|e| format!("insmod {}: {e}", ko.display()))?;
+        sys::finit_module(&ko, params)
+            .map_err(|e| format!("insmod {} {}: {e}", ko.display(), params.join(" ")))?;
         Ok(ifaces)
     }
 

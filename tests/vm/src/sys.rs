@@ -431,6 +431,31 @@ pub fn set_link_up(dev: &str, up: bool) -> io::Result<()> {
     Ok(())
 }
 
+/// `ip link set DEV mtu MTU` (`SIOCSIFMTU` through an AF_INET datagram
+/// socket): a CAN interface takes it only while down (16 classic CAN, 72
+/// CAN FD).
+pub fn set_mtu(dev: &str, mtu: i32) -> io::Result<()> {
+    if dev.is_empty() || dev.len() >= libc::IFNAMSIZ {
+        return Err(io::Error::from_raw_os_error(libc::ENODEV));
+    }
+    // SAFETY: plain socket(2) call; the result is checked before use.
+    let fd = cvt(unsafe { libc::socket(libc::AF_INET, libc::SOCK_DGRAM | libc::SOCK_CLOEXEC, 0) })?;
+    // SAFETY: `fd` was just returned by socket(2) and is owned by nobody else.
+    let sock = unsafe { OwnedFd::from_raw_fd(fd) };
+    // SAFETY: all-zero bytes are a valid `ifreq` (a name and a union of
+    // plain integers and pointers).
+    let mut ifr: libc::ifreq = unsafe { zeroed() };
+    for (d, s) in ifr.ifr_name.iter_mut().zip(dev.bytes()) {
+        *d = s as libc::c_char;
+    }
+    ifr.ifr_ifru.ifru_mtu = mtu;
+    // SAFETY: `ifr` is a valid `ifreq` with a NUL-terminated name (the
+    // buffer is zeroed and the name shorter than IFNAMSIZ) and the MTU in
+    // `ifru_mtu`; the kernel only reads it.
+    cvt(unsafe { libc::ioctl(sock.as_raw_fd(), libc::SIOCSIFMTU, &ifr) })?;
+    Ok(())
+}
+
 /// `recv(fd, buf, flags)` on a descriptor *number* that other threads
 /// share and one of them may close meanwhile (the teardown tests: a thread
 /// blocked in `recv` while another closes the socket). A number that was

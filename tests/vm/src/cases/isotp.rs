@@ -44,10 +44,10 @@ pub static OURS: &[crate::Test] = test_table![
 ];
 
 const CAN_ISOTP: i32 = 6;
-const SOL_CAN_ISOTP: i32 = 106;
-const CAN_ISOTP_OPTS: i32 = 1;
-const CAN_ISOTP_LL_OPTS: i32 = 5;
-const CAN_ISOTP_WAIT_TX_DONE: u32 = 0x0400;
+pub(super) const SOL_CAN_ISOTP: i32 = 106;
+pub(super) const CAN_ISOTP_OPTS: i32 = 1;
+pub(super) const CAN_ISOTP_LL_OPTS: i32 = 5;
+pub(super) const CAN_ISOTP_WAIT_TX_DONE: u32 = 0x0400;
 const CAN_ISOTP_SF_BROADCAST: u32 = 0x0800;
 const SOL_CAN_RAW: i32 = 101;
 const CAN_RAW_FILTER: i32 = 1;
@@ -60,21 +60,21 @@ const SOCKADDR_CAN: usize = 24;
 
 /// A frame as the sniffer saw it.
 #[derive(Clone, Debug, PartialEq, Eq)]
-struct Fr {
-    id: u32,
-    fd: bool,
-    flags: u8,
-    data: Vec<u8>,
+pub(super) struct Fr {
+    pub(super) id: u32,
+    pub(super) fd: bool,
+    pub(super) flags: u8,
+    pub(super) data: Vec<u8>,
 }
 
-fn hex(b: &[u8]) -> String {
+pub(super) fn hex(b: &[u8]) -> String {
     b.iter()
         .map(|x| format!("{x:02X}"))
         .collect::<Vec<_>>()
         .join(" ")
 }
 
-fn show(f: &Fr) -> String {
+pub(super) fn show(f: &Fr) -> String {
     format!(
         "{:03X}{}[{}] {}",
         f.id,
@@ -85,12 +85,12 @@ fn show(f: &Fr) -> String {
 }
 
 /// `isotpsend -D n`'s PDU: byte i is (i mod 255) + 1.
-fn pattern(n: usize) -> Vec<u8> {
+pub(super) fn pattern(n: usize) -> Vec<u8> {
     (0..n).map(|i| ((i % 255) + 1) as u8).collect()
 }
 
 /// A CAN_RAW socket on `ifindex` taking CAN FD frames too.
-fn raw_open(ifindex: u32) -> Result<OwnedFd, String> {
+pub(super) fn raw_open(ifindex: u32) -> Result<OwnedFd, String> {
     raw_open_ids(ifindex, &[])
 }
 
@@ -148,7 +148,7 @@ fn raw_expect(s: impl AsFd, id: u32, t: Duration, what: &str) -> Result<Fr, Stri
 }
 
 /// Sends a classic frame `id#data` on `s`.
-fn raw_send(s: impl AsFd, id: u32, data: &[u8]) -> TestResult {
+pub(super) fn raw_send(s: impl AsFd, id: u32, data: &[u8]) -> TestResult {
     let mut b = [0u8; 16];
     b[..4].copy_from_slice(&id.to_ne_bytes());
     b[4] = data.len() as u8;
@@ -1675,7 +1675,7 @@ fn ctucanfd_isotp_fd_both_ways(ctx: &mut Ctx) -> TestResult {
 
 /// An ISO-TP socket with `CAN_ISOTP_OPTS` flags `flags` (defaults
 /// otherwise), not bound.
-fn tp_socket(flags: u32) -> Result<OwnedFd, String> {
+pub(super) fn tp_socket(flags: u32) -> Result<OwnedFd, String> {
     let s = raw::socket(libc::AF_CAN, libc::SOCK_DGRAM, CAN_ISOTP).or_fail("socket(CAN_ISOTP)")?;
     if flags != 0 {
         raw::setsockopt(&s, SOL_CAN_ISOTP, CAN_ISOTP_OPTS, &opts(flags))
@@ -1685,7 +1685,7 @@ fn tp_socket(flags: u32) -> Result<OwnedFd, String> {
 }
 
 /// `struct can_isotp_options` with `flags`, mainline's other defaults.
-fn opts(flags: u32) -> [u8; 12] {
+pub(super) fn opts(flags: u32) -> [u8; 12] {
     let mut o = [0u8; 12];
     o[..4].copy_from_slice(&flags.to_ne_bytes());
     o[4..8].copy_from_slice(&50_000u32.to_ne_bytes());
@@ -1695,7 +1695,7 @@ fn opts(flags: u32) -> [u8; 12] {
 }
 
 /// `struct sockaddr_can` for ISO-TP: `can_addr.tp = {rx_id, tx_id}`.
-fn tp_addr(ifindex: u32, rx: u32, tx: u32) -> [u8; SOCKADDR_CAN] {
+pub(super) fn tp_addr(ifindex: u32, rx: u32, tx: u32) -> [u8; SOCKADDR_CAN] {
     let mut a = [0u8; SOCKADDR_CAN];
     a[..2].copy_from_slice(&(libc::AF_CAN as u16).to_ne_bytes());
     a[4..8].copy_from_slice(&ifindex.to_ne_bytes());
@@ -1711,14 +1711,21 @@ fn tp_bound(flags: u32, ifindex: u32, rx: u32, tx: u32) -> Result<OwnedFd, Strin
 }
 
 /// The errno of `r`, or a failure naming `what` if it succeeded.
-fn errno_of<T: std::fmt::Debug>(r: std::io::Result<T>, what: &str) -> Result<i32, String> {
+pub(super) fn errno_of<T: std::fmt::Debug>(
+    r: std::io::Result<T>,
+    what: &str,
+) -> Result<i32, String> {
     match r {
         Ok(v) => Err(format!("{what}: succeeded ({v:?}), want an error")),
         Err(e) => Ok(e.raw_os_error().unwrap_or(0)),
     }
 }
 
-fn want_errno<T: std::fmt::Debug>(r: std::io::Result<T>, want: i32, what: &str) -> TestResult {
+pub(super) fn want_errno<T: std::fmt::Debug>(
+    r: std::io::Result<T>,
+    want: i32,
+    what: &str,
+) -> TestResult {
     let got = errno_of(r, what)?;
     ensure!(
         got == want,
@@ -1745,7 +1752,7 @@ fn poll_out(s: impl AsFd, ms: i32) -> Result<i16, String> {
 
 /// Writes `pdu` on `s` in a thread (it may block); the handle gives its
 /// result.
-fn write_bg(s: &Arc<OwnedFd>, pdu: Vec<u8>) -> JoinHandle<std::io::Result<usize>> {
+pub(super) fn write_bg(s: &Arc<OwnedFd>, pdu: Vec<u8>) -> JoinHandle<std::io::Result<usize>> {
     let s = Arc::clone(s);
     thread::spawn(move || raw::write(&*s, &pdu))
 }
@@ -1756,7 +1763,7 @@ fn joined(h: JoinHandle<std::io::Result<usize>>) -> Result<std::io::Result<usize
 
 /// [`joined`], but a writer still blocked after `t` is a failure (a
 /// transfer that never ends), not a hung test.
-fn joined_within(
+pub(super) fn joined_within(
     h: JoinHandle<std::io::Result<usize>>,
     t: Duration,
     what: &str,

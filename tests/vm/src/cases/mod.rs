@@ -20,6 +20,7 @@ mod i82527;
 mod i82527_dev;
 mod install;
 mod isotp;
+mod isotp_opts;
 mod leak;
 mod lifecycle;
 mod loopdrv;
@@ -221,6 +222,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         bcm::OURS,
         isotp::TESTS,
         isotp::OURS,
+        isotp_opts::TESTS,
         netns::TESTS,
         netns::OURS,
         fd::TESTS,
