@@ -2429,10 +2429,11 @@ fn teardown_isotp_transfers(ctx: &mut Ctx) -> TestResult {
         thread::spawn(move || {
             tid.store(crate::sys::gettid(), Ordering::SeqCst);
             let pdu = tagged(1, 100);
+            // `fd` is only a number here: the main thread closes it while
+            // this call runs; the kernel keeps the file until the call
+            // returns, and a number already closed is EBADF.
             // SAFETY: `pdu` is valid for reads of its length for the whole
-            // call; `fd` is only a number here (the main thread closes it
-            // while this call runs: the kernel keeps the file until the
-            // call returns; a number already closed is EBADF).
+            // call, and a raw fd number is not memory.
             let n = unsafe { libc::write(fd, pdu.as_ptr().cast(), pdu.len()) };
             if n < 0 {
                 Err(std::io::Error::last_os_error())
