@@ -56,18 +56,6 @@ shards_debug=${RCAN_SHARDS_DEBUG:-2}
 for v in jobs_max shards_release shards_debug; do
 	[[ ${!v} =~ ^[1-9][0-9]*$ ]] || die "RCAN_JOBS, RCAN_SHARDS_RELEASE and RCAN_SHARDS_DEBUG want a number >= 1"
 done
-# RCAN_MAIN_NICE (default 4, 0 to turn off): the main lane's jobs run
-# at this nice value, the debug lane's at the caller's. The debug shards
-# are the run's longest chain and wait half their time (timers, program
-# starts), so the main lane fills what they leave; but while the release
-# and mainline VMs ran beside them at equal priority the host's two cores
-# were oversubscribed (2026-11-29: debug VMs 0.6-0.7 of a core each,
-# release VMs 0.35-0.45, host CPU 1.84 of 2 over the VM stages) and the
-# critical path got an equal share only. At nice 4 the main lane gets
-# about 2/7 of a contended core against a debug VM's 5/7; uncontended,
-# everything.
-main_nice=${RCAN_MAIN_NICE:-4}
-[[ $main_nice =~ ^[0-9]+$ ]] && [ "$main_nice" -le 19 ] || die "RCAN_MAIN_NICE wants 0..19"
 # make check's setup and builds before this script (the Makefile passes
 # when make started).
 pre_secs=
@@ -153,10 +141,6 @@ start_ready() {
 		# included) go beside its log, for the table at the end.
 		# shellcheck disable=SC2086  # RUN is a command line
 		(
-			# The main lane yields the CPU to the debug lane when both
-			# want it (main_nice, below).
-			[ "${job_lane[$n]}" = main ] && [ "$main_nice" -gt 0 ] &&
-				renice -n "$main_nice" -p "$BASHPID" >/dev/null
 			${job_run[$n]}
 			rc=$?
 			# Not in a pipeline: that would be a fork of its own,
