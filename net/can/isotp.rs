@@ -81,7 +81,7 @@ use rcan_api::{
 };
 use rcan_core::frame::AnyFrame;
 use rcan_core::isotp::{
-    clamp_max_pdu_size, route, single_mask, Config, IsotpOptions, LlOptions, Route, Timeouts,
+    clamp_max_pdu_size, pdu_limit, route, single_mask, Config, IsotpOptions, LlOptions, Route, Timeouts,
     TpAddr, CAN_ISOTP, CAN_ISOTP_LL_OPTS, CAN_ISOTP_OPTS, CAN_ISOTP_RECV_FC, CAN_ISOTP_RX_STMIN,
     CAN_ISOTP_TX_STMIN, CAN_ISOTP_WAIT_TX_DONE, ISOTP_MIN_NAMELEN, MAX_OPTLEN, SOL_CAN_ISOTP,
 };
@@ -95,7 +95,8 @@ const TX_TIMER: usize = 0;
 const RX_TIMER: usize = 1;
 
 /// `max_pdu_size` (C shim `isotp_c.c`): the largest PDU sent or received,
-/// read at `bind` (clamped as mainline clamps it at load).
+/// read at `bind` (clamped as mainline clamps it at load, and never under
+/// mainline's 8300-byte buffers: [`pdu_limit`]).
 const MAX_PDU_SIZE: Param<u32> = Param::new(0);
 /// `fc_timeout_ms` and `echo_timeout_ms` (C shim; test-only, not
 /// mainline's): the timeouts of a socket, read at `bind`
@@ -703,7 +704,7 @@ impl glue::sock::Proto for IsotpProto {
         let down = !dev.is_up();
         let ifindex = dev.ifindex();
         drop(dev);
-        let max = clamp_max_pdu_size(MAX_PDU_SIZE.get()) as usize;
+        let max = pdu_limit(MAX_PDU_SIZE.get()) as usize;
         let mut rxbuf = KVVec::from_elem(0u8, max, GFP_KERNEL)?;
         let fs = [
             RxFilter {

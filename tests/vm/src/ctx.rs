@@ -706,6 +706,24 @@ impl Ctx {
         Ok(ifaces)
     }
 
+    /// Loads the ISO-TP module that [`Ctx::isotp_ifaces_with`] loaded
+    /// again, with `params` (its sockets must be closed): a [`Uses::Own`]
+    /// test.
+    pub fn reload_isotp_with(&mut self, params: &[&str]) -> Result<(), String> {
+        self.own("reload", "the ISO-TP module")?;
+        if self.stack == Stack::Ours {
+            // Retrying: a socket's release may end a little after close.
+            rmmod_retrying(Module::Isotp.name())?;
+            return self.insmod(Module::Isotp, params);
+        }
+        rmmod_retrying(Mainline::Isotp.name())?;
+        let ko = self
+            .mainline_ko(Mainline::Isotp)
+            .ok_or("no kernel build directory (RCAN_KBUILD or --kbuild)")?;
+        sys::finit_module(&ko, params)
+            .map_err(|e| format!("insmod {} {}: {e}", ko.display(), params.join(" ")))
+    }
+
     /// Unregisters the interfaces [`Ctx::can_ifaces`] made, under any
     /// sockets bound to them. Ours: rmmod rcan_loop. Mainline:
     /// `ip link del` each vcan.

@@ -176,6 +176,20 @@ pub const fn clamp_max_pdu_size(param: u32) -> u32 {
     }
 }
 
+/// The largest PDU a socket sends or receives for the module parameter
+/// `max_pdu_size`: the clamped value ([`clamp_max_pdu_size`]), but never
+/// under [`DEFAULT_MAX_PDU_SIZE`]. Mainline's buffers start at 8300 bytes
+/// and only grow towards the parameter, so a parameter below 8300 (4095,
+/// say) takes PDUs of up to 8300 bytes all the same; ours matches.
+pub const fn pdu_limit(param: u32) -> u32 {
+    let p = clamp_max_pdu_size(param);
+    if p < DEFAULT_MAX_PDU_SIZE {
+        DEFAULT_MAX_PDU_SIZE
+    } else {
+        p
+    }
+}
+
 /// Mainline `struct can_isotp_options` (12 bytes, native endian).
 #[repr(C)]
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -788,6 +802,12 @@ mod tests {
         assert_eq!(clamp_max_pdu_size(0), 4095);
         assert_eq!(clamp_max_pdu_size(8300), 8300);
         assert_eq!(clamp_max_pdu_size(u32::MAX), 1025 * 1024);
+        // Mainline's buffers never shrink under 8300 bytes.
+        assert_eq!(pdu_limit(0), 8300);
+        assert_eq!(pdu_limit(5000), 8300);
+        assert_eq!(pdu_limit(8300), 8300);
+        assert_eq!(pdu_limit(10000), 10000);
+        assert_eq!(pdu_limit(u32::MAX), 1025 * 1024);
     }
 
     #[test]

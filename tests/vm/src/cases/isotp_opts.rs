@@ -1247,6 +1247,9 @@ fn fd_receive(i0: u32, peer: &OwnedFd, dl: usize, rx: u32, tx: u32) -> TestResul
 ///    FF announces 10000 with the 32-bit FF_DL (`10 00 00 00 27 10`).
 /// 2. An FF announcing 10001 bytes is answered with FC overflow
 ///    `32 00 00`, one announcing 10000 with `30 00 00`.
+/// 3. Reloaded with 5000 (below 8300): the limit stays 8300 (8301 bytes
+///    EINVAL, 8300 taken; an FF of 8301 overflow, of 8300 CTS), as on
+///    mainline, whose buffers never shrink under 8300 bytes.
 fn isotp_max_pdu_size(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.isotp_ifaces_with(1, &["max_pdu_size=10000"])?[0];
     let _pin = crate::sys::pin_to_cpu0_for().or_fail("pin to CPU 0")?;
@@ -1282,6 +1285,41 @@ fn isotp_max_pdu_size(ctx: &mut Ctx) -> TestResult {
         );
     }
     // An SF ends the running reception and is read.
+    raw_send(&peer, 0x7F8, &[0x01, 0x77])?;
+    want_pdu(&s, &[0x77], "an SF after the FF")?;
+    drop((s, peer));
+
+    // Below 8300 the parameter does not lower the limit: mainline's
+    // buffers start at 8300 bytes and only grow.
+    ctx.reload_isotp_with(&["max_pdu_size=5000"])?;
+    let peer = peer_open(i0)?;
+    let s = tp_on(opts(0), &[], i0, 0x7F8, 0x7F0)?;
+    want_errno(
+        raw::write(&s, &vec![0u8; 8301]),
+        libc::EINVAL,
+        "write of 8301 bytes with max_pdu_size 5000",
+    )?;
+    let n = raw::write(&s, &pattern(8300)).or_fail("write of 8300 bytes with max_pdu_size 5000")?;
+    ensure!(n == 8300, "write of 8300 bytes returned {n}");
+    let ff = peer_expect(&peer, 0x7F0, "FF of 8300 bytes")?.f;
+    ensure!(
+        ff.data.get(..6) == Some(&[0x10, 0, 0, 0, 0x20, 0x6C][..]),
+        "FF of 8300 bytes with max_pdu_size 5000: {}",
+        show(&ff)
+    );
+    raw_send(&peer, 0x7F8, &[0x32, 0, 0])?;
+    want_read_errno(&s, libc::EMSGSIZE, "the 8300-byte transfer answered FC overflow")?;
+    for (len, fc) in [(8301u32, [0x32, 0, 0]), (8300, [0x30, 0, 0])] {
+        let l = len.to_be_bytes();
+        raw_send(&peer, 0x7F8, &[0x10, 0, l[0], l[1], l[2], l[3], 1, 2])?;
+        let got = peer_expect(&peer, 0x7F0, "FC to an FF")?.f;
+        ensure!(
+            got.data == fc,
+            "FC to an FF of {len} bytes with max_pdu_size 5000: {}, want {}",
+            show(&got),
+            hex(&fc)
+        );
+    }
     raw_send(&peer, 0x7F8, &[0x01, 0x77])?;
     want_pdu(&s, &[0x77], "an SF after the FF")
 }
