@@ -28,6 +28,7 @@ pub mod isotp;
 pub mod isotp_pci;
 pub mod isotp_rx;
 pub mod isotp_tx;
+pub mod j1939;
 pub mod ring;
 pub mod rxtable;
 pub mod slotring;
