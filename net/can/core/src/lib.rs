@@ -29,6 +29,7 @@ pub mod isotp_pci;
 pub mod isotp_rx;
 pub mod isotp_tx;
 pub mod j1939;
+pub mod j1939_ac;
 pub mod ring;
 pub mod rxtable;
 pub mod slotring;
