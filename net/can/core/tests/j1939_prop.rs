@@ -113,6 +113,34 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(500))]
+
+    /// Distinct NAMEs, each claiming one of 4 addresses once, in any
+    /// order and at any times: once every window has passed, each
+    /// address is held by the lowest NAME that claimed it (J1939-81's
+    /// priority rule; mainline would keep whichever of two overlapping
+    /// claims had its timer expire first).
+    #[test]
+    fn lowest_name_holds_each_address(
+        claims in prop::collection::btree_map(1u64..1000, (0u8..4, 0u64..600), 1..12)
+    ) {
+        let mut order: Vec<(u64, u64, u8)> =
+            claims.iter().map(|(&n, &(a, t))| (t * 1_000_000, n, a)).collect();
+        order.sort();
+        let mut t = AcTable::new();
+        for &(at, name, a) in &order {
+            t.on_timer(at);
+            t.on_claim(a, &name.to_le_bytes(), at);
+        }
+        t.on_timer(u64::MAX);
+        for a in 0..4u8 {
+            let want = claims.iter().filter(|(_, &(x, _))| x == a).map(|(&n, _)| n).min();
+            prop_assert_eq!(t.addr_to_name(a), want.unwrap_or(0), "address {}", a);
+        }
+    }
+}
+
 // ---- two machines over a simulated bus -------------------------------------
 
 /// How the transfer ended on each side.
