@@ -144,6 +144,13 @@ impl AcTable {
     /// Drops ECU `i`'s mapping and pending claim; frees the entry when
     /// nothing refers to it any more.
     fn unmap(&mut self, i: usize) {
+        self.unmap_keep(i);
+        self.release_if_unused(i);
+    }
+
+    /// [`Self::unmap`], keeping the entry (its NAME is about to get a new
+    /// address or to be released by the caller).
+    fn unmap_keep(&mut self, i: usize) {
         let a = usize::from(self.ecus[i].addr);
         if addr_is_unicast(self.ecus[i].addr) {
             if usize::from(self.map[a]) == i {
@@ -154,7 +161,6 @@ impl AcTable {
             }
         }
         self.ecus[i].claim_at = None;
-        self.release_if_unused(i);
     }
 
     fn release_if_unused(&mut self, i: usize) {
@@ -192,10 +198,7 @@ impl AcTable {
             return ClaimResult::Repeated;
         }
         // The previous claim of this NAME, mapped or pending, is over.
-        let keep = self.ecus[i].local_users;
-        self.ecus[i].local_users = keep + 1; // keep the entry through unmap
-        self.unmap(i);
-        self.ecus[i].local_users = keep;
+        self.unmap_keep(i);
         if !addr_is_unicast(sa) {
             self.ecus[i].addr = J1939_IDLE_ADDR;
             self.release_if_unused(i);
@@ -316,10 +319,11 @@ impl AcTable {
                 Some(i) => i,
                 None => self.create(name).ok_or(ENOMEM)?,
             };
-            self.ecus[i].local_users += 1;
+            self.ecus[i].local_users = self.ecus[i].local_users.saturating_add(1);
         }
         if addr_is_unicast(sa) {
-            self.bound[usize::from(sa)] += 1;
+            let b = &mut self.bound[usize::from(sa)];
+            *b = b.saturating_add(1);
         }
         Ok(())
     }
@@ -389,11 +393,7 @@ impl AcTable {
             }
             let i = self.find(src_name).ok_or(ENODEV)?;
             if self.ecus[i].addr != sa {
-                let keep = self.ecus[i].local_users;
-                self.ecus[i].local_users = keep + 1;
                 self.unmap(i);
-                self.ecus[i].local_users = keep;
-                self.release_if_unused(i);
             }
         } else if src_name != J1939_NO_NAME {
             let a = self.name_to_addr(src_name);
