@@ -1060,6 +1060,25 @@ mod tests {
     }
 
     #[test]
+    fn largest_etp_is_accepted() {
+        let id = Id {
+            prio: 6,
+            pgn: ETP_PGN_CTL,
+            sa: SA,
+            da: DA,
+        };
+        let max = (MAX_ETP_SIZE as u32).to_le_bytes();
+        let d = [0x14, max[0], max[1], max[2], max[3], 0x00, 0xEF, 0x00];
+        let (rx, s) = RxSession::on_rts(&Params::default(), id, &d, usize::MAX, 0).unwrap();
+        assert_eq!(rx.size(), 117_440_505);
+        assert_eq!(s.frame.unwrap().data[..5], [0x15, 255, 1, 0, 0]);
+        let over = ((MAX_ETP_SIZE + 1) as u32).to_le_bytes();
+        let d = [0x14, over[0], over[1], over[2], over[3], 0x00, 0xEF, 0x00];
+        let e = RxSession::on_rts(&Params::default(), id, &d, usize::MAX, 0).unwrap_err();
+        assert_eq!(e.frame.unwrap().data[1], abort::FAULT);
+    }
+
+    #[test]
     fn receiver_timeouts() {
         let data = msg(30);
         // T2 after CTS.
