@@ -232,7 +232,7 @@ impl Id {
     /// The `can_id` (with `CAN_EFF_FLAG`) mainline's `j1939_send_one`
     /// builds: the PGN is cut as [`pgn_for_send`] does, a priority over
     /// 7 becomes 6, and for a PDU1 PGN the destination fills PS.
-    pub const fn to_can_id(&self) -> u32 {
+    pub const fn to_can_id(self) -> u32 {
         let pgn = pgn_for_send(self.pgn);
         let prio = if self.prio > 7 { 6 } else { self.prio };
         let mut id = CAN_EFF_FLAG | (prio as u32) << 26 | pgn << 8 | self.sa as u32;
@@ -384,7 +384,7 @@ impl SockAddr {
 
     /// The image `getsockname`/`getpeername`/`recvmsg` write: padding
     /// zeroed.
-    pub fn to_bytes(&self) -> [u8; SOCKADDR_J1939_LEN] {
+    pub fn to_bytes(self) -> [u8; SOCKADDR_J1939_LEN] {
         let mut b = [0u8; SOCKADDR_J1939_LEN];
         b[..2].copy_from_slice(&AF_CAN.to_ne_bytes());
         b[4..8].copy_from_slice(&self.ifindex.to_ne_bytes());
@@ -468,7 +468,7 @@ impl Filter {
     }
 
     /// The image (padding zero).
-    pub fn to_bytes(&self) -> [u8; Self::SIZE] {
+    pub fn to_bytes(self) -> [u8; Self::SIZE] {
         let mut b = [0u8; Self::SIZE];
         b[0..8].copy_from_slice(&self.name.to_ne_bytes());
         b[8..16].copy_from_slice(&self.name_mask.to_ne_bytes());
@@ -492,7 +492,7 @@ impl Filter {
 /// bytes: `EINVAL` when not a multiple of [`Filter::SIZE`] or over
 /// [`J1939_FILTER_MAX`] filters. 0 (or no buffer) removes the filters.
 pub const fn filter_count(optlen: usize) -> Result<usize, i32> {
-    if optlen % Filter::SIZE != 0 || optlen > J1939_FILTER_MAX * Filter::SIZE {
+    if !optlen.is_multiple_of(Filter::SIZE) || optlen > J1939_FILTER_MAX * Filter::SIZE {
         Err(EINVAL)
     } else {
         Ok(optlen / Filter::SIZE)
