@@ -822,6 +822,7 @@ mod tests {
         let s = tx.on_ctl(&hold, &data, 100);
         assert_eq!(s.frame, None);
         assert_eq!(s.timer, TimerCmd::Arm(100 + T4_NS));
+        assert_eq!(s.notify, None);
         // Repeated holds extend the wait.
         let s = tx.on_ctl(&hold, &data, 500 * MS);
         assert_eq!(s.timer, TimerCmd::Arm(500 * MS + T4_NS));
@@ -860,6 +861,10 @@ mod tests {
             s = tx.on_timer(&data, 0);
         }
         assert_eq!(seqs, [1, 2, 3, 4, 5]);
+        // A hold after data reports no progress (mainline's TX_SCHED
+        // comes with windows only).
+        let s = tx.on_ctl(&[0x11, 0, 3, 0xFF, 0xFF, 0x00, 0xEF, 0x00], &data, 5);
+        assert_eq!((s.frame, s.notify), (None, None));
         // The receiver asks for packets 2 and 3 again.
         let mut s = tx.on_ctl(&[0x11, 2, 2, 0xFF, 0xFF, 0x00, 0xEF, 0x00], &data, 10);
         assert_eq!(s.notify, Some(Notify::TxSched(7)));

@@ -270,7 +270,6 @@ impl TxSession {
         }
         let acked = next - 1;
         self.acked = acked;
-        let notify = (acked > 0).then(|| Notify::TxSched((acked * 7).min(self.size as u32)));
         self.tx = acked;
         self.echo_pending = false;
         if n == 0 {
@@ -278,10 +277,12 @@ impl TxSession {
             // likes: mainline would abort a second CTS(0) with reason 8).
             return Step {
                 timer: self.clock.arm(now.saturating_add(T4_NS), Due::Timeout),
-                notify,
                 ..Step::NONE
             };
         }
+        // Progress reported for a window after the first, as mainline
+        // does (not for holds).
+        let notify = (acked > 0).then(|| Notify::TxSched((acked * 7).min(self.size as u32)));
         self.last = (acked + n).min(self.total);
         self.st = TxSt::Sending;
         let mut s = if self.kind == Kind::Etp {
