@@ -18,6 +18,21 @@ use crate::ctx::tool;
 /// a software-emulated VM loads the binaries over 9p.
 pub const TOOL_LIMIT: Duration = Duration::from_secs(60);
 
+/// How long a python3 script of a test may take, start-up and imports
+/// included: a hang bound, not a speed limit. python3 reads some 300
+/// modules over 9p; importing python-can took 20-36 s on the release
+/// kernel, 76 s alone on the debug kernel, and on the debug kernel of a
+/// loaded 2-core host more than 300 s (2026-11-30, twice in a row).
+/// The tests that start python3 on the debug kernel have a watchdog to
+/// match (`cases::LONG_RUNNING`).
+pub fn python_limit() -> Duration {
+    if crate::ctx::debug_kernel() {
+        TOOL_LIMIT * 15
+    } else {
+        TOOL_LIMIT * 2
+    }
+}
+
 /// System calls a receiving program blocks in once its socket is set up
 /// (x86_64 numbers): read, poll, select, recvfrom, recvmsg, epoll_wait,
 /// pselect6, ppoll, epoll_pwait, recvmmsg, epoll_pwait2.
@@ -246,8 +261,35 @@ impl Bg {
         })
     }
 
+    /// What the program is doing, for a failure message: its scheduler
+    /// state, the CPU seconds it has used and the system call it sleeps
+    /// in, from `/proc/PID/stat` and `/proc/PID/syscall`. A slow program
+    /// reads `R` (running) with CPU seconds near the wall-clock ones; one
+    /// that waits forever reads `S` in the same system call.
+    pub fn activity(&self) -> String {
+        let pid = self.child.id();
+        let Ok(stat) = fs::read_to_string(format!("/proc/{pid}/stat")) else {
+            return format!("pid {pid}: no /proc entry");
+        };
+        // Fields after the parenthesised name: state is the 3rd of the
+        // line, utime and stime the 14th and 15th (clock ticks, 100 Hz).
+        let f: Vec<&str> = stat
+            .rsplit_once(')')
+            .map_or("", |(_, rest)| rest)
+            .split_whitespace()
+            .collect();
+        let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
+        let cpu = (ticks(11) + ticks(12)) as f64 / 100.0;
+        let sc = fs::read_to_string(format!("/proc/{pid}/syscall")).unwrap_or_default();
+        format!(
+            "pid {pid}: state {}, {cpu:.1} CPU s, syscall {}",
+            f.first().unwrap_or(&"?"),
+            sc.split_whitespace().next().unwrap_or("?")
+        )
+    }
+
     /// Waits up to `limit` for the program to exit on its own; kills it and
-    /// fails (with its output) if it does not.
+    /// fails (with its output and [`Bg::activity`]) if it does not.
     pub fn finish(mut self, limit: Duration) -> Result<Output, String> {
         let waited = wait_for(limit, &format!("{} to exit", self.cmd), || {
             self.child.try_wait().or_fail(&self.cmd)
@@ -255,6 +297,7 @@ impl Bg {
         let status = match waited {
             Ok(st) => st,
             Err(e) => {
+                let e = format!("{e} ({})", self.activity());
                 let _ = self.child.kill();
                 let _ = self.child.wait();
                 self.join_readers();

@@ -989,13 +989,7 @@ print("done", flush=True)
         })
     };
     let start = Instant::now();
-    // Starting python3 and importing can takes some 20 s under emulation on
-    // the release kernel, several times that on the debug kernel.
-    let limit = if crate::ctx::debug_kernel() {
-        tools::TOOL_LIMIT * 5
-    } else {
-        tools::TOOL_LIMIT
-    };
+    let limit = tools::python_limit();
     let out = tools::spawn("/usr/bin/python3", &["-c", script], None)?.finish(limit);
     // The recorder ends at the marker, once every frame before it is read.
     let marked = match &out {
@@ -2042,11 +2036,7 @@ print("done", flush=True)
         })
     };
     let start = Instant::now();
-    let limit = if crate::ctx::debug_kernel() {
-        tools::TOOL_LIMIT * 5
-    } else {
-        tools::TOOL_LIMIT
-    };
+    let limit = tools::python_limit();
     let out = tools::spawn("/usr/bin/python3", &["-c", script], None)?.finish(limit);
     let marked = match &out {
         Ok(o) if o.status.success() => wait_until(SETTLE, "the marker frame 0x3D1", || rec.is_finished()),

@@ -423,20 +423,6 @@ fn read_msg(s: &mut TcpStream, pending: &mut String) -> Result<String, String> {
     }
 }
 
-/// How long a python3 client may take to start and finish: a hang bound,
-/// not a speed limit. Importing python-can over 9p takes over a minute on
-/// the debug kernel under TCG, and more than 150 s (this bound until
-/// 2026-11-30) on a slower host: the same bound as the other python
-/// tests (`TOOL_LIMIT * 5` on the debug kernel), under its per-test
-/// watchdog (360 s there).
-fn py_limit() -> Duration {
-    if crate::ctx::debug_kernel() {
-        TOOL_LIMIT * 5
-    } else {
-        TOOL_LIMIT * 2
-    }
-}
-
 /// The python-can side of the cantcpd test: sends two frames, then
 /// prints the two it receives.
 const PY_CLIENT: &str = r#"
@@ -482,7 +468,8 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
     let py = tools::spawn("python3", &["-c", PY_CLIENT], None)?;
     // Importing python-can over 9p takes over a minute on the debug
     // kernel under TCG.
-    wait_for(py_limit(), "python-can client to send", || {
+    let start = Instant::now();
+    wait_for(tools::python_limit(), "python-can client to send", || {
         if py.stdout_now().contains("SENT") {
             return Ok(Some(()));
         }
@@ -490,7 +477,12 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
             return Err(format!("python3: {}", py.stderr_now()));
         }
         Ok(None)
-    })?;
+    })
+    .map_err(|e| format!("{e} ({}; stderr {:?})", py.activity(), py.stderr_now()))?;
+    println!(
+        "# python3 started, imported python-can and sent in {:.1} s",
+        start.elapsed().as_secs_f64()
+    );
     let from_py = [std(0x123, &[1, 2, 3]), ext(0x1234567, &[0xAA])];
     canraw::expect_seq(&rx, &from_py, "CAN_RAW socket, frames from python-can")?;
     let from_bus = [std(0x321, &[9, 8]), ext(0x1ABCDEF, &[])];
@@ -499,7 +491,7 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
         // python-can 4.1's socketcand reader loses a message split across
         // two reads: one frame at a time, the next once the client has
         // printed this one.
-        wait_for(py_limit(), &format!("the python-can client to print {line:?}"), || {
+        wait_for(tools::python_limit(), &format!("the python-can client to print {line:?}"), || {
             if py.stdout_now().contains(line) {
                 return Ok(Some(()));
             }
@@ -509,7 +501,7 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
             Ok(None)
         })?;
     }
-    let out = py.finish(py_limit())?;
+    let out = py.finish(tools::python_limit())?;
     ensure!(
         out.status.success()
             && out.stdout.contains("RX 321 0908")
@@ -597,7 +589,7 @@ fn cantcpd_slow_client_drops_alone(ctx: &mut Ctx) -> TestResult {
         ensure!(m == want, "reading client: expected {want:?}, got {m:?}");
     }
     let slow = tools::spawn("python3", &["-c", PY_SLOW_CLIENT], None)?;
-    wait_for(py_limit(), "the slow client to be in raw mode", || {
+    wait_for(tools::python_limit(), "the slow client to be in raw mode", || {
         if slow.stdout_now().contains("READY") {
             return Ok(Some(()));
         }

@@ -498,11 +498,7 @@ print("got", m is not None and m.is_fd, m is not None and m.error_state_indicato
       m.data.hex() if m else None, flush=True)
 bus.shutdown()
 "#;
-    let limit = if crate::ctx::debug_kernel() {
-        TOOL_LIMIT * 5
-    } else {
-        TOOL_LIMIT
-    };
+    let limit = tools::python_limit();
     let py = tools::spawn("/usr/bin/python3", &["-c", script], None)?;
     // Python's start-up under emulation takes long. Once its frame is
     // here its socket exists, so the frame we send back is queued for it

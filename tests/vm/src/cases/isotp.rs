@@ -753,17 +753,6 @@ fn isotp_canutils_fd(ctx: &mut Ctx) -> TestResult {
     r.and(restore)
 }
 
-/// How long python3 may take for the whole script: starting it and
-/// importing can-isotp and udsoncan over 9p takes seconds on the release
-/// kernel and far more on the debug kernel.
-fn python_limit() -> Duration {
-    if crate::ctx::debug_kernel() {
-        TOOL_LIMIT * 5
-    } else {
-        TOOL_LIMIT * 2
-    }
-}
-
 /// The python side of [`isotp_python_uds`]: one process, as python
 /// start-up is the expensive part. argv: the interface (MTU 72), the
 /// directory setup.sh installed can-isotp and udsoncan into, the size of
@@ -1142,7 +1131,7 @@ fn python_uds_on(c0: &str, i0: u32, pydir: &str) -> TestResult {
         ],
         None,
     )?
-    .finish(python_limit())?;
+    .finish(tools::python_limit())?;
     let took = start.elapsed();
     let rcv = r.finish(TOOL_LIMIT)?;
     let fr = sn.stop()?;
