@@ -355,3 +355,30 @@ impl Drop for TempDir {
         let _ = fs::remove_dir_all(&self.0);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A program that waits reads `S` in its system call; one that
+    /// computes reads `R` with CPU seconds. The failure message of a bound
+    /// that runs out tells the two apart by this.
+    #[test]
+    fn activity_tells_waiting_from_running() {
+        let sleeper = spawn("sleep", &["30"], None).expect("sleep");
+        let waiting = wait_for(TOOL_LIMIT, "sleep to block", || {
+            let a = sleeper.activity();
+            Ok(a.contains("state S, ").then_some(a))
+        })
+        .expect("sleep never blocked");
+        // clock_nanosleep, x86_64 system call 230.
+        assert!(waiting.ends_with("syscall 230"), "{waiting}");
+        let spinner = spawn("sh", &["-c", "while :; do :; done"], None).expect("sh");
+        let running = wait_for(TOOL_LIMIT, "sh to use CPU time", || {
+            let a = spinner.activity();
+            Ok((a.contains("state R, ") && !a.contains(" 0.0 CPU s")).then_some(a))
+        })
+        .expect("the busy loop never ran");
+        assert!(running.ends_with("syscall running"), "{running}");
+    }
+}
