@@ -1399,6 +1399,9 @@ fn sja1000_kvaser_iomem_revoked(ctx: &mut Ctx) -> TestResult {
         ));
     }
     let (i0, i1) = kvaser2(ctx)?;
+    // Bound before the keeper's write: a bind reprograms the hardware
+    // filter, which would take the chip out of reset mode again.
+    let (s0, s1) = (canraw::open(i0)?, canraw::open(i1)?);
     let with_kvaser = pci_enable_count(&addr)?;
     ctx.rmmod_iomemkeep()?;
     let after_exit = reg0(&kmsg.read_new()?, "exit")?;
@@ -1419,7 +1422,6 @@ fn sja1000_kvaser_iomem_revoked(ctx: &mut Ctx) -> TestResult {
              {after_rmmod}"
         ));
     }
-    let (s0, s1) = (canraw::open(i0)?, canraw::open(i1)?);
     let frames = || -> TestResult {
         for k in 0..4u8 {
             let f = sff(0x71, &[k]);
