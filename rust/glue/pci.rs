@@ -16,10 +16,10 @@
 //!   trampoline, if `T::probe` fails). Revoking clears its `live` flag and
 //!   waits for an RCU grace period (`synchronize_rcu`), then disables the
 //!   device for each [`Enabled`] still alive. A register access tests the
-//!   flag inside an RCU read-side section ([`IoMem::access`], which every
-//!   accessor goes through): one that began before the revocation ends
-//!   before `remove` returns, one that begins after it reads all-ones
-//!   (as absent hardware does) or writes nothing, and never touches the
+//!   flag inside an RCU read-side section (every accessor; the only way
+//!   to the registers): one that began before the revocation ends before
+//!   `remove` returns, one that begins after it reads all-ones (as
+//!   absent hardware does) or writes nothing, and never touches the
 //!   device. So safe code that keeps an `IoMem` or an `Enabled` past
 //!   `remove` (in a `static`, or in a network device whose registration
 //!   it forgot) cannot program a device another driver may own by then,
@@ -27,9 +27,14 @@
 //!   stays valid until the `IoMem`'s drop unmaps it. This is upstream's
 //!   `Devres`/`Revocable` idea with one revocation per binding.
 //!
-//!   Cost: each register access takes and releases an RCU read lock (two
-//!   calls into the RCU core under `PREEMPT_RCU`) and loads the flag;
-//!   [`IoMem::access`] lets a caller pay it once for several accesses.
+//!   Cost: with interrupts, preemption or softirqs off (the drivers'
+//!   hot paths run under their chip's spinlock, interrupts off) that
+//!   region is the read-side section already (since v5.0
+//!   `synchronize_rcu` waits for it): an access costs one call
+//!   (`rcan_may_sleep`) and a load more. Elsewhere it takes and releases
+//!   the RCU read lock (two calls into the RCU core under `PREEMPT_RCU`).
+//!   [`IoMem::access`] lends the registers for several accesses behind
+//!   one check, under the RCU read lock.
 //!
 //! Modelled on upstream's `rust/kernel/pci.rs` (Adapter + id table +
 //! drvdata) and `rust/kernel/devres.rs`, with 6.12's C API.
@@ -309,6 +314,15 @@ impl Binding {
     fn live(&self, _rcu: &RcuReadGuard) -> bool {
         self.live.load(Ordering::Relaxed)
     }
+
+    /// Whether the binding is live, for a caller in a read-side section
+    /// of another kind: interrupts, preemption or softirqs disabled, or
+    /// an `rcu_read_lock()` of a caller up the stack, from before this
+    /// call until after the access it guards ([`IoMem::with`]).
+    #[inline]
+    fn live_in_section(&self) -> bool {
+        self.live.load(Ordering::Relaxed)
+    }
 }
 
 /// Keeps a PCI device enabled until it is dropped or its binding ends,
@@ -401,51 +415,72 @@ impl IoMem {
         self.io.len()
     }
 
+    /// `f` on the BAR's registers if the binding has not ended: one
+    /// check and the accesses `f` makes, all inside one read-side section
+    /// that [`Binding::revoke`] waits for. Private: `f` is one of the
+    /// accessors below, which neither sleep nor turn interrupts,
+    /// preemption or softirqs back on. Any context.
+    ///
+    /// The hot paths of the drivers (interrupt handler, transmit, NAPI
+    /// poll) access the registers under the chip's spinlock with
+    /// interrupts off: there the section exists already, and only the
+    /// check is made. Elsewhere (probe, process context without the
+    /// lock) it takes the RCU read lock, as [`IoMem::access`] does.
+    #[inline]
+    fn with<R>(&self, f: impl FnOnce(&IoRange) -> R) -> Option<R> {
+        // SAFETY: no precondition; reads the preempt count, the
+        // interrupt flag and the task's RCU nesting depth.
+        if unsafe { bindings::rcan_may_sleep() } {
+            return self.access().map(|r| f(&r));
+        }
+        // Not preemptible (interrupts, preemption or softirqs off) or
+        // inside an `rcu_read_lock()` of a caller: either lasts until
+        // `f` returns (nothing between here and there ends it), and since
+        // v5.0 `synchronize_rcu()` waits for both kinds of region
+        // (`include/linux/rcupdate.h`, `synchronize_rcu`'s comment in
+        // `kernel/rcu/tree.c`), so the revocation waits for this one.
+        self.binding.live_in_section().then(|| f(&self.io))
+    }
+
     /// `ioread8` at `off`; 0xFF outside the mapping or after the binding.
     #[inline]
     pub(crate) fn read8(&self, off: usize) -> u8 {
-        self.access().map_or(0xFF, |r| r.read8(off))
+        self.with(|r| r.read8(off)).unwrap_or(0xFF)
     }
 
     /// `iowrite8` at `off`; dropped outside the mapping or after the
     /// binding.
     #[inline]
     pub(crate) fn write8(&self, off: usize, val: u8) {
-        if let Some(r) = self.access() {
-            r.write8(off, val);
-        }
+        self.with(|r| r.write8(off, val));
     }
 
     /// `ioread16` at `off` (little-endian); all-ones outside the mapping
     /// or after the binding.
     #[inline]
     pub(crate) fn read16(&self, off: usize) -> u16 {
-        self.access().map_or(!0, |r| r.read16(off))
+        self.with(|r| r.read16(off)).unwrap_or(!0)
     }
 
     /// `iowrite16` at `off` (little-endian); dropped outside the mapping
     /// or after the binding.
     #[inline]
     pub(crate) fn write16(&self, off: usize, val: u16) {
-        if let Some(r) = self.access() {
-            r.write16(off, val);
-        }
+        self.with(|r| r.write16(off, val));
     }
 
     /// `ioread32` at `off`; all-ones outside the mapping or after the
     /// binding.
     #[inline]
     pub(crate) fn read32(&self, off: usize) -> u32 {
-        self.access().map_or(!0, |r| r.read32(off))
+        self.with(|r| r.read32(off)).unwrap_or(!0)
     }
 
     /// `iowrite32` at `off`; dropped outside the mapping or after the
     /// binding.
     #[inline]
     pub(crate) fn write32(&self, off: usize, val: u32) {
-        if let Some(r) = self.access() {
-            r.write32(off, val);
-        }
+        self.with(|r| r.write32(off, val));
     }
 }
 
