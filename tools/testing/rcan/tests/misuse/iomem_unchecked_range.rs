@@ -13,7 +13,7 @@
 use crate::glue::iomap::IoRange;
 use crate::glue::pci::IoMem;
 
-pub(crate) fn unchecked(io: &IoMem) -> u8 {
+pub(crate) fn unchecked(io: IoMem) -> u8 {
     let r: &IoRange = &*io;
     r.read8(0)
 }
