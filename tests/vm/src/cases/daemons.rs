@@ -423,9 +423,19 @@ fn read_msg(s: &mut TcpStream, pending: &mut String) -> Result<String, String> {
     }
 }
 
-/// How long a python3 client may take to start and finish (under the
-/// per-test watchdog of 180 s, so a slow start fails with this message).
-const PY_LIMIT: Duration = Duration::from_secs(150);
+/// How long a python3 client may take to start and finish: a hang bound,
+/// not a speed limit. Importing python-can over 9p takes over a minute on
+/// the debug kernel under TCG, and more than 150 s (this bound until
+/// 2026-11-30) on a slower host: the same bound as the other python
+/// tests (`TOOL_LIMIT * 5` on the debug kernel), under its per-test
+/// watchdog (360 s there).
+fn py_limit() -> Duration {
+    if crate::ctx::debug_kernel() {
+        TOOL_LIMIT * 5
+    } else {
+        TOOL_LIMIT * 2
+    }
+}
 
 /// The python-can side of the cantcpd test: sends two frames, then
 /// prints the two it receives.
@@ -472,7 +482,7 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
     let py = tools::spawn("python3", &["-c", PY_CLIENT], None)?;
     // Importing python-can over 9p takes over a minute on the debug
     // kernel under TCG.
-    wait_for(PY_LIMIT, "python-can client to send", || {
+    wait_for(py_limit(), "python-can client to send", || {
         if py.stdout_now().contains("SENT") {
             return Ok(Some(()));
         }
@@ -489,7 +499,7 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
         // python-can 4.1's socketcand reader loses a message split across
         // two reads: one frame at a time, the next once the client has
         // printed this one.
-        wait_for(PY_LIMIT, &format!("the python-can client to print {line:?}"), || {
+        wait_for(py_limit(), &format!("the python-can client to print {line:?}"), || {
             if py.stdout_now().contains(line) {
                 return Ok(Some(()));
             }
@@ -499,7 +509,7 @@ fn cantcpd_python_can_and_second_client(ctx: &mut Ctx) -> TestResult {
             Ok(None)
         })?;
     }
-    let out = py.finish(PY_LIMIT)?;
+    let out = py.finish(py_limit())?;
     ensure!(
         out.status.success()
             && out.stdout.contains("RX 321 0908")
@@ -587,7 +597,7 @@ fn cantcpd_slow_client_drops_alone(ctx: &mut Ctx) -> TestResult {
         ensure!(m == want, "reading client: expected {want:?}, got {m:?}");
     }
     let slow = tools::spawn("python3", &["-c", PY_SLOW_CLIENT], None)?;
-    wait_for(PY_LIMIT, "the slow client to be in raw mode", || {
+    wait_for(py_limit(), "the slow client to be in raw mode", || {
         if slow.stdout_now().contains("READY") {
             return Ok(Some(()));
         }

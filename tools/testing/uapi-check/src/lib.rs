@@ -9,8 +9,9 @@
 //! for the value of every object-like macro that the rcan headers
 //! (`include/uapi/linux/can/*.h`) and mainline's CAN headers
 //! (`<linux/can.h>`, `<linux/can/raw.h>`, `<linux/can/bcm.h>`,
-//! `<linux/can/error.h>`) define, and for `sizeof`, `alignof` and every
-//! field's `offsetof` of the structs in the rcan headers. [`rust_consts`]
+//! `<linux/can/error.h>`, `<linux/can/j1939.h>`) define, for the enum
+//! constants of `<linux/can/j1939.h>`, and for `sizeof`, `alignof` and
+//! every field's `offsetof` of the structs in the rcan headers. [`rust_consts`]
 //! finds every Rust `const` in the tree whose name is one of those
 //! macros, and [`check_tree`] evaluates each and compares. Constants the
 //! host can link (crates `rcan-uapi` and `rcan-core`) are compared by
@@ -45,7 +46,13 @@ pub const MAINLINE_HEADERS: &[&str] = &[
     "linux/can/raw.h",
     "linux/can/bcm.h",
     "linux/can/error.h",
+    "linux/can/j1939.h",
 ];
+
+/// Mainline headers whose enum constants (not only their macros) are
+/// uapi: `<linux/can/j1939.h>` gives its socket options, cmsg types,
+/// netlink attributes and error-queue codes as `enum { ... }`.
+pub const MAINLINE_ENUM_HEADERS: &[&str] = &["linux/can/j1939.h"];
 
 /// Headers every other header builds on; their macros are not ours.
 const BASE_HEADERS: &[&str] = &["linux/types.h", "linux/socket.h", "linux/sockios.h"];
@@ -107,10 +114,21 @@ fn strip_c_comments(text: &str) -> String {
 
 static SEQ: AtomicU32 = AtomicU32::new(0);
 
+/// What [`run_c`] does with a program.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum CMode {
+    /// The preprocessor's macro list (`-dM -E`).
+    Macros,
+    /// The preprocessed text (`-E`), with its line markers.
+    Preprocess,
+    /// Build and run the program; its output.
+    Run,
+}
+
 /// Runs the C compiler (`$CC`, else `cc`) with `-I include/uapi` on
-/// `program`; with `dump_macros` returns the preprocessor's macro list
-/// (`-dM -E`), else builds and runs the program and returns its output.
-fn run_c(root: &Path, program: &str, dump_macros: bool) -> Result<String, String> {
+/// `program` in `mode` and returns what it printed (see [`CMode`]).
+fn run_c_mode(root: &Path, program: &str, mode: CMode) -> Result<String, String> {
+    let dump_macros = mode != CMode::Run;
     let dir = std::env::temp_dir().join(format!(
         "rcan-uapi-check.{}.{}",
         std::process::id(),
@@ -123,8 +141,10 @@ fn run_c(root: &Path, program: &str, dump_macros: bool) -> Result<String, String
     let cc = std::env::var("CC").unwrap_or_else(|_| "cc".to_string());
     let mut cmd = Command::new(&cc);
     cmd.arg("-I").arg(root.join("include/uapi"));
-    if dump_macros {
+    if mode == CMode::Macros {
         cmd.args(["-dM", "-E"]).arg(&src);
+    } else if mode == CMode::Preprocess {
+        cmd.arg("-E").arg(&src);
     } else {
         cmd.arg("-o").arg(&exe).arg(&src);
     }
@@ -150,6 +170,72 @@ fn run_c(root: &Path, program: &str, dump_macros: bool) -> Result<String, String
     };
     let _ = fs::remove_dir_all(&dir);
     Ok(text)
+}
+
+/// [`run_c_mode`]: with `dump_macros` the macro list, else the output of
+/// the program.
+fn run_c(root: &Path, program: &str, dump_macros: bool) -> Result<String, String> {
+    run_c_mode(
+        root,
+        program,
+        if dump_macros {
+            CMode::Macros
+        } else {
+            CMode::Run
+        },
+    )
+}
+
+/// The enumerators of every `enum { ... }` that the preprocessed text
+/// `pp` (with `# LINE "FILE"` markers) takes from a file whose path ends
+/// in one of `headers`, in order.
+pub fn enum_constants(pp: &str, headers: &[&str]) -> Vec<String> {
+    let mut text = String::new();
+    let mut inside = false;
+    for line in pp.lines() {
+        if let Some(marker) = line.strip_prefix("# ") {
+            let file = marker.split('"').nth(1).unwrap_or("");
+            inside = headers.iter().any(|h| file.ends_with(&format!("/{h}")));
+            continue;
+        }
+        if inside {
+            text.push_str(line);
+            text.push('\n');
+        }
+    }
+    let mut out = Vec::new();
+    let mut rest = text.as_str();
+    while let Some(i) = rest.find("enum") {
+        let after = &rest[i + 4..];
+        // A whole word, followed by an optional tag and a body.
+        let word_start = i == 0
+            || !rest[..i]
+                .chars()
+                .next_back()
+                .is_some_and(|c| c.is_ascii_alphanumeric() || c == '_');
+        let open = after.find('{');
+        let semi = after.find(';');
+        match (word_start, open) {
+            (true, Some(o)) if semi.is_none_or(|s| o < s) => {
+                let Some(close) = after[o..].find('}') else {
+                    break;
+                };
+                for item in after[o + 1..o + close].split(',') {
+                    let name: String = item
+                        .trim()
+                        .chars()
+                        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                        .collect();
+                    if !name.is_empty() {
+                        out.push(name);
+                    }
+                }
+                rest = &after[o + close..];
+            }
+            _ => rest = after,
+        }
+    }
+    out
 }
 
 fn includes(headers: &[String]) -> String {
@@ -222,7 +308,8 @@ pub fn c_eval(root: &Path, exprs: &[&str]) -> Result<BTreeMap<String, i128>, Str
 }
 
 /// What the headers say: every object-like macro of the rcan and
-/// mainline CAN headers (and [`BASE_MACROS`]) by name; for every struct of
+/// mainline CAN headers (and [`BASE_MACROS`]) by name, and every enum
+/// constant of [`MAINLINE_ENUM_HEADERS`]; for every struct of
 /// the rcan headers `sizeof(struct S)`, `alignof(struct S)` and
 /// `offsetof(struct S, f)` / `sizeof(struct S.f)` for each field `f`.
 /// Values as the C compiler computes them on this host.
@@ -236,6 +323,12 @@ pub fn header_values(root: &Path) -> Result<BTreeMap<String, i128>, String> {
         .collect();
     for m in BASE_MACROS {
         exprs.push((m.to_string(), m.to_string()));
+    }
+    let pp = run_c_mode(root, &includes(&all_headers(root)), CMode::Preprocess)?;
+    for e in enum_constants(&pp, MAINLINE_ENUM_HEADERS) {
+        if !exprs.iter().any(|(k, _)| *k == e) {
+            exprs.push((e.clone(), e));
+        }
     }
     for h in rcan_headers(root) {
         let text = fs::read_to_string(&h).map_err(|e| format!("{}: {e}", h.display()))?;
@@ -661,6 +754,22 @@ mod tests {
         for (g, w) in got.iter().zip(want) {
             assert_eq!((g.0, g.1.as_str(), g.2.as_str()), w);
         }
+    }
+
+    #[test]
+    fn reads_enum_constants_of_the_named_headers_only() {
+        let pp = "# 1 \"/usr/include/linux/can/raw.h\" 1\n\
+                  enum { CAN_RAW_FILTER = 1, };\n\
+                  # 5 \"/usr/include/linux/can/j1939.h\" 1\n\
+                  typedef unsigned int pgn_t;\n\
+                  enum {\n SO_A = 1,\n SO_B,\n};\n\
+                  enum tag { X_NONE, X_ONE = (1 << 2) };\n\
+                  enum tag t;\n\
+                  int enumerate;\n";
+        assert_eq!(
+            enum_constants(pp, &["linux/can/j1939.h"]),
+            ["SO_A", "SO_B", "X_NONE", "X_ONE"]
+        );
     }
 
     #[test]

@@ -81,6 +81,23 @@ fn every_rust_spelling_of_a_uapi_macro_agrees_with_the_headers() {
         );
         assert!(user(name), "no user-space Rust definition of {name} found");
     }
+    // Mainline's J1939 uapi, macros and enum constants, on the kernel
+    // side (the module's core; user space uses libc's or its own).
+    for name in [
+        "CAN_J1939",
+        "SOL_CAN_J1939",
+        "J1939_NO_PGN",
+        "J1939_FILTER_MAX",
+        "SO_J1939_FILTER",
+        "SCM_J1939_ERRQUEUE",
+        "J1939_NLA_DEST_ADDR",
+        "J1939_EE_INFO_RX_ABORT",
+    ] {
+        assert!(
+            kernel(name),
+            "no kernel-side Rust definition of {name} found"
+        );
+    }
 }
 
 #[test]
@@ -539,4 +556,128 @@ fn canfd_frame_agrees_with_mainline() {
         b[c["offsetof(struct canfd_frame, data)"] as usize + 11],
         0x5a
     );
+}
+
+#[test]
+fn rcan_core_j1939_agrees_with_mainline() {
+    use rcan_core::j1939 as j;
+    let values = values();
+    let same = |name: &str, x: i128| assert_eq!(x, v(&values, name), "rcan_core::j1939::{name}");
+    // Macros of <linux/can.h> and <linux/can/j1939.h>.
+    same("CAN_J1939", j::CAN_J1939.into());
+    same("SOL_CAN_J1939", j::SOL_CAN_J1939.into());
+    same("J1939_MAX_UNICAST_ADDR", j::J1939_MAX_UNICAST_ADDR.into());
+    same("J1939_IDLE_ADDR", j::J1939_IDLE_ADDR.into());
+    same("J1939_NO_ADDR", j::J1939_NO_ADDR.into());
+    same("J1939_NO_NAME", j::J1939_NO_NAME.into());
+    same("J1939_PGN_REQUEST", j::J1939_PGN_REQUEST.into());
+    same(
+        "J1939_PGN_ADDRESS_CLAIMED",
+        j::J1939_PGN_ADDRESS_CLAIMED.into(),
+    );
+    same(
+        "J1939_PGN_ADDRESS_COMMANDED",
+        j::J1939_PGN_ADDRESS_COMMANDED.into(),
+    );
+    same("J1939_PGN_PDU1_MAX", j::J1939_PGN_PDU1_MAX.into());
+    same("J1939_PGN_MAX", j::J1939_PGN_MAX.into());
+    same("J1939_NO_PGN", j::J1939_NO_PGN.into());
+    same("J1939_FILTER_MAX", j::J1939_FILTER_MAX as i128);
+    // Its enum constants (read through enum_constants).
+    for (name, x) in [
+        ("SO_J1939_FILTER", j::SO_J1939_FILTER),
+        ("SO_J1939_PROMISC", j::SO_J1939_PROMISC),
+        ("SO_J1939_SEND_PRIO", j::SO_J1939_SEND_PRIO),
+        ("SO_J1939_ERRQUEUE", j::SO_J1939_ERRQUEUE),
+        ("SCM_J1939_DEST_ADDR", j::SCM_J1939_DEST_ADDR),
+        ("SCM_J1939_DEST_NAME", j::SCM_J1939_DEST_NAME),
+        ("SCM_J1939_PRIO", j::SCM_J1939_PRIO),
+        ("SCM_J1939_ERRQUEUE", j::SCM_J1939_ERRQUEUE),
+        ("J1939_NLA_PAD", j::J1939_NLA_PAD),
+        ("J1939_NLA_BYTES_ACKED", j::J1939_NLA_BYTES_ACKED),
+        ("J1939_NLA_TOTAL_SIZE", j::J1939_NLA_TOTAL_SIZE),
+        ("J1939_NLA_PGN", j::J1939_NLA_PGN),
+        ("J1939_NLA_SRC_NAME", j::J1939_NLA_SRC_NAME),
+        ("J1939_NLA_DEST_NAME", j::J1939_NLA_DEST_NAME),
+        ("J1939_NLA_SRC_ADDR", j::J1939_NLA_SRC_ADDR),
+        ("J1939_NLA_DEST_ADDR", j::J1939_NLA_DEST_ADDR),
+        ("J1939_EE_INFO_NONE", j::J1939_EE_INFO_NONE),
+        ("J1939_EE_INFO_TX_ABORT", j::J1939_EE_INFO_TX_ABORT),
+        ("J1939_EE_INFO_RX_RTS", j::J1939_EE_INFO_RX_RTS),
+        ("J1939_EE_INFO_RX_DPO", j::J1939_EE_INFO_RX_DPO),
+        ("J1939_EE_INFO_RX_ABORT", j::J1939_EE_INFO_RX_ABORT),
+    ] {
+        same(name, x.into());
+    }
+    // Every enum constant of the header is among the values (a new one
+    // in a later header would show up here).
+    let n = values
+        .keys()
+        .filter(|k| {
+            ["SO_J1939_", "SCM_J1939_", "J1939_NLA_", "J1939_EE_INFO_"]
+                .iter()
+                .any(|p| k.starts_with(p))
+        })
+        .count();
+    assert_eq!(n, 21);
+
+    // Layouts: struct j1939_filter and sockaddr_can's j1939 part.
+    let c = c_eval(
+        &repo_root(),
+        &[
+            "sizeof(struct j1939_filter)",
+            "offsetof(struct j1939_filter, name)",
+            "offsetof(struct j1939_filter, name_mask)",
+            "offsetof(struct j1939_filter, pgn)",
+            "offsetof(struct j1939_filter, pgn_mask)",
+            "offsetof(struct j1939_filter, addr)",
+            "offsetof(struct j1939_filter, addr_mask)",
+            "offsetof(struct sockaddr_can, can_ifindex)",
+            "offsetof(struct sockaddr_can, can_addr.j1939.name)",
+            "offsetof(struct sockaddr_can, can_addr.j1939.pgn)",
+            "offsetof(struct sockaddr_can, can_addr.j1939.addr)",
+            "offsetof(struct sockaddr_can, can_addr.j1939) + sizeof(((struct sockaddr_can *)0)->can_addr.j1939)",
+        ],
+    )
+    .unwrap();
+    assert_eq!(c["sizeof(struct j1939_filter)"], j::Filter::SIZE as i128);
+    let f = j::Filter {
+        name: 0x0102_0304_0506_0708,
+        name_mask: 0x1112_1314_1516_1718,
+        pgn: 0x2122_2324,
+        pgn_mask: 0x3132_3334,
+        addr: 0x41,
+        addr_mask: 0x51,
+    };
+    let mut want = vec![0u8; j::Filter::SIZE];
+    let put = |w: &mut Vec<u8>, field: &str, bytes: &[u8]| {
+        let off = c[&format!("offsetof(struct j1939_filter, {field})")] as usize;
+        w[off..off + bytes.len()].copy_from_slice(bytes);
+    };
+    put(&mut want, "name", &f.name.to_ne_bytes());
+    put(&mut want, "name_mask", &f.name_mask.to_ne_bytes());
+    put(&mut want, "pgn", &f.pgn.to_ne_bytes());
+    put(&mut want, "pgn_mask", &f.pgn_mask.to_ne_bytes());
+    put(&mut want, "addr", &[f.addr]);
+    put(&mut want, "addr_mask", &[f.addr_mask]);
+    assert_eq!(f.to_bytes().to_vec(), want);
+    assert_eq!(
+        c["offsetof(struct sockaddr_can, can_addr.j1939) + sizeof(((struct sockaddr_can *)0)->can_addr.j1939)"],
+        j::SOCKADDR_J1939_LEN as i128
+    );
+    let a = j::SockAddr {
+        ifindex: 0x0a0b_0c0d,
+        name: 0x1122_3344_5566_7788,
+        pgn: 0x0001_2300,
+        addr: 0x99,
+    };
+    let mut want = vec![0u8; j::SOCKADDR_J1939_LEN];
+    want[..2].copy_from_slice(&29u16.to_ne_bytes());
+    let at = |k: &str| c[&format!("offsetof(struct sockaddr_can, {k})")] as usize;
+    want[at("can_ifindex")..][..4].copy_from_slice(&a.ifindex.to_ne_bytes());
+    want[at("can_addr.j1939.name")..][..8].copy_from_slice(&a.name.to_ne_bytes());
+    want[at("can_addr.j1939.pgn")..][..4].copy_from_slice(&a.pgn.to_ne_bytes());
+    want[at("can_addr.j1939.addr")] = a.addr;
+    assert_eq!(a.to_bytes().to_vec(), want);
+    assert_eq!(j::SockAddr::parse(&want), Ok(a));
 }
