@@ -4,6 +4,11 @@
 //! shared by PCI BAR mappings ([`super::pci::IoMem`]) and ISA windows
 //! ([`super::isa::IoWindow`]). The kernel's `ioread*`/`iowrite*` take
 //! either kind of cookie (memory or port). Any context.
+//!
+//! An ISA window lends its range for as long as it is claimed (its
+//! owner, the module, is the binding). A PCI mapping lends it only
+//! through a [`super::pci::IoGuard`], while its binding lasts: the range
+//! checks bounds, the guard checks the binding.
 
 use super::bindings;
 use core::ptr::NonNull;

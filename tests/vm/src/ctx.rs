@@ -290,6 +290,16 @@ pub const ABISKEW: &str = "rcan_abiskew";
 /// Its `.ko`, relative to the repository root.
 pub const ABISKEW_KO: &str = "tools/testing/rcan/exitmod/rcan_abiskew.ko";
 
+/// The test-only module `rcan_iomemkeep` (built beside [`EXITTEST`]): a
+/// PCI driver, bound by `driver_override` only, that keeps its register
+/// window and its enable past `remove` and uses the window at exit
+/// (issue 39, "A mapping past its binding"); only
+/// `sja1000_kvaser_iomem_revoked` loads it ([`Ctx::insmod_iomemkeep`]),
+/// and [`Ctx::unload_all`] unloads it.
+pub const IOMEMKEEP: &str = "rcan_iomemkeep";
+/// Its `.ko`, relative to the repository root.
+pub const IOMEMKEEP_KO: &str = "tools/testing/rcan/exitmod/rcan_iomemkeep.ko";
+
 /// Test context: where the modules are and the state of the loaded stack.
 pub struct Ctx {
     root: PathBuf,
@@ -438,6 +448,19 @@ impl Ctx {
     pub fn insmod_abiskew(&mut self) -> Result<std::io::Result<()>, String> {
         self.own("insmod", ABISKEW)?;
         Ok(sys::finit_module(&self.root.join(ABISKEW_KO), &[]))
+    }
+
+    /// `insmod` the test-only module [`IOMEMKEEP`].
+    pub fn insmod_iomemkeep(&mut self) -> Result<(), String> {
+        self.own("insmod", IOMEMKEEP)?;
+        let ko = self.root.join(IOMEMKEEP_KO);
+        sys::finit_module(&ko, &[]).map_err(|e| format!("insmod {}: {e}", ko.display()))
+    }
+
+    /// `rmmod` the test-only module [`IOMEMKEEP`] (no retries).
+    pub fn rmmod_iomemkeep(&mut self) -> Result<(), String> {
+        self.own("rmmod", IOMEMKEEP)?;
+        rmmod(IOMEMKEEP)
     }
 
     /// `rmmod` the test-only module [`EXITTEST`] (no retries).
@@ -752,6 +775,9 @@ impl Ctx {
         let mut errors = Vec::new();
         // It uses rcan_pf: first.
         if let Err(e) = rmmod_retrying(EXITTEST) {
+            errors.push(e);
+        }
+        if let Err(e) = rmmod_retrying(IOMEMKEEP) {
             errors.push(e);
         }
         for m in Module::ALL.into_iter().rev() {

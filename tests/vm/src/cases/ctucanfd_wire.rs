@@ -100,10 +100,10 @@ pub fn park_spare_ctucan_cards() -> TestResult {
 /// `echo DRIVER > /sys/bus/pci/devices/ADDR/driver_override` for each
 /// card; dropping it puts back what each had (an empty write for none),
 /// whatever the test's outcome.
-struct Overrides(Vec<(String, String)>);
+pub(super) struct Overrides(Vec<(String, String)>);
 
 impl Overrides {
-    fn set(pairs: &[(&str, &str)]) -> Result<Overrides, String> {
+    pub(super) fn set(pairs: &[(&str, &str)]) -> Result<Overrides, String> {
         let mut o = Overrides(Vec::new());
         for (addr, drv) in pairs {
             let p = format!("/sys/bus/pci/devices/{addr}/driver_override");

@@ -41,6 +41,8 @@ pub const TESTS: &[crate::Test] = test_table![
     sja1000_isa_absent,
     sja1000_tscan1_absent,
     sja1000_pcan_pci_no_device,
+    sja1000_kvaser_unbind_bind_traffic,
+    sja1000_kvaser_iomem_revoked,
 ];
 
 /// The bit timing preset these tests load the SJA1000 front-ends with
@@ -1159,4 +1161,280 @@ mod tests {
         );
         assert_eq!(batch_errors(""), (vec![], String::new()));
     }
+}
+
+/// The PCI address of the first Kvaser PCIcan card, whose channel is
+/// can0 when rcan_kvaser_pci is the only card driver loaded (it probes
+/// the cards in PCI order; its devices have no sysfs parent to look at).
+fn first_kvaser() -> Result<String, String> {
+    let cards = crate::ctx::pci_devices(&[(0x10e8, 0x8406)])?;
+    ensure!(
+        cards.len() >= 2,
+        "{} Kvaser PCIcan cards, expected two (is the VM booted with RCAN_QEMU_CAN?)",
+        cards.len()
+    );
+    Ok(cards[0].clone())
+}
+
+/// `echo ADDR > /sys/bus/pci/drivers/DRIVER/{bind,unbind}`.
+fn pci_driver_op(driver: &str, op: &str, addr: &str) -> TestResult {
+    let p = format!("/sys/bus/pci/drivers/{driver}/{op}");
+    std::fs::write(&p, addr).map_err(|e| format!("echo {addr} > {p}: {e}"))
+}
+
+/// How many enables a PCI device counts (`/sys/bus/pci/devices/ADDR/
+/// enable` shows `enable_cnt`; the runner holds one of its own on every
+/// CAN card, see `ctx::hold_can_cards_enabled`).
+fn pci_enable_count(addr: &str) -> Result<u32, String> {
+    let p = format!("/sys/bus/pci/devices/{addr}/enable");
+    let s = std::fs::read_to_string(&p).or_fail(&p)?;
+    s.trim().parse().map_err(|e| format!("{p}: {e}: {:?}", s.trim()))
+}
+
+/// sysfs `unbind` of a Kvaser PCIcan from rcan_kvaser_pci while frames
+/// flow through its interface both ways (a sender and a receiver on it,
+/// and on the other card's), with an idle CAN_RAW socket bound to it;
+/// then `bind` again. What a user does to hand a card to another driver
+/// and back. The unbind returns; the card's interface goes; its sender's
+/// write fails with a documented errno and the idle socket reads ENODEV
+/// (after ENETDOWN, possibly); the other card's flow is not disturbed.
+/// After `bind`, the interface comes back under the same name and frames
+/// pass both ways again. The runner fails the test on any kernel report
+/// (each register access of the unbound card's driver now checks its
+/// binding, which the glue revokes after the driver's remove).
+fn sja1000_kvaser_unbind_bind_traffic(ctx: &mut Ctx) -> TestResult {
+    const DRV: &str = "rcan_kvaser_pci";
+    let (i0, i1) = kvaser2(ctx)?;
+    let addr = first_kvaser()?;
+    // Bound to can0 with a filter nothing sent here matches.
+    let idle = canraw::open(i0)?;
+    idle.set_read_timeout(Duration::from_millis(100))
+        .or_fail("SO_RCVTIMEO")?;
+    idle.set_filters(&[CanFilter::new(0x123, canraw::CAN_SFF_MASK)])
+        .or_fail("CAN_RAW_FILTER")?;
+    let stop = AtomicBool::new(false);
+    // [0]: can0 -> can1, [1]: can1 -> can0: (sent, received).
+    let counts: [(AtomicU64, AtomicU64); 2] = Default::default();
+    let (fail0, took) = thread::scope(|sc| -> Result<_, String> {
+        let _stop = OnDrop(|| stop.store(true, Ordering::SeqCst));
+        let mut senders = Vec::new();
+        for (k, (tx, rx)) in [(i0, i1), (i1, i0)].into_iter().enumerate() {
+            let txs = canraw::open(tx)?;
+            let rxs = canraw::open(rx)?;
+            rxs.set_read_timeout(Duration::from_millis(100))
+                .or_fail("SO_RCVTIMEO")?;
+            let (stop, c) = (&stop, &counts[k]);
+            let id = 0x60 + k as u16;
+            rxs.set_filters(&[CanFilter::new(u32::from(id), canraw::CAN_SFF_MASK)])
+                .or_fail("CAN_RAW_FILTER")?;
+            senders.push(sc.spawn(move || -> Option<i32> {
+                let mut n = 0u8;
+                while !stop.load(Ordering::SeqCst) {
+                    if let Err(e) = txs.write_frame(&sff(id, &[n])) {
+                        // A full queue on a live interface is back
+                        // pressure, not the unbind.
+                        match e.raw_os_error() {
+                            Some(libc::ENOBUFS) | Some(libc::EAGAIN) => continue,
+                            errno => return errno,
+                        }
+                    }
+                    n = n.wrapping_add(1);
+                    c.0.fetch_add(1, Ordering::SeqCst);
+                }
+                None
+            }));
+            sc.spawn(move || {
+                while !stop.load(Ordering::SeqCst) {
+                    if rxs.read_frame().is_ok() {
+                        c.1.fetch_add(1, Ordering::SeqCst);
+                    }
+                }
+            });
+        }
+        let moving = |what: &str| -> TestResult {
+            let first: Vec<(u64, u64)> = counts
+                .iter()
+                .map(|c| (c.0.load(Ordering::SeqCst), c.1.load(Ordering::SeqCst)))
+                .collect();
+            wait_until(SETTLE, what, || {
+                counts.iter().zip(&first).all(|(c, &(s, g))| {
+                    c.0.load(Ordering::SeqCst) >= s + 16 && c.1.load(Ordering::SeqCst) >= g + 16
+                })
+            })
+        };
+        moving("frames flowing both ways before the unbind")?;
+        let t = Instant::now();
+        pci_driver_op(DRV, "unbind", &addr)?;
+        let took = t.elapsed();
+        // can0's sender meets the unbind; can1's goes on.
+        let s0 = senders.remove(0);
+        wait_until(SETTLE, "can0's sender failing after the unbind", || {
+            s0.is_finished()
+        })?;
+        let fail0 = s0.join().map_err(|_| "can0's sender panicked")?;
+        let s1 = counts[1].0.load(Ordering::SeqCst);
+        wait_until(SETTLE, "can1's sender going on after the unbind", || {
+            counts[1].0.load(Ordering::SeqCst) >= s1 + 16
+        })?;
+        stop.store(true, Ordering::SeqCst);
+        let fail1 = senders
+            .remove(0)
+            .join()
+            .map_err(|_| "can1's sender panicked")?;
+        ensure!(
+            fail1.is_none(),
+            "can1's sender failed with errno {:?} while can0's card was unbound",
+            fail1
+        );
+        Ok((fail0, took))
+    })?;
+    ctx.note(format!(
+        "unbind under traffic: {:.2} s; can0 -> can1 {} sent, {} received; can1 -> can0 {} sent, {} received",
+        took.as_secs_f64(),
+        counts[0].0.load(Ordering::SeqCst),
+        counts[0].1.load(Ordering::SeqCst),
+        counts[1].0.load(Ordering::SeqCst),
+        counts[1].1.load(Ordering::SeqCst),
+    ));
+    ensure!(
+        matches!(fail0, Some(libc::ENETDOWN | libc::ENODEV | libc::ENXIO)),
+        "can0's sender after the unbind: errno {fail0:?}, expected ENETDOWN, ENODEV or ENXIO"
+    );
+    ensure!(
+        !std::path::Path::new("/sys/class/net/can0").exists(),
+        "can0 still there after unbinding {addr} from {DRV}"
+    );
+    ensure!(
+        !std::path::Path::new(&format!("/sys/bus/pci/drivers/{DRV}/{addr}")).exists(),
+        "{addr} still bound to {DRV} after the unbind"
+    );
+    // The idle socket: ENETDOWN possibly, ENODEV, then nothing.
+    let mut errs = Vec::new();
+    loop {
+        match idle.read_frame() {
+            Err(e) if crate::check::errno_of(&e) == libc::EAGAIN => break,
+            Err(e) if errs.len() < 2 => errs.push(crate::check::errno_of(&e)),
+            r => return Err(format!("idle socket on can0 after the unbind: {r:?}")),
+        }
+    }
+    ensure!(
+        errs == [libc::ENODEV] || errs == [libc::ENETDOWN, libc::ENODEV],
+        "idle socket on can0 after the unbind: errnos {errs:?}, expected [ENETDOWN,] ENODEV"
+    );
+    drop(idle);
+
+    pci_driver_op(DRV, "bind", &addr)?;
+    ensure!(
+        std::path::Path::new("/sys/class/net/can0").exists(),
+        "no can0 after binding {addr} to {DRV} again"
+    );
+    ctx.link_up("can0")?;
+    let (j0, j1) = (ctx.ifindex("can0")?, ctx.ifindex("can1")?);
+    ensure!(j1 == i1, "can1's ifindex changed from {i1} to {j1}");
+    let (s0, s1) = (canraw::open(j0)?, canraw::open(j1)?);
+    for k in 0..4u8 {
+        let f = sff(0x70, &[k]);
+        canraw::send(&s0, &f)?;
+        canraw::expect(&s1, &f, "can1 after the bind")?;
+        let f = ext(0x0700_0000 | u32::from(k), &[k, 0xB0]);
+        canraw::send(&s1, &f)?;
+        canraw::expect(&s0, &f, "can0 after the bind")?;
+    }
+    Ok(())
+}
+
+/// The revocation itself (issue 39, "A mapping past its binding"): the
+/// test-only driver `rcan_iomemkeep` keeps a Kvaser card's register
+/// window and enable past its `remove`. Bound to the first card (sysfs
+/// `driver_override`), it reads the first SJA1000's register 0 (not
+/// 0xff); after the unbind the device counts one enable less than while
+/// bound (the glue disabled it for the kept enable at the binding's
+/// end). The card then goes to rcan_kvaser_pci with the other one
+/// (can0, can1); the keeper's exit reads register 0 through its kept
+/// window (must read 0xff: nothing reaches the device) and writes reset
+/// mode to it (must be dropped: frames still pass both ways between can0
+/// and can1), and dropping the kept enable leaves the device's enable
+/// count alone. Without the revocation the read returns the chip's
+/// register, the write stops can0's chip, and the kept enable holds the
+/// device enabled past its binding, then disables it under
+/// rcan_kvaser_pci when dropped.
+fn sja1000_kvaser_iomem_revoked(ctx: &mut Ctx) -> TestResult {
+    use crate::ctx::IOMEMKEEP;
+    let addr = first_kvaser()?;
+    let bound = format!("/sys/bus/pci/drivers/{IOMEMKEEP}/{addr}");
+    let mut kmsg = ctx.kmsg()?;
+    let reg0 = |log: &[String], at: &str| -> Result<u8, String> {
+        let tag = format!("{IOMEMKEEP}: {at}: reg 0 = 0x");
+        let l = log
+            .iter()
+            .find_map(|l| l.split_once(&tag).map(|(_, v)| v.to_string()))
+            .ok_or_else(|| format!("no '{tag}..' line in the kernel log: {log:?}"))?;
+        let hex: String = l.chars().take_while(char::is_ascii_hexdigit).collect();
+        u8::from_str_radix(&hex, 16).map_err(|e| format!("'{tag}{l}': {e}"))
+    };
+    let (probed, while_bound, after_unbind) = {
+        let _override = super::ctucanfd_wire::Overrides::set(&[(&addr, IOMEMKEEP)])?;
+        ctx.insmod_iomemkeep()?;
+        ensure!(
+            std::path::Path::new(&bound).exists(),
+            "{addr} not bound to {IOMEMKEEP} after insmod with driver_override"
+        );
+        let probed = reg0(&kmsg.read_new()?, "probe")?;
+        let while_bound = pci_enable_count(&addr)?;
+        pci_driver_op(IOMEMKEEP, "unbind", &addr)?;
+        ensure!(!std::path::Path::new(&bound).exists(), "{addr} still bound after the unbind");
+        (probed, while_bound, pci_enable_count(&addr)?)
+    };
+    ctx.note(format!(
+        "{addr}: register 0 at probe {probed:#04x}; enables {while_bound} bound, {after_unbind} after the unbind"
+    ));
+    ensure!(probed != 0xFF, "register 0 read 0xff at probe: not an SJA1000 window");
+    // Every check below is made and reported, not only the first that
+    // fails: without the revocation all of them fail.
+    let mut wrong = Vec::new();
+    if after_unbind + 1 != while_bound {
+        wrong.push(format!(
+            "{addr} counts {after_unbind} enables after the unbind, {while_bound} while bound: \
+             the kept enable was not undone at the binding's end"
+        ));
+    }
+    let (i0, i1) = kvaser2(ctx)?;
+    // Bound before the keeper's write: a bind reprograms the hardware
+    // filter, which would take the chip out of reset mode again.
+    let (s0, s1) = (canraw::open(i0)?, canraw::open(i1)?);
+    let with_kvaser = pci_enable_count(&addr)?;
+    ctx.rmmod_iomemkeep()?;
+    let after_exit = reg0(&kmsg.read_new()?, "exit")?;
+    let after_rmmod = pci_enable_count(&addr)?;
+    ctx.note(format!(
+        "register 0 through the kept window after the unbind: {after_exit:#04x}; \
+         enables {with_kvaser} with rcan_kvaser_pci, {after_rmmod} after rmmod {IOMEMKEEP}"
+    ));
+    if after_exit != 0xFF {
+        wrong.push(format!(
+            "the kept window read {after_exit:#04x} after the unbind: it reached the device \
+             (expected 0xff)"
+        ));
+    }
+    if after_rmmod != with_kvaser {
+        wrong.push(format!(
+            "dropping the kept enable changed {addr}'s enable count from {with_kvaser} to \
+             {after_rmmod}"
+        ));
+    }
+    let frames = || -> TestResult {
+        for k in 0..4u8 {
+            let f = sff(0x71, &[k]);
+            canraw::send(&s0, &f)?;
+            canraw::expect(&s1, &f, "can1 after the keeper's exit")?;
+            canraw::send(&s1, &f)?;
+            canraw::expect(&s0, &f, "can0 after the keeper's exit wrote through its kept window")?;
+        }
+        Ok(())
+    };
+    if let Err(e) = frames() {
+        wrong.push(e);
+    }
+    ensure!(wrong.is_empty(), "{}", wrong.join("; "));
+    Ok(())
 }

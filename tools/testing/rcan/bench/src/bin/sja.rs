@@ -20,6 +20,14 @@
 //! cards' regions between the n-th pair of markers: register accesses of
 //! both drivers counted by the same emulator code.
 //!
+//! With `RCAN_BENCH_SJA_BEFORE_KO` set to another build of
+//! `rcan_kvaser_pci.ko` (say, of the commit before a change to the driver
+//! or the glue), the rounds compare that module with ours instead of
+//! mainline with ours, on the same core modules (ours): phases named
+//! `before` and `ours`. Under `RCAN_KVM=icount` the seconds are guest
+//! instructions (one nanosecond each), so the two figures give the
+//! change's instructions per frame.
+//!
 //! Interrupts of both cards and this process are on CPU 0, as in the VM
 //! burst test: QEMU's bus has no bit timing, so without that the
 //! receiver's FIFO overruns and the figures would measure losses.
@@ -47,7 +55,13 @@ fn unload() -> Result<(), String> {
     card::unload(&all)
 }
 
-fn load(s: Stack, root: &Path, kb: &Path) -> Result<(), String> {
+/// Our driver module, relative to the tree.
+const OUR_KO: &str = "drivers/net/can/sja1000/rcan_kvaser_pci.ko";
+
+/// Loads stack `s`; `ko` (absolute, or relative to `root`) is our driver
+/// module.
+fn load(s: Stack, root: &Path, kb: &Path, ko: &Path) -> Result<(), String> {
+    let ko = ko.to_str().ok_or("driver module path not UTF-8")?;
     card::load(
         s,
         root,
@@ -56,7 +70,7 @@ fn load(s: Stack, root: &Path, kb: &Path) -> Result<(), String> {
             "drivers/net/can/sja1000/sja1000.ko",
             "drivers/net/can/sja1000/kvaser_pci.ko",
         ],
-        &["drivers/net/can/sja1000/rcan_kvaser_pci.ko"],
+        &[ko],
         &["bitrate", "500000"],
     )
 }
@@ -102,10 +116,18 @@ fn real_main(frames: u32, rounds: usize) -> Result<(), String> {
     let (config, cf8) = card::pci_config(0x10e8, 0x8406)?;
     println!("SJA-MARKERS {:#x} {:#x}", cf8 | MARK_START, cf8 | MARK_END);
     unload()?;
+    // (stack, our driver module, phase name): mainline then ours, or the
+    // other build of our driver then ours.
+    let before = env("RCAN_BENCH_SJA_BEFORE_KO");
+    let ours = (Stack::Ours, PathBuf::from(OUR_KO), "ours");
+    let sides = match before {
+        Some(ko) => [(Stack::Ours, ko, "before"), ours],
+        None => [(Stack::Mainline, PathBuf::from(OUR_KO), "mainline"), ours],
+    };
     let mut n = 0;
     for round in 0..rounds {
-        for s in [Stack::Mainline, Stack::Ours] {
-            load(s, &root, &kb)?;
+        for (s, ko, name) in &sides {
+            load(*s, &root, &kb, ko)?;
             pin_irq("can0")?;
             pin_irq("can1")?;
             marker(&config, MARK_START)?;
@@ -113,7 +135,6 @@ fn real_main(frames: u32, rounds: usize) -> Result<(), String> {
             marker(&config, MARK_END)?;
             unload()?;
             let secs = secs?;
-            let name = if s == Stack::Ours { "ours" } else { "mainline" };
             println!("SJA-PHASE {n} {name} {round} {frames} {secs:.3}");
             n += 1;
         }
