@@ -44,6 +44,16 @@ pub(crate) mod isotp_pci;
 pub(crate) mod isotp_rx;
 #[path = "core/src/isotp_tx.rs"]
 pub(crate) mod isotp_tx;
+#[path = "core/src/j1939.rs"]
+pub(crate) mod j1939;
+#[path = "core/src/j1939_ac.rs"]
+pub(crate) mod j1939_ac;
+#[path = "core/src/j1939_tp.rs"]
+pub(crate) mod j1939_tp;
+#[path = "core/src/j1939_tp_rx.rs"]
+pub(crate) mod j1939_tp_rx;
+#[path = "core/src/j1939_tp_tx.rs"]
+pub(crate) mod j1939_tp_tx;
 #[path = "core/src/ring.rs"]
 pub(crate) mod ring;
 #[path = "core/src/rxtable.rs"]
