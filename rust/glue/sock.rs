@@ -83,9 +83,10 @@ pub(crate) trait Proto: Sized + 'static {
     fn release(sk: &Sock<Self>);
     fn bind(sk: &Sock<Self>, addr: &[u8]) -> Result;
     fn connect(sk: &Sock<Self>, addr: &[u8], flags: i32) -> Result;
-    /// Writes the local or peer address into `out` ([`NAME_ROOM`] bytes,
-    /// zeroed); returns its length, at most `out.len()` (a longer one is
-    /// EINVAL to the caller). Process context.
+    /// Writes the local or peer address into `out` ([`name_room`] bytes,
+    /// zeroed: [`NAME_ROOM`], or [`SOCKADDR_CAN_ROOM`] with
+    /// [`Proto::SOCKADDR_CAN_NAMES`]); returns its length, at most
+    /// `out.len()` (a longer one is EINVAL to the caller). Process context.
     fn getname(sk: &Sock<Self>, peer: bool, out: &mut [u8]) -> Result<usize>;
     fn sendmsg(sk: &Sock<Self>, msg: &mut Msg, len: usize) -> Result<usize>;
     fn recvmsg(sk: &Sock<Self>, msg: &mut Msg, len: usize, flags: i32) -> Result<usize>;
@@ -103,6 +104,17 @@ pub(crate) trait Proto: Sized + 'static {
     /// `writable` both say so. Protocols that set it call
     /// [`Sock::wake_writers`] when `writable` may have become true.
     const HAS_WRITABLE: bool = false;
+    /// Whether the protocol's addresses are whole `struct sockaddr_can`s
+    /// (24 bytes, CAN_J1939's `can_addr.j1939`): its `getname` buffer and
+    /// its recvmsg's [`Msg::set_name`] then take [`SOCKADDR_CAN_ROOM`]
+    /// bytes instead of [`NAME_ROOM`] (why that is sound: at
+    /// [`SOCKADDR_CAN_ROOM`]). A choice between two bounds the glue
+    /// proves, not a number the protocol picks.
+    const SOCKADDR_CAN_NAMES: bool = false;
+    /// The `sk_priority` of a new socket (`sock_init_data` leaves 0):
+    /// mainline CAN_J1939 starts its sockets at J1939 priority 6, which
+    /// it keeps as `sk_priority` 1.
+    const SK_PRIORITY: u32 = 0;
     /// Whether a write would not block on the protocol's own state (a
     /// CAN_ISOTP transfer running), for `poll`. Process context (a
     /// `poll` call); must not sleep.
@@ -419,9 +431,42 @@ impl<T: Proto> SockView<T> {
         unsafe { bindings::rcan_sk_wake_writers(self.sk) };
     }
 
+    /// The socket's `sk_priority` (SO_PRIORITY, or what the protocol set
+    /// with [`Sock::set_priority`]), read once as the kernel's send
+    /// paths read it (`READ_ONCE`: setsockopt writes it without the
+    /// socket lock). Any context.
+    pub(crate) fn priority(&self) -> u32 {
+        // SAFETY: live sock (type invariant); `sk_priority` is a plain
+        // u32 field that the kernel reads and writes with
+        // READ_ONCE/WRITE_ONCE.
+        unsafe { core::ptr::read_volatile(core::ptr::addr_of!((*self.sk).sk_priority)) }
+    }
+
+    /// Whether SO_BROADCAST is set (`sock_flag(sk, SOCK_BROADCAST)`),
+    /// read once. Any context.
+    pub(crate) fn broadcast(&self) -> bool {
+        // SAFETY: live sock (type invariant); the flag word is read once,
+        // as `sock_flag`'s `test_bit` reads it (setsockopt sets the bit
+        // atomically).
+        let flags = unsafe {
+            core::ptr::read_volatile(core::ptr::addr_of!(
+                (*self.sk).__sk_common.__bindgen_anon_5.skc_flags
+            ))
+        };
+        flags & (1 << bindings::sock_flags_SOCK_BROADCAST) != 0
+    }
 }
 
 impl<T: Proto> Sock<T> {
+    /// Sets the socket's `sk_priority` (`WRITE_ONCE`, as `sock_setsockopt`
+    /// writes SO_PRIORITY): for a protocol option that sets it too
+    /// (mainline CAN_J1939's `SO_J1939_SEND_PRIO`). Process context.
+    pub(crate) fn set_priority(&self, priority: u32) {
+        // SAFETY: live sock (type invariant); `sk_priority` is a plain
+        // u32 field read with READ_ONCE by lockless readers.
+        unsafe { core::ptr::write_volatile(core::ptr::addr_of_mut!((*self.sk).sk_priority), priority) };
+    }
+
     /// The send timeout in jiffies (`sock_sndtimeo`): 0 if `nonblock`,
     /// else SO_SNDTIMEO (`MAX_SCHEDULE_TIMEOUT` when unset).
     pub(crate) fn sndtimeo(&self, nonblock: bool) -> i64 {
@@ -581,14 +626,44 @@ impl<T: Proto> Drop for SockGuard<'_, T> {
 pub(crate) const NAME_ROOM: usize = core::mem::size_of::<bindings::sockaddr>();
 const _: () = assert!(NAME_ROOM == 16);
 
+/// The bytes of a socket address the glue writes for a protocol with
+/// [`Proto::SOCKADDR_CAN_NAMES`]: `sizeof(struct sockaddr_can)` (family,
+/// padding, `can_ifindex`, the 16-byte `can_addr` union), which is what
+/// mainline's own PF_CAN protocols write through the same two pointers
+/// (`j1939_sk_getname` and `j1939_sk_recvmsg` write
+/// `J1939_MIN_NAMELEN`, 24 bytes; `isotp_getname` 16). So every caller
+/// that can reach the `getname` or `recvmsg` of a PF_CAN socket already
+/// gives at least this much, or mainline would overrun it: the socket
+/// layer (`__sys_getsockname`, `__sys_getpeername`, `SO_PEERNAME`,
+/// `____sys_recvmsg`, io_uring) a `sockaddr_storage` (128 bytes); the
+/// in-kernel `kernel_getsockname`/`kernel_getpeername` callers of 6.12
+/// use sockets of their own families (INET, INET6, QRTR, SMC's TCP) or
+/// check the socket is TCP (iscsi_tcp, on a user's descriptor, with a
+/// 28-byte `sockaddr_in6`), and no in-kernel `kernel_recvmsg` caller
+/// opens PF_CAN sockets.
+pub(crate) const SOCKADDR_CAN_ROOM: usize = 24;
+const _: () = assert!(SOCKADDR_CAN_ROOM > NAME_ROOM && SOCKADDR_CAN_ROOM <= 128);
+
+/// The bound for protocol `T`'s addresses: [`NAME_ROOM`] or, for a
+/// protocol with [`Proto::SOCKADDR_CAN_NAMES`], [`SOCKADDR_CAN_ROOM`].
+pub(crate) const fn name_room<T: Proto>() -> usize {
+    if T::SOCKADDR_CAN_NAMES {
+        SOCKADDR_CAN_ROOM
+    } else {
+        NAME_ROOM
+    }
+}
+
 /// A `struct msghdr` of a sendmsg/recvmsg call.
 ///
 /// # Invariants
 ///
 /// Made only by the sendmsg and recvmsg trampolines of this file, from
 /// the socket layer's argument: a valid msghdr for the duration of the
-/// call, used by nobody else meanwhile.
-pub(crate) struct Msg(*mut bindings::msghdr);
+/// call, used by nobody else meanwhile; the second field is
+/// [`name_room`] of the socket's protocol, which those trampolines
+/// alone set.
+pub(crate) struct Msg(*mut bindings::msghdr, usize);
 
 impl Msg {
     pub(crate) fn as_ptr(&self) -> *mut bindings::msghdr {
@@ -620,8 +695,10 @@ impl Msg {
     }
 
     /// Stores a source address for recvmsg (if the caller asked for one):
-    /// at most [`NAME_ROOM`] bytes of `addr` (more are cut), and
-    /// `msg_namelen` says how many.
+    /// at most [`name_room`] bytes of `addr` for the socket's protocol
+    /// ([`NAME_ROOM`], or [`SOCKADDR_CAN_ROOM`] for a protocol with
+    /// [`Proto::SOCKADDR_CAN_NAMES`]; more are cut), and `msg_namelen`
+    /// says how many.
     #[inline]
     pub(crate) fn set_name(&mut self, addr: &[u8]) {
         // `msg_name` is NULL or the buffer the recvmsg's caller gave for
@@ -632,17 +709,20 @@ impl Msg {
         // sockaddr_storage", net/socket.c), in-kernel `kernel_recvmsg`
         // callers a buffer for a socket address, of which the smallest
         // type is `struct sockaddr`. We write at most `NAME_ROOM`, that
-        // size: within any such buffer, and less than mainline's own PF_CAN
-        // protocols write there (isotp 16 bytes, j1939 24).
+        // size: within any such buffer, and no more than mainline's own
+        // PF_CAN protocols write there (isotp 16 bytes, j1939 24); for a
+        // protocol with `SOCKADDR_CAN_NAMES`, `SOCKADDR_CAN_ROOM` (24),
+        // what mainline's j1939 writes (the argument at that constant).
+        // `self.1` is one of the two (type invariant).
         // SAFETY: a valid msghdr of the current call, used by nobody else
         // meanwhile (type invariant); `msg_name`, when set, has room for
-        // `NAME_ROOM` bytes (above).
+        // `self.1` bytes (above).
         unsafe {
             let m = &mut *self.0;
             if m.msg_name.is_null() {
                 return;
             }
-            let n = addr.len().min(NAME_ROOM);
+            let n = addr.len().min(self.1).min(SOCKADDR_CAN_ROOM);
             core::ptr::copy_nonoverlapping(addr.as_ptr(), m.msg_name as *mut u8, n);
             m.msg_namelen = n as i32;
         }
@@ -749,6 +829,29 @@ impl Msg {
     pub(crate) fn flags(&self) -> u32 {
         // SAFETY: valid msghdr.
         unsafe { (*self.0).msg_flags }
+    }
+
+    /// Adds a control message (`put_cmsg`) to a recvmsg's answer: level,
+    /// type and the bytes of its data. Like mainline's callers, ignores
+    /// a control buffer that is too small (the kernel sets MSG_CTRUNC).
+    /// Does nothing in a sendmsg, whose control buffer holds the
+    /// caller's messages. Process context (may fault pages in).
+    pub(crate) fn put_cmsg(&mut self, level: i32, type_: i32, data: &[u8]) {
+        // A cmsg's length is an int; ours are a few bytes.
+        let Ok(len) = ffi::c_int::try_from(data.len()) else {
+            return;
+        };
+        // SAFETY: the valid msghdr of the current call, used by nobody
+        // else meanwhile (type invariant); only a recvmsg's (a
+        // destination iterator), whose control buffer `put_cmsg` fills
+        // within `msg_controllen` (user or kernel memory, as the msghdr
+        // says); `data` is readable for `len` bytes.
+        unsafe {
+            if (*self.0).msg_iter.data_source {
+                return;
+            }
+            let _ = bindings::put_cmsg(self.0, level, type_, len, data.as_ptr() as *mut ffi::c_void);
+        }
     }
 
     /// Adds `flag` (e.g. MSG_TRUNC) to the flags returned to the user.
@@ -909,6 +1012,7 @@ impl<T: Proto> ProtoReg<T> {
             }
             bindings::sock_init_data(sock, sk);
             (*sk).sk_protocol = protocol as u16;
+            (*sk).sk_priority = T::SK_PRIORITY;
             core::ptr::addr_of_mut!((*sk.cast::<ObjOf<T>>()).set).write(SetLink {
                 prev: core::cell::Cell::new(0),
                 next: core::cell::Cell::new(0),
@@ -1237,14 +1341,17 @@ unsafe extern "C" fn getname<T: Proto>(
     // `SO_PEERNAME`) a `sockaddr_storage`, the in-kernel
     // `kernel_getsockname`/`kernel_getpeername` an "address holder" of the
     // caller's choice. `NAME_ROOM` bytes of it are all we rely on (every
-    // address of ours fits; mainline's PF_CAN protocols write up to 24).
+    // address of ours fits; mainline's PF_CAN protocols write up to 24),
+    // or `SOCKADDR_CAN_ROOM` for a protocol with `SOCKADDR_CAN_NAMES`
+    // (the argument at that constant).
+    let room = name_room::<T>();
     // They may be uninitialised (a buffer on the caller's stack): zeroed
     // first, so the slice below covers initialised bytes.
-    // SAFETY: so `addr` is valid for `NAME_ROOM` bytes of writes, and
+    // SAFETY: so `addr` is valid for `room` bytes of writes, and
     // nothing else uses it during the call.
     let out = unsafe {
-        core::ptr::write_bytes(addr.cast::<u8>(), 0, NAME_ROOM);
-        core::slice::from_raw_parts_mut(addr.cast::<u8>(), NAME_ROOM)
+        core::ptr::write_bytes(addr.cast::<u8>(), 0, room);
+        core::slice::from_raw_parts_mut(addr.cast::<u8>(), room)
     };
     // SAFETY: socket-layer call.
     match unsafe { sock_of::<T>(sock) } {
@@ -1252,7 +1359,7 @@ unsafe extern "C" fn getname<T: Proto>(
         // (`move_addr_to_user`, which BUG()s above a sockaddr_storage):
         // never more than we let the protocol write.
         Some(sk) => match T::getname(&sk, peer != 0, out) {
-            Ok(n) if n <= NAME_ROOM => n as ffi::c_int,
+            Ok(n) if n <= room => n as ffi::c_int,
             Ok(_) => code::EINVAL.to_errno(),
             Err(e) => e.to_errno(),
         },
@@ -1265,7 +1372,7 @@ unsafe extern "C" fn sendmsg<T: Proto>(
     msg: *mut bindings::msghdr,
     len: usize,
 ) -> ffi::c_int {
-    let mut m = Msg(msg);
+    let mut m = Msg(msg, name_room::<T>());
     // SAFETY: socket-layer call.
     match unsafe { sock_of::<T>(sock) } {
         Some(sk) => match T::sendmsg(&sk, &mut m, len) {
@@ -1282,7 +1389,7 @@ unsafe extern "C" fn recvmsg<T: Proto>(
     len: usize,
     flags: ffi::c_int,
 ) -> ffi::c_int {
-    let mut m = Msg(msg);
+    let mut m = Msg(msg, name_room::<T>());
     // SAFETY: socket-layer call.
     match unsafe { sock_of::<T>(sock) } {
         Some(sk) => match T::recvmsg(&sk, &mut m, len, flags) {
