@@ -1,0 +1,735 @@
+// SPDX-License-Identifier: GPL-2.0
+
+//! rcan_j1939: CAN_J1939 (SAE J1939), mainline SocketCAN's J1939 socket
+//! API, on the rcan stack (issue 42, step 2a: the first slice).
+//!
+//! `socket(PF_CAN, SOCK_DGRAM, CAN_J1939)` with mainline's ABI
+//! (`<linux/can/j1939.h>` of 6.12): `bind`/`connect` with
+//! `sockaddr_can.can_addr.j1939 {name, pgn, addr}` and an interface, one
+//! J1939 message per `sendmsg` and per `recvmsg`, the source address in
+//! `msg_name` (24 bytes), the `SCM_J1939_DEST_ADDR`, `SCM_J1939_DEST_NAME`
+//! and `SCM_J1939_PRIO` control messages, the options `SO_J1939_FILTER`,
+//! `SO_J1939_PROMISC`, `SO_J1939_SEND_PRIO` and `SO_J1939_ERRQUEUE`
+//! (accepted and kept; nothing is queued yet), and `SO_BROADCAST`'s
+//! rules. The address checks, identifier mapping, option checks and
+//! receive matching are `rcan_core::j1939`, host-tested; this file gives
+//! them a socket, a receive subscription and a transmit path.
+//!
+//! Not yet (Documentation/networking/rcan/j1939.rst, "The module"): the
+//! transport protocols (a message over 8 bytes gets `EOPNOTSUPP`; TP and
+//! ETP frames are not reassembled), the address claim table (a socket
+//! bound to a NAME cannot send, `EADDRNOTAVAIL`, and received messages
+//! carry no NAMEs), the error queue's notifications.
+//!
+//! Objects and their locks (lock order: RTNL, socket lock, `rx`):
+//!
+//! * [`J1939Sock`] (socket lock): the binding, the peer, the options as
+//!   set. Process context only.
+//! * [`J1939Shared::rx`], allocated by the first `bind`: what the receive
+//!   callback matches frames against ([`RxState`], a copy of the binding,
+//!   the peer, `SO_J1939_PROMISC` and the filters) under a `BhLock`
+//!   (`spin_lock_bh`, lockdep class `j1939_rx`; mainline's
+//!   `filters_lock`). Written in process context under the socket lock
+//!   ([`publish`]), read by the receive callback (NET_RX softirq).
+//!   `SO_BROADCAST` is read from the socket itself, as mainline does.
+//!
+//! Every bound socket subscribes to every extended data frame of its
+//! interface (mainline subscribes once per interface and walks its
+//! sockets; here pf_can's receive table does the walking), and matches
+//! each with [`SockRx::accepts`]: mainline's `j1939_sk_recv_match_one`.
+
+#![forbid(unsafe_code)]
+
+use crate::{glue, rcan_api, rcan_core};
+use core::sync::atomic::{AtomicBool, Ordering};
+use kernel::prelude::*;
+
+use crate::glue::module::{ModuleScope, ScopedModule};
+use glue::jobtimer::OnceBox;
+use glue::lock::{new_bh_spinlock, BhLock};
+use glue::netdev::{DevRef, NetDev};
+use glue::skb::UniqueSkb;
+use glue::sock::{Msg, OptIn, OptOut, Sock, SockView};
+use glue::sync::Rtnl;
+use kernel::alloc::KVec;
+use kernel::c_str;
+use rcan_api::{
+    CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets,
+    RX_FILTER_CAN_ID, SOCK_DGRAM,
+};
+use rcan_core::arb::{CAN_EFF_FLAG, CAN_RTR_FLAG};
+use rcan_core::frame::AnyFrame;
+use rcan_core::j1939::{
+    addr_is_unicast, filter_count, flag_option, pgn_is_valid, prio_to_sk_priority,
+    send_prio_option, sk_priority_to_prio, Filter, Id, RxMeta, SockAddr, SockRx, AF_CAN,
+    CAN_J1939, DEFAULT_PRIO, EACCES, EBADFD, EDOM, J1939_NO_ADDR, J1939_NO_NAME, J1939_NO_PGN,
+    SCM_J1939_DEST_ADDR, SCM_J1939_DEST_NAME, SCM_J1939_ERRQUEUE, SCM_J1939_PRIO,
+    SOCKADDR_J1939_LEN, SOL_CAN_J1939, SO_J1939_ERRQUEUE, SO_J1939_FILTER, SO_J1939_PROMISC,
+    SO_J1939_SEND_PRIO,
+};
+use rcan_core::j1939_tp::{ETP_PGN_CTL, ETP_PGN_DAT, TP_PGN_CTL, TP_PGN_DAT};
+
+fn errno(e: i32) -> Error {
+    glue::errno(e)
+}
+
+type S = Sock<J1939Proto>;
+
+/// The largest message this slice sends: one frame.
+const MAX_SINGLE: usize = 8;
+
+/// Offsets in `skb->cb` of a message queued for `recvmsg` (ours; the
+/// socket layer keeps its own 4 bytes at the end of the 48): the
+/// receiving interface, the PGN, source and destination address,
+/// priority, the recvmsg flags (MSG_DONTROUTE), the source and
+/// destination NAMEs.
+const CB_IFINDEX: usize = 0;
+const CB_PGN: usize = 4;
+const CB_SA: usize = 8;
+const CB_DA: usize = 9;
+const CB_PRIO: usize = 10;
+const CB_FLAGS: usize = 12;
+const CB_SRC_NAME: usize = 16;
+const CB_DST_NAME: usize = 24;
+const CB_LEN: usize = 32;
+
+/// What the receive callback matches a frame against: the socket's
+/// binding, peer and options, copied from [`J1939Sock`] by [`publish`].
+struct RxState {
+    /// Bound (false again after the device's removal or `release`).
+    bound: bool,
+    ifindex: i32,
+    /// The socket's receive side (its `broadcast` is filled per frame
+    /// from SO_BROADCAST).
+    rx: SockRx,
+    filters: KVec<Filter>,
+}
+
+/// A CAN_J1939 socket's state under the socket lock.
+struct J1939Sock {
+    bound: bool,
+    ifindex: i32,
+    /// Bound NAME and address (`jsk->addr.src_name`, `.sa`).
+    src_name: u64,
+    sa: u8,
+    /// The PGN given to `bind`, or [`J1939_NO_PGN`]: only that PGN is
+    /// received (`jsk->pgn_rx_filter`).
+    pgn_rx_filter: u32,
+    /// `connect` was called; its NAME, address and PGN (the default
+    /// destination and PGN of `send`; `jsk->addr.dst_name`, `.da`,
+    /// `.pgn`).
+    connected: bool,
+    dst_name: u64,
+    da: u8,
+    pgn: u32,
+    promisc: bool,
+    errqueue: bool,
+    /// SO_J1939_FILTER as set (values masked).
+    filters: KVec<Filter>,
+}
+
+/// What the receive path and the lockless checks need.
+struct J1939Shared {
+    /// Mirrors `J1939Sock::bound` (written under the socket lock).
+    bound: AtomicBool,
+    /// The receive state, allocated by the first `bind` and kept until
+    /// the sock is freed.
+    rx: OnceBox<BhLock<RxState>>,
+}
+
+struct J1939Proto;
+
+/// This module's registrations (proto, CAN protocol, notifier).
+static MODULE: ProtoModule<J1939Proto> = ProtoModule::new();
+
+/// Copies what the receive callback needs from `s` into the socket's
+/// [`RxState`] (allocating it at the first call). Process context, socket
+/// lock held (`s` is its data). ENOMEM.
+fn publish(sk: &S, s: &J1939Sock) -> Result {
+    let mut filters = KVec::with_capacity(s.filters.len(), GFP_KERNEL)?;
+    for f in s.filters.iter() {
+        filters.push(*f, GFP_KERNEL)?;
+    }
+    let rx = SockRx {
+        promisc: s.promisc,
+        broadcast: false,
+        src_name: s.src_name,
+        sa: s.sa,
+        connected: s.connected,
+        dst_name: s.dst_name,
+        da: s.da,
+        pgn_rx_filter: s.pgn_rx_filter,
+    };
+    let st = RxState {
+        bound: s.bound,
+        ifindex: s.ifindex,
+        rx,
+        filters,
+    };
+    match sk.shared().rx.get() {
+        Some(l) => {
+            let old = {
+                let mut g = l.lock();
+                core::mem::replace(&mut *g, st)
+            };
+            // The old filters are freed here, outside the spinlock.
+            drop(old);
+        }
+        None => {
+            let l = new_bh_spinlock!(st, "j1939_rx")?;
+            sk.shared().rx.set(KBox::new(l, GFP_KERNEL)?)?;
+        }
+    }
+    Ok(())
+}
+
+/// Whether `pgn` is one of the transport protocols' own PGNs (TP and ETP
+/// connection management and data transfer): user space may not send
+/// them (mainline's `j1939_tp_send`: `EDOM`), and their frames are not
+/// messages (see `rx`).
+fn is_transport_pgn(pgn: u32) -> bool {
+    matches!(pgn, TP_PGN_CTL | TP_PGN_DAT | ETP_PGN_CTL | ETP_PGN_DAT)
+}
+
+/// The receive buffer of a delivered frame: its payload, the metadata in
+/// the cb for `recvmsg`, the frame's timestamp. Any context (GFP_ATOMIC).
+fn rx_skb(data: &[u8], ifindex: i32, m: &RxMeta, flags: u32, tstamp: i64) -> Option<UniqueSkb> {
+    let mut skb = UniqueSkb::alloc(MAX_SINGLE as u32, glue::GFP_ATOMIC)?;
+    if !skb.put_data(data) {
+        return None;
+    }
+    let mut cb = [0u8; CB_LEN];
+    cb[CB_IFINDEX..CB_IFINDEX + 4].copy_from_slice(&ifindex.to_ne_bytes());
+    cb[CB_PGN..CB_PGN + 4].copy_from_slice(&m.id.pgn.to_ne_bytes());
+    cb[CB_SA] = m.id.sa;
+    cb[CB_DA] = m.id.da;
+    cb[CB_PRIO] = m.id.prio;
+    cb[CB_FLAGS..CB_FLAGS + 4].copy_from_slice(&flags.to_ne_bytes());
+    cb[CB_SRC_NAME..CB_SRC_NAME + 8].copy_from_slice(&m.src_name.to_ne_bytes());
+    cb[CB_DST_NAME..CB_DST_NAME + 8].copy_from_slice(&m.dst_name.to_ne_bytes());
+    skb.cb_write(0, &cb);
+    if tstamp != 0 {
+        skb.set_tstamp(tstamp);
+    }
+    Some(skb)
+}
+
+impl CanProtocol for J1939Proto {
+    const PROTOCOL: i32 = CAN_J1939;
+    const SOCK_TYPE: i32 = SOCK_DGRAM;
+    /// All state is in the socket; devices are looked up in the socket's
+    /// namespace.
+    const ALL_NAMESPACES: bool = true;
+
+    fn module() -> &'static ProtoModule<Self> {
+        &MODULE
+    }
+
+    /// NET_RX softirq, RCU read side (mainline `j1939_can_recv` and
+    /// `j1939_sk_recv_one`): a classic extended data frame on the bound
+    /// interface, not sent by this socket, whose addressing the socket
+    /// accepts, is queued as a message of its payload. Frames of the
+    /// transport protocols' PGNs are mainline's transport's, never
+    /// messages: they are dropped here, except for a promiscuous socket
+    /// when the transfer involves neither the socket's own address nor
+    /// broadcast (mainline hands a transfer between other nodes to its
+    /// sockets as frames; one involving a local address, or a BAM, it
+    /// reassembles, which this slice does not do yet).
+    fn rx(sk: &SockView<Self>, skb: RxSkb<'_>, _cookie: u32) {
+        let s = skb.skb();
+        if s.sent_by(sk) {
+            skb.done();
+            return;
+        }
+        let Some((can_id, data, false)) = AnyFrame::view(s.data()) else {
+            skb.done();
+            return;
+        };
+        let Some(id) = Id::from_can_id(can_id) else {
+            skb.done();
+            return;
+        };
+        let Some(st) = sk.shared().rx.get() else {
+            skb.done();
+            return;
+        };
+        let ifindex = skb.ifindex();
+        let m = RxMeta {
+            id,
+            src_name: J1939_NO_NAME,
+            dst_name: J1939_NO_NAME,
+        };
+        let broadcast = sk.broadcast();
+        let accepted = {
+            let g = st.lock();
+            let mut rx = g.rx;
+            rx.broadcast = broadcast;
+            g.bound
+                && g.ifindex == ifindex
+                && (!is_transport_pgn(id.pgn)
+                    || (rx.promisc
+                        && addr_is_unicast(id.da)
+                        && id.da != rx.sa
+                        && id.sa != rx.sa))
+                && rx.accepts(&g.filters, &m)
+        };
+        if !accepted {
+            skb.done();
+            return;
+        }
+        let flags = if s.is_local() { glue::msg::DONTROUTE } else { 0 };
+        let out = rx_skb(data, ifindex, &m, flags, s.tstamp());
+        skb.done();
+        if let Some(out) = out {
+            // A full receive queue drops the message, as mainline.
+            let _ = sk.queue_rcv(out.into_owned());
+        }
+    }
+
+    /// Mainline `j1939_netdev_notify`. Process context, RTNL held. The
+    /// bound device going down reports ENETDOWN; going away unbinds the
+    /// socket without an error (mainline's
+    /// `j1939_sk_netdev_event_unregister`), after which sends get EBADFD.
+    fn netdev_event(event: NetdevEvent, dev: &NetDev, sockets: &Sockets<'_, Self>) {
+        if !dev.is_can() {
+            return;
+        }
+        let ifindex = dev.ifindex();
+        sockets.for_each(|sk| {
+            let mut s = sk.lock();
+            if !s.bound || s.ifindex != ifindex {
+                return;
+            }
+            if event == NetdevEvent::Down {
+                drop(s);
+                sk.report_error(-glue::neterr::ENETDOWN().to_errno());
+                return;
+            }
+            rcan_api::rx_remove(sk);
+            s.bound = false;
+            sk.shared().bound.store(false, Ordering::Relaxed);
+            if let Some(l) = sk.shared().rx.get() {
+                l.lock().bound = false;
+            }
+        });
+    }
+}
+
+/// The subscription of a bound socket: every classic extended data frame
+/// (mainline's `J1939_CAN_ID`/`J1939_CAN_MASK`: EFF set, RTR clear).
+const RX_FILTERS: [RxFilter; 1] = [RxFilter {
+    kind: RX_FILTER_CAN_ID,
+    id: CAN_EFF_FLAG,
+    mask: CAN_EFF_FLAG | CAN_RTR_FLAG,
+}];
+
+impl glue::sock::Proto for J1939Proto {
+    type Data = J1939Sock;
+    type Shared = J1939Shared;
+
+    /// Addresses are whole 24-byte `sockaddr_can`s.
+    const SOCKADDR_CAN_NAMES: bool = true;
+    /// Mainline `j1939_sk_init`: J1939 priority 6.
+    const SK_PRIORITY: u32 = prio_to_sk_priority(DEFAULT_PRIO);
+
+    fn new_shared() -> J1939Shared {
+        J1939Shared {
+            bound: AtomicBool::new(false),
+            rx: OnceBox::new(),
+        }
+    }
+
+    /// Mainline `j1939_sk_init`: no address, no PGN.
+    fn new_data() -> J1939Sock {
+        J1939Sock {
+            bound: false,
+            ifindex: 0,
+            src_name: J1939_NO_NAME,
+            sa: J1939_NO_ADDR,
+            pgn_rx_filter: J1939_NO_PGN,
+            connected: false,
+            dst_name: J1939_NO_NAME,
+            da: J1939_NO_ADDR,
+            pgn: J1939_NO_PGN,
+            promisc: false,
+            errqueue: false,
+            filters: KVec::new(),
+        }
+    }
+
+    /// Mainline `j1939_sk_release`: unsubscribes; nothing is in flight
+    /// (single frames go out within `sendmsg`).
+    fn release(sk: &S) {
+        {
+            let mut rtnl = Rtnl::lock();
+            MODULE.sockets.get(&mut rtnl).remove(sk);
+        }
+        rcan_api::rx_remove(sk);
+        let mut s = sk.lock();
+        s.bound = false;
+        sk.shared().bound.store(false, Ordering::Relaxed);
+        if let Some(l) = sk.shared().rx.get() {
+            l.lock().bound = false;
+        }
+    }
+
+    /// Mainline `j1939_sk_bind`, in its order of checks: the address
+    /// (`EINVAL` short or not AF_CAN, `ENODEV` no interface, `EINVAL`
+    /// a PDU1 PGN with a destination byte), a second bind to another
+    /// interface (`EINVAL`), the interface (`ENODEV` missing or not CAN,
+    /// `ENETDOWN` down). A second bind to the same interface changes the
+    /// NAME and address (and the PGN, if one is given).
+    fn bind(sk: &S, addr: &[u8]) -> Result {
+        let a = SockAddr::parse_for_bind(addr).map_err(errno)?;
+        // RTNL before the socket lock: the device cannot go between the
+        // check and the subscription, and the notifier sees the binding.
+        let rtnl = Rtnl::lock();
+        let mut s = sk.lock();
+        if s.bound {
+            if s.ifindex != a.ifindex {
+                return Err(EINVAL);
+            }
+        } else {
+            let dev = NetDev::by_index_rtnl(sk.net(), a.ifindex, &rtnl).ok_or(ENODEV)?;
+            if !dev.is_can() {
+                return Err(ENODEV);
+            }
+            if !dev.is_up() {
+                return Err(glue::neterr::ENETDOWN());
+            }
+        }
+        let old = (s.src_name, s.sa, s.pgn_rx_filter, s.bound, s.ifindex);
+        if pgn_is_valid(a.pgn) {
+            s.pgn_rx_filter = a.pgn;
+        }
+        s.src_name = a.name;
+        s.sa = a.addr;
+        s.bound = true;
+        s.ifindex = a.ifindex;
+        // The receive state first: a frame arriving right after the
+        // subscription is matched against the new binding.
+        let r = publish(sk, &s).and_then(|()| {
+            if old.3 {
+                Ok(())
+            } else {
+                rcan_api::rx_set(sk, 0, a.ifindex, &RX_FILTERS, false, 0)
+            }
+        });
+        if let Err(e) = r {
+            (s.src_name, s.sa, s.pgn_rx_filter, s.bound, s.ifindex) = old;
+            let _ = publish(sk, &s);
+            return Err(e);
+        }
+        sk.shared().bound.store(true, Ordering::Relaxed);
+        drop(s);
+        drop(rtnl);
+        Ok(())
+    }
+
+    /// Mainline `j1939_sk_connect`: the address checks of `bind`, then
+    /// `EINVAL` unbound or another interface, `EACCES` broadcast without
+    /// SO_BROADCAST. Sets the default destination and PGN of `send`, and
+    /// receives only from that peer.
+    fn connect(sk: &S, addr: &[u8], _flags: i32) -> Result {
+        let a = SockAddr::parse_for_bind(addr).map_err(errno)?;
+        let mut s = sk.lock();
+        if !s.bound || s.ifindex != a.ifindex {
+            return Err(EINVAL);
+        }
+        if a.is_broadcast() && !sk.broadcast() {
+            return Err(errno(EACCES));
+        }
+        let old = (s.dst_name, s.da, s.pgn, s.connected);
+        s.dst_name = a.name;
+        s.da = a.addr;
+        if pgn_is_valid(a.pgn) {
+            s.pgn = a.pgn;
+        }
+        s.connected = true;
+        if let Err(e) = publish(sk, &s) {
+            (s.dst_name, s.da, s.pgn, s.connected) = old;
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// Mainline `j1939_sk_getname`: 24 bytes, the interface, the
+    /// connected PGN, and the bound (or, for the peer, the connected) NAME
+    /// and address; the peer of an unconnected socket is EADDRNOTAVAIL.
+    fn getname(sk: &S, peer: bool, out: &mut [u8]) -> Result<usize> {
+        let s = sk.lock();
+        if peer && !s.connected {
+            return Err(glue::neterr::EADDRNOTAVAIL());
+        }
+        let (name, addr) = if peer {
+            (s.dst_name, s.da)
+        } else {
+            (s.src_name, s.sa)
+        };
+        let b = SockAddr {
+            ifindex: s.ifindex,
+            name,
+            pgn: s.pgn,
+            addr,
+        }
+        .to_bytes();
+        out.get_mut(..b.len()).ok_or(EINVAL)?.copy_from_slice(&b);
+        Ok(b.len())
+    }
+
+    /// Mainline `j1939_sk_sendmsg` and its simple (single frame) path:
+    /// `EBADFD` unbound or without a source address; a `msg_name`
+    /// destination checked as mainline (`EINVAL`, `EBADFD`, `EINVAL`,
+    /// `EACCES`), without one the connected peer (broadcast needs
+    /// SO_BROADCAST: `EACCES`); `EDOM` for a transport PGN. Messages of
+    /// up to 8 bytes go out as one frame (priority from
+    /// SO_J1939_SEND_PRIO / SO_PRIORITY) and the call returns once the
+    /// device took it; longer ones get `EOPNOTSUPP` (no transport
+    /// protocol yet). A socket bound to a NAME, or sending to one, gets
+    /// `EADDRNOTAVAIL` (no address claim table yet: mainline answers the
+    /// same while the NAME has no address).
+    fn sendmsg(sk: &S, msg: &mut Msg, len: usize) -> Result<usize> {
+        let (ifindex, src_name, sa, mut dst_name, mut da, mut pgn) = {
+            let s = sk.lock();
+            if !s.bound {
+                return Err(errno(EBADFD));
+            }
+            if s.src_name == J1939_NO_NAME && s.sa == J1939_NO_ADDR {
+                return Err(errno(EBADFD));
+            }
+            (s.ifindex, s.src_name, s.sa, s.dst_name, s.da, s.pgn)
+        };
+        let broadcast = sk.broadcast();
+        match msg.name() {
+            Some(name) => {
+                let a = SockAddr::parse_for_send(name, ifindex, broadcast).map_err(errno)?;
+                if a.name != J1939_NO_NAME || a.addr != J1939_NO_ADDR {
+                    dst_name = a.name;
+                    da = a.addr;
+                }
+                if pgn_is_valid(a.pgn) {
+                    pgn = a.pgn;
+                }
+            }
+            None => {
+                if dst_name == J1939_NO_NAME && da == J1939_NO_ADDR && !broadcast {
+                    return Err(errno(EACCES));
+                }
+            }
+        }
+        if is_transport_pgn(pgn) {
+            return Err(errno(EDOM));
+        }
+        if len > MAX_SINGLE {
+            return Err(glue::neterr::EOPNOTSUPP());
+        }
+        if src_name != J1939_NO_NAME || dst_name != J1939_NO_NAME {
+            return Err(glue::neterr::EADDRNOTAVAIL());
+        }
+        let mut data = [0u8; MAX_SINGLE];
+        msg.copy_from_user(&mut data[..len])?;
+        let id = Id {
+            prio: sk_priority_to_prio(sk.priority()),
+            pgn,
+            sa,
+            da,
+        };
+        let can_id = id.to_can_id();
+        let idb = can_id.to_ne_bytes();
+        let mut img = [0u8; 16];
+        img[..4].copy_from_slice(&idb);
+        img[4] = len as u8;
+        img[8..8 + len].copy_from_slice(&data[..len]);
+        let dev = DevRef::by_index(sk.net(), ifindex).ok_or(ENODEV)?;
+        let nonblock = msg.flags() & glue::msg::DONTWAIT != 0;
+        let mut skb = glue::can::skb::alloc_tx(sk, &dev, img.len(), nonblock)?;
+        if !skb.put_data(&img) {
+            return Err(glue::neterr::ENOBUFS());
+        }
+        skb.set_sock_params(sk);
+        rcan_api::send(skb, &dev, true)?;
+        Ok(len)
+    }
+
+    /// Mainline `j1939_sk_recvmsg`: one message per call, `MSG_TRUNC` when
+    /// the buffer is shorter; the control messages `SCM_J1939_DEST_ADDR`
+    /// (unless the destination was broadcast), `SCM_J1939_DEST_NAME`
+    /// (when known), `SCM_J1939_PRIO`, then the socket's timestamps; the
+    /// source as a 24-byte `sockaddr_can`. Flags other than
+    /// MSG_DONTWAIT, MSG_ERRQUEUE and MSG_CMSG_COMPAT are EINVAL.
+    fn recvmsg(sk: &S, msg: &mut Msg, len: usize, flags: i32) -> Result<usize> {
+        let allowed = glue::msg::DONTWAIT | glue::msg::ERRQUEUE | MSG_CMSG_COMPAT;
+        if flags as u32 & !allowed != 0 {
+            return Err(EINVAL);
+        }
+        if flags as u32 & glue::msg::ERRQUEUE != 0 {
+            return sk.recv_errqueue(msg, len, SOL_CAN_J1939, SCM_J1939_ERRQUEUE);
+        }
+        let skb = sk.recv_datagram(flags)?;
+        let n = skb.len() as usize;
+        let size = if len < n {
+            msg.add_flags(glue::msg::TRUNC);
+            len
+        } else {
+            n
+        };
+        if let Err(e) = msg.copy_from_skb(&skb, 0, size) {
+            sk.free_datagram(skb);
+            return Err(e);
+        }
+        let mut cb = [0u8; CB_LEN];
+        skb.cb_read(0, &mut cb);
+        let u32_at = |i: usize| u32::from_ne_bytes([cb[i], cb[i + 1], cb[i + 2], cb[i + 3]]);
+        let u64_at = |i: usize| {
+            u64::from_ne_bytes([
+                cb[i],
+                cb[i + 1],
+                cb[i + 2],
+                cb[i + 3],
+                cb[i + 4],
+                cb[i + 5],
+                cb[i + 6],
+                cb[i + 7],
+            ])
+        };
+        let da = cb[CB_DA];
+        let dst_name = u64_at(CB_DST_NAME);
+        if da != J1939_NO_ADDR {
+            msg.put_cmsg(SOL_CAN_J1939, SCM_J1939_DEST_ADDR, &[da]);
+        }
+        if dst_name != J1939_NO_NAME {
+            msg.put_cmsg(SOL_CAN_J1939, SCM_J1939_DEST_NAME, &dst_name.to_ne_bytes());
+        }
+        msg.put_cmsg(SOL_CAN_J1939, SCM_J1939_PRIO, &[cb[CB_PRIO]]);
+        let src = SockAddr {
+            ifindex: u32_at(CB_IFINDEX) as i32,
+            name: u64_at(CB_SRC_NAME),
+            pgn: u32_at(CB_PGN),
+            addr: cb[CB_SA],
+        };
+        msg.set_name(&src.to_bytes());
+        msg.recv_cmsgs(sk, &skb);
+        msg.add_flags(u32_at(CB_FLAGS));
+        sk.free_datagram(skb);
+        Ok(size)
+    }
+
+    /// Mainline `j1939_sk_setsockopt`: `EINVAL` at another level;
+    /// SO_J1939_FILTER (a multiple of 32 bytes, at most 512 filters, or
+    /// none to remove them), SO_J1939_PROMISC and SO_J1939_ERRQUEUE (an
+    /// `int`), SO_J1939_SEND_PRIO (an `int` 0..7, `EDOM` otherwise, 0 and
+    /// 1 need CAP_NET_ADMIN: `EPERM`); others `ENOPROTOOPT`. Process
+    /// context.
+    fn setsockopt(sk: &S, level: i32, name: i32, opt: &OptIn) -> Result {
+        if level != SOL_CAN_J1939 {
+            return Err(EINVAL);
+        }
+        match name {
+            SO_J1939_FILTER => {
+                let n = filter_count(opt.len()).map_err(errno)?;
+                let mut filters = KVec::with_capacity(n, GFP_KERNEL)?;
+                if n > 0 {
+                    let mut raw = KVec::from_elem(0u8, n * Filter::SIZE, GFP_KERNEL)?;
+                    opt.read(&mut raw)?;
+                    for c in raw.chunks_exact(Filter::SIZE) {
+                        let b: &[u8; Filter::SIZE] = c.try_into().map_err(|_| EINVAL)?;
+                        filters.push(Filter::from_bytes(b), GFP_KERNEL)?;
+                    }
+                }
+                let mut s = sk.lock();
+                let old = core::mem::replace(&mut s.filters, filters);
+                if s.bound || sk.shared().rx.get().is_some() {
+                    if let Err(e) = publish(sk, &s) {
+                        s.filters = old;
+                        return Err(e);
+                    }
+                }
+                Ok(())
+            }
+            SO_J1939_PROMISC | SO_J1939_ERRQUEUE => {
+                let v = read_int(opt)?;
+                let on = flag_option(&v).map_err(errno)?;
+                let mut s = sk.lock();
+                if name == SO_J1939_PROMISC {
+                    let old = s.promisc;
+                    s.promisc = on;
+                    if s.bound || sk.shared().rx.get().is_some() {
+                        if let Err(e) = publish(sk, &s) {
+                            s.promisc = old;
+                            return Err(e);
+                        }
+                    }
+                } else {
+                    s.errqueue = on;
+                }
+                Ok(())
+            }
+            SO_J1939_SEND_PRIO => {
+                let v = read_int(opt)?;
+                let prio = send_prio_option(&v, glue::netdev::capable_net_admin()).map_err(errno)?;
+                let _s = sk.lock();
+                sk.set_priority(prio_to_sk_priority(prio));
+                Ok(())
+            }
+            _ => Err(glue::neterr::ENOPROTOOPT()),
+        }
+    }
+
+    /// Mainline `j1939_sk_getsockopt`: `EINVAL` at another level or for a
+    /// negative length; SO_J1939_PROMISC, SO_J1939_ERRQUEUE (0 or 1) and
+    /// SO_J1939_SEND_PRIO as an `int`, `EFAULT` if the buffer is shorter
+    /// (mainline's answer); others `ENOPROTOOPT`.
+    fn getsockopt(sk: &S, level: i32, name: i32, opt: &OptOut) -> Result {
+        if level != SOL_CAN_J1939 {
+            return Err(EINVAL);
+        }
+        let ulen = opt.len()?;
+        if ulen < 0 {
+            return Err(EINVAL);
+        }
+        let v: i32 = {
+            let s = sk.lock();
+            match name {
+                SO_J1939_PROMISC => i32::from(s.promisc),
+                SO_J1939_ERRQUEUE => i32::from(s.errqueue),
+                SO_J1939_SEND_PRIO => i32::from(sk_priority_to_prio(sk.priority())),
+                _ => return Err(glue::neterr::ENOPROTOOPT()),
+            }
+        };
+        if ulen < 4 {
+            return Err(EFAULT);
+        }
+        opt.set_len(4)?;
+        opt.write(&v.to_ne_bytes())
+    }
+}
+
+/// An `int` option's 4 bytes: `EINVAL` for another length (before the
+/// value is read, as mainline), `EFAULT` on a bad pointer.
+fn read_int(opt: &OptIn) -> Result<[u8; 4]> {
+    if opt.len() != 4 {
+        return Err(EINVAL);
+    }
+    let mut v = [0u8; 4];
+    opt.read(&mut v)?;
+    Ok(v)
+}
+
+/// `MSG_CMSG_COMPAT` of `<linux/socket.h>`.
+const MSG_CMSG_COMPAT: u32 = 0x8000_0000;
+
+/// The family of a J1939 `sockaddr_can` (checked by the core's parser).
+const _: () = assert!(AF_CAN == 29 && SOCKADDR_J1939_LEN == 24);
+
+/// The module: its registrations, undone when it is dropped (unload).
+pub(crate) struct J1939Module {
+    _reg: ProtoRegistration<J1939Proto>,
+}
+
+impl ScopedModule for J1939Module {
+    fn init(_module: &'static ThisModule, scope: &ModuleScope) -> Result<Self> {
+        let reg = MODULE.register(c_str!("CAN_J1939"), scope)?;
+        pr_info!("CAN_J1939 ({}) registered\n", CAN_J1939);
+        Ok(J1939Module { _reg: reg })
+    }
+}
