@@ -60,7 +60,7 @@ pub enum Uses {
     /// on purpose.
     Own,
     /// The loaded stack: [`Module::SHARED`] (rcan_pf, rcan_can, rcan_raw,
-    /// rcan_bcm, rcan_isotp, and rcan_loop with no parameter but `count=N`), loaded
+    /// rcan_bcm, rcan_isotp, rcan_j1939, and rcan_loop with no parameter but `count=N`), loaded
     /// through [`Ctx::load_stack`], [`Ctx::can_ifaces`], [`Ctx::bcm_ifaces`]
     /// or [`Ctx::insmod`]. On our stack the runner keeps those modules
     /// loaded from one such test to the next, when the test left them as
@@ -84,6 +84,8 @@ pub enum Module {
     Bcm,
     /// SocketCAN-compatible CAN_ISOTP (`net/can/rcan_isotp.ko`).
     Isotp,
+    /// SocketCAN-compatible CAN_J1939 (`net/can/rcan_j1939.ko`).
+    J1939,
     /// Loopback driver (`drivers/net/can/rcan_loop.ko`).
     Loop,
     /// DSOR time service (`net/can/dsor/rcan_time.ko`).
@@ -119,12 +121,13 @@ pub enum Module {
 
 impl Module {
     /// Load order; unload in reverse.
-    pub const ALL: [Module; 20] = [
+    pub const ALL: [Module; 21] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
         Module::Bcm,
         Module::Isotp,
+        Module::J1939,
         Module::Loop,
         Module::Time,
         Module::Rtime,
@@ -143,12 +146,13 @@ impl Module {
     ];
 
     /// The modules a [`Uses::Stack`] test may load, in load order.
-    pub const SHARED: [Module; 6] = [
+    pub const SHARED: [Module; 7] = [
         Module::Pf,
         Module::Can,
         Module::Raw,
         Module::Bcm,
         Module::Isotp,
+        Module::J1939,
         Module::Loop,
     ];
 
@@ -160,6 +164,7 @@ impl Module {
             Module::Raw => "rcan_raw",
             Module::Bcm => "rcan_bcm",
             Module::Isotp => "rcan_isotp",
+            Module::J1939 => "rcan_j1939",
             Module::Loop => "rcan_loop",
             Module::Time => "rcan_time",
             Module::Rtime => "rcan_rtime",
@@ -186,6 +191,7 @@ impl Module {
             Module::Raw => "net/can/rcan_raw.ko",
             Module::Bcm => "net/can/rcan_bcm.ko",
             Module::Isotp => "net/can/rcan_isotp.ko",
+            Module::J1939 => "net/can/rcan_j1939.ko",
             Module::Loop => "drivers/net/can/rcan_loop.ko",
             Module::Time => "net/can/dsor/rcan_time.ko",
             Module::Rtime => "net/can/dsor/rcan_rtime.ko",
@@ -223,6 +229,9 @@ pub enum Mainline {
     /// ISO-TP (`net/can/can-isotp.ko`): not in [`Mainline::ALL`], loaded
     /// only by [`Ctx::isotp_ifaces`].
     Isotp,
+    /// SAE J1939 (`net/can/j1939/can-j1939.ko`): not in
+    /// [`Mainline::ALL`], loaded only by [`Ctx::j1939_ifaces`].
+    J1939,
     /// SJA1000 core (`drivers/net/can/sja1000/sja1000.ko`): not in
     /// [`Mainline::ALL`], loaded only by [`Ctx::sja1000_cards`].
     Sja1000,
@@ -249,6 +258,7 @@ impl Mainline {
             Mainline::Vcan => "vcan",
             Mainline::Bcm => "can_bcm",
             Mainline::Isotp => "can_isotp",
+            Mainline::J1939 => "can_j1939",
             Mainline::Sja1000 => "sja1000",
             Mainline::KvaserPci => "kvaser_pci",
             Mainline::CtuCanFd => "ctucanfd",
@@ -265,6 +275,7 @@ impl Mainline {
             Mainline::Vcan => "drivers/net/can/vcan.ko",
             Mainline::Bcm => "net/can/can-bcm.ko",
             Mainline::Isotp => "net/can/can-isotp.ko",
+            Mainline::J1939 => "net/can/j1939/can-j1939.ko",
             Mainline::Sja1000 => "drivers/net/can/sja1000/sja1000.ko",
             Mainline::KvaserPci => "drivers/net/can/sja1000/kvaser_pci.ko",
             Mainline::CtuCanFd => "drivers/net/can/ctucanfd/ctucanfd.ko",
@@ -707,6 +718,21 @@ impl Ctx {
         Ok(ifaces)
     }
 
+    /// [`Ctx::can_ifaces`] plus the CAN_J1939 protocol. Mainline:
+    /// can-j1939.ko. Ours: rcan_j1939.
+    pub fn j1939_ifaces(&mut self, n: usize) -> Result<Vec<u32>, String> {
+        let ifaces = self.can_ifaces(n)?;
+        if self.stack == Stack::Ours {
+            self.insmod(Module::J1939, &[])?;
+            return Ok(ifaces);
+        }
+        let ko = self
+            .mainline_ko(Mainline::J1939)
+            .ok_or("no kernel build directory (RCAN_KBUILD or --kbuild)")?;
+        sys::finit_module(&ko, &[]).map_err(|e| format!("insmod {}: {e}", ko.display()))?;
+        Ok(ifaces)
+    }
+
     /// [`Ctx::can_ifaces`] plus the CAN_ISOTP protocol. Mainline:
     /// can-isotp.ko. Ours: rcan_isotp.
     pub fn isotp_ifaces(&mut self, n: usize) -> Result<Vec<u32>, String> {
@@ -795,6 +821,7 @@ impl Ctx {
         for m in [
             Mainline::Bcm,
             Mainline::Isotp,
+            Mainline::J1939,
             Mainline::KvaserPci,
             Mainline::Sja1000,
             Mainline::CtuCanFdPci,
@@ -1118,6 +1145,7 @@ mod tests {
                 "rcan_raw",
                 "rcan_bcm",
                 "rcan_isotp",
+                "rcan_j1939",
                 "rcan_loop",
                 "rcan_time",
                 "rcan_rtime",

@@ -63,6 +63,8 @@ pub struct Received {
     pub timespec: Option<libc::timespec>,
     /// (level, type) of every control message, in order.
     pub cmsgs: Vec<(c_int, c_int)>,
+    /// The payload of every control message, in the same order.
+    pub cdata: Vec<Vec<u8>>,
 }
 
 /// Control message buffer, aligned for `struct cmsghdr`.
@@ -81,6 +83,7 @@ pub fn recvmsg(fd: impl AsFd, buflen: usize, flags: c_int) -> io::Result<Receive
         timeval: None,
         timespec: None,
         cmsgs: Vec::new(),
+        cdata: Vec::new(),
     };
     let mut ctrl = CmsgBuf([0; 256]);
     let mut iov = libc::iovec {
@@ -107,13 +110,19 @@ pub fn recvmsg(fd: impl AsFd, buflen: usize, flags: c_int) -> io::Result<Receive
     r.flags = msg.msg_flags;
     // SAFETY: msg describes the control buffer the kernel just filled;
     // CMSG_FIRSTHDR/CMSG_NXTHDR stay inside msg_controllen, and each payload
-    // is read unaligned only when cmsg_len says it is complete.
+    // is read unaligned only when cmsg_len says it is complete; a payload's
+    // bytes are copied as cmsg_len gives them, which put_cmsg never sets
+    // beyond the buffer (it cuts a message that does not fit).
     unsafe {
         let mut c = libc::CMSG_FIRSTHDR(&msg);
         while !c.is_null() {
             let (level, ty, len) = ((*c).cmsg_level, (*c).cmsg_type, (*c).cmsg_len as usize);
             r.cmsgs.push((level, ty));
             let data = libc::CMSG_DATA(c);
+            let hdr = libc::CMSG_LEN(0) as usize;
+            r.cdata.push(
+                std::slice::from_raw_parts(data.cast_const(), len.saturating_sub(hdr)).to_vec(),
+            );
             let tv_len = libc::CMSG_LEN(size_of::<libc::timeval>() as u32) as usize;
             let ts_len = libc::CMSG_LEN(size_of::<libc::timespec>() as u32) as usize;
             if level == libc::SOL_SOCKET && ty == libc::SCM_TIMESTAMP && len >= tv_len {

@@ -299,6 +299,7 @@ fn install_autoload(ctx: &mut Ctx) -> TestResult {
         ("SOCK_RAW", 1, "rcan_raw"),
         ("SOCK_DGRAM", 2, "rcan_bcm"),
         ("SOCK_DGRAM", 6, "rcan_isotp"),
+        ("SOCK_DGRAM", 7, "rcan_j1939"),
         ("SOCK_RAW", 16, "rcan_can"),
         ("SOCK_DGRAM", 17, "rcan_dsor"),
     ] {

@@ -21,6 +21,7 @@ mod i82527_dev;
 mod install;
 mod isotp;
 mod isotp_opts;
+mod j1939;
 mod leak;
 mod lifecycle;
 mod loopdrv;
@@ -233,6 +234,8 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         isotp::TESTS,
         isotp::OURS,
         isotp_opts::TESTS,
+        j1939::TESTS,
+        j1939::OURS,
         netns::TESTS,
         netns::OURS,
         fd::TESTS,
@@ -335,7 +338,7 @@ mod tests {
     #[test]
     fn portable_names() {
         // The prefixes say what a test needs: raw_/canutils_/candev_/bcm_/
-        // isotp_ and the daemons' canzlogd_/cantcpd_/powerd_ run on both stacks,
+        // isotp_, j1939_ and the daemons' canzlogd_/cantcpd_/powerd_ run on both stacks,
         // everything else (mixed_, sja1000_ included) on ours only.
         for t in super::all() {
             let portable = [
@@ -344,6 +347,7 @@ mod tests {
                 "candev_",
                 "bcm_",
                 "isotp_",
+                "j1939_",
                 "canzlogd_",
                 "cantcpd_",
                 "powerd_",
