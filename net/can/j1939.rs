@@ -260,13 +260,18 @@ impl CanProtocol for J1939Proto {
             dst_name: J1939_NO_NAME,
         };
         let broadcast = sk.broadcast();
+        // Mainline's transport takes the TP/ETP frames it is involved in
+        // or that are broadcast (all a non-promiscuous socket could
+        // match), except control frames shorter than 8 bytes.
+        let transport = is_transport_pgn(id.pgn)
+            && !(matches!(id.pgn, TP_PGN_CTL | ETP_PGN_CTL) && data.len() < 8);
         let accepted = {
             let g = st.lock();
             let mut rx = g.rx;
             rx.broadcast = broadcast;
             g.bound
                 && g.ifindex == ifindex
-                && (!is_transport_pgn(id.pgn)
+                && (!transport
                     || (rx.promisc
                         && addr_is_unicast(id.da)
                         && id.da != rx.sa
