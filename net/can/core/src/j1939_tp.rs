@@ -45,8 +45,8 @@
 use super::arb::EINVAL;
 use super::j1939::{
     Frame, Id, EADDRNOTAVAIL, EAGAIN, EALREADY, EBADMSG, EDESTADDRREQ, EHOSTUNREACH, EILSEQ,
-    EMSGSIZE, ENOTCONN, ENOTRECOVERABLE, EPROTO, J1939_NO_ADDR, MAX_ETP_SIZE, MAX_TP_SIZE,
-    MIN_TP_SIZE,
+    EMSGSIZE, ENETUNREACH, ENOTCONN, ENOTRECOVERABLE, EPROTO, J1939_NO_ADDR, MAX_ETP_SIZE,
+    MAX_TP_SIZE, MIN_TP_SIZE,
 };
 
 /// PGN of TP connection management (TP.CM).
@@ -485,6 +485,58 @@ pub(super) enum Due {
     Timeout,
     /// The device refused `resend`: try again.
     Retry,
+}
+
+/// What the two session machines ([`super::j1939_tp_tx::TxSession`],
+/// [`super::j1939_tp_rx::RxSession`]) share at their end: a refused frame
+/// retried or given up, and a cancel from outside. Each says whether it is
+/// done, lends its clock, finishes with an outcome, and names the route of
+/// its abort frame (the sender aborts from its source to its destination,
+/// the receiver the other way).
+pub(super) trait SessionEnd {
+    fn is_done(&self) -> bool;
+    fn clock_mut(&mut self) -> &mut Clock;
+    fn end(&mut self, o: Outcome) -> Step;
+    /// The session's kind, priority, abort frame source and destination,
+    /// and PGN.
+    fn abort_route(&self) -> (Kind, u8, u8, u8, u32);
+
+    /// The device refused the frame of the last step at `now`: sent again
+    /// after 10 ms plus `jitter_ms` (0..=15); after [`RETRY_LIMIT`]
+    /// refusals in a row the session ends with `ENETUNREACH` and no abort
+    /// frame (mainline).
+    fn refused_step(&mut self, now: u64, jitter_ms: u8) -> Step {
+        if self.is_done() {
+            return Step::NONE;
+        }
+        match self.clock_mut().refused(now, jitter_ms) {
+            Ok(timer) => Step {
+                timer,
+                ..Step::NONE
+            },
+            Err(()) => self.end(Outcome::Aborted {
+                errno: ENETUNREACH,
+                reason: None,
+            }),
+        }
+    }
+
+    /// Ends the session from outside with `errno`; with `code`, an abort
+    /// frame with that reason goes out (not for BAM).
+    fn cancel_step(&mut self, errno: i32, code: Option<u8>) -> Step {
+        if self.is_done() {
+            return Step::NONE;
+        }
+        let mut s = self.end(Outcome::Aborted {
+            errno,
+            reason: code,
+        });
+        let (kind, prio, from, to, pgn) = self.abort_route();
+        if let (Some(c), true) = (code, kind != Kind::Bam) {
+            s.frame = Some(abort_frame(kind == Kind::Etp, prio, from, to, c, pgn));
+        }
+        s
+    }
 }
 
 /// Timer and retry bookkeeping shared by both machines.

@@ -11,11 +11,12 @@
 //! outside the announced size). The caller serializes the events of a
 //! session.
 
-use super::j1939::{Id, ENETUNREACH, MAX_ETP_SIZE, MAX_TP_SIZE, MIN_TP_SIZE};
+use super::j1939::{Id, MAX_ETP_SIZE, MAX_TP_SIZE, MIN_TP_SIZE};
 use super::j1939_tp::{
     abort, abort_errno, abort_frame, bad_pgn_abort, ctl, ctl_pgn, le24, packets, Clock, Due, Key,
-    Kind, Notify, Outcome, Params, Step, CMD_ABORT, ETP_CMD_CTS, ETP_CMD_DPO, ETP_CMD_EOMA,
-    ETP_CMD_RTS, ETP_PGN_CTL, T1_NS, T2_NS, TP_CMD_BAM, TP_CMD_CTS, TP_CMD_EOMA, TP_CMD_RTS,
+    Kind, Notify, Outcome, Params, SessionEnd, Step, CMD_ABORT, ETP_CMD_CTS, ETP_CMD_DPO,
+    ETP_CMD_EOMA, ETP_CMD_RTS, ETP_PGN_CTL, T1_NS, T2_NS, TP_CMD_BAM, TP_CMD_CTS, TP_CMD_EOMA,
+    TP_CMD_RTS,
 };
 
 /// The states of a receiver.
@@ -386,40 +387,30 @@ impl RxSession {
     /// [`TxSession::on_refused`]. A refused EOMA is not retried (the
     /// message was delivered; the originator times out).
     pub fn on_refused(&mut self, now: u64, jitter_ms: u8) -> Step {
-        if self.st == RxSt::Done {
-            return Step::NONE;
-        }
-        match self.clock.refused(now, jitter_ms) {
-            Ok(timer) => Step {
-                timer,
-                ..Step::NONE
-            },
-            Err(()) => self.finish(Outcome::Aborted {
-                errno: ENETUNREACH,
-                reason: None,
-            }),
-        }
+        self.refused_step(now, jitter_ms)
     }
 
     /// Ends the session from outside, as [`TxSession::cancel`].
     pub fn cancel(&mut self, errno: i32, code: Option<u8>) -> Step {
-        if self.st == RxSt::Done {
-            return Step::NONE;
-        }
-        let mut s = self.finish(Outcome::Aborted {
-            errno,
-            reason: code,
-        });
-        if let (Some(c), true) = (code, self.kind != Kind::Bam) {
-            s.frame = Some(abort_frame(
-                self.kind == Kind::Etp,
-                self.id.prio,
-                self.id.da,
-                self.id.sa,
-                c,
-                self.id.pgn,
-            ));
-        }
-        s
+        self.cancel_step(errno, code)
+    }
+}
+
+impl SessionEnd for RxSession {
+    fn is_done(&self) -> bool {
+        self.st == RxSt::Done
+    }
+
+    fn clock_mut(&mut self) -> &mut Clock {
+        &mut self.clock
+    }
+
+    fn end(&mut self, o: Outcome) -> Step {
+        self.finish(o)
+    }
+
+    /// The responder aborts back to the originator.
+    fn abort_route(&self) -> (Kind, u8, u8, u8, u32) {
+        (self.kind, self.id.prio, self.id.da, self.id.sa, self.id.pgn)
     }
 }

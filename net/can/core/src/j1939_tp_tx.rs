@@ -11,12 +11,12 @@
 //! caller passes the same bytes to every event. The caller serializes
 //! the events of a session.
 
-use super::j1939::{Frame, Id, EDOM, ENETUNREACH};
+use super::j1939::{Frame, Id, EDOM};
 use super::j1939_tp::{
     abort, abort_errno, abort_frame, bad_pgn_abort, ctl, ctl_pgn, kind_for, le24, packets, Clock,
-    Due, Key, Kind, Notify, Outcome, Params, Step, BAM_GAP_NS, CMD_ABORT, ECHO_NS, ETP_CMD_CTS,
-    ETP_CMD_DPO, ETP_CMD_EOMA, ETP_CMD_RTS, ETP_PGN_CTL, ETP_PGN_DAT, T3_NS, T4_NS, TP_CMD_BAM,
-    TP_CMD_CTS, TP_CMD_EOMA, TP_CMD_RTS, TP_PGN_CTL, TP_PGN_DAT,
+    Due, Key, Kind, Notify, Outcome, Params, SessionEnd, Step, BAM_GAP_NS, CMD_ABORT, ECHO_NS,
+    ETP_CMD_CTS, ETP_CMD_DPO, ETP_CMD_EOMA, ETP_CMD_RTS, ETP_PGN_CTL, ETP_PGN_DAT, T3_NS, T4_NS,
+    TP_CMD_BAM, TP_CMD_CTS, TP_CMD_EOMA, TP_CMD_RTS, TP_PGN_CTL, TP_PGN_DAT,
 };
 
 /// The states of a sender.
@@ -356,19 +356,7 @@ impl TxSession {
     /// after [`RETRY_LIMIT`] refusals in a row the session ends with
     /// `ENETUNREACH` and no abort frame (mainline).
     pub fn on_refused(&mut self, now: u64, jitter_ms: u8) -> Step {
-        if self.st == TxSt::Done {
-            return Step::NONE;
-        }
-        match self.clock.refused(now, jitter_ms) {
-            Ok(timer) => Step {
-                timer,
-                ..Step::NONE
-            },
-            Err(()) => self.finish(Outcome::Aborted {
-                errno: ENETUNREACH,
-                reason: None,
-            }),
-        }
+        self.refused_step(now, jitter_ms)
     }
 
     /// Ends the session from outside (socket closed, interface down):
@@ -376,23 +364,25 @@ impl TxSession {
     /// with `code`, an abort frame with that reason goes out (not for
     /// BAM).
     pub fn cancel(&mut self, errno: i32, code: Option<u8>) -> Step {
-        if self.st == TxSt::Done {
-            return Step::NONE;
-        }
-        let mut s = self.finish(Outcome::Aborted {
-            errno,
-            reason: code,
-        });
-        if let (Some(c), true) = (code, self.kind != Kind::Bam) {
-            s.frame = Some(abort_frame(
-                self.kind == Kind::Etp,
-                self.id.prio,
-                self.id.sa,
-                self.id.da,
-                c,
-                self.id.pgn,
-            ));
-        }
-        s
+        self.cancel_step(errno, code)
+    }
+}
+
+impl SessionEnd for TxSession {
+    fn is_done(&self) -> bool {
+        self.st == TxSt::Done
+    }
+
+    fn clock_mut(&mut self) -> &mut Clock {
+        &mut self.clock
+    }
+
+    fn end(&mut self, o: Outcome) -> Step {
+        self.finish(o)
+    }
+
+    /// The originator aborts from its source to its destination.
+    fn abort_route(&self) -> (Kind, u8, u8, u8, u32) {
+        (self.kind, self.id.prio, self.id.sa, self.id.da, self.id.pgn)
     }
 }
