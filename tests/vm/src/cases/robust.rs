@@ -266,12 +266,13 @@ fn modules_load_unload_cycles(ctx: &mut Ctx) -> TestResult {
     let n = sized("RCAN_MODULE_CYCLES", 20, 1);
     // (module, parameters, modules it needs, loads: false if it must fail)
     let stack = [Module::Pf, Module::Can, Module::Raw, Module::Loop];
-    let plan: [(Module, &[&str], &[Module], bool); 20] = [
+    let plan: [(Module, &[&str], &[Module], bool); 21] = [
         (Module::Pf, &[], &[], true),
         (Module::Can, &[], &[Module::Pf], true),
         (Module::Raw, &[], &[Module::Pf], true),
         (Module::Bcm, &[], &[Module::Pf], true),
         (Module::Isotp, &[], &[Module::Pf], true),
+        (Module::J1939, &[], &[Module::Pf], true),
         (Module::Loop, &["count=2"], &[Module::Pf], true),
         (Module::Dsor, &["ifname=can0"], &stack, true),
         (Module::Time, &[], &stack, true),
