@@ -60,6 +60,51 @@ impl PartialEq for Net {
 
 impl Eq for Net {}
 
+impl Net {
+    /// A counted reference on this namespace (`maybe_get_net`), which
+    /// keeps it from being dismantled until dropped; `None` if its count
+    /// already reached zero (it is going away). Any context.
+    pub(crate) fn hold(&self) -> Option<NetRef> {
+        // SAFETY: `self` is alive while borrowed; maybe_get_net fails
+        // (false) if the count already reached zero.
+        if !unsafe { bindings::rcan_maybe_get_net(self.as_ptr()) } {
+            return None;
+        }
+        // INVARIANT: the reference just taken.
+        Some(NetRef(core::ptr::NonNull::from(self)))
+    }
+}
+
+/// A counted reference on a namespace ([`Net::hold`]), put when dropped
+/// (`put_net`; the last one schedules the namespace's cleanup, which
+/// runs in a workqueue: dropping is allowed in any context).
+///
+/// # Invariants
+///
+/// The value holds one reference on the namespace it points to.
+pub(crate) struct NetRef(core::ptr::NonNull<Net>);
+
+// SAFETY: a counted reference, which may be dropped on any thread.
+unsafe impl Send for NetRef {}
+// SAFETY: shared access only reads the (alive) namespace's address.
+unsafe impl Sync for NetRef {}
+
+impl core::ops::Deref for NetRef {
+    type Target = Net;
+    fn deref(&self) -> &Net {
+        // SAFETY: the reference held keeps the namespace alive (type
+        // invariant).
+        unsafe { self.0.as_ref() }
+    }
+}
+
+impl Drop for NetRef {
+    fn drop(&mut self) {
+        // SAFETY: the reference taken in `Net::hold` (type invariant).
+        unsafe { bindings::rcan_put_net(self.0.as_ptr().cast()) };
+    }
+}
+
 /// A module's data for one namespace.
 pub(crate) trait PernetData: Sized + Send + Sync + 'static {
     /// The module's [`Pernet`] static.

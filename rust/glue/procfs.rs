@@ -24,7 +24,7 @@
 //!   (at the namespace's exit) while a file in it exists.
 
 use super::bindings;
-use super::net::{Net, Pernet, PernetData, PernetReg};
+use super::net::{Net, NetRef, Pernet, PernetData, PernetReg};
 use super::sync::RcuReadGuard;
 use core::fmt;
 use core::marker::PhantomData;
@@ -176,17 +176,9 @@ impl NetProcDir {
             NET_DIRS.get(net).and_then(|d| d.dir.clone())
         }
         .ok_or(code::ENOENT)?;
-        // SAFETY: `net` is alive while borrowed; maybe_get_net fails
-        // (false) if its count already reached zero (it is being
-        // dismantled).
-        if !unsafe { bindings::rcan_maybe_get_net(net.as_ptr()) } {
-            return Err(code::ENOENT);
-        }
-        // INVARIANT: the reference just taken.
         let hold = NetHold {
             dir: Some(dir),
-            // SAFETY: a `&Net` is never null.
-            net: unsafe { NonNull::new_unchecked(net.as_ptr()) },
+            _net: net.hold().ok_or(code::ENOENT)?,
         };
         ProcEntry::new(hold, name, data)
     }
@@ -195,29 +187,18 @@ impl NetProcDir {
 /// What a file holds of its place: its directory and a reference on the
 /// directory's namespace, dropped in that order.
 ///
-/// # Invariants
-///
-/// `net` is a namespace this value holds a reference on; `dir` (`Some`
-/// until dropped) is a directory in `net`'s /proc/net.
+/// `dir` (`Some` until dropped) is a directory in `_net`'s /proc/net.
 struct NetHold {
     dir: Option<Arc<DirInner>>,
-    net: NonNull<bindings::net>,
+    _net: NetRef,
 }
-
-// SAFETY: a counted namespace reference and an Arc; both may be dropped
-// from any thread (process context).
-unsafe impl Send for NetHold {}
-// SAFETY: shared access reaches nothing.
-unsafe impl Sync for NetHold {}
 
 impl Drop for NetHold {
     /// Process context.
     fn drop(&mut self) {
         // The directory first (possibly its removal), while its parent is
-        // held alive by the reference dropped next.
+        // held alive by `net`, dropped after this.
         drop(self.dir.take());
-        // SAFETY: the reference taken in `NetProcDir::entry` (invariant).
-        unsafe { bindings::rcan_put_net(self.net.as_ptr()) };
     }
 }
 
