@@ -31,7 +31,9 @@ pub(crate) const CANPROTO_MAX: usize = 24;
 /// version, as a module built from another tree would.
 pub(crate) const ABI_VERSION: u32 = if cfg!(rcan_abi_skew) { BASE_ABI_VERSION + 1 } else { BASE_ABI_VERSION };
 /// This tree's [`ABI_VERSION`].
-const BASE_ABI_VERSION: u32 = 1;
+///
+/// 2: `rcan_rx_set_kernel` takes the receiver's namespace.
+const BASE_ABI_VERSION: u32 = 2;
 
 /// FNV-1a (32 bits) over the size, alignment and field offsets of every
 /// struct that crosses between the modules, the size of their pointers
@@ -299,12 +301,16 @@ extern "C" {
     /// socket: `data` is passed to `func` as its `owner`. No reference is
     /// taken; instead every call returns only after every running callback
     /// with a registration it replaced or removed has finished, so the
-    /// caller may free `data` (or unload) then. Process context. Kernel
-    /// receivers see the initial namespace's devices only.
+    /// caller may free `data` (or unload) then. Process context. The
+    /// receiver sees the devices of namespace `net` (NULL: the initial
+    /// one), which the caller keeps alive until the registration is
+    /// removed; a removal names the namespace the registration was made
+    /// in.
     pub(crate) fn rcan_rx_set_kernel(
         func: RxFn,
         data: *mut ffi::c_void,
         cookie: u32,
+        net: *mut bindings::net,
         spec: *const RxSpec,
     ) -> ffi::c_int;
     /// Sends one CAN frame (mainline `can_send`): `skb` holds a

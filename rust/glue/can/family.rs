@@ -471,14 +471,22 @@ unsafe extern "C" fn rcan_rx_set_reserved(
 ///
 /// `data` is NULL or the caller's data, valid (with `func`, which may be
 /// called with it) until a call of this function removing or replacing
-/// the registration has returned; `spec` as for [`rcan_rx_set`].
+/// the registration has returned; `net` is NULL or a namespace alive
+/// until then; `spec` as for [`rcan_rx_set`].
 #[no_mangle]
 unsafe extern "C" fn rcan_rx_set_kernel(
     func: RxFn,
     data: *mut ffi::c_void,
     cookie: u32,
+    net: *mut bindings::net,
     spec: *const RxSpec,
 ) -> ffi::c_int {
+    let net = if net.is_null() {
+        Net::init()
+    } else {
+        // SAFETY: a namespace alive for the call (contract).
+        unsafe { Net::from_raw(net) }
+    };
     let Some(owner) = NonNull::new(data) else {
         return code::EINVAL.to_errno();
     };
@@ -495,7 +503,7 @@ unsafe extern "C" fn rcan_rx_set_kernel(
         // SAFETY: as in rcan_rx_set.
         (unsafe { request_of(spec, cookie) }, t)
     });
-    let ret = Impl::rx_set(Net::init(), id, new);
+    let ret = Impl::rx_set(net, id, new);
     // A registration this call replaced or removed is unlinked now; the
     // caller may free `data` (or unload) once we return: wait out every
     // callback that may still use it.

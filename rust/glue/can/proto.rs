@@ -34,8 +34,8 @@ use super::abi::{self, CanProto, RxSpec, RxTableSpec, TableFilter};
 #[allow(unused_imports)]
 pub(crate) use super::abi::{RxFilter, RX_FILTER_ARB, RX_FILTER_CAN_ID};
 use crate::glue::bindings;
-use crate::glue::module::{ExitTable, ModuleScope, SweepKind};
-use crate::glue::net::Net;
+use crate::glue::module::{ExitList, ExitNode, ExitTable, InScopedModule, ModuleScope, SweepKind};
+use crate::glue::net::{Net, NetRef};
 use crate::glue::netdev::{self as gnetdev, NetDev};
 use crate::glue::skb::{OwnedSkb, Shared, Skb, UniqueSkb};
 use crate::glue::sock::{Proto, ProtoReg, SetLink, Sock, SockGuard, SockView};
@@ -44,7 +44,8 @@ use crate::rcan_core::rxtable::CanFilterKind;
 use core::marker::PhantomData;
 use core::mem::ManuallyDrop;
 use core::sync::atomic::Ordering;
-use kernel::alloc::{flags::GFP_KERNEL, KVec};
+use kernel::alloc::{flags::GFP_KERNEL, KBox, KVec};
+use kernel::sync::Arc;
 use kernel::error::{code, Result};
 use kernel::ffi;
 
@@ -942,7 +943,7 @@ impl<T: KernelRx> Drop for KernelRxReg<T> {
         let data = self.0 as *const T as *mut ffi::c_void;
         // SAFETY: removal (NULL spec) of the receiver registered with this
         // func and data; never fails.
-        unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, core::ptr::null()) };
+        unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, core::ptr::null_mut(), core::ptr::null()) };
         // SAFETY: the registration was removed just above.
         unsafe { KERNEL_RXS.take(data.cast(), kernel_rx_remove::<T>) };
     }
@@ -971,7 +972,7 @@ unsafe fn kernel_rx_remove<T: KernelRx>(data: *mut ()) {
     // SAFETY: removal (NULL spec) of the receiver registered with this
     // func and data, or of nothing if it was removed already; never
     // fails, waits out running callbacks.
-    unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data.cast(), 0, core::ptr::null()) };
+    unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data.cast(), 0, core::ptr::null_mut(), core::ptr::null()) };
 }
 
 /// The exit's sweep ([`crate::glue::module::Scoped`], step 3): removes
@@ -980,6 +981,7 @@ unsafe fn kernel_rx_remove<T: KernelRx>(data: *mut ()) {
 /// per receiver).
 fn kernel_rx_sweep() {
     KERNEL_RXS.sweep();
+    KERNEL_RX_AT.sweep();
 }
 
 /// Registers `rx` for frames on `ifindex` (0: every CAN interface)
@@ -1018,7 +1020,7 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
     // SAFETY: `spec` and its filters live for the call; `data` is 'static
     // (module data), and the registration is removed by the guard's drop
     // or by the module's exit, before the module's memory goes.
-    let ret = unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, &spec) };
+    let ret = unsafe { abi::rcan_rx_set_kernel(kernel_rx::<T>, data, 0, core::ptr::null_mut(), &spec) };
     if let Err(e) = crate::glue::to_result(ret) {
         if new {
             // SAFETY: the registration failed: there is nothing to undo.
@@ -1027,6 +1029,161 @@ pub(crate) fn rx_set_kernel<T: KernelRx>(
         return Err(e);
     }
     Ok(KernelRxReg(rx))
+}
+
+/// A kernel receiver made at run time ([`rx_set_kernel_at`]): a
+/// protocol's per-interface state (CAN_J1939's address claim table),
+/// registered when a socket first binds to an interface and removed when
+/// the last one leaves it, in the sockets' namespace.
+///
+/// Dropping it removes the receiver and waits for running callbacks
+/// (process context; sleeps), then drops its `Arc<T>` and its reference
+/// on the namespace. One never dropped (forgotten, or owned by something
+/// leaked) is removed by the module's exit ([`KERNEL_RX_AT`]), which
+/// [`InScopedModule`] evidence proves the glue runs: no frame reaches
+/// the module's text after `rmmod`.
+pub(crate) struct KernelRxAt<T: KernelRx + Send> {
+    node: Option<KBox<AtNode<T>>>,
+}
+
+/// What [`KernelRxAt`] registers: its address is the receiver's `data`
+/// (stable: boxed, and never freed while registered).
+struct AtNode<T> {
+    exit: ExitNode,
+    rx: Arc<T>,
+    /// The registration's namespace, held until the node is freed.
+    net: NetRef,
+}
+
+/// The run-time kernel receivers of this module still registered (the
+/// glue is compiled into each module: one list per module), through the
+/// nodes in their allocations; swept at exit by [`kernel_rx_sweep`].
+/// Unbounded (one per interface in use), so a list.
+static KERNEL_RX_AT: ExitList = ExitList::new(kernel::c_str!("rcan_glue_kernel_rx_at"));
+
+/// The `abi::RxFn` of a [`KernelRxAt`]: [`kernel_rx`] with the node's
+/// `rx` as the receiver.
+///
+/// # Safety
+///
+/// Called by pf_can's dispatcher as `abi::RxFn` says, with the `owner`
+/// that [`rx_set_kernel_at`] registered: the address of an `AtNode<T>`,
+/// which stays allocated until the registration is removed (by
+/// `KernelRxAt`'s drop, which frees it only afterwards, or by the exit,
+/// which never frees it).
+unsafe extern "C" fn kernel_rx_at<T: KernelRx + Send>(
+    skb: *mut bindings::sk_buff,
+    owner: *mut ffi::c_void,
+    cookie: u32,
+    owned: bool,
+) {
+    // CAST: the registered `AtNode<T>` (contract).
+    let node = owner as *const AtNode<T>;
+    // SAFETY: allocated while registered (contract); shared access only.
+    let rx = unsafe { &*(*node).rx } as *const T;
+    // SAFETY: `kernel_rx`'s contract with `rx` as the owner, alive for the
+    // call (the node's Arc holds it).
+    unsafe { kernel_rx::<T>(skb, rx as *mut ffi::c_void, cookie, owned) };
+}
+
+/// Removes the registration of the node at `node` from pf_can, waiting
+/// out running callbacks; leaves the node's memory to its owner. Process
+/// context; sleeps.
+///
+/// # Safety
+///
+/// `node` is an `AtNode<T>` registered by [`rx_set_kernel_at`], not
+/// freed until this returns (its guard frees it only after taking it off
+/// [`KERNEL_RX_AT`] itself; when the exit took it, never).
+unsafe fn kernel_rx_at_remove<T: KernelRx + Send>(node: *mut ()) {
+    // SAFETY: allocated (contract); its namespace is held by its NetRef.
+    let net = unsafe { (*node.cast::<AtNode<T>>()).net.as_ptr() };
+    // SAFETY: removal (NULL spec) of the receiver registered with this
+    // func, data and namespace; never fails, waits out running callbacks.
+    unsafe { abi::rcan_rx_set_kernel(kernel_rx_at::<T>, node.cast(), 0, net, core::ptr::null()) };
+}
+
+impl<T: KernelRx + Send> Drop for KernelRxAt<T> {
+    fn drop(&mut self) {
+        let Some(node) = self.node.take() else {
+            return;
+        };
+        if KERNEL_RX_AT.remove(&node.exit) {
+            let p = core::ptr::from_ref::<AtNode<T>>(&node).cast_mut().cast();
+            // SAFETY: registered by rx_set_kernel_at and just taken off
+            // the list by us, so nobody else removes it; freed below,
+            // after the call.
+            unsafe { kernel_rx_at_remove::<T>(p) };
+            drop(node);
+        } else {
+            // The exit took it (and removes it, or did): its memory is
+            // the exit's to read from now on, never freed.
+            core::mem::forget(node);
+        }
+    }
+}
+
+/// Registers `rx` for frames on interface `ifindex` (0: every CAN
+/// interface) of namespace `net` passing any of `filters` (at least
+/// one), until the returned guard is dropped, and at the latest until
+/// the module's exit (`_in` proves the glue owns it: a socket or device
+/// of the module, or its init scope). A frame goes to `rx` once per
+/// frame, in NET_RX softirq under RCU, as for [`rx_set_kernel`]. ENODEV
+/// if `net` is going away; ENOMEM. Process context; sleeps (a grace
+/// period).
+pub(crate) fn rx_set_kernel_at<T: KernelRx + Send>(
+    _in: &impl InScopedModule,
+    net: &Net,
+    ifindex: i32,
+    rx: Arc<T>,
+    filters: &[RxFilter],
+) -> Result<KernelRxAt<T>> {
+    if filters.is_empty() {
+        return Err(code::EINVAL);
+    }
+    abi::check()?;
+    let net = net.hold().ok_or(code::ENODEV)?;
+    let node = KBox::new(
+        AtNode {
+            exit: ExitNode::new(),
+            rx,
+            net,
+        },
+        GFP_KERNEL,
+    )?;
+    let p: *mut () = core::ptr::from_ref::<AtNode<T>>(&node).cast_mut().cast();
+    // SAFETY: the node stays at its address until the guard's drop takes
+    // it off the list (boxed; a forgotten guard leaks it), and
+    // `kernel_rx_at_remove::<T>(p)` may be called once at the exit: it
+    // removes the registration or nothing, and never frees the node.
+    unsafe {
+        KERNEL_RX_AT.push(
+            &node.exit,
+            p,
+            kernel_rx_at_remove::<T>,
+            SweepKind::KernelRx,
+            kernel_rx_sweep,
+        )
+    };
+    let spec = RxSpec {
+        ifindex,
+        join: false,
+        err_mask: 0,
+        filters: filters.as_ptr(),
+        nfilters: filters.len(),
+    };
+    // SAFETY: `spec` and its filters live for the call; `p` is the node,
+    // which stays allocated until the registration is removed (the
+    // guard's drop removes it before freeing it; the exit never frees
+    // it), and its NetRef keeps `net` alive as long.
+    let ret = unsafe {
+        abi::rcan_rx_set_kernel(kernel_rx_at::<T>, p.cast(), 0, node.net.as_ptr(), &spec)
+    };
+    // From here the guard owns the node: dropped on error, it takes it
+    // off the list and removes the (absent) registration.
+    let guard = KernelRxAt { node: Some(node) };
+    crate::glue::to_result(ret)?;
+    Ok(guard)
 }
 
 /// Checks that the loaded `rcan_pf` speaks this module's ABI (see
