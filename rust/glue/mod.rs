@@ -185,6 +185,25 @@ pub(crate) fn kvec_swap_remove<T>(v: &mut kernel::alloc::KVec<T>, idx: usize) ->
     }
 }
 
+/// A new box holding a copy of `*v`, copied from `v` straight into the
+/// allocation, never through the stack: for tables too large for a
+/// kernel stack (CAN_J1939's claim table, 18 KiB, from a `static` empty
+/// table), which `KBox::new(value)` may build on the stack first. ENOMEM.
+/// Process context with `GFP_KERNEL`.
+pub(crate) fn kbox_copy<T: Copy>(
+    v: &T,
+    flags: kernel::alloc::Flags,
+) -> kernel::error::Result<kernel::alloc::KBox<T>> {
+    let mut b = kernel::alloc::KBox::<T>::new_uninit(flags)?;
+    // SAFETY: `b` is a fresh allocation for one `T`, not overlapping `v`;
+    // `T: Copy`, so a bitwise copy is a valid `T` and duplicates nothing
+    // that needs dropping. After the copy the box is initialised.
+    unsafe {
+        core::ptr::copy_nonoverlapping(core::ptr::from_ref(v), b.as_mut_ptr(), 1);
+        Ok(b.assume_init())
+    }
+}
+
 /// Removes every element equal to `x` from `v` (6.12's `KVec` has no
 /// `retain`). Order is not kept.
 pub(crate) fn kvec_remove_all<T: Copy + PartialEq>(v: &mut kernel::alloc::KVec<T>, x: T) {
