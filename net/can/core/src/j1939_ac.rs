@@ -90,8 +90,10 @@ pub enum ClaimResult {
     Released,
 }
 
-/// The address claim table of one interface.
-#[derive(Clone, PartialEq, Eq, Debug)]
+/// The address claim table of one interface. `Copy`, so that the module
+/// can copy an empty one from a `static` into its allocation without
+/// building it on the kernel stack (18 KiB).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct AcTable {
     ecus: [Ecu; ECU_SLOTS],
     /// The ECU holding each address (index into `ecus`), or `NONE`.
@@ -100,6 +102,12 @@ pub struct AcTable {
     pending: [u16; 256],
     /// Local sockets bound to each address directly (not by NAME).
     bound: [u32; 256],
+    /// No pending claim becomes valid before this time, if set: the
+    /// earliest deadline, or earlier (a claim pending when it was noted
+    /// may have been dropped since; [`AcTable::settle`] then finds nothing
+    /// due and notes the next one). Lets `settle` skip the table's scan
+    /// on every frame.
+    due: Option<u64>,
 }
 
 impl Default for AcTable {
@@ -116,6 +124,7 @@ impl AcTable {
             map: [NONE; 256],
             pending: [NONE; 256],
             bound: [0; 256],
+            due: None,
         }
     }
 
@@ -225,6 +234,7 @@ impl AcTable {
         let at = now.saturating_add(AC_WINDOW_NS);
         self.ecus[i].claim_at = Some(at);
         self.pending[a] = Self::slot(i);
+        self.due = Some(self.due.map_or(at, |d| d.min(at)));
         ClaimResult::Pending(at)
     }
 
@@ -263,6 +273,18 @@ impl AcTable {
                 }
                 self.map[a] = p;
             }
+        }
+        self.due = self.next_deadline();
+    }
+
+    /// Brings the claims whose window has passed by `now` into force, as
+    /// [`AcTable::on_timer`] at each deadline would have: for a caller
+    /// with no timer, which calls this before every question it asks and
+    /// every frame it feeds (the table only answers at those moments, so
+    /// the answers are the same). Cheap when nothing is due (no scan).
+    pub fn settle(&mut self, now: u64) {
+        if self.due.is_some_and(|d| d <= now) {
+            self.on_timer(now);
         }
     }
 
@@ -446,6 +468,31 @@ mod tests {
         assert_eq!(claim(&mut t, 0x100, 0x20, 300 * MS), ClaimResult::Repeated);
         assert_eq!(t.name_to_addr(0x100), 0x20);
         assert_eq!(t.next_deadline(), None);
+    }
+
+    #[test]
+    fn settle_brings_claims_into_force_at_their_deadline() {
+        let mut t = AcTable::new();
+        t.settle(0);
+        claim(&mut t, 0x100, 0x20, 0);
+        claim(&mut t, 0x200, 0x21, 100 * MS);
+        t.settle(249 * MS);
+        assert_eq!(t.name_to_addr(0x100), J1939_IDLE_ADDR);
+        t.settle(250 * MS);
+        assert_eq!(t.name_to_addr(0x100), 0x20);
+        assert_eq!(t.name_to_addr(0x200), J1939_IDLE_ADDR);
+        t.settle(349 * MS);
+        assert_eq!(t.name_to_addr(0x200), J1939_IDLE_ADDR);
+        t.settle(350 * MS);
+        assert_eq!(t.name_to_addr(0x200), 0x21);
+        // A pending claim that lost its address before its deadline
+        // leaves a stale `due`: settling then changes nothing.
+        claim(&mut t, 0x900, 0x30, 400 * MS);
+        claim(&mut t, 0x800, 0x30, 500 * MS);
+        t.settle(650 * MS);
+        assert_eq!(t.addr_to_name(0x30), 0);
+        t.settle(750 * MS);
+        assert_eq!(t.addr_to_name(0x30), 0x800);
     }
 
     #[test]

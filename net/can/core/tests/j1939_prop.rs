@@ -9,6 +9,7 @@
 //!   "every masked field equal", checked against a model;
 //! - the address claim table keeps one holder per address, the lowest
 //!   NAME of the claims it saw, and never maps inside the claim window;
+//!   settled lazily it answers as with a timer at every deadline;
 //! - a sender and a receiver connected back to back over a simulated bus
 //!   in virtual time transfer any message of 9..=N bytes exactly, by TP,
 //!   BAM or ETP, with random block limits and packet delays, and every
@@ -115,6 +116,32 @@ proptest! {
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(500))]
+
+    /// A table settled lazily (`settle` before each claim and question,
+    /// as the module does without a timer) answers as one whose timer
+    /// fires at every step (`on_timer`), whatever claims come when.
+    #[test]
+    fn settling_lazily_answers_as_a_timer_does(
+        claims in prop::collection::vec((1u64..12, 0u8..6, 0u64..400), 1..60)
+    ) {
+        let mut timed = AcTable::new();
+        let mut lazy = AcTable::new();
+        let mut now = 0u64;
+        for (name, a, dt) in claims {
+            now += dt * 1_000_000;
+            timed.on_timer(now);
+            lazy.settle(now);
+            for addr in 0..4u8 {
+                prop_assert_eq!(timed.addr_to_name(addr), lazy.addr_to_name(addr));
+            }
+            for n in 1..12u64 {
+                prop_assert_eq!(timed.name_to_addr(n), lazy.name_to_addr(n));
+            }
+            let sa = match a { 4 => 0xFE, 5 => 0xFF, x => x };
+            let r = timed.on_claim(sa, &name.to_le_bytes(), now);
+            prop_assert_eq!(lazy.on_claim(sa, &name.to_le_bytes(), now), r);
+        }
+    }
 
     /// Distinct NAMEs, each claiming one of 4 addresses once, in any
     /// order and at any times: once every window has passed, each
