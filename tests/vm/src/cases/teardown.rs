@@ -2,8 +2,9 @@
 //! Teardown races (issue 15, item 3): one thread tears down a socket, an
 //! interface or a module while other threads are inside calls on it, the
 //! way a multi-threaded program does. Each test is a loop a user could
-//! write, on CAN_RAW (`raw_teardown_*`, also run against mainline
-//! SocketCAN), CANPROTO_CAN and CANPROTO_DSOR (`teardown_*`, ours only).
+//! write, on CAN_RAW (`raw_teardown_*`) and CAN_J1939
+//! (`j1939_teardown_*`), also run against mainline SocketCAN, and
+//! CANPROTO_CAN and CANPROTO_DSOR (`teardown_*`, ours only).
 //!
 //! What they check: no call hangs (every blocking call has a timeout, and
 //! the runner's watchdog ends a hung test), every errno is in the set the
@@ -40,15 +41,18 @@ use crate::ctx::{debug_kernel, dev, sized, Ctx, Mainline, Module, Stack, EXITTES
 use crate::sys;
 use crate::Test;
 
-/// CAN_RAW: run on both stacks.
+/// CAN_RAW and CAN_J1939: run on both stacks.
 pub const TESTS: &[Test] = portable_table![
     raw_teardown_close_during_recv,
     raw_teardown_ifdown_during_send,
     raw_teardown_iface_delete_bound,
     raw_teardown_rmmod_busy,
+    j1939_teardown_close_during_recv,
+    j1939_teardown_ifdown_during_send,
+    j1939_teardown_rmmod_busy,
 ];
 
-/// CANPROTO_CAN and CANPROTO_DSOR, and all three protocols at once.
+/// CANPROTO_CAN and CANPROTO_DSOR, and all four protocols at once.
 pub const OURS: &[Test] = test_table![
     teardown_close_during_recv,
     teardown_ifdown_during_send,
@@ -70,23 +74,52 @@ const TX_TIMEOUT: Duration = Duration::from_secs(1);
 /// every timeout set, for a debug kernel under software emulation.
 const HANG: Duration = Duration::from_secs(30);
 
-/// The three protocols, as a test drives them: a receiver for one tag (CAN
+/// The four protocols, as a test drives them: a receiver for one tag (CAN
 /// identifier or DSOR message id), and numbered messages with that tag.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum Proto {
     Raw,
     Arb,
     Dsor,
+    /// Tag `t`: a J1939 message of PGN [`J1939_PGN`] to address
+    /// [`j1939_addr`]`(t)`, from address [`J1939_SRC`].
+    J1939,
+}
+
+/// The PGN of the CAN_J1939 messages here: Proprietary A (PDU1, 0xEF00),
+/// which every J1939 stack carries unchanged.
+const J1939_PGN: u32 = 0xEF00;
+/// The source address of this test's CAN_J1939 senders.
+const J1939_SRC: u8 = 0x01;
+/// `CAN_J1939` of `<linux/can.h>`, `J1939_NO_PGN` of `<linux/can/j1939.h>`.
+const CAN_J1939: i32 = 7;
+const J1939_NO_PGN: u32 = 0x40000;
+
+/// The destination address standing for tag `tag` (0x10..0x8F), so that
+/// receivers of different tags on one interface get only their own.
+fn j1939_addr(tag: u16) -> u8 {
+    0x10 + (tag & 0x7F) as u8
+}
+
+/// A J1939 `sockaddr_can` (24 bytes): interface, NAME 0, `pgn`, `addr`.
+fn j1939_sockaddr(ifindex: u32, pgn: u32, addr: u8) -> [u8; 24] {
+    let mut a = [0u8; 24];
+    a[..2].copy_from_slice(&(libc::AF_CAN as u16).to_ne_bytes());
+    a[4..8].copy_from_slice(&ifindex.to_ne_bytes());
+    a[16..20].copy_from_slice(&pgn.to_ne_bytes());
+    a[20] = addr;
+    a
 }
 
 impl Proto {
-    const OURS: [Proto; 3] = [Proto::Raw, Proto::Arb, Proto::Dsor];
+    const OURS: [Proto; 4] = [Proto::Raw, Proto::Arb, Proto::Dsor, Proto::J1939];
 
     fn name(self) -> &'static str {
         match self {
             Proto::Raw => "CAN_RAW",
             Proto::Arb => "CANPROTO_CAN",
             Proto::Dsor => "CANPROTO_DSOR",
+            Proto::J1939 => "CAN_J1939",
         }
     }
 
@@ -96,6 +129,7 @@ impl Proto {
             Proto::Raw => (libc::SOCK_RAW, CAN_RAW),
             Proto::Arb => (libc::SOCK_RAW, CANPROTO_CAN),
             Proto::Dsor => (libc::SOCK_DGRAM, CANPROTO_DSOR),
+            Proto::J1939 => (libc::SOCK_DGRAM, CAN_J1939),
         };
         let fd = raw::socket(PF_CAN, ty, proto).or_fail(format_args!("{} socket", self.name()))?;
         raw::set_timeout(&fd, libc::SO_RCVTIMEO, rx).or_fail("SO_RCVTIMEO")?;
@@ -121,6 +155,9 @@ impl Proto {
                 raw::bind(&fd, &a.to_bytes()).or_fail(what)?
             }
             Proto::Dsor => raw::bind(&fd, &dsor_addr(tag).to_bytes()).or_fail(what)?,
+            // Its tag's address, that PGN only.
+            Proto::J1939 => raw::bind(&fd, &j1939_sockaddr(ifindex, J1939_PGN, j1939_addr(tag)))
+                .or_fail(what)?,
         }
         Ok(fd)
     }
@@ -148,6 +185,21 @@ impl Proto {
                 raw::sendto(fd, &i.to_le_bytes(), 0, Some(&a.to_bytes()))
             }
             Proto::Dsor => raw::sendto(fd, &dsor_payload(i), 0, Some(&dsor_addr(tag).to_bytes())),
+            Proto::J1939 => {
+                let to = j1939_sockaddr(ifindex, J1939_PGN, j1939_addr(tag));
+                match raw::sendto(&fd, &i.to_le_bytes(), 0, Some(&to)) {
+                    // A J1939 socket sends only when bound (to the
+                    // interface, from an address): bound at its first
+                    // send, and again once its interface went away
+                    // (which unbinds it).
+                    Err(e) if errno_of(&e) == libc::EBADFD => {
+                        let me = j1939_sockaddr(ifindex, J1939_NO_PGN, J1939_SRC);
+                        raw::bind(&fd, &me)?;
+                        raw::sendto(&fd, &i.to_le_bytes(), 0, Some(&to))
+                    }
+                    r => r,
+                }
+            }
         }
     }
 
@@ -161,7 +213,7 @@ impl Proto {
                 (b.len() == canraw::CAN_MTU && id == u32::from(tag) && b[4] == 4)
                     .then(|| num(&b[8..12]))
             }
-            Proto::Arb => (b.len() == 4).then(|| num(b)),
+            Proto::Arb | Proto::J1939 => (b.len() == 4).then(|| num(b)),
             Proto::Dsor => {
                 let i = num(b.get(..4)?);
                 (b == dsor_payload(i).as_slice()).then_some(i)
@@ -173,7 +225,7 @@ impl Proto {
     fn buf_len(self) -> usize {
         match self {
             Proto::Raw => 72,
-            Proto::Arb => 8,
+            Proto::Arb | Proto::J1939 => 8,
             Proto::Dsor => 64,
         }
     }
@@ -191,6 +243,16 @@ impl Proto {
                 libc::EAGAIN,
             ],
             Proto::Arb => &[libc::ENETDOWN, libc::ENODEV, libc::ENOBUFS, libc::EAGAIN],
+            // j1939.rst: down is ENETDOWN; away unbinds the socket
+            // (EBADFD), and binding it again finds no interface (ENODEV)
+            // or one that is down (ENETDOWN).
+            Proto::J1939 => &[
+                libc::ENETDOWN,
+                libc::ENODEV,
+                libc::EBADFD,
+                libc::ENOBUFS,
+                libc::EAGAIN,
+            ],
             Proto::Dsor => &[
                 libc::ENETDOWN,
                 libc::ENODEV,
@@ -311,11 +373,12 @@ fn expect_nothing(p: Proto, fd: impl AsFd, what: &str) -> TestResult {
     }
 }
 
-/// Loads our stack with one loopback interface (up), CAN_RAW and
-/// rcan_dsor on can0; returns can0's ifindex.
+/// Loads our stack with one loopback interface (up), CAN_RAW,
+/// rcan_j1939 and rcan_dsor on can0; returns can0's ifindex.
 fn all_protocols(ctx: &mut Ctx) -> Result<u32, String> {
     ctx.load_stack(&[])?;
     ensure!(ctx.is_loaded(Module::Raw), "rcan_raw not built");
+    ctx.insmod(Module::J1939, &[])?;
     ctx.insmod(Module::Dsor, &["ifname=can0"])?;
     ctx.ifindex("can0")
 }
@@ -494,6 +557,20 @@ fn teardown_close_during_recv(ctx: &mut Ctx) -> TestResult {
         close_during_recv(ctx, p, idx, sized("RCAN_TEARDOWN_ROUNDS", 3, 1))?;
     }
     Ok(())
+}
+
+/// Loads the stack under test with CAN_J1939 (ours rcan_j1939, mainline
+/// can-j1939) and one interface (up); returns its ifindex.
+fn j1939_1(ctx: &mut Ctx) -> Result<u32, String> {
+    Ok(ctx.j1939_ifaces(1)?[0])
+}
+
+/// Close during receive on CAN_J1939 ([`close_during_recv`]): the
+/// socket leaves its interface's state (ours: the interface's socket
+/// list, which holds a reference) while readers are blocked in it.
+fn j1939_teardown_close_during_recv(ctx: &mut Ctx) -> TestResult {
+    let idx = j1939_1(ctx)?;
+    close_during_recv(ctx, Proto::J1939, idx, sized("RCAN_TEARDOWN_ROUNDS", 3, 1))
 }
 
 /// Progress of one [`traffic`]: sends that succeeded, messages received.
@@ -694,6 +771,12 @@ fn ifdown_during_send(ctx: &Ctx, p: Proto, ifindex: u32) -> TestResult {
 fn raw_teardown_ifdown_during_send(ctx: &mut Ctx) -> TestResult {
     let idx = raw1(ctx)?;
     ifdown_during_send(ctx, Proto::Raw, idx)
+}
+
+/// ip link down/up during CAN_J1939 sends ([`ifdown_during_send`]).
+fn j1939_teardown_ifdown_during_send(ctx: &mut Ctx) -> TestResult {
+    let idx = j1939_1(ctx)?;
+    ifdown_during_send(ctx, Proto::J1939, idx)
 }
 
 /// ip link down/up during CANPROTO_CAN and DSOR sends
@@ -941,6 +1024,20 @@ fn raw_teardown_rmmod_busy(ctx: &mut Ctx) -> TestResult {
     rmmod_busy(ctx, Proto::Raw, idx, name, core)
 }
 
+/// rmmod of the CAN_J1939 module (ours rcan_j1939, mainline can_j1939)
+/// and the family's with a CAN_J1939 socket open and bound
+/// ([`rmmod_busy`]); after the last close it unloads, so nothing (ours:
+/// the interface's state, its receiver, a socket reference) outlives
+/// the sockets.
+fn j1939_teardown_rmmod_busy(ctx: &mut Ctx) -> TestResult {
+    let idx = j1939_1(ctx)?;
+    let (name, core) = match ctx.stack() {
+        Stack::Ours => (Module::J1939.name(), Module::Pf.name()),
+        Stack::Mainline => (Mainline::J1939.name(), Mainline::Can.name()),
+    };
+    rmmod_busy(ctx, Proto::J1939, idx, name, core)
+}
+
 /// rmmod of rcan_can and rcan_dsor with one of their sockets open
 /// ([`rmmod_busy`]).
 fn teardown_rmmod_proto_busy(ctx: &mut Ctx) -> TestResult {
@@ -955,7 +1052,7 @@ fn teardown_rmmod_proto_busy(ctx: &mut Ctx) -> TestResult {
     rmmod_busy(ctx, Proto::Arb, idx, Module::Can.name(), Module::Pf.name())
 }
 
-/// rmmod rcan_loop while all three protocols send and receive on can0 at
+/// rmmod rcan_loop while all four protocols send and receive on can0 at
 /// full speed, twice: the driver goes, every call returns (documented
 /// errnos only: the interface went down, then away), and once it is
 /// loaded again each protocol works on the new can0 with new sockets.
@@ -969,17 +1066,17 @@ fn teardown_rmmod_loop_traffic(ctx: &mut Ctx) -> TestResult {
     for round in 0..2 {
         let idx = ctx.ifindex("can0")?;
         let stop = AtomicBool::new(false);
-        let flows: [Flow; 3] = Default::default();
+        let flows: [Flow; 4] = Default::default();
         let tallies = thread::scope(|sc| -> Result<Vec<(Proto, Tally, Tally)>, String> {
             let _stop = OnDrop(|| stop.store(true, Ordering::SeqCst));
             let mut threads = Vec::new();
             for (k, p) in Proto::OURS.into_iter().enumerate() {
                 threads.push((p, traffic(sc, p, idx, 0x500 + k as u16, &stop, &flows[k])?));
             }
-            flowing(&flows.each_ref(), "all three protocols")?;
+            flowing(&flows.each_ref(), "all four protocols")?;
             let rm = ctx.rmmod(Module::Loop);
             if rm.is_ok() {
-                failing(&flows.each_ref(), "all three protocols")?;
+                failing(&flows.each_ref(), "all four protocols")?;
             }
             stop.store(true, Ordering::SeqCst);
             let mut out = Vec::new();
