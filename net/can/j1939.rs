@@ -17,27 +17,29 @@
 //!
 //! Not yet (Documentation/networking/rcan/j1939.rst, "The module"): the
 //! transport protocols (a message over 8 bytes gets `EOPNOTSUPP`; TP and
-//! ETP frames are not reassembled), the address claim table (a socket
-//! bound to a NAME cannot send, `EADDRNOTAVAIL`, and received messages
-//! carry no NAMEs), the error queue's notifications.
+//! ETP frames are not reassembled), the error queue's notifications.
 //!
-//! Objects and their locks (lock order: RTNL, socket lock, `rx`):
+//! Objects and their locks (lock order: RTNL, socket lock, [`IFACES`],
+//! `Iface::ac`, `Iface::socks`, a socket's `rx`):
 //!
 //! * [`J1939Sock`] (socket lock): the binding, the peer, the options as
-//!   set. Process context only.
-//! * [`J1939Shared::rx`], allocated by the first `bind`: what the receive
-//!   callback matches frames against ([`RxState`], a copy of the binding,
-//!   the peer, `SO_J1939_PROMISC` and the filters) under a `BhLock`
+//!   set, the interface state joined. Process context only.
+//! * [`J1939Shared::rx`], allocated by the first `bind`: what delivery
+//!   matches frames against ([`RxState`], a copy of the binding, the
+//!   peer, `SO_J1939_PROMISC` and the filters) under a `BhLock`
 //!   (`spin_lock_bh`, lockdep class `j1939_rx`; mainline's
 //!   `filters_lock`). Written in process context under the socket lock
-//!   ([`publish`]), read by the receive callback (NET_RX softirq).
-//!   `SO_BROADCAST` is read from the socket itself, as mainline does.
-//!
-//! Every bound socket subscribes to every extended data frame of its
-//! interface (mainline subscribes once per interface and walks its
-//! sockets; here pf_can's receive table does the walking), and matches
-//! each with [`SockRx::accepts`]: mainline's `j1939_sk_recv_match_one`.
-
+//!   ([`publish`]), read by the receive softirq. `SO_BROADCAST` is read
+//!   from the socket itself, as mainline does.
+//! * [`Iface`], one per interface (and namespace) with a bound socket
+//!   (mainline's `struct j1939_priv`): the address claim table
+//!   (`AcTable`, `BhLock` class `j1939_ac`) and the bound sockets
+//!   (`BhLock` class `j1939_socks`), and one kernel receiver for every
+//!   extended data frame of the interface ([`IfaceUse`], in [`IFACES`]).
+//!   The receiver runs in NET_RX softirq: it feeds ADDRESS_CLAIMED frames
+//!   to the table, names the frame's source and destination from it once,
+//!   and walks the interface's sockets with [`SockRx::accepts`]
+//!   (mainline's `j1939_can_recv`, `j1939_ac_recv`, `j1939_sk_recv`).
 #![forbid(unsafe_code)]
 
 use crate::{glue, rcan_api, rcan_core};
@@ -45,25 +47,30 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use kernel::prelude::*;
 
 use crate::glue::module::{ModuleScope, ScopedModule};
+use glue::hrtimer::ktime_get_mono_ns;
 use glue::jobtimer::OnceBox;
-use glue::lock::{new_bh_spinlock, BhLock};
+use glue::lock::{new_bh_spinlock, BhLock, BhSpinLock};
+use glue::net::NetRef;
 use glue::netdev::{DevRef, NetDev};
-use glue::skb::UniqueSkb;
-use glue::sock::{Msg, OptIn, OptOut, Sock, SockView};
+use glue::skb::{Skb, UniqueSkb};
+use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
 use glue::sync::Rtnl;
-use kernel::alloc::KVec;
+use kernel::alloc::{flags::GFP_ATOMIC, KVec};
 use kernel::c_str;
+use kernel::sync::Arc;
 use rcan_api::{
-    CanProtocol, NetdevEvent, ProtoModule, ProtoRegistration, RxFilter, RxSkb, Sockets,
-    RX_FILTER_CAN_ID, SOCK_DGRAM,
+    rx_set_kernel_at, CanProtocol, KernelRx, KernelRxAt, NetdevEvent, ProtoModule,
+    ProtoRegistration, RxFilter, Sockets, RX_FILTER_CAN_ID, SOCK_DGRAM,
 };
 use rcan_core::arb::{CAN_EFF_FLAG, CAN_RTR_FLAG};
 use rcan_core::frame::AnyFrame;
+use rcan_core::j1939_ac::AcTable;
 use rcan_core::j1939::{
-    addr_is_unicast, filter_count, flag_option, pgn_is_valid, prio_to_sk_priority,
+    filter_count, flag_option, pgn_is_valid, prio_to_sk_priority,
     send_prio_option, sk_priority_to_prio, Filter, Id, RxMeta, SockAddr, SockRx, AF_CAN,
     CAN_J1939, DEFAULT_PRIO, EACCES, EBADFD, EDOM, J1939_NO_ADDR, J1939_NO_NAME, J1939_NO_PGN,
-    SCM_J1939_DEST_ADDR, SCM_J1939_DEST_NAME, SCM_J1939_ERRQUEUE, SCM_J1939_PRIO,
+    J1939_PGN_ADDRESS_CLAIMED, SCM_J1939_DEST_ADDR, SCM_J1939_DEST_NAME, SCM_J1939_ERRQUEUE,
+    SCM_J1939_PRIO,
     SOCKADDR_J1939_LEN, SOL_CAN_J1939, SO_J1939_ERRQUEUE, SO_J1939_FILTER, SO_J1939_PROMISC,
     SO_J1939_SEND_PRIO,
 };
@@ -126,6 +133,9 @@ struct J1939Sock {
     errqueue: bool,
     /// SO_J1939_FILTER as set (values masked).
     filters: KVec<Filter>,
+    /// The state of the bound interface, joined by `bind` ([`join`]),
+    /// left by unbinding ([`leave`]); `Some` exactly while bound.
+    iface: Option<Arc<Iface>>,
 }
 
 /// What the receive path and the lockless checks need.
@@ -135,6 +145,229 @@ struct J1939Shared {
     /// The receive state, allocated by the first `bind` and kept until
     /// the sock is freed.
     rx: OnceBox<BhLock<RxState>>,
+}
+
+/// One interface's J1939 state (mainline's `struct j1939_priv`), shared
+/// by the sockets bound to it: made by the first `bind`, dropped after
+/// the last socket left ([`IFACES`]).
+struct Iface {
+    /// The address claim table (mainline's ECU list and address
+    /// entries). `BhLock` (class `j1939_ac`): taken in process context
+    /// (`bind`, `sendmsg`, unbinding, the interface going down) and by
+    /// the receive softirq. Nothing else is locked inside it.
+    ac: BhLock<KBox<AcTable>>,
+    /// The sockets bound to the interface, each held by a reference
+    /// (mainline's `j1939_socks`). `BhLock` (class `j1939_socks`):
+    /// written in process context ([`join`], [`leave`]), walked by the
+    /// receive softirq, which takes each socket's `rx` lock inside it.
+    socks: BhLock<KVec<SockRef<J1939Proto>>>,
+}
+
+/// An interface in use: its state, how many sockets joined it, and its
+/// kernel receiver, registered while the entry exists.
+struct IfaceUse {
+    /// The namespace of the interface (held: compared by identity with a
+    /// socket's).
+    net: NetRef,
+    ifindex: i32,
+    users: usize,
+    iface: Arc<Iface>,
+    /// Every classic extended data frame of the interface goes to
+    /// `iface` ([`Iface::rx`]); dropping it removes the receiver (process
+    /// context, sleeps).
+    _rx: KernelRxAt<Iface>,
+}
+
+/// The interfaces in use, in every namespace (a handful). `BhSpinLock`
+/// (class `rcan_j1939::IFACES`), process context only, never held across
+/// a sleep: an entry is made and dropped outside it ([`join`],
+/// [`leave`]).
+static IFACES: BhSpinLock<KVec<IfaceUse>> = BhSpinLock::new(KVec::new(), c_str!("rcan_j1939::IFACES"));
+
+/// An empty claim table, copied into each new interface state (too big
+/// to be built on the stack).
+static EMPTY_AC: AcTable = AcTable::new();
+
+/// Monotonic time for the claim table, in ns.
+fn now_ns() -> u64 {
+    ktime_get_mono_ns() as u64
+}
+
+/// Joins socket `sk` to the state of interface `ifindex` of its
+/// namespace, making it (and its receiver) for the first socket. Process
+/// context (sleeps: a new receiver waits a grace period). ENOMEM.
+fn join(sk: &S, ifindex: i32) -> Result<Arc<Iface>> {
+    let net = sk.net();
+    let find = |v: &mut KVec<IfaceUse>| -> Option<Arc<Iface>> {
+        let u = v.iter_mut().find(|u| *u.net == *net && u.ifindex == ifindex)?;
+        u.users += 1;
+        Some(u.iface.clone())
+    };
+    // Its own statement: the guard must be gone before the `None` arm
+    // (which sleeps and takes the lock again).
+    let found = find(&mut IFACES.lock());
+    let iface = match found {
+        Some(i) => i,
+        None => {
+            // Made outside the registry's lock (allocations, a grace
+            // period), then entered unless another bind was quicker.
+            let ac = new_bh_spinlock!(glue::kbox_copy(&EMPTY_AC, GFP_KERNEL)?, "j1939_ac")?;
+            let socks = new_bh_spinlock!(KVec::new(), "j1939_socks")?;
+            let iface = Arc::new(Iface { ac, socks }, GFP_KERNEL)?;
+            let rx = rx_set_kernel_at(sk, net, ifindex, iface.clone(), &RX_FILTERS)?;
+            let mine = IfaceUse {
+                net: net.hold().ok_or(ENODEV)?,
+                ifindex,
+                users: 1,
+                iface: iface.clone(),
+                _rx: rx,
+            };
+            let mut v = IFACES.lock();
+            if let Some(theirs) = find(&mut v) {
+                // Ours (and its receiver) is dropped outside the lock.
+                drop(v);
+                drop(mine);
+                theirs
+            } else if v.reserve(1, GFP_ATOMIC).is_err() {
+                drop(v);
+                drop(mine);
+                return Err(ENOMEM);
+            } else {
+                // Room was reserved: the push does not allocate.
+                let _ = v.push(mine, GFP_ATOMIC);
+                iface
+            }
+        }
+    };
+    let r = sk.to_ref();
+    let pushed = iface.socks.lock().push(r, GFP_ATOMIC);
+    if let Err(e) = pushed {
+        leave(sk, iface);
+        return Err(e.into());
+    }
+    Ok(iface)
+}
+
+/// Takes socket `sk` off `iface`'s sockets and drops its use of it; the
+/// last user's leaving drops the state and its receiver. Process context
+/// (sleeps then: a grace period).
+fn leave(sk: &S, iface: Arc<Iface>) {
+    let mine = {
+        let mut socks = iface.socks.lock();
+        socks
+            .iter()
+            .position(|r| r.sock().same(sk))
+            .map(|i| glue::kvec_swap_remove(&mut socks, i))
+    };
+    // The reference is put outside the lock.
+    drop(mine);
+    let gone = {
+        let mut v = IFACES.lock();
+        match v.iter().position(|u| Arc::ptr_eq(&u.iface, &iface)) {
+            Some(i) => {
+                let u = &mut v[i];
+                u.users -= 1;
+                if u.users == 0 {
+                    Some(glue::kvec_swap_remove(&mut v, i))
+                } else {
+                    None
+                }
+            }
+            None => None,
+        }
+    };
+    // The receiver is removed outside the lock (a grace period).
+    drop(gone);
+}
+
+impl KernelRx for Iface {
+    /// NET_RX softirq, RCU read side: a classic extended data frame of the
+    /// interface (mainline's `j1939_can_recv`). ADDRESS_CLAIMED frames go
+    /// to the claim table (`j1939_ac_recv`); the source and destination
+    /// NAMEs come from the table; then every bound socket whose binding,
+    /// peer, options and filters accept the frame gets it as a message,
+    /// except the sender. Frames of the transport protocols that involve
+    /// a local address, or go to broadcast, are the transport's (mainline's
+    /// `j1939_tp_recv` takes them; we do not reassemble yet, so they are
+    /// dropped); control frames shorter than 8 bytes, and transfers
+    /// between two other nodes, are messages like any other.
+    fn rx(&self, skb: &Skb, dev: &NetDev) {
+        let Some((can_id, data, false)) = AnyFrame::view(skb.data()) else {
+            return;
+        };
+        let Some(id) = Id::from_can_id(can_id) else {
+            return;
+        };
+        let now = now_ns();
+        let (m, involved) = {
+            // No timer: the table is settled whenever it is asked
+            // (`AcTable::settle`).
+            let mut ac = self.ac.lock();
+            ac.settle(now);
+            ac.on_frame(id.sa, id.pgn, data, now);
+            // An ADDRESS_CLAIMED frame names its source itself (mainline's
+            // `j1939_ac_process`); other frames get the NAME the table
+            // maps the address to.
+            let src_name = if id.pgn == J1939_PGN_ADDRESS_CLAIMED {
+                <[u8; 8]>::try_from(data).map_or(J1939_NO_NAME, u64::from_le_bytes)
+            } else {
+                ac.addr_to_name(id.sa)
+            };
+            let m = RxMeta {
+                id,
+                src_name,
+                dst_name: ac.addr_to_name(id.da),
+            };
+            (m, ac.is_local(id.sa) || ac.is_local(id.da))
+        };
+        let transport = is_transport_pgn(id.pgn)
+            && !(matches!(id.pgn, TP_PGN_CTL | ETP_PGN_CTL) && data.len() < 8)
+            && (involved || id.is_broadcast());
+        if transport {
+            return;
+        }
+        let ifindex = dev.ifindex();
+        let flags = if skb.is_local() { glue::msg::DONTROUTE } else { 0 };
+        let socks = self.socks.lock();
+        for r in socks.iter() {
+            let sk = r.sock();
+            if skb.sent_by(sk) {
+                continue;
+            }
+            let Some(st) = sk.shared().rx.get() else {
+                continue;
+            };
+            let broadcast = sk.broadcast();
+            let accepted = {
+                let g = st.lock();
+                let mut rx = g.rx;
+                rx.broadcast = broadcast;
+                g.bound && g.ifindex == ifindex && rx.accepts(&g.filters, &m)
+            };
+            if !accepted {
+                continue;
+            }
+            if let Some(out) = rx_skb(data, ifindex, &m, flags, skb.tstamp()) {
+                // A full receive queue drops the message, as mainline.
+                let _ = sk.queue_rcv(out.into_owned());
+            }
+        }
+    }
+}
+
+/// Unbinds `s` (the socket lock held: `s` is its data): off the
+/// interface's sockets and claim table, no more frames. Process context
+/// (sleeps: the last socket of an interface removes its receiver).
+fn unbind(sk: &S, s: &mut J1939Sock) {
+    s.bound = false;
+    sk.shared().bound.store(false, Ordering::Relaxed);
+    if let Some(l) = sk.shared().rx.get() {
+        l.lock().bound = false;
+    }
+    if let Some(iface) = s.iface.take() {
+        iface.ac.lock().local_put(s.src_name, s.sa);
+        leave(sk, iface);
+    }
 }
 
 struct J1939Proto;
@@ -225,75 +458,10 @@ impl CanProtocol for J1939Proto {
         &MODULE
     }
 
-    /// NET_RX softirq, RCU read side (mainline `j1939_can_recv` and
-    /// `j1939_sk_recv_one`): a classic extended data frame on the bound
-    /// interface, not sent by this socket, whose addressing the socket
-    /// accepts, is queued as a message of its payload. Frames of the
-    /// transport protocols' PGNs are mainline's transport's, never
-    /// messages: they are dropped here, except for a promiscuous socket
-    /// when the transfer involves neither the socket's own address nor
-    /// broadcast (mainline hands a transfer between other nodes to its
-    /// sockets as frames; one involving a local address, or a BAM, it
-    /// reassembles, which this slice does not do yet).
-    fn rx(sk: &SockView<Self>, skb: RxSkb<'_>, _cookie: u32) {
-        let s = skb.skb();
-        if s.sent_by(sk) {
-            skb.done();
-            return;
-        }
-        let Some((can_id, data, false)) = AnyFrame::view(s.data()) else {
-            skb.done();
-            return;
-        };
-        let Some(id) = Id::from_can_id(can_id) else {
-            skb.done();
-            return;
-        };
-        let Some(st) = sk.shared().rx.get() else {
-            skb.done();
-            return;
-        };
-        let ifindex = skb.ifindex();
-        let m = RxMeta {
-            id,
-            src_name: J1939_NO_NAME,
-            dst_name: J1939_NO_NAME,
-        };
-        let broadcast = sk.broadcast();
-        // Mainline's transport takes the TP/ETP frames it is involved in
-        // or that are broadcast (all a non-promiscuous socket could
-        // match), except control frames shorter than 8 bytes.
-        let transport = is_transport_pgn(id.pgn)
-            && !(matches!(id.pgn, TP_PGN_CTL | ETP_PGN_CTL) && data.len() < 8);
-        let accepted = {
-            let g = st.lock();
-            let mut rx = g.rx;
-            rx.broadcast = broadcast;
-            g.bound
-                && g.ifindex == ifindex
-                && (!transport
-                    || (rx.promisc
-                        && addr_is_unicast(id.da)
-                        && id.da != rx.sa
-                        && id.sa != rx.sa))
-                && rx.accepts(&g.filters, &m)
-        };
-        if !accepted {
-            skb.done();
-            return;
-        }
-        let flags = if s.is_local() { glue::msg::DONTROUTE } else { 0 };
-        let out = rx_skb(data, ifindex, &m, flags, s.tstamp());
-        skb.done();
-        if let Some(out) = out {
-            // A full receive queue drops the message, as mainline.
-            let _ = sk.queue_rcv(out.into_owned());
-        }
-    }
-
     /// Mainline `j1939_netdev_notify`. Process context, RTNL held. The
-    /// bound device going down reports ENETDOWN; going away unbinds the
-    /// socket without an error (mainline's
+    /// bound device going down forgets every claimed address (mainline's
+    /// `j1939_ecu_unmap_all`) and reports ENETDOWN; going away unbinds
+    /// the socket without an error (mainline's
     /// `j1939_sk_netdev_event_unregister`), after which sends get EBADFD.
     fn netdev_event(event: NetdevEvent, dev: &NetDev, sockets: &Sockets<'_, Self>) {
         if !dev.is_can() {
@@ -306,22 +474,20 @@ impl CanProtocol for J1939Proto {
                 return;
             }
             if event == NetdevEvent::Down {
+                if let Some(iface) = &s.iface {
+                    iface.ac.lock().unmap_all();
+                }
                 drop(s);
                 sk.report_error(-glue::neterr::ENETDOWN().to_errno());
                 return;
             }
-            rcan_api::rx_remove(sk);
-            s.bound = false;
-            sk.shared().bound.store(false, Ordering::Relaxed);
-            if let Some(l) = sk.shared().rx.get() {
-                l.lock().bound = false;
-            }
+            unbind(sk, &mut s);
         });
     }
 }
 
-/// The subscription of a bound socket: every classic extended data frame
-/// (mainline's `J1939_CAN_ID`/`J1939_CAN_MASK`: EFF set, RTR clear).
+/// The subscription of an interface's state: every classic extended data
+/// frame (mainline's `J1939_CAN_ID`/`J1939_CAN_MASK`: EFF set, RTR clear).
 const RX_FILTERS: [RxFilter; 1] = [RxFilter {
     kind: RX_FILTER_CAN_ID,
     id: CAN_EFF_FLAG,
@@ -359,23 +525,17 @@ impl glue::sock::Proto for J1939Proto {
             promisc: false,
             errqueue: false,
             filters: KVec::new(),
+            iface: None,
         }
     }
 
-    /// Mainline `j1939_sk_release`: unsubscribes; nothing is in flight
+    /// Mainline `j1939_sk_release`: unbinds; nothing is in flight
     /// (single frames go out within `sendmsg`).
     fn release(sk: &S) {
-        {
-            let mut rtnl = Rtnl::lock();
-            MODULE.sockets.get(&mut rtnl).remove(sk);
-        }
-        rcan_api::rx_remove(sk);
+        let mut rtnl = Rtnl::lock();
+        MODULE.sockets.get(&mut rtnl).remove(sk);
         let mut s = sk.lock();
-        s.bound = false;
-        sk.shared().bound.store(false, Ordering::Relaxed);
-        if let Some(l) = sk.shared().rx.get() {
-            l.lock().bound = false;
-        }
+        unbind(sk, &mut s);
     }
 
     /// Mainline `j1939_sk_bind`, in its order of checks: the address
@@ -404,6 +564,28 @@ impl glue::sock::Proto for J1939Proto {
             }
         }
         let old = (s.src_name, s.sa, s.pgn_rx_filter, s.bound, s.ifindex);
+        // The interface's state: joined by the first bind; a NAME and
+        // address are entered in its claim table (mainline's
+        // `j1939_local_ecu_get`: ENOMEM when the table is full), the old
+        // ones of a second bind taken out.
+        let iface = match &s.iface {
+            Some(i) => i.clone(),
+            None => join(sk, a.ifindex)?,
+        };
+        let entered = {
+            let mut ac = iface.ac.lock();
+            ac.local_get(a.name, a.addr).map(|()| {
+                if old.3 {
+                    ac.local_put(old.0, old.1);
+                }
+            })
+        };
+        if let Err(e) = entered {
+            if !old.3 {
+                leave(sk, iface);
+            }
+            return Err(errno(e));
+        }
         if pgn_is_valid(a.pgn) {
             s.pgn_rx_filter = a.pgn;
         }
@@ -411,20 +593,20 @@ impl glue::sock::Proto for J1939Proto {
         s.sa = a.addr;
         s.bound = true;
         s.ifindex = a.ifindex;
-        // The receive state first: a frame arriving right after the
-        // subscription is matched against the new binding.
-        let r = publish(sk, &s).and_then(|()| {
-            if old.3 {
-                Ok(())
-            } else {
-                rcan_api::rx_set(sk, 0, a.ifindex, &RX_FILTERS, false, 0)
-            }
-        });
-        if let Err(e) = r {
+        // The receive state: frames are matched against the new binding
+        // from now on.
+        if let Err(e) = publish(sk, &s) {
+            iface.ac.lock().local_put(a.name, a.addr);
             (s.src_name, s.sa, s.pgn_rx_filter, s.bound, s.ifindex) = old;
-            let _ = publish(sk, &s);
+            if old.3 {
+                let _ = iface.ac.lock().local_get(old.0, old.1);
+                let _ = publish(sk, &s);
+            } else {
+                leave(sk, iface);
+            }
             return Err(e);
         }
+        s.iface = Some(iface);
         sk.shared().bound.store(true, Ordering::Relaxed);
         drop(s);
         drop(rtnl);
@@ -490,19 +672,20 @@ impl glue::sock::Proto for J1939Proto {
     /// up to 8 bytes go out as one frame (priority from
     /// SO_J1939_SEND_PRIO / SO_PRIORITY) and the call returns once the
     /// device took it; longer ones get `EOPNOTSUPP` (no transport
-    /// protocol yet). A socket bound to a NAME, or sending to one, gets
-    /// `EADDRNOTAVAIL` (no address claim table yet: mainline answers the
-    /// same while the NAME has no address).
+    /// protocol yet). NAMEs are resolved, and outgoing address claims
+    /// checked, by the interface's claim table (`AcTable::fixup_send`:
+    /// `EADDRNOTAVAIL` while a NAME holds no address, `EPROTO`/`ENODEV`
+    /// for a bad claim).
     fn sendmsg(sk: &S, msg: &mut Msg, len: usize) -> Result<usize> {
-        let (ifindex, src_name, sa, mut dst_name, mut da, mut pgn) = {
+        let (ifindex, src_name, sa, mut dst_name, mut da, mut pgn, iface) = {
             let s = sk.lock();
-            if !s.bound {
+            let Some(iface) = s.iface.clone() else {
                 return Err(errno(EBADFD));
-            }
+            };
             if s.src_name == J1939_NO_NAME && s.sa == J1939_NO_ADDR {
                 return Err(errno(EBADFD));
             }
-            (s.ifindex, s.src_name, s.sa, s.dst_name, s.da, s.pgn)
+            (s.ifindex, s.src_name, s.sa, s.dst_name, s.da, s.pgn, iface)
         };
         let broadcast = sk.broadcast();
         match msg.name() {
@@ -528,11 +711,16 @@ impl glue::sock::Proto for J1939Proto {
         if len > MAX_SINGLE {
             return Err(glue::neterr::EOPNOTSUPP());
         }
-        if src_name != J1939_NO_NAME || dst_name != J1939_NO_NAME {
-            return Err(glue::neterr::EADDRNOTAVAIL());
-        }
         let mut data = [0u8; MAX_SINGLE];
         msg.copy_from_user(&mut data[..len])?;
+        // NAMEs to addresses, and the checks of an outgoing claim, by the
+        // interface's claim table (mainline's `j1939_ac_fixup`).
+        let (sa, da) = {
+            let mut ac = iface.ac.lock();
+            ac.settle(now_ns());
+            ac.fixup_send(src_name, sa, dst_name, da, pgn, &data[..len])
+        }
+        .map_err(errno)?;
         let id = Id {
             prio: sk_priority_to_prio(sk.priority()),
             pgn,
