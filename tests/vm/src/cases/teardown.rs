@@ -4,7 +4,7 @@
 //! way a multi-threaded program does. Each test is a loop a user could
 //! write, on CAN_RAW (`raw_teardown_*`) and CAN_J1939
 //! (`j1939_teardown_*`), also run against mainline SocketCAN, and
-//! CANPROTO_CAN and CANPROTO_DSOR (`teardown_*`, ours only).
+//! CANPROTO_CAN, CANPROTO_DSOR and CAN_J1939 (`teardown_*`, ours only).
 //!
 //! What they check: no call hangs (every blocking call has a timeout, and
 //! the runner's watchdog ends a hung test), every errno is in the set the
@@ -48,7 +48,6 @@ pub const TESTS: &[Test] = portable_table![
     raw_teardown_iface_delete_bound,
     raw_teardown_rmmod_busy,
     j1939_teardown_close_during_recv,
-    j1939_teardown_ifdown_during_send,
     j1939_teardown_rmmod_busy,
 ];
 
@@ -56,6 +55,7 @@ pub const TESTS: &[Test] = portable_table![
 pub const OURS: &[Test] = test_table![
     teardown_close_during_recv,
     teardown_ifdown_during_send,
+    teardown_j1939_ifdown_during_send,
     teardown_rmmod_loop_traffic,
     teardown_rmmod_proto_busy,
     teardown_rmmod_drivers_traffic,
@@ -774,7 +774,14 @@ fn raw_teardown_ifdown_during_send(ctx: &mut Ctx) -> TestResult {
 }
 
 /// ip link down/up during CAN_J1939 sends ([`ifdown_during_send`]).
-fn j1939_teardown_ifdown_during_send(ctx: &mut Ctx) -> TestResult {
+/// Ours only: against mainline 6.12's can-j1939 the same loop did not
+/// end (run of 2026-11-30: the runner's 180 s watchdog; dmesg had one
+/// "j1939_tp_rxtimer: ... Failed to send simple message", mainline's 10 s
+/// wait for the echo of a single frame sent while the link was down).
+/// Mainline queues each message as a session that waits for its echo;
+/// ours hands the frame to the device within `sendmsg` (j1939.rst,
+/// "Differences for now"). Which call hung on mainline was not found.
+fn teardown_j1939_ifdown_during_send(ctx: &mut Ctx) -> TestResult {
     let idx = j1939_1(ctx)?;
     ifdown_during_send(ctx, Proto::J1939, idx)
 }
