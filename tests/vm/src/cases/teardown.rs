@@ -507,6 +507,15 @@ fn close_during_recv(ctx: &Ctx, p: Proto, ifindex: u32, rounds: u32) -> TestResu
             ev & libc::POLLIN != 0,
             "{what}: messages 2000, 2001 not queued after 2 s"
         );
+        // Both have arrived, not only the first: a protocol that sends
+        // after `sendto` returns (mainline's CAN_J1939 queues a session
+        // per message) may still have 2001 on its way, which would reach
+        // the next socket. One sender's messages arrive in order, so a
+        // message to another tag sent after them marks that they are in.
+        let marker = p.receiver(ifindex, tag + 0x40, BLOCKED_RX)?;
+        p.send(&tx, ifindex, tag + 0x40, 2002)
+            .or_fail(format_args!("{what}: send the marker 2002"))?;
+        expect_msg(p, &marker, tag + 0x40, 2002, &format!("{what}: the marker"))?;
         drop(rx);
         let fresh = p.receiver(ifindex, tag, Duration::from_secs(2))?;
         if fresh.as_raw_fd() == old {
