@@ -841,11 +841,11 @@ impl Msg {
         let Ok(len) = ffi::c_int::try_from(data.len()) else {
             return;
         };
-        // SAFETY: the valid msghdr of the current call, used by nobody
-        // else meanwhile (type invariant); only a recvmsg's (a
-        // destination iterator), whose control buffer `put_cmsg` fills
-        // within `msg_controllen` (user or kernel memory, as the msghdr
-        // says); `data` is readable for `len` bytes.
+        // The valid msghdr of the current call, used by nobody else
+        // meanwhile (type invariant); only a recvmsg's (a destination
+        // iterator), whose control buffer `put_cmsg` fills within
+        // `msg_controllen` (user or kernel memory, as the msghdr says).
+        // SAFETY: that, and `data` is readable for `len` bytes.
         unsafe {
             if (*self.0).msg_iter.data_source {
                 return;

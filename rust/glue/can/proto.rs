@@ -1152,10 +1152,10 @@ pub(crate) fn rx_set_kernel_at<T: KernelRx + Send>(
         GFP_KERNEL,
     )?;
     let p: *mut () = core::ptr::from_ref::<AtNode<T>>(&node).cast_mut().cast();
-    // SAFETY: the node stays at its address until the guard's drop takes
-    // it off the list (boxed; a forgotten guard leaks it), and
-    // `kernel_rx_at_remove::<T>(p)` may be called once at the exit: it
-    // removes the registration or nothing, and never frees the node.
+    // The node stays at its address until the guard's drop takes it off
+    // the list (boxed; a forgotten guard leaks it), and
+    // SAFETY: `kernel_rx_at_remove::<T>(p)` may be called once at the
+    // exit: it removes the registration or nothing, never frees the node.
     unsafe {
         KERNEL_RX_AT.push(
             &node.exit,
@@ -1172,10 +1172,10 @@ pub(crate) fn rx_set_kernel_at<T: KernelRx + Send>(
         filters: filters.as_ptr(),
         nfilters: filters.len(),
     };
-    // SAFETY: `spec` and its filters live for the call; `p` is the node,
-    // which stays allocated until the registration is removed (the
-    // guard's drop removes it before freeing it; the exit never frees
-    // it), and its NetRef keeps `net` alive as long.
+    // `p` is the node, which stays allocated until the registration is
+    // removed (the guard's drop removes it before freeing it; the exit
+    // never frees it), and its NetRef keeps `net` alive as long.
+    // SAFETY: that, and `spec` and its filters live for the call.
     let ret = unsafe {
         abi::rcan_rx_set_kernel(kernel_rx_at::<T>, p.cast(), 0, node.net.as_ptr(), &spec)
     };
