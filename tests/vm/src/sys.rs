@@ -108,11 +108,11 @@ pub fn recvmsg(fd: impl AsFd, buflen: usize, flags: c_int) -> io::Result<Receive
     r.len = n as usize;
     r.namelen = msg.msg_namelen as usize;
     r.flags = msg.msg_flags;
-    // SAFETY: msg describes the control buffer the kernel just filled;
-    // CMSG_FIRSTHDR/CMSG_NXTHDR stay inside msg_controllen, and each payload
-    // is read unaligned only when cmsg_len says it is complete; a payload's
+    // msg describes the control buffer the kernel just filled;
+    // CMSG_FIRSTHDR/CMSG_NXTHDR stay inside msg_controllen, and a payload's
     // bytes are copied as cmsg_len gives them, which put_cmsg never sets
     // beyond the buffer (it cuts a message that does not fit).
+    // SAFETY: that, and each payload is read unaligned only when complete.
     unsafe {
         let mut c = libc::CMSG_FIRSTHDR(&msg);
         while !c.is_null() {
