@@ -48,14 +48,14 @@ use kernel::prelude::*;
 
 use crate::glue::module::{ModuleScope, ScopedModule};
 use glue::hrtimer::ktime_get_mono_ns;
-use glue::jobtimer::OnceBox;
-use glue::lock::{new_bh_spinlock, BhLock, BhSpinLock};
+use glue::jobtimer::{JobTimers, OnceBox};
+use glue::lock::{new_bh_spinlock, BhLock, BhSpinLock, WaitQueue, Waited};
 use glue::net::NetRef;
 use glue::netdev::{DevRef, NetDev};
-use glue::skb::{Skb, UniqueSkb};
+use glue::skb::{OwnedSkb, Skb, UniqueSkb};
 use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
 use glue::sync::Rtnl;
-use kernel::alloc::{flags::GFP_ATOMIC, KVec};
+use kernel::alloc::{flags::GFP_ATOMIC, KVVec, KVec};
 use kernel::c_str;
 use kernel::sync::Arc;
 use rcan_api::{
@@ -74,7 +74,9 @@ use rcan_core::j1939::{
     SOCKADDR_J1939_LEN, SOL_CAN_J1939, SO_J1939_ERRQUEUE, SO_J1939_FILTER, SO_J1939_PROMISC,
     SO_J1939_SEND_PRIO,
 };
-use rcan_core::j1939_tp::{ETP_PGN_CTL, ETP_PGN_DAT, TP_PGN_CTL, TP_PGN_DAT};
+use rcan_core::j1939_tp::{kind_for, ETP_PGN_CTL, ETP_PGN_DAT, TP_PGN_CTL, TP_PGN_DAT};
+
+use crate::j1939_tp::{self, IfaceJob, Tp};
 
 fn errno(e: i32) -> Error {
     glue::errno(e)
@@ -82,8 +84,14 @@ fn errno(e: i32) -> Error {
 
 type S = Sock<J1939Proto>;
 
-/// The largest message this slice sends: one frame.
+/// The largest message sent as one frame; longer ones go by a transport
+/// protocol ([`j1939_tp`]).
 const MAX_SINGLE: usize = 8;
+
+/// Where `sendmsg` and `release` wait for their socket's transport session
+/// to end (all CAN_J1939 sockets share it: each waiter re-checks its own
+/// socket's [`J1939Shared::tx_busy`]); woken by every sender's end.
+pub(crate) static WAITQ: WaitQueue = WaitQueue::new(c_str!("rcan_j1939::WAITQ"));
 
 /// Offsets in `skb->cb` of a message queued for `recvmsg` (ours; the
 /// socket layer keeps its own 4 bytes at the end of the 48): the
@@ -113,7 +121,7 @@ struct RxState {
 }
 
 /// A CAN_J1939 socket's state under the socket lock.
-struct J1939Sock {
+pub(crate) struct J1939Sock {
     bound: bool,
     ifindex: i32,
     /// Bound NAME and address (`jsk->addr.src_name`, `.sa`).
@@ -139,9 +147,16 @@ struct J1939Sock {
 }
 
 /// What the receive path and the lockless checks need.
-struct J1939Shared {
+pub(crate) struct J1939Shared {
     /// Mirrors `J1939Sock::bound` (written under the socket lock).
     bound: AtomicBool,
+    /// A transport session of this socket is active (at most one):
+    /// claimed by `sendmsg` (compare-exchange), cleared by the session's
+    /// end in any context ([`j1939_tp`]), which then wakes [`WAITQ`].
+    pub(crate) tx_busy: AtomicBool,
+    /// SO_J1939_ERRQUEUE (written under the socket lock, read by the
+    /// sessions: errors then go to the error queue, not to `sk_err`).
+    pub(crate) errqueue: AtomicBool,
     /// The receive state, allocated by the first `bind` and kept until
     /// the sock is freed.
     rx: OnceBox<BhLock<RxState>>,
@@ -149,27 +164,47 @@ struct J1939Shared {
 
 /// One interface's J1939 state (mainline's `struct j1939_priv`), shared
 /// by the sockets bound to it: made by the first `bind`, dropped after
-/// the last socket left ([`IFACES`]).
-struct Iface {
+/// the last socket left ([`IFACES`]), always in process context (every
+/// holder is: the registry, the sockets' bindings, the receiver's
+/// registration). It is the data of the job timer that runs its
+/// transport sessions ([`j1939_tp::IfaceJob`]); dropping it kills the
+/// timer first.
+pub(crate) struct Iface {
+    job: JobTimers<IfaceJob>,
+}
+
+impl core::ops::Deref for Iface {
+    type Target = IfaceState;
+    fn deref(&self) -> &IfaceState {
+        self.job.data()
+    }
+}
+
+/// What an [`Iface`] holds.
+pub(crate) struct IfaceState {
+    /// The namespace of the interface (held: compared by identity with a
+    /// socket's, and the sessions' timer looks the device up in it).
+    pub(crate) net: NetRef,
+    pub(crate) ifindex: i32,
     /// The address claim table (mainline's ECU list and address
     /// entries). `BhLock` (class `j1939_ac`): taken in process context
     /// (`bind`, `sendmsg`, unbinding, the interface going down) and by
     /// the receive softirq. Nothing else is locked inside it.
-    ac: BhLock<KBox<AcTable>>,
+    pub(crate) ac: BhLock<KBox<AcTable>>,
     /// The sockets bound to the interface, each held by a reference
     /// (mainline's `j1939_socks`). `BhLock` (class `j1939_socks`):
     /// written in process context ([`join`], [`leave`]), walked by the
     /// receive softirq, which takes each socket's `rx` lock inside it.
     socks: BhLock<KVec<SockRef<J1939Proto>>>,
+    /// The transport sessions ([`j1939_tp::Tp`]; `BhLock` class
+    /// `j1939_tp`, taken in the receive and timer softirqs and in process
+    /// context, with nothing of this module inside it).
+    pub(crate) tp: BhLock<KBox<Tp>>,
 }
 
 /// An interface in use: its state, how many sockets joined it, and its
 /// kernel receiver, registered while the entry exists.
 struct IfaceUse {
-    /// The namespace of the interface (held: compared by identity with a
-    /// socket's).
-    net: NetRef,
-    ifindex: i32,
     users: usize,
     iface: Arc<Iface>,
     /// Every classic extended data frame of the interface goes to
@@ -189,7 +224,7 @@ static IFACES: BhSpinLock<KVec<IfaceUse>> = BhSpinLock::new(KVec::new(), c_str!(
 static EMPTY_AC: AcTable = AcTable::new();
 
 /// Monotonic time for the claim table, in ns.
-fn now_ns() -> u64 {
+pub(crate) fn now_ns() -> u64 {
     ktime_get_mono_ns() as u64
 }
 
@@ -199,7 +234,9 @@ fn now_ns() -> u64 {
 fn join(sk: &S, ifindex: i32) -> Result<Arc<Iface>> {
     let net = sk.net();
     let find = |v: &mut KVec<IfaceUse>| -> Option<Arc<Iface>> {
-        let u = v.iter_mut().find(|u| *u.net == *net && u.ifindex == ifindex)?;
+        let u = v
+            .iter_mut()
+            .find(|u| *u.iface.net == *net && u.iface.ifindex == ifindex)?;
         u.users += 1;
         Some(u.iface.clone())
     };
@@ -213,11 +250,18 @@ fn join(sk: &S, ifindex: i32) -> Result<Arc<Iface>> {
             // period), then entered unless another bind was quicker.
             let ac = new_bh_spinlock!(glue::kbox_copy(&EMPTY_AC, GFP_KERNEL)?, "j1939_ac")?;
             let socks = new_bh_spinlock!(KVec::new(), "j1939_socks")?;
-            let iface = Arc::new(Iface { ac, socks }, GFP_KERNEL)?;
-            let rx = rx_set_kernel_at(sk, net, ifindex, iface.clone(), &RX_FILTERS)?;
-            let mine = IfaceUse {
+            let tp = new_bh_spinlock!(Tp::new()?, "j1939_tp")?;
+            let state = IfaceState {
                 net: net.hold().ok_or(ENODEV)?,
                 ifindex,
+                ac,
+                socks,
+                tp,
+            };
+            let job = JobTimers::new(state, sk)?;
+            let iface = Arc::new(Iface { job }, GFP_KERNEL)?;
+            let rx = rx_set_kernel_at(sk, net, ifindex, iface.clone(), &RX_FILTERS)?;
+            let mine = IfaceUse {
                 users: 1,
                 iface: iface.clone(),
                 _rx: rx,
@@ -284,13 +328,13 @@ impl KernelRx for Iface {
     /// NET_RX softirq, RCU read side: a classic extended data frame of the
     /// interface (mainline's `j1939_can_recv`). ADDRESS_CLAIMED frames go
     /// to the claim table (`j1939_ac_recv`); the source and destination
-    /// NAMEs come from the table; then every bound socket whose binding,
-    /// peer, options and filters accept the frame gets it as a message,
-    /// except the sender. Frames of the transport protocols that involve
-    /// a local address, or go to broadcast, are the transport's (mainline's
-    /// `j1939_tp_recv` takes them; we do not reassemble yet, so they are
-    /// dropped); control frames shorter than 8 bytes, and transfers
-    /// between two other nodes, are messages like any other.
+    /// NAMEs come from the table. Frames of the transport protocols that
+    /// involve a local address, or go to broadcast, are the transport's
+    /// ([`j1939_tp::on_frame`], mainline's `j1939_tp_recv`); control frames
+    /// shorter than 8 bytes, and transfers between two other nodes, are
+    /// messages like any other: every bound socket whose binding, peer,
+    /// options and filters accept the frame gets it, except the sender
+    /// (`j1939_sk_recv`).
     fn rx(&self, skb: &Skb, dev: &NetDev) {
         let Some((can_id, data, false)) = AnyFrame::view(skb.data()) else {
             return;
@@ -299,7 +343,7 @@ impl KernelRx for Iface {
             return;
         };
         let now = now_ns();
-        let (m, involved) = {
+        let (m, local_sa, local_da) = {
             // No timer: the table is settled whenever it is asked
             // (`AcTable::settle`).
             let mut ac = self.ac.lock();
@@ -318,39 +362,66 @@ impl KernelRx for Iface {
                 src_name,
                 dst_name: ac.addr_to_name(id.da),
             };
-            (m, ac.is_local(id.sa) || ac.is_local(id.da))
+            (m, ac.is_local(id.sa), ac.is_local(id.da))
         };
         let transport = is_transport_pgn(id.pgn)
             && !(matches!(id.pgn, TP_PGN_CTL | ETP_PGN_CTL) && data.len() < 8)
-            && (involved || id.is_broadcast());
+            && (local_sa || local_da || id.is_broadcast());
         if transport {
+            j1939_tp::on_frame(
+                self,
+                self.job.get(),
+                dev,
+                id,
+                data,
+                local_sa,
+                local_da,
+                skb.tstamp(),
+            );
             return;
         }
         let ifindex = dev.ifindex();
         let flags = if skb.is_local() { glue::msg::DONTROUTE } else { 0 };
-        let socks = self.socks.lock();
-        for r in socks.iter() {
-            let sk = r.sock();
-            if skb.sent_by(sk) {
-                continue;
-            }
-            let Some(st) = sk.shared().rx.get() else {
-                continue;
-            };
-            let broadcast = sk.broadcast();
-            let accepted = {
-                let g = st.lock();
-                let mut rx = g.rx;
-                rx.broadcast = broadcast;
-                g.bound && g.ifindex == ifindex && rx.accepts(&g.filters, &m)
-            };
-            if !accepted {
-                continue;
-            }
-            if let Some(out) = rx_skb(data, ifindex, &m, flags, skb.tstamp()) {
-                // A full receive queue drops the message, as mainline.
-                let _ = sk.queue_rcv(out.into_owned());
-            }
+        let tstamp = skb.tstamp();
+        deliver(self, ifindex, &m, Some(skb), || {
+            rx_skb(data, ifindex, &m, flags, tstamp).map(UniqueSkb::into_owned)
+        });
+    }
+}
+
+/// Gives a message received on interface `ifindex` (`m`) to every socket
+/// of `st` whose binding, peer, options and filters accept it, except the
+/// sender of `skip` (a single frame; mainline's `j1939_sk_recv`); `make`
+/// gives each its copy. A full receive queue drops the message, as
+/// mainline. Softirq context.
+pub(crate) fn deliver(
+    st: &IfaceState,
+    ifindex: i32,
+    m: &RxMeta,
+    skip: Option<&Skb>,
+    mut make: impl FnMut() -> Option<OwnedSkb>,
+) {
+    let socks = st.socks.lock();
+    for r in socks.iter() {
+        let sk = r.sock();
+        if skip.is_some_and(|s| s.sent_by(sk)) {
+            continue;
+        }
+        let Some(rxs) = sk.shared().rx.get() else {
+            continue;
+        };
+        let broadcast = sk.broadcast();
+        let accepted = {
+            let g = rxs.lock();
+            let mut rx = g.rx;
+            rx.broadcast = broadcast;
+            g.bound && g.ifindex == ifindex && rx.accepts(&g.filters, m)
+        };
+        if !accepted {
+            continue;
+        }
+        if let Some(out) = make() {
+            let _ = sk.queue_rcv(out);
         }
     }
 }
@@ -365,12 +436,16 @@ fn unbind(sk: &S, s: &mut J1939Sock) {
         l.lock().bound = false;
     }
     if let Some(iface) = s.iface.take() {
+        // Its transport session ends without a frame (mainline's
+        // `j1939_cancel_active_session`): nothing of the socket is left in
+        // the interface's table.
+        j1939_tp::cancel(&iface, iface.job.get(), Some(sk));
         iface.ac.lock().local_put(s.src_name, s.sa);
         leave(sk, iface);
     }
 }
 
-struct J1939Proto;
+pub(crate) struct J1939Proto;
 
 /// This module's registrations (proto, CAN protocol, notifier).
 static MODULE: ProtoModule<J1939Proto> = ProtoModule::new();
@@ -431,6 +506,14 @@ fn rx_skb(data: &[u8], ifindex: i32, m: &RxMeta, flags: u32, tstamp: i64) -> Opt
     if !skb.put_data(data) {
         return None;
     }
+    write_meta(&mut skb, ifindex, m, flags, tstamp);
+    Some(skb)
+}
+
+/// Writes what `recvmsg` reports of a message into its buffer's cb (the
+/// receiving interface, `m`, the recvmsg flags) and its timestamp (0:
+/// none). Any context.
+pub(crate) fn write_meta(skb: &mut UniqueSkb, ifindex: i32, m: &RxMeta, flags: u32, tstamp: i64) {
     let mut cb = [0u8; CB_LEN];
     cb[CB_IFINDEX..CB_IFINDEX + 4].copy_from_slice(&ifindex.to_ne_bytes());
     cb[CB_PGN..CB_PGN + 4].copy_from_slice(&m.id.pgn.to_ne_bytes());
@@ -444,7 +527,6 @@ fn rx_skb(data: &[u8], ifindex: i32, m: &RxMeta, flags: u32, tstamp: i64) -> Opt
     if tstamp != 0 {
         skb.set_tstamp(tstamp);
     }
-    Some(skb)
 }
 
 impl CanProtocol for J1939Proto {
@@ -475,6 +557,10 @@ impl CanProtocol for J1939Proto {
             }
             if event == NetdevEvent::Down {
                 if let Some(iface) = &s.iface {
+                    // Every session of the interface ends (mainline's
+                    // `j1939_cancel_active_session(priv, NULL)`), every
+                    // claim is forgotten.
+                    j1939_tp::cancel(iface, iface.job.get(), None);
                     iface.ac.lock().unmap_all();
                 }
                 drop(s);
@@ -506,6 +592,8 @@ impl glue::sock::Proto for J1939Proto {
     fn new_shared() -> J1939Shared {
         J1939Shared {
             bound: AtomicBool::new(false),
+            tx_busy: AtomicBool::new(false),
+            errqueue: AtomicBool::new(false),
             rx: OnceBox::new(),
         }
     }
@@ -529,9 +617,11 @@ impl glue::sock::Proto for J1939Proto {
         }
     }
 
-    /// Mainline `j1939_sk_release`: unbinds; nothing is in flight
-    /// (single frames go out within `sendmsg`).
+    /// Mainline `j1939_sk_release`: waits (interruptibly) for the
+    /// socket's transport session to end, then unbinds, which cancels it
+    /// if a signal cut the wait short.
     fn release(sk: &S) {
+        let _ = wait_idle(sk);
         let mut rtnl = Rtnl::lock();
         MODULE.sockets.get(&mut rtnl).remove(sk);
         let mut s = sk.lock();
@@ -671,8 +761,8 @@ impl glue::sock::Proto for J1939Proto {
     /// SO_BROADCAST: `EACCES`); `EDOM` for a transport PGN. Messages of
     /// up to 8 bytes go out as one frame (priority from
     /// SO_J1939_SEND_PRIO / SO_PRIORITY) and the call returns once the
-    /// device took it; longer ones get `EOPNOTSUPP` (no transport
-    /// protocol yet). NAMEs are resolved, and outgoing address claims
+    /// device took it; longer ones start a transport session and return
+    /// at once ([`send_transport`]). NAMEs are resolved, and outgoing address claims
     /// checked, by the interface's claim table (`AcTable::fixup_send`:
     /// `EADDRNOTAVAIL` while a NAME holds no address, `EPROTO`/`ENODEV`
     /// for a bad claim).
@@ -709,7 +799,15 @@ impl glue::sock::Proto for J1939Proto {
             return Err(errno(EDOM));
         }
         if len > MAX_SINGLE {
-            return Err(glue::neterr::EOPNOTSUPP());
+            let to = Route {
+                ifindex,
+                src_name,
+                sa,
+                dst_name,
+                da,
+                pgn,
+            };
+            return send_transport(sk, msg, len, &iface, to);
         }
         let mut data = [0u8; MAX_SINGLE];
         msg.copy_from_user(&mut data[..len])?;
@@ -854,6 +952,7 @@ impl glue::sock::Proto for J1939Proto {
                     }
                 } else {
                     s.errqueue = on;
+                    sk.shared().errqueue.store(on, Ordering::Relaxed);
                 }
                 Ok(())
             }
@@ -895,6 +994,88 @@ impl glue::sock::Proto for J1939Proto {
         opt.set_len(4)?;
         opt.write(&v.to_ne_bytes())
     }
+}
+
+/// Where a message goes: the socket's interface, its source and
+/// destination (NAMEs and addresses, before the claim table resolves
+/// them), the PGN.
+struct Route {
+    ifindex: i32,
+    src_name: u64,
+    sa: u8,
+    dst_name: u64,
+    da: u8,
+    pgn: u32,
+}
+
+/// `sendmsg` of a message over 8 bytes (mainline's `j1939_sk_send_loop`
+/// and `j1939_tp_send`): `EMSGSIZE` over 117,440,505 bytes,
+/// `EDESTADDRREQ` for ETP (over 1785) to broadcast, the claim table's
+/// errors; then the message is copied, the socket's previous session
+/// waited for (mainline queues it instead; with MSG_DONTWAIT `EAGAIN`,
+/// a signal `ERESTARTSYS`, SO_SNDTIMEO `EAGAIN`), and a TP, BAM or ETP
+/// session started (`EBUSY` while one with the same source, destination
+/// and kind runs, from any socket). Returns `len` once the RTS or BAM
+/// is out; how the session ends is reported later (an abort as the
+/// socket's error). Process context.
+fn send_transport(sk: &S, msg: &mut Msg, len: usize, iface: &Iface, to: Route) -> Result<usize> {
+    // The kind only decides the errors here: a NAME is a unicast
+    // destination whatever address it resolves to.
+    let da_kind = if to.dst_name != J1939_NO_NAME { 0 } else { to.da };
+    kind_for(len, da_kind).map_err(errno)?;
+    let mut data = KVVec::from_elem(0u8, len, GFP_KERNEL)?;
+    msg.copy_from_user(&mut data)?;
+    let (sa, da) = {
+        let mut ac = iface.ac.lock();
+        ac.settle(now_ns());
+        ac.fixup_send(to.src_name, to.sa, to.dst_name, to.da, to.pgn, &data)
+    }
+    .map_err(errno)?;
+    let id = Id {
+        prio: sk_priority_to_prio(sk.priority()),
+        pgn: to.pgn,
+        sa,
+        da,
+    };
+    let dev = DevRef::by_index(sk.net(), to.ifindex).ok_or(ENODEV)?;
+    claim_tx(sk, msg.flags() & glue::msg::DONTWAIT != 0)?;
+    if let Err(e) = j1939_tp::start_tx(iface, iface.job.get(), &dev, sk, id, data) {
+        sk.shared().tx_busy.store(false, Ordering::Release);
+        WAITQ.wake_all();
+        return Err(e);
+    }
+    Ok(len)
+}
+
+/// Makes `sk` the owner of a transport session (its
+/// [`J1939Shared::tx_busy`]), waiting for its previous one to end:
+/// `EAGAIN` if `nonblock` or SO_SNDTIMEO ran out, `ERESTARTSYS` on a
+/// signal. Process context.
+fn claim_tx(sk: &S, nonblock: bool) -> Result {
+    let busy = &sk.shared().tx_busy;
+    loop {
+        if busy
+            .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
+            .is_ok()
+        {
+            return Ok(());
+        }
+        if nonblock {
+            return Err(EAGAIN);
+        }
+        match WAITQ.wait(sk.sndtimeo(false), &|| !busy.load(Ordering::Acquire)) {
+            Waited::Ready => {}
+            Waited::TimedOut => return Err(EAGAIN),
+            Waited::Interrupted => return Err(ERESTARTSYS),
+        }
+    }
+}
+
+/// Waits (interruptibly) until `sk` has no transport session. Process
+/// context.
+fn wait_idle(sk: &S) -> Waited {
+    let busy = &sk.shared().tx_busy;
+    WAITQ.wait(i64::MAX, &|| !busy.load(Ordering::Acquire))
 }
 
 /// An `int` option's 4 bytes: `EINVAL` for another length (before the

@@ -75,6 +75,10 @@ use kernel::error::{code, Error};
 /// Allocation flags, from the `kernel` crate (bindgen cannot see them).
 pub(crate) const GFP_KERNEL: bindings::gfp_t = kernel::bindings::GFP_KERNEL;
 pub(crate) const GFP_ATOMIC: bindings::gfp_t = kernel::bindings::GFP_ATOMIC;
+/// `GFP_ATOMIC | __GFP_NOWARN`: an atomic allocation whose size a peer
+/// chose (a J1939 transport message), which may fail without a warning.
+pub(crate) const GFP_ATOMIC_NOWARN: bindings::gfp_t =
+    kernel::bindings::GFP_ATOMIC | kernel::bindings::__GFP_NOWARN;
 
 /// This module's `struct module`, for `owner` fields and module references.
 pub(crate) fn this_module() -> *mut bindings::module {

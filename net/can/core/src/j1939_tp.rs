@@ -233,7 +233,8 @@ pub struct Step {
 }
 
 impl Step {
-    pub(super) const NONE: Step = Step {
+    /// Nothing to do.
+    pub const NONE: Step = Step {
         frame: None,
         timer: TimerCmd::Keep,
         done: None,
@@ -1114,6 +1115,62 @@ mod tests {
                 tx: false
             }
         );
+    }
+
+    #[test]
+    fn wanted_buffer_only_for_what_may_come() {
+        let p = Params::default();
+        let tp = Id {
+            prio: 6,
+            pgn: TP_PGN_CTL,
+            sa: SA,
+            da: DA,
+        };
+        let etp = Id {
+            pgn: ETP_PGN_CTL,
+            ..tp
+        };
+        let bam = Id { da: 0xFF, ..tp };
+        // TP: 20 bytes in 3 packets; a count that does not fit, too
+        // short, too long: no buffer.
+        let rts = [0x10, 20, 0, 3, 3, 0, 0xEF, 0];
+        assert_eq!(RxSession::wanted_buffer(&p, tp, &rts), Some(20));
+        assert_eq!(RxSession::wanted_buffer(&p, tp, &[0x10, 20, 0, 4, 3, 0, 0xEF, 0]), None);
+        assert_eq!(RxSession::wanted_buffer(&p, tp, &[0x10, 8, 0, 2, 2, 0, 0xEF, 0]), None);
+        assert_eq!(RxSession::wanted_buffer(&p, tp, &[0x10, 0xFA, 6, 0xFF, 0xFF, 0, 0xEF, 0]), None);
+        // RTS to broadcast, BAM to one address, a CTS: nothing starts.
+        assert_eq!(RxSession::wanted_buffer(&p, bam, &rts), None);
+        assert_eq!(RxSession::wanted_buffer(&p, tp, &[0x20, 20, 0, 3, 0xFF, 0, 0xEF, 0]), None);
+        assert_eq!(RxSession::wanted_buffer(&p, tp, &[0x11, 3, 1, 0xFF, 0xFF, 0, 0xEF, 0]), None);
+        assert_eq!(
+            RxSession::wanted_buffer(&p, bam, &[0x20, 20, 0, 3, 0xFF, 0, 0xEF, 0]),
+            Some(20)
+        );
+        // ETP: over 1785 bytes, at most the largest, at most `max_size`.
+        let big = |n: u32| {
+            let b = n.to_le_bytes();
+            [0x14, b[0], b[1], b[2], b[3], 0, 0xEF, 0]
+        };
+        assert_eq!(RxSession::wanted_buffer(&p, etp, &big(1786)), Some(1786));
+        assert_eq!(RxSession::wanted_buffer(&p, etp, &big(1785)), None);
+        assert_eq!(
+            RxSession::wanted_buffer(&p, etp, &big(MAX_ETP_SIZE as u32)),
+            Some(MAX_ETP_SIZE)
+        );
+        assert_eq!(RxSession::wanted_buffer(&p, etp, &big(MAX_ETP_SIZE as u32 + 1)), None);
+        let small = Params {
+            max_size: 4096,
+            ..p
+        };
+        assert_eq!(RxSession::wanted_buffer(&small, etp, &big(4097)), None);
+        assert_eq!(RxSession::wanted_buffer(&small, etp, &big(4096)), Some(4096));
+        // What is refused gets its own abort code with `usize::MAX` as the
+        // buffer: a fault for a size ETP does not carry, "resources" over
+        // the limit (a 0-byte buffer would say "resources" for both).
+        for (d, code) in [(big(1785), abort::FAULT), (big(4097), abort::RESOURCE)] {
+            let s = RxSession::on_rts(&small, etp, &d, usize::MAX, 0).unwrap_err();
+            assert_eq!(s.frame.unwrap().data[..2], [CMD_ABORT, code]);
+        }
     }
 
     #[test]

@@ -150,6 +150,20 @@ impl RxSession {
         Ok((s, step))
     }
 
+    /// The reassembly buffer an RTS or BAM (`d`, on the control PGN of
+    /// `id`) needs: its announced size when [`RxSession::on_rts`] would
+    /// take it given a buffer that large, `None` when it refuses it
+    /// whatever the buffer (a size or packet count out of range, over
+    /// `p.max_size`, a command that starts nothing). So the caller
+    /// allocates only for a message that may come, and passes
+    /// `usize::MAX` as `buf_len` for one that may not (the refusal, and
+    /// its abort code, are then the same as with any buffer).
+    pub fn wanted_buffer(p: &Params, id: Id, d: &[u8; 8]) -> Option<usize> {
+        RxSession::on_rts(p, id, d, usize::MAX, 0)
+            .ok()
+            .map(|(s, _)| s.size)
+    }
+
     /// The transport.
     pub fn kind(&self) -> Kind {
         self.kind

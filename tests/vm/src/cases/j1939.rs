@@ -12,8 +12,8 @@
 //! by and to NAMEs, NAMEs in what is received, contending claims, the
 //! checks of outgoing claims, and can-utils' `j1939acd`. Portable: the
 //! same tests pass against mainline's can-j1939.ko (mainline stage) and
-//! rcan_j1939; the one about what this slice does not do yet (transport,
-//! NAMEs) is ours only. No test sleeps to synchronise: receives wait
+//! rcan_j1939 (the transport protocols' tests are in j1939_tp.rs). No
+//! test sleeps to synchronise: receives wait
 //! with a deadline, a claim's window is waited out by retrying the send
 //! until it stops failing, a claim has been taken in by the kernel's
 //! table when a socket watching ADDRESS_CLAIMED frames has received it
@@ -33,7 +33,7 @@ use crate::sys;
 use crate::tools::{self, TOOL_LIMIT};
 
 use super::isotp::{hex, raw_open, raw_send, want_errno};
-use super::{portable_table, test_table};
+use super::portable_table;
 
 pub static TESTS: &[crate::Test] = portable_table![
     ;
@@ -46,12 +46,6 @@ pub static TESTS: &[crate::Test] = portable_table![
     j1939_claim_conflict_lower_name_wins,
     j1939_outgoing_claim_checks,
     j1939_canutils_j1939acd,
-];
-
-pub static OURS: &[crate::Test] = test_table![
-    ;
-    stack:
-    rcan_j1939_single_frames_only,
 ];
 
 const CAN_J1939: i32 = 7;
@@ -600,21 +594,6 @@ fn j1939_canutils_testj1939(ctx: &mut Ctx) -> TestResult {
         out.stdout,
         hex(&data)
     );
-    Ok(())
-}
-
-/// What this slice does not do yet, as ours answers it: a message over 8
-/// bytes (the transport protocols) is EOPNOTSUPP, where mainline starts a
-/// TP session. (NAMEs work: the portable `j1939_name_*`/`*_claim_*`
-/// tests.)
-fn rcan_j1939_single_frames_only(ctx: &mut Ctx) -> TestResult {
-    let i0 = ctx.j1939_ifaces(1)?[0];
-    let a = jbound(i0, 0x20, NO_PGN)?;
-    want_errno(
-        raw::sendto(&a, &[0; 9], 0, Some(&jaddr(0, 0, 0x12300, 0x30))),
-        libc::EOPNOTSUPP,
-        "sendto 9 bytes",
-    )?;
     Ok(())
 }
 

@@ -235,7 +235,6 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         isotp::OURS,
         isotp_opts::TESTS,
         j1939::TESTS,
-        j1939::OURS,
         netns::TESTS,
         netns::OURS,
         fd::TESTS,
