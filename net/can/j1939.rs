@@ -1,12 +1,13 @@
 // SPDX-License-Identifier: GPL-2.0
 
 //! rcan_j1939: CAN_J1939 (SAE J1939), mainline SocketCAN's J1939 socket
-//! API, on the rcan stack (issue 42, step 2a: the first slice).
+//! API, on the rcan stack (issue 42, steps 2a to 2c).
 //!
 //! `socket(PF_CAN, SOCK_DGRAM, CAN_J1939)` with mainline's ABI
 //! (`<linux/can/j1939.h>` of 6.12): `bind`/`connect` with
 //! `sockaddr_can.can_addr.j1939 {name, pgn, addr}` and an interface, one
-//! J1939 message per `sendmsg` and per `recvmsg`, the source address in
+//! J1939 message per `sendmsg` and per `recvmsg` (over 8 bytes by the
+//! transport protocols, [`j1939_tp`]), the source address in
 //! `msg_name` (24 bytes), the `SCM_J1939_DEST_ADDR`, `SCM_J1939_DEST_NAME`
 //! and `SCM_J1939_PRIO` control messages, the options `SO_J1939_FILTER`,
 //! `SO_J1939_PROMISC`, `SO_J1939_SEND_PRIO` and `SO_J1939_ERRQUEUE`
@@ -16,11 +17,11 @@
 //! them a socket, a receive subscription and a transmit path.
 //!
 //! Not yet (Documentation/networking/rcan/j1939.rst, "The module"): the
-//! transport protocols (a message over 8 bytes gets `EOPNOTSUPP`; TP and
-//! ETP frames are not reassembled), the error queue's notifications.
+//! error queue's notifications.
 //!
 //! Objects and their locks (lock order: RTNL, socket lock, [`IFACES`],
-//! `Iface::ac`, `Iface::socks`, a socket's `rx`):
+//! `Iface::ac`, `Iface::socks`, a socket's `rx`; `Iface::tp` nests
+//! nothing of ours and is never held while another is taken):
 //!
 //! * [`J1939Sock`] (socket lock): the binding, the peer, the options as
 //!   set, the interface state joined. Process context only.
@@ -34,7 +35,9 @@
 //! * [`Iface`], one per interface (and namespace) with a bound socket
 //!   (mainline's `struct j1939_priv`): the address claim table
 //!   (`AcTable`, `BhLock` class `j1939_ac`) and the bound sockets
-//!   (`BhLock` class `j1939_socks`), and one kernel receiver for every
+//!   (`BhLock` class `j1939_socks`), the transport sessions (`BhLock`
+//!   class `j1939_tp`, [`j1939_tp`], with the interface's timer), and
+//!   one kernel receiver for every
 //!   extended data frame of the interface ([`IfaceUse`], in [`IFACES`]).
 //!   The receiver runs in NET_RX softirq: it feeds ADDRESS_CLAIMED frames
 //!   to the table, names the frame's source and destination from it once,
