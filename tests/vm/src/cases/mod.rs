@@ -22,6 +22,7 @@ mod install;
 mod isotp;
 mod isotp_opts;
 mod j1939;
+mod j1939_tp;
 mod leak;
 mod lifecycle;
 mod loopdrv;
@@ -236,6 +237,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         isotp_opts::TESTS,
         j1939::TESTS,
         j1939::OURS,
+        j1939_tp::TESTS,
         netns::TESTS,
         netns::OURS,
         fd::TESTS,
