@@ -478,6 +478,9 @@ fn j1939_canutils_j1939cat_etp(ctx: &mut Ctx) -> TestResult {
         s.status,
         s.stderr.trim()
     );
+    if !s.status.success() {
+        ctx.note(format!("j1939cat -i: {}: {CTRUNC}", s.status));
+    }
     let (id, data) = raw_next(&from80, "the first frame from 0x80")?;
     let f = frame(id, data);
     let mut want = vec![ETP_RTS];
