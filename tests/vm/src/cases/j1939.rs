@@ -49,24 +49,24 @@ pub static TESTS: &[crate::Test] = portable_table![
 ];
 
 const CAN_J1939: i32 = 7;
-const SOL_CAN_J1939: i32 = 107;
+pub(super) const SOL_CAN_J1939: i32 = 107;
 const SO_J1939_FILTER: i32 = 1;
 const SO_J1939_PROMISC: i32 = 2;
 const SO_J1939_SEND_PRIO: i32 = 3;
-const SCM_J1939_DEST_ADDR: i32 = 1;
+pub(super) const SCM_J1939_DEST_ADDR: i32 = 1;
 const SCM_J1939_DEST_NAME: i32 = 2;
 const SCM_J1939_PRIO: i32 = 3;
-const NO_ADDR: u8 = 0xff;
-const NO_PGN: u32 = 0x40000;
+pub(super) const NO_ADDR: u8 = 0xff;
+pub(super) const NO_PGN: u32 = 0x40000;
 /// `sizeof(struct sockaddr_can)`, J1939's `J1939_MIN_NAMELEN`.
-const NAMELEN: usize = 24;
+pub(super) const NAMELEN: usize = 24;
 /// `sizeof(struct j1939_filter)`.
 const FILTER_LEN: usize = 32;
 /// How long a receive that must succeed may wait.
-const T: Duration = Duration::from_secs(10);
+pub(super) const T: Duration = Duration::from_secs(10);
 
 /// A J1939 `struct sockaddr_can`: family, interface, NAME, PGN, address.
-fn jaddr(ifindex: u32, name: u64, pgn: u32, addr: u8) -> [u8; NAMELEN] {
+pub(super) fn jaddr(ifindex: u32, name: u64, pgn: u32, addr: u8) -> [u8; NAMELEN] {
     let mut b = [0u8; NAMELEN];
     b[..2].copy_from_slice(&(libc::AF_CAN as u16).to_ne_bytes());
     b[4..8].copy_from_slice(&ifindex.to_ne_bytes());
@@ -81,7 +81,7 @@ fn jsocket() -> Result<OwnedFd, String> {
 }
 
 /// A J1939 socket bound to `addr` (and `pgn`) on `ifindex`.
-fn jbound(ifindex: u32, addr: u8, pgn: u32) -> Result<OwnedFd, String> {
+pub(super) fn jbound(ifindex: u32, addr: u8, pgn: u32) -> Result<OwnedFd, String> {
     let s = jsocket()?;
     raw::bind(&s, &jaddr(ifindex, 0, pgn, addr)).or_fail(format!("bind {addr:02X}"))?;
     Ok(s)
@@ -101,7 +101,7 @@ fn get_int(s: impl AsFd, name: i32, what: &str) -> Result<i32, String> {
 /// The 29-bit identifier J1939-21 gives a frame (with CAN_EFF_FLAG):
 /// priority in bits 28..26, the PGN in 25..8 with the destination in PS
 /// (bits 15..8) when PF (bits 23..16) is below 240, the source in 7..0.
-fn can_id(prio: u8, pgn: u32, da: u8, sa: u8) -> u32 {
+pub(super) fn can_id(prio: u8, pgn: u32, da: u8, sa: u8) -> u32 {
     let mut id = libc::CAN_EFF_FLAG | u32::from(prio) << 26 | (pgn & 0x3ffff) << 8 | u32::from(sa);
     if (pgn >> 8) & 0xff < 240 {
         id = (id & !0xff00) | u32::from(da) << 8;
@@ -159,7 +159,7 @@ fn recv(s: impl AsFd, what: &str) -> Result<Got, String> {
 }
 
 /// The next frame on CAN_RAW socket `s` within [`T`]: identifier and data.
-fn raw_next(s: impl AsFd, what: &str) -> Result<(u32, Vec<u8>), String> {
+pub(super) fn raw_next(s: impl AsFd, what: &str) -> Result<(u32, Vec<u8>), String> {
     raw::set_timeout(&s, libc::SO_RCVTIMEO, T).or_fail("SO_RCVTIMEO")?;
     let mut b = [0u8; 72];
     let n = raw::read(&s, &mut b).or_fail(format!("CAN_RAW read ({what})"))?;
@@ -617,7 +617,7 @@ fn jbound_name(ifindex: u32, name: u64, addr: u8) -> Result<OwnedFd, String> {
     Ok(s)
 }
 
-fn set_broadcast(s: impl AsFd) -> TestResult {
+pub(super) fn set_broadcast(s: impl AsFd) -> TestResult {
     raw::setsockopt(s, libc::SOL_SOCKET, libc::SO_BROADCAST, &1i32.to_ne_bytes())
         .or_fail("SO_BROADCAST")
 }
@@ -689,7 +689,7 @@ fn send_once_claimed(s: impl AsFd, data: &[u8], to: Option<&[u8]>, what: &str) -
 
 /// A CAN_RAW socket on `ifindex` that receives only the extended frames
 /// whose source address (bits 7..0) is `sa`.
-fn raw_from(ifindex: u32, sa: u8) -> Result<OwnedFd, String> {
+pub(super) fn raw_from(ifindex: u32, sa: u8) -> Result<OwnedFd, String> {
     const SOL_CAN_RAW: i32 = 101;
     const CAN_RAW_FILTER: i32 = 1;
     let s = raw::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW).or_fail("socket(CAN_RAW)")?;

@@ -22,6 +22,7 @@ mod install;
 mod isotp;
 mod isotp_opts;
 mod j1939;
+mod j1939_tp;
 mod leak;
 mod lifecycle;
 mod loopdrv;
@@ -235,6 +236,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         isotp::OURS,
         isotp_opts::TESTS,
         j1939::TESTS,
+        j1939_tp::TESTS,
         netns::TESTS,
         netns::OURS,
         fd::TESTS,
