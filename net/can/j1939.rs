@@ -308,9 +308,9 @@ fn leave(sk: &S, iface: Arc<Iface>) {
     };
     // The reference is put outside the lock.
     drop(mine);
-    let gone = {
+    let (gone, emptied) = {
         let mut v = IFACES.lock();
-        match v.iter().position(|u| Arc::ptr_eq(&u.iface, &iface)) {
+        let gone = match v.iter().position(|u| Arc::ptr_eq(&u.iface, &iface)) {
             Some(i) => {
                 let u = &mut v[i];
                 u.users -= 1;
@@ -321,10 +321,21 @@ fn leave(sk: &S, iface: Arc<Iface>) {
                 }
             }
             None => None,
-        }
+        };
+        // An empty registry gives its buffer back: a `static` is never
+        // dropped, so a buffer kept after the last interface would leak
+        // when the module is unloaded (kmemleak saw it on the debug kernel).
+        let emptied = if v.is_empty() {
+            Some(core::mem::take(&mut *v))
+        } else {
+            None
+        };
+        (gone, emptied)
     };
-    // The receiver is removed outside the lock (a grace period).
+    // The receiver is removed outside the lock (a grace period); the
+    // buffer is freed there too.
     drop(gone);
+    drop(emptied);
 }
 
 impl KernelRx for Iface {

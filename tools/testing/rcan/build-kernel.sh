@@ -81,10 +81,17 @@ trap 'signal=HUP; exit 129' HUP
 # the waiters' message.
 lock_fd=
 take_lock() {
-	local file=$1 what=$2 holder
+	local file=$1 what=$2 holder= i
 	exec {lock_fd}<>"$file"
 	if ! flock -n "$lock_fd"; then
-		holder=$(cat "$file" 2>/dev/null || true)
+		# The holder writes its pid just after it took the lock: a waiter
+		# that looks in between finds the file empty (a loaded host makes
+		# that window long), so it gives the pid up to 3 s to appear.
+		for i in $(seq 30); do
+			holder=$(cat "$file" 2>/dev/null || true)
+			[ -n "$holder" ] && break
+			sleep 0.1
+		done
 		log "waiting for another run${holder:+ (pid $holder)} to finish $what (lock: $file)"
 		flock "$lock_fd"
 	fi
