@@ -220,6 +220,13 @@ fn spawn_watchdog(progress: Arc<Mutex<Progress>>, limit: Duration) {
                 .find(|(n, _)| *n == name)
                 .map_or(limit, |&(_, secs)| limit.max(Duration::from_secs(secs)));
             if start.elapsed() > limit {
+                // Where it hangs: every thread's system call and kernel
+                // place, and the kernel's list of blocked tasks (sysrq w,
+                // on the console).
+                for l in tools::hang_report() {
+                    println!("# hung: {l}");
+                }
+                let _ = std::fs::write("/proc/sysrq-trigger", "w");
                 println!("not ok - {name}: hung, no result after {limit:?}");
                 println!("{} passed, {} failed", p.passed, p.failed + 1);
                 std::process::exit(1);

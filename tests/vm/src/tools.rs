@@ -268,24 +268,7 @@ impl Bg {
     /// that waits forever reads `S` in the same system call.
     pub fn activity(&self) -> String {
         let pid = self.child.id();
-        let Ok(stat) = fs::read_to_string(format!("/proc/{pid}/stat")) else {
-            return format!("pid {pid}: no /proc entry");
-        };
-        // Fields after the parenthesised name: state is the 3rd of the
-        // line, utime and stime the 14th and 15th (clock ticks, 100 Hz).
-        let f: Vec<&str> = stat
-            .rsplit_once(')')
-            .map_or("", |(_, rest)| rest)
-            .split_whitespace()
-            .collect();
-        let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
-        let cpu = (ticks(11) + ticks(12)) as f64 / 100.0;
-        let sc = fs::read_to_string(format!("/proc/{pid}/syscall")).unwrap_or_default();
-        format!(
-            "pid {pid}: state {}, {cpu:.1} CPU s, syscall {}",
-            f.first().unwrap_or(&"?"),
-            sc.split_whitespace().next().unwrap_or("?")
-        )
+        format!("pid {pid}: {}", task_activity(&format!("/proc/{pid}")))
     }
 
     /// Waits up to `limit` for the program to exit on its own; kills it and
@@ -330,6 +313,108 @@ impl Drop for Bg {
             let _ = self.child.wait();
         }
     }
+}
+
+/// The `stat` fields of the task at `dir` (`/proc/PID` or
+/// `/proc/PID/task/TID`) after its parenthesised name (the state is the
+/// first), and its name; `None` if it is gone.
+fn task_stat(dir: &str) -> Option<(String, Vec<String>)> {
+    let stat = fs::read_to_string(format!("{dir}/stat")).ok()?;
+    let (head, rest) = stat.rsplit_once(')')?;
+    let comm = head.split_once('(').map_or("?", |(_, c)| c).to_string();
+    Some((comm, rest.split_whitespace().map(str::to_string).collect()))
+}
+
+/// What the task at `dir` (`/proc/PID` or `/proc/PID/task/TID`) is
+/// doing: its scheduler state, the CPU seconds it has used and the
+/// system call it sleeps in (`stat`, `syscall`). One that waits forever
+/// reads `S` or `D` in the same system call; a slow one `R` with CPU
+/// seconds near the wall-clock ones.
+pub fn task_activity(dir: &str) -> String {
+    let Some((_, f)) = task_stat(dir) else {
+        return "no /proc entry".into();
+    };
+    // utime and stime: the 12th and 13th fields after the name (clock
+    // ticks, 100 Hz).
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
+    let cpu = (ticks(11) + ticks(12)) as f64 / 100.0;
+    let sc = fs::read_to_string(format!("{dir}/syscall")).unwrap_or_default();
+    format!(
+        "state {}, {cpu:.1} CPU s, syscall {}",
+        f.first().map_or("?", String::as_str),
+        sc.split_whitespace().next().unwrap_or("?")
+    )
+}
+
+/// Where in the kernel the task at `dir` waits: its wait channel
+/// (`wchan`) and the innermost frames of its kernel stack (`stack`, root
+/// only, where the kernel keeps stack traces), offsets cut.
+fn task_kernel_place(dir: &str) -> String {
+    let wchan = fs::read_to_string(format!("{dir}/wchan")).unwrap_or_default();
+    let stack = fs::read_to_string(format!("{dir}/stack")).unwrap_or_default();
+    let frames: Vec<&str> = stack
+        .lines()
+        .filter_map(|l| l.split_whitespace().nth(1))
+        .map(|f| f.split_once('+').map_or(f, |(name, _)| name))
+        .take(8)
+        .collect();
+    let wchan = match wchan.trim() {
+        "" | "0" => "-",
+        w => w,
+    };
+    if frames.is_empty() {
+        format!("wchan {wchan}")
+    } else {
+        format!("wchan {wchan}, kernel stack {}", frames.join(" < "))
+    }
+}
+
+/// What every thread of this process, and every process it started (and
+/// theirs), is doing: one line each with its [`task_activity`] and its
+/// place in the kernel. The VM runner's watchdog prints it for a test
+/// that hangs, so that the report names the call and the kernel
+/// function it waits in, not only the test.
+pub fn hang_report() -> Vec<String> {
+    let me = std::process::id();
+    let mut lines = Vec::new();
+    let mut pids = vec![me];
+    let mut i = 0;
+    // Descendants, breadth first (a tool's shell and what it runs).
+    while let Some(&pid) = pids.get(i) {
+        i += 1;
+        let Ok(dir) = fs::read_dir("/proc") else { break };
+        for e in dir.flatten() {
+            let Some(child) = e.file_name().to_str().and_then(|n| n.parse::<u32>().ok()) else {
+                continue;
+            };
+            // The parent's pid: the 2nd field after the name.
+            let parent = task_stat(&format!("/proc/{child}"))
+                .and_then(|(_, f)| f.get(1).and_then(|p| p.parse::<u32>().ok()));
+            if parent == Some(pid) && !pids.contains(&child) {
+                pids.push(child);
+            }
+        }
+    }
+    for pid in pids {
+        let Ok(tasks) = fs::read_dir(format!("/proc/{pid}/task")) else {
+            continue;
+        };
+        let mut tids: Vec<u32> = tasks
+            .flatten()
+            .filter_map(|e| e.file_name().to_str().and_then(|n| n.parse().ok()))
+            .collect();
+        tids.sort();
+        for tid in tids {
+            let dir = format!("/proc/{pid}/task/{tid}");
+            let comm = task_stat(&dir).map_or_else(|| "?".into(), |(c, _)| c);
+            lines.push(format!(
+                "pid {pid} tid {tid} ({comm}): {}, {}",
+                task_activity(&dir),
+                task_kernel_place(&dir)
+            ));
+        }
+    }
+    lines
 }
 
 /// A scratch directory in the guest's writable /tmp, removed when dropped.
@@ -380,5 +465,33 @@ mod tests {
         })
         .expect("the busy loop never ran");
         assert!(running.ends_with("syscall running"), "{running}");
+    }
+
+    /// The hang report names every thread of the process and the programs
+    /// it started, each with the system call it waits in: a thread blocked
+    /// on a channel waits in futex, a child `sleep` in clock_nanosleep.
+    #[test]
+    fn hang_report_names_threads_and_children() {
+        let (tx, rx) = std::sync::mpsc::channel::<()>();
+        let waiter = std::thread::Builder::new()
+            .name("hang-waiter".into())
+            .spawn(move || rx.recv())
+            .expect("thread");
+        let sleeper = spawn("sleep", &["30"], None).expect("sleep");
+        let report = wait_for(TOOL_LIMIT, "the thread and sleep to block", || {
+            let r = hang_report();
+            let blocked = |what: &str, nr: &str| {
+                r.iter().any(|l| l.contains(what) && l.contains("state S") && l.contains(&format!("syscall {nr},")))
+            };
+            // futex is x86_64 system call 202, clock_nanosleep 230.
+            Ok((blocked("(hang-waiter)", "202") && blocked("(sleep)", "230")).then_some(r))
+        })
+        .expect("no report line for the blocked thread and child");
+        assert!(
+            report.iter().any(|l| l.contains(&format!("pid {}", sleeper.child.id()))),
+            "{report:?}"
+        );
+        drop(tx);
+        let _ = waiter.join();
     }
 }
