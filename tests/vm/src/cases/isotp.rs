@@ -74,6 +74,23 @@ pub(super) fn hex(b: &[u8]) -> String {
         .join(" ")
 }
 
+/// The frames of `tx` from `before` frames ahead of `at` (found by
+/// identity) to `after` frames past it, as hex, `at` marked with `>`:
+/// what a failed order check names.
+fn cf_context(tx: &[&Fr], at: &Fr, before: usize, after: usize) -> String {
+    let Some(k) = tx.iter().position(|f| core::ptr::eq(*f, at)) else {
+        return String::from("?");
+    };
+    tx[k.saturating_sub(before)..tx.len().min(k + after + 1)]
+        .iter()
+        .map(|f| {
+            let m = if core::ptr::eq(*f, at) { ">" } else { "" };
+            format!("{m}{}", hex(&f.data[..f.data.len().min(4)]))
+        })
+        .collect::<Vec<_>>()
+        .join(" | ")
+}
+
 pub(super) fn show(f: &Fr) -> String {
     format!(
         "{:03X}{}[{}] {}",
@@ -1523,14 +1540,20 @@ fn isotp_tunnel_ip(ctx: &mut Ctx) -> TestResult {
                 .take_while(|f| f.data.first().is_some_and(|b| b >> 4 == 2))
                 .collect();
             let want = (len - 6).div_ceil(7);
+            let bad = cfs
+                .iter()
+                .enumerate()
+                .position(|(i, f)| f.data[0] != 0x20 | ((i + 1) % 16) as u8);
             ensure!(
-                cfs.len() == want
-                    && cfs
-                        .iter()
-                        .enumerate()
-                        .all(|(i, f)| f.data[0] == 0x20 | ((i + 1) % 16) as u8),
-                "{id:03X}: the {len}-byte PDU has {} CFs, want {want} numbered from 1",
-                cfs.len()
+                cfs.len() == want && bad.is_none(),
+                "{id:03X}: the {len}-byte PDU has {} CFs, want {want} numbered from 1{}",
+                cfs.len(),
+                bad.map_or(String::new(), |b| format!(
+                    "; CF {} of them is {}, the frames on {id:03X} from 3 before it: {}",
+                    b + 1,
+                    hex(&cfs[b].data),
+                    cf_context(&tx[at + 1..], cfs[b], 3, 6)
+                ))
             );
         }
     }
