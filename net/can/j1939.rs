@@ -56,7 +56,7 @@ use glue::lock::{new_bh_spinlock, BhLock, BhSpinLock, WaitQueue, Waited};
 use glue::net::NetRef;
 use glue::netdev::{DevRef, NetDev};
 use glue::skb::{OwnedSkb, Skb, UniqueSkb};
-use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef};
+use glue::sock::{Msg, OptIn, OptOut, Sock, SockRef, SockView};
 use glue::sync::Rtnl;
 use kernel::alloc::{flags::GFP_ATOMIC, KVVec, KVec};
 use kernel::c_str;
@@ -404,16 +404,33 @@ impl KernelRx for Iface {
 }
 
 /// Gives a message received on interface `ifindex` (`m`) to every socket
-/// of `st` whose binding, peer, options and filters accept it, except the
-/// sender of `skip` (a single frame; mainline's `j1939_sk_recv`); `make`
-/// gives each its copy. A full receive queue drops the message, as
-/// mainline. Softirq context.
+/// of `st` that accepts it, except the sender of `skip` (a single frame;
+/// mainline's `j1939_sk_recv`); `make` gives each its copy. A full
+/// receive queue drops the message, as mainline. Softirq context.
 pub(crate) fn deliver(
     st: &IfaceState,
     ifindex: i32,
     m: &RxMeta,
     skip: Option<&Skb>,
     mut make: impl FnMut() -> Option<OwnedSkb>,
+) {
+    for_each_accepting(st, ifindex, m, skip, |sk| {
+        if let Some(out) = make() {
+            let _ = sk.queue_rcv(out);
+        }
+    });
+}
+
+/// Calls `f` for every socket of `st` whose binding, peer, options and
+/// filters accept a message `m` received on interface `ifindex` (mainline's
+/// `j1939_sk_recv_match_one`), except the sender of `skip`. Softirq or
+/// process context; `f` runs under the sockets' lock (`j1939_socks`).
+pub(crate) fn for_each_accepting(
+    st: &IfaceState,
+    ifindex: i32,
+    m: &RxMeta,
+    skip: Option<&Skb>,
+    mut f: impl FnMut(&SockView<J1939Proto>),
 ) {
     let socks = st.socks.lock();
     for r in socks.iter() {
@@ -431,11 +448,8 @@ pub(crate) fn deliver(
             rx.broadcast = broadcast;
             g.bound && g.ifindex == ifindex && rx.accepts(&g.filters, m)
         };
-        if !accepted {
-            continue;
-        }
-        if let Some(out) = make() {
-            let _ = sk.queue_rcv(out);
+        if accepted {
+            f(sk);
         }
     }
 }
@@ -852,6 +866,9 @@ impl glue::sock::Proto for J1939Proto {
             return Err(glue::neterr::ENOBUFS());
         }
         skb.set_sock_params(sk);
+        // Every send takes a timestamp key, as mainline's (whose single
+        // frames are sessions too): the keys of transport sends count them.
+        let _ = sk.next_tskey();
         rcan_api::send(skb, &dev, true)?;
         Ok(len)
     }

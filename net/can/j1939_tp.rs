@@ -38,11 +38,15 @@
 //! sender (which waits for the last one's). Between two local sockets
 //! every frame comes back once, as its echo, and plays both parts.
 //!
-//! Not yet (Documentation/networking/rcan/j1939.rst, "The module"): the
-//! error queue's notifications (`J1939_EE_INFO_*`, `SOF_TIMESTAMPING`
-//! TX ACK/SCHED), mainline's per-socket queue of messages (ours: one at a
-//! time per socket, the next `sendmsg` waits), module parameters for the
-//! block size, packet delay and largest message.
+//! The error queue (`SO_J1939_ERRQUEUE`): a sender's socket is told of
+//! its session's TX ACK, TX SCHED (each CTS after data) and abort, the
+//! sockets a message would reach of its RTS, DPO and abort
+//! (`rcan_core::j1939_errqueue`), once the `tp` lock is released.
+//!
+//! Not yet (Documentation/networking/rcan/j1939.rst, "The module"):
+//! mainline's per-socket queue of messages (ours: one at a time per
+//! socket, the next `sendmsg` waits), TX ACK for single frames, module
+//! parameters for the block size, packet delay and largest message.
 #![forbid(unsafe_code)]
 
 use crate::{glue, rcan_api, rcan_core};
@@ -53,16 +57,17 @@ use kernel::prelude::*;
 use glue::jobtimer::{JobCallback, JobRef};
 use glue::netdev::{DevRef, NetDev};
 use glue::skb::UniqueSkb;
-use glue::sock::{Sock, SockRef};
-use rcan_core::j1939::{Frame, Id, RxMeta, EAGAIN, EADDRNOTAVAIL, EBUSY, EMSGSIZE, ESHUTDOWN, MAX_ETP_SIZE};
+use glue::sock::{ErrNote, Sock, SockRef, SockView};
+use rcan_core::j1939::{Frame, Id, RxMeta, J1939_NO_NAME, EAGAIN, EADDRNOTAVAIL, EBUSY, EMSGSIZE, ESHUTDOWN, MAX_ETP_SIZE};
+use rcan_core::j1939_errqueue::{note, Event, Session as NoteSession};
 use rcan_core::j1939_tp::{
-    abort, classify, from_originator, Key, Msg, Outcome, Params, Sessions, Step, TimerCmd,
+    abort, classify, from_originator, Key, Msg, Notify, Outcome, Params, Sessions, Step, TimerCmd,
     CMD_ABORT, ETP_CMD_RTS, TP_CMD_BAM, TP_CMD_RTS,
 };
 use rcan_core::j1939_tp_rx::RxSession;
 use rcan_core::j1939_tp_tx::TxSession;
 
-use super::j1939::{deliver, now_ns, write_meta, IfaceState, J1939Proto, WAITQ};
+use super::j1939::{deliver, for_each_accepting, now_ns, write_meta, IfaceState, J1939Proto, WAITQ};
 
 /// Sessions an interface runs at once, both directions (mainline has no
 /// limit; 100 concurrent sessions is a bench target). A sender over the
@@ -85,11 +90,14 @@ const BURST: usize = 64;
 
 /// What a session owns besides its machine.
 enum Machine {
-    /// A local sender: its message and its socket.
+    /// A local sender: its message, its addressing, its socket and the
+    /// send's timestamp key (`SOF_TIMESTAMPING_OPT_ID`).
     Tx {
         m: TxSession,
         data: KVVec<u8>,
+        id: Id,
         sk: SockRef<J1939Proto>,
+        tskey: u32,
     },
     /// A receiver: the reassembly buffer, `m.size()` bytes of data.
     Rx { m: RxSession, buf: UniqueSkb },
@@ -241,6 +249,11 @@ struct After {
     tx_end: Option<(SockRef<J1939Proto>, Option<i32>)>,
     /// A sender's message, freed outside the lock.
     freed: Option<KVVec<u8>>,
+    /// An error queue notification for a sender's socket.
+    tx_note: Option<(SockRef<J1939Proto>, Event, NoteSession)>,
+    /// An error queue notification for the sockets that would receive a
+    /// message: the event, the message's addressing and size.
+    rx_note: Option<(Event, Id, usize)>,
 }
 
 /// Applies `step` of the session in `slot` (number `gen`) under the `tp`
@@ -253,6 +266,16 @@ fn apply(tp: &mut Tp, job: Job<'_>, slot: usize, gen: u32, step: Step, a: &mut A
     if let Some(f) = step.frame {
         a.frame = Some((f, slot, gen));
     }
+    if let (Some(n), Some(Some(s))) = (step.notify, tp.slots.get(slot)) {
+        match (n, &s.mach) {
+            (Notify::TxSched(acked), Machine::Tx { .. }) => {
+                a.tx_note = tx_note(&s.mach, Event::TxSched, acked);
+            }
+            (Notify::RxRts, Machine::Rx { m, .. }) => a.rx_note = Some((Event::RxRts, m.id(), m.size())),
+            (Notify::RxDpo, Machine::Rx { m, .. }) => a.rx_note = Some((Event::RxDpo, m.id(), m.size())),
+            _ => {}
+        }
+    }
     let Some(outcome) = step.done else {
         return;
     };
@@ -260,6 +283,16 @@ fn apply(tp: &mut Tp, job: Job<'_>, slot: usize, gen: u32, step: Step, a: &mut A
     let Some(s) = tp.slots.get_mut(slot).and_then(Option::take) else {
         return;
     };
+    match outcome {
+        Outcome::Sent => a.tx_note = tx_note(&s.mach, Event::TxAck, u32::MAX),
+        Outcome::Aborted { errno, .. } => match &s.mach {
+            Machine::Tx { m, .. } => {
+                a.tx_note = tx_note(&s.mach, Event::TxAbort(errno), m.acked_bytes());
+            }
+            Machine::Rx { m, .. } => a.rx_note = Some((Event::RxAbort(errno), m.id(), m.size())),
+        },
+        Outcome::Delivered(_) => {}
+    }
     match s.mach {
         Machine::Tx { data, sk, .. } => {
             let err = match outcome {
@@ -284,6 +317,74 @@ fn apply(tp: &mut Tp, job: Job<'_>, slot: usize, gen: u32, step: Step, a: &mut A
     }
 }
 
+/// A sender's notification `ev` with `acked` bytes acknowledged (at most
+/// the message), for its socket (a new reference: taken under the `tp`
+/// lock, told after it).
+fn tx_note(mach: &Machine, ev: Event, acked: u32) -> Option<(SockRef<J1939Proto>, Event, NoteSession)> {
+    let Machine::Tx {
+        data, id, sk, tskey, ..
+    } = mach
+    else {
+        return None;
+    };
+    let size = data.len() as u32;
+    let s = NoteSession {
+        size,
+        acked: acked.min(size),
+        pgn: id.pgn,
+        src_name: J1939_NO_NAME,
+        dst_name: J1939_NO_NAME,
+        sa: id.sa,
+        da: id.da,
+        tskey: *tskey,
+    };
+    Some((sk.sock().to_ref(), ev, s))
+}
+
+/// Tells socket `sk` of `ev` on its error queue, if SO_J1939_ERRQUEUE is
+/// on and its SO_TIMESTAMPING flags ask for it (mainline's
+/// `__j1939_sk_errqueue`); a full queue drops it. Any context.
+fn notify(sk: &SockView<J1939Proto>, ev: Event, s: &NoteSession) {
+    if !sk.shared().errqueue.load(Ordering::Relaxed) {
+        return;
+    }
+    let Some(n) = note(ev, sk.tsflags(), s) else {
+        return;
+    };
+    let _ = sk.queue_err(&ErrNote {
+        errno: n.errno,
+        origin: n.origin,
+        info: n.info,
+        data: n.data,
+        stats: n.stats(),
+    });
+}
+
+/// Tells the sockets that would receive the message `id` of `size` bytes
+/// of `ev` (mainline spreads receive notifications to every socket the
+/// session's message matches). Softirq or process context.
+fn notify_rx(st: &IfaceState, ev: Event, id: Id, size: usize) {
+    let m = {
+        let ac = st.ac.lock();
+        RxMeta {
+            id,
+            src_name: ac.addr_to_name(id.sa),
+            dst_name: ac.addr_to_name(id.da),
+        }
+    };
+    let s = NoteSession {
+        size: size as u32,
+        acked: 0,
+        pgn: id.pgn,
+        src_name: m.src_name,
+        dst_name: m.dst_name,
+        sa: id.sa,
+        da: id.da,
+        tskey: 0,
+    };
+    for_each_accepting(st, st.ifindex, &m, None, |sk| notify(sk, ev, &s));
+}
+
 /// Sends `f` on `dev`. Any context.
 fn send(dev: &NetDev, f: &Frame) -> Result {
     let mut img = [0u8; 16];
@@ -294,48 +395,57 @@ fn send(dev: &NetDev, f: &Frame) -> Result {
     rcan_api::send(skb, dev, true)
 }
 
-/// Carries out `a` (no lock held): sends its frame (a refusal goes back
-/// to the session, which retries or gives up), delivers its message,
-/// tells its sender's socket. `dev` is the interface, if it is still
-/// there. Softirq or process context.
+/// Carries out `a` (no lock held): first sends its frame (a refusal goes
+/// back to the session, which retries or gives up), then delivers its
+/// message and tells its sender's socket. In that order: a sender's
+/// abort frame must be on its way before the socket may start its next
+/// session, whose RTS would otherwise overtake it and be aborted by the
+/// peer in its place. `dev` is the interface, if it is still there.
+/// Softirq or process context.
 fn finish(st: &IfaceState, job: Job<'_>, dev: Option<&NetDev>, mut a: After) {
-    loop {
-        if let Some((m, skb)) = a.deliver.take() {
-            deliver_message(st, dev, m, skb, a.tstamp);
-        }
-        if let Some((sk, err)) = a.tx_end.take() {
-            let s = sk.sock();
-            s.shared().tx_busy.store(false, Ordering::Release);
-            if let Some(e) = err {
-                if !s.shared().errqueue.load(Ordering::Relaxed) {
-                    s.report_error(e);
-                }
+    if let Some((f, slot, gen)) = a.frame.take() {
+        if !dev.is_some_and(|d| send(d, &f).is_ok()) {
+            // Refused (or the device is gone): the session retries after
+            // 10 ms plus a jitter (its step has no frame: the retry comes
+            // from the timer), and gives up after 100 refusals in a row
+            // (then its end is carried out below). A frame of a session
+            // that ended is not retried.
+            let now = now_ns();
+            let mut tp = st.tp.lock();
+            let step = match tp.slots.get_mut(slot) {
+                Some(Some(s)) if s.gen == gen => Some(match &mut s.mach {
+                    Machine::Tx { m, .. } => m.on_refused(now, (now >> 20) as u8 & 15),
+                    Machine::Rx { m, .. } => m.on_refused(now, (now >> 20) as u8 & 15),
+                }),
+                _ => None,
+            };
+            if let Some(step) = step {
+                apply(&mut tp, job, slot, gen, step, &mut a);
             }
-            drop(sk);
-            WAITQ.wake_all();
         }
-        drop(a.freed.take());
-        let Some((f, slot, gen)) = a.frame.take() else {
-            return;
-        };
-        if dev.is_some_and(|d| send(d, &f).is_ok()) {
-            return;
-        }
-        // Refused (or the device is gone): the session retries after 10 ms
-        // plus a jitter, and gives up after 100 refusals in a row.
-        let now = now_ns();
-        let mut tp = st.tp.lock();
-        let step = match tp.slots.get_mut(slot) {
-            Some(Some(s)) if s.gen == gen => match &mut s.mach {
-                Machine::Tx { m, .. } => m.on_refused(now, (now >> 20) as u8 & 15),
-                Machine::Rx { m, .. } => m.on_refused(now, (now >> 20) as u8 & 15),
-            },
-            _ => return,
-        };
-        apply(&mut tp, job, slot, gen, step, &mut a);
-        // The retry has no frame of its own (it comes from the timer).
-        a.frame = None;
     }
+    if let Some((m, skb)) = a.deliver.take() {
+        deliver_message(st, dev, m, skb, a.tstamp);
+    }
+    if let Some((ev, id, size)) = a.rx_note.take() {
+        notify_rx(st, ev, id, size);
+    }
+    // Before the end is told: a writer woken by it finds the notification.
+    if let Some((sk, ev, s)) = a.tx_note.take() {
+        notify(sk.sock(), ev, &s);
+    }
+    if let Some((sk, err)) = a.tx_end.take() {
+        let s = sk.sock();
+        s.shared().tx_busy.store(false, Ordering::Release);
+        if let Some(e) = err {
+            if !s.shared().errqueue.load(Ordering::Relaxed) {
+                s.report_error(e);
+            }
+        }
+        drop(sk);
+        WAITQ.wake_all();
+    }
+    drop(a.freed.take());
 }
 
 /// Delivers a message received whole to the interface's sockets that take
@@ -574,6 +684,7 @@ pub(crate) fn start_tx(
     data: KVVec<u8>,
 ) -> Result {
     let now = now_ns();
+    let tskey = sk.next_tskey();
     let mut a = After::default();
     let r = {
         let mut tp = st.tp.lock();
@@ -584,7 +695,9 @@ pub(crate) fn start_tx(
                 let mach = Machine::Tx {
                     m,
                     data,
+                    id,
                     sk: sk.to_ref(),
+                    tskey,
                 };
                 match tp.enter(key, mach) {
                     Ok((slot, gen)) => {

@@ -455,6 +455,60 @@ impl<T: Proto> SockView<T> {
         };
         flags & (1 << bindings::sock_flags_SOCK_BROADCAST) != 0
     }
+
+    /// The socket's `sk_tsflags` (`SOF_TIMESTAMPING_*`, set by
+    /// SO_TIMESTAMPING without the socket lock), read once. Any context.
+    pub(crate) fn tsflags(&self) -> u32 {
+        // SAFETY: live sock (type invariant); the helper is a READ_ONCE.
+        unsafe { bindings::rcan_sock_tsflags(self.sk) }
+    }
+
+    /// The next timestamp key of a send (`sk_tskey`, incremented
+    /// atomically, for `SOF_TIMESTAMPING_OPT_ID`). Any context.
+    pub(crate) fn next_tskey(&self) -> u32 {
+        // SAFETY: live sock (type invariant); `sk_tskey` is an atomic_t.
+        unsafe { bindings::rcan_sock_next_tskey(self.sk) }
+    }
+
+    /// Queues a notification on the error queue (`sock_queue_err_skb`),
+    /// stamped now, for `recvmsg(MSG_ERRQUEUE)`: `note`'s errno, origin,
+    /// info and data in its `sock_extended_err`, its statistics as the
+    /// data (reported as `SCM_TIMESTAMPING_OPT_STATS`). Any context
+    /// (`GFP_ATOMIC`). `ENOMEM`, or the queue's refusal (a full receive
+    /// buffer), when it is dropped.
+    pub(crate) fn queue_err(&self, note: &ErrNote<'_>) -> Result {
+        let len = u32::try_from(note.stats.len()).map_err(|_| code::EINVAL)?;
+        // SAFETY: live sock (type invariant); `stats` is valid for `len`
+        // bytes for the call (a borrowed slice), which copies them.
+        let ret = unsafe {
+            bindings::rcan_sock_queue_err(
+                self.sk,
+                note.stats.as_ptr().cast(),
+                len,
+                note.errno,
+                note.origin,
+                note.info,
+                note.data,
+                true,
+            )
+        };
+        super::to_result(ret).map(|_| ())
+    }
+}
+
+/// An error queue notification for [`SockView::queue_err`]: the fields of
+/// its `struct sock_extended_err` and its statistics (netlink attributes).
+pub(crate) struct ErrNote<'a> {
+    /// `ee_errno` (positive).
+    pub(crate) errno: u32,
+    /// `ee_origin` (`SO_EE_ORIGIN_*`).
+    pub(crate) origin: u8,
+    /// `ee_info`.
+    pub(crate) info: u32,
+    /// `ee_data`.
+    pub(crate) data: u32,
+    /// The statistics.
+    pub(crate) stats: &'a [u8],
 }
 
 impl<T: Proto> Sock<T> {

@@ -10,6 +10,7 @@
 #include <linux/if_arp.h>
 #include <linux/ip.h>
 #include <linux/delay.h>
+#include <linux/errqueue.h>
 #include <linux/interrupt.h>
 #include <linux/io.h>
 #include <linux/kmemleak.h>
@@ -562,6 +563,48 @@ void rcan_wake_up_all(struct wait_queue_head *wq)
 long rcan_sock_sndtimeo(const struct sock *sk, bool nonblock)
 {
 	return sock_sndtimeo(sk, nonblock);
+}
+
+unsigned int rcan_sock_tsflags(const struct sock *sk)
+{
+	return READ_ONCE(sk->sk_tsflags);
+}
+
+unsigned int rcan_sock_next_tskey(struct sock *sk)
+{
+	return atomic_inc_return(&sk->sk_tskey) - 1;
+}
+
+/*
+ * Queues a notification on sk's error queue: an skb with the `len` bytes
+ * at `stats` (netlink attributes when `opt_stats`), stamped now, whose
+ * `sock_exterr_skb` has the given errno, origin, info and data.
+ */
+int rcan_sock_queue_err(struct sock *sk, const void *stats, unsigned int len,
+			u32 ee_errno, u8 ee_origin, u32 ee_info, u32 ee_data,
+			bool opt_stats)
+{
+	struct sock_exterr_skb *serr;
+	struct sk_buff *skb;
+	int err;
+
+	skb = alloc_skb(len, GFP_ATOMIC);
+	if (!skb)
+		return -ENOMEM;
+	skb_put_data(skb, stats, len);
+	skb->tstamp = ktime_get_real();
+	BUILD_BUG_ON(sizeof(struct sock_exterr_skb) > sizeof(skb->cb));
+	serr = SKB_EXT_ERR(skb);
+	memset(serr, 0, sizeof(*serr));
+	serr->ee.ee_errno = ee_errno;
+	serr->ee.ee_origin = ee_origin;
+	serr->ee.ee_info = ee_info;
+	serr->ee.ee_data = ee_data;
+	serr->opt_stats = opt_stats;
+	err = sock_queue_err_skb(sk, skb);
+	if (err)
+		kfree_skb(skb);
+	return err;
 }
 
 bool rcan_skb_put_zero(struct sk_buff *skb, unsigned int len)

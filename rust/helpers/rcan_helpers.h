@@ -157,6 +157,11 @@ long rcan_wait_event_timeout(struct wait_queue_head *wq,
 			     bool (*cond)(void *arg), void *arg, long timeo);
 void rcan_wake_up_all(struct wait_queue_head *wq);
 long rcan_sock_sndtimeo(const struct sock *sk, bool nonblock);
+unsigned int rcan_sock_tsflags(const struct sock *sk);
+unsigned int rcan_sock_next_tskey(struct sock *sk);
+int rcan_sock_queue_err(struct sock *sk, const void *stats, unsigned int len,
+			u32 ee_errno, u8 ee_origin, u32 ee_info, u32 ee_data,
+			bool opt_stats);
 
 /* skb data and IPv4 delivery */
 bool rcan_skb_put_zero(struct sk_buff *skb, unsigned int len);

@@ -1041,20 +1041,22 @@ mod tests {
         }
     }
 
-    #[test]
-    fn rts_checks() {
-        let p = Params::default();
+    /// The addressing of control frames from SA to DA with priority
+    /// `prio`: on TP.CM, on ETP.CM, and TP.CM to broadcast.
+    fn ctl_ids(prio: u8) -> (Id, Id, Id) {
         let tp = Id {
-            prio: 7,
+            prio,
             pgn: TP_PGN_CTL,
             sa: SA,
             da: DA,
         };
-        let etp = Id {
-            pgn: ETP_PGN_CTL,
-            ..tp
-        };
-        let bam = Id { da: 0xFF, ..tp };
+        (tp, Id { pgn: ETP_PGN_CTL, ..tp }, Id { da: 0xFF, ..tp })
+    }
+
+    #[test]
+    fn rts_checks() {
+        let p = Params::default();
+        let (tp, etp, bam) = ctl_ids(7);
         let code = |id: Id, d: [u8; 8], buf: usize| {
             let s = RxSession::on_rts(&p, id, &d, buf, 0).unwrap_err();
             s.frame.map(|f| {
@@ -1120,17 +1122,7 @@ mod tests {
     #[test]
     fn wanted_buffer_only_for_what_may_come() {
         let p = Params::default();
-        let tp = Id {
-            prio: 6,
-            pgn: TP_PGN_CTL,
-            sa: SA,
-            da: DA,
-        };
-        let etp = Id {
-            pgn: ETP_PGN_CTL,
-            ..tp
-        };
-        let bam = Id { da: 0xFF, ..tp };
+        let (tp, etp, bam) = ctl_ids(6);
         // TP: 20 bytes in 3 packets; a count that does not fit, too
         // short, too long: no buffer.
         let rts = [0x10, 20, 0, 3, 3, 0, 0xEF, 0];

@@ -44,6 +44,7 @@ pub static TESTS: &[crate::Test] = portable_table![
     stack:
     j1939_tp_unicast_sizes,
     j1939_bam_broadcast,
+    j1939_canutils_j1939cat_etp,
     j1939_tp_second_session_busy,
     j1939_tp_raw_peer_silent_after_cts,
     j1939_tp_raw_peer_receives,
@@ -447,12 +448,6 @@ fn j1939_bam_broadcast(ctx: &mut Ctx) -> TestResult {
 /// session's end (mainline's `j1939_sk_release`), so the file still
 /// arrives. (`-P 0`, plain blocking sends, fails too: it sends 0 bytes
 /// after the last and calls that an error.) Any other failure fails.
-///
-/// Not in the table yet: `j1939cat`'s sender waits in `poll` for the
-/// error queue's TX ACK after its send, and ours queues no notifications
-/// until issue 42's step 2d (it passes on mainline, 3 runs; on ours the
-/// sender never exits). Registered again with the error queue.
-#[allow(dead_code)]
 fn j1939_canutils_j1939cat_etp(ctx: &mut Ctx) -> TestResult {
     const SIZE: usize = 64 << 10;
     const CTRUNC: &str = "recvmsg error notification: truncated";
