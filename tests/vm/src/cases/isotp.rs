@@ -1503,7 +1503,25 @@ fn isotp_tunnel_ip(ctx: &mut Ctx) -> TestResult {
     b.signal("TERM")?;
     let (oa, ob) = (a.finish(TOOL_LIMIT)?, b.finish(TOOL_LIMIT)?);
     drop(ns);
-    let fr = sn.stop()?;
+    // The order the frames were sent in. Ours: the order the sniffer
+    // read them, as canloop's one receive FIFO keeps the transmit order
+    // (canloop.rs). Mainline: the order of the kernel's receive
+    // timestamps, taken when `vcan_rx` queues each echo on the sending
+    // CPU's backlog (`netif_rx`). The sniffer's own queue order is not the
+    // bus's there: the CFs come from whichever CPU ran the sender's
+    // echo handler or its `txfrtimer` (50 us after each echo, an hrtimer
+    // not pinned to the CPU that starts it), and the sniffer, bound before
+    // the tunnels and so last in the receive list, is handed CF k after the
+    // sender's echo handler has already started CF k+1; a vCPU the host
+    // stops for 50 us there lets CF k+1 reach the sniffer first from the
+    // other CPU's backlog (CI of 71a58d6: "the 1428-byte PDU has 204 CFs,
+    // want 204 numbered from 1", the tunnels' own transfers intact).
+    let mut timed = sn.stop_timed()?;
+    if ctx.stack() == crate::ctx::Stack::Mainline {
+        // Stable: frames stamped in the same nanosecond keep queue order.
+        timed.sort_by_key(|&(_, at)| at);
+    }
+    let fr: Vec<Fr> = timed.into_iter().map(|(f, _)| f).collect();
     r.map_err(|e| {
         format!(
             "{e}; isotptun: {:?} {:?}; {} frames on the bus",
