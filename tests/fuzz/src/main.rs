@@ -459,8 +459,16 @@ impl Worker<'_> {
             )
         };
         let flags = *r.pick(&[0, 0, libc::SOCK_NONBLOCK, libc::SOCK_CLOEXEC]);
+        // Every socket starts non-blocking, and only becomes blocking (if
+        // the draw wants that) once it has the timeouts below. Another
+        // thread may hold this descriptor number from a slot whose socket
+        // was closed since (socket() takes the lowest free number): its
+        // receive must not reach a socket without SO_RCVTIMEO and wait
+        // for ever (make check of 04564a5: a "HANG" in a BCM recvmsg on
+        // the debug kernel, the call labelled with the slot's former
+        // ISO-TP socket).
         self.begin(format!("socket(PF_CAN, {ty:#x}, {proto})"));
-        let res = sys::socket(PF_CAN, ty | flags, proto);
+        let res = sys::socket(PF_CAN, ty | flags | libc::SOCK_NONBLOCK, proto);
         if !self.end(Call::Socket, &res) {
             return;
         }
@@ -480,6 +488,9 @@ impl Worker<'_> {
                 };
                 let _ = sys::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVTIMEO, &tv(20_000), 16);
                 let _ = sys::setsockopt(fd, libc::SOL_SOCKET, libc::SO_SNDTIMEO, &tv(100_000), 16);
+                if flags != libc::SOCK_NONBLOCK {
+                    let _ = sys::set_blocking(fd);
+                }
                 let pi = PROTOS
                     .iter()
                     .position(|p| p.protocol == proto)

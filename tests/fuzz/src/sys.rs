@@ -45,6 +45,14 @@ pub fn close(fd: c_int) -> Res<()> {
     cvt(unsafe { libc::close(fd) } as isize).map(drop)
 }
 
+/// Clears `O_NONBLOCK` on `fd` (`fcntl(2)` `F_GETFL`, `F_SETFL`).
+pub fn set_blocking(fd: c_int) -> Res<()> {
+    // SAFETY: integer arguments.
+    let fl = cvt(unsafe { libc::fcntl(fd, libc::F_GETFL) } as isize)? as c_int;
+    // SAFETY: integer arguments.
+    cvt(unsafe { libc::fcntl(fd, libc::F_SETFL, fl & !libc::O_NONBLOCK) } as isize).map(drop)
+}
+
 /// `dup(2)`.
 pub fn dup(fd: c_int) -> Res<c_int> {
     // SAFETY: integer argument.
