@@ -44,6 +44,8 @@ cd "$RCAN_ROOT"
 
 passed=0
 failed=0
+# What failed, a line each, printed last (CI shows a run's last lines).
+fail_lines=()
 # Every job's log and VM output directory, kept after the run for a look
 # at what failed and for test-weights.sh; emptied at the start.
 log_dir=$RCAN_ROOT/target/rcan-check
@@ -79,6 +81,15 @@ tally() {
 	if [ "$rc" != 0 ] && [ "$f" = 0 ]; then
 		f=1
 		echo "rcan: stage '$name' failed (exit $rc)"
+	fi
+	# For the closing summary: each failed test by name, and a stage that
+	# failed without naming one (a VM that timed out, 124, or crashed,
+	# 125, before its count line: its remaining tests did not run).
+	while IFS= read -r t; do
+		fail_lines+=("$name: $t")
+	done < <(sed -nE -e 's/^not ok - ([^ ]+).*/\1/p' -e 's/^test (.*) \.\.\. FAILED$/\1/p' "$logf")
+	if [ "$f" != 0 ] && ! grep -qE '^not ok - |^test .* \.\.\. FAILED$' "$logf"; then
+		fail_lines+=("$name: the stage failed (exit $rc) after $(grep -c '^ok - ' "$logf") tests passed$( [ -n "$line" ] || echo ", with no count line"); its log: $logf")
 	fi
 	echo "rcan: stage '$name': $p passed, $f failed"
 	passed=$((passed + p))
@@ -269,6 +280,7 @@ build_done() {
 	if [ "$2" != 0 ]; then
 		echo "=== $1 failed:"
 		tail -n 40 "$3"
+		fail_lines+=("$1: the build failed (exit $2); its log: $3")
 		failed=$((failed + 1))
 		counts[$1]="failed"
 	fi
@@ -461,5 +473,9 @@ for variant in release mainline debug; do
 		sort -rn | head -n 15 | awk '{printf "rcan:   %7.1f s  cpu %7.1f s  %s\n", $1, $2, $3}'
 done
 echo "rcan: the jobs' logs and the VMs' output are in $log_dir"
+if [ ${#fail_lines[@]} -gt 0 ]; then
+	echo "rcan: what failed:"
+	printf 'rcan:   %s\n' "${fail_lines[@]}"
+fi
 echo "$passed passed, $failed failed"
 [ "$failed" = 0 ]
