@@ -575,6 +575,12 @@ unsigned int rcan_sock_next_tskey(struct sock *sk)
 	return atomic_inc_return(&sk->sk_tskey) - 1;
 }
 
+/* Frees every skb on sk's error queue (its own lock, IRQ-safe). */
+void rcan_sock_purge_errqueue(struct sock *sk)
+{
+	skb_queue_purge(&sk->sk_error_queue);
+}
+
 /*
  * Queues a notification on sk's error queue: an skb with the `len` bytes
  * at `stats` (netlink attributes when `opt_stats`), stamped now, whose
