@@ -713,6 +713,8 @@ const SOF_SOFTWARE: u32 = 1 << 4;
 const SOF_OPT_ID: u32 = 1 << 7;
 const SOF_TX_SCHED: u32 = 1 << 8;
 const SOF_TX_ACK: u32 = 1 << 9;
+const SOF_OPT_TSONLY: u32 = 1 << 11;
+/// Needs [`SOF_OPT_TSONLY`] beside it (`sock_set_timestamping`: `EINVAL`).
 const SOF_OPT_STATS: u32 = 1 << 12;
 /// `SO_EE_ORIGIN_LOCAL`, `SO_EE_ORIGIN_TIMESTAMPING`, `SCM_TSTAMP_ACK`,
 /// `J1939_EE_INFO_RX_RTS`.
@@ -820,20 +822,32 @@ fn j1939_tp_errqueue_notifications(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.j1939_ifaces(1)?[0];
     let a = jbound(i0, 0x20, NO_PGN)?;
     let b = jbound(i0, 0x30, NO_PGN)?;
-    set_int(&a, SOL_CAN_J1939, SO_J1939_ERRQUEUE, 1, "SO_J1939_ERRQUEUE at 0x20")?;
-    set_int(&b, SOL_CAN_J1939, SO_J1939_ERRQUEUE, 1, "SO_J1939_ERRQUEUE at 0x30")?;
+    set_int(
+        &a,
+        SOL_CAN_J1939,
+        SO_J1939_ERRQUEUE,
+        1,
+        "SO_J1939_ERRQUEUE at 0x20",
+    )?;
+    set_int(
+        &b,
+        SOL_CAN_J1939,
+        SO_J1939_ERRQUEUE,
+        1,
+        "SO_J1939_ERRQUEUE at 0x30",
+    )?;
     set_int(
         &a,
         libc::SOL_SOCKET,
         libc::SO_TIMESTAMPING,
-        SOF_TX_ACK | SOF_TX_SCHED | SOF_SOFTWARE | SOF_OPT_ID | SOF_OPT_STATS,
+        SOF_TX_ACK | SOF_TX_SCHED | SOF_SOFTWARE | SOF_OPT_ID | SOF_OPT_STATS | SOF_OPT_TSONLY,
         "SO_TIMESTAMPING at 0x20",
     )?;
     set_int(
         &b,
         libc::SOL_SOCKET,
         libc::SO_TIMESTAMPING,
-        SOF_RX_SOFTWARE | SOF_SOFTWARE | SOF_OPT_STATS,
+        SOF_RX_SOFTWARE | SOF_SOFTWARE | SOF_OPT_STATS | SOF_OPT_TSONLY,
         "SO_TIMESTAMPING at 0x30",
     )?;
     for key in 0..2u32 {
@@ -866,13 +880,22 @@ fn j1939_tp_errqueue_notifications(ctx: &mut Ctx) -> TestResult {
             "{what}: {n:?}, want errno ENOMSG, origin {ORIGIN_LOCAL}, info RX_RTS \
              ({EE_INFO_RX_RTS}), TOTAL_SIZE 100, PGN {PGN:05X}, SRC_ADDR 20, DEST_ADDR 30"
         );
-        no_note(&b, &format!("the receiver's queue after message {key}'s RTS"))?;
+        no_note(
+            &b,
+            &format!("the receiver's queue after message {key}'s RTS"),
+        )?;
     }
     let msg = payload(100, 42);
     send_to(&a, &msg, 0x30, "sendto 100 bytes, the third")?;
     let m = recv_msg(&b, "the third 100 bytes at 0x30")?;
     want_msg(&m, &msg, 0x20, Some(0x30), "the third 100 bytes at 0x30")?;
     wait_pollerr(&a, "the sender's notification of the third message")?;
-    set_int(&a, SOL_CAN_J1939, SO_J1939_ERRQUEUE, 0, "SO_J1939_ERRQUEUE 0 at 0x20")?;
+    set_int(
+        &a,
+        SOL_CAN_J1939,
+        SO_J1939_ERRQUEUE,
+        0,
+        "SO_J1939_ERRQUEUE 0 at 0x20",
+    )?;
     no_note(&a, "the sender's queue after SO_J1939_ERRQUEUE 0")
 }
