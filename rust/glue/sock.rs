@@ -472,7 +472,9 @@ impl<T: Proto> SockView<T> {
 
     /// Frees every notification on the error queue (`skb_queue_purge`
     /// of `sk_error_queue`, under the queue's own IRQ-safe lock): what
-    /// turning a protocol's error queue off does. Any context.
+    /// turning a protocol's error queue off does. Process or softirq
+    /// context, not hardirq: each notification's destructor
+    /// (`sock_rmem_free`) runs here.
     pub(crate) fn purge_errqueue(&self) {
         // SAFETY: live sock (type invariant); its error queue is an
         // initialised `sk_buff_head` for the sock's whole life.

@@ -575,7 +575,10 @@ unsigned int rcan_sock_next_tskey(struct sock *sk)
 	return atomic_inc_return(&sk->sk_tskey) - 1;
 }
 
-/* Frees every skb on sk's error queue (its own lock, IRQ-safe). */
+/*
+ * Frees every skb on sk's error queue (its own lock, IRQ-safe); not from
+ * hardirq: the skbs' destructors (sock_rmem_free) run.
+ */
 void rcan_sock_purge_errqueue(struct sock *sk)
 {
 	skb_queue_purge(&sk->sk_error_queue);
