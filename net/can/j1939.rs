@@ -939,9 +939,9 @@ impl glue::sock::Proto for J1939Proto {
     /// Mainline `j1939_sk_setsockopt`: `EINVAL` at another level;
     /// SO_J1939_FILTER (a multiple of 32 bytes, at most 512 filters, or
     /// none to remove them), SO_J1939_PROMISC and SO_J1939_ERRQUEUE (an
-    /// `int`), SO_J1939_SEND_PRIO (an `int` 0..7, `EDOM` otherwise, 0 and
-    /// 1 need CAP_NET_ADMIN: `EPERM`); others `ENOPROTOOPT`. Process
-    /// context.
+    /// `int`; turning the error queue off empties it), SO_J1939_SEND_PRIO
+    /// (an `int` 0..7, `EDOM` otherwise, 0 and 1 need CAP_NET_ADMIN:
+    /// `EPERM`); others `ENOPROTOOPT`. Process context.
     fn setsockopt(sk: &S, level: i32, name: i32, opt: &OptIn) -> Result {
         if level != SOL_CAN_J1939 {
             return Err(EINVAL);
@@ -984,6 +984,13 @@ impl glue::sock::Proto for J1939Proto {
                 } else {
                     s.errqueue = on;
                     sk.shared().errqueue.store(on, Ordering::Relaxed);
+                    // Off: what was queued goes (mainline's
+                    // skb_queue_purge). A notification whose check of
+                    // the flag came before the store above may still
+                    // land after the purge, as on mainline.
+                    if !on {
+                        sk.purge_errqueue();
+                    }
                 }
                 Ok(())
             }

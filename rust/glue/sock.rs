@@ -470,6 +470,17 @@ impl<T: Proto> SockView<T> {
         unsafe { bindings::rcan_sock_next_tskey(self.sk) }
     }
 
+    /// Frees every notification on the error queue (`skb_queue_purge`
+    /// of `sk_error_queue`, under the queue's own IRQ-safe lock): what
+    /// turning a protocol's error queue off does. Process or softirq
+    /// context, not hardirq: each notification's destructor
+    /// (`sock_rmem_free`) runs here.
+    pub(crate) fn purge_errqueue(&self) {
+        // SAFETY: live sock (type invariant); its error queue is an
+        // initialised `sk_buff_head` for the sock's whole life.
+        unsafe { bindings::rcan_sock_purge_errqueue(self.sk) }
+    }
+
     /// Queues a notification on the error queue (`sock_queue_err_skb`),
     /// stamped now, for `recvmsg(MSG_ERRQUEUE)`: `note`'s errno, origin,
     /// info and data in its `sock_extended_err`, its statistics as the

@@ -576,6 +576,15 @@ unsigned int rcan_sock_next_tskey(struct sock *sk)
 }
 
 /*
+ * Frees every skb on sk's error queue (its own lock, IRQ-safe); not from
+ * hardirq: the skbs' destructors (sock_rmem_free) run.
+ */
+void rcan_sock_purge_errqueue(struct sock *sk)
+{
+	skb_queue_purge(&sk->sk_error_queue);
+}
+
+/*
  * Queues a notification on sk's error queue: an skb with the `len` bytes
  * at `stats` (netlink attributes when `opt_stats`), stamped now, whose
  * `sock_exterr_skb` has the given errno, origin, info and data.

@@ -159,6 +159,7 @@ void rcan_wake_up_all(struct wait_queue_head *wq);
 long rcan_sock_sndtimeo(const struct sock *sk, bool nonblock);
 unsigned int rcan_sock_tsflags(const struct sock *sk);
 unsigned int rcan_sock_next_tskey(struct sock *sk);
+void rcan_sock_purge_errqueue(struct sock *sk);
 int rcan_sock_queue_err(struct sock *sk, const void *stats, unsigned int len,
 			u32 ee_errno, u8 ee_origin, u32 ee_info, u32 ee_data,
 			bool opt_stats);
