@@ -27,6 +27,7 @@ use std::os::fd::{AsFd, OwnedFd};
 
 use rcan_uapi::raw;
 
+use crate::canraw;
 use crate::check::{ensure, OrFail, TestResult};
 use crate::ctx::{dev, Ctx, Stack};
 use crate::sys;
@@ -287,6 +288,38 @@ fn bus_socket(ifindex: u32) -> Result<OwnedFd, String> {
     Ok(s)
 }
 
+/// A CAN_RAW socket on `ifindex` receiving only the frames of `pgns` from
+/// `sa` to `da` (at any priority) through exact-identifier filters.
+///
+/// It is the socket to wait on when the J1939 stack's handling of such a
+/// frame must be over once the frame has been read. Mainline's
+/// `can_rcv_filter` hands a frame to the receivers of all frames first,
+/// then to the masked ones (J1939's), then to those of its exact
+/// identifier, in one softirq: a reader of [`bus_socket`] can run before
+/// J1939 has seen the frame; a reader of this socket cannot. This matters
+/// for mainline's own abort after a timeout. It reports the session's
+/// error on the sending socket twice, at the timeout
+/// (`__j1939_session_cancel`) and again when the abort comes back to it
+/// (`j1939_xtp_rx_abort` as transmitter); a test that read the abort on
+/// [`bus_socket`], then SO_ERROR twice, saw the second report
+/// (`j1939_tp_abort_from_peer`, mainline stage, CI of 7b48b72,
+/// 2026-11-30). Ours reports the error once, at the timeout.
+fn exact_socket(ifindex: u32, sa: u8, da: u8, pgns: &[u32]) -> Result<OwnedFd, String> {
+    const SOL_CAN_RAW: i32 = 101;
+    const CAN_RAW_FILTER: i32 = 1;
+    let mask = libc::CAN_EFF_MASK | libc::CAN_EFF_FLAG | libc::CAN_RTR_FLAG;
+    let f: Vec<(u32, u32)> = pgns
+        .iter()
+        .flat_map(|&pgn| (0..8).map(move |prio| (can_id(prio, pgn, da, sa), mask)))
+        .collect();
+    let s = raw::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW).or_fail("socket(CAN_RAW)")?;
+    raw::setsockopt(&s, SOL_CAN_RAW, CAN_RAW_FILTER, &canraw::filter_bytes(&f))
+        .or_fail("CAN_RAW_FILTER")?;
+    raw::bind(&s, &canraw::addr_bytes(libc::AF_CAN as u16, ifindex)).or_fail("bind CAN_RAW")?;
+    sys::set_rcvbufforce(&s, 8 << 20).or_fail("SO_RCVBUFFORCE")?;
+    Ok(s)
+}
+
 /// `sendto` of `data` to `da` with [`PGN`], which must return its size at
 /// once (a session runs after the call).
 fn send_to(s: impl AsFd, data: &[u8], da: u8, what: &str) -> TestResult {
@@ -528,10 +561,11 @@ fn j1939_canutils_j1939cat_etp(ctx: &mut Ctx) -> TestResult {
 /// nothing. After T3 the first session ends with an abort "timeout"
 /// (reason 3) from 0x20 to 0x50, and its socket reports the error
 /// (POLLERR): its next `sendto` fails with EHOSTUNREACH (mainline's
-/// errno for a timeout), the one after goes out.
+/// errno for a timeout), the one after goes out. The bus is read on an
+/// [`exact_socket`]: mainline reports the timeout twice.
 fn j1939_tp_second_session_busy(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.j1939_ifaces(1)?[0];
-    let bus = bus_socket(i0)?;
+    let bus = exact_socket(i0, 0x20, 0x50, &[PGN_TP_CM, PGN])?;
     let a = jbound(i0, 0x20, NO_PGN)?;
     let a2 = jbound(i0, 0x20, NO_PGN)?;
     let msg = payload(20, 4);
@@ -656,15 +690,18 @@ fn j1939_tp_raw_peer_receives(ctx: &mut Ctx) -> TestResult {
 /// (reason 3, timeout) and reports EHOSTUNREACH (seen on 6.12.117,
 /// 2026-11-30: "rx timeout, send abort" in its log). Ours (the core's
 /// `TxSession`) ends the session at the peer's abort with the reason's
-/// errno, EALREADY for "busy", and sends nothing more.
+/// errno, EALREADY for "busy", and sends nothing more. The frames from
+/// 0x20 are read on an [`exact_socket`]: mainline reports its timeout
+/// twice, and the second report must be in before SO_ERROR is read.
 fn j1939_tp_abort_from_peer(ctx: &mut Ctx) -> TestResult {
     let i0 = ctx.j1939_ifaces(1)?[0];
     let peer = bus_socket(i0)?;
+    let from_a = exact_socket(i0, 0x20, 0x61, &[PGN_TP_CM, PGN])?;
     let a = jbound(i0, 0x20, NO_PGN)?;
     let addrs = [0x20, 0x61];
     let msg = payload(30, 5);
     send_to(&a, &msg, 0x61, "sendto 30 bytes")?;
-    let f = next_of(&peer, &addrs, "the RTS")?;
+    let f = next_of(&from_a, &addrs, "the RTS")?;
     want_rts(&f, 0x20, 0x61, 30, PGN)?;
     raw_send(
         &peer,
@@ -673,7 +710,7 @@ fn j1939_tp_abort_from_peer(ctx: &mut Ctx) -> TestResult {
     )?;
     let want = match ctx.stack() {
         Stack::Mainline => {
-            let f = next_of(&peer, &addrs, "mainline's abort after T3")?;
+            let f = next_of(&from_a, &addrs, "mainline's abort after T3")?;
             want_cm(
                 &f,
                 0x20,
@@ -695,7 +732,7 @@ fn j1939_tp_abort_from_peer(ctx: &mut Ctx) -> TestResult {
     );
     ensure!(so_error(&a)? == 0, "SO_ERROR read twice: the error stays");
     send_to(&a, &[3], 0x61, "sendto 1 byte after the abort")?;
-    let f = next_of(&peer, &addrs, "the single frame")?;
+    let f = next_of(&from_a, &addrs, "the single frame")?;
     ensure!(
         f.pgn == PGN && f.sa == 0x20 && f.da == 0x61 && f.data == [3],
         "after the peer's abort: {}, want the single frame [03] 20->61",
