@@ -36,6 +36,10 @@ pub const POISON: u8 = 0xAA;
 const SOL_CAN_RAW: c_int = 101;
 /// `SCM_CAN_RAW_ERRQUEUE`: a `struct sock_extended_err`.
 const SCM_CAN_RAW_ERRQUEUE: c_int = 1;
+/// `SOL_CAN_J1939` and `SCM_J1939_ERRQUEUE`: a `struct sock_extended_err`
+/// too.
+const SOL_CAN_J1939: c_int = 107;
+const SCM_J1939_ERRQUEUE: c_int = 4;
 /// `sizeof(struct cmsghdr)` on x86_64.
 const CMSG_HDR: usize = 16;
 
@@ -55,6 +59,9 @@ pub enum Kind {
     /// CAN_ISOTP: `struct sockaddr_can` of 16 bytes (family, ifindex and,
     /// from getsockname, `can_addr.tp`; zeros from recvmsg).
     Isotp,
+    /// CAN_J1939: `struct sockaddr_can` of 24 bytes (family, ifindex,
+    /// `can_addr.j1939` {name, pgn, addr}, three bytes of padding).
+    J1939,
 }
 
 /// Offsets of the padding bytes in an address of `kind` that the kernel
@@ -67,6 +74,9 @@ pub enum Kind {
 ///   must be zero);
 /// * `sockaddr_can` (CAN_ISOTP): family, two bytes of padding, ifindex,
 ///   `rx_id`, `tx_id` (16 bytes reported; more must be zero);
+/// * `sockaddr_can` (CAN_J1939): family, two bytes of padding, ifindex,
+///   name (8..16), pgn (16..20), addr (20), three bytes of padding (24
+///   bytes reported; more must be zero);
 /// * `sockaddr_canarb`: family, two bytes of padding, arb, mask, ifindex;
 /// * `sockaddr_cansegm` (8 bytes): family, priority, node, id: no padding;
 /// * `sockaddr_canport` (6 bytes): family, port, priority, one byte of
@@ -76,6 +86,7 @@ pub fn addr_padding(kind: Kind, len: usize) -> Vec<usize> {
         (Kind::Raw | Kind::Bcm, _) => [2, 3].into_iter().chain(8..len.max(8)).collect(),
         (Kind::Arb, _) => vec![2, 3],
         (Kind::Isotp, _) => [2, 3].into_iter().chain(16..len.max(16)).collect(),
+        (Kind::J1939, _) => [2, 3].into_iter().chain(21..len.max(24)).collect(),
         (Kind::Dsor, 6) => vec![5],
         (Kind::Dsor, _) => vec![],
     }
@@ -193,9 +204,10 @@ pub fn check_cmsgs(buf: &[u8], controllen: usize, what: &str) -> Result<(), Stri
             ));
         }
         let data = &buf[off + CMSG_HDR..off + len];
-        if level == SOL_CAN_RAW
-            && ty == SCM_CAN_RAW_ERRQUEUE
-            && data.len() >= 8
+        if matches!(
+            (level, ty),
+            (SOL_CAN_RAW, SCM_CAN_RAW_ERRQUEUE) | (SOL_CAN_J1939, SCM_J1939_ERRQUEUE)
+        ) && data.len() >= 8
             && !is_clean(data[7])
         {
             return Err(format!(
@@ -255,6 +267,22 @@ mod tests {
         assert!(check_addr(Some(Kind::Bcm), &a, 16, "x").is_ok());
         a[9] = 1;
         assert!(check_addr(Some(Kind::Bcm), &a, 16, "x").is_err());
+    }
+
+    #[test]
+    fn j1939_address() {
+        // family, padding, ifindex 3, NAME, PGN 0x12300, address 0x20,
+        // three bytes of padding.
+        let mut a = poisoned(32);
+        a[..24].copy_from_slice(&[
+            29, 0, 0, 0, 3, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 0x23, 1, 0, 0x20, 0, 0, 0,
+        ]);
+        assert!(check_addr(Some(Kind::J1939), &a, 24, "x").is_ok());
+        // The NAME, PGN and address are fields; the bytes after the
+        // address are padding.
+        a[22] = 0x5c;
+        let e = check_addr(Some(Kind::J1939), &a, 24, "x").unwrap_err();
+        assert!(e.contains("padding byte 22"), "{e}");
     }
 
     #[test]

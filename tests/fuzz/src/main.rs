@@ -292,6 +292,7 @@ impl Worker<'_> {
                         .find(|q| q.msg == table::Msg::Bcm)
                         .map_or(p.extra_send, |q| q.extra_send),
                     Some(leak::Kind::Isotp) => table::ISOTP_ERRS,
+                    Some(leak::Kind::J1939) => table::J1939_SEND_ERRS,
                     _ => p.extra_send,
                 }
             }
@@ -301,30 +302,23 @@ impl Worker<'_> {
     }
 
     /// [`Self::end`] for a call on `fd`, a socket of `p` when the slot
-    /// was read, that may give `set` if it is an ISO-TP socket: its
-    /// protocol errors from a receive ([`table::ISOTP_ERRS`], its pending
-    /// error), `EISCONN` from a setsockopt ([`table::ISOTP_OPT_ERRS`]).
-    /// If `p` is not ISO-TP the descriptor may have been reused for an
-    /// ISO-TP socket meanwhile (as in [`Self::end_send`]).
-    fn end_isotp<T>(
-        &mut self,
-        call: Call,
-        r: &sys::Res<T>,
-        fd: c_int,
-        p: &Proto,
-        set: &'static [c_int],
-    ) -> bool {
+    /// was read: the errnos of `p`'s protocol for this call are allowed
+    /// too ([`table::extra_errs`]). If the errno is in neither set, the
+    /// descriptor may have been reused by another thread for a socket of
+    /// another protocol meanwhile (as in [`Self::end_send`]): then that
+    /// protocol's apply.
+    fn end_on<T>(&mut self, call: Call, r: &sys::Res<T>, fd: c_int, p: &Proto) -> bool {
+        let mine = table::extra_errs(p.protocol, call);
         let extra: &[c_int] = match r {
-            Err(e) if set.contains(e) => {
-                if p.msg == table::Msg::Isotp
-                    || Self::ident(fd).and_then(|(_, k)| k) == Some(leak::Kind::Isotp)
-                {
-                    set
-                } else {
-                    &[]
-                }
+            Err(e) if !call.allowed().contains(e) && !mine.contains(e) => {
+                let now = match Self::ident(fd).and_then(|(_, k)| k) {
+                    Some(leak::Kind::Isotp) => 6,
+                    Some(leak::Kind::J1939) => 7,
+                    _ => p.protocol,
+                };
+                table::extra_errs(now, call)
             }
-            _ => &[],
+            _ => mine,
         };
         self.end_with(call, r, extra)
     }
@@ -356,12 +350,13 @@ impl Worker<'_> {
             int(libc::SOL_SOCKET, libc::SO_DOMAIN),
             int(libc::SOL_SOCKET, libc::SO_TYPE),
         ) {
-            // DSOR, BCM and ISO-TP are datagram sockets; rcan sets
-            // SO_PROTOCOL (CAN_BCM 2, CAN_ISOTP 6).
+            // DSOR, BCM, ISO-TP and J1939 are datagram sockets; rcan
+            // sets SO_PROTOCOL (CAN_BCM 2, CAN_ISOTP 6, CAN_J1939 7).
             (Some(PF_CAN), Some(libc::SOCK_DGRAM)) => {
                 Some(match int(libc::SOL_SOCKET, libc::SO_PROTOCOL) {
                     Some(2) => leak::Kind::Bcm,
                     Some(6) => leak::Kind::Isotp,
+                    Some(7) => leak::Kind::J1939,
                     _ => leak::Kind::Dsor,
                 })
             }
@@ -511,7 +506,7 @@ impl Worker<'_> {
                             hex(&v)
                         ));
                         let r = sys::setsockopt(fd, o.level, o.name, &v, v.len() as u32);
-                        self.end_isotp(Call::Setsockopt, &r, fd, &PROTOS[pi], table::ISOTP_OPT_ERRS);
+                        self.end_on(Call::Setsockopt, &r, fd, &PROTOS[pi]);
                     }
                 }
                 // Half the new sockets get a well-formed bind at once, so
@@ -528,10 +523,10 @@ impl Worker<'_> {
                     ));
                     if bcm {
                         let r = sys::connect(fd, &a);
-                        self.end(Call::Connect, &r);
+                        self.end_on(Call::Connect, &r, fd, p);
                     } else {
                         let r = sys::bind(fd, &a);
-                        self.end(Call::Bind, &r);
+                        self.end_on(Call::Bind, &r, fd, p);
                     }
                 }
             }
@@ -553,19 +548,25 @@ impl Worker<'_> {
         let mut b = vec![0u8; l.len];
         for &(off, size, kind) in l.fields {
             let r = &mut self.rng;
-            let v: u32 = match kind {
-                Field::Family => AF_CAN as u32,
-                Field::Ifindex => self.sh.can_ifindex[r.below(NDEV)].load(Ordering::Relaxed),
-                Field::Arb => (r.next_u32() & 0x7ff) << 21,
+            let v: u64 = match kind {
+                Field::Family => AF_CAN.into(),
+                Field::Ifindex => self.sh.can_ifindex[r.below(NDEV)]
+                    .load(Ordering::Relaxed)
+                    .into(),
+                Field::Arb => ((r.next_u32() & 0x7ff) << 21).into(),
                 Field::Mask => 0xffff_ffff,
                 Field::Node => *r.pick(&[0, 0xff]),
-                Field::Port => r.next_u32() & 0xff, // a port of node 0, ours
+                Field::Port => (r.next_u32() & 0xff).into(), // a port of node 0, ours
                 Field::MsgId => {
-                    let small = r.below(8) as u32;
+                    let small = r.below(8) as u64;
                     *r.pick(&[0xffff_ffff, small])
                 }
-                Field::Any => r.next_u32() & 0xff,
-                Field::IsotpId => isotp_id(r),
+                Field::Any => (r.next_u32() & 0xff).into(),
+                Field::IsotpId => isotp_id(r).into(),
+                // Bound by address, no PGN filter or a PGN to receive.
+                Field::J1939Name => table::J1939_NO_NAME,
+                Field::J1939Pgn => *r.pick(&[table::J1939_NO_PGN, 0x12300, 0xfeca]),
+                Field::J1939Addr => *r.pick(&J1939_ADDRS),
             };
             b[off..off + size].copy_from_slice(&v.to_ne_bytes()[..size]);
         }
@@ -592,44 +593,42 @@ impl Worker<'_> {
             r.fill(&mut b);
         }
         for &(off, size, kind) in l.fields {
-            let v: u32 = match kind {
+            let v: u64 = match kind {
                 Field::Family => {
                     if r.chance(9, 10) {
-                        AF_CAN as u32
+                        AF_CAN.into()
                     } else {
-                        r.pick_or_rand(&[0, 1, 2, 0xffff])
+                        r.pick_or_rand(&[0, 1, 2, 0xffff]).into()
                     }
                 }
-                Field::Ifindex => self.sh.ifindex(r),
-                Field::Arb => {
-                    let id = r.next_u32();
-                    let rtr = if r.chance(1, 4) { 2 } else { 0 };
-                    match r.below(6) {
-                        0 | 1 => ((id & 0x7ff) << 21) | rtr,
-                        2 | 3 => ((id & 0x1fff_ffff) << 3) | 4 | rtr,
-                        4 => (id & 0x7ff) << 21 | 8, // std with extension bits
-                        _ => id,                     // bit 0 may be set
-                    }
-                }
-                Field::Mask => r.pick_or_rand(&[1, 0xffff_ffff, 0]),
-                Field::Node => r.pick_or_rand(&[0, 0, 1, 5, 0x7f, 0x80, 0xff]),
-                Field::Port => {
-                    let node = r.pick_or_rand(&[0u32, 0, 1, 0x7f, 0xff]) & 0xff;
-                    (node << 8) | (r.next_u32() & 0xff)
-                }
-                Field::MsgId => r.pick_or_rand(&[0, 1, 2, 7, 0xffff_ffff]),
-                Field::Any => r.next_u32(),
-                Field::IsotpId => match r.below(4) {
-                    0 => r.pick_or_rand(&[
-                        0x800,       // beyond 11 bits
-                        0x8000_0000, // CAN_EFF_FLAG, id 0
-                        0xA000_0700, // EFF with CAN_ERR_FLAG
-                        0x4000_0700, // CAN_RTR_FLAG
-                        0x3fff_ffff, // beyond 29 bits, no EFF
-                        0x9fff_ffff, // 29 bits + EFF
-                    ]),
-                    _ => isotp_id(r),
+                Field::Ifindex => self.sh.ifindex(r).into(),
+                Field::J1939Name => match r.below(4) {
+                    0 | 1 => table::J1939_NO_NAME,
+                    2 => *r.pick(&J1939_NAMES),
+                    _ => r.next_u64(),
                 },
+                Field::J1939Pgn => r
+                    .pick_or_rand(&[
+                        table::J1939_NO_PGN as u32,
+                        0x12300, // PDU1, destination byte 0
+                        0x12345, // PDU1 with a destination byte
+                        0xfeca,  // PDU2
+                        0xea00,  // request
+                        0xee00,  // address claimed
+                        0xec00,  // TP.CM
+                        0xeb00,  // TP.DT
+                        0xc800,  // ETP.CM
+                        0xc700,  // ETP.DT
+                        0x3ffff,
+                        0x40001,
+                    ])
+                    .into(),
+                Field::J1939Addr => match r.below(4) {
+                    0 | 1 => *r.pick(&J1939_ADDRS),
+                    2 => *r.pick(&[table::J1939_IDLE_ADDR, table::J1939_NO_ADDR, 0]),
+                    _ => r.below(256) as u64,
+                },
+                other => u64::from(Self::field32(r, other)),
             };
             b[off..off + size].copy_from_slice(&v.to_ne_bytes()[..size]);
         }
@@ -643,6 +642,47 @@ impl Worker<'_> {
             }
         }
         (l.name, b)
+    }
+
+    /// A random value of a field of at most 32 bits (the
+    /// [`Self::addr_named`] arms that predate the 64-bit NAME).
+    fn field32(r: &mut Rng, kind: Field) -> u32 {
+        match kind {
+            Field::Arb => {
+                let id = r.next_u32();
+                let rtr = if r.chance(1, 4) { 2 } else { 0 };
+                match r.below(6) {
+                    0 | 1 => ((id & 0x7ff) << 21) | rtr,
+                    2 | 3 => ((id & 0x1fff_ffff) << 3) | 4 | rtr,
+                    4 => (id & 0x7ff) << 21 | 8, // std with extension bits
+                    _ => id,                     // bit 0 may be set
+                }
+            }
+            Field::Mask => r.pick_or_rand(&[1, 0xffff_ffff, 0]),
+            Field::Node => r.pick_or_rand(&[0, 0, 1, 5, 0x7f, 0x80, 0xff]),
+            Field::Port => {
+                let node = r.pick_or_rand(&[0u32, 0, 1, 0x7f, 0xff]) & 0xff;
+                (node << 8) | (r.next_u32() & 0xff)
+            }
+            Field::MsgId => r.pick_or_rand(&[0, 1, 2, 7, 0xffff_ffff]),
+            Field::Any => r.next_u32(),
+            Field::IsotpId => match r.below(4) {
+                0 => r.pick_or_rand(&[
+                    0x800,       // beyond 11 bits
+                    0x8000_0000, // CAN_EFF_FLAG, id 0
+                    0xA000_0700, // EFF with CAN_ERR_FLAG
+                    0x4000_0700, // CAN_RTR_FLAG
+                    0x3fff_ffff, // beyond 29 bits, no EFF
+                    0x9fff_ffff, // 29 bits + EFF
+                ]),
+                _ => isotp_id(r),
+            },
+            Field::Family
+            | Field::Ifindex
+            | Field::J1939Name
+            | Field::J1939Pgn
+            | Field::J1939Addr => r.next_u32(),
+        }
     }
 
     fn op_bind_connect(&mut self, connect: bool) {
@@ -664,7 +704,7 @@ impl Worker<'_> {
         } else {
             sys::bind(fd, &a)
         };
-        self.end(call, &r);
+        self.end_on(call, &r, fd, p);
     }
 
     /// An option to try: (label, level, name, natural value).
@@ -744,7 +784,7 @@ impl Worker<'_> {
             hex(&val)
         ));
         let res = sys::setsockopt(fd, level, name, &val, len);
-        self.end_isotp(Call::Setsockopt, &res, fd, p, table::ISOTP_OPT_ERRS);
+        self.end_on(Call::Setsockopt, &res, fd, p);
     }
 
     fn op_getsockopt(&mut self) {
@@ -758,7 +798,7 @@ impl Worker<'_> {
                 p.name, len
             ));
             let res = sys::getsockopt_guarded(fd, level, name, len);
-            if !self.end(Call::Getsockopt, &res) {
+            if !self.end_on(Call::Getsockopt, &res, fd, p) {
                 return;
             }
             if let Ok(l) = res {
@@ -775,7 +815,7 @@ impl Worker<'_> {
             p.name
         ));
         let res = sys::getsockopt(fd, level, name, &mut buf);
-        if !self.end(Call::Getsockopt, &res) {
+        if !self.end_on(Call::Getsockopt, &res, fd, p) {
             return;
         }
         if let Ok(l) = res {
@@ -926,6 +966,15 @@ impl Worker<'_> {
             let mut n = self.send_len(p);
             if p.msg == table::Msg::Isotp {
                 n = self.isotp_send_len(fd, n);
+            }
+            if n > table::J1939_MAX_SEND
+                && (p.msg == table::Msg::J1939
+                    || Self::ident(fd).and_then(|(_, k)| k) == Some(leak::Kind::J1939))
+            {
+                // Whatever the slot held: a descriptor reused for a J1939
+                // socket gets the bound too (bar a reuse between this
+                // query and the send).
+                n = table::j1939_bound(n, self.rng.next_u32() as usize);
             }
             let mut data = vec![0u8; n];
             self.rng.fill(&mut data);
@@ -1108,7 +1157,7 @@ impl Worker<'_> {
                 } else {
                     Call::Recv
                 };
-                if !self.end_isotp(call, &res, fd, p, table::ISOTP_ERRS) {
+                if !self.end_on(call, &res, fd, p) {
                     return;
                 }
                 if let Ok((k, al)) = res {
@@ -1135,7 +1184,7 @@ impl Worker<'_> {
                 ));
                 let before = sys::ino(fd).ok();
                 let res = sys::recvmsg(fd, &mut buf, &mut name, &mut c, clen, flags);
-                if !self.end_isotp(Call::Recvmsg, &res, fd, p, table::ISOTP_ERRS) {
+                if !self.end_on(Call::Recvmsg, &res, fd, p) {
                     return;
                 }
                 if let Ok(m) = &res {
@@ -1287,7 +1336,7 @@ impl Worker<'_> {
                 } else {
                     Call::Getsockname
                 };
-                if self.end(call, &r) {
+                if self.end_on(call, &r, fd, p) {
                     if let Ok(l) = r {
                         if l > MAX_ADDR {
                             self.violation(format!("address length {l}"));
@@ -1346,6 +1395,13 @@ impl Worker<'_> {
 /// pair up (one's `tx_id` the other's `rx_id`) on one interface and
 /// multi-frame transfers with flow control run between them; two
 /// extended ones for 29-bit addressing.
+/// J1939 addresses the fuzzer's sockets bind to and send to, so that
+/// they find each other (the kernel then runs both ends of a session).
+const J1939_ADDRS: [u64; 3] = [0x20, 0x30, 0x40];
+/// A few J1939 NAMEs (no claim on the bus makes them resolve: sends to
+/// them get EADDRNOTAVAIL, binds to them reach the claim table).
+const J1939_NAMES: [u64; 2] = [0x1122_3344_5566_7788, 0x8000_0000_0000_0001];
+
 const ISOTP_IDS: &[u32] = &[0x700, 0x701, 0x702, 0x8000_0700, 0x8000_0701];
 
 /// A well-formed ISO-TP identifier (mostly standard).
@@ -1466,6 +1522,7 @@ const MODULES: &[(&str, &str, &str)] = &[
     ("rcan_dsor", "net/can/dsor/rcan_dsor.ko", "ifname=can0"),
     ("rcan_bcm", "net/can/rcan_bcm.ko", ""),
     ("rcan_isotp", "net/can/rcan_isotp.ko", ""),
+    ("rcan_j1939", "net/can/rcan_j1939.ko", ""),
 ];
 
 fn rmmod_retrying(name: &str, secs: u64) -> Result<(), String> {

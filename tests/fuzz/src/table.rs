@@ -21,6 +21,46 @@ pub const CAN_ISOTP_RECV_FC: c_int = 2;
 pub const CAN_ISOTP_TX_STMIN: c_int = 3;
 pub const CAN_ISOTP_RX_STMIN: c_int = 4;
 pub const CAN_ISOTP_LL_OPTS: c_int = 5;
+/// `SOL_CAN_J1939` (`SOL_CAN_BASE` 100 + `CAN_J1939`).
+pub const SOL_CAN_J1939: c_int = 107;
+/// `<linux/can/j1939.h>`: `J1939_NO_NAME`, `J1939_NO_PGN`, `J1939_NO_ADDR`
+/// (broadcast as a destination), `J1939_IDLE_ADDR`.
+pub const J1939_NO_NAME: u64 = 0;
+pub const J1939_NO_PGN: u64 = 0x40000;
+pub const J1939_NO_ADDR: u64 = 0xff;
+pub const J1939_IDLE_ADDR: u64 = 0xfe;
+/// `J1939_FILTER_MAX` and `sizeof(struct j1939_filter)` on x86_64 (two
+/// u64, two u32, two u8, padded to 32).
+pub const J1939_FILTER_MAX: usize = 512;
+pub const J1939_FILTER_LEN: usize = 32;
+
+/// The longest J1939 message the fuzzer sends (its transport sessions
+/// must end well inside the watchdog, and `close` waits for its socket's
+/// session): [`j1939_bound`].
+///
+/// * A message of 9..=1785 bytes to broadcast is a BAM: 50 ms between
+///   its data packets, at most 255 of them, 12.8 s.
+/// * A unicast TP or ETP session to an address nobody has ends after T3
+///   (1.25 s) with an abort; to another fuzzer socket's address the
+///   kernel is both ends and the session runs as fast as the frames'
+///   echoes: [`J1939_MAX_SEND`] bytes are 1,143 packets.
+/// * A peer's hold (CTS for 0 packets) delays a sender by T4 (550 ms)
+///   each time; only random CAN_RAW frames send one, rarely.
+///
+/// A longer send is cut to a random length up to this. (Over the ETP
+/// limit, 117,440,505 bytes, the kernel says EMSGSIZE before it copies
+/// anything; the fuzzer's longest send is 70,000 bytes.)
+pub const J1939_MAX_SEND: usize = 8000;
+
+/// `n` bounded for a J1939 send ([`J1939_MAX_SEND`]).
+pub fn j1939_bound(n: usize, pick: usize) -> usize {
+    if n > J1939_MAX_SEND {
+        1 + pick % J1939_MAX_SEND
+    } else {
+        n
+    }
+}
+
 /// Every `CAN_ISOTP_OPTS` flag, LISTEN_MODE (0x1) to DYN_FC_PARMS
 /// (0x2000).
 pub const ISOTP_FLAGS: &[u32] = &[
@@ -128,6 +168,16 @@ pub enum Field {
     /// one of a few (so that sockets pair up and talk), sometimes
     /// extended, RTR/ERR flags or bits beyond the identifier.
     IsotpId,
+    /// A J1939 NAME (`can_addr.j1939.name`, u64): mostly none
+    /// (`J1939_NO_NAME`), sometimes one of a few, random.
+    J1939Name,
+    /// A J1939 PGN (`can_addr.j1939.pgn`, u32): none (`J1939_NO_PGN`), a
+    /// PDU1 or PDU2 PGN, the kernel's own (request, address claim, the
+    /// transport PGNs), beyond 18 bits.
+    J1939Pgn,
+    /// A J1939 address (`can_addr.j1939.addr`, u8): one of a few (so
+    /// that sockets talk to each other), idle, broadcast, random.
+    J1939Addr,
 }
 
 /// One address layout: its length and fields (offset, size, kind). Bytes
@@ -203,6 +253,9 @@ pub enum Msg {
     /// link layer ([`isotp_max_send`]) unless the kernel refuses it
     /// before any transfer starts.
     Isotp,
+    /// A J1939 message: random bytes, of a length bounded by
+    /// [`J1939_MAX_SEND`].
+    J1939,
 }
 
 /// `sizeof(struct bcm_msg_head)` on x86_64.
@@ -270,6 +323,38 @@ const SOCKADDR_CAN_TP: Layout = Layout {
         (12, 4, Field::IsotpId),
     ],
 };
+
+/// `struct sockaddr_can` as J1939 reads it (24 bytes, mainline's
+/// `J1939_MIN_NAMELEN`): family, ifindex, `can_addr.j1939` {name, pgn,
+/// addr}.
+const SOCKADDR_CAN_J1939: Layout = Layout {
+    name: "sockaddr_can (j1939)",
+    len: 24,
+    fields: &[
+        (0, 2, Field::Family),
+        (4, 4, Field::Ifindex),
+        (8, 8, Field::J1939Name),
+        (16, 4, Field::J1939Pgn),
+        (20, 1, Field::J1939Addr),
+    ],
+};
+
+/// CAN_J1939 options (j1939.rst): the filters (`struct j1939_filter[]`)
+/// and three ints.
+const J1939_OPTS: &[Opt] = &[
+    Opt {
+        level: SOL_CAN_J1939,
+        name: 1,
+        label: "SO_J1939_FILTER",
+        val: Val::Array {
+            elem: J1939_FILTER_LEN,
+            max: J1939_FILTER_MAX,
+        },
+    },
+    int(SOL_CAN_J1939, 2, "SO_J1939_PROMISC"),
+    int(SOL_CAN_J1939, 3, "SO_J1939_SEND_PRIO"),
+    int(SOL_CAN_J1939, 4, "SO_J1939_ERRQUEUE"),
+];
 
 /// CAN_ISOTP options (isotp.rst, "Options"), each of the size mainline
 /// takes and nothing else.
@@ -409,13 +494,100 @@ pub const PROTOS: &[Proto] = &[
         msg: Msg::Isotp,
         extra_send: ISOTP_ERRS,
     },
+    // CAN_J1939 (j1939.rst): bound to a NAME or address on an interface,
+    // SOL_CAN_J1939 options, one message per datagram: up to 8 bytes one
+    // frame, longer ones a TP, BAM or ETP session ([`J1939_MAX_SEND`]).
+    Proto {
+        name: "CAN_J1939",
+        sock_type: libc::SOCK_DGRAM,
+        protocol: 7,
+        addrs: &[SOCKADDR_CAN_J1939],
+        opts: J1939_OPTS,
+        level: Some(SOL_CAN_J1939),
+        // What another thread's send of the fuzzer's longest random
+        // length may leave on a J1939 socket (a descriptor reused between
+        // the bound and the send, see `j1939_bound`'s caller).
+        max_msg: 70_000,
+        send_lens: &[0, 1, 8, 9, 1785, 1786, 1787, J1939_MAX_SEND],
+        msg: Msg::J1939,
+        extra_send: J1939_SEND_ERRS,
+    },
 ];
+
+/// What a session's end leaves as a J1939 socket's pending error, which
+/// its next send or receive returns: the errno of each abort reason
+/// (mainline's `j1939_xtp_abort_to_errno`: EALREADY busy, EMSGSIZE
+/// resources, EHOSTUNREACH timeout, EBADMSG CTS during data,
+/// ENOTRECOVERABLE maximum retransmissions, ENOTCONN unexpected data,
+/// EILSEQ bad sequence, EPROTO the rest), ENETDOWN when its interface
+/// goes down, ESHUTDOWN for a session cancelled by unbinding.
+pub const J1939_PENDING: &[c_int] = &[
+    libc::EALREADY,
+    libc::EMSGSIZE,
+    libc::EHOSTUNREACH,
+    libc::EBADMSG,
+    libc::ENOTRECOVERABLE,
+    libc::ENOTCONN,
+    libc::EILSEQ,
+    libc::EPROTO,
+    libc::ENETDOWN,
+    libc::ESHUTDOWN,
+];
+
+/// A J1939 send's own errnos (j1939.rst, mainline's `j1939_sk_sendmsg`):
+/// EBADFD unbound or without a source address, EACCES broadcast without
+/// SO_BROADCAST, EDOM a transport PGN, EBUSY a session with the same
+/// ends running, EADDRNOTAVAIL a NAME without an address, EPROTO or
+/// ENODEV a bad address claim, EDESTADDRREQ ETP to broadcast; and the
+/// pending errors ([`J1939_PENDING`]).
+pub const J1939_SEND_ERRS: &[c_int] = &[
+    libc::EBADFD,
+    libc::EACCES,
+    libc::EDOM,
+    libc::EBUSY,
+    libc::EADDRNOTAVAIL,
+    libc::EPROTO,
+    libc::EALREADY,
+    libc::EHOSTUNREACH,
+    libc::EBADMSG,
+    libc::ENOTRECOVERABLE,
+    libc::ENOTCONN,
+    libc::EILSEQ,
+    libc::ESHUTDOWN,
+];
+
+/// The errnos a call other than a send may return on a socket of
+/// protocol number `protocol` besides [`Call::allowed`]:
+///
+/// * CAN_ISOTP: its protocol errors from a receive ([`ISOTP_ERRS`], its
+///   pending error), `EISCONN` from a setsockopt ([`ISOTP_OPT_ERRS`]);
+/// * CAN_J1939: the pending errors from a receive ([`J1939_PENDING`]),
+///   `EACCES` from a connect to broadcast without SO_BROADCAST,
+///   `EADDRNOTAVAIL` for the peer of an unconnected socket, `EFAULT`
+///   from a getsockopt whose buffer is shorter than the value
+///   (mainline's answer; the fuzzer's buffers are all valid).
+pub fn extra_errs(protocol: c_int, call: Call) -> &'static [c_int] {
+    match (protocol, call) {
+        (6, Call::Recv | Call::Recvfrom | Call::Recvmsg) => ISOTP_ERRS,
+        (6, Call::Setsockopt) => ISOTP_OPT_ERRS,
+        (7, Call::Recv | Call::Recvfrom | Call::Recvmsg) => J1939_PENDING,
+        (7, Call::Connect) => &[libc::EACCES],
+        (7, Call::Getpeername) => &[libc::EADDRNOTAVAIL],
+        (7, Call::Getsockopt) => &[libc::EFAULT],
+        _ => &[],
+    }
+}
 
 /// The ISO-TP protocol errors a send or receive may report (above), and
 /// `EADDRNOTAVAIL` from a receive on an unbound socket (mainline "isotp:
 /// return -EADDRNOTAVAIL when reading from unbound socket"; found by
 /// seed 1 on the first run).
-pub const ISOTP_ERRS: &[c_int] = &[libc::ECOMM, libc::EILSEQ, libc::EBADMSG, libc::EADDRNOTAVAIL];
+pub const ISOTP_ERRS: &[c_int] = &[
+    libc::ECOMM,
+    libc::EILSEQ,
+    libc::EBADMSG,
+    libc::EADDRNOTAVAIL,
+];
 /// What an ISO-TP `setsockopt` may give besides the common set:
 /// `EISCONN` on a bound socket, for any name (mainline checks it before
 /// the name and length; found by seed 1 on the second run).
@@ -735,6 +907,14 @@ pub fn errno_name(e: c_int) -> String {
         EBADMSG => "EBADMSG",
         ETIMEDOUT => "ETIMEDOUT",
         ECONNREFUSED => "ECONNREFUSED",
+        EACCES => "EACCES",
+        EBADFD => "EBADFD",
+        EALREADY => "EALREADY",
+        EHOSTUNREACH => "EHOSTUNREACH",
+        ENOTRECOVERABLE => "ENOTRECOVERABLE",
+        EPROTO => "EPROTO",
+        ESHUTDOWN => "ESHUTDOWN",
+        ENETUNREACH => "ENETUNREACH",
         _ => return format!("errno{e}"),
     };
     n.to_string()
@@ -776,6 +956,7 @@ mod tests {
         assert_eq!(len("sockaddr_cansegm"), 8);
         assert_eq!(len("sockaddr_canport"), 6);
         assert_eq!(len("sockaddr_can (tp)"), 24);
+        assert_eq!(len("sockaddr_can (j1939)"), 24);
     }
 
     #[test]
@@ -804,6 +985,21 @@ mod tests {
         let mut t = 5u32.to_ne_bytes();
         isotp_bound(CAN_ISOTP_TX_STMIN, &mut t);
         assert_eq!(u32::from_ne_bytes(t), 5);
+    }
+
+    #[test]
+    fn j1939_bounds() {
+        // TP and BAM stay whole, ETP is cut, over the ETP limit is left
+        // to the kernel's EMSGSIZE.
+        assert_eq!(j1939_bound(1785, 7), 1785);
+        assert_eq!(j1939_bound(J1939_MAX_SEND, 7), J1939_MAX_SEND);
+        assert!((1..=J1939_MAX_SEND).contains(&j1939_bound(70_000, 123_456)));
+        assert!((1..=J1939_MAX_SEND).contains(&j1939_bound(117_440_506, 0)));
+        // The errnos of a receive include every pending one.
+        for e in J1939_PENDING {
+            assert!(extra_errs(7, Call::Recvmsg).contains(e));
+        }
+        assert!(extra_errs(1, Call::Recv).is_empty());
     }
 
     #[test]
