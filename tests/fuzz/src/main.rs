@@ -628,7 +628,35 @@ impl Worker<'_> {
                     2 => *r.pick(&[table::J1939_IDLE_ADDR, table::J1939_NO_ADDR, 0]),
                     _ => r.below(256) as u64,
                 },
-                other => u64::from(Self::field32(r, other)),
+                Field::Arb => {
+                    let id = r.next_u32();
+                    let rtr = if r.chance(1, 4) { 2 } else { 0 };
+                    u64::from(match r.below(6) {
+                        0 | 1 => ((id & 0x7ff) << 21) | rtr,
+                        2 | 3 => ((id & 0x1fff_ffff) << 3) | 4 | rtr,
+                        4 => (id & 0x7ff) << 21 | 8, // std with extension bits
+                        _ => id,                     // bit 0 may be set
+                    })
+                }
+                Field::Mask => r.pick_or_rand(&[1, 0xffff_ffff, 0]).into(),
+                Field::Node => r.pick_or_rand(&[0, 0, 1, 5, 0x7f, 0x80, 0xff]).into(),
+                Field::Port => {
+                    let node = r.pick_or_rand(&[0u32, 0, 1, 0x7f, 0xff]) & 0xff;
+                    ((node << 8) | (r.next_u32() & 0xff)).into()
+                }
+                Field::MsgId => r.pick_or_rand(&[0, 1, 2, 7, 0xffff_ffff]).into(),
+                Field::Any => r.next_u32().into(),
+                Field::IsotpId => u64::from(match r.below(4) {
+                    0 => r.pick_or_rand(&[
+                        0x800,       // beyond 11 bits
+                        0x8000_0000, // CAN_EFF_FLAG, id 0
+                        0xA000_0700, // EFF with CAN_ERR_FLAG
+                        0x4000_0700, // CAN_RTR_FLAG
+                        0x3fff_ffff, // beyond 29 bits, no EFF
+                        0x9fff_ffff, // 29 bits + EFF
+                    ]),
+                    _ => isotp_id(r),
+                }),
             };
             b[off..off + size].copy_from_slice(&v.to_ne_bytes()[..size]);
         }
@@ -642,47 +670,6 @@ impl Worker<'_> {
             }
         }
         (l.name, b)
-    }
-
-    /// A random value of a field of at most 32 bits (the
-    /// [`Self::addr_named`] arms that predate the 64-bit NAME).
-    fn field32(r: &mut Rng, kind: Field) -> u32 {
-        match kind {
-            Field::Arb => {
-                let id = r.next_u32();
-                let rtr = if r.chance(1, 4) { 2 } else { 0 };
-                match r.below(6) {
-                    0 | 1 => ((id & 0x7ff) << 21) | rtr,
-                    2 | 3 => ((id & 0x1fff_ffff) << 3) | 4 | rtr,
-                    4 => (id & 0x7ff) << 21 | 8, // std with extension bits
-                    _ => id,                     // bit 0 may be set
-                }
-            }
-            Field::Mask => r.pick_or_rand(&[1, 0xffff_ffff, 0]),
-            Field::Node => r.pick_or_rand(&[0, 0, 1, 5, 0x7f, 0x80, 0xff]),
-            Field::Port => {
-                let node = r.pick_or_rand(&[0u32, 0, 1, 0x7f, 0xff]) & 0xff;
-                (node << 8) | (r.next_u32() & 0xff)
-            }
-            Field::MsgId => r.pick_or_rand(&[0, 1, 2, 7, 0xffff_ffff]),
-            Field::Any => r.next_u32(),
-            Field::IsotpId => match r.below(4) {
-                0 => r.pick_or_rand(&[
-                    0x800,       // beyond 11 bits
-                    0x8000_0000, // CAN_EFF_FLAG, id 0
-                    0xA000_0700, // EFF with CAN_ERR_FLAG
-                    0x4000_0700, // CAN_RTR_FLAG
-                    0x3fff_ffff, // beyond 29 bits, no EFF
-                    0x9fff_ffff, // 29 bits + EFF
-                ]),
-                _ => isotp_id(r),
-            },
-            Field::Family
-            | Field::Ifindex
-            | Field::J1939Name
-            | Field::J1939Pgn
-            | Field::J1939Addr => r.next_u32(),
-        }
     }
 
     fn op_bind_connect(&mut self, connect: bool) {
