@@ -30,6 +30,7 @@ pub mod isotp_rx;
 pub mod isotp_tx;
 pub mod j1939;
 pub mod j1939_ac;
+pub mod j1939_echo;
 pub mod j1939_errqueue;
 pub mod j1939_tp;
 pub mod j1939_tp_rx;
