@@ -71,6 +71,28 @@ pub fn open_filtered(
     Ok(s)
 }
 
+/// A CAN_RAW socket as a plain descriptor, bound to `ifindex` with
+/// `filters` (identifier, mask) set before the bind (none: the default,
+/// every frame), and with CAN_RAW_FD_FRAMES on if `fd_frames`: the raw
+/// peer or bus recorder of the protocol tests, which read and write
+/// frame images themselves.
+pub fn open_fd(ifindex: u32, filters: &[(u32, u32)], fd_frames: bool) -> Result<std::os::fd::OwnedFd, String> {
+    const SOL_CAN_RAW: libc::c_int = 101;
+    const CAN_RAW_FILTER: libc::c_int = 1;
+    const CAN_RAW_FD_FRAMES: libc::c_int = 5;
+    let s = raw::socket(libc::AF_CAN, libc::SOCK_RAW, CAN_RAW).or_fail("socket(CAN_RAW)")?;
+    if fd_frames {
+        raw::setsockopt(&s, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &1i32.to_ne_bytes())
+            .or_fail("CAN_RAW_FD_FRAMES")?;
+    }
+    if !filters.is_empty() {
+        raw::setsockopt(&s, SOL_CAN_RAW, CAN_RAW_FILTER, &filter_bytes(filters))
+            .or_fail("CAN_RAW_FILTER")?;
+    }
+    raw::bind(&s, &addr_bytes(libc::AF_CAN as u16, ifindex)).or_fail("bind CAN_RAW")?;
+    Ok(s)
+}
+
 /// A CAN_RAW socket that is not bound. The crate binds in every
 /// constructor, so the socket is made with socket(2) and handed to it.
 pub fn unbound() -> Result<CanSocket, String> {

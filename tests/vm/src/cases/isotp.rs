@@ -49,9 +49,6 @@ pub(super) const CAN_ISOTP_OPTS: i32 = 1;
 pub(super) const CAN_ISOTP_LL_OPTS: i32 = 5;
 pub(super) const CAN_ISOTP_WAIT_TX_DONE: u32 = 0x0400;
 const CAN_ISOTP_SF_BROADCAST: u32 = 0x0800;
-const SOL_CAN_RAW: i32 = 101;
-const CAN_RAW_FILTER: i32 = 1;
-const CAN_RAW_FD_FRAMES: i32 = 5;
 const CANFD_BRS: u8 = 0x01;
 /// Bytes of the ISO-TP address (`ISOTP_MIN_NAMELEN`) and of a whole
 /// `struct sockaddr_can`.
@@ -114,17 +111,9 @@ pub(super) fn raw_open(ifindex: u32) -> Result<OwnedFd, String> {
 /// [`raw_open`] receiving only the standard identifiers `ids` (all
 /// frames if empty).
 fn raw_open_ids(ifindex: u32, ids: &[u32]) -> Result<OwnedFd, String> {
-    let s = raw::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW).or_fail("socket(CAN_RAW)")?;
-    raw::setsockopt(&s, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &1i32.to_ne_bytes())
-        .or_fail("CAN_RAW_FD_FRAMES")?;
-    if !ids.is_empty() {
-        let mask = libc::CAN_SFF_MASK | libc::CAN_EFF_FLAG | libc::CAN_RTR_FLAG;
-        let f: Vec<(u32, u32)> = ids.iter().map(|&id| (id, mask)).collect();
-        raw::setsockopt(&s, SOL_CAN_RAW, CAN_RAW_FILTER, &canraw::filter_bytes(&f))
-            .or_fail("CAN_RAW_FILTER")?;
-    }
-    raw::bind(&s, &canraw::addr_bytes(libc::AF_CAN as u16, ifindex)).or_fail("bind CAN_RAW")?;
-    Ok(s)
+    let mask = libc::CAN_SFF_MASK | libc::CAN_EFF_FLAG | libc::CAN_RTR_FLAG;
+    let f: Vec<(u32, u32)> = ids.iter().map(|&id| (id, mask)).collect();
+    canraw::open_fd(ifindex, &f, true)
 }
 
 /// The next frame on `s` within `t`, or None.

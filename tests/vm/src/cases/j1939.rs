@@ -690,14 +690,8 @@ fn send_once_claimed(s: impl AsFd, data: &[u8], to: Option<&[u8]>, what: &str) -
 /// A CAN_RAW socket on `ifindex` that receives only the extended frames
 /// whose source address (bits 7..0) is `sa`.
 pub(super) fn raw_from(ifindex: u32, sa: u8) -> Result<OwnedFd, String> {
-    const SOL_CAN_RAW: i32 = 101;
-    const CAN_RAW_FILTER: i32 = 1;
-    let s = raw::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW).or_fail("socket(CAN_RAW)")?;
     let mask = libc::CAN_EFF_FLAG | libc::CAN_RTR_FLAG | 0xff;
-    let f = canraw::filter_bytes(&[(libc::CAN_EFF_FLAG | u32::from(sa), mask)]);
-    raw::setsockopt(&s, SOL_CAN_RAW, CAN_RAW_FILTER, &f).or_fail("CAN_RAW_FILTER")?;
-    raw::bind(&s, &canraw::addr_bytes(libc::AF_CAN as u16, ifindex)).or_fail("bind CAN_RAW")?;
-    Ok(s)
+    canraw::open_fd(ifindex, &[(libc::CAN_EFF_FLAG | u32::from(sa), mask)], false)
 }
 
 /// The address the kernel resolves `name` to: `t` (bound to address
