@@ -11,17 +11,17 @@
 //! `msg_name` (24 bytes), the `SCM_J1939_DEST_ADDR`, `SCM_J1939_DEST_NAME`
 //! and `SCM_J1939_PRIO` control messages, the options `SO_J1939_FILTER`,
 //! `SO_J1939_PROMISC`, `SO_J1939_SEND_PRIO` and `SO_J1939_ERRQUEUE`
-//! (accepted and kept; nothing is queued yet), and `SO_BROADCAST`'s
-//! rules. The address checks, identifier mapping, option checks and
+//! (the error queue: a transport session's events in [`j1939_tp`], a
+//! single frame's in [`j1939_echo`]), and `SO_BROADCAST`'s rules. The address checks, identifier mapping, option checks and
 //! receive matching are `rcan_core::j1939`, host-tested; this file gives
 //! them a socket, a receive subscription and a transmit path.
 //!
-//! Not yet (Documentation/networking/rcan/j1939.rst, "The module"): the
-//! error queue's notifications.
+//! Not yet: Documentation/networking/rcan/j1939.rst, "The module".
 //!
 //! Objects and their locks (lock order: RTNL, socket lock, [`IFACES`],
-//! `Iface::ac`, `Iface::socks`, a socket's `rx`; `Iface::tp` nests
-//! nothing of ours and is never held while another is taken):
+//! `Iface::ac`, `Iface::socks`, a socket's `rx`; `Iface::tp` and
+//! `Iface::echo` nest nothing of ours and are never held while another
+//! is taken):
 //!
 //! * [`J1939Sock`] (socket lock): the binding, the peer, the options as
 //!   set, the interface state joined. Process context only.
@@ -36,7 +36,9 @@
 //!   (mainline's `struct j1939_priv`): the address claim table
 //!   (`AcTable`, `BhLock` class `j1939_ac`) and the bound sockets
 //!   (`BhLock` class `j1939_socks`), the transport sessions (`BhLock`
-//!   class `j1939_tp`, [`j1939_tp`], with the interface's timer), and
+//!   class `j1939_tp`, [`j1939_tp`], with the interface's first timer),
+//!   the single frames waiting for their echo (`BhLock` class
+//!   `j1939_echo`, [`j1939_echo`], with its second timer), and
 //!   one kernel receiver for every
 //!   extended data frame of the interface ([`IfaceUse`], in [`IFACES`]).
 //!   The receiver runs in NET_RX softirq: it feeds ADDRESS_CLAIMED frames
@@ -46,7 +48,7 @@
 #![forbid(unsafe_code)]
 
 use crate::{glue, rcan_api, rcan_core};
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use kernel::prelude::*;
 
 use crate::glue::module::{ModuleScope, ScopedModule};
@@ -69,7 +71,7 @@ use rcan_core::arb::{CAN_EFF_FLAG, CAN_RTR_FLAG};
 use rcan_core::frame::AnyFrame;
 use rcan_core::j1939_ac::AcTable;
 use rcan_core::j1939::{
-    filter_count, flag_option, pgn_is_valid, prio_to_sk_priority,
+    filter_count, flag_option, pgn_is_valid, Frame, prio_to_sk_priority,
     send_prio_option, sk_priority_to_prio, Filter, Id, RxMeta, SockAddr, SockRx, AF_CAN,
     CAN_J1939, DEFAULT_PRIO, EACCES, EBADFD, EDOM, J1939_NO_ADDR, J1939_NO_NAME, J1939_NO_PGN,
     J1939_PGN_ADDRESS_CLAIMED, SCM_J1939_DEST_ADDR, SCM_J1939_DEST_NAME, SCM_J1939_ERRQUEUE,
@@ -79,6 +81,7 @@ use rcan_core::j1939::{
 };
 use rcan_core::j1939_tp::{kind_for, ETP_PGN_CTL, ETP_PGN_DAT, TP_PGN_CTL, TP_PGN_DAT};
 
+use crate::j1939_echo::{self, EchoTable};
 use crate::j1939_tp::{self, IfaceJob, Tp};
 
 fn errno(e: i32) -> Error {
@@ -203,6 +206,14 @@ pub(crate) struct IfaceState {
     /// `j1939_tp`, taken in the receive and timer softirqs and in process
     /// context, with nothing of this module inside it).
     pub(crate) tp: BhLock<KBox<Tp>>,
+    /// The single frames that wait for their echo ([`j1939_echo`];
+    /// `BhLock` class `j1939_echo`, taken in the receive and timer
+    /// softirqs and in process context, with nothing of this module
+    /// inside it).
+    pub(crate) echo: BhLock<EchoTable>,
+    /// The number of entries of `echo`, written under its lock, read
+    /// without it by the receive path ([`j1939_echo::on_echo`]).
+    pub(crate) echo_used: AtomicUsize,
 }
 
 /// An interface in use: its state, how many sockets joined it, and its
@@ -254,12 +265,15 @@ fn join(sk: &S, ifindex: i32) -> Result<Arc<Iface>> {
             let ac = new_bh_spinlock!(glue::kbox_copy(&EMPTY_AC, GFP_KERNEL)?, "j1939_ac")?;
             let socks = new_bh_spinlock!(KVec::new(), "j1939_socks")?;
             let tp = new_bh_spinlock!(Tp::new()?, "j1939_tp")?;
+            let echo = new_bh_spinlock!(j1939_echo::new_table()?, "j1939_echo")?;
             let state = IfaceState {
                 net: net.hold().ok_or(ENODEV)?,
                 ifindex,
                 ac,
                 socks,
                 tp,
+                echo,
+                echo_used: AtomicUsize::new(0),
             };
             let job = JobTimers::new(state, sk)?;
             let iface = Arc::new(Iface { job }, GFP_KERNEL)?;
@@ -394,6 +408,11 @@ impl KernelRx for Iface {
             );
             return;
         }
+        if skb.is_local() {
+            // The echo of a local socket's single frame (mainline's
+            // `j1939_simple_recv`, before the frame is delivered).
+            j1939_echo::on_echo(self, skb, &Frame::new(id, data));
+        }
         let ifindex = dev.ifindex();
         let flags = if skb.is_local() { glue::msg::DONTROUTE } else { 0 };
         let tstamp = skb.tstamp();
@@ -468,6 +487,7 @@ fn unbind(sk: &S, s: &mut J1939Sock) {
         // `j1939_cancel_active_session`): nothing of the socket is left in
         // the interface's table.
         j1939_tp::cancel(&iface, iface.job.get(), Some(sk));
+        j1939_echo::cancel(&iface, Some(sk));
         iface.ac.lock().local_put(s.src_name, s.sa);
         leave(sk, iface);
     }
@@ -589,6 +609,7 @@ impl CanProtocol for J1939Proto {
                     // `j1939_cancel_active_session(priv, NULL)`), every
                     // claim is forgotten.
                     j1939_tp::cancel(iface, iface.job.get(), None);
+                    j1939_echo::cancel(iface, None);
                     iface.ac.lock().unmap_all();
                 }
                 drop(s);
@@ -789,7 +810,8 @@ impl glue::sock::Proto for J1939Proto {
     /// SO_BROADCAST: `EACCES`); `EDOM` for a transport PGN. Messages of
     /// up to 8 bytes go out as one frame (priority from
     /// SO_J1939_SEND_PRIO / SO_PRIORITY) and the call returns once the
-    /// device took it; longer ones start a transport session and return
+    /// device took it (with SO_J1939_ERRQUEUE on, the send then waits for
+    /// its echo: [`j1939_echo`]); longer ones start a transport session and return
     /// at once ([`send_transport`]). NAMEs are resolved, and outgoing address claims
     /// checked, by the interface's claim table (`AcTable::fixup_send`:
     /// `EADDRNOTAVAIL` while a NAME holds no address, `EPROTO`/`ENODEV`
@@ -868,8 +890,11 @@ impl glue::sock::Proto for J1939Proto {
         skb.set_sock_params(sk);
         // Every send takes a timestamp key, as mainline's (whose single
         // frames are sessions too): the keys of transport sends count them.
-        let _ = sk.next_tskey();
-        rcan_api::send(skb, &dev, true)?;
+        let key = sk.next_tskey();
+        // The frame as its echo will be parsed (a PDU1 PGN without its
+        // destination byte).
+        let f = Frame::new(Id::from_can_id(can_id).unwrap_or(id), &data[..len]);
+        j1939_echo::send(sk, iface.job.get(), &dev, skb, f, key)?;
         Ok(len)
     }
 

@@ -15,6 +15,7 @@ mod rcan_api;
 mod rcan_core;
 
 mod j1939;
+mod j1939_echo;
 mod j1939_tp;
 
 /// `module!` takes a plain name: the glue's wrapper, which owns the exit

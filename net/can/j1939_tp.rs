@@ -45,8 +45,9 @@
 //!
 //! Not yet (Documentation/networking/rcan/j1939.rst, "The module"):
 //! mainline's per-socket queue of messages (ours: one at a time per
-//! socket, the next `sendmsg` waits), TX ACK for single frames, module
-//! parameters for the block size, packet delay and largest message.
+//! socket, the next `sendmsg` waits), module parameters for the block
+//! size, packet delay and largest message. (Single frames' error queue
+//! events are [`super::j1939_echo`]'s.)
 #![forbid(unsafe_code)]
 
 use crate::{glue, rcan_api, rcan_core};
@@ -67,6 +68,7 @@ use rcan_core::j1939_tp::{
 use rcan_core::j1939_tp_rx::RxSession;
 use rcan_core::j1939_tp_tx::TxSession;
 
+use super::j1939_echo::ECHO_TIMER;
 use super::j1939::{deliver, for_each_accepting, now_ns, write_meta, IfaceState, J1939Proto, WAITQ};
 
 /// Sessions an interface runs at once, both directions (mainline has no
@@ -213,10 +215,13 @@ pub(crate) struct IfaceJob;
 impl JobCallback for IfaceJob {
     type Data = IfaceState;
 
-    /// HRTIMER softirq: runs the sessions that are due.
+    /// HRTIMER softirq: runs the sessions that are due ([`TP_TIMER`]), or
+    /// ends the single frames whose echo is overdue ([`ECHO_TIMER`]).
     fn expired(job: JobRef<'_, Self>, which: usize) {
-        if which == TP_TIMER {
-            on_timer(job);
+        match which {
+            TP_TIMER => on_timer(job),
+            ECHO_TIMER => super::j1939_echo::on_timer(job),
+            _ => {}
         }
     }
 }
@@ -344,7 +349,7 @@ fn tx_note(mach: &Machine, ev: Event, acked: u32) -> Option<(SockRef<J1939Proto>
 /// Tells socket `sk` of `ev` on its error queue, if SO_J1939_ERRQUEUE is
 /// on and its SO_TIMESTAMPING flags ask for it (mainline's
 /// `__j1939_sk_errqueue`); a full queue drops it. Any context.
-fn notify(sk: &SockView<J1939Proto>, ev: Event, s: &NoteSession) {
+pub(crate) fn notify(sk: &SockView<J1939Proto>, ev: Event, s: &NoteSession) {
     if !sk.shared().errqueue.load(Ordering::Relaxed) {
         return;
     }

@@ -48,6 +48,8 @@ pub(crate) mod isotp_tx;
 pub(crate) mod j1939;
 #[path = "core/src/j1939_ac.rs"]
 pub(crate) mod j1939_ac;
+#[path = "core/src/j1939_echo.rs"]
+pub(crate) mod j1939_echo;
 #[path = "core/src/j1939_errqueue.rs"]
 pub(crate) mod j1939_errqueue;
 #[path = "core/src/j1939_tp.rs"]

@@ -50,7 +50,6 @@ pub static TESTS: &[crate::Test] = portable_table![
     j1939_tp_raw_peer_silent_after_cts,
     j1939_tp_raw_peer_receives,
     j1939_tp_abort_from_peer,
-    j1939_tp_errqueue_notifications,
 ];
 
 /// TP.CM, the connection management PGN (J1939-21 5.10).
@@ -70,7 +69,7 @@ const ETP_RTS: u8 = 0x14;
 const ABORT_BUSY: u8 = 1;
 const ABORT_TIMEOUT: u8 = 3;
 /// The PGN the messages carry: PDU1 with a clean PS byte (data page 1).
-const PGN: u32 = 0x12300;
+pub(super) const PGN: u32 = 0x12300;
 
 /// A J1939 frame as the bus shows it: priority, PGN (PS cleared for
 /// PDU1), destination (0xFF for PDU2), source, data.
@@ -140,7 +139,7 @@ fn cm(head: [u8; 5], pgn: u32) -> Vec<u8> {
 
 /// `n` bytes that differ from message to message (`seed`) and along
 /// the message: a misplaced or repeated packet shows.
-fn payload(n: usize, seed: u32) -> Vec<u8> {
+pub(super) fn payload(n: usize, seed: u32) -> Vec<u8> {
     let mut x = seed.wrapping_mul(2_654_435_761) | 1;
     (0..n)
         .map(|_| {
@@ -210,7 +209,7 @@ fn want_dt(f: &Frame, sa: u8, da: u8, seq: usize, msg: &[u8]) -> TestResult {
 /// One received J1939 message (up to 2048 bytes): data, source PGN and
 /// address, SCM_J1939_DEST_ADDR.
 #[derive(Debug)]
-struct Msg {
+pub(super) struct Msg {
     data: Vec<u8>,
     pgn: u32,
     sa: u8,
@@ -219,7 +218,7 @@ struct Msg {
 }
 
 /// The next message on J1939 socket `s` within [`T`].
-fn recv_msg(s: impl AsFd, what: &str) -> Result<Msg, String> {
+pub(super) fn recv_msg(s: impl AsFd, what: &str) -> Result<Msg, String> {
     raw::set_timeout(&s, libc::SO_RCVTIMEO, T).or_fail("SO_RCVTIMEO")?;
     let mut data = vec![0u8; 2048];
     let mut name = [0u8; NAMELEN];
@@ -251,7 +250,7 @@ fn recv_msg(s: impl AsFd, what: &str) -> Result<Msg, String> {
 }
 
 /// Checks that `m` is `data` from `sa` to `da` with [`PGN`], whole.
-fn want_msg(m: &Msg, data: &[u8], sa: u8, da: Option<u8>, what: &str) -> TestResult {
+pub(super) fn want_msg(m: &Msg, data: &[u8], sa: u8, da: Option<u8>, what: &str) -> TestResult {
     ensure!(
         m.data.len() == data.len() && m.flags & libc::MSG_TRUNC == 0,
         "{what}: {} bytes (flags {:#x}), want {}",
@@ -305,24 +304,19 @@ fn bus_socket(ifindex: u32) -> Result<OwnedFd, String> {
 /// (`j1939_tp_abort_from_peer`, mainline stage, CI of 7b48b72,
 /// 2026-11-30). Ours reports the error once, at the timeout.
 fn exact_socket(ifindex: u32, sa: u8, da: u8, pgns: &[u32]) -> Result<OwnedFd, String> {
-    const SOL_CAN_RAW: i32 = 101;
-    const CAN_RAW_FILTER: i32 = 1;
     let mask = libc::CAN_EFF_MASK | libc::CAN_EFF_FLAG | libc::CAN_RTR_FLAG;
     let f: Vec<(u32, u32)> = pgns
         .iter()
         .flat_map(|&pgn| (0..8).map(move |prio| (can_id(prio, pgn, da, sa), mask)))
         .collect();
-    let s = raw::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW).or_fail("socket(CAN_RAW)")?;
-    raw::setsockopt(&s, SOL_CAN_RAW, CAN_RAW_FILTER, &canraw::filter_bytes(&f))
-        .or_fail("CAN_RAW_FILTER")?;
-    raw::bind(&s, &canraw::addr_bytes(libc::AF_CAN as u16, ifindex)).or_fail("bind CAN_RAW")?;
+    let s = canraw::open_fd(ifindex, &f, false)?;
     sys::set_rcvbufforce(&s, 8 << 20).or_fail("SO_RCVBUFFORCE")?;
     Ok(s)
 }
 
 /// `sendto` of `data` to `da` with [`PGN`], which must return its size at
 /// once (a session runs after the call).
-fn send_to(s: impl AsFd, data: &[u8], da: u8, what: &str) -> TestResult {
+pub(super) fn send_to(s: impl AsFd, data: &[u8], da: u8, what: &str) -> TestResult {
     let n = raw::sendto(&s, data, 0, Some(&jaddr(0, 0, PGN, da))).or_fail(what)?;
     ensure!(n == data.len(), "{what}: returned {n}, want {}", data.len());
     Ok(())
@@ -330,7 +324,7 @@ fn send_to(s: impl AsFd, data: &[u8], da: u8, what: &str) -> TestResult {
 
 /// Waits (within [`T`]) until `s` reports an error (POLLERR): a session
 /// of it has failed.
-fn wait_pollerr(s: impl AsFd, what: &str) -> TestResult {
+pub(super) fn wait_pollerr(s: impl AsFd, what: &str) -> TestResult {
     let r = sys::poll_one(&s, libc::POLLERR, T.as_millis() as i32).or_fail("poll")?;
     ensure!(
         r & libc::POLLERR != 0,
@@ -739,200 +733,4 @@ fn j1939_tp_abort_from_peer(ctx: &mut Ctx) -> TestResult {
         show(&f)
     );
     Ok(())
-}
-
-/// `SO_J1939_ERRQUEUE`, `SCM_J1939_ERRQUEUE` (`<linux/can/j1939.h>`).
-const SO_J1939_ERRQUEUE: i32 = 4;
-const SCM_J1939_ERRQUEUE: i32 = 4;
-/// `SOF_TIMESTAMPING_*` (`<linux/net_tstamp.h>`).
-const SOF_RX_SOFTWARE: u32 = 1 << 3;
-const SOF_SOFTWARE: u32 = 1 << 4;
-const SOF_OPT_ID: u32 = 1 << 7;
-const SOF_TX_SCHED: u32 = 1 << 8;
-const SOF_TX_ACK: u32 = 1 << 9;
-const SOF_OPT_TSONLY: u32 = 1 << 11;
-/// Needs [`SOF_OPT_TSONLY`] beside it (`sock_set_timestamping`: `EINVAL`).
-const SOF_OPT_STATS: u32 = 1 << 12;
-/// `SO_EE_ORIGIN_LOCAL`, `SO_EE_ORIGIN_TIMESTAMPING`, `SCM_TSTAMP_ACK`,
-/// `J1939_EE_INFO_RX_RTS`.
-const ORIGIN_LOCAL: u8 = 1;
-const ORIGIN_TIMESTAMPING: u8 = 4;
-const TSTAMP_ACK: u32 = 2;
-const EE_INFO_RX_RTS: u32 = 2;
-/// `J1939_NLA_*` statistics attributes.
-const NLA_BYTES_ACKED: u16 = 1;
-const NLA_TOTAL_SIZE: u16 = 2;
-const NLA_PGN: u16 = 3;
-const NLA_SRC_ADDR: u16 = 6;
-const NLA_DEST_ADDR: u16 = 7;
-
-/// One error queue notification: `struct sock_extended_err`'s errno,
-/// origin, info and data, and the statistics (netlink attributes, the
-/// message's data) as (type, payload).
-#[derive(Debug)]
-struct Note {
-    errno: u32,
-    origin: u8,
-    info: u32,
-    data: u32,
-    stats: Vec<(u16, Vec<u8>)>,
-}
-
-impl Note {
-    /// The payload of statistics attribute `ty`, as a little number.
-    fn stat(&self, ty: u16) -> Option<u64> {
-        let (_, p) = self.stats.iter().find(|(t, _)| *t == ty)?;
-        let mut b = [0u8; 8];
-        b[..p.len().min(8)].copy_from_slice(&p[..p.len().min(8)]);
-        Some(u64::from_ne_bytes(b))
-    }
-}
-
-fn set_int(s: impl AsFd, level: i32, name: i32, v: u32, what: &str) -> TestResult {
-    raw::setsockopt(&s, level, name, &v.to_ne_bytes()).or_fail(what)
-}
-
-/// The next notification on `s`'s error queue, waited for (POLLERR)
-/// within [`T`].
-fn next_note(s: impl AsFd, what: &str) -> Result<Note, String> {
-    wait_pollerr(&s, what)?;
-    let r = sys::recvmsg(&s, 72, libc::MSG_ERRQUEUE)
-        .or_fail(format!("recvmsg MSG_ERRQUEUE ({what})"))?;
-    let ee = r
-        .cmsgs
-        .iter()
-        .zip(&r.cdata)
-        .find(|((l, t), d)| *l == SOL_CAN_J1939 && *t == SCM_J1939_ERRQUEUE && d.len() >= 16)
-        .map(|(_, d)| d)
-        .ok_or(format!(
-            "{what}: no SCM_J1939_ERRQUEUE of 16 bytes among {:?}",
-            r.cmsgs
-        ))?;
-    let u = |i: usize| u32::from_ne_bytes([ee[i], ee[i + 1], ee[i + 2], ee[i + 3]]);
-    let b = &r.data[..r.len.min(r.data.len())];
-    let mut stats = vec![];
-    let mut i = 0;
-    while i + 4 <= b.len() {
-        let len = usize::from(u16::from_ne_bytes([b[i], b[i + 1]]));
-        let ty = u16::from_ne_bytes([b[i + 2], b[i + 3]]);
-        ensure!(
-            len >= 4 && i + len <= b.len(),
-            "{what}: statistics attribute of {len} bytes at {i} of {}",
-            b.len()
-        );
-        stats.push((ty, b[i + 4..i + len].to_vec()));
-        i += len.div_ceil(4) * 4;
-    }
-    Ok(Note {
-        errno: u(0),
-        origin: ee[4],
-        info: u(8),
-        data: u(12),
-        stats,
-    })
-}
-
-/// Checks that `s`'s error queue is empty now (EAGAIN at once).
-fn no_note(s: impl AsFd, what: &str) -> TestResult {
-    want_errno(
-        sys::recvmsg(&s, 72, libc::MSG_ERRQUEUE | libc::MSG_DONTWAIT),
-        libc::EAGAIN,
-        what,
-    )
-}
-
-/// The error queue as `j1939cat` and other senders read it, between two
-/// sockets on one interface, 0x20 sending 100 bytes (TP, one CTS) to
-/// 0x30, both with SO_J1939_ERRQUEUE on:
-/// 1. the sender, with SOF_TIMESTAMPING_TX_ACK | TX_SCHED | OPT_ID, is
-///    told once per message, when the receiver's EOMA acknowledged it:
-///    ENOMSG, origin TIMESTAMPING, `SCM_TSTAMP_ACK`, the send's key (0,
-///    then 1 for the next message), statistics J1939_NLA_BYTES_ACKED 100;
-///    nothing else (one CTS for all packets: no TX_SCHED, which mainline
-///    gives only for a CTS after the first);
-/// 2. the receiver, with SOF_TIMESTAMPING_RX_SOFTWARE, is told of the
-///    RTS: ENOMSG, origin LOCAL, J1939_EE_INFO_RX_RTS, statistics
-///    TOTAL_SIZE 100, PGN, SRC_ADDR 0x20, DEST_ADDR 0x30;
-/// 3. turning SO_J1939_ERRQUEUE off empties the queue: a third message's
-///    notification, queued, is gone (mainline's `skb_queue_purge`).
-fn j1939_tp_errqueue_notifications(ctx: &mut Ctx) -> TestResult {
-    let i0 = ctx.j1939_ifaces(1)?[0];
-    let a = jbound(i0, 0x20, NO_PGN)?;
-    let b = jbound(i0, 0x30, NO_PGN)?;
-    set_int(
-        &a,
-        SOL_CAN_J1939,
-        SO_J1939_ERRQUEUE,
-        1,
-        "SO_J1939_ERRQUEUE at 0x20",
-    )?;
-    set_int(
-        &b,
-        SOL_CAN_J1939,
-        SO_J1939_ERRQUEUE,
-        1,
-        "SO_J1939_ERRQUEUE at 0x30",
-    )?;
-    set_int(
-        &a,
-        libc::SOL_SOCKET,
-        libc::SO_TIMESTAMPING,
-        SOF_TX_ACK | SOF_TX_SCHED | SOF_SOFTWARE | SOF_OPT_ID | SOF_OPT_STATS | SOF_OPT_TSONLY,
-        "SO_TIMESTAMPING at 0x20",
-    )?;
-    set_int(
-        &b,
-        libc::SOL_SOCKET,
-        libc::SO_TIMESTAMPING,
-        SOF_RX_SOFTWARE | SOF_SOFTWARE | SOF_OPT_STATS | SOF_OPT_TSONLY,
-        "SO_TIMESTAMPING at 0x30",
-    )?;
-    for key in 0..2u32 {
-        let msg = payload(100, key + 40);
-        send_to(&a, &msg, 0x30, &format!("sendto 100 bytes, key {key}"))?;
-        let m = recv_msg(&b, "100 bytes at 0x30")?;
-        want_msg(&m, &msg, 0x20, Some(0x30), "100 bytes at 0x30")?;
-        let what = format!("the sender's notification of message {key}");
-        let n = next_note(&a, &what)?;
-        ensure!(
-            n.errno == libc::ENOMSG as u32
-                && n.origin == ORIGIN_TIMESTAMPING
-                && n.info == TSTAMP_ACK
-                && n.data == key
-                && n.stat(NLA_BYTES_ACKED) == Some(100),
-            "{what}: {n:?}, want errno ENOMSG, origin {ORIGIN_TIMESTAMPING}, info \
-             SCM_TSTAMP_ACK ({TSTAMP_ACK}), data {key}, BYTES_ACKED 100"
-        );
-        no_note(&a, &format!("the sender's queue after message {key}'s ACK"))?;
-        let what = format!("the receiver's notification of message {key}");
-        let n = next_note(&b, &what)?;
-        ensure!(
-            n.errno == libc::ENOMSG as u32
-                && n.origin == ORIGIN_LOCAL
-                && n.info == EE_INFO_RX_RTS
-                && n.stat(NLA_TOTAL_SIZE) == Some(100)
-                && n.stat(NLA_PGN) == Some(u64::from(PGN))
-                && n.stat(NLA_SRC_ADDR) == Some(0x20)
-                && n.stat(NLA_DEST_ADDR) == Some(0x30),
-            "{what}: {n:?}, want errno ENOMSG, origin {ORIGIN_LOCAL}, info RX_RTS \
-             ({EE_INFO_RX_RTS}), TOTAL_SIZE 100, PGN {PGN:05X}, SRC_ADDR 20, DEST_ADDR 30"
-        );
-        no_note(
-            &b,
-            &format!("the receiver's queue after message {key}'s RTS"),
-        )?;
-    }
-    let msg = payload(100, 42);
-    send_to(&a, &msg, 0x30, "sendto 100 bytes, the third")?;
-    let m = recv_msg(&b, "the third 100 bytes at 0x30")?;
-    want_msg(&m, &msg, 0x20, Some(0x30), "the third 100 bytes at 0x30")?;
-    wait_pollerr(&a, "the sender's notification of the third message")?;
-    set_int(
-        &a,
-        SOL_CAN_J1939,
-        SO_J1939_ERRQUEUE,
-        0,
-        "SO_J1939_ERRQUEUE 0 at 0x20",
-    )?;
-    no_note(&a, "the sender's queue after SO_J1939_ERRQUEUE 0")
 }

@@ -22,6 +22,7 @@ mod install;
 mod isotp;
 mod isotp_opts;
 mod j1939;
+mod j1939_errqueue;
 mod j1939_tp;
 mod leak;
 mod lifecycle;
@@ -237,6 +238,8 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         isotp_opts::TESTS,
         j1939::TESTS,
         j1939_tp::TESTS,
+        j1939_errqueue::TESTS,
+        j1939_errqueue::OURS,
         netns::TESTS,
         netns::OURS,
         fd::TESTS,
