@@ -59,12 +59,12 @@ const SOF_OPT_STATS: u32 = 1 << 12;
 /// `SCM_TSTAMP_ACK`, `J1939_EE_INFO_TX_ABORT`, `J1939_EE_INFO_RX_RTS`.
 const ORIGIN_LOCAL: u8 = 1;
 const ORIGIN_TIMESTAMPING: u8 = 4;
-const TSTAMP_SCHED: u32 = 1;
-const TSTAMP_ACK: u32 = 2;
+pub(super) const TSTAMP_SCHED: u32 = 1;
+pub(super) const TSTAMP_ACK: u32 = 2;
 const EE_INFO_TX_ABORT: u32 = 1;
 const EE_INFO_RX_RTS: u32 = 2;
 /// `J1939_NLA_*` statistics attributes.
-const NLA_BYTES_ACKED: u16 = 1;
+pub(super) const NLA_BYTES_ACKED: u16 = 1;
 const NLA_TOTAL_SIZE: u16 = 2;
 const NLA_PGN: u16 = 3;
 const NLA_SRC_ADDR: u16 = 6;
@@ -74,17 +74,17 @@ const NLA_DEST_ADDR: u16 = 7;
 /// origin, info and data, and the statistics (netlink attributes, the
 /// message's data) as (type, payload).
 #[derive(Debug)]
-struct Note {
+pub(super) struct Note {
     errno: u32,
     origin: u8,
-    info: u32,
-    data: u32,
+    pub(super) info: u32,
+    pub(super) data: u32,
     stats: Vec<(u16, Vec<u8>)>,
 }
 
 impl Note {
     /// The payload of statistics attribute `ty`, as a little number.
-    fn stat(&self, ty: u16) -> Option<u64> {
+    pub(super) fn stat(&self, ty: u16) -> Option<u64> {
         let (_, p) = self.stats.iter().find(|(t, _)| *t == ty)?;
         let mut b = [0u8; 8];
         b[..p.len().min(8)].copy_from_slice(&p[..p.len().min(8)]);
@@ -98,7 +98,7 @@ fn set_int(s: impl AsFd, level: i32, name: i32, v: u32, what: &str) -> TestResul
 
 /// The next notification on `s`'s error queue, waited for (POLLERR)
 /// within [`T`].
-fn next_note(s: impl AsFd, what: &str) -> Result<Note, String> {
+pub(super) fn next_note(s: impl AsFd, what: &str) -> Result<Note, String> {
     next_note_within(s, T, what)
 }
 
@@ -147,7 +147,7 @@ fn next_note_within(s: impl AsFd, limit: Duration, what: &str) -> Result<Note, S
 }
 
 /// Checks that `s`'s error queue is empty now (EAGAIN at once).
-fn no_note(s: impl AsFd, what: &str) -> TestResult {
+pub(super) fn no_note(s: impl AsFd, what: &str) -> TestResult {
     want_errno(
         sys::recvmsg(&s, 72, libc::MSG_ERRQUEUE | libc::MSG_DONTWAIT),
         libc::EAGAIN,
@@ -254,7 +254,7 @@ fn j1939_tp_errqueue_notifications(ctx: &mut Ctx) -> TestResult {
 /// Turns `s` into a sender that is told of everything: SO_J1939_ERRQUEUE
 /// on, SO_TIMESTAMPING with TX ACK, TX SCHED, the send's key and the
 /// statistics (what `j1939cat` sets).
-fn errqueue_sender(s: impl AsFd, what: &str) -> TestResult {
+pub(super) fn errqueue_sender(s: impl AsFd, what: &str) -> TestResult {
     set_int(&s, SOL_CAN_J1939, SO_J1939_ERRQUEUE, 1, &format!("SO_J1939_ERRQUEUE at {what}"))?;
     set_int(
         &s,
@@ -267,7 +267,7 @@ fn errqueue_sender(s: impl AsFd, what: &str) -> TestResult {
 
 /// Checks that `n` is a timestamping notification `info` (SCHED or ACK)
 /// of the send with key `key` of `size` bytes.
-fn want_tstamp(n: &Note, info: u32, key: u32, size: u64, what: &str) -> TestResult {
+pub(super) fn want_tstamp(n: &Note, info: u32, key: u32, size: u64, what: &str) -> TestResult {
     ensure!(
         n.errno == libc::ENOMSG as u32
             && n.origin == ORIGIN_TIMESTAMPING

@@ -23,6 +23,7 @@ mod isotp;
 mod isotp_opts;
 mod j1939;
 mod j1939_errqueue;
+mod j1939_sja1000;
 mod j1939_tp;
 mod leak;
 mod lifecycle;
@@ -240,6 +241,7 @@ pub fn all() -> impl Iterator<Item = &'static Test> {
         j1939_tp::TESTS,
         j1939_errqueue::TESTS,
         j1939_errqueue::OURS,
+        j1939_sja1000::TESTS,
         netns::TESTS,
         netns::OURS,
         fd::TESTS,

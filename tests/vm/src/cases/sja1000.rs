@@ -187,7 +187,7 @@ fn sja1000_hw_filter(ctx: &mut Ctx) -> TestResult {
 /// taken right after the transmit request, as bus timing would allow; a
 /// lost frame is then the driver's fault. Until the returned guard is
 /// dropped (see [`Pinned`]).
-fn pin_to_cpu0(devs: &[&str]) -> Result<Pinned, String> {
+pub(super) fn pin_to_cpu0(devs: &[&str]) -> Result<Pinned, String> {
     let irqs = IrqAffinities::save(devs)?;
     let text = std::fs::read_to_string("/proc/interrupts").or_fail("/proc/interrupts")?;
     for d in devs {
@@ -213,7 +213,7 @@ fn pin_to_cpu0(devs: &[&str]) -> Result<Pinned, String> {
 /// on one CPU (with the other idle), unlike the same test run alone; and
 /// the cards' lines kept the burst's or the overrun's CPU split for every
 /// later test that loads a card driver.
-struct Pinned {
+pub(super) struct Pinned {
     _cpu: crate::sys::Pinned,
     _irqs: IrqAffinities,
 }
