@@ -900,6 +900,22 @@ mod tests {
     }
 
     #[test]
+    fn hold_next_packet_byte_is_not_checked() {
+        // A receiver's hold with next packet 0xFF (beyond a 5-packet
+        // message) or 0: both holds, not faults; CTS(5, 1) then resumes
+        // from the first packet.
+        let data = msg(30);
+        for next in [0xFF, 0] {
+            let (mut tx, _, _) = connected(&Params::default(), &data, 30);
+            let s = tx.on_ctl(&[0x11, 0, next, 0xFF, 0xFF, 0x00, 0xEF, 0x00], &data, 100);
+            assert_eq!((s.frame, s.done), (None, None), "hold with next {next:#x}");
+            assert_eq!(s.timer, TimerCmd::Arm(100 + T4_NS));
+            let s = tx.on_ctl(&[0x11, 5, 1, 0xFF, 0xFF, 0x00, 0xEF, 0x00], &data, 200);
+            assert_eq!(s.frame.unwrap().data[0], 1, "after a hold with next {next:#x}");
+        }
+    }
+
+    #[test]
     fn retransmit_request() {
         let data = msg(30);
         let (mut tx, _, s) = connected(&Params::default(), &data, 30);

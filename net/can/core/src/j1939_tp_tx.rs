@@ -261,6 +261,19 @@ impl TxSession {
             // (mainline: restarts the window from the CTS.)
             return self.abort(abort::GENERIC);
         }
+        if n == 0 {
+            // Hold: the receiver asks us to wait (repeatedly, if it
+            // likes: mainline would abort a second CTS(0) with reason 8).
+            // A hold asks for no packet, so its next-packet byte names
+            // none (receivers send 0xFF there; mainline takes any value
+            // but 0): it is not checked, and the position stays until a
+            // CTS asks for packets.
+            self.echo_pending = false;
+            return Step {
+                timer: self.clock.arm(now.saturating_add(T4_NS), Due::Timeout),
+                ..Step::NONE
+            };
+        }
         if next == 0 || n > self.block {
             return self.abort(abort::FAULT);
         }
@@ -272,14 +285,6 @@ impl TxSession {
         self.acked = acked;
         self.tx = acked;
         self.echo_pending = false;
-        if n == 0 {
-            // Hold: the receiver asks us to wait (repeatedly, if it
-            // likes: mainline would abort a second CTS(0) with reason 8).
-            return Step {
-                timer: self.clock.arm(now.saturating_add(T4_NS), Due::Timeout),
-                ..Step::NONE
-            };
-        }
         // Progress reported for a window after the first, as mainline
         // does (not for holds).
         let notify = (acked > 0).then(|| Notify::TxSched((acked * 7).min(self.size as u32)));

@@ -50,6 +50,8 @@ pub static TESTS: &[crate::Test] = portable_table![
     j1939_tp_raw_peer_silent_after_cts,
     j1939_tp_raw_peer_receives,
     j1939_tp_abort_from_peer,
+    j1939_tp_raw_peer_second_rts,
+    j1939_tp_raw_peer_holds,
 ];
 
 /// TP.CM, the connection management PGN (J1939-21 5.10).
@@ -68,6 +70,8 @@ const ETP_RTS: u8 = 0x14;
 /// sessions", "timeout".
 const ABORT_BUSY: u8 = 1;
 const ABORT_TIMEOUT: u8 = 3;
+/// "Duplicate sequence number" (mainline's `J1939_XTP_ABORT_DUP_SEQ`).
+const ABORT_DUP_SEQ: u8 = 8;
 /// The PGN the messages carry: PDU1 with a clean PS byte (data page 1).
 pub(super) const PGN: u32 = 0x12300;
 
@@ -193,10 +197,7 @@ fn want_rts(f: &Frame, sa: u8, da: u8, size: usize, pgn: u32) -> TestResult {
 /// Checks that `f` is TP.DT packet `seq` (1-based) of `msg`, from `sa`
 /// to `da`: 7 bytes of the message, the last packet padded with 0xFF.
 fn want_dt(f: &Frame, sa: u8, da: u8, seq: usize, msg: &[u8]) -> TestResult {
-    let lo = (seq - 1) * 7;
-    let mut want = vec![seq as u8];
-    want.extend_from_slice(&msg[lo..(lo + 7).min(msg.len())]);
-    want.resize(8, 0xff);
+    let want = dt(seq, msg);
     ensure!(
         f.pgn == PGN_TP_DT && f.sa == sa && f.da == da && f.data == want,
         "DT {seq}: {}, want PGN {PGN_TP_DT:05X} {sa:02X}->{da:02X} [{}]",
@@ -732,5 +733,153 @@ fn j1939_tp_abort_from_peer(ctx: &mut Ctx) -> TestResult {
         "after the peer's abort: {}, want the single frame [03] 20->61",
         show(&f)
     );
+    Ok(())
+}
+
+/// TP.DT packet `seq` (1-based) of `msg`: the sequence number and 7
+/// bytes of it, the last packet padded with 0xFF.
+fn dt(seq: usize, msg: &[u8]) -> Vec<u8> {
+    let lo = (seq - 1) * 7;
+    let mut d = vec![seq as u8];
+    d.extend_from_slice(&msg[lo..(lo + 7).min(msg.len())]);
+    d.resize(8, 0xff);
+    d
+}
+
+/// A node at 0x60 (CAN_RAW) sends 20 bytes (3 packets) to a socket at
+/// 0x30 and, after the kernel's CTS and one data packet, the same RTS
+/// again (mainline's bug class "second RTS": `j1939_xtp_rx_rts_session_active`
+/// has had use-after-free and double-deactivation fixes). The kernel
+/// aborts the running session with reason 1 ("already in a session")
+/// and starts none for the second RTS; a third RTS then starts a fresh
+/// session that runs to its EOMA, and the first message the socket
+/// reads is that one, whole: nothing of the aborted session.
+fn j1939_tp_raw_peer_second_rts(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.j1939_ifaces(1)?[0];
+    let peer = bus_socket(i0)?;
+    let b = jbound(i0, 0x30, NO_PGN)?;
+    let addrs = [0x30, 0x60];
+    let to_b = can_id(7, PGN_TP_CM, 0x30, 0x60);
+    let rts = cm([RTS, 20, 0, 3, 0xff], PGN);
+    let msg = payload(20, 31);
+    raw_send(&peer, to_b, &rts)?;
+    let f = next_of(&peer, &addrs, "the CTS")?;
+    want_cm(&f, 0x30, 0x60, &cm([CTS, 3, 1, 0xff, 0xff], PGN), "the CTS")?;
+    raw_send(&peer, can_id(7, PGN_TP_DT, 0x30, 0x60), &dt(1, &msg))?;
+    raw_send(&peer, to_b, &rts)?;
+    let f = next_of(&peer, &addrs, "the answer to the second RTS")?;
+    want_cm(
+        &f,
+        0x30,
+        0x60,
+        &cm([ABORT, ABORT_BUSY, 0xff, 0xff, 0xff], PGN),
+        "the answer to a second RTS during the session",
+    )?;
+    raw_send(&peer, to_b, &rts)?;
+    let f = next_of(&peer, &addrs, "the CTS of the third RTS")?;
+    want_cm(
+        &f,
+        0x30,
+        0x60,
+        &cm([CTS, 3, 1, 0xff, 0xff], PGN),
+        "the answer to a third RTS after the abort",
+    )?;
+    for seq in 1..=3 {
+        raw_send(&peer, can_id(7, PGN_TP_DT, 0x30, 0x60), &dt(seq, &msg))?;
+    }
+    let f = next_of(&peer, &addrs, "the EOMA")?;
+    want_cm(&f, 0x30, 0x60, &cm([EOMA, 20, 0, 3, 0xff], PGN), "the EOMA")?;
+    let m = recv_msg(&b, "the 20 bytes at 0x30")?;
+    want_msg(&m, &msg, 0x60, Some(0x30), "the first message at 0x30")
+}
+
+/// The kernel sends 100 bytes from 0x20 to a node played by a CAN_RAW
+/// socket that answers the RTS with a hold, CTS(0) (mainline's bug class
+/// "CTS hold timeout"):
+/// 1. to 0x61, the hold and then silence: after T4 the kernel aborts
+///    with reason 3 (timeout) and the socket's error is EHOSTUNREACH,
+///    reported once when read (both stacks: mainline's T4 is 550 ms,
+///    the core's too);
+/// 2. to 0x62, the hold and then CTS(15) from packet 1: the stacks
+///    differ. Ours follows the standard: the hold ends, the 15 packets
+///    go out, the peer's EOMA ends the session without an error, and the
+///    socket's next message goes out (its RTS). Mainline aborts a CTS that
+///    follows a CTS with reason 8 ("duplicate sequence number",
+///    `j1939_xtp_rx_cts_one`: the last command equals this one) and
+///    reports EPROTO (j1939.rst, "Mainline or the standard").
+///
+/// The frames from 0x20 are read on an [`exact_socket`]: mainline reports
+/// a session's error twice (at the abort and at its echo).
+fn j1939_tp_raw_peer_holds(ctx: &mut Ctx) -> TestResult {
+    let i0 = ctx.j1939_ifaces(1)?[0];
+    let peer = bus_socket(i0)?;
+    let a = jbound(i0, 0x20, NO_PGN)?;
+    let hold = cm([CTS, 0, 0xff, 0xff, 0xff], PGN);
+    let msg = payload(100, 21);
+
+    let to61 = exact_socket(i0, 0x20, 0x61, &[PGN_TP_CM, PGN_TP_DT, PGN])?;
+    let addrs = [0x20, 0x61];
+    send_to(&a, &msg, 0x61, "sendto 100 bytes to 0x61")?;
+    let f = next_of(&to61, &addrs, "the RTS to 0x61")?;
+    want_rts(&f, 0x20, 0x61, 100, PGN)?;
+    raw_send(&peer, can_id(7, PGN_TP_CM, 0x20, 0x61), &hold)?;
+    let f = next_of(&to61, &addrs, "the frame after the hold and silence")?;
+    want_cm(
+        &f,
+        0x20,
+        0x61,
+        &cm([ABORT, ABORT_TIMEOUT, 0xff, 0xff, 0xff], PGN),
+        "after a hold and silence (T4)",
+    )?;
+    wait_pollerr(&a, "the sender after the hold's timeout")?;
+    let e = so_error(&a)?;
+    ensure!(
+        e == libc::EHOSTUNREACH,
+        "SO_ERROR after the hold's timeout: {}, want EHOSTUNREACH",
+        crate::check::errno_name(e)
+    );
+    ensure!(so_error(&a)? == 0, "SO_ERROR read twice: the error stays");
+
+    let to62 = exact_socket(i0, 0x20, 0x62, &[PGN_TP_CM, PGN_TP_DT, PGN])?;
+    let addrs = [0x20, 0x62];
+    let from62 = can_id(7, PGN_TP_CM, 0x20, 0x62);
+    send_to(&a, &msg, 0x62, "sendto 100 bytes to 0x62")?;
+    let f = next_of(&to62, &addrs, "the RTS to 0x62")?;
+    want_rts(&f, 0x20, 0x62, 100, PGN)?;
+    raw_send(&peer, from62, &hold)?;
+    raw_send(&peer, from62, &cm([CTS, 15, 1, 0xff, 0xff], PGN))?;
+    match ctx.stack() {
+        Stack::Ours => {
+            for seq in 1..=15 {
+                let f = next_of(&to62, &addrs, "a DT after the hold")?;
+                want_dt(&f, 0x20, 0x62, seq, &msg)?;
+            }
+            raw_send(&peer, from62, &cm([EOMA, 100, 0, 15, 0xff], PGN))?;
+            // The socket's next message starts only once this session
+            // has ended: its RTS, not an abort, is the next frame.
+            let next = payload(9, 22);
+            send_to(&a, &next, 0x62, "sendto 9 bytes to 0x62 after the EOMA")?;
+            let f = next_of(&to62, &addrs, "the next message's RTS")?;
+            want_rts(&f, 0x20, 0x62, 9, PGN)?;
+            ensure!(so_error(&a)? == 0, "an error on the sender after the resumed session");
+        }
+        Stack::Mainline => {
+            let f = next_of(&to62, &addrs, "mainline's answer to the CTS after the hold")?;
+            want_cm(
+                &f,
+                0x20,
+                0x62,
+                &cm([ABORT, ABORT_DUP_SEQ, 0xff, 0xff, 0xff], PGN),
+                "mainline after a CTS following a hold",
+            )?;
+            wait_pollerr(&a, "the sender after mainline's abort")?;
+            let e = so_error(&a)?;
+            ensure!(
+                e == libc::EPROTO,
+                "SO_ERROR after mainline's abort (reason 8): {}, want EPROTO",
+                crate::check::errno_name(e)
+            );
+        }
+    }
     Ok(())
 }
