@@ -46,9 +46,8 @@
 //! each way counts the loss and reports it (in the test's note), without
 //! asserting on it.
 //!
-//! Ours only (not portable): it is the two stacks side by side. Release
-//! kernel only (see `RELEASE_ONLY`): the debug kernel reaches the same
-//! driver paths in the `ctucanfd` and `candev_ctucanfd` tests.
+//! Ours only (not portable): it is the two stacks side by side. It runs on
+//! both kernels (release-only until 2026-12-01, see `RELEASE_ONLY`).
 
 use socketcan::id::FdFlags;
 use socketcan::{CanAnyFrame, CanFdFrame, CanFdSocket, EmbeddedFrame, ExtendedId, Socket};
