@@ -202,12 +202,25 @@ fn fd_all(
     Ok(n)
 }
 
+/// How long the burst's writer waits for its transmit queue to take a
+/// frame before it calls the queue stalled: a hang bound, not a speed
+/// limit (a run of 2026-12-01 blocked in `sendto` until the runner's
+/// watchdog ended the test, build.rst).
+const TX_STALL: std::time::Duration = std::time::Duration::from_secs(20);
+
 /// An unpaced burst of `n` numbered 64-byte BRS frames from `tx` to
 /// `rx` (the writer does not wait for the reader, only for room in the
-/// TX queue): how many arrived, and
-/// whether those that did came in order and intact (an `Err` if not).
+/// TX queue): how many arrived, whether those that did came in order and
+/// intact (an `Err` if not), and the frame the writer stopped at if the
+/// transmit queue took none for [`TX_STALL`] (`None`: all were written).
 /// The reader stops at the last number or after a second of silence.
-fn burst_count(tx: &CanFdSocket, rx: CanFdSocket, n: u32, base: u32) -> Result<u32, String> {
+fn burst_count(
+    tx: &CanFdSocket,
+    rx: CanFdSocket,
+    n: u32,
+    base: u32,
+) -> Result<(u32, Option<u32>), String> {
+    tx.set_write_timeout(TX_STALL).or_fail("SO_SNDTIMEO")?;
     rx.set_read_timeout(std::time::Duration::from_secs(1))
         .or_fail("SO_RCVTIMEO")?;
     let recv = std::thread::spawn(move || -> Result<u32, String> {
@@ -238,7 +251,9 @@ fn burst_count(tx: &CanFdSocket, rx: CanFdSocket, n: u32, base: u32) -> Result<u
         }
         Ok(got)
     });
-    for seq in 0..n {
+    let mut stalled = None;
+    let mut progress = std::time::Instant::now();
+    'send: for seq in 0..n {
         let mut d = [0x5Au8; 64];
         d[..4].copy_from_slice(&seq.to_le_bytes());
         let id = ExtendedId::new(base | (seq & 0xFFFF)).ok_or("bad id")?;
@@ -249,16 +264,30 @@ fn burst_count(tx: &CanFdSocket, rx: CanFdSocket, n: u32, base: u32) -> Result<u
         // room).
         loop {
             match tx.write_frame(&f) {
-                Ok(()) => break,
+                Ok(()) => {
+                    progress = std::time::Instant::now();
+                    break;
+                }
                 Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) => {
+                    if progress.elapsed() > TX_STALL {
+                        stalled = Some(seq);
+                        break 'send;
+                    }
                     std::thread::sleep(std::time::Duration::from_millis(1));
+                }
+                // SO_SNDTIMEO ran out: the socket's buffer stayed full.
+                Err(e) if e.raw_os_error() == Some(libc::EAGAIN) => {
+                    stalled = Some(seq);
+                    break 'send;
                 }
                 Err(e) => return Err(format!("burst: write frame {seq}: {e}")),
             }
         }
     }
-    recv.join()
-        .map_err(|_| "burst receiver panicked".to_string())?
+    let got = recv
+        .join()
+        .map_err(|_| "burst receiver panicked".to_string())??;
+    Ok((got, stalled))
 }
 
 /// Ours and mainline's CTU CAN FD drivers on two cards of one bus, see
@@ -394,9 +423,23 @@ fn ctucanfd_wire_peer_mainline(ctx: &mut Ctx) -> TestResult {
     };
     let over = |d: &str| ctx.stat(d, "rx_over_errors");
     let (ob, oa) = (over(b)?, over(a)?);
-    let got_ab = burst_count(&fa, big(fd_open(ib)?)?, n, 0x0C00_0000)?;
+    let (got_ab, stall_ab) = burst_count(&fa, big(fd_open(ib)?)?, n, 0x0C00_0000)?;
+    // Our driver's transmit queue must keep draining; mainline's stall
+    // is reported, as its losses are.
+    if let Some(k) = stall_ab {
+        return Err(format!(
+            "unpaced burst ours -> mainline: our {a}'s transmit queue took no frame for {TX_STALL:?} \
+             after {k} of {n} ({got_ab} arrived)"
+        ));
+    }
     let ob2 = over(b)?;
-    let got_ba = burst_count(&fb, big(fd_open(ia)?)?, n, 0x0D00_0000)?;
+    let (got_ba, stall_ba) = burst_count(&fb, big(fd_open(ia)?)?, n, 0x0D00_0000)?;
+    if let Some(k) = stall_ba {
+        ctx.note(format!(
+            "unpaced burst mainline -> ours: mainline's {b} took no frame for {TX_STALL:?} after \
+             {k} of {n}: written {k}"
+        ));
+    }
     let oa2 = over(a)?;
     ctx.note(format!(
         "unpaced burst of {n} 64-byte BRS frames: ours -> mainline {got_ab} arrived ({} lost, \
