@@ -37,25 +37,45 @@ DEPMOD=${DEPMOD:-depmod}
 new_files=()
 new_dirs=()
 
+# The parent of an absolute path without a trailing slash, in REPLY (no
+# dirname process: under TCG on the debug kernel each process start costs
+# about a second, and install made some 170 of them for paths alone).
+parent() {
+	REPLY=${1%/*}
+	REPLY=${REPLY:-/}
+}
+
 # mkdir -p DIR (a path without DESTDIR), remembering every level it creates.
 mkdir_rec() {
 	local d=$1 missing=()
 	while [ -n "$d" ] && [ "$d" != / ] && [ ! -d "$DESTDIR$d" ]; do
 		missing=("$d" "${missing[@]}")
-		d=$(dirname "$d")
+		parent "$d"
+		d=$REPLY
 	done
-	local m
-	for m in "${missing[@]}"; do
-		mkdir -m 0755 "$DESTDIR$m"
-		new_dirs+=("$m")
-	done
+	[ ${#missing[@]} = 0 ] && return 0
+	# One mkdir, parents first (it creates its arguments in order).
+	mkdir -m 0755 "${missing[@]/#/$DESTDIR}"
+	new_dirs+=("${missing[@]}")
 }
 
 # put MODE SRC DST (DST without DESTDIR)
 put() {
-	mkdir_rec "$(dirname "$3")"
+	parent "$3"
+	mkdir_rec "$REPLY"
 	install -m "$1" "$2" "$DESTDIR$3"
 	new_files+=("$3")
+}
+
+# put_into MODE DIR SRC... (DIR without DESTDIR): each SRC keeps its name.
+put_into() {
+	local mode=$1 dir=$2 src
+	shift 2
+	mkdir_rec "$dir"
+	install -m "$mode" -t "$DESTDIR$dir" "$@"
+	for src; do
+		new_files+=("$dir/${src##*/}")
+	done
 }
 
 depmod_for() {
@@ -87,7 +107,8 @@ do_install() {
 	[ -d "$root/target/man/man1" ] || die "no man pages in target/man: run 'make' first"
 	local tools=() page t
 	for page in "$root"/target/man/man1/*.1; do
-		t=$(basename "$page" .1)
+		t=${page##*/}
+		t=${t%.1}
 		[ -x "$root/target/release/$t" ] || die "target/release/$t missing: run 'make' first"
 		tools+=("$t")
 	done
@@ -97,10 +118,12 @@ do_install() {
 	mkdir_rec "/lib/modules/$kver"
 	local d
 	for ko in "${mods[@]}"; do
-		d=$(dirname "/lib/modules/$kver/updates/$ko")
+		parent "/lib/modules/$kver/updates/$ko"
+		d=$REPLY
 		while [ "$d" != "/lib/modules/$kver" ] && [ ! -d "$DESTDIR$d" ]; do
 			new_dirs+=("$d")
-			d=$(dirname "$d")
+			parent "$d"
+			d=$REPLY
 		done
 	done
 	make -s -C "$kdir" M="$root" LLVM=1 INSTALL_MOD_PATH="$DESTDIR" INSTALL_MOD_DIR=updates \
@@ -113,18 +136,28 @@ do_install() {
 	depmod_for "$kver"
 
 	local bindir=$PREFIX/bin mandir=$PREFIX/share/man share=$PREFIX/share
+	# One install per directory whose files keep their names.
+	local bins=() pages=() zsh=() fish=()
 	for t in "${tools[@]}"; do
-		put 0755 "$root/target/release/$t" "$bindir/$t"
-		put 0644 "$root/target/man/man1/$t.1" "$mandir/man1/$t.1"
+		bins+=("$root/target/release/$t")
+		pages+=("$root/target/man/man1/$t.1")
+		zsh+=("$root/target/man/completions/zsh/_$t")
+		fish+=("$root/target/man/completions/fish/$t.fish")
+	done
+	put_into 0755 "$bindir" "${bins[@]}"
+	put_into 0644 "$mandir/man1" "${pages[@]}"
+	put_into 0644 "$share/zsh/site-functions" "${zsh[@]}"
+	put_into 0644 "$share/fish/vendor_completions.d" "${fish[@]}"
+	# bash-completion wants the command's own name, without .bash.
+	for t in "${tools[@]}"; do
 		put 0644 "$root/target/man/completions/bash/$t.bash" "$share/bash-completion/completions/$t"
-		put 0644 "$root/target/man/completions/zsh/_$t" "$share/zsh/site-functions/_$t"
-		put 0644 "$root/target/man/completions/fish/$t.fish" "$share/fish/vendor_completions.d/$t.fish"
 	done
 	put 0644 "$root/tools/install/rcan.conf" /etc/modprobe.d/rcan.conf
 
 	# The manifest: "f PATH" per file, "d PATH" per created directory,
 	# "k KVER" per kernel; merged with an earlier install's.
-	mkdir_rec "$(dirname "$manifest")"
+	parent "$manifest"
+	mkdir_rec "$REPLY"
 	local tmp
 	tmp=$(mktemp)
 	{
@@ -140,14 +173,15 @@ do_install() {
 
 do_uninstall() {
 	[ -f "$DESTDIR$manifest" ] || die "no manifest $DESTDIR$manifest: nothing installed there (same PREFIX and DESTDIR as make install?)"
-	local kind p kvers=() dirs=()
+	local kind p kvers=() dirs=() files=()
 	while read -r kind p; do
 		case $kind in
-		f) rm -f "$DESTDIR$p" ;;
+		f) files+=("$DESTDIR$p") ;;
 		d) dirs+=("$p") ;;
 		k) kvers+=("$p") ;;
 		esac
 	done < "$DESTDIR$manifest"
+	[ ${#files[@]} = 0 ] || rm -f -- "${files[@]}"
 	local kver
 	for kver in "${kvers[@]}"; do
 		# A /lib/modules/KVER that install created holds only depmod's
@@ -159,10 +193,11 @@ do_uninstall() {
 		fi
 	done
 	# Deepest first, and only if empty (something else may live there now).
-	printf '%s\n' "${dirs[@]}" | awk '{ print length($0) "\t" $0 }' | sort -rn | cut -f2- |
-		while read -r p; do
-			rmdir "$DESTDIR$p" 2>/dev/null || true
-		done
+	# One rmdir: it goes through its arguments in order, skipping (with an
+	# error we drop) those not empty or already gone.
+	local deepest=()
+	mapfile -t deepest < <(printf '%s\n' "${dirs[@]}" | awk '{ print length($0) "\t" $0 }' | sort -rn | cut -f2-)
+	[ ${#dirs[@]} = 0 ] || rmdir -- "${deepest[@]/#/$DESTDIR}" 2>/dev/null || true
 	echo "rcan: uninstalled what $DESTDIR$manifest listed"
 }
 

@@ -406,6 +406,14 @@ pub fn delete_module(name: &str) -> io::Result<()> {
     }
 }
 
+/// `socket(family, ty, proto)` with `SOCK_CLOEXEC`, owned.
+pub fn socket(family: c_int, ty: c_int, proto: c_int) -> io::Result<OwnedFd> {
+    // SAFETY: plain socket(2) call; the result is checked before use.
+    let fd = cvt(unsafe { libc::socket(family, ty | libc::SOCK_CLOEXEC, proto) })?;
+    // SAFETY: `fd` was just returned by socket(2) and is owned by nobody else.
+    Ok(unsafe { OwnedFd::from_raw_fd(fd) })
+}
+
 /// `ip link set DEV up` or `down`: `SIOCGIFFLAGS`, then `SIOCSIFFLAGS`
 /// with `IFF_UP` set or cleared, through an AF_INET datagram socket.
 pub fn set_link_up(dev: &str, up: bool) -> io::Result<()> {
