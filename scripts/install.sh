@@ -196,7 +196,8 @@ do_uninstall() {
 	# One rmdir: it goes through its arguments in order, skipping (with an
 	# error we drop) those not empty or already gone.
 	local deepest=()
-	mapfile -t deepest < <(printf '%s\n' "${dirs[@]}" | awk '{ print length($0) "\t" $0 }' | sort -rn | cut -f2-)
+	[ ${#dirs[@]} = 0 ] ||
+		mapfile -t deepest <<<"$(printf '%s\n' "${dirs[@]}" | awk '{ print length($0) "\t" $0 }' | sort -rn | cut -f2-)"
 	[ ${#dirs[@]} = 0 ] || rmdir -- "${deepest[@]/#/$DESTDIR}" 2>/dev/null || true
 	echo "rcan: uninstalled what $DESTDIR$manifest listed"
 }
