@@ -155,8 +155,7 @@ fi
 
 extract_source
 
-frags="$RCAN_ROOT/tools/testing/rcan/config/base.config"
-[ "$RCAN_KERNEL" = debug ] && frags="$frags $RCAN_ROOT/tools/testing/rcan/config/debug.config"
+frags=$(rcan_config_frags)
 
 blog=$kbuild/build.log
 log "building $RCAN_KERNEL kernel in $kbuild (cold build: several minutes; log: $blog)"

@@ -17,10 +17,16 @@ log() { echo "rcan: $*" >&2; }
 # Directory of the extracted kernel source (shared by both variants).
 rcan_ksrc() { echo "$RCAN_CACHE/src/linux-source-6.12"; }
 
+# The config fragments of the selected variant, in merge order: base.config,
+# then release.config or debug.config.
+rcan_config_frags() {
+	echo "$RCAN_ROOT/tools/testing/rcan/config/base.config $RCAN_ROOT/tools/testing/rcan/config/$RCAN_KERNEL.config"
+}
+
 # Cache key: everything that changes the kernel binary.
 rcan_kernel_key() {
-	local frags="$RCAN_ROOT/tools/testing/rcan/config/base.config"
-	[ "$RCAN_KERNEL" = debug ] && frags="$frags $RCAN_ROOT/tools/testing/rcan/config/debug.config"
+	local frags
+	frags=$(rcan_config_frags)
 	{
 		ls -l "$KERNEL_TARBALL" 2>/dev/null | awk '{print $5}'
 		cat $frags

@@ -4,7 +4,8 @@
 # Run a command inside a throw-away QEMU VM booted with the rcan test kernel.
 #
 #   vm-run.sh [--kernel BZIMAGE] [--timeout SECONDS] [--mem MB] [--smp N]
-#             [--out DIR] [--qemu-extra 'ARGS'] -- COMMAND [ARGS...]
+#             [--out DIR] [--qemu-extra 'ARGS'] [--append 'PARAMS']
+#             -- COMMAND [ARGS...]
 #   vm-run.sh --scan FILE...
 #
 # The guest sees the host's root filesystem read-only (9p) on a writable
@@ -20,7 +21,10 @@
 # COMMAND's output appears on stdout as it runs (serial console, with kernel
 # messages of level WARNING and worse interleaved) and is saved in
 # OUT/console.log; the full kernel log ends up in OUT/dmesg.txt and, on
-# kmemleak kernels, the leak report in OUT/kmemleak.txt.
+# kmemleak kernels, the leak report in OUT/kmemleak.txt (the release
+# kernel has kmemleak built in but off unless the command line says
+# kmemleak=on: --append 'kmemleak=on'). --append adds PARAMS to the
+# kernel command line.
 #
 # Exit status:
 #   the command's own status if the VM ran cleanly, else
@@ -48,7 +52,7 @@ VM_DIR="$RCAN_ROOT/tools/testing/rcan/vm"
 QEMU=qemu-system-x86_64
 
 usage() {
-	sed -n '6,9s/^# \{0,1\}//p' "$0" >&2
+	sed -n '6,10s/^# \{0,1\}//p' "$0" >&2
 	exit 1
 }
 
@@ -248,7 +252,7 @@ host_tsc_khz() {
 
 # --- main ----------------------------------------------------------------------
 
-kernel='' timeout=600 mem='' smp=2 out='' qemu_extra=''
+kernel='' timeout=600 mem='' smp=2 out='' qemu_extra='' append=''
 [ $# -gt 0 ] || usage
 while [ $# -gt 0 ]; do
 	case $1 in
@@ -258,6 +262,7 @@ while [ $# -gt 0 ]; do
 	--smp) smp=${2:?}; shift 2 ;;
 	--out) out=${2:?}; shift 2 ;;
 	--qemu-extra) qemu_extra=${2?}; shift 2 ;;
+	--append) append=${2?}; shift 2 ;;
 	--scan)
 		shift
 		[ $# -gt 0 ] || usage
@@ -359,6 +364,7 @@ cmdline+=" pty.legacy_count=0"
 cmdline+=" no_timer_check"
 # The TSC's frequency under TCG, when the host knows it: host_tsc_khz.
 [ -z "${tcg_tsc_khz:-}" ] || cmdline+=" tsc_early_khz=$tcg_tsc_khz"
+[ -z "$append" ] || cmdline+=" $append"
 
 qemu_args=(
 	-nodefaults -no-user-config -display none -no-reboot
