@@ -635,6 +635,13 @@ pub fn catch_sigusr1() -> io::Result<()> {
     cvt(rc).map(drop)
 }
 
+/// Sends `SIGUSR1` to process 1 (the VM's init; see
+/// tools/testing/rcan/vm/init), ignoring failure.
+pub fn sigusr1_to_init() {
+    // SAFETY: no memory is passed.
+    unsafe { libc::kill(1, libc::SIGUSR1) };
+}
+
 /// Sends `SIGUSR1` to thread `tid` of this process (`tgkill`); see
 /// [`catch_sigusr1`].
 pub fn sigusr1_to(tid: i32) -> io::Result<()> {
