@@ -296,20 +296,6 @@ build_done() {
 # suite 1,146-2,633 s (build.rst); each shard keeps the whole suite's
 # limit, so a shard on a slow host is not cut off where one VM would not
 # have been.
-# The suite VMs' extra kernel parameters (build.rst, "kmemleak on release,
-# expedited grace periods"):
-# - kmemleak=on: the release kernel has kmemleak built in but off; the
-#   suite's release VMs end with its scan as the debug ones do
-#   (modules_load_unload_cycles' 100 cycles of every module among what it
-#   covers). Not in the mainline stage: its leaks are not ours to fail on.
-# - rcupdate.rcu_expedited=1: synchronize_rcu() waits for an expedited
-#   grace period (IPIs to the other CPUs) instead of a normal one, which
-#   takes several scheduler ticks and, under TCG, is most of what a module
-#   unload, an ifdown or a socket close waits for (100 load/unload cycles
-#   of every module: 190 s, 80 s expedited). Grace periods are as correct
-#   either way; call_rcu() callbacks are not affected. make bench boots
-#   without it.
-suite_append='rcupdate.rcu_expedited=1'
 fuzz_marker='=== syscall fuzzer: the suite is done, fuzzing in the same boot'
 vm_run() {
 	local variant=$1 shard=$2 limit=2400 out
@@ -343,9 +329,16 @@ vm_run() {
 	# RCAN_KBUILD: install_autoload installs the kernel's own modules
 	# beside ours and runs make install KDIR=... against it; other tests
 	# load the same kernel's mainline CAN modules to compare in one boot.
+	# kmemleak=on: the release kernel has kmemleak built in but off; the
+	# suite's release VMs end with its scan as the debug ones do
+	# (modules_load_unload_cycles' 100 cycles of every module among what
+	# it covers). Not in the mainline stage: its leaks are not ours to
+	# fail on. (rcupdate.rcu_expedited=1 beside it made those 100 cycles
+	# 190 s -> 80 s, but its one make check had ctucanfd_wire_peer_mainline
+	# fail twice: not adopted until that is understood; build.rst.)
 	RCAN_KERNEL=$variant RCAN_KBUILD=$(RCAN_KERNEL=$variant bash "$RCAN_ROOT/tools/testing/rcan/build-kernel.sh") \
 		bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout "$limit" --out "$out" \
-		--qemu-extra "$RCAN_QEMU_CAN" --append "kmemleak=on $suite_append" -- "${cmd[@]}"
+		--qemu-extra "$RCAN_QEMU_CAN" --append kmemleak=on -- "${cmd[@]}"
 }
 vm_done() {
 	local name=$1 rc=$2 logf=$3 variant shard out suite_rc fuzz_rc
@@ -384,8 +377,8 @@ mainline_run() {
 	local kbuild
 	kbuild=$(RCAN_KERNEL=release bash "$RCAN_ROOT/tools/testing/rcan/build-kernel.sh") || return 1
 	RCAN_KERNEL=release RCAN_KBUILD=$kbuild RCAN_VMTEST_STACK=mainline \
-		bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 --qemu-extra "$RCAN_QEMU_CAN" \
-		--append "$suite_append" -- target/release/rcan-vmtest
+		bash "$RCAN_ROOT/tools/testing/rcan/vm-run.sh" --timeout 2400 --qemu-extra "$RCAN_QEMU_CAN" -- \
+		target/release/rcan-vmtest
 }
 mainline_done() {
 	echo "=== VM suite, CAN_RAW, can-utils and CAN_BCM tests, against mainline SocketCAN (release kernel)"

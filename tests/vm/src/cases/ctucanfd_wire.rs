@@ -238,10 +238,11 @@ fn burst_count(
                     && d.len() == 64
                     && d[4..].iter().all(|&b| b == 0x5A)
                     && raw.flags == CANFD_BRS | CANFD_FDF,
-                "burst: frame {seq} after {last:?}: id {:#x} len {} flags {:#x}",
+                "burst: frame {seq} after {last:?}: id {:#x} len {} flags {:#x} data {}",
                 raw.can_id,
                 d.len(),
-                raw.flags
+                raw.flags,
+                d.iter().map(|b| format!("{b:02x}")).collect::<String>()
             );
             got += 1;
             last = Some(seq);
