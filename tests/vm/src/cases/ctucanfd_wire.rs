@@ -208,6 +208,32 @@ fn fd_all(
 /// watchdog ended the test, build.rst).
 const TX_STALL: std::time::Duration = std::time::Duration::from_secs(20);
 
+/// How long [`echo_count`] waits for the next echo.
+const ECHO_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Reads the echoes of an unpaced burst (identifiers `base | seq`, see
+/// [`burst_count`]) from `mon`, a socket on the sending device opened
+/// before the burst, until `n` came or none for [`ECHO_WAIT`]; returns
+/// how many came. Anything else on `mon` is an error.
+fn echo_count(mon: &CanFdSocket, base: u32, n: u32) -> Result<u32, String> {
+    mon.set_read_timeout(ECHO_WAIT).or_fail("SO_RCVTIMEO")?;
+    let mut got = 0;
+    while got < n {
+        let Ok(f) = mon.read_frame() else { break };
+        let CanAnyFrame::Fd(f) = f else {
+            return Err(format!("echoes: not an FD frame: {f:?}"));
+        };
+        let raw: &libc::canfd_frame = f.as_ref();
+        ensure!(
+            raw.can_id & 0x1FFF_0000 == base,
+            "echoes: frame {:#x} on the sending device",
+            raw.can_id
+        );
+        got += 1;
+    }
+    Ok(got)
+}
+
 /// An unpaced burst of `n` numbered 64-byte BRS frames from `tx` to
 /// `rx` (the writer does not wait for the reader, only for room in the
 /// TX queue): how many arrived, whether those that did came in order and
@@ -424,6 +450,11 @@ fn ctucanfd_wire_peer_mainline(ctx: &mut Ctx) -> TestResult {
     };
     let over = |d: &str| ctx.stat(d, "rx_over_errors");
     let (ob, oa) = (over(b)?, over(a)?);
+    // Our echoes of the burst, on a socket of our own device opened
+    // before it: each frame sent comes back there (its echo, in our NAPI
+    // poll) or is counted in rx_dropped (the poll's queue was full).
+    let echo_mon = big(fd_open(ia)?)?;
+    let dropped_a = ctx.stat(a, "rx_dropped")?;
     let (got_ab, stall_ab) = burst_count(&fa, big(fd_open(ib)?)?, n, 0x0C00_0000)?;
     // Our driver's transmit queue must keep draining; mainline's stall
     // is reported, as its losses are.
@@ -433,6 +464,16 @@ fn ctucanfd_wire_peer_mainline(ctx: &mut Ctx) -> TestResult {
              after {k} of {n} ({got_ab} arrived)"
         ));
     }
+    // Every echo delivered or counted before the next burst's socket
+    // opens on the same device (it would get the late ones).
+    let echoed = echo_count(&echo_mon, 0x0C00_0000, n)?;
+    let dropped = ctx.stat(a, "rx_dropped")? - dropped_a;
+    ensure!(
+        u64::from(echoed) + dropped >= u64::from(n),
+        "unpaced burst ours -> mainline: our {a} delivered {echoed} of the {n} echoes and dropped \
+         {dropped}: the rest did not come within {ECHO_WAIT:?} of the last"
+    );
+    drop(echo_mon);
     let ob2 = over(b)?;
     let (got_ba, stall_ba) = burst_count(&fb, big(fd_open(ia)?)?, n, 0x0D00_0000)?;
     if let Some(k) = stall_ba {
@@ -442,10 +483,12 @@ fn ctucanfd_wire_peer_mainline(ctx: &mut Ctx) -> TestResult {
         ));
     }
     let oa2 = over(a)?;
+    let dropped_ba = ctx.stat(a, "rx_dropped")? - dropped_a - dropped;
     ctx.note(format!(
         "unpaced burst of {n} 64-byte BRS frames: ours -> mainline {got_ab} arrived ({} lost, \
-         {} RX overruns on mainline's {b}); mainline -> ours {got_ba} arrived ({} lost, {} RX \
-         overruns on our {a})",
+         {} RX overruns on mainline's {b}; {echoed} echoes on our {a}, {dropped} dropped); \
+         mainline -> ours {got_ba} arrived ({} lost, {} RX overruns and {dropped_ba} dropped \
+         on our {a})",
         n - got_ab,
         ob2 - ob,
         n - got_ba,
