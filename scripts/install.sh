@@ -55,7 +55,7 @@ mkdir_rec() {
 	done
 	[ ${#missing[@]} = 0 ] && return 0
 	# One mkdir, parents first (it creates its arguments in order).
-	mkdir -m 0755 "${missing[@]/#/$DESTDIR}"
+	mkdir -m 0755 "${missing[@]/#/"$DESTDIR"}"
 	new_dirs+=("${missing[@]}")
 }
 
@@ -198,7 +198,7 @@ do_uninstall() {
 	local deepest=()
 	[ ${#dirs[@]} = 0 ] ||
 		mapfile -t deepest <<<"$(printf '%s\n' "${dirs[@]}" | awk '{ print length($0) "\t" $0 }' | sort -rn | cut -f2-)"
-	[ ${#dirs[@]} = 0 ] || rmdir -- "${deepest[@]/#/$DESTDIR}" 2>/dev/null || true
+	[ ${#dirs[@]} = 0 ] || rmdir -- "${deepest[@]/#/"$DESTDIR"}" 2>/dev/null || true
 	echo "rcan: uninstalled what $DESTDIR$manifest listed"
 }
 
